@@ -1,0 +1,155 @@
+"""``ramdaq`` command line: thin -- it parses, builds a device and a recorder, runs, prints.
+
+Commands: ``record`` (a device into an MCAP file, with a live readout), ``info`` (what a
+recording holds), ``recover`` (a valid copy of a recording whose writer was killed), ``rig``
+(a rig's modes in air and in water, and Eq 18 on them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from analysis.rig import RigError, load_rig
+from drivers.errors import DeviceError
+from drivers.mcap_format import RecordingError
+
+RECORDINGS = Path("recordings")
+
+
+def _parse_impacts(text: str) -> list[float]:
+    try:
+        return [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--impacts {text!r}: expected seconds separated by commas, e.g. 1,4.5,8") from None
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from daq.record import record
+    from drivers.registry import open_device
+
+    options: dict = {}
+    name = args.name
+    if args.device == "sim":
+        if not args.rig:
+            raise SystemExit("ramdaq record: --rig is required with --device sim")
+        rig = load_rig(args.rig)
+        if args.medium:
+            rig = rig.with_medium(args.medium)
+        impacts = list(args.impacts or [])
+        if args.impact_every:
+            t = args.impact_every / 2
+            while t < args.duration:
+                impacts.append(t)
+                t += args.impact_every
+        options = dict(rig=rig, seed=args.seed, duration_s=args.duration, impacts=impacts,
+                       pace="fast" if args.fast else "realtime", fs_hz=args.fs)
+        name = name or f"{rig.name}-{rig.medium}"
+    name = name or "trial"
+    out = Path(args.out) if args.out else RECORDINGS / f"{name}.mcap"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    device = open_device(args.device, **options)
+    print(f"recording {device.info.device} ({device.info.n_channels} ch at "
+          f"{device.info.fs_hz:g} Hz) into {out}; Ctrl-C ends it cleanly", flush=True)
+    s = record(device, out, readout=not args.quiet, overwrite=args.overwrite)
+    print(f"{'interrupted: ' if s.interrupted else ''}wrote {out}: {s.duration_s:.2f} s, "
+          f"{s.blocks} blocks, {s.samples * device.info.n_channels:,} samples, {s.gaps} gaps, "
+          f"{s.overflows} overflows, {s.impacts} impacts, in {s.wall_s:.1f} s wall time")
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from daq.info import describe_recording, format_info
+
+    d = describe_recording(args.file)
+    print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
+    return 0
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    from daq.recover import recover
+
+    src = Path(args.file)
+    dst = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
+    report = recover(src, dst)
+    print(f"recovered {dst}: {report}")
+    return 0
+
+
+def cmd_rig(args: argparse.Namespace) -> int:
+    from analysis.rig_modes import eq18_check, modes_in
+
+    rig = load_rig(args.rig)
+    print(f"rig {rig.name} ({args.rig}): {len(rig.gages)} gages, "
+          f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
+    for medium in ("air", "water"):
+        if medium not in rig.damping:
+            continue
+        m = modes_in(rig, medium)
+        print(f"\nmodes in {medium}:  (* predominant after the rig's default ram blow)")
+        print("   f (Hz)    delta     zeta")
+        for i, (f, d, z) in enumerate(zip(m.table.frequency_hz, m.table.decrement,
+                                          m.table.damping_ratio, strict=True)):
+            print(f"{'*' if i == m.predominant else ' '} {f:8.3f}  {d:7.4f}  {z:7.4f}")
+    if {"air", "water"} <= set(rig.damping):
+        c = eq18_check(rig)
+        print(f"\nEq 18: m_vir = m_a[(f_air/f_water)^2 - 1] = {c.m_a_kg:.0f} kg x "
+              f"[({c.f_air_hz:.2f}/{c.f_water_hz:.2f})^2 - 1] = {c.m_vir_eq18_kg:.0f} kg")
+        print(f"model's own added mass (Eq 19): {c.m_vir_model_kg:.0f} kg; Eq 18 is "
+              f"{100 * c.difference:+.1f} % off it. Eq 18 assumes an uncoupled translation mode;"
+              f" the predominant mode couples v with alpha and gamma, whose added inertias "
+              f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
+              f"0.2735 ton s^2/ft, -18 %).")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ramdaq", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("record", help="record a device into an MCAP file")
+    r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
+    r.add_argument("--rig", help="rig file (TOML), required for the simulator")
+    r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
+    r.add_argument("--duration", type=float, default=10.0, help="seconds to record (sim)")
+    r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
+    r.add_argument("--impact-every", type=float, help="a ram blow every S seconds")
+    r.add_argument("--seed", type=int, default=0, help="noise seed (sim)")
+    r.add_argument("--fs", type=float, help="override the rig's sample rate, Hz")
+    r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
+    r.add_argument("--name", help="recording name: writes recordings/NAME.mcap")
+    r.add_argument("--out", help="output file (overrides --name)")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    r.add_argument("--quiet", action="store_true", help="no live readout")
+    r.set_defaults(func=cmd_record)
+
+    i = sub.add_parser("info", help="describe a recording")
+    i.add_argument("file")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=cmd_info)
+
+    c = sub.add_parser("recover", help="write a valid copy of a recording that lost its footer")
+    c.add_argument("file")
+    c.add_argument("-o", "--out", help="output file (default FILE.recovered.mcap)")
+    c.set_defaults(func=cmd_recover)
+
+    g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
+    g.add_argument("rig")
+    g.set_defaults(func=cmd_rig)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (RigError, DeviceError, RecordingError, FileExistsError, FileNotFoundError) as err:
+        print(f"ramdaq {args.command}: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

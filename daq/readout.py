@@ -1,0 +1,122 @@
+"""Live terminal readout of a running acquisition: per-gage level, peak and clipping, with the
+stream's health (blocks, gaps, recorder queue, overflows, impacts).
+
+On a terminal it redraws a rich table in place; otherwise (CI, a log file) it prints one plain
+line every ``every_s`` seconds of stream time.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from rich.console import Console
+from rich.live import Live
+from rich.table import Table
+
+from drivers.block import Block, StreamInfo
+
+
+class LiveReadout:
+    """Accumulates per-channel statistics block by block and shows them.
+
+    Parameters
+    ----------
+    info : StreamInfo
+        The stream being shown.
+    adc_bits : int or None
+        ADC resolution, to count samples at the rails; ``None`` skips clip counting.
+    window_s : float
+        Window of the RMS level, seconds.
+    every_s : float
+        Plain-text mode: stream seconds between lines.
+    """
+
+    def __init__(self, info: StreamInfo, *, adc_bits: int | None = None, window_s: float = 1.0,
+                 every_s: float = 2.0, console: Console | None = None) -> None:
+        self.info = info
+        self.console = console or Console(soft_wrap=True)
+        self.tty = self.console.is_terminal
+        self.rails = None if adc_bits is None else (-(2 ** (adc_bits - 1)), 2 ** (adc_bits - 1) - 1)
+        n = info.n_channels
+        self.peak = np.zeros(n)
+        self.clipped = np.zeros(n, dtype=np.int64)
+        self._sq: deque[tuple[int, np.ndarray]] = deque()
+        self._window_n = max(1, round(window_s * info.fs_hz))
+        self.samples = 0
+        self.blocks = 0
+        self.gaps = 0
+        self.impacts: list[float] = []
+        self.queue = 0
+        self.overflows = 0
+        self._next_print = every_s
+        self.every_s = every_s
+        self._live: Live | None = None
+
+    def __enter__(self) -> LiveReadout:
+        if self.tty:
+            self._live = Live(self._table(), console=self.console, refresh_per_second=4)
+            self._live.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._live is not None:
+            self._live.update(self._table())
+            self._live.__exit__(None, None, None)
+            self._live = None
+
+    def update(self, block: Block, *, queue: int = 0, overflows: int = 0, gap: bool = False,
+               impacts: list[float] | None = None) -> None:
+        """Fold one block in and refresh the display."""
+        x = block.values()
+        self.peak = np.maximum(self.peak, np.abs(x).max(axis=1))
+        if self.rails is not None:
+            self.clipped += ((block.counts <= self.rails[0]) | (block.counts >= self.rails[1])).sum(1)
+        self._sq.append((block.n_samples, (x**2).sum(axis=1)))
+        while sum(n for n, _ in self._sq) - self._sq[0][0] >= self._window_n:
+            self._sq.popleft()
+        self.samples += block.n_samples
+        self.blocks += 1
+        self.gaps += int(gap)
+        self.queue, self.overflows = queue, overflows
+        if impacts is not None:
+            self.impacts = impacts
+        if self._live is not None:
+            self._live.update(self._table())
+        elif self.samples / self.info.fs_hz >= self._next_print:
+            self._next_print += self.every_s
+            self.console.print(self.line(), highlight=False)
+
+    @property
+    def rms(self) -> np.ndarray:
+        n = sum(k for k, _ in self._sq)
+        return np.sqrt(sum(s for _, s in self._sq) / max(n, 1))
+
+    def line(self) -> str:
+        """One plain line: time, health and the three loudest gages."""
+        t = self.samples / self.info.fs_hz
+        loud = np.argsort(self.rms)[::-1][:3]
+        levels = ", ".join(f"{self.info.channels[i]} {self.rms[i]:.3g}" for i in loud)
+        clip = f", CLIPPED {int(self.clipped.sum())}" if self.clipped.any() else ""
+        return (f"t={t:7.2f} s  blocks {self.blocks}  gaps {self.gaps}  queue {self.queue}  "
+                f"overflows {self.overflows}  impacts {len(self.impacts)}{clip}  |  "
+                f"rms {self.info.units[0]}: {levels}")
+
+    def _table(self) -> Table:
+        t = self.samples / self.info.fs_hz
+        table = Table(title=f"ramdaq  {self.info.device}  t = {t:.2f} s  "
+                            f"({self.info.fs_hz:g} Hz, {self.info.n_channels} ch)",
+                      caption=f"blocks {self.blocks}   gaps {self.gaps}   recorder queue "
+                              f"{self.queue}   overflows {self.overflows}   impacts at "
+                              + (", ".join(f"{s:.2f}" for s in self.impacts[-6:]) or "-") + " s")
+        table.add_column("gage", justify="right")
+        table.add_column("rms (1 s)", justify="right")
+        table.add_column("peak", justify="right")
+        table.add_column("unit")
+        table.add_column("clipped", justify="right")
+        rms = self.rms
+        for i, name in enumerate(self.info.channels):
+            clip = str(int(self.clipped[i])) if self.clipped[i] else ""
+            table.add_row(name, f"{rms[i]:.4g}", f"{self.peak[i]:.4g}", self.info.units[i],
+                          f"[red]{clip}[/red]" if clip else "")
+        return table

@@ -1,0 +1,74 @@
+"""End to end: the simulated device through the record loop into MCAP, replayed bit-identical;
+and the command line as a user runs it."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from analysis.rig_modes import eq18_check
+from daq.record import record
+from drivers.mcap_replay import McapReplayDevice
+from drivers.registry import open_device
+from drivers.sim import SimDevice
+from tests.conftest import RIGS
+
+
+def test_sim_recording_replays_bit_identical(albacore, tmp_path):
+    kw = dict(duration_s=3.0, impacts=[0.5, 2.0], seed=11)
+    with SimDevice(albacore, **kw) as dev:
+        produced = list(dev)
+    path = tmp_path / "trial.mcap"
+    summary = record(SimDevice(albacore, **kw), path, readout=False)
+    assert summary.blocks == len(produced) and summary.impacts == 2 and summary.overflows == 0
+    with open_device(str(path)) as replay:
+        assert isinstance(replay, McapReplayDevice)
+        got = list(replay)
+        assert replay.info.rig_toml == albacore.text
+        assert replay.info.channels == tuple(f"g{g.number:02d}" for g in albacore.gages_by_channel())
+    assert len(got) == len(produced)
+    assert all(a.same_as(b) for a, b in zip(produced, got, strict=True))
+
+
+def _ramdaq(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "daq.cli", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_cli_record_and_info(tmp_path):
+    out = tmp_path / "t.mcap"
+    r = _ramdaq("record", "--rig", str(RIGS / "sampson.toml"), "--duration", "4", "--impacts",
+                "1,2.5", "--fast", "--out", str(out), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "wrote" in r.stdout and "2 impacts" in r.stdout
+    info = _ramdaq("info", str(out), "--json", cwd=tmp_path)
+    assert info.returncode == 0, info.stderr
+    d = json.loads(info.stdout)
+    assert abs(d["duration_s"] - 4.0) < 1 / 2048  # one sample period
+    assert len(d["channels"]) == 16
+    text = _ramdaq("info", str(out), cwd=tmp_path)
+    assert "g16" in text.stdout
+
+
+def test_cli_bad_rig_is_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((RIGS / "albacore.toml").read_text().replace('axis = "z"', 'axis = "up"', 1))
+    r = _ramdaq("record", "--rig", str(bad), "--duration", "1", "--fast", "--out",
+                str(tmp_path / "x.mcap"), cwd=tmp_path)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "axis: unknown axis 'up'" in lines[0] and "bad.toml" in lines[0]
+
+
+def test_cli_rig_prints_eq18_beside_model_added_mass(albacore, tmp_path):
+    r = _ramdaq("rig", str(RIGS / "albacore.toml"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    c = eq18_check(albacore)
+    assert f"{c.m_vir_eq18_kg:.0f} kg" in r.stdout and f"{c.m_vir_model_kg:.0f} kg" in r.stdout
+    # Report 1836 Table 2d: Eq 18 0.2240 vs Eq 19 0.2735 ton s^2/ft, i.e. -18.1 %. Our model,
+    # tuned to the same frequencies with the same m_a and Eq 19, shows a gap of that sign and
+    # size (a coupled mode, not Eq 18's uncoupled translation); 5 points either side allowed.
+    report_gap = 0.2240 / 0.2735 - 1
+    assert abs(c.difference - report_gap) < 0.05
+    assert np.isfinite(c.difference)
