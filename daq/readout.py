@@ -89,8 +89,11 @@ class LiveReadout:
 
     @property
     def rms(self) -> np.ndarray:
+        """RMS of each channel over the last ``window_s`` (SI units), shape (n_channels,)."""
+        if not self._sq:
+            return np.zeros(self.info.n_channels)
         n = sum(k for k, _ in self._sq)
-        return np.sqrt(sum(s for _, s in self._sq) / max(n, 1))
+        return np.sqrt(sum(s for _, s in self._sq) / n)
 
     def line(self) -> str:
         """One plain line: time, health and the three loudest gages."""
