@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.rig import AXES, Rig
+from analysis.virtual_inertia import Ix_vir, Iz_vir_elliptic, m_vir_flat_plate
 
 RUDDER_DOFS = ("v", "gamma", "alpha")
 
@@ -109,10 +110,9 @@ def added_mass(rig: Rig) -> dict[str, float]:
     if rig.medium == "air":
         return {"m_vir": 0.0, "Iz_vir": 0.0, "Ix_vir": 0.0}
     r, rho, f = rig.rudder, rig.water_density_kg_m3, rig.rudder.added_mass_factor
-    m_vir = math.pi / 4 * rho * r.chord_m**2 * r.span_m
-    iz_vir = math.pi / 8 * rho * ((r.chord_m / 2) ** 2 - (r.thickness_m / 2) ** 2) ** 2 * r.span_m
-    ix_vir = m_vir * r.span_m**2 / 16
-    return {"m_vir": f * m_vir, "Iz_vir": f * iz_vir, "Ix_vir": f * ix_vir}
+    m_vir = m_vir_flat_plate(rho, r.chord_m, r.span_m)
+    iz_vir = Iz_vir_elliptic(rho, r.chord_m, r.thickness_m, r.span_m)
+    return {"m_vir": f * m_vir, "Iz_vir": f * iz_vir, "Ix_vir": f * Ix_vir(m_vir, r.span_m)}
 
 
 def stock_element(rig: Rig) -> np.ndarray:
