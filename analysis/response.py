@@ -102,7 +102,7 @@ def modal_form(model: StructuralModel) -> ModalForm:
 
 
 @dataclass(frozen=True)
-class ModeTable:
+class ModelModes:
     """The model's true modes: what every estimator is held against.
 
     ``frequency_hz`` is the damped frequency ``omega/2pi``; ``decrement`` the logarithmic
@@ -119,13 +119,13 @@ class ModeTable:
     gage_numbers: tuple[int, ...]
 
 
-def mode_table(form: ModalForm) -> ModeTable:
+def mode_table(form: ModalForm) -> ModelModes:
     lam = form.eigenvalues
     shapes = form.gage_disp.copy()
     for i in range(shapes.shape[1]):
         j = np.argmax(np.abs(shapes[:, i]))
         shapes[:, i] *= np.conj(shapes[j, i]) / np.abs(shapes[j, i]) ** 2
-    return ModeTable(
+    return ModelModes(
         frequency_hz=lam.imag / (2 * math.pi),
         damping_ratio=-lam.real / np.abs(lam),
         decrement=-2 * math.pi * lam.real / lam.imag,

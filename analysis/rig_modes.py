@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from analysis.model import build_model
-from analysis.response import ModeTable, modal_form, mode_table, predominant_mode
+from analysis.response import ModelModes, modal_form, mode_table, predominant_mode
 from analysis.rig import Rig
 
 
@@ -16,7 +16,7 @@ class MediumModes:
     """The model's modes in one medium and the index of the predominant one."""
 
     medium: str
-    table: ModeTable
+    table: ModelModes
     predominant: int
     added: dict[str, float]
 
