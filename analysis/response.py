@@ -119,7 +119,7 @@ class ModelModes:
     gage_numbers: tuple[int, ...]
 
 
-def mode_table(form: ModalForm) -> ModelModes:
+def model_modes(form: ModalForm) -> ModelModes:
     lam = form.eigenvalues
     shapes = form.gage_disp.copy()
     for i in range(shapes.shape[1]):

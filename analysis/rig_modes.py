@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from analysis.model import build_model
-from analysis.response import ModelModes, modal_form, mode_table, predominant_mode
+from analysis.response import ModelModes, modal_form, model_modes, predominant_mode
 from analysis.rig import Rig
 
 
@@ -32,7 +32,7 @@ def modes_in(rig: Rig, medium: str) -> MediumModes:
     form = modal_form(model)
     i = predominant_mode(form, r.impact.peak_force_N, r.impact.duration_s, r.impact.location_m,
                          r.impact.direction)
-    return MediumModes(medium, mode_table(form), i, model.added)
+    return MediumModes(medium, model_modes(form), i, model.added)
 
 
 @dataclass(frozen=True)

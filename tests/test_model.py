@@ -11,7 +11,7 @@ from analysis.model import build_model, stock_element
 from analysis.response import (
     ModalSimulator,
     modal_form,
-    mode_table,
+    model_modes,
     predominant_mode,
     state_matrix,
 )
@@ -27,7 +27,7 @@ def _predominant(rig):
     form = modal_form(build_model(rig))
     imp = rig.impact
     i = predominant_mode(form, imp.peak_force_N, imp.duration_s, imp.location_m, imp.direction)
-    return form, mode_table(form), i
+    return form, model_modes(form), i
 
 
 @pytest.mark.parametrize("medium", ["air", "water"])
@@ -136,7 +136,7 @@ def test_albacore_predominant_modes_match_table_2a(albacore):
 
 def test_sampson_hull_mode_near_2_18_hz(sampson):
     form = modal_form(build_model(sampson))
-    table = mode_table(form)
+    table = model_modes(form)
     assert np.min(np.abs(table.frequency_hz / SAMPSON_HULL_HZ - 1)) < 0.02
 
 
