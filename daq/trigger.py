@@ -1,0 +1,666 @@
+"""Impact trigger: finds ram blows in a block stream, to the sample, and hands over their records.
+
+``Trigger(info).process(block) -> [ImpactEvent]``; events come out once their record is complete
+(``flush()`` at the end of a stream). States and what moves them::
+
+    not ready --(lta_s of samples since the start or a gap)--> armed
+    armed  --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
+    active --(envelope back near the pre-event level for rearm_hold_s, or max_post_s)--> armed
+
+* **Detection.** With a ram load cell (a channel in ``"N"``; ``mode="force"``, or ``"auto"``
+  when one exists) a level / slope trigger on ``|F|`` with hysteresis; otherwise recursive
+  STA/LTA (:mod:`analysis.onset`) on every gage, at least ``k`` of ``n`` agreeing. A steady tone
+  already present (SAMPSON's 2.18 Hz hull) is in the LTA too, so its ratio stays near 1-2 and
+  does not trigger. The LTA is frozen while a blow rings, so the trigger is fully sensitive again
+  as soon as it re-arms, and the frozen value is the *pre-event level*.
+* **Onset.** AIC (Maeda) over the responding gages, then a joint hinge fit of the rising edge
+  (:func:`analysis.onset.hinge_onset`) to a fraction of a sample, less the front end's delay
+  (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``).
+* **Second contact.** 15-45 ms after the onset an AR prediction-error filter is fitted to the
+  ringing (all gages share its poles, so it reaches the noise floor); the innovation of a new
+  blow then stands far out of the ringing. A new sharp onset within ``double_hit_s`` flags the
+  event ``double_hit`` (its time: AIC on the innovation, which the AR filter has also freed of
+  the anti-alias delay); later, while still ringing, it closes the record
+  (``end_reason="next_impact"``) and opens a new event timed the same way. With a load cell, a
+  second crossing of ``level`` after ``|F|`` fell below ``hysteresis * level`` is the second
+  contact. Contacts closer than ``ar_guard_s + ar_fit_s`` (45 ms) to the first are not seen.
+* **Decay and re-arm.** The envelope (recursive mean of x**2 over ``envelope_s``) of every
+  responding gage must stay below ``rearm_ratio`` times its pre-event level for
+  ``rearm_hold_s``. The record runs from ``pre_trigger_s`` before the onset to the decay's end,
+  but at least ``post_s`` and at most ``max_post_s`` after the onset. On re-arming, the LTA
+  resumes from the larger of the pre-event level and the envelope, so what still rings (or a
+  background that changed) cannot trigger at once.
+* **Clipping.** Counts at the ADC rails ``-2**(bits-1)`` / ``2**(bits-1) - 1`` (``adc_bits``
+  from ``info.extra``; no check without it) anywhere in the record name the channel in
+  ``clipped``.
+* **Gaps.** A block whose ``first_sample`` is not the previous block's ``next_sample`` is a gap:
+  an open event is closed at the last sample before it (``end_reason="gap"``), the STA/LTA and
+  the ring buffer restart, and the trigger is *not ready* for ``lta_s``: a step across a gap can
+  never trigger, and a blow within ``lta_s`` after one is missed.
+
+Events are JSON-serialisable (:meth:`ImpactEvent.to_json`) for ``/ramdaq/impacts``
+(:data:`IMPACT_JSON_SCHEMA`); the samples (``ImpactEvent.record``) travel beside the JSON.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from analysis import onset as ons
+from drivers.block import Block, StreamInfo
+
+__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "Trigger"]
+
+_AIC_PRE_S, _AIC_POST_S = 0.1, 0.01          # AIC window around a detection
+_EDGE_PRE_S, _EDGE_POST_S = 0.015, 0.004     # hinge fit window around the AIC pick
+_EDGE_SEARCH_S = (0.0015, 0.0005)            # onset search around the AIC pick
+_RING_SPARE_S = 1.0
+NOT_READY, ARMED, ACTIVE = "not ready", "armed", "active"
+
+
+@dataclass(frozen=True, eq=False)
+class ImpactRecord:
+    """Samples of one impact, all channels: ``counts`` int32 (n_channels, n_samples), SI
+    ``scale`` (n_channels,), from ``first_sample`` (device time ``t0_ns``) at ``fs_hz``."""
+
+    first_sample: int
+    t0_ns: int
+    fs_hz: float
+    counts: np.ndarray
+    scale: np.ndarray
+
+    @property
+    def last_sample(self) -> int:
+        return self.first_sample + self.counts.shape[1] - 1
+
+    def values(self) -> np.ndarray:
+        """Samples in SI units, float64, shape (n_channels, n_samples)."""
+        return self.counts * self.scale[:, None]
+
+
+@dataclass(frozen=True)
+class ImpactEvent:
+    """One detected blow. Samples count from the stream's first sample; times are s since it.
+
+    ``onset_s`` is the refined (sub-sample) onset with the front-end delay removed and
+    ``onset_sample`` its nearest sample; ``trigger_sample`` is where the detector fired. The
+    record spans ``first_sample .. last_sample`` (inclusive). ``peak`` is max |value| per channel
+    over ``onset .. last_sample`` (SI units); ``snr_db`` is 20 log10(peak / pre-event rms) on the
+    best responding channel. ``too_short``: the record was cut (gap, next impact, end of stream)
+    before ``post_s`` or lacks part of its pre-trigger. ``end_reason``: ``decayed``,
+    ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to re-arm, or
+    ``None`` if the envelope never came back.
+    """
+
+    onset_sample: int
+    onset_s: float
+    t_ns: int
+    trigger_sample: int
+    first_sample: int
+    last_sample: int
+    fs_hz: float
+    mode: str
+    channels: tuple[str, ...]
+    gages: tuple[int, ...]
+    peak: dict[str, float]
+    snr_db: float
+    double_hit: bool = False
+    second_onset_sample: int | None = None
+    second_onset_s: float | None = None
+    clipped: tuple[str, ...] = ()
+    too_short: bool = False
+    end_reason: str = "decayed"
+    decay_s: float | None = None
+    record: ImpactRecord | None = field(default=None, compare=False, repr=False)
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON object for ``/ramdaq/impacts`` (the record's samples are not included)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "record"}
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()} | {
+            "peak": dict(self.peak)}
+
+
+IMPACT_JSON_SCHEMA: dict[str, Any] = {
+    "title": "ramdaq.Impact", "type": "object",
+    "required": ["onset_sample", "onset_s", "t_ns", "first_sample", "last_sample", "channels",
+                 "peak", "double_hit", "clipped", "too_short", "end_reason"],
+    "properties": {
+        "onset_sample": {"type": "integer"}, "onset_s": {"type": "number"},
+        "t_ns": {"type": "integer", "description": "device time of the onset, ns"},
+        "trigger_sample": {"type": "integer"}, "first_sample": {"type": "integer"},
+        "last_sample": {"type": "integer"}, "fs_hz": {"type": "number"},
+        "mode": {"enum": ["sta_lta", "force"]},
+        "channels": {"type": "array", "items": {"type": "string"}},
+        "gages": {"type": "array", "items": {"type": "integer"}},
+        "peak": {"type": "object", "additionalProperties": {"type": "number"}},
+        "snr_db": {"type": "number"}, "double_hit": {"type": "boolean"},
+        "second_onset_sample": {"type": ["integer", "null"]},
+        "second_onset_s": {"type": ["number", "null"]},
+        "clipped": {"type": "array", "items": {"type": "string"}},
+        "too_short": {"type": "boolean"},
+        "end_reason": {"enum": ["decayed", "max_length", "next_impact", "gap", "flush"]},
+        "decay_s": {"type": ["number", "null"]},
+    },
+}
+"""JSON Schema of :meth:`ImpactEvent.to_json`, for the ``/ramdaq/impacts`` topic."""
+
+
+class _Ring:
+    """The last ``history`` samples (at least) of every channel, int32, by sample index."""
+
+    def __init__(self, n_channels: int, history: int) -> None:
+        self.history = history
+        self.buf = np.zeros((n_channels, 2 * history), dtype=np.int32)
+        self.start = self.end = 0
+
+    def reset(self, at: int) -> None:
+        self.start = self.end = at
+
+    def write(self, first: int, counts: np.ndarray) -> None:
+        n = counts.shape[1]
+        if self.buf.shape[1] < self.history + n:  # a long block: grow, keeping the history
+            keep = max(self.start, self.end - self.history)
+            old = self.read(keep, self.end)
+            self.buf = np.zeros((len(self.buf), self.history + 2 * n), dtype=np.int32)
+            self.start = self.end = keep
+            self._put(keep, old)
+        self._put(first, counts)
+
+    def _put(self, first: int, counts: np.ndarray) -> None:
+        n, cap = counts.shape[1], self.buf.shape[1]
+        i = first % cap
+        k = min(n, cap - i)
+        self.buf[:, i:i + k] = counts[:, :k]
+        self.buf[:, :n - k] = counts[:, k:]
+        self.end = first + n
+        self.start = max(self.start, self.end - cap)
+
+    def read(self, a: int, b: int, rows: Any = slice(None)) -> np.ndarray:
+        if not self.start <= a <= b <= self.end:
+            raise IndexError(f"samples {a}..{b} are not in the ring ({self.start}..{self.end})")
+        cap = self.buf.shape[1]
+        i, j = a % cap, a % cap + (b - a)
+        if j <= cap:
+            return self.buf[rows, i:j]
+        return np.concatenate([self.buf[rows, i:], self.buf[rows, :j - cap]], axis=-1)
+
+
+@dataclass
+class _Event:
+    """An event being recorded (mutable working state)."""
+
+    detect: int
+    pre: np.ndarray                      # pre-event power of the monitor channels, units^2
+    onset: int = -1                      # refined onset sample, -1 until refined
+    onset_s: float = 0.0
+    voters: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    second: tuple[int, float | None] | None = None   # (sample, s); s None until refined
+    cut: _Event | None = None            # previous event to close at this one's onset
+    env_last: np.ndarray | None = None
+    env_pos: int = 0
+    hold: int = 0
+    decayed: int | None = None
+    end: int = -1                        # last sample of the record, -1 while ringing
+    end_reason: str = "decayed"
+    scan_pos: int = 0                    # next sample for the second-contact detector
+    sharp_on: bool = True                # detector still 'on' from the last contact
+    sharp_last: np.ndarray | None = None
+    off_pos: int = 0                     # where the second-contact detector last went off
+    dead_until: int = 0                  # no new contact before this sample
+    ar: np.ndarray | None = None
+    ar_var: np.ndarray | None = None
+
+
+class Trigger:
+    """Stateful impact trigger over a block stream; see the module docstring.
+
+    Parameters
+    ----------
+    info : StreamInfo
+        The stream: channel names, units, gage numbers, ``fs_hz``, ``rig_toml``, ``extra``.
+    mode : {"auto", "force", "sta_lta"}
+        ``auto`` uses a ram force channel (unit ``"N"``) when the stream has one.
+    force_channel : str, optional
+        Name of the ram load cell; default the first channel in ``"N"``.
+    level_N, slope_N_per_s : float
+        Force trigger: ``|F| >= level_N``, or ``|dF/dt| >= slope_N_per_s`` (N/s) if given.
+    hysteresis : float
+        ``|F|`` must fall below ``hysteresis * level_N`` before a new contact counts.
+    sta_s, lta_s : float
+        STA and LTA lengths, s. The trigger is ready ``lta_s`` after the start and any gap.
+    on : float
+        STA/LTA ratio of a voting gage that counts towards a trigger.
+    off : float
+        A second contact has ended when fewer than ``k`` gages' innovation ratio exceeds it.
+    k_of_n : (int, int or None)
+        ``k`` of the ``n`` voting gages must exceed ``on`` (``n`` None: all of ``voters``).
+    voters : sequence of str, optional
+        Channels that vote; default every gage (``info.gages > 0``).
+    pre_trigger_s, post_s, max_post_s : float
+        Record from ``pre_trigger_s`` before the onset to the decay's end, kept within
+        ``post_s .. max_post_s`` after the onset.
+    envelope_s, rearm_ratio, rearm_hold_s : float
+        Decay: envelope / pre-event power < ``rearm_ratio`` on every responding gage for
+        ``rearm_hold_s``; the envelope is a recursive mean of x**2 over ``envelope_s``.
+    double_hit_s : float
+        A second contact up to this long after the onset is a double hit; later, a new impact.
+    double_on, innovation_sta_s : float
+        Second contact: innovation power (mean over ``innovation_sta_s``) / its level in the
+        fit window above ``double_on`` on ``k`` responding gages.
+    ar_order : int, optional
+        Taps of the AR prediction-error filter; default ``min(32, fit samples // 3)`` (20 at
+        2048 Hz, 32 at 25.6 kHz, where the anti-alias band edge needs more).
+    ar_guard_s, ar_fit_s : float
+        The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset.
+    delay_s : float, optional
+        Front-end delay removed from onsets, s; default the rig's anti-alias filter
+        (:func:`analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
+    keep_records : bool
+        Attach the samples (:class:`ImpactRecord`) to each event.
+    """
+
+    def __init__(self, info: StreamInfo, *, mode: str = "auto", force_channel: str | None = None,
+                 level_N: float = 1000.0, slope_N_per_s: float | None = None,
+                 hysteresis: float = 0.5, sta_s: float = 0.01, lta_s: float = 2.0,
+                 on: float = 4.0, off: float = 2.0, k_of_n: tuple[int, int | None] = (3, None),
+                 voters: list[str] | tuple[str, ...] | None = None, pre_trigger_s: float = 0.5,
+                 post_s: float = 2.0, max_post_s: float = 30.0, envelope_s: float = 0.25,
+                 rearm_ratio: float = 2.0, rearm_hold_s: float = 0.25, double_hit_s: float = 1.0,
+                 double_on: float = 5.0, innovation_sta_s: float = 0.003, ar_order: int | None = None,
+                 ar_guard_s: float = 0.015, ar_fit_s: float = 0.03, delay_s: float | None = None,
+                 keep_records: bool = True) -> None:
+        self.info, self.fs_hz = info, float(info.fs_hz)
+        for name, v in (("level_N", level_N), ("sta_s", sta_s), ("lta_s", lta_s), ("on", on),
+                        ("off", off), ("post_s", post_s), ("envelope_s", envelope_s),
+                        ("rearm_ratio", rearm_ratio), ("rearm_hold_s", rearm_hold_s),
+                        ("double_on", double_on), ("innovation_sta_s", innovation_sta_s),
+                        ("ar_guard_s", ar_guard_s), ("ar_fit_s", ar_fit_s)):
+            if not v > 0 or not math.isfinite(v):
+                raise ValueError(f"{name} ({v}) must be a positive number")
+        if not 0 < hysteresis < 1:
+            raise ValueError(f"hysteresis ({hysteresis}) must lie between 0 and 1")
+        if not off < on:
+            raise ValueError(f"off ({off}) must be below on ({on})")
+        if not (0 <= pre_trigger_s and post_s <= max_post_s):
+            raise ValueError(f"need 0 <= pre_trigger_s ({pre_trigger_s}) and post_s ({post_s}) "
+                             f"<= max_post_s ({max_post_s})")
+        n = self._n
+        self._nsta, self._nlta = n(sta_s), n(lta_s)
+        if self._nsta >= self._nlta:
+            raise ValueError(f"sta_s ({sta_s}) must be shorter than lta_s ({lta_s})")
+        names = list(info.channels)
+        if voters is None:
+            voters = [c for c, g in zip(names, info.gages, strict=True) if g > 0]
+        for v in voters:
+            if v not in names:
+                raise ValueError(f"voter {v!r} is not a channel of the stream")
+        self._vidx = np.array([names.index(v) for v in voters], dtype=int)
+        k, n_of = k_of_n
+        if n_of is not None and n_of != len(self._vidx):
+            raise ValueError(f"k_of_n n ({n_of}) is not the number of voting gages "
+                             f"({len(self._vidx)})")
+        if not 1 <= k <= len(self._vidx):
+            raise ValueError(f"k_of_n k ({k}) must lie in 1..{len(self._vidx)}")
+        self._k = k
+        if mode not in ("auto", "force", "sta_lta"):
+            raise ValueError(f"mode {mode!r} is not 'auto', 'force' or 'sta_lta'")
+        if force_channel is not None and (force_channel not in names
+                                          or info.units[names.index(force_channel)] != "N"):
+            raise ValueError(f"force_channel {force_channel!r} is not a channel in N")
+        in_n = [i for i, u in enumerate(info.units) if u == "N"]
+        fidx = names.index(force_channel) if force_channel else (in_n[0] if in_n else None)
+        if mode == "force" and fidx is None:
+            raise ValueError("mode 'force' needs a channel in N; the stream has none")
+        self._fidx = fidx if mode in ("auto", "force") else None
+        self.mode = "sta_lta" if self._fidx is None else "force"
+        self.level_N, self.slope_N_per_s, self.hysteresis = level_N, slope_N_per_s, hysteresis
+        self.on, self.off, self.double_on, self.rearm_ratio = on, off, double_on, rearm_ratio
+        self._pre_n, self._post_n, self._max_n = n(pre_trigger_s, 0), n(post_s), n(max_post_s)
+        self._env_n, self._hold_n, self._double_n = n(envelope_s), n(rearm_hold_s), n(double_hit_s)
+        self._guard_n, self._fit_n = n(ar_guard_s), n(ar_fit_s)
+        self._inno_n = n(innovation_sta_s)
+        self._order = min(32, self._fit_n // 3) if ar_order is None else int(ar_order)
+        if not 1 <= self._order < self._fit_n // 2:
+            raise ValueError(f"ar_order ({self._order}) must lie in 1..{self._fit_n // 2 - 1} "
+                             f"for ar_fit_s ({ar_fit_s})")
+        self._aic_pre_n, self._aic_post_n = n(_AIC_PRE_S), n(_AIC_POST_S)
+        self._search_n = (n(_EDGE_SEARCH_S[0]), n(_EDGE_SEARCH_S[1], 0))
+        self._edge_pre_n = max(n(_EDGE_PRE_S), self._search_n[0] + 3)
+        self._edge_post_n = max(n(_EDGE_POST_S), self._search_n[1] + 3)
+        self._look_n = self._aic_post_n + self._edge_post_n + 2
+        if self._env_n + self._hold_n <= self._look_n:
+            raise ValueError(f"envelope_s + rearm_hold_s ({envelope_s + rearm_hold_s}) must be "
+                             f"longer than the onset look-ahead ({self._look_n / self.fs_hz} s)")
+        self.delay_s = _rig_delay_s(info) if delay_s is None else float(delay_s)
+        self._delay_n = self.delay_s * self.fs_hz
+        bits = info.extra.get("adc_bits")
+        self._rails = None if bits is None else (-(2 ** (int(bits) - 1)), 2 ** (int(bits) - 1) - 1)
+        self.keep_records = keep_records
+        self._ring = _Ring(info.n_channels, self._pre_n + self._max_n + n(_RING_SPARE_S))
+        self._scale = np.ones(info.n_channels)
+        self._expected: int | None = None
+        self._reset(0, 0)
+
+    # -- public ----------------------------------------------------------------------------
+    @property
+    def state(self) -> str:
+        """``"not ready"``, ``"armed"`` or ``"active"``."""
+        return self._state
+
+    def process(self, block: Block) -> list[ImpactEvent]:
+        """Feed the next block; returns the events whose records completed in it."""
+        if block.n_channels != self.info.n_channels or block.fs_hz != self.fs_hz:
+            raise ValueError(f"block of {block.n_channels} channels at {block.fs_hz} Hz does not "
+                             f"match the stream ({self.info.n_channels} at {self.fs_hz} Hz)")
+        out: list[ImpactEvent] = []
+        if block.first_sample != self._expected:
+            if self._expected is not None:
+                out += self._close("gap")
+            self._reset(block.first_sample, block.t0_ns)
+        self._expected = block.next_sample
+        self._ring.write(block.first_sample, block.counts)
+        self._scale = block.scale
+        x = block.counts[self._vidx] * block.scale[self._vidx, None]
+        x2 = x * x
+        sta, self._sta_last = ons.exp_average(x2, self._nsta, self._sta_last)
+        self._run(block.first_sample, x2, sta, out)
+        return out
+
+    def flush(self) -> list[ImpactEvent]:
+        """End of stream: close the event being recorded, if any (``end_reason="flush"``)."""
+        out = self._close("flush")
+        self._expected = None
+        return out
+
+    # -- state machine -----------------------------------------------------------------------
+    def _n(self, seconds: float, minimum: int = 1) -> int:
+        return max(minimum, round(seconds * self.fs_hz))
+
+    def _reset(self, first_sample: int, t0_ns: int) -> None:
+        nv = len(self._vidx)
+        self._state, self._ev = NOT_READY, None
+        self._sta_last, self._lta_last, self._lta_m = np.zeros(nv), np.zeros(nv), 0
+        self._seg = (first_sample, t0_ns)
+        self._ring.reset(first_sample)
+        self._f_below = True
+
+    def _run(self, b0: int, x2: np.ndarray, sta: np.ndarray, out: list[ImpactEvent]) -> None:
+        end, pos = b0 + x2.shape[1], b0
+        while True:
+            ev = self._ev
+            if self._state == NOT_READY:
+                if pos >= end:
+                    return
+                stop = min(end, pos + self._nlta - self._lta_m)
+                self._lta_advance(x2[:, pos - b0:stop - b0])
+                pos = stop
+                if self._lta_m >= self._nlta:
+                    self._state = ARMED
+            elif self._state == ARMED:
+                if ev is not None and ev.end < pos:
+                    out.append(self._finish(ev))
+                    self._ev = None
+                    continue
+                if pos >= end:
+                    return
+                limit = end if ev is None else min(end, ev.end + 1)
+                d = self._detect(pos, limit, b0, x2, sta)
+                if d is None:
+                    pos = limit
+                else:
+                    self._ev = _Event(detect=d, pre=self._pre_power(), cut=ev)
+                    self._state, pos = ACTIVE, d
+            else:
+                r = self._advance(end, out)
+                if r is None:
+                    return
+                self._state, pos = ARMED, r
+
+    def _lta_advance(self, x2: np.ndarray) -> np.ndarray:
+        lta, self._lta_last = ons.exp_average(x2, self._nlta, self._lta_last)
+        m0, self._lta_m = self._lta_m, self._lta_m + x2.shape[1]
+        if m0 < 20 * self._nlta:  # undo the bias of an average started from zero
+            lta = lta / -np.expm1(np.arange(m0 + 1, self._lta_m + 1) * np.log1p(-1 / self._nlta))
+        return lta
+
+    def _pre_power(self) -> np.ndarray:
+        bias = -math.expm1(self._lta_m * math.log1p(-1 / self._nlta))
+        return np.maximum(self._lta_last / bias, self._scale[self._vidx] ** 2 / 12)
+
+    def _values(self, a: int, b: int, rows: Any) -> np.ndarray:
+        return self._ring.read(a, b, rows) * self._scale[rows, None]
+
+    def _detect(self, pos: int, limit: int, b0: int, x2: np.ndarray, sta: np.ndarray) -> int | None:
+        """First trigger in ``pos .. limit-1`` while armed; the LTA advances up to it."""
+        seg = slice(pos - b0, limit - b0)
+        lta_last, m0 = self._lta_last, self._lta_m
+        lta = self._lta_advance(x2[:, seg])
+        if self._fidx is None:
+            hit = (sta[:, seg] > self.on * lta).sum(axis=0) >= self._k
+        else:
+            f = self._values(max(pos - 1, self._ring.start), limit, [self._fidx])[0]
+            slope = (np.abs(np.diff(f, prepend=f[0])) * self.fs_hz)[-(limit - pos):]
+            f = np.abs(f[-(limit - pos):])
+            hit = f >= self.level_N
+            if self.slope_N_per_s is not None:
+                hit |= slope >= self.slope_N_per_s
+            if not self._f_below:
+                below = np.flatnonzero(f < self.hysteresis * self.level_N)
+                hit[:below[0] if below.size else hit.size] = False
+                self._f_below = bool(below.size)
+        idx = np.flatnonzero(hit)
+        if idx.size == 0:
+            return None
+        j = int(idx[0])
+        self._lta_last = lta_last if j == 0 else ons.exp_average(
+            x2[:, seg.start:seg.start + j], self._nlta, lta_last)[1]
+        self._lta_m = m0 + j
+        return pos + j
+
+    def _advance(self, end: int, out: list[ImpactEvent]) -> int | None:
+        """Work through the active event up to sample ``end``; the re-arm sample, or None."""
+        while True:
+            ev = self._ev
+            if ev.onset < 0:
+                if end < ev.detect + self._look_n:
+                    return None
+                self._refine(ev, out)
+            self._refine_second(ev, end)
+            max_end = ev.onset + self._max_n
+            if self._fidx is None and ev.ar is None and end >= ev.onset + self._guard_n + self._fit_n:
+                self._fit(ev)
+            r = self._scan_decay(ev, min(end, max_end + 1))
+            s = self._scan_sharp(ev, end if r is None else r)
+            if s is not None and s - ev.onset <= self._double_n:
+                ev.second = ev.second or (s, None)
+            elif s is not None:  # a new blow while the last one still rings
+                self._ev = _Event(detect=s, pre=ev.pre, cut=ev, voters=ev.voters, ar=ev.ar,
+                                  ar_var=ev.ar_var, scan_pos=ev.scan_pos,
+                                  sharp_last=ev.sharp_last, off_pos=ev.off_pos,
+                                  dead_until=ev.dead_until)
+            elif r is not None or ev.env_pos > max_end:
+                # the LTA resumes from the pre-event level, or from what still rings if higher
+                self._f_below = not ev.sharp_on
+                self._lta_last = np.maximum(ev.pre, ev.env_last)
+                self._lta_m = max(self._lta_m, 20 * self._nlta)
+                if r is not None:
+                    ev.end = min(max(r, ev.onset + self._post_n), max_end)
+                    return r + 1
+                ev.end, ev.end_reason = max_end, "max_length"
+                return max_end + 1
+            else:
+                return None
+
+    def _edge(self, rows: Any, noise_var: np.ndarray | None, a: int, d: int) -> float:
+        """AIC pick in ``a .. d + aic_post``, refined by the hinge fit when the ring allows."""
+        pick = a + ons.aic_pick(self._values(a, d + self._aic_post_n + 1, rows))
+        lo, hi = pick - self._edge_pre_n, pick + self._edge_post_n + 1
+        if lo < self._ring.start or hi > self._ring.end:
+            return float(pick)
+        return lo + ons.hinge_onset(self._values(lo, hi, rows), self._edge_pre_n,
+                                    pre_n=self._edge_pre_n, post_n=self._edge_post_n,
+                                    search_n=self._search_n, noise_var=noise_var)
+
+    def _residual_pick(self, ev: _Event, d: int) -> float:
+        a = max(d - self._aic_pre_n // 2, ev.off_pos, self._ring.start + self._order)
+        a = min(a, d - self._guard_n)
+        x = self._values(a - self._order, d + self._aic_post_n + 1, self._vidx[ev.voters])
+        return float(a + ons.aic_pick(ons.prediction_error(x, ev.ar)))
+
+    def _refine(self, ev: _Event, out: list[ImpactEvent]) -> None:
+        d = ev.detect
+        a = max(self._ring.start, d - self._aic_pre_n)
+        if ev.voters.size == 0:
+            x = self._values(d, d + self._aic_post_n + 1, self._vidx)
+            resp = np.flatnonzero((x * x).max(axis=1) > self.on * ev.pre)
+            ev.voters = resp if resp.size else np.arange(len(self._vidx))
+        if self._fidx is not None:
+            f = self._edge([self._fidx], None, max(a, ev.off_pos), d)
+            ev.scan_pos, ev.sharp_on = d + 1, True
+        elif ev.ar is None:
+            f = self._edge(self._vidx[ev.voters], ev.pre[ev.voters], a, d)
+        else:  # the AR filter whitens the anti-alias filter too: no delay to remove
+            f = self._residual_pick(ev, d) + self._delay_n
+        f -= self._delay_n
+        ev.onset, ev.onset_s = max(round(f), self._ring.start), f / self.fs_hz
+        ev.env_last, ev.env_pos = ev.pre.copy(), ev.onset
+        if ev.cut is not None:
+            ev.cut.end = min(ev.cut.end if ev.cut.end >= 0 else ev.onset, ev.onset) - 1
+            ev.cut.end = max(ev.cut.end, ev.cut.onset)
+            ev.cut.end_reason = "next_impact"
+            out.append(self._finish(ev.cut))
+            ev.cut = None
+
+    def _refine_second(self, ev: _Event, end: int) -> None:
+        if ev.second is None or ev.second[1] is not None or end < ev.second[0] + self._look_n:
+            return
+        s = ev.second[0]
+        if self._fidx is not None:
+            f = self._edge([self._fidx], None, max(s - self._aic_pre_n, ev.off_pos), s)
+            f -= self._delay_n
+        else:
+            f = self._residual_pick(ev, s)
+        ev.second = (round(f), f / self.fs_hz)
+
+    def _fit(self, ev: _Event) -> None:
+        f0 = ev.onset + self._guard_n
+        rows = self._vidx[ev.voters]
+        x = self._values(f0, f0 + self._fit_n, rows)
+        ev.ar = ons.ar_prediction_filter(x, self._order, ev.pre[ev.voters])
+        e = ons.prediction_error(x, ev.ar)
+        ev.ar_var = np.maximum(np.mean(e * e, axis=1), self._scale[rows] ** 2 / 12)
+        ev.scan_pos = ev.off_pos = f0 + self._fit_n
+        ev.sharp_on, ev.sharp_last = False, ev.ar_var.copy()
+
+    def _scan_decay(self, ev: _Event, limit: int) -> int | None:
+        """Sample where the envelope has been back near the pre-event level for the hold."""
+        if ev.decayed is not None or limit <= ev.env_pos:
+            return ev.decayed
+        a = ev.env_pos
+        x = self._values(a, limit, self._vidx)
+        env, last = ons.exp_average(x * x, self._env_n, ev.env_last)
+        ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.rearm_ratio
+        ok[:max(0, ev.onset + self._env_n - a)] = False
+        j, ev.hold = ons.first_hold(ok, self._hold_n, ev.hold)
+        if j is None:
+            ev.env_last, ev.env_pos = last, limit
+            return None
+        ev.env_last, ev.env_pos, ev.decayed = env[:, j].copy(), a + j + 1, a + j
+        return a + j
+
+    def _scan_sharp(self, ev: _Event, limit: int) -> int | None:
+        """Next sharp onset (second contact) in ``scan_pos .. limit-1``, with hysteresis."""
+        a = ev.scan_pos
+        if limit <= a or (self._fidx is None and ev.ar is None):
+            return None
+        if self._fidx is not None:
+            f = np.abs(self._values(a, limit, [self._fidx])[0])
+            on, off, p, last = f >= self.level_N, f < self.hysteresis * self.level_N, None, None
+        else:
+            x = self._values(a - self._order, limit, self._vidx[ev.voters])
+            e = ons.prediction_error(x, ev.ar)
+            p, last = ons.exp_average(e * e, self._inno_n, ev.sharp_last)
+            ratio = p / ev.ar_var[:, None]
+            kk = min(self._k, len(ev.voters))
+            on = (ratio > self.double_on).sum(axis=0) >= kk
+            off = (ratio > self.off).sum(axis=0) < kk
+        dead = max(0, ev.dead_until - a)  # one contact cannot trigger twice
+        on[:dead] = off[:dead] = False
+        j, ev.sharp_on, off_i = ons.next_trigger(on, off, ev.sharp_on)
+        if off_i >= 0:
+            ev.off_pos = a + off_i
+        if j is None:
+            ev.scan_pos, ev.sharp_last = limit, last
+            return None
+        ev.scan_pos, ev.sharp_last = a + j + 1, None if p is None else p[:, j].copy()
+        ev.dead_until = a + j + self._guard_n
+        return a + j
+
+    def _close(self, reason: str) -> list[ImpactEvent]:
+        """Close the open event at the last sample in the ring (gap or end of stream)."""
+        out: list[ImpactEvent] = []
+        ev, end = self._ev, self._ring.end
+        if ev is None:
+            return out
+        if ev.onset < 0 and end >= ev.detect + self._look_n:
+            self._refine(ev, out)
+        elif ev.onset < 0:
+            ev.onset, ev.onset_s = ev.detect, ev.detect / self.fs_hz
+            if ev.voters.size == 0:
+                ev.voters = np.arange(len(self._vidx))
+            if ev.cut is not None:
+                ev.cut.end, ev.cut.end_reason = max(ev.detect - 1, ev.cut.onset), "next_impact"
+                out.append(self._finish(ev.cut))
+        self._refine_second(ev, end)
+        if ev.second is not None and ev.second[1] is None:
+            ev.second = (ev.second[0], ev.second[0] / self.fs_hz)
+        ev.end, ev.end_reason = end - 1, reason
+        out.append(self._finish(ev))
+        self._ev = None
+        return out
+
+    def _finish(self, ev: _Event) -> ImpactEvent:
+        fs, names = self.fs_hz, self.info.channels
+        first = max(ev.onset - self._pre_n, self._ring.start)
+        last = max(ev.end, ev.onset)
+        counts = self._ring.read(first, last + 1)
+        peak = np.abs(counts[:, ev.onset - first:]).max(axis=1) * self._scale
+        clipped: tuple[str, ...] = ()
+        if self._rails is not None:
+            rail = ((counts <= self._rails[0]) | (counts >= self._rails[1])).any(axis=1)
+            clipped = tuple(names[i] for i in np.flatnonzero(rail))
+        rows = self._vidx[ev.voters]
+        chans = ([self._fidx] if self._fidx is not None else []) + list(rows)
+        snr = np.max(peak[rows] ** 2 / ev.pre[ev.voters])
+        cut = ev.end_reason in ("gap", "flush", "next_impact") and last < ev.onset + self._post_n
+        seg0, t0 = self._seg
+        second = ev.second or (None, None)
+        return ImpactEvent(
+            onset_sample=ev.onset, onset_s=ev.onset_s,
+            t_ns=t0 + round((ev.onset_s * fs - seg0) * 1e9 / fs), trigger_sample=ev.detect,
+            first_sample=first, last_sample=last, fs_hz=fs, mode=self.mode,
+            channels=tuple(names[i] for i in chans),
+            gages=tuple(int(self.info.gages[i]) for i in chans if self.info.gages[i] > 0),
+            peak={n: float(v) for n, v in zip(names, peak, strict=True)},
+            snr_db=float(10 * np.log10(snr)) if snr > 0 else 0.0,
+            double_hit=ev.second is not None, second_onset_sample=second[0],
+            second_onset_s=second[1], clipped=clipped,
+            too_short=cut or first > ev.onset - self._pre_n, end_reason=ev.end_reason,
+            decay_s=None if ev.decayed is None else (ev.decayed - ev.onset) / fs,
+            record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
+                                self._scale.copy()) if self.keep_records else None)
+
+
+def _rig_delay_s(info: StreamInfo) -> float:
+    """Group delay of the anti-alias filter the rig in ``info.rig_toml`` describes, else 0."""
+    try:
+        daq = tomllib.loads(info.rig_toml).get("daq", {})
+        return ons.butterworth_delay_s(int(daq["anti_alias_order"]), float(daq["anti_alias_hz"]),
+                                       info.fs_hz)
+    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError):
+        return 0.0

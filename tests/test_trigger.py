@@ -1,0 +1,330 @@
+"""The impact trigger (daq/trigger.py) and its maths (analysis/onset.py), on the real simulator.
+
+SNR, as used here and in ``ImpactEvent.snr_db``: 20 log10 of the peak |acceleration| of the
+blow's noise-free response on the strongest gage over the rms of that gage's noise after the
+anti-alias filter (the rig's ``daq.noise_m_s2_rms`` is broadband, before the filter). It is set
+by scaling the rig's noise. Truth is ``SimDevice.delivered_impacts`` (exact start times, between
+samples); "within 1 sample" compares ``onset_sample`` and ``onset_s * fs`` with ``t_s * fs``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import scipy.signal
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from analysis import onset as ons
+from analysis.rig import Rig
+from daq.info import describe_recording
+from daq.recorder import Recorder
+from daq.trigger import IMPACT_JSON_SCHEMA, Trigger
+from drivers.block import Block, StreamInfo, sample_time_ns
+from drivers.mcap_format import IMPACTS_TOPIC
+from drivers.sim import Impact, SimDevice
+
+pytestmark = pytest.mark.timeout(120)
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def stream(rig: Rig, impacts: list, duration_s: float, seed: int = 0, **kw) -> tuple:
+    dev = SimDevice(rig, seed=seed, duration_s=duration_s, impacts=impacts, **kw)
+    with dev:
+        return dev, list(dev)
+
+
+def run(info: StreamInfo, blocks, **kw) -> list:
+    trig = Trigger(info, **kw)
+    events = [e for b in blocks for e in trig.process(b)]
+    return events + trig.flush()
+
+
+def rechunk(blocks: list[Block], n: int) -> list[Block]:
+    """The same stream cut into blocks of ``n`` samples."""
+    counts, fs = np.hstack([b.counts for b in blocks]), blocks[0].fs_hz
+    return [Block(k, a, sample_time_ns(a, fs), fs, counts[:, a:a + n], blocks[0].scale)
+            for k, a in enumerate(range(0, counts.shape[1], n))]
+
+
+def with_noise(rig: Rig, noise_m_s2_rms: float) -> Rig:
+    return dataclasses.replace(rig, daq=dataclasses.replace(rig.daq, noise_m_s2_rms=noise_m_s2_rms))
+
+
+_SNR_REFERENCE: dict[str, tuple[float, float]] = {}
+
+
+def _snr_reference(rig: Rig) -> tuple[float, float]:
+    """(noise-free peak on the strongest gage, m/s^2; filtered rms per unit broadband noise)."""
+    if rig.name not in _SNR_REFERENCE:
+        _, clean = stream(rig, [0.2], 1.5, noise=False)
+        _, quiet = stream(dataclasses.replace(with_noise(rig, 1.0), ambient=()), [], 3.0)
+        peak = np.abs(np.hstack([b.values() for b in clean])).max()
+        noise = np.hstack([b.values() for b in quiet])[:, 500:].std()
+        _SNR_REFERENCE[rig.name] = (float(peak), float(noise))
+    return _SNR_REFERENCE[rig.name]
+
+
+def rig_at_snr(rig: Rig, snr_db: float) -> Rig:
+    peak, filtered_per_unit = _snr_reference(rig)
+    return with_noise(rig, peak / 10 ** (snr_db / 20) / filtered_per_unit)
+
+
+def blow(rig: Rig, t_s: float, scale: float = 1.0) -> Impact:
+    i = rig.impact
+    return Impact(t_s, i.peak_force_N * scale, i.duration_s, i.location_m, i.direction)
+
+
+# -- analysis.onset ---------------------------------------------------------------------------
+def test_sta_lta_fast_equals_reference_and_obspy_warmup():
+    x = np.random.default_rng(1).standard_normal((3, 3000)) * [[1.0], [1e-3], [50.0]]
+    ratio, state = ons.recursive_sta_lta(x, 25, 800)
+    for c in range(3):
+        ref = ons.recursive_sta_lta_ref(x[c], 25, 800)
+        np.testing.assert_allclose(ratio[c], ref, rtol=1e-12, atol=0)
+    assert not ratio[:, :800].any() and (ratio[:, 800:] > 0).all()
+    assert state.n_seen == 3000
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.integers(min_value=0, max_value=2500), max_size=8))
+def test_sta_lta_block_by_block_equals_whole_record(cuts):
+    x = np.random.default_rng(2).standard_normal((2, 2500))
+    whole, _ = ons.recursive_sta_lta(x, 10, 400)
+    edges = [0, *sorted(cuts), 2500]
+    state, parts = None, []
+    for a, b in zip(edges, edges[1:], strict=False):
+        r, state = ons.recursive_sta_lta(x[:, a:b], 10, 400, state)
+        parts.append(r)
+    assert np.array_equal(np.hstack(parts), whole)  # to the last bit
+
+
+@pytest.mark.parametrize(("nsta", "nlta", "match"), [
+    (0, 100, r"nsta \(0\)"), (10, 10, r"nsta \(10\) must be shorter than nlta \(10\)"),
+    (2.5, 100, r"nsta \(2.5\)"), (5, -1, r"nlta \(-1\)"),
+])
+def test_sta_lta_bad_lengths(nsta, nlta, match):
+    with pytest.raises(ValueError, match=match):
+        ons.recursive_sta_lta(np.zeros(50), nsta, nlta)
+
+
+def test_aic_pick_finds_a_variance_step():
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((4, 300))
+    x[:, 173:] *= 6.0
+    assert abs(ons.aic_pick(x) - 173) <= 2
+
+
+def test_hinge_onset_places_a_ramp_between_samples():
+    t = np.arange(200.0)
+    rng = np.random.default_rng(4)
+    for true in (100.0, 100.3, 100.75):
+        x = np.vstack([a * np.maximum(t - true, 0) + 0.3 * np.maximum(t - true, 0) ** 2
+                       for a in (1.0, -2.0, 0.5)]) + 0.02 * rng.standard_normal((3, 200))
+        got = ons.hinge_onset(x, 101, pre_n=30, post_n=8, search_n=(3, 1), noise_var=[4e-4] * 3)
+        assert abs(got - true) < 0.1
+
+
+def test_ar_filter_whitens_ringing_shared_by_channels():
+    t = np.arange(400) / 2048
+    modes = [np.exp(-3 * t) * np.sin(2 * np.pi * 24.5 * t + p) for p in (0, 1, 2)]
+    modes2 = [np.exp(-1 * t) * np.sin(2 * np.pi * 88 * t + p) for p in (2, 0, 1)]
+    x = np.vstack([a + 0.3 * b for a, b in zip(modes, modes2, strict=True)])
+    a = ons.ar_prediction_filter(x[:, :120], 4)
+    e = ons.prediction_error(x, a)
+    assert np.abs(e).max() < 1e-8 * np.abs(x).max()
+
+
+def test_butterworth_delay():
+    # analogue limit 1 / (2 pi fc sin(pi / 2n)); the rig's 800 Hz 4th order at 2048 Hz: 0.4675 samples
+    assert ons.butterworth_delay_s(4, 5.0, 2048) == pytest.approx(
+        1 / (2 * np.pi * 5.0 * np.sin(np.pi / 8)), rel=1e-4)
+    assert ons.butterworth_delay_s(4, 800.0, 2048) * 2048 == pytest.approx(0.4675, abs=1e-4)
+    with pytest.raises(ValueError, match=r"corner_hz \(1100.0\)"):
+        ons.butterworth_delay_s(4, 1100.0, 2048)
+
+
+def test_streaming_trigger_helpers():
+    on = np.array([1, 1, 1, 0, 0, 1, 0], bool)
+    assert ons.next_trigger(on, ~on, False) == (0, True, -1)
+    assert ons.next_trigger(on, ~on, True) == (5, True, 3)  # off at 3 first, then on again
+    assert ons.next_trigger(on[:3], ~on[:3], True) == (None, True, -1)
+    ok = np.array([1, 1, 0, 1, 1, 1, 1], bool)
+    assert ons.first_hold(ok, 3) == (5, 4)
+    assert ons.first_hold(ok[:2], 3, run=1) == (1, 3)
+
+
+# -- Trigger: detection and onset -------------------------------------------------------------
+@pytest.mark.parametrize("snr_db", [15, 20, 30, 45, 60])
+def test_every_hit_found_and_onset_to_the_sample(albacore, snr_db):
+    """10 blows per SNR, each in its own seeded stream after the LTA has filled."""
+    rig, fs = rig_at_snr(albacore, snr_db), albacore.daq.sample_rate_hz
+    rng = np.random.default_rng(snr_db)
+    errors = []
+    for seed in range(10):
+        t = 2.5 + rng.uniform(0, 0.5)
+        dev, blocks = stream(rig, [t], t + 1.0, seed=seed)
+        events = run(dev.info, blocks)
+        assert len(events) == 1, f"SNR {snr_db} dB seed {seed}: {len(events)} events"
+        truth = dev.delivered_impacts[0].t_s * fs
+        errors.append(events[0].onset_s * fs - truth)
+        if snr_db >= 20:
+            assert abs(events[0].onset_sample - truth) <= 1
+        assert not events[0].double_hit
+        assert -2 < events[0].snr_db - snr_db < (4 if snr_db < 20 else 2)  # noise lifts the peak
+    if snr_db >= 20:
+        assert np.max(np.abs(errors)) < 1.0
+
+
+def test_sampson_tone_before_the_hit_does_not_trigger(sampson):
+    fs = sampson.daq.sample_rate_hz
+    dev, blocks = stream(sampson, [12.0004, 25.3], 35.0, seed=3)
+    events = run(dev.info, blocks)
+    truth = [i.t_s * fs for i in dev.delivered_impacts]
+    assert [abs(e.onset_s * fs - t) < 1 for e, t in zip(events, truth, strict=True)] == [True] * 2
+    assert events[0].first_sample == events[0].onset_sample - round(0.5 * fs)
+
+
+def test_ten_minutes_of_tone_and_noise_give_no_trigger(sampson):
+    """SAMPSON's 2.18 Hz hull tone plus noise, 10 min, 16 ch x 2048 Hz (~20 M samples)."""
+    dev = SimDevice(sampson, seed=11, duration_s=600.0, block_s=0.5)
+    with dev:
+        trig = Trigger(dev.info)
+        events = [e for b in dev for e in trig.process(b)]
+    assert events == [] and trig.state == "armed"
+
+
+# -- double hits, clipping, records -----------------------------------------------------------
+@pytest.mark.parametrize("rig_name", ["albacore", "sampson"])
+def test_double_hits_are_flagged(rig_name, request):
+    rig = request.getfixturevalue(rig_name)
+    fs = rig.daq.sample_rate_hz
+    rng = np.random.default_rng(7)
+    for seed in range(6):
+        t, dt = 2.5 + rng.uniform(0, 0.5), rng.uniform(0.05, 0.15)
+        pair = [blow(rig, t), blow(rig, t + dt, rng.uniform(0.3, 1.0))]
+        dev, blocks = stream(rig, pair, t + 3.0, seed=seed)
+        (event,) = run(dev.info, blocks)
+        assert event.double_hit, f"seed {seed}: second blow {dt * 1e3:.0f} ms later missed"
+        assert abs(event.second_onset_s - (t + dt)) * fs <= 2
+        dev, blocks = stream(rig, pair[:1], t + 3.0, seed=seed)
+        (single,) = run(dev.info, blocks)
+        assert not single.double_hit and single.second_onset_s is None
+
+
+def test_clipped_channels_are_flagged(albacore):
+    small = dataclasses.replace(albacore, daq=dataclasses.replace(albacore.daq,
+                                                                  adc_full_scale_V=0.05))
+    dev, blocks = stream(small, [3.0], 5.0)
+    (event,) = run(dev.info, blocks)
+    assert dev.clipped_samples and set(event.clipped) == set(dev.clipped_samples)
+    dev, blocks = stream(albacore, [3.0], 5.0)
+    assert run(dev.info, blocks)[0].clipped == ()
+
+
+def test_record_is_handed_over_with_its_first_sample(albacore):
+    dev, blocks = stream(albacore, [3.0], 8.0)
+    (event,) = run(dev.info, blocks, post_s=2.0, max_post_s=4.0)
+    rec, fs = event.record, albacore.daq.sample_rate_hz
+    assert (rec.first_sample, rec.last_sample) == (event.first_sample, event.last_sample)
+    assert rec.first_sample == event.onset_sample - round(0.5 * fs)
+    assert event.end_reason == "max_length" and event.last_sample == event.onset_sample + 4 * fs
+    whole = np.hstack([b.values() for b in blocks])
+    assert np.array_equal(rec.values(), whole[:, rec.first_sample:rec.last_sample + 1])
+    assert event.peak["g04"] == pytest.approx(np.abs(whole[3, event.onset_sample:]).max())
+
+
+# -- streaming, gaps, force channel, JSON -----------------------------------------------------
+def test_streaming_equals_batch(albacore):
+    """A blow, a second contact 90 ms later, a new blow while still ringing: any block size."""
+    dev, blocks = stream(albacore, [3.0004, blow(albacore, 3.09, 0.5), 8.0], 12.0)
+    ref = run(dev.info, blocks)
+    assert [(e.double_hit, e.end_reason) for e in ref] == [(True, "next_impact"), (False, "flush")]
+    for n in (3, 27, 1000, 24576):
+        events = run(dev.info, rechunk(blocks, n))
+        assert events == ref, f"blocks of {n} samples"
+        assert all(np.array_equal(a.record.counts, b.record.counts)
+                   for a, b in zip(events, ref, strict=True))
+
+
+def test_gaps_give_no_false_trigger(sampson):
+    """Dropped blocks put phase jumps into the 2.18 Hz tone; the trigger restarts instead."""
+    fs = sampson.daq.sample_rate_hz
+    dev, blocks = stream(sampson, [4.0, 20.0], 30.0, seed=5)
+    dropped = [(6.0, 6.3), (10.0, 10.15), (20.05, 20.2)]
+    kept = [b for b in blocks
+            if not any(a <= b.first_sample / fs < z for a, z in dropped)]
+    events = run(dev.info, kept)
+    assert [round(e.onset_s, 2) for e in events] == [4.0, 20.0]
+    assert [e.end_reason for e in events] == ["gap", "gap"]
+    first_dropped = next(b for b in blocks if b.first_sample / fs >= 6.0).first_sample
+    assert events[0].last_sample == first_dropped - 1 and not events[0].too_short
+    assert events[1].too_short
+
+
+def test_force_channel_level_trigger(albacore):
+    """A 17th channel, a ram load cell in N, built from the simulator's truth (half-sines through
+    the rig's anti-alias filter, 20 N rms noise)."""
+    fs = albacore.daq.sample_rate_hz
+    dev, blocks = stream(albacore, [3.0004, blow(albacore, 3.09), 6.5], 8.0)
+    t = np.arange(sum(b.n_samples for b in blocks)) / fs
+    force = np.random.default_rng(0).normal(0.0, 20.0, t.size)
+    for i in dev.delivered_impacts:
+        on = (t >= i.t_s) & (t <= i.t_s + i.duration_s)
+        force[on] += i.peak_force_N * np.sin(np.pi * (t[on] - i.t_s) / i.duration_s)
+    sos = scipy.signal.butter(albacore.daq.anti_alias_order, albacore.daq.anti_alias_hz, fs=fs,
+                              output="sos")
+    counts = np.rint(scipy.signal.sosfilt(sos, force) / 0.01).astype(np.int32)
+    info = dataclasses.replace(dev.info, channels=dev.info.channels + ("ram",),
+                               units=dev.info.units + ("N",), gages=dev.info.gages + (0,))
+    blocks17 = [Block(b.seq, b.first_sample, b.t0_ns, fs,
+                      np.vstack([b.counts, counts[None, b.first_sample:b.next_sample]]),
+                      np.append(b.scale, 0.01)) for b in blocks]
+    events = run(info, blocks17)
+    truth = [i.t_s * fs for i in dev.delivered_impacts]
+    assert Trigger(info).mode == "force" and len(events) == 2
+    assert abs(events[0].onset_s * fs - truth[0]) < 1 and abs(events[1].onset_s * fs - truth[2]) < 1
+    assert events[0].double_hit and abs(events[0].second_onset_s * fs - truth[1]) < 1
+    assert events[0].end_reason == "next_impact" and events[0].channels[0] == "ram"
+
+
+def test_events_are_json_for_the_impacts_topic(albacore, tmp_path):
+    dev, blocks = stream(albacore, [3.0, blow(albacore, 3.1)], 6.0)
+    path = tmp_path / "impacts.mcap"
+    trig, sent = Trigger(dev.info), []
+    with Recorder(path, dev.info) as rec:
+        for b in blocks:
+            rec.put(b)
+            for e in trig.process(b):
+                rec.write_json(IMPACTS_TOPIC, e.to_json(), e.t_ns)
+                sent.append(e.to_json())
+        for e in trig.flush():
+            rec.write_json(IMPACTS_TOPIC, e.to_json(), e.t_ns)
+            sent.append(e.to_json())
+    assert len(sent) == 1 and sent[0]["double_hit"]
+    assert describe_recording(path)["impacts"] == sent
+    assert set(IMPACT_JSON_SCHEMA["required"]) <= set(sent[0])
+    assert set(sent[0]) == set(IMPACT_JSON_SCHEMA["properties"])
+    json.dumps(sent[0], allow_nan=False)
+
+
+@pytest.mark.parametrize(("kw", "match"), [
+    (dict(on=2.0, off=2.0), r"off \(2.0\) must be below on \(2.0\)"),
+    (dict(k_of_n=(0, None)), r"k_of_n k \(0\)"),
+    (dict(k_of_n=(3, 12)), r"k_of_n n \(12\) is not the number of voting gages \(16\)"),
+    (dict(mode="force"), r"mode 'force' needs a channel in N"),
+    (dict(mode="level"), r"mode 'level'"),
+    (dict(voters=["g01", "g99"]), r"voter 'g99'"),
+    (dict(sta_s=2.0, lta_s=1.0), r"sta_s \(2.0\) must be shorter than lta_s \(1.0\)"),
+    (dict(lta_s=-1.0), r"lta_s \(-1.0\) must be a positive number"),
+    (dict(hysteresis=1.5), r"hysteresis \(1.5\)"),
+    (dict(post_s=5.0, max_post_s=2.0), r"post_s \(5.0\)"),
+    (dict(ar_order=40), r"ar_order \(40\)"),
+])
+def test_bad_settings_are_refused(albacore, kw, match):
+    info = SimDevice(albacore).info
+    with pytest.raises(ValueError, match=match):
+        Trigger(info, **kw)
