@@ -1,0 +1,77 @@
+"""Tests for analysis.peaks: the report's band-pass + successive-peak decrement."""
+
+import numpy as np
+import pytest
+
+from analysis.modal_signal import damped_sinusoids
+from analysis.peaks import bandpass_mode, decrement_from_peaks
+
+pytestmark = pytest.mark.timeout(60)
+
+FS_HZ = 2048.0
+
+
+def _decay(f_hz, delta, n_cycles, amplitude=1.0, phase=0.3):
+    n = int(n_cycles * FS_HZ / f_hz)
+    return damped_sinusoids(FS_HZ, n, [f_hz], [delta], [amplitude], [phase])
+
+
+@pytest.mark.parametrize(("f_hz", "delta"), [(24.5, 0.06), (123.0, 0.05), (13.0, 0.12)])
+@pytest.mark.parametrize("bandpass", [True, False])
+def test_clean_single_mode_within_one_percent(f_hz, delta, bandpass):
+    r = decrement_from_peaks(_decay(f_hz, delta, 40), FS_HZ, f_hz, bandpass=bandpass)
+    assert r.delta == pytest.approx(delta, rel=0.01)
+    assert r.delta_fit == pytest.approx(delta, rel=0.01)
+    assert r.f_hz == pytest.approx(f_hz, rel=0.005)
+    assert r.n_ratios >= 1
+
+
+def test_ratios_q_periods_apart():
+    x = _decay(24.5, 0.06, 40)
+    r1 = decrement_from_peaks(x, FS_HZ, 24.5, q=1, bandpass=False)
+    r3 = decrement_from_peaks(x, FS_HZ, 24.5, q=3, bandpass=False)
+    assert r3.q == 3 and r3.n_ratios == r1.n_ratios - 2
+    assert r3.delta == pytest.approx(r1.delta, rel=1e-3)
+
+
+def test_bandpass_separates_a_distant_mode():
+    n = int(40 * FS_HZ / 24.5)
+    x = damped_sinusoids(FS_HZ, n, [24.5, 123.0], [0.06, 0.05], [1.0, 0.5], [0.3, 1.0])
+    r = decrement_from_peaks(x, FS_HZ, 24.5)
+    assert r.delta == pytest.approx(0.06, rel=0.02)
+    y = bandpass_mode(x, FS_HZ, 24.5)
+    assert y.shape == x.shape
+
+
+def test_noisy_mode_error_is_covered_by_its_standard_error():
+    rng = np.random.default_rng(11)
+    x = _decay(24.5, 0.06, 40)
+    x = x + 0.005 * rng.standard_normal(x.size)
+    r = decrement_from_peaks(x, FS_HZ, 24.5)
+    assert np.isfinite(r.std_error) and r.std_error > 0
+    assert abs(r.delta - 0.06) < 5 * r.std_error + 0.002
+
+
+def test_narrow_filter_on_heavy_damping_is_flagged():
+    r = decrement_from_peaks(_decay(13.0, 0.17, 30), FS_HZ, 13.0, rel_bandwidth=0.05)
+    assert r.filter_limited
+
+
+@pytest.mark.parametrize(
+    ("args", "kwargs", "match"),
+    [
+        ((np.zeros((2, 100)), FS_HZ, 24.5), {}, "1-D"),
+        ((np.zeros(100), FS_HZ, 24.5), {"q": 0}, "q"),
+        ((np.zeros(100), FS_HZ, 1000.0), {}, "f_hz"),
+        ((np.zeros(100), FS_HZ, 24.5), {"rel_bandwidth": 2.0}, "rel_bandwidth"),
+    ],
+)
+def test_bad_arguments(args, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        decrement_from_peaks(*args, **kwargs)
+
+
+def test_too_few_peaks_raises():
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="peaks"):
+        decrement_from_peaks(rng.standard_normal(2000) * 1e-3, FS_HZ, 24.5, noise_std=1e-3)
