@@ -57,6 +57,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+# The exact delta <-> zeta relations live in analysis.damping; re-exported here for the chain.
+from analysis.damping import damping_ratio_from_decrement, decrement_from_damping_ratio
+
 __all__ = [
     "damping_ratio_from_decrement",
     "decrement_from_damping_ratio",
@@ -103,42 +106,6 @@ def _positive(name: str, value: ArrayLike) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- decrement <-> ζ
-
-
-def damping_ratio_from_decrement(delta: ArrayLike) -> Number:
-    """Exact damping ratio of a logarithmic decrement, ``ζ = δ/√(4π² + δ²)``.
-
-    Parameters
-    ----------
-    delta : float or array_like
-        Logarithmic decrement per period (dimensionless); negative for a growing oscillation.
-
-    Returns
-    -------
-    float or numpy.ndarray
-        Damping ratio ζ = C/C_c (dimensionless), same shape; ≈ δ/2π for light damping.
-    """
-    d = _finite("delta", delta)
-    return _out(d / np.sqrt(4 * np.pi**2 + d**2))
-
-
-def decrement_from_damping_ratio(zeta: ArrayLike) -> Number:
-    """Exact logarithmic decrement of a damping ratio, ``δ = 2πζ/√(1 - ζ²)``.
-
-    Parameters
-    ----------
-    zeta : float or array_like
-        Damping ratio, ``|ζ| < 1`` (an overdamped system has no period and no decrement).
-
-    Returns
-    -------
-    float or numpy.ndarray
-        Logarithmic decrement δ (dimensionless), same shape.
-    """
-    z = _finite("zeta", zeta)
-    if np.any(np.abs(z) >= 1):
-        raise ValueError(f"zeta ({zeta!r}) must satisfy |zeta| < 1 to have a decrement")
-    return _out(2 * np.pi * z / np.sqrt(1 - z**2))
 
 
 def mu_from_decrement(f_hz: ArrayLike, delta: ArrayLike) -> Number:
