@@ -79,6 +79,46 @@ def cmd_recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from daq.analyze import build_report, format_summary, run_analysis
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
+
+    def progress(msg: str) -> None:
+        print(msg, flush=True)
+
+    rig, hits = run_analysis(src, impact=args.impact, progress=progress)
+    air = run_analysis(Path(args.air), progress=progress) if args.air else None
+    report = build_report(src, rig, hits, air)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.json").write_text(json.dumps(report, indent=1, default=_json_default))
+    files = [out / "report.json"]
+    if not args.no_plots:
+        from daq.plots import plot_impact
+
+        for h in hits:
+            if h.accepted and h.analysis is not None and h.event.record is not None:
+                rec = h.event.record
+                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
+                rows = [i for i, g in enumerate(rig.gages_by_channel())]
+                x = rec.values()[rows, i0:]
+                files += plot_impact(h.analysis, x, rec.fs_hz, rig, out, h.index)
+    print(format_summary(report, args.units))
+    print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
+    return 0
+
+
+def _json_default(o: object) -> object:
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
 def cmd_rig(args: argparse.Namespace) -> int:
     from analysis.rig_modes import eq18_check, modes_in
 
@@ -136,6 +176,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--out", help="output file (default FILE.recovered.mcap)")
     c.set_defaults(func=cmd_recover)
 
+    a = sub.add_parser("analyze", help="trial report: frequency, decrement, Report 1836 chain")
+    a.add_argument("file")
+    a.add_argument("--impact", type=int, help="analyse only this hit (0-based)")
+    a.add_argument("--air", help="the same rudder's in-air recording, for Eq 18 (file is in water)")
+    a.add_argument("--out", help="output folder (default FILE_analysis/)")
+    a.add_argument("--units", choices=("si", "report"), default="si",
+                   help="terminal units: SI, or the report's ft / long ton / s")
+    a.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    a.set_defaults(func=cmd_analyze)
+
     g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
     g.add_argument("rig")
     g.set_defaults(func=cmd_rig)
@@ -146,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (RigError, DeviceError, RecordingError, FileExistsError, FileNotFoundError) as err:
+    except (RigError, DeviceError, RecordingError, FileExistsError, FileNotFoundError,
+            ValueError) as err:
         print(f"ramdaq {args.command}: {err}", file=sys.stderr)
         return 2
 

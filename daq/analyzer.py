@@ -1,0 +1,106 @@
+"""From a detected impact to its numbers, and from all of a trial's impacts to its summary.
+
+The same functions serve ``ramdaq analyze`` (offline, a recording replayed through the trigger)
+and the live trial: one implementation, so live and replay cannot drift apart.
+
+Each hit is accepted or rejected with a reason: a double hit, an overload (clipped channels), a
+decay too short to measure, or an analysis that found no usable decay. The trial summary gives,
+per gage and per motion, the mean decrement over accepted hits with its scatter -- Report 1836's
+Table 2b "percent deviation from average", done automatically.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis.impact_analysis import ImpactAnalysis, analyze_decay
+from analysis.rig import Rig
+from daq.trigger import ImpactEvent
+from drivers.block import StreamInfo
+
+MIN_DECAY_S = 0.25
+"""Shortest free decay analysed, s: fewer than a few periods of a 13 Hz mode is no decrement."""
+
+
+@dataclass(frozen=True)
+class HitResult:
+    """One hit: its trigger event, whether it counts, why not, and its analysis if any."""
+
+    index: int
+    event: ImpactEvent
+    accepted: bool
+    reason: str
+    analysis: ImpactAnalysis | None
+
+
+def decay_skip_s(rig: Rig) -> float:
+    """Time after the onset before the free decay is taken, s: the ram's contact (twice its
+    nominal duration, for a ram that dwells) plus 10 ms for the anti-alias filter to settle."""
+    return 2 * rig.impact.duration_s + 0.010
+
+
+def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
+    """Judge and analyse one trigger event that carries its record."""
+    if event.double_hit:
+        return HitResult(index, event, False, f"double hit: second contact at "
+                         f"{event.second_onset_s:.3f} s", None)
+    if event.clipped:
+        return HitResult(index, event, False, f"overload: clipped on {', '.join(event.clipped)}",
+                         None)
+    rec = event.record
+    if rec is None:
+        return HitResult(index, event, False, "no record kept for this event", None)
+    start = event.onset_sample + round(decay_skip_s(rig) * info.fs_hz)
+    i0 = start - rec.first_sample
+    x = rec.counts[:, i0:] * rec.scale[:, None]
+    if event.too_short or x.shape[1] < MIN_DECAY_S * info.fs_hz:
+        return HitResult(index, event, False,
+                         f"decay too short: {x.shape[1] / info.fs_hz:.2f} s "
+                         f"(< {MIN_DECAY_S} s, ended by {event.end_reason})", None)
+    gage_rows = [i for i, g in enumerate(info.gages) if g]
+    try:
+        result = analyze_decay(x[gage_rows], info.fs_hz, rig,
+                               tuple(info.gages[i] for i in gage_rows),
+                               onset_s=event.onset_s, decay_start_s=start / info.fs_hz,
+                               adc_full_scale=_full_scale(info, rec.scale[gage_rows]))
+    except ValueError as err:
+        return HitResult(index, event, False, f"no usable decay: {err}", None)
+    return HitResult(index, event, True, "", result)
+
+
+def _full_scale(info: StreamInfo, scale: np.ndarray) -> float | None:
+    bits = info.extra.get("adc_bits")
+    if not bits:
+        return None
+    return float(np.min(np.abs(scale)) * (2 ** (bits - 1) - 1))
+
+
+def _mean_scatter(values: list[float]) -> dict:
+    v = np.array([x for x in values if np.isfinite(x)])
+    if v.size == 0:
+        return {"mean": None, "std": None, "n": 0, "deviation_pct": []}
+    mean = float(v.mean())
+    return {"mean": mean, "std": float(v.std(ddof=1)) if v.size > 1 else None, "n": int(v.size),
+            "deviation_pct": [float(100 * (x / mean - 1)) for x in v]}
+
+
+def trial_summary(hits: list[HitResult]) -> dict:
+    """Per gage and per motion: mean decrement over accepted hits, its standard deviation and
+    each hit's percent deviation from the mean; the predominant frequency likewise."""
+    ok = [h.analysis for h in hits if h.accepted and h.analysis is not None]
+    gages = sorted({n for a in ok for n in a.gages})
+    motions = sorted({m for a in ok for m in a.motions})
+    return {
+        "hits": len(hits), "accepted": len(ok),
+        "rejected": {h.index: h.reason for h in hits if not h.accepted},
+        "f_hz": _mean_scatter([a.f_hz for a in ok]),
+        "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages])
+                       for n in gages},
+        "delta_motion": {m: _mean_scatter([a.motions[m].delta for a in ok if m in a.motions])
+                         for m in motions},
+        "delta_modal": _mean_scatter([a.damping["delta_modal"] for a in ok]),
+        "C_N_s_per_m": _mean_scatter([a.damping["C_N_s_per_m"] for a in ok]),
+        "c_N_m_s_per_rad": _mean_scatter([a.damping["c_N_m_s_per_rad"] for a in ok]),
+    }

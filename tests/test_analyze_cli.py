@@ -1,0 +1,50 @@
+"""``ramdaq analyze`` on a shipped sample recording, as a user runs it."""
+
+import json
+
+import pytest
+
+from daq.cli import main
+from tests.conftest import RIGS
+
+SAMPLES = RIGS.parent
+
+
+@pytest.fixture(scope="module")
+def air_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("an")
+    assert main(["analyze", str(SAMPLES / "albacore-air.mcap"), "--impact", "1", "--out",
+                 str(out), "--units", "report"]) == 0
+    return out, json.loads((out / "report.json").read_text())
+
+
+def test_report_json_and_plots(air_report):
+    out, rep = air_report
+    assert [i["index"] for i in rep["impacts"]] == [0, 1, 2]  # the trigger found the 3 blows
+    # the simulator hit at 2, 8, 14 s; the trigger places onsets to within one sample
+    assert [round(i["onset_s"], 2) for i in rep["impacts"]] == [2.0, 8.0, 14.0]
+    hit = rep["impacts"][1]
+    assert hit["accepted"] and rep["impacts"][0]["reason"] == "not requested"
+    a = hit["analysis"]
+    # the ALBACORE-like rig's predominant mode in air: 24.5 Hz (Table 2a) within the rig's 2 %
+    assert abs(a["f_hz"] / 24.5 - 1) < 0.02
+    assert set(a["motions"]) == {"gamma", "alpha", "v_2_6", "v_4_8"}
+    assert a["gages"]["g04"]["delta_se"] > 0
+    for name in ("decay", "spectrum", "modeshape", "stock"):
+        assert (out / f"impact1_{name}.png").stat().st_size > 10_000
+
+
+def test_units_report_in_terminal(air_report, capsys, tmp_path):
+    assert main(["analyze", str(SAMPLES / "albacore-air.mcap"), "--impact", "0", "--out",
+                 str(tmp_path), "--units", "report", "--no-plots"]) == 0
+    text = capsys.readouterr().out
+    assert "ton s/ft" in text and "ft ton s^2" in text
+    assert not list(tmp_path.glob("*.png"))
+
+
+def test_not_a_recording_is_one_line(tmp_path, capsys):
+    bad = tmp_path / "x.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    assert main(["analyze", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "x.mcap" in err[0]

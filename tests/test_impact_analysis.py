@@ -1,0 +1,97 @@
+"""The report's chain on the simulator's decays, held against the model's exact truth."""
+
+import numpy as np
+import pytest
+
+from analysis.damping_inertia import C_translational_full, c_rotational_full, stock_stiffness_k_s
+from analysis.impact_analysis import analyze_decay
+from analysis.model import build_model
+from analysis.response import modal_form
+from analysis.rig_modes import modes_in
+from drivers.sim import SimDevice
+
+
+def _true_motions(rig):
+    """The predominant mode's exact (v, gamma, alpha, v_b, alpha_b, gamma_b), turned so that
+    v = v1 sin(wt), as sine and cosine parts, with its f and delta."""
+    m = build_model(rig)
+    form = modal_form(m)
+    k = modes_in(rig, rig.medium).predominant
+    lam, q = form.eigenvalues[k], form.right[: m.n_dof, k]
+    hull = rig.hull_modes
+    mot = {"v": q[0], "gamma": q[1], "alpha": q[2],
+           "v_b": sum(h.v_b * q[3 + i] for i, h in enumerate(hull)),
+           "alpha_b": sum(h.alpha_b * q[3 + i] for i, h in enumerate(hull)),
+           "gamma_b": sum(h.gamma_b * q[3 + i] for i, h in enumerate(hull))}
+    turn = -1j * abs(mot["v"]) / mot["v"]
+    sin = {a: float(-np.imag(v * turn)) for a, v in mot.items()}
+    cos = {a: float(np.real(v * turn)) for a, v in mot.items()}
+    return m, lam.imag / (2 * np.pi), -2 * np.pi * lam.real / lam.imag, sin, cos
+
+
+@pytest.mark.parametrize("medium", ["air", "water"])
+def test_eq_14_and_15_recover_the_models_damping_constants(albacore, medium):
+    """With the model's exact motions and phases, the re-derived Eq 14 and 15 give back the
+    rig's C and c to float rounding: the model is Eq 62a, b, and the derivation inverts them."""
+    rig = albacore.with_medium(medium)
+    m, f, delta, sin, cos = _true_motions(rig)
+    st, r = rig.stock, rig.rudder
+    ell = st.bending_length_m
+    ks = float(stock_stiffness_k_s(st.E_Pa * st.I_m4, st.shear_area_m2 * st.G_Pa, ell))
+    C = C_translational_full(m.M[0, 0], f, delta, sin["v"], ks, r.stock_x_m, r.attach_z_m, ell,
+                             v_b2=cos["v_b"], gamma2=cos["gamma"], alpha2=cos["alpha"],
+                             alpha_b2=cos["alpha_b"])
+    c = c_rotational_full(m.M[1, 1], r.Ixz_kg_m2, f, delta, sin["gamma"], sin["alpha"], ks,
+                          r.stock_x_m, r.attach_z_m, ell,
+                          st.G_Pa * st.J_m4 * ell / st.torsion_length_m,
+                          gamma2=cos["gamma"], alpha2=cos["alpha"], v_b2=cos["v_b"],
+                          alpha_b2=cos["alpha_b"], gamma_b1=sin["gamma_b"],
+                          gamma_b2=cos["gamma_b"])
+    d = rig.active_damping
+    assert C == pytest.approx(d.C_N_s_per_m, rel=1e-9)
+    assert c == pytest.approx(d.c_N_m_s_per_rad, rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def water_clean(request):
+    """A noise-free (24-bit quantised) decay of the ALBACORE-like rudder in water, analysed."""
+    rig = request.getfixturevalue("albacore").with_medium("water")
+    with SimDevice(rig, duration_s=7.0, impacts=[1.0], noise=False) as dev:
+        x = np.hstack([b.values() for b in dev])
+        gages = dev.info.gages
+    fs = rig.daq.sample_rate_hz
+    i0 = int(1.03 * fs)
+    return rig, analyze_decay(x[:, i0:], fs, rig, gages, onset_s=1.0, decay_start_s=1.03)
+
+
+def test_predominant_mode_and_decrements_match_model(water_clean):
+    rig, a = water_clean
+    truth = modes_in(rig, "water")
+    k = truth.predominant
+    # quantisation-only data: the estimator's own bias is far below 0.5 % (see the benchmark)
+    assert a.f_hz == pytest.approx(truth.table.frequency_hz[k], rel=1e-4)
+    assert a.modes.delta[a.predominant] == pytest.approx(truth.table.decrement[k], rel=5e-3)
+    for name in ("gamma", "alpha", "v_2_6", "v_4_8"):
+        # Report: "for a particular mode, the decay ratio for v alone is the same as for gamma
+        # alone or alpha alone" (theory); the single-signal fits agree to 1 %.
+        assert a.motions[name].delta == pytest.approx(truth.table.decrement[k], rel=1e-2)
+    assert a.table2b()["mean_abs_deviation_pct"] < 1.0
+
+
+def test_stock_lengths_read_from_figures_8_and_9(water_clean):
+    """Figure 8/9 readings find the rig's own stock attachment heights (z' = the stock
+    lengths): within 1 % on quantisation-only data."""
+    rig, a = water_clean
+    b = rig.rudder.attach_z_m
+    assert a.stock_lengths["bending_m"] - b == pytest.approx(rig.stock.bending_length_m, rel=0.01)
+    assert a.stock_lengths["torsion_m"] - b == pytest.approx(rig.stock.torsion_length_m, rel=0.01)
+
+
+def test_eq_14_on_estimated_motions(water_clean):
+    """Eq 14 with estimated amplitudes and phases recovers the rig's C within 2 % on clean data,
+    where Eq 16 (phases neglected, as the report had to) is 16 % low: the hull's participation
+    and the phase between motions matter for this coupled mode."""
+    rig, a = water_clean
+    C = rig.active_damping.C_N_s_per_m
+    assert a.damping["C_eq14_N_s_per_m"] == pytest.approx(C, rel=0.02)
+    assert a.damping["C_N_s_per_m"] < 0.9 * C
