@@ -347,3 +347,34 @@ def _full_damping(table: ModeTable, k: int, good: list[int], gage_numbers: tuple
                           gamma_b1=sin["gamma_b"], gamma_b2=cos["gamma_b"])
     return {"C_eq14_N_s_per_m": float(C), "c_eq15_N_m_s_per_rad": float(c),
             "k_s_N_per_m": k_s, "ell_m": ell}
+
+
+@dataclass(frozen=True)
+class FirstLook:
+    """A preliminary reading while the rudder still rings: the predominant mode's frequency and
+    decrement per gage, from the decay so far (``duration_s`` of it)."""
+
+    duration_s: float
+    f_hz: float
+    delta: float
+    gages: dict[int, tuple[float, float, float]]  # gage -> (f_hz, delta, delta_se)
+
+
+def first_look(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
+               max_samples: int = 40_000) -> FirstLook | None:
+    """Quick per-gage frequency and decrement on the decay so far, (n_gages, n) m/s^2.
+
+    The same estimator as the final analysis, on a decimated copy (``max_samples``) and
+    without verdicts or the report's chain: a first look, refined as the decay goes on.
+    Returns None when no mode stands above the noise yet.
+    """
+    table = identify_modes(x, fs_hz, per_channel=True, max_samples=max_samples)
+    if len(table) == 0:
+        return None
+    rudder = [i for i, n in enumerate(gage_numbers) if rig.gage(n).body == "rudder"]
+    disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
+    k = int(np.argmax(mode_energy(disp[rudder or slice(None)], table.delta * table.frequency_hz)))
+    gages = {n: (float(table.channel_frequency_hz[i, k]), float(table.channel_delta[i, k]),
+                 float(table.channel_delta_se[i, k])) for i, n in enumerate(gage_numbers)}
+    return FirstLook(x.shape[1] / fs_hz, float(table.frequency_hz[k]), float(table.delta[k]),
+                     gages)

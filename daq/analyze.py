@@ -141,10 +141,26 @@ def format_summary(report: dict, units: str = "si") -> str:
         else:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
                          f"{imp['reason']}")
-    s = report["summary"]
-    lines.append(f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
-                 f"(+- std, n):")
-    lines.append("  quantity          mean        std     n")
+    lines += summary_table(report["summary"], units)
+    vi = report["virtual_inertias"]
+    conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
+    mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
+    lines.append(f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
+                 f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
+                 f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g}"
+                 f" {iu}")
+    if "m_vir_eq18_kg" in vi:
+        lines.append(f"virtual mass, Eq 18 (air {vi['f_air_hz']:.3f} Hz, water "
+                     f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
+                     f" {vi['eq18_vs_eq19_pct']:+.1f} % against Eq 19")
+    return "\n".join(lines)
+
+
+def summary_table(s: dict, units: str = "si") -> list[str]:
+    """Lines of the trial summary: per motion and gage the mean decrement over accepted hits
+    with its standard deviation; C and c in SI or, with ``units="report"``, ton/ft units."""
+    lines = [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
+             f"(+- std, n):", "  quantity          mean        std     n"]
 
     def row(name: str, d: dict, fmt: str = "{:.4f}") -> None:
         if d["mean"] is None:
@@ -169,15 +185,4 @@ def format_summary(report: dict, units: str = "si") -> str:
         else:
             name += " (N s/m)" if key.startswith("C") else " (N m s)"
         row(name, d, "{:.4g}")
-    vi = report["virtual_inertias"]
-    conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
-    mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
-    lines.append(f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
-                 f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
-                 f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g}"
-                 f" {iu}")
-    if "m_vir_eq18_kg" in vi:
-        lines.append(f"virtual mass, Eq 18 (air {vi['f_air_hz']:.3f} Hz, water "
-                     f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
-                     f" {vi['eq18_vs_eq19_pct']:+.1f} % against Eq 19")
-    return "\n".join(lines)
+    return lines

@@ -34,20 +34,8 @@ def cmd_record(args: argparse.Namespace) -> int:
     options: dict = {}
     name = args.name
     if args.device == "sim":
-        if not args.rig:
-            raise SystemExit("ramdaq record: --rig is required with --device sim")
-        rig = load_rig(args.rig)
-        if args.medium:
-            rig = rig.with_medium(args.medium)
-        impacts = list(args.impacts or [])
-        if args.impact_every:
-            t = args.impact_every / 2
-            while t < args.duration:
-                impacts.append(t)
-                t += args.impact_every
-        options = dict(rig=rig, seed=args.seed, duration_s=args.duration, impacts=impacts,
-                       pace="fast" if args.fast else "realtime", fs_hz=args.fs)
-        name = name or f"{rig.name}-{rig.medium}"
+        options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
+        name = name or default_name
     name = name or "trial"
     out = Path(args.out) if args.out else RECORDINGS / f"{name}.mcap"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -76,6 +64,92 @@ def cmd_recover(args: argparse.Namespace) -> int:
     dst = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
     report = recover(src, dst)
     print(f"recovered {dst}: {report}")
+    return 0
+
+
+def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
+    """Device options and a default recording name for ``--device sim``."""
+    if not args.rig:
+        raise SystemExit(f"ramdaq {args.command}: --rig is required with --device sim")
+    rig = load_rig(args.rig)
+    if args.medium:
+        rig = rig.with_medium(args.medium)
+    impacts = list(args.impacts or [])
+    if args.impact_every:
+        t = args.impact_every / 2
+        while t < args.duration:
+            impacts.append(t)
+            t += args.impact_every
+    return (dict(rig=rig, seed=args.seed, duration_s=args.duration, impacts=impacts, pace=pace,
+                 fs_hz=args.fs), f"{rig.name}-{rig.medium}")
+
+
+def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd: Path | None):
+    from daq.session import Session
+
+    view = None
+    if rrd is not None or args.web:
+        from daq.rerun_view import RerunView
+
+        view = RerunView(device.info, rrd_path=rrd, serve_web=args.web)
+        if args.web:
+            print(f"Rerun web viewer: {view.web_url}", flush=True)
+    try:
+        outcome = Session(device, record_path=record_path, overwrite=args.overwrite, view=view,
+                          readout=False if args.quiet else None,
+                          log=None if not args.quiet else (lambda m: None)).run()
+    finally:
+        if view is not None:
+            view.close()
+    return outcome
+
+
+def _print_outcome(outcome, args: argparse.Namespace) -> None:
+    from daq.analyze import summary_table
+
+    print("\n".join(summary_table(outcome.summary, args.units)))
+    print(f"{outcome.first_looks} first looks shown while ringing, {outcome.skipped_updates} "
+          f"skipped because the analyzer was busy (no samples skipped)")
+
+
+def cmd_trial(args: argparse.Namespace) -> int:
+    from drivers.registry import open_device
+
+    options: dict = {}
+    name = args.name
+    if args.device == "sim":
+        options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
+        name = name or default_name
+    name = name or "trial"
+    out = Path(args.out) if args.out else RECORDINGS / f"{name}.mcap"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rrd = None if args.no_rerun else (Path(args.rrd) if args.rrd else out.with_suffix(".rrd"))
+    device = open_device(args.device, **options)
+    print(f"trial: {device.info.device} ({device.info.n_channels} ch at {device.info.fs_hz:g} Hz)"
+          f" recording into {out}" + (f", Rerun view into {rrd}" if rrd else "")
+          + "; Ctrl-C ends it cleanly", flush=True)
+    outcome = _run_session(device, args, out, rrd)
+    print(f"{'interrupted: ' if outcome.interrupted else ''}wrote {out}"
+          + (f" and {rrd}" if rrd else ""))
+    _print_outcome(outcome, args)
+    if args.json:
+        Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
+                                              default=_json_default))
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from drivers.mcap_replay import McapReplayDevice
+
+    device = McapReplayDevice(args.file, pace="realtime" if args.realtime else "fast")
+    rrd = Path(args.rrd) if args.rrd else None
+    print(f"replaying {args.file} ({'real time' if args.realtime else 'as fast as possible'})",
+          flush=True)
+    outcome = _run_session(device, args, None, rrd)
+    _print_outcome(outcome, args)
+    if args.json:
+        Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
+                                              default=_json_default))
     return 0
 
 
@@ -146,11 +220,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="ramdaq", description=__doc__.split("\n")[0])
-    sub = p.add_subparsers(dest="command", required=True)
-
-    r = sub.add_parser("record", help="record a device into an MCAP file")
+def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
     r.add_argument("--rig", help="rig file (TOML), required for the simulator")
     r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
@@ -164,7 +234,35 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", help="output file (overrides --name)")
     r.add_argument("--overwrite", action="store_true", help="replace an existing file")
     r.add_argument("--quiet", action="store_true", help="no live readout")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ramdaq", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("record", help="record a device into an MCAP file")
+    _device_args(r)
     r.set_defaults(func=cmd_record)
+
+    t = sub.add_parser("trial", help="the live trial: record, detect hits, analyse, show live")
+    _device_args(t)
+    t.add_argument("--rrd", help="Rerun recording of the live view (default: beside the MCAP)")
+    t.add_argument("--no-rerun", action="store_true", help="no Rerun view")
+    t.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    t.add_argument("--units", choices=("si", "report"), default="si", help="summary units")
+    t.add_argument("--json", help="also write the final per-hit results here (JSON)")
+    t.set_defaults(func=cmd_trial)
+
+    p_ = sub.add_parser("replay", help="a recording through the same trigger and analyzer")
+    p_.add_argument("file")
+    p_.add_argument("--realtime", action="store_true", help="at the recording's own pace")
+    p_.add_argument("--rrd", help="write a Rerun view of the replay here")
+    p_.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    p_.add_argument("--quiet", action="store_true", help="no live table")
+    p_.add_argument("--overwrite", action="store_true", help=argparse.SUPPRESS)
+    p_.add_argument("--units", choices=("si", "report"), default="si", help="summary units")
+    p_.add_argument("--json", help="also write the final per-hit results here (JSON)")
+    p_.set_defaults(func=cmd_replay)
 
     i = sub.add_parser("info", help="describe a recording")
     i.add_argument("file")

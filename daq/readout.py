@@ -10,9 +10,10 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
-from rich.console import Console
+from rich.console import Console, Group
 from rich.live import Live
 from rich.table import Table
+from rich.text import Text
 
 from drivers.block import Block, StreamInfo
 
@@ -49,6 +50,8 @@ class LiveReadout:
         self.impacts: list[float] = []
         self.queue = 0
         self.overflows = 0
+        self.results: dict[str, tuple[float, float, bool]] = {}  # channel -> (f, delta, final)
+        self.hits: list[str] = []
         self._next_print = every_s
         self.every_s = every_s
         self._live: Live | None = None
@@ -87,6 +90,22 @@ class LiveReadout:
             self._next_print += self.every_s
             self.console.print(self.line(), highlight=False)
 
+    def set_result(self, channel: str, f_hz: float, delta: float, final: bool) -> None:
+        """Show a gage's latest frequency (Hz) and decrement; ``final`` once the decay ended."""
+        self.results[channel] = (f_hz, delta, final)
+        self._refresh()
+
+    def hit(self, text: str) -> None:
+        """Report a hit's status (detected, preliminary, accepted, rejected and why)."""
+        self.hits.append(text)
+        if self._live is None:
+            self.console.print(text, highlight=False)
+        self._refresh()
+
+    def _refresh(self) -> None:
+        if self._live is not None:
+            self._live.update(self._table())
+
     @property
     def rms(self) -> np.ndarray:
         """RMS of each channel over the last ``window_s`` (SI units), shape (n_channels,)."""
@@ -105,21 +124,32 @@ class LiveReadout:
                 f"overflows {self.overflows}  impacts {len(self.impacts)}{clip}  |  "
                 f"rms {self.info.units[0]}: {levels}")
 
-    def _table(self) -> Table:
+    def _table(self) -> Group:
         t = self.samples / self.info.fs_hz
+        health = (f"blocks {self.blocks}   gaps {self.gaps}   recorder queue {self.queue}   "
+                  f"overflows {self.overflows}   impacts at "
+                  + (", ".join(f"{s:.2f}" for s in self.impacts[-6:]) or "-") + " s")
         table = Table(title=f"ramdaq  {self.info.device}  t = {t:.2f} s  "
-                            f"({self.info.fs_hz:g} Hz, {self.info.n_channels} ch)",
-                      caption=f"blocks {self.blocks}   gaps {self.gaps}   recorder queue "
-                              f"{self.queue}   overflows {self.overflows}   impacts at "
-                              + (", ".join(f"{s:.2f}" for s in self.impacts[-6:]) or "-") + " s")
+                            f"({self.info.fs_hz:g} Hz, {self.info.n_channels} ch)")
         table.add_column("gage", justify="right")
         table.add_column("rms (1 s)", justify="right")
         table.add_column("peak", justify="right")
         table.add_column("unit")
         table.add_column("clipped", justify="right")
+        table.add_column("f (Hz)", justify="right")
+        table.add_column("delta", justify="right")
+        table.add_column("", justify="left")
         rms = self.rms
         for i, name in enumerate(self.info.channels):
             clip = str(int(self.clipped[i])) if self.clipped[i] else ""
+            f, d, final = self.results.get(name, (np.nan, np.nan, False))
             table.add_row(name, f"{rms[i]:.4g}", f"{self.peak[i]:.4g}", self.info.units[i],
-                          f"[red]{clip}[/red]" if clip else "")
-        return table
+                          f"[red]{clip}[/red]" if clip else "",
+                          "" if not np.isfinite(f) else f"{f:.3f}",
+                          "" if not np.isfinite(d) else f"{d:.4f}",
+                          "" if name not in self.results else ("final" if final else "so far"))
+        if self.hits:
+            table.add_section()
+            for text in self.hits[-4:]:
+                table.add_row(text, end_section=False)
+        return Group(table, Text(health))

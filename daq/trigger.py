@@ -352,6 +352,21 @@ class Trigger:
         """``"not ready"``, ``"armed"`` or ``"active"``."""
         return self._state
 
+    @property
+    def ringing(self) -> tuple[int, int] | None:
+        """``(onset_sample, end_sample)`` of the impact being recorded now, or ``None``: the
+        refined onset once known (else the detection sample) and one past the latest sample.
+        For an analyzer that wants a first look before the record completes."""
+        ev = self._ev
+        if ev is None or self._state != ACTIVE:
+            return None
+        return (ev.onset if ev.onset >= 0 else ev.detect), self._ring.end
+
+    def recent(self, first: int, end: int) -> np.ndarray:
+        """Samples ``first .. end-1`` of every channel from the pre-trigger ring, SI units,
+        shape (n_channels, end - first). Raises IndexError if they are no longer held."""
+        return self._values(first, end, slice(None))
+
     def process(self, block: Block) -> list[ImpactEvent]:
         """Feed the next block; returns the events whose records completed in it."""
         if block.n_channels != self.info.n_channels or block.fs_hz != self.fs_hz:

@@ -20,7 +20,7 @@ def _feed(console, albacore):
 
 def test_terminal_table_shows_every_gage(albacore):
     out = io.StringIO()
-    view = _feed(Console(file=out, force_terminal=True, width=120), albacore)
+    view = _feed(Console(file=out, force_terminal=True, width=200), albacore)
     text = out.getvalue()
     assert all(f"g{n:02d}" in text for n in range(1, 17))
     assert "impacts at 1.00 s" in text

@@ -1,0 +1,293 @@
+"""A trial, live or replayed: one device through recorder, trigger, analyzer and views.
+
+Threads (the only place in ramdaq that starts them, besides the recorder's writer):
+
+- the caller's thread reads the device and never waits on disk or analysis: each block goes to
+  the recorder's bounded queue, through the trigger (vectorised, far faster than real time), to
+  the live views;
+- one analyzer thread takes work from the main loop: every finished impact record (a final
+  analysis -- never dropped) and, while the rudder still rings, a first look at the decay so far.
+  A first look is asked for only when the analyzer is idle: when it falls behind, updates are
+  skipped and counted, samples never are.
+
+Final numbers come from the impact's complete record alone, so a replay of the recording
+(``McapReplayDevice`` through the same session) gives the same impacts and the same numbers.
+Results go into the recording on ``/ramdaq/impacts`` (detections) and ``/ramdaq/results``.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from analysis.impact_analysis import FirstLook, first_look
+from analysis.rig import Rig, parse_rig
+from daq.analyze import analysis_to_json
+from daq.analyzer import HitResult, analyze_event, decay_skip_s, trial_summary
+from daq.readout import LiveReadout
+from daq.recorder import Recorder
+from daq.trigger import ImpactEvent, Trigger
+from drivers.base import Device
+from drivers.mcap_format import IMPACTS_TOPIC, SIM_IMPACTS_TOPIC
+
+RESULTS_TOPIC = "/ramdaq/results"
+"""Per-hit final results (JSON, SI units) written into the recording by a live trial."""
+
+
+@dataclass
+class TrialOutcome:
+    """What a session leaves: every hit judged and analysed, the trial summary, and counts."""
+
+    hits: list[HitResult]
+    summary: dict
+    samples: int
+    skipped_updates: int
+    first_looks: int
+    interrupted: bool
+    recording: Path | None = None
+    rrd: Path | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def results_json(self) -> list[dict]:
+        """Final per-hit results, the numbers replay must reproduce exactly."""
+        return [{"index": h.index, "onset_sample": h.event.onset_sample,
+                 "onset_s": h.event.onset_s, "accepted": h.accepted, "reason": h.reason,
+                 "analysis": analysis_to_json(h.analysis) if h.analysis else None}
+                for h in self.hits]
+
+
+class Session:
+    """Run ``device`` to its end (or Ctrl-C), recording and analysing as it goes.
+
+    Parameters
+    ----------
+    device : Device
+        Any back-end: the simulator, a front-end, or a recording replayed.
+    record_path : Path, optional
+        Write an MCAP recording here (live trials); ``None`` records nothing (replay).
+    view : RerunView, optional
+        Live Rerun view (its own ``.rrd`` or web viewer).
+    readout : LiveReadout or False or None
+        Terminal table; ``None`` makes one, ``False`` shows nothing.
+    update_s : float
+        Stream seconds between first looks at a ringing decay.
+    trigger_options : dict
+        Passed to :class:`~daq.trigger.Trigger`.
+    """
+
+    def __init__(self, device: Device, *, record_path: str | Path | None = None,
+                 overwrite: bool = False, view=None, readout: LiveReadout | bool | None = None,
+                 update_s: float = 0.5, trigger_options: dict | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
+        self.device = device
+        self.info = device.open()
+        if not self.info.rig_toml:
+            raise ValueError(f"{self.info.device}: the stream carries no rig; a trial needs one")
+        rig = parse_rig(self.info.rig_toml, source=f"{self.info.device}:rig")
+        medium = self.info.extra.get("medium")
+        self.rig: Rig = rig.with_medium(medium) if medium and medium != rig.medium else rig
+        self.record_path = Path(record_path) if record_path else None
+        self.overwrite = overwrite
+        self.view = view
+        self.readout = (LiveReadout(self.info, adc_bits=self.info.extra.get("adc_bits"))
+                        if readout is None else (readout or None))
+        self.update_n = round(update_s * self.info.fs_hz)
+        self.trigger = Trigger(self.info, **(trigger_options or {}))
+        self.log = log
+        self._jobs: queue.Queue = queue.Queue()
+        self._done: queue.Queue = queue.Queue()
+        self._busy = threading.Event()
+        self.hits: list[HitResult] = []
+        self.skipped_updates = 0
+        self.first_looks = 0
+        self._next_look = None
+        self._n_events = 0
+        self._gage_rows = [i for i, g in enumerate(self.info.gages) if g]
+        self._gages = tuple(self.info.gages[i] for i in self._gage_rows)
+
+    # -- the analyzer thread ------------------------------------------------------------------
+    def _worker(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            self._busy.set()
+            try:
+                kind, k, payload = job
+                if kind == "final":
+                    self._done.put(("final", k, analyze_event(k, payload, self.info, self.rig)))
+                else:
+                    x, dur = payload
+                    try:
+                        look = first_look(x, self.info.fs_hz, self.rig, self._gages)
+                    except ValueError:
+                        look = None
+                    self._done.put(("look", k, look))
+            except Exception as err:  # never let the analyzer thread die silently
+                self._done.put(("error", job[1], err))
+            finally:
+                self._busy.clear()
+                self._jobs.task_done()
+
+    # -- the main loop ------------------------------------------------------------------------
+    def run(self) -> TrialOutcome:
+        worker = threading.Thread(target=self._worker, name="ramdaq-analyzer", daemon=True)
+        worker.start()
+        rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
+               if self.record_path else None)
+        truth = getattr(self.device, "delivered_impacts", None)
+        truth_written = 0
+        samples = 0
+        interrupted = False
+        last = None
+        if self.readout:
+            self.readout.__enter__()
+        try:
+            try:
+                for block in self.device:
+                    if rec:
+                        if getattr(self.device, "pace", "realtime") == "fast":
+                            while rec.stats.queued >= 250:  # no deadline: wait, don't drop
+                                time.sleep(0.001)
+                        rec.put(block)
+                        if truth is not None and len(truth) > truth_written:
+                            for blow in truth[truth_written:]:
+                                rec.write_json(SIM_IMPACTS_TOPIC, {
+                                    "sample": round(blow.t_s * self.info.fs_hz), **blow.to_json()},
+                                    block.t0_ns)
+                            truth_written = len(truth)
+                    gap = last is not None and block.first_sample != last
+                    last = block.next_sample
+                    samples += block.n_samples
+                    for ev in self.trigger.process(block):
+                        self._on_event(ev, rec)
+                    self._maybe_look(block.next_sample)
+                    if self.view is not None:
+                        self.view.log_block(block)
+                    if self.readout:
+                        self.readout.update(block, queue=rec.stats.queued if rec else 0,
+                                            overflows=rec.overflows if rec else 0, gap=gap,
+                                            impacts=[h.event.onset_s for h in self.hits])
+                    self._drain(rec)
+            except KeyboardInterrupt:
+                interrupted = True
+                if rec:
+                    rec.event("interrupted", 0, reason="Ctrl-C")
+            for ev in self.trigger.flush():
+                self._on_event(ev, rec)
+            self._say(f"waiting for the analyzer to finish {self._jobs.unfinished_tasks} job(s)")
+            self._jobs.join()
+            self._drain(rec)
+        finally:
+            self._jobs.put(None)
+            if self.readout:
+                self.readout.__exit__(None, None, None)
+            if rec:
+                rec.close()
+            self.device.close()
+        self.hits.sort(key=lambda h: h.index)
+        return TrialOutcome(self.hits, trial_summary(self.hits), samples, self.skipped_updates,
+                            self.first_looks, interrupted, self.record_path)
+
+    def _on_event(self, ev: ImpactEvent, rec: Recorder | None) -> None:
+        k = self._n_events
+        self._n_events += 1
+        if rec:
+            rec.write_json(IMPACTS_TOPIC, ev.to_json(), ev.t_ns)
+        flags = [f for f, on in (("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
+                                 ("short", ev.too_short)) if on]
+        self._say(f"hit {k} at {ev.onset_s:.3f} s detected ({ev.snr_db:.0f} dB"
+                  + (", " + ", ".join(flags) if flags else "") + "): analysing")
+        if self.view is not None:
+            self.view.log_impact(k, ev.onset_s, {"double_hit": ev.double_hit,
+                                                 "clipped": list(ev.clipped),
+                                                 "too_short": ev.too_short}, None)
+        self._jobs.put(("final", k, ev))
+        self._next_look = None
+
+    def _maybe_look(self, now: int) -> None:
+        ringing = self.trigger.ringing
+        if ringing is None:
+            self._next_look = None
+            return
+        onset, end = ringing
+        start = onset + round(decay_skip_s(self.rig) * self.info.fs_hz)
+        if self._next_look is None:
+            self._next_look = start + self.update_n
+        if now < self._next_look:
+            return
+        self._next_look = now + self.update_n
+        if self._busy.is_set() or self._jobs.unfinished_tasks:
+            self.skipped_updates += 1
+            return
+        try:
+            x = self.trigger.recent(start, end)[self._gage_rows]
+        except IndexError:
+            return
+        self._jobs.put(("look", onset, (x, (end - start) / self.info.fs_hz)))
+
+    def _drain(self, rec: Recorder | None) -> None:
+        while True:
+            try:
+                kind, k, payload = self._done.get_nowait()
+            except queue.Empty:
+                return
+            if kind == "look":
+                self._show_look(k, payload)
+            elif kind == "final":
+                self._show_final(payload, rec)
+            else:
+                self._say(f"analyzer error on hit {k}: {payload}")
+
+    def _show_look(self, onset: int, look: FirstLook | None) -> None:
+        if look is None:
+            return
+        self.first_looks += 1
+        if self.readout:
+            for n, (f, d, _) in look.gages.items():
+                self.readout.set_result(f"g{n:02d}", f, d, final=False)
+        if self.view is not None:
+            t = onset / self.info.fs_hz + look.duration_s
+            for n, (f, d, _) in look.gages.items():
+                self.view.log_gage_result(len(self.hits), f"g{n:02d}", t, f, d, float("nan"),
+                                          final=False)
+
+    def _show_final(self, hit: HitResult, rec: Recorder | None) -> None:
+        self.hits.append(hit)
+        a = hit.analysis
+        if rec:
+            rec.write_json(RESULTS_TOPIC, {"index": hit.index, "accepted": hit.accepted,
+                                           "reason": hit.reason,
+                                           "analysis": analysis_to_json(a) if a else None},
+                           hit.event.t_ns)
+        if a is None:
+            self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s REJECTED: {hit.reason}")
+        else:
+            self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s accepted: f = {a.f_hz:.3f} Hz,"
+                      f" delta_modal = {a.damping['delta_modal']:.4f}, delta_v = "
+                      f"{a.motions['v_2_6'].delta if 'v_2_6' in a.motions else float('nan'):.4f}")
+            if self.readout:
+                for n, g in a.gages.items():
+                    self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)
+        if self.view is not None:
+            self.view.log_impact(hit.index, hit.event.onset_s, {}, hit.accepted, hit.reason)
+            if a is not None:
+                t = a.decay_start_s + a.duration_s
+                for n, g in a.gages.items():
+                    self.view.log_gage_result(hit.index, f"g{n:02d}", t, g.f_hz, g.delta,
+                                              float("nan"), final=True)
+                k = a.predominant
+                active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
+                self.view.log_mode_shape(hit.index, a.f_hz, {
+                    f"g{n:02d}": complex(s) for n, s in zip(active, a.modes.mode_shape[:, k],
+                                                             strict=False)})
+
+    def _say(self, text: str) -> None:
+        if self.readout:
+            self.readout.hit(text)
+        elif self.log:
+            self.log(text)
