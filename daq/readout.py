@@ -95,6 +95,11 @@ class LiveReadout:
         self.results[channel] = (f_hz, delta, final)
         self._refresh()
 
+    def clear_results(self) -> None:
+        """A new hit rings: the previous hit's per-gage numbers are no longer the ones shown."""
+        self.results.clear()
+        self._refresh()
+
     def hit(self, text: str) -> None:
         """Report a hit's status (detected, preliminary, accepted, rejected and why)."""
         self.hits.append(text)
@@ -148,8 +153,4 @@ class LiveReadout:
                           "" if not np.isfinite(f) else f"{f:.3f}",
                           "" if not np.isfinite(d) else f"{d:.4f}",
                           "" if name not in self.results else ("final" if final else "so far"))
-        if self.hits:
-            table.add_section()
-            for text in self.hits[-4:]:
-                table.add_row(text, end_section=False)
-        return Group(table, Text(health))
+        return Group(table, Text("\n".join(self.hits[-4:])), Text(health))

@@ -106,6 +106,8 @@ class Session:
         self.first_looks = 0
         self._next_look = None
         self._n_events = 0
+        self._ringing_hit: int | None = None  # the hit whose first looks are being shown
+        self._onsets: dict[int, float] = {}  # hit index -> onset, s, as soon as it rings
         self._gage_rows = [i for i, g in enumerate(self.info.gages) if g]
         self._gages = tuple(self.info.gages[i] for i in self._gage_rows)
 
@@ -171,7 +173,7 @@ class Session:
                     if self.readout:
                         self.readout.update(block, queue=rec.stats.queued if rec else 0,
                                             overflows=rec.overflows if rec else 0, gap=gap,
-                                            impacts=[h.event.onset_s for h in self.hits])
+                                            impacts=list(self._onsets.values()))
                     self._drain(rec)
             except KeyboardInterrupt:
                 interrupted = True
@@ -196,6 +198,7 @@ class Session:
     def _on_event(self, ev: ImpactEvent, rec: Recorder | None) -> None:
         k = self._n_events
         self._n_events += 1
+        self._onsets[k] = ev.onset_s
         if rec:
             rec.write_json(IMPACTS_TOPIC, ev.to_json(), ev.t_ns)
         flags = [f for f, on in (("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
@@ -208,6 +211,7 @@ class Session:
                                                  "too_short": ev.too_short}, None)
         self._jobs.put(("final", k, ev))
         self._next_look = None
+        self._ringing_hit = None
 
     def _maybe_look(self, now: int) -> None:
         ringing = self.trigger.ringing
@@ -217,6 +221,11 @@ class Session:
         onset, end = ringing
         start = onset + round(decay_skip_s(self.rig) * self.info.fs_hz)
         if self._next_look is None:
+            self._ringing_hit = self._n_events
+            self._onsets[self._n_events] = onset / self.info.fs_hz
+            self._say(f"hit {self._n_events} at {onset / self.info.fs_hz:.3f} s: ringing")
+            if self.readout:
+                self.readout.clear_results()
             self._next_look = start + self.update_n
         if now < self._next_look:
             return
@@ -270,7 +279,7 @@ class Session:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s accepted: f = {a.f_hz:.3f} Hz,"
                       f" delta_modal = {a.damping['delta_modal']:.4f}, delta_v = "
                       f"{a.motions['v_2_6'].delta if 'v_2_6' in a.motions else float('nan'):.4f}")
-            if self.readout:
+            if self.readout and self._ringing_hit in (None, hit.index):
                 for n, g in a.gages.items():
                     self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)
         if self.view is not None:
