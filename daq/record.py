@@ -55,6 +55,8 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
                     while rec.stats.queued >= queue_blocks - 1:
                         time.sleep(0.001)
                 rec.put(block)
+                for fault in device.take_faults():
+                    rec.event(fault.kind, fault.t_ns, **fault.detail)
                 gap = last is not None and block.first_sample != last
                 gaps += gap
                 last = block.next_sample

@@ -162,6 +162,10 @@ class Session:
                                     "sample": round(blow.t_s * self.info.fs_hz), **blow.to_json()},
                                     block.t0_ns)
                             truth_written = len(truth)
+                    for fault in self.device.take_faults():
+                        if rec:
+                            rec.event(fault.kind, fault.t_ns, **fault.detail)
+                        self._say(f"device fault: {fault.kind} {fault.detail}")
                     gap = last is not None and block.first_sample != last
                     last = block.next_sample
                     samples += block.n_samples

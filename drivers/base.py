@@ -18,9 +18,21 @@ from __future__ import annotations
 import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 
 from drivers.block import Block, StreamInfo
 from drivers.errors import DeviceClosed, DeviceTimeout
+
+
+@dataclass(frozen=True)
+class DeviceFault:
+    """Something the device saw go wrong, for the recording's events and the live view:
+    ``kind`` (e.g. ``"crc_error"``, ``"error_frame"``, ``"bus_off"``, ``"port_lost"``,
+    ``"resync"``), device time ``t_ns`` and a JSON-serialisable ``detail``."""
+
+    kind: str
+    t_ns: int
+    detail: dict = field(default_factory=dict)
 
 
 class Device(ABC):
@@ -31,6 +43,17 @@ class Device(ABC):
     def __init__(self) -> None:
         self._info: StreamInfo | None = None
         self._closed = False
+        self._faults: list[DeviceFault] = []
+
+    # -- faults --------------------------------------------------------------------------------
+    def _fault(self, kind: str, t_ns: int, **detail: object) -> None:
+        """Back-ends call this to report a fault; it is never raised, only collected."""
+        self._faults.append(DeviceFault(kind, t_ns, dict(detail)))
+
+    def take_faults(self) -> list[DeviceFault]:
+        """Faults seen since the last call (oldest first); the caller records and shows them."""
+        out, self._faults = self._faults, []
+        return out
 
     # -- lifecycle ---------------------------------------------------------------------------
     def open(self) -> StreamInfo:

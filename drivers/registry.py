@@ -16,6 +16,11 @@ from drivers.errors import DeviceNotFound
 BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("drivers.sim", "SimDevice"),
     "mcap": ("drivers.mcap_replay", "McapReplayDevice"),
+    "can": ("drivers.can_device", "CanDevice"),
+    "serial": ("drivers.serial_device", "SerialDevice"),
+    "csv": ("drivers.import_csv", "CsvImportDevice"),
+    "uff": ("drivers.import_uff", "UffImportDevice"),
+    "tdms": ("drivers.import_tdms", "TdmsImportDevice"),
 }
 
 
@@ -28,8 +33,10 @@ def parse_device_spec(spec: str) -> tuple[str, str]:
     if "://" in spec:
         kind, address = spec.split("://", 1)
         return kind, address
-    if spec.endswith(".mcap"):
-        return "mcap", spec
+    for suffix, kind in ((".mcap", "mcap"), (".csv", "csv"), (".uff", "uff"), (".unv", "uff"),
+                         (".tdms", "tdms")):
+        if spec.lower().endswith(suffix):
+            return kind, spec
     return spec, ""
 
 
