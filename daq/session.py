@@ -24,6 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from analysis.impact_analysis import FirstLook, first_look
 from analysis.rig import Rig, parse_rig
 from daq.analyze import analysis_to_json
@@ -287,17 +289,40 @@ class Session:
                 for n, g in a.gages.items():
                     self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)
         if self.view is not None:
-            self.view.log_impact(hit.index, hit.event.onset_s, {}, hit.accepted, hit.reason)
+            ev = hit.event
+            self.view.log_impact(hit.index, ev.onset_s, {"double_hit": ev.double_hit,
+                                                         "clipped": list(ev.clipped),
+                                                         "too_short": ev.too_short},
+                                 hit.accepted, hit.reason)
+            if ev.record is not None:  # full rate only around impacts
+                self.view.log_full_rate(ev.record.first_sample, ev.record.values(),
+                                        self.info.fs_hz, k=hit.index)
             if a is not None:
-                t = a.decay_start_s + a.duration_s
-                for n, g in a.gages.items():
-                    self.view.log_gage_result(hit.index, f"g{n:02d}", t, g.f_hz, g.delta,
-                                              float("nan"), final=True)
+                self._log_decays(hit, a)
                 k = a.predominant
                 active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
                 self.view.log_mode_shape(hit.index, a.f_hz, {
                     f"g{n:02d}": complex(s) for n, s in zip(active, a.modes.mode_shape[:, k],
                                                              strict=False)})
+
+    def _log_decays(self, hit: HitResult, a) -> None:
+        """Each gage's decay with the fitted envelope of the predominant mode, and its final
+        frequency, decrement and amplitude, to the Rerun view."""
+        rec, m, k = hit.event.record, a.modes, a.predominant
+        fs = self.info.fs_hz
+        i0 = round(a.decay_start_s * fs) - rec.first_sample
+        x = rec.values()[:, i0:]
+        t_rel = np.arange(x.shape[1]) / fs
+        envelope = np.exp(-m.delta[k] * m.frequency_hz[k] * t_rel)
+        active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
+        amp = dict(zip(active, m.amplitude[:, k], strict=False))
+        row = {g: i for i, g in enumerate(self.info.gages)}
+        t_end = a.decay_start_s + a.duration_s
+        for n, g in a.gages.items():
+            self.view.log_gage_result(hit.index, f"g{n:02d}", t_end, g.f_hz, g.delta,
+                                      float(amp.get(n, np.nan)), final=True,
+                                      decay_t_s=a.decay_start_s + t_rel, decay=x[row[n]],
+                                      envelope=amp.get(n, np.nan) * envelope)
 
     def _say(self, text: str) -> None:
         if self.readout:
