@@ -212,9 +212,7 @@ class Session:
         self._say(f"hit {k} at {ev.onset_s:.3f} s detected ({ev.snr_db:.0f} dB"
                   + (", " + ", ".join(flags) if flags else "") + "): analysing")
         if self.view is not None:
-            self.view.log_impact(k, ev.onset_s, {"double_hit": ev.double_hit,
-                                                 "clipped": list(ev.clipped),
-                                                 "too_short": ev.too_short}, None)
+            self.view.log_impact(k, ev.onset_s, _flags(ev), None)
         self._jobs.put(("final", k, ev))
         self._next_look = None
         self._ringing_hit = None
@@ -290,10 +288,7 @@ class Session:
                     self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)
         if self.view is not None:
             ev = hit.event
-            self.view.log_impact(hit.index, ev.onset_s, {"double_hit": ev.double_hit,
-                                                         "clipped": list(ev.clipped),
-                                                         "too_short": ev.too_short},
-                                 hit.accepted, hit.reason)
+            self.view.log_impact(hit.index, ev.onset_s, _flags(ev), hit.accepted, hit.reason)
             if ev.record is not None:  # full rate only around impacts
                 self.view.log_full_rate(ev.record.first_sample, ev.record.values(),
                                         self.info.fs_hz, k=hit.index)
@@ -329,3 +324,9 @@ class Session:
             self.readout.hit(text)
         elif self.log:
             self.log(text)
+
+
+def _flags(ev: ImpactEvent) -> dict:
+    """An impact's flags for the live view, one type per flag."""
+    return {"double_hit": ev.double_hit, "clipped": bool(ev.clipped),
+            "clipped_channels": ", ".join(ev.clipped), "too_short": ev.too_short}
