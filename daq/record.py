@@ -14,8 +14,34 @@ from pathlib import Path
 
 from daq.readout import LiveReadout
 from daq.recorder import Recorder
-from drivers.base import Device
+from drivers.base import Device, DeviceFault
+from drivers.block import Block
 from drivers.mcap_format import SIM_IMPACTS_TOPIC
+
+
+def store_block(rec: Recorder, device: Device, block: Block, truth_written: int, *,
+                wait_for_room: bool, queue_limit: int = 256) -> tuple[int, list[DeviceFault]]:
+    """Hand one block to the recorder with what came with it: the device's faults as events and,
+    from the simulator, the blows it delivered (``/ramdaq/sim/impacts``, ground truth).
+
+    ``wait_for_room``: for a device with no real-time deadline (the simulator run fast), wait
+    for the recorder's queue instead of letting it drop. Returns the updated count of truth
+    records written and the faults, for the caller to show.
+    """
+    if wait_for_room:
+        while rec.stats.queued >= queue_limit - 1:
+            time.sleep(0.001)
+    rec.put(block)
+    faults = device.take_faults()
+    for fault in faults:
+        rec.event(fault.kind, fault.t_ns, **fault.detail)
+    truth = getattr(device, "delivered_impacts", None)
+    if truth is not None and len(truth) > truth_written:
+        for blow in truth[truth_written:]:
+            rec.write_json(SIM_IMPACTS_TOPIC, {"sample": round(blow.t_s * block.fs_hz),
+                                               **blow.to_json()}, block.t0_ns)
+        truth_written = len(truth)
+    return truth_written, faults
 
 
 @dataclass(frozen=True)
@@ -51,21 +77,11 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
             if view:
                 view.__enter__()
             for block in device:
-                if not paced:
-                    while rec.stats.queued >= queue_blocks - 1:
-                        time.sleep(0.001)
-                rec.put(block)
-                for fault in device.take_faults():
-                    rec.event(fault.kind, fault.t_ns, **fault.detail)
+                written_truth, _ = store_block(rec, device, block, written_truth,
+                                               wait_for_room=not paced, queue_limit=queue_blocks)
                 gap = last is not None and block.first_sample != last
                 gaps += gap
                 last = block.next_sample
-                if truth is not None:
-                    for blow in truth[written_truth:]:
-                        rec.write_json(SIM_IMPACTS_TOPIC, {
-                            "sample": round(blow.t_s * info.fs_hz), **blow.to_json()},
-                            block.t0_ns)
-                    written_truth = len(truth)
                 if view:
                     view.update(block, queue=rec.stats.queued, overflows=rec.overflows, gap=gap,
                                 impacts=[b.t_s for b in truth] if truth is not None else None)

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import queue
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,10 +30,11 @@ from analysis.rig import Rig, parse_rig
 from daq.analyze import analysis_to_json
 from daq.analyzer import HitResult, analyze_event, decay_skip_s, trial_summary
 from daq.readout import LiveReadout
+from daq.record import store_block
 from daq.recorder import Recorder
 from daq.trigger import ImpactEvent, Trigger
 from drivers.base import Device
-from drivers.mcap_format import IMPACTS_TOPIC, SIM_IMPACTS_TOPIC
+from drivers.mcap_format import IMPACTS_TOPIC
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""
@@ -143,7 +143,6 @@ class Session:
         worker.start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
                if self.record_path else None)
-        truth = getattr(self.device, "delivered_impacts", None)
         truth_written = 0
         samples = 0
         interrupted = False
@@ -154,19 +153,12 @@ class Session:
             try:
                 for block in self.device:
                     if rec:
-                        if getattr(self.device, "pace", "realtime") == "fast":
-                            while rec.stats.queued >= 250:  # no deadline: wait, don't drop
-                                time.sleep(0.001)
-                        rec.put(block)
-                        if truth is not None and len(truth) > truth_written:
-                            for blow in truth[truth_written:]:
-                                rec.write_json(SIM_IMPACTS_TOPIC, {
-                                    "sample": round(blow.t_s * self.info.fs_hz), **blow.to_json()},
-                                    block.t0_ns)
-                            truth_written = len(truth)
-                    for fault in self.device.take_faults():
-                        if rec:
-                            rec.event(fault.kind, fault.t_ns, **fault.detail)
+                        truth_written, faults = store_block(
+                            rec, self.device, block, truth_written,
+                            wait_for_room=getattr(self.device, "pace", "realtime") == "fast")
+                    else:
+                        faults = self.device.take_faults()
+                    for fault in faults:
                         self._say(f"device fault: {fault.kind} {fault.detail}")
                     gap = last is not None and block.first_sample != last
                     last = block.next_sample
