@@ -55,7 +55,9 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) ->
     start = event.onset_sample + round(decay_skip_s(rig) * info.fs_hz)
     i0 = start - rec.first_sample
     x = rec.counts[:, i0:] * rec.scale[:, None]
-    if event.too_short or x.shape[1] < MIN_DECAY_S * info.fs_hz:
+    # The trigger's too_short only says the record was cut (next blow, gap, end of stream)
+    # before the ringing died; what counts here is whether enough decay remains to measure.
+    if x.shape[1] < MIN_DECAY_S * info.fs_hz:
         return HitResult(index, event, False,
                          f"decay too short: {x.shape[1] / info.fs_hz:.2f} s "
                          f"(< {MIN_DECAY_S} s, ended by {event.end_reason})", None)

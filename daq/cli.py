@@ -29,17 +29,8 @@ def _parse_impacts(text: str) -> list[float]:
 
 def cmd_record(args: argparse.Namespace) -> int:
     from daq.record import record
-    from drivers.registry import open_device
 
-    options: dict = {}
-    name = args.name
-    if args.device == "sim":
-        options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
-        name = name or default_name
-    name = name or "trial"
-    out = Path(args.out) if args.out else RECORDINGS / f"{name}.mcap"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    device = open_device(args.device, **options)
+    device, out = _device_and_output(args)
     print(f"recording {device.info.device} ({device.info.n_channels} ch at "
           f"{device.info.fs_hz:g} Hz) into {out}; Ctrl-C ends it cleanly", flush=True)
     s = record(device, out, readout=not args.quiet, overwrite=args.overwrite)
@@ -84,6 +75,22 @@ def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
                  fs_hz=args.fs), f"{rig.name}-{rig.medium}")
 
 
+def _device_and_output(args: argparse.Namespace):
+    """Open the device named by ``--device`` and choose the recording's path."""
+    from drivers.registry import open_device
+
+    options: dict = {}
+    name = args.name
+    if args.device == "sim":
+        options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
+        name = name or default_name
+    elif args.rig:
+        options = {"rig": args.rig}
+    out = Path(args.out) if args.out else RECORDINGS / f"{name or 'trial'}.mcap"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return open_device(args.device, **options), out
+
+
 def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd: Path | None):
     from daq.session import Session
 
@@ -97,7 +104,7 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
     try:
         outcome = Session(device, record_path=record_path, overwrite=args.overwrite, view=view,
                           readout=False if args.quiet else None,
-                          log=None if not args.quiet else (lambda m: None)).run()
+                          log=print).run()
     finally:
         if view is not None:
             view.close()
@@ -107,24 +114,16 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
 def _print_outcome(outcome, args: argparse.Namespace) -> None:
     from daq.analyze import summary_table
 
+    for k, why in outcome.summary["rejected"].items():
+        print(f"hit {k} rejected: {why}")
     print("\n".join(summary_table(outcome.summary, args.units)))
     print(f"{outcome.first_looks} first looks shown while ringing, {outcome.skipped_updates} "
           f"skipped because the analyzer was busy (no samples skipped)")
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
-    from drivers.registry import open_device
-
-    options: dict = {}
-    name = args.name
-    if args.device == "sim":
-        options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
-        name = name or default_name
-    name = name or "trial"
-    out = Path(args.out) if args.out else RECORDINGS / f"{name}.mcap"
-    out.parent.mkdir(parents=True, exist_ok=True)
+    device, out = _device_and_output(args)
     rrd = None if args.no_rerun else (Path(args.rrd) if args.rrd else out.with_suffix(".rrd"))
-    device = open_device(args.device, **options)
     print(f"trial: {device.info.device} ({device.info.n_channels} ch at {device.info.fs_hz:g} Hz)"
           f" recording into {out}" + (f", Rerun view into {rrd}" if rrd else "")
           + "; Ctrl-C ends it cleanly", flush=True)

@@ -67,6 +67,9 @@ class SimDevice(Device):
         Override the rig's sample rate.
     noise : bool
         Add the rig's noise floor.
+
+    The stream's ``rig_toml`` is the rig file's text: a rig changed in memory
+    (``dataclasses.replace``) is simulated as changed but described by its file's text.
     """
 
     kind = "sim"
