@@ -34,6 +34,7 @@ from daq.record import store_block
 from daq.recorder import Recorder
 from daq.trigger import ImpactEvent, Trigger
 from drivers.base import Device
+from drivers.errors import DeviceError
 from drivers.mcap_format import IMPACTS_TOPIC
 
 RESULTS_TOPIC = "/ramdaq/results"
@@ -104,6 +105,7 @@ class Session:
         self._done: queue.Queue = queue.Queue()
         self._busy = threading.Event()
         self.hits: list[HitResult] = []
+        self.notes: list[str] = []
         self.skipped_updates = 0
         self.first_looks = 0
         self._next_look = None
@@ -177,6 +179,15 @@ class Session:
                 interrupted = True
                 if rec:
                     rec.event("interrupted", 0, reason="Ctrl-C")
+            except DeviceError as err:  # the device gave up: keep what came, say why
+                self._say(f"device ended the stream: {err}")
+                if rec:
+                    rec.event("device_error", 0, message=str(err))
+                self.notes.append(str(err))
+            for fault in self.device.take_faults():  # faults reported with the last read
+                if rec:
+                    rec.event(fault.kind, fault.t_ns, **fault.detail)
+                self._say(f"device fault: {fault.kind} {fault.detail}")
             for ev in self.trigger.flush():
                 self._on_event(ev, rec)
             self._say(f"waiting for the analyzer to finish {self._jobs.unfinished_tasks} job(s)")
@@ -191,7 +202,7 @@ class Session:
             self.device.close()
         self.hits.sort(key=lambda h: h.index)
         return TrialOutcome(self.hits, trial_summary(self.hits), samples, self.skipped_updates,
-                            self.first_looks, interrupted, self.record_path)
+                            self.first_looks, interrupted, self.record_path, notes=self.notes)
 
     def _on_event(self, ev: ImpactEvent, rec: Recorder | None) -> None:
         k = self._n_events
