@@ -1,0 +1,349 @@
+"""Serial back-end: framed ADC samples (:mod:`drivers.serial_frames`) over any pyserial URL.
+
+::
+
+    with open_device("serial:///dev/ttyUSB0?rig=rigs/albacore.toml") as dev:
+        for block in dev:
+            ...
+    open_device("serial://socket://10.0.0.7:4001?rig=rigs/albacore.toml")  # Ethernet bridge
+
+The address is anything :func:`serial.serial_for_url` opens (a device path, ``socket://``,
+``rfc2217://``, ...). Query keys this back-end knows (``rig``, ``fs_hz``, ``channels``,
+``block_s``, ``baudrate``, ``reconnect_s``, ``give_up_s``) are taken out of the URL before it is
+handed to pyserial; any other key (``logging=debug``) is left for pyserial.
+
+Frames are gathered into blocks of at most ``block_s`` (and at least one frame); a block's
+``first_sample`` is its first frame's own sample index, so frames that never arrived leave a
+gap that is never filled. Faults are reported through
+:meth:`~drivers.base.Device.take_faults`, never raised:
+
+* ``crc_error`` -- frames whose header or payload CRC failed (``count``, ``total``);
+* ``resync`` -- sync regained after garbage or a torn frame (``bytes_discarded``, ``seq``);
+* ``seq_gap`` -- frames missing from the sequence (``missing_frames``, ``missing_samples``);
+* ``port_lost`` -- the port vanished (USB unplug, bridge down, EOF on a pty or socket);
+* ``port_back`` -- the port reopened and data flows again, with the gap it left
+  (``gap_samples``, ``gap_frames``, ``down_s``);
+* ``frame_mismatch`` -- a CRC-valid frame with the wrong channel count, dropped.
+
+A lost port is reopened with the same URL every ``reconnect_s`` seconds; after ``give_up_s``
+seconds without it, :meth:`read` raises :class:`~drivers.errors.DeviceClosed` naming the URL.
+The block in progress when the port is lost is handed out at once, so the loss is recorded live.
+``read`` checks its timeout once per ``read_slice_s`` (20 ms): a timeout may run over by that.
+"""
+
+from __future__ import annotations
+
+import io
+import select
+import time
+from collections import deque
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+import serial
+
+from analysis.rig import Rig, load_rig, parse_rig
+from analysis.sensor import channel_scales
+from drivers.base import TIMED_OUT, Device
+from drivers.block import Block, StreamInfo, sample_time_ns
+from drivers.errors import DeviceClosed, DeviceNotFound
+from drivers.serial_frames import Frame, FrameParser
+
+__all__ = ["SerialDevice", "split_url"]
+
+_QUERY_KEYS = {"rig": str, "fs_hz": float, "channels": int, "block_s": float, "baudrate": int,
+               "reconnect_s": float, "give_up_s": float}
+_READ_CHUNK = 1 << 16
+_PORT_ERRORS = (serial.SerialException, OSError)
+
+
+def split_url(address: str) -> tuple[str, dict[str, str]]:
+    """Split ``address`` into the URL for pyserial and this back-end's own query options.
+
+    ``"socket://h:1?rig=a.toml&logging=debug"`` -> ``("socket://h:1?logging=debug",
+    {"rig": "a.toml"})``.
+    """
+    base, sep, query = address.partition("?")
+    if not sep:
+        return address, {}
+    own, kept = {}, []
+    for item in query.split("&"):
+        key, _, value = item.partition("=")
+        if key in _QUERY_KEYS:
+            own[key] = unquote(value)
+        elif item:
+            kept.append(item)
+    return base + ("?" + "&".join(kept) if kept else ""), own
+
+
+def _load_rig(rig: Rig | str | Path) -> Rig:
+    if isinstance(rig, Rig):
+        return rig
+    if isinstance(rig, str) and ("\n" in rig or "=" in rig):
+        return parse_rig(rig, source="serial:rig")
+    return load_rig(rig)
+
+
+class SerialDevice(Device):
+    """A front-end streaming :mod:`~drivers.serial_frames` frames (back-end name ``"serial"``).
+
+    Parameters
+    ----------
+    url : str
+        pyserial URL or device path, optionally with ``?rig=...&fs_hz=...`` (see module notes).
+    baudrate : int, optional
+        Line rate, baud; default 2 000 000 (ignored by ``socket://``). 16 ch x 2048 Hz x 3 bytes
+        is 100 kB/s with framing, ~1 Mbaud at 10 bits per byte.
+    rig : Rig, path or str, optional
+        The rig (object, TOML path or TOML text): channel names, gages, scales, sample rate.
+        Without one the channels are ``c01``... in raw counts (scale 1).
+    channels : int, optional
+        Channel count; the rig's, else 16. Frames with another count are dropped.
+    fs_hz : float, optional
+        Sample rate, Hz; the rig's, else 2048.
+    block_s : float, optional
+        Longest block, s; default 0.05 (blocks hold whole frames; a longer frame is a block).
+    reconnect_s : float, optional
+        Seconds between attempts to reopen a lost port; default 0.5.
+    give_up_s : float, optional
+        Seconds a port may stay lost before the stream ends with ``DeviceClosed``; default 30.
+    read_slice_s : float
+        Longest wait for bytes in one go, s: the granularity of ``read(timeout)``.
+    """
+
+    kind = "serial"
+
+    def __init__(self, url: str, *, baudrate: int | None = None, rig: Rig | str | Path | None = None,
+                 channels: int | None = None, fs_hz: float | None = None,
+                 block_s: float | None = None, reconnect_s: float | None = None,
+                 give_up_s: float | None = None, read_slice_s: float = 0.02) -> None:
+        super().__init__()
+        self.url, query = split_url(url)
+        given = {"rig": rig, "fs_hz": fs_hz, "channels": channels, "block_s": block_s,
+                 "baudrate": baudrate, "reconnect_s": reconnect_s, "give_up_s": give_up_s}
+        opts = {}
+        for key, value in given.items():
+            if key in query and value is not None:
+                raise ValueError(f"serial: {key} given both in {url!r} and as an argument")
+            try:
+                opts[key] = _QUERY_KEYS[key](query[key]) if key in query else value
+            except ValueError:
+                raise ValueError(f"serial: {key}={query[key]!r} in {url!r} is not a "
+                                 f"{_QUERY_KEYS[key].__name__}") from None
+        self.rig = None if opts["rig"] is None else _load_rig(opts["rig"])
+        rig_fs = self.rig.daq.sample_rate_hz if self.rig else 2048.0
+        rig_ch = len(self.rig.gages_by_channel()) if self.rig else 16
+        self.fs_hz = float(opts["fs_hz"] or rig_fs)
+        self.n_channels = int(opts["channels"] or rig_ch)
+        self.baudrate = int(opts["baudrate"] or 2_000_000)
+        self.block_s = float(opts["block_s"] if opts["block_s"] is not None else 0.05)
+        self.reconnect_s = float(opts["reconnect_s"] if opts["reconnect_s"] is not None else 0.5)
+        self.give_up_s = float(opts["give_up_s"] if opts["give_up_s"] is not None else 30.0)
+        self.read_slice_s = float(read_slice_s)
+        for name in ("fs_hz", "block_s", "reconnect_s", "give_up_s", "read_slice_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"serial: {name} ({getattr(self, name)}) must be positive")
+        if self.rig is not None and self.n_channels != rig_ch:
+            raise ValueError(f"serial: channels ({self.n_channels}) differs from the rig's {rig_ch}")
+        if not 1 <= self.n_channels <= 255:
+            raise ValueError(f"serial: channels ({self.n_channels}) must be within 1..255")
+        self.block_n = max(1, round(self.block_s * self.fs_hz))
+        self.parser = FrameParser()
+        self._port: serial.SerialBase | None = None
+        self._fileno: int | None = None
+        self._ready: deque[Block] = deque()
+        self._parts: list[np.ndarray] = []
+        self._part_first = 0
+        self._part_n = 0
+        self._next: int | None = None  # sample index the next frame should start at
+        self._last_seq: int | None = None
+        self._offset = 0  # added to device sample indices after a device restart
+        self._seq = 0
+        self._ended = False
+        self._lost_at: float | None = None
+        self._next_try = 0.0
+        self._back: float | None = None  # seconds the port was down, until data flows again
+
+    # -- Device hooks ------------------------------------------------------------------------
+    def _open(self) -> StreamInfo:
+        try:
+            self._port = self._open_port()
+        except _PORT_ERRORS as err:
+            raise DeviceNotFound(f"serial: cannot open {self.url}: {_one_line(err)}") from err
+        if self.rig is not None:
+            gages = self.rig.gages_by_channel()
+            names = tuple(f"g{g.number:02d}" for g in gages)
+            units, numbers = ("m/s^2",) * len(gages), tuple(g.number for g in gages)
+            self.scale = channel_scales(self.rig).astype(np.float64)
+            extra = {"adc_bits": self.rig.daq.adc_bits, "medium": self.rig.medium,
+                     "rig_name": self.rig.name}
+        else:
+            names = tuple(f"c{i + 1:02d}" for i in range(self.n_channels))
+            units, numbers = ("count",) * self.n_channels, (0,) * self.n_channels
+            self.scale = np.ones(self.n_channels)
+            extra = {}
+        extra.update(url=self.url, baudrate=self.baudrate, block_samples=self.block_n,
+                     wire_format="ramdaq-serial v1")
+        return StreamInfo(device=f"serial://{self.url}", fs_hz=self.fs_hz, channels=names,
+                          units=units, gages=numbers, rig_toml=self.rig.text if self.rig else "",
+                          extra=extra)
+
+    def _read(self, timeout: float | None) -> Block | None:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            if self._ready:
+                return self._ready.popleft()
+            if self._ended:
+                return None
+            if self._port is None:
+                if not self._reconnect(deadline):
+                    return TIMED_OUT
+                continue
+            try:
+                data = self._receive()
+            except _PORT_ERRORS as err:
+                self._lose(err)
+                continue
+            if data:
+                self._ingest(self.parser.feed(data))
+            if not self._ready and deadline is not None and time.monotonic() >= deadline:
+                return TIMED_OUT
+
+    def _close(self) -> None:
+        self._drop_port()
+
+    # -- port --------------------------------------------------------------------------------
+    def _open_port(self) -> serial.SerialBase:
+        port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=self.read_slice_s)
+        try:
+            self._fileno = port.fileno()
+        except (AttributeError, io.UnsupportedOperation, *_PORT_ERRORS):
+            self._fileno = None  # rfc2217://, loop://, ...: pyserial's own timeout does the waiting
+        else:
+            port.timeout = 0  # select() below waits; each read is then a single recv / os.read
+        return port
+
+    def _receive(self) -> bytes:
+        """Bytes that arrived, waiting at most ``read_slice_s``; ``b""`` if none did.
+
+        pyserial's ``read(n)`` with a timeout loops until ``n`` bytes, and its ``socket://`` and
+        posix handlers raise at EOF *discarding what that call had already read* -- the last
+        frames before an unplug or the end-of-stream frame. Waiting with ``select`` on the port's
+        descriptor and then reading without a timeout makes each read one ``recv``/``os.read``:
+        nothing read is ever thrown away.
+        """
+        port = self._port
+        if self._fileno is None:
+            return port.read(max(1, min(port.in_waiting, _READ_CHUNK)))
+        ready, _, _ = select.select([self._fileno], [], [], self.read_slice_s)
+        return port.read(_READ_CHUNK) if ready else b""
+
+    def _drop_port(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except _PORT_ERRORS:
+                pass  # it is gone already
+
+    def _lose(self, err: BaseException) -> None:
+        """The port failed: keep what was received, hand out the partial block, start retrying."""
+        self._drop_port()
+        self._ingest(self.parser.flush())
+        self._emit_partial()
+        if self._ended:  # the device said goodbye before it went: not a fault
+            return
+        self._lost_at = time.monotonic()
+        self._next_try = self._lost_at + self.reconnect_s
+        self._fault("port_lost", self._t_next(), url=self.url, error=_one_line(err),
+                    retry_every_s=self.reconnect_s, give_up_s=self.give_up_s)
+
+    def _reconnect(self, deadline: float | None) -> bool:
+        """Reopen the lost port; False if ``deadline`` came first. Raises DeviceClosed at give-up."""
+        while True:
+            now = time.monotonic()
+            if now - self._lost_at >= self.give_up_s:
+                raise DeviceClosed(f"serial: {self.url} vanished and did not come back within "
+                                   f"{self.give_up_s:g} s")
+            if now >= self._next_try:
+                try:
+                    self._port = self._open_port()
+                except _PORT_ERRORS:
+                    self._next_try = now + self.reconnect_s
+                else:
+                    self._back = now - self._lost_at
+                    self._lost_at = None
+                    return True
+            wake = min(self._next_try, self._lost_at + self.give_up_s)
+            if deadline is not None and wake > deadline:
+                time.sleep(max(0.0, deadline - now))
+                return False
+            time.sleep(max(0.0, wake - now))
+
+    # -- frames -> blocks --------------------------------------------------------------------
+    def _t_next(self) -> int:
+        return sample_time_ns(self._next if self._next is not None else 0, self.fs_hz)
+
+    def _ingest(self, frames: list[Frame]) -> None:
+        for frame in frames:
+            if frame.failed_crc:
+                self._fault("crc_error", self._t_next(), count=frame.failed_crc,
+                            total=self.parser.crc_errors)
+            if frame.skipped_bytes:
+                self._fault("resync", self._t_next(), bytes_discarded=frame.skipped_bytes,
+                            seq=frame.seq, total=self.parser.resyncs)
+            if frame.end:
+                self._ended = True
+                self._drop_port()
+                break
+            if frame.n_channels != self.n_channels:
+                self._fault("frame_mismatch", self._t_next(), seq=frame.seq,
+                            channels=frame.n_channels, expected=self.n_channels)
+                continue
+            self._place(frame)
+        if self._ended:
+            self._emit_partial()
+
+    def _place(self, frame: Frame) -> None:
+        first = frame.first_sample + self._offset
+        if self._next is not None and first < self._next:  # the device restarted its count
+            self._fault("stream_restart", self._t_next(), seq=frame.seq,
+                        device_first_sample=frame.first_sample, continues_at=self._next)
+            self._offset += self._next - first
+            first = self._next
+        if (self._next is not None and first > self._next) or self._back is not None:
+            missing = first - (self._next if self._next is not None else first)
+            frames = 0 if self._last_seq is None else (frame.seq - self._last_seq - 1) % 2**32
+            detail = {"gap_samples": missing, "gap_frames": frames}
+            if self._back is not None:
+                self._fault("port_back", self._t_next(), url=self.url,
+                            down_s=round(self._back, 3), **detail)
+                self._back = None
+            else:
+                self._fault("seq_gap", self._t_next(), after_seq=self._last_seq, seq=frame.seq,
+                            missing_frames=frames, missing_samples=missing)
+            if missing:
+                self._emit_partial()
+        if not self._parts:
+            self._part_first = first
+        self._parts.append(frame.counts)
+        self._part_n += frame.n_samples
+        self._next = first + frame.n_samples
+        self._last_seq = frame.seq
+        if self._part_n + frame.n_samples > self.block_n:  # another such frame would not fit
+            self._emit_partial()
+
+    def _emit_partial(self) -> None:
+        if not self._parts:
+            return
+        counts = np.ascontiguousarray(np.concatenate(self._parts, axis=1), dtype=np.int32)
+        self._ready.append(Block(seq=self._seq, first_sample=self._part_first,
+                                 t0_ns=sample_time_ns(self._part_first, self.fs_hz),
+                                 fs_hz=self.fs_hz, counts=counts, scale=self.scale))
+        self._seq += 1
+        self._parts, self._part_n = [], 0
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split()) or type(err).__name__

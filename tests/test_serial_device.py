@@ -1,0 +1,288 @@
+"""Serial back-end against the emulator: real processes, real ptys and loopback sockets, the real
+pyserial stack, no mocks.
+
+Each test runs ``python -m drivers.serial_emulator`` with a rig, seed and impacts, streams it
+through :class:`SerialDevice` into :class:`Recorder` (the ``ramdaq record`` loop), replays the file
+with :class:`McapReplayDevice`, and holds the samples against a :class:`SimDevice` with the same
+rig, seed and impacts: bit for bit where they were delivered, and exactly the frames the emulator
+dropped, corrupted or lost where they were not -- which the file must show as gaps and events.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.record import record
+from daq.session import Session
+from drivers.block import sample_time_ns
+from drivers.errors import DeviceClosed, DeviceNotFound
+from drivers.mcap_replay import McapReplayDevice
+from drivers.registry import open_device
+from drivers.serial_device import SerialDevice, split_url
+from drivers.sim import SimDevice
+
+pytestmark = pytest.mark.timeout(60)
+
+REPO = Path(__file__).resolve().parent.parent
+RIG = REPO / "recordings" / "rigs" / "albacore.toml"
+SEED, DURATION, IMPACTS = 11, 3.0, [1.2]
+
+
+@contextmanager
+def emulator(tmp_path: Path, transport: str, *args: str, duration: float = DURATION,
+             impacts: list[float] = IMPACTS):
+    """Start the emulator; yield ``(process, address)``; make sure it is gone afterwards."""
+    where = ["--pty", "--link", str(tmp_path / "tty")] if transport == "pty" else [
+        "--tcp", "127.0.0.1:0"]
+    cmd = [sys.executable, "-m", "drivers.serial_emulator", *where, "--rig", str(RIG),
+           "--duration", str(duration), "--impacts", ",".join(map(str, impacts)), "--seed",
+           str(SEED), "--pace", "fast", "--linger", "5", *args]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        address = proc.stdout.readline().strip()
+        assert address, f"emulator did not start: {proc.stderr.read()}"
+        yield proc, address
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+        proc.wait(10)
+        proc.stdout.close()
+        proc.stderr.close()
+
+
+def summary(proc: subprocess.Popen) -> dict:
+    out = proc.stdout.read()
+    assert proc.wait(10) == 0, proc.stderr.read()
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def truth(duration: float = DURATION, impacts: list[float] = IMPACTS
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's counts, shape (channels, samples), and scales."""
+    with SimDevice(RIG, seed=SEED, duration_s=duration, impacts=impacts) as sim:
+        return np.hstack([b.counts for b in sim]), sim._sensor.scale
+
+
+def replay(path: Path) -> tuple[list, list[dict]]:
+    with McapReplayDevice(path) as dev:
+        return list(dev), dev.events()
+
+
+def frames_missing(s: dict, total: int, *keys: str) -> np.ndarray:
+    """Mask of the samples in the frames the emulator's summary lists under ``keys``."""
+    mask = np.zeros(total, bool)
+    n = s["frame_samples"]
+    for key in keys:
+        for k in s[key]:
+            mask[k * n:(k + 1) * n] = True
+    return mask
+
+
+def check_recording(path: Path, duration: float = DURATION, impacts: list[float] = IMPACTS
+                    ) -> tuple[np.ndarray, list[dict]]:
+    """Every recorded sample equals the simulator's; returns the mask of samples *not* recorded
+    and the file's events, after checking the gap events account for exactly those samples."""
+    ref, scale = truth(duration, impacts)
+    blocks, events = replay(path)
+    got = np.zeros(ref.shape[1], bool)
+    for b in blocks:
+        assert np.array_equal(b.counts, ref[:, b.first_sample:b.next_sample]), b.first_sample
+        assert np.array_equal(b.scale, scale) and not got[b.first_sample:b.next_sample].any()
+        got[b.first_sample:b.next_sample] = True
+    gaps = [e["detail"] for e in events if e["kind"] == "gap"]
+    inner_missing = np.count_nonzero(~got[: blocks[-1].next_sample])
+    assert sum(g["missing_samples"] for g in gaps) == inner_missing
+    return ~got, events
+
+
+def live_trial(dev: SerialDevice, path: Path) -> list[str]:
+    """Run ``dev`` through the live trial session (recorder, trigger, analyzer) into ``path``;
+    return what the session showed live (the terminal readout shows the same lines)."""
+    shown: list[str] = []
+    Session(dev, record_path=path, readout=False, log=shown.append).run()
+    return shown
+
+
+def shown_faults(shown: list[str]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for line in shown:
+        if line.startswith("device fault: "):
+            kind = line.split()[2]
+            out[kind] = out.get(kind, 0) + 1
+    return out
+
+
+def kinds(events: list[dict]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for e in events:
+        out[e["kind"]] = out.get(e["kind"], 0) + 1
+    return out
+
+
+# -- clean stream ----------------------------------------------------------------------------
+@pytest.mark.parametrize("transport", ["pty", "tcp"])
+def test_recording_equals_the_simulator_bit_for_bit(tmp_path, transport):
+    path = tmp_path / "trial.mcap"
+    with emulator(tmp_path, transport) as (proc, address):
+        dev = open_device(f"serial://{address}?rig={RIG}")
+        rec = record(dev, path, readout=False)
+        s = summary(proc)
+    missing, events = check_recording(path)
+    assert not missing.any() and rec.gaps == 0 and events == []
+    assert s["samples_sent"] == round(DURATION * 2048) == rec.samples
+    p = dev.parser
+    assert (p.crc_errors, p.resyncs, p.bytes_discarded, p.bad_headers) == (0, 0, 0, 0)
+    with SimDevice(RIG, seed=SEED) as sim, McapReplayDevice(path) as back:
+        assert back.info.channels == sim.info.channels and back.info.gages == sim.info.gages
+        assert back.info.rig_toml == sim.info.rig_toml and back.info.fs_hz == sim.info.fs_hz
+        assert back.info.device == f"serial://{address}"
+
+
+# -- faults ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("transport", ["pty", "tcp"])
+def test_drops_corruption_and_garbage_become_gaps_and_events(tmp_path, transport):
+    path = tmp_path / "faults.mcap"
+    with emulator(tmp_path, transport, "--drop-every", "9", "--corrupt-every", "13",
+                  "--garbage-every", "7") as (proc, address):
+        dev = SerialDevice(address, rig=str(RIG))
+        shown = live_trial(dev, path)
+        s = summary(proc)
+    missing, events = check_recording(path)
+    assert s["dropped"] and s["corrupted"] and s["garbage"]
+    assert np.array_equal(missing, frames_missing(s, missing.size, "dropped", "corrupted"))
+    n = kinds(events)
+    assert shown_faults(shown) == {k: n[k] for k in ("crc_error", "resync", "seq_gap")}
+    assert dev.parser.crc_errors == len(s["corrupted"]) == sum(
+        e["detail"]["count"] for e in events if e["kind"] == "crc_error")
+    assert n["seq_gap"] == n["gap"]
+    seq_gaps = [e["detail"] for e in events if e["kind"] == "seq_gap"]
+    lost = set(s["dropped"]) | set(s["corrupted"])
+    assert sum(g["missing_frames"] for g in seq_gaps) == len(lost)
+    # one resync for each good frame reached across garbage or a corrupted frame, no other
+    reached = {_next_good(k, lost) for k in s["garbage"]}
+    reached |= {_next_good(k + 1, lost) for k in s["corrupted"]}
+    assert n["resync"] == dev.parser.resyncs == len(reached)
+
+
+def _next_good(k: int, lost: set[int]) -> int:
+    while k in lost:
+        k += 1
+    return k
+
+
+def test_unplug_and_replug_over_socket(tmp_path):
+    """The bridge vanishes mid-frame for 0.6 s: port_lost, port_back with the exact gap, the
+    torn frame discarded, and the stream goes on bit for bit."""
+    path = tmp_path / "unplug.mcap"
+    with emulator(tmp_path, "tcp", "--unplug-at", "1.0", "--unplug-for", "0.6") as (proc, address):
+        dev = SerialDevice(address, rig=RIG, reconnect_s=0.05, give_up_s=10)
+        shown = live_trial(dev, path)
+        s = summary(proc)
+    missing, events = check_recording(path)
+    assert shown_faults(shown) == {"port_lost": 1, "resync": 1, "port_back": 1}
+    assert s["torn"] and s["lost"]
+    assert np.array_equal(missing, frames_missing(s, missing.size, "torn", "lost"))
+    n = kinds(events)
+    assert n["port_lost"] == n["port_back"] == n["gap"] == 1 and "seq_gap" not in n
+    back = next(e for e in events if e["kind"] == "port_back")
+    assert back["detail"]["gap_frames"] == len(s["torn"]) + len(s["lost"])
+    assert back["detail"]["gap_samples"] == np.count_nonzero(missing) == 32 * (
+        back["detail"]["gap_frames"]) >= 0.6 * 2048
+    assert back["t_ns"] == sample_time_ns(int(np.argmax(missing)), 2048.0)
+    assert dev.parser.resyncs == 1  # the torn half frame, discarded when the port went
+    assert not missing[-100:].any()
+
+
+def test_unplug_and_replug_pty_behind_a_stable_link(tmp_path):
+    """A replugged pty is a new /dev/pts/N; the emulator's symlink keeps the name, as udev's
+    /dev/serial/by-id does. Bytes in flight when a pty hangs up may be lost: the gap covers at
+    least the unplugged frames, and the file accounts for it."""
+    path = tmp_path / "unplug.mcap"
+    with emulator(tmp_path, "pty", "--unplug-at", "1.0", "--unplug-for", "0.6") as (proc, address):
+        dev = SerialDevice(address, rig=RIG, reconnect_s=0.05, give_up_s=10)
+        record(dev, path, readout=False)
+        s = summary(proc)
+    missing, events = check_recording(path)
+    assert (missing >= frames_missing(s, missing.size, "torn", "lost")).all()
+    assert kinds(events)["port_lost"] == kinds(events)["port_back"] == 1
+    assert not missing[-100:].any()
+
+
+def test_port_that_never_comes_back_ends_the_stream_naming_the_url(tmp_path):
+    with emulator(tmp_path, "tcp", duration=60.0) as (proc, address):
+        dev = SerialDevice(address, rig=RIG, reconnect_s=0.05, give_up_s=0.5)
+        with dev:
+            first = dev.read(timeout=5)
+            proc.kill()
+            t = time.monotonic()
+            with pytest.raises(DeviceClosed, match=re.escape(address)) as err:
+                while True:
+                    dev.read(timeout=5)
+        assert time.monotonic() - t < 5 and "\n" not in str(err.value)
+        assert first.first_sample == 0
+        assert [f.kind for f in dev.take_faults()][-1] == "port_lost"
+
+
+def test_cli_trial_over_serial_gives_the_simulator_trials_numbers(tmp_path):
+    """``ramdaq trial --device serial://...`` against the emulator, with garbage on the line:
+    every garbage burst is shown live and logged as a resync, no sample is lost, and the final
+    numbers equal those of the same trial run straight from the simulator."""
+    out, results = tmp_path / "trial.mcap", tmp_path / "results.json"
+    with emulator(tmp_path, "tcp", "--garbage-every", "25", duration=6.0,
+                  impacts=[3.0]) as (proc, address):
+        cli = subprocess.Popen([sys.executable, "-m", "daq.cli", "trial", "--device",
+                                f"serial://{address}?rig={RIG}", "--no-rerun", "--out", str(out),
+                                "--json", str(results)],
+                               cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+        try:  # meanwhile, the same trial straight from the simulator
+            direct = Session(SimDevice(RIG, seed=SEED, duration_s=6.0, impacts=[3.0]),
+                             readout=False).run()
+            stdout, stderr = cli.communicate(timeout=50)
+        finally:
+            cli.kill()
+        s = summary(proc)
+    assert cli.returncode == 0, stderr
+    assert stdout.count("device fault: resync") == len(s["garbage"]) > 0
+    missing, events = check_recording(out, duration=6.0, impacts=[3.0])
+    assert not missing.any() and kinds(events) == {"resync": len(s["garbage"])}
+    assert len(direct.hits) == 1
+    assert _canonical(results.read_text()) == _canonical(json.dumps(direct.results_json(),
+                                                                     default=_plain))
+
+
+def _plain(o: object) -> object:
+    return o.tolist() if isinstance(o, np.ndarray | np.generic) else str(o)
+
+
+def _canonical(text: str) -> str:
+    """JSON text in one spelling (NaN compares equal to NaN here)."""
+    return json.dumps(json.loads(text), sort_keys=True)
+
+
+# -- arguments -------------------------------------------------------------------------------
+def test_url_options_are_split_from_pyserials():
+    assert split_url("socket://127.0.0.1:5?rig=a%20b.toml&logging=debug&fs_hz=100") == (
+        "socket://127.0.0.1:5?logging=debug", {"rig": "a b.toml", "fs_hz": "100"})
+    assert split_url("/dev/ttyUSB0") == ("/dev/ttyUSB0", {})
+    with pytest.raises(ValueError, match="channels"):
+        SerialDevice("/dev/null?channels=x")
+    with pytest.raises(ValueError, match="fs_hz given both"):
+        SerialDevice("/dev/null?fs_hz=1", fs_hz=2)
+    with pytest.raises(ValueError, match="rig's 16"):
+        SerialDevice("/dev/null", rig=RIG, channels=4)
+
+
+def test_missing_port_is_not_found_naming_it(tmp_path):
+    with pytest.raises(DeviceNotFound, match=re.escape(str(tmp_path / "nope"))):
+        open_device(f"serial://{tmp_path / 'nope'}")
