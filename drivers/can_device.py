@@ -1,0 +1,523 @@
+"""CAN and CAN FD front-ends through python-can (back-end name ``"can"``).
+
+::
+
+    with open_device("can://socketcan/can0?rig=rigs/sampson.toml&dbc=fd24&fd=1") as dev:
+        for block in dev: ...
+
+The address is ``INTERFACE/CHANNEL`` of any python-can interface (``socketcan/can0``,
+``pcan/PCAN_USBBUS1``, ``kvaser/0``, ``vector/0``, ``slcan//dev/ttyACM0``, ``virtual/0``) and a
+query: ``rig``, ``dbc``, ``channels``, ``fs_hz``, ``block_s``, ``bitrate``, ``data_bitrate``, ``fd``,
+``duration_s``, ``idle_s``, ``group_timeout_s``, ``bus`` (one more ``INTERFACE/CHANNEL``,
+repeatable); any other key goes to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan). slcan
+is python-can's, with a reader that takes every byte waiting at most every 4 ms instead of one
+byte per call (python-can's own cannot keep up with 16 ch x 2.048 kHz).
+
+The frames are described by a DBC (:mod:`drivers.can_frames`). Each channel group's frames are
+put together cycle by cycle by their SEQ counter; a block holds every channel, so a sample is
+delivered only when every group delivered it. Several buses may feed one trial: a frame's
+identifier names its group, whatever bus it came on. Nothing is filled in:
+
+* a lost, corrupted (``bad_crc``) or wrong-length (``wrong_dlc``) frame loses its cycle, a SEQ
+  jump loses the cycles skipped, a silent group (``group_timeout``) everything until it speaks
+  again: the next block's ``first_sample`` jumps by exactly the samples lost (``seq_gap``);
+* error frames (SocketCAN error classes: bus-off 0x40, restarted 0x100), ``bus.state`` and frames
+  resuming give ``error_frame``, ``bus_off`` and ``bus_recovered``; after a bus-off the cycles
+  lost are counted from the frames' timestamps, so SEQ wrapping (classic: 256 cycles = 0.375 s at
+  2.048 kHz; fd24: 65 536 cycles = 640 s) is not mistaken. A silence without a bus-off report is
+  counted modulo the wrap. A SEQ jump of more than 3 cycles is believed only when the group's next
+  frame agrees (a lone one is a ``seq_outlier``);
+* frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
+  (``bad_frame``), late and duplicate frames are counted; these faults are reported at most once
+  per ``report_s`` with their counts. ``bus_lost`` (the interface failed) ends that bus; when
+  none is left the stream ends.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import select
+import time
+from collections import Counter
+from pathlib import Path
+from urllib.parse import parse_qsl
+
+import can
+import numpy as np
+
+from analysis.rig import Rig, load_rig, parse_rig
+from analysis.sensor import channel_scales
+from drivers.base import TIMED_OUT, Device
+from drivers.block import Block, StreamInfo, sample_time_ns
+from drivers.can_frames import UNRELATED, CycleAssembler, FrameCodec
+from drivers.errors import DeviceNotFound
+
+__all__ = ["CanDevice", "parse_address"]
+
+_BUS_OFF, _RESTARTED, _CRTL, _CRTL_ACTIVE = 0x40, 0x100, 0x04, 0x40  # linux/can/error.h
+_READ_EVERY_S = 0.004  # slcan: read the port at most this often (adds at most this latency)
+_OPTIONS = {"rig", "dbc", "channels", "fs_hz", "block_s", "bitrate", "data_bitrate", "fd", "bus",
+            "duration_s", "idle_s", "group_timeout_s", "scale"}
+
+
+def _coerce(text: str) -> object:
+    low = text.lower()
+    if low in ("true", "yes", "on", "false", "no", "off"):
+        return low in ("true", "yes", "on")
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def parse_address(address: str) -> tuple[str, str, dict[str, object], list[str]]:
+    """``"slcan//dev/pts/3?rig=r.toml&bus=virtual/1"`` -> interface, channel, options, extra buses."""
+    head, _, query = address.partition("?")
+    interface, _, channel = head.partition("/")
+    if not interface:
+        raise ValueError(f"can://{address}: expected INTERFACE/CHANNEL, e.g. socketcan/can0")
+    options: dict[str, object] = {}
+    buses = []
+    for key, value in parse_qsl(query, keep_blank_values=True):
+        if key == "bus":
+            buses.append(value)
+        else:
+            options[key] = value if key in ("rig", "dbc", "scale") else _coerce(value)
+    return interface, channel, options, buses
+
+
+def _open_bus(interface: str, channel: str, options: dict) -> can.BusABC:
+    """``can.Bus``, except slcan: python-can's, with a reader that takes all the bytes waiting."""
+    if interface != "slcan":
+        return can.Bus(interface=interface, channel=channel, **options)
+    from can.interfaces.slcan import slcanBus
+
+    class BufferedSlcan(slcanBus):
+        def __init__(self, **kwargs: object) -> None:
+            self._lines: list[str] = []  # parsed lines, last first
+            self._read_at = 0.0
+            super().__init__(**kwargs)
+
+        def _read(self, timeout: float | None) -> str | None:
+            port = self.serialPortOrig
+            deadline = None if timeout is None else time.monotonic() + timeout
+            while not self._lines:
+                if port.in_waiting:
+                    # let lines gather for up to _READ_EVERY_S: fewer wake-ups, more lines each
+                    time.sleep(max(0.0, self._read_at + _READ_EVERY_S - time.monotonic()))
+                    self._read_at = time.monotonic()
+                    self._buffer += port.read(port.in_waiting).replace(b"\a", b"\a\r")
+                    *done, rest = self._buffer.split(b"\r")
+                    self._buffer = bytearray(rest)
+                    self._lines = [d.decode("ascii", "replace") + "\r" for d in reversed(done)]
+                    continue
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    return None
+                try:  # sleep until bytes come, not in 1 ms polls
+                    select.select([port.fileno()], [], [], left)
+                except (AttributeError, OSError, ValueError):  # a port without a file descriptor
+                    time.sleep(0.001)
+            return self._lines.pop()
+
+    return BufferedSlcan(channel=channel, **options)
+
+
+class CanDevice(Device):
+    """Sample frames from one or more CAN buses (back-end name ``"can"``).
+
+    Parameters
+    ----------
+    address : str
+        ``INTERFACE/CHANNEL`` with optional query options (module docstring).
+    dbc : str or Path, optional
+        Frame layout: ``classic``, ``fd24``, ``fd16`` or a DBC path (default ``classic``, or
+        ``fd24`` with ``fd``).
+    channels : int, optional
+        Stream the DBC's channels 1..``channels`` (default: the rig's channel count, else all).
+    fs_hz : float, optional
+        Sample rate, Hz (default: the rig's, else 2048).
+    block_s : float, optional
+        Block length, s (default 0.05).
+    rig : Rig, str or Path, optional
+        The rig (a path or TOML text): channel names, gage numbers, scales; kept in the stream.
+    scale : float or sequence, optional
+        SI units per count when no rig is given (default 1.0, units ``count``).
+    bitrate, data_bitrate : int, optional
+        Passed to ``can.Bus``; ``fd`` opens CAN FD buses.
+    extra_buses : sequence of str
+        More ``INTERFACE/CHANNEL`` buses whose frames join the same trial.
+    duration_s : float, optional
+        End the stream after this many seconds of samples (default: never).
+    idle_s : float, optional
+        End the stream when no frame came for this long after the first (default: never).
+    group_timeout_s : float
+        A group silent this long while another delivers is declared missing (default 0.5 s).
+    report_s : float
+        Counted faults are reported at most this often, s.
+    bus_options : dict, optional
+        More keyword arguments for ``can.Bus``.
+    """
+
+    kind = "can"
+
+    def __init__(self, address: str = "virtual/0", *, dbc: str | Path | None = None,
+                 channels: int | None = None, fs_hz: float | None = None,
+                 block_s: float | None = None, rig: Rig | str | Path | None = None,
+                 scale: float | list[float] | None = None, bitrate: int | None = None,
+                 data_bitrate: int | None = None, fd: bool | None = None,
+                 extra_buses: list[str] | tuple[str, ...] = (), duration_s: float | None = None,
+                 idle_s: float | None = None, group_timeout_s: float | None = None,
+                 report_s: float = 1.0, bus_options: dict | None = None) -> None:
+        super().__init__()
+        interface, channel, q, more = parse_address(address)
+        unknown = {k: q.pop(k) for k in list(q) if k not in _OPTIONS}
+        self.bus_options = {**unknown, **(bus_options or {})}
+        for k, v in dict(bitrate=bitrate, data_bitrate=data_bitrate).items():
+            v = v if v is not None else q.get(k)
+            if v is not None:
+                self.bus_options[k] = int(v)
+        self.fd = bool(fd if fd is not None else q.get("fd", False))
+        if self.fd:
+            self.bus_options["fd"] = True
+        self.specs = [(interface, channel)] + [self._split(s) for s in [*more, *extra_buses]]
+        self.codec = FrameCodec(dbc if dbc is not None else q.get("dbc"), fd=self.fd)
+        rig = rig if rig is not None else q.get("rig")
+        if isinstance(rig, str) and "\n" in rig:
+            rig = parse_rig(rig, source=f"can://{address}:rig")
+        self.rig = rig if rig is None or isinstance(rig, Rig) else load_rig(rig)
+        n_rig = len(self.rig.gages_by_channel()) if self.rig else None
+        n = int(channels if channels is not None else q.get("channels", n_rig or len(self.codec.channels)))
+        self.groups = {g: CycleAssembler(lay)
+                       for g, lay in self.codec.groups.items() if max(lay.channels) <= n}
+        if sorted(c for gr in self.groups.values() for c in gr.lay.channels) != list(range(1, n + 1)):
+            groups = {g: f"{lay.channels[0]}-{lay.channels[-1]}" for g, lay in self.codec.groups.items()}
+            raise ValueError(f"can://{address}: channels 1-{n} are not whole groups of {self.codec.name} "
+                             f"(groups {groups})")
+        if n_rig is not None and n_rig < n:
+            raise ValueError(f"can://{address}: {n} channels, but the rig has {n_rig}")
+        bits = min(gr.lay.sample_bits for gr in self.groups.values())
+        if self.rig and self.rig.daq.adc_bits > bits:
+            raise ValueError(f"can://{address}: rig ADC has {self.rig.daq.adc_bits} bits, "
+                             f"{self.codec.name} carries {bits}-bit samples")
+        self.fs_hz = float(fs_hz or q.get("fs_hz") or (self.rig.daq.sample_rate_hz if self.rig else 2048.0))
+        self.block_n = max(1, round(float(block_s or q.get("block_s", 0.05)) * self.fs_hz))
+        dur = duration_s if duration_s is not None else q.get("duration_s")
+        self.total_n = None if dur is None else round(float(dur) * self.fs_hz)
+        idle = idle_s if idle_s is not None else q.get("idle_s")
+        self.idle_s = None if idle is None else float(idle)
+        self.group_timeout_s = float(group_timeout_s or q.get("group_timeout_s", 0.5))
+        self.report_s = report_s
+        if self.rig:
+            self.scale = channel_scales(self.rig)[:n]
+        else:
+            s = scale if scale is not None else q.get("scale", 1.0)
+            self.scale = np.broadcast_to(np.asarray(
+                [float(x) for x in s.split(",")] if isinstance(s, str) else s, float), (n,)).copy()
+        self.units = "m/s^2" if self.rig or scale is not None or "scale" in q else "count"
+        self.order = np.argsort([c for gr in self.groups.values() for c in gr.lay.channels])
+        self.address = address
+        self._counts: Counter = Counter()
+        self._frames = self._good = 0
+        self._dirty = False
+        self._buses: list = []
+        self._origin: int | None = None
+        self._pos = 0
+        self._seq = 0
+        self._final = self._ended = False
+        self._pending: dict[str, dict] = {}
+        self._reported: dict[str, float] = {}
+        self._first_wall: float | None = None
+        self._last_wall = 0.0
+        self._next_poll = 0.0
+        self._states: dict[str, str] = {}  # bus name -> "active", "passive" or "bus_off"
+        self._names: list[str] = []
+        self._off_since: dict[str, float] = {}
+        self._resync: dict[int, bool] = {}        # group -> count the cycles a bus-off lost
+        self._last_ts: dict[int, float] = {}      # group -> timestamp of its last good frame, s
+        self._last_seen: dict[int, float] = {}    # group -> monotonic time of that frame, s
+        self._silent: set[int] = set()
+        self._stateful: list[bool] = []
+        self._rr = 0
+
+    @staticmethod
+    def _split(spec: str) -> tuple[str, str]:
+        interface, _, channel = spec.partition("/")
+        return interface, channel
+
+    # -- Device hooks ------------------------------------------------------------------------
+    def _open(self) -> StreamInfo:
+        for interface, channel in self.specs:
+            try:
+                bus = _open_bus(interface, channel, self.bus_options)
+            except Exception as err:
+                self._close()  # the buses already opened
+                if isinstance(err.__cause__, ValueError):  # python-can wraps a bad argument
+                    raise ValueError(f"can://{interface}/{channel}: {err.__cause__}") from err
+                if isinstance(err, (can.CanInterfaceNotImplementedError, can.CanInitializationError,
+                                    ImportError, OSError)):
+                    raise DeviceNotFound(f"can://{interface}/{channel}: cannot open ({err})") from err
+                raise
+            self._buses.append(bus)
+            self._names.append(f"{interface}/{channel}")
+            self._stateful.append(type(bus).state is not can.BusABC.state)
+        n = len(self.scale)
+        numbers = [g.number for g in self.rig.gages_by_channel()[:n]] if self.rig else range(1, n + 1)
+        return StreamInfo(
+            device="can://" + "+".join(self._names), fs_hz=self.fs_hz,
+            channels=tuple(f"g{k:02d}" for k in numbers), units=(self.units,) * n, gages=tuple(numbers),
+            rig_toml=self.rig.text if self.rig else "",
+            extra={"dbc": self.codec.name,
+                   "dbc_sha256": hashlib.sha256(self.codec.path.read_bytes()).hexdigest(),
+                   "groups": {str(g): list(gr.lay.channels) for g, gr in self.groups.items()},
+                   "samples_per_cycle": {str(g): gr.T for g, gr in self.groups.items()},
+                   "buses": list(self._names), "block_samples": self.block_n,
+                   "adc_bits": self.rig.daq.adc_bits if self.rig else
+                   min(gr.lay.sample_bits for gr in self.groups.values()),
+                   **({"medium": self.rig.medium, "rig_name": self.rig.name} if self.rig else {})},
+        )
+
+    def _close(self) -> None:
+        for bus in self._buses:
+            try:
+                bus.shutdown()
+            except Exception:  # noqa: BLE001 - a failing interface must not stop the others closing
+                pass
+        self._buses, self._names, self._stateful = [], [], []
+
+    def _read(self, timeout: float | None) -> Block | None:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            if self._dirty or self._final:  # a cycle became final since the last look
+                block = self._next_block()
+                if block is not None:
+                    return block
+                self._dirty = False
+            if self._ended:
+                for kind in list(self._pending):
+                    self._report(kind, math.inf)
+                return None
+            wait = 0.05
+            if deadline is not None:
+                wait = min(wait, deadline - time.monotonic())
+                if wait <= 0:
+                    return TIMED_OUT
+            got = self._recv(wait)
+            now = time.monotonic()
+            if got is not None:
+                self._on_message(got[0], got[1], now)
+            if now >= self._next_poll or got is None:
+                self._poll(now)
+
+    # -- receiving ---------------------------------------------------------------------------
+    def _recv(self, timeout: float) -> tuple[can.Message, int] | None:
+        n = len(self._buses)
+        for k in range(n):
+            i = (self._rr + k) % n
+            try:
+                msg = self._buses[i].recv(timeout if n == 1 else 0.0)
+            except (ValueError, IndexError, UnicodeDecodeError) as err:  # an unparseable serial line
+                self._count("bad_frame", time.monotonic(), reason=f"unparseable: {err}"[:80])
+                return None
+            except (can.CanError, OSError) as err:
+                self._lose_bus(i, err)
+                return None
+            if msg is not None:
+                self._rr = (i + 1) % n
+                return msg, i
+        if n > 1:
+            time.sleep(min(timeout, 0.001))
+        return None
+
+    def _lose_bus(self, i: int, err: Exception) -> None:
+        self._fault("bus_lost", self._t_ns(), bus=self._names.pop(i), error=str(err)[:120])
+        self._stateful.pop(i)
+        bus = self._buses.pop(i)
+        try:
+            bus.shutdown()
+        except Exception:  # noqa: BLE001 - already failed
+            pass
+        if not self._buses:
+            self._finish()
+
+    def _on_message(self, msg: can.Message, bus_i: int, now: float) -> None:
+        self._frames += 1
+        if msg.is_error_frame:
+            self._on_error_frame(msg, bus_i, now)
+            return
+        hit = self.codec.check(msg)
+        if type(hit) is str or hit[0].group not in self.groups:
+            self._count(hit if type(hit) is str else UNRELATED, now, id=hex(msg.arbitration_id),
+                        dlc=len(msg.data))
+            return
+        if self._states and self._states.get(self._names[bus_i]) == "bus_off":
+            self._bus_state(bus_i, "active", now, why="frames resumed")
+        lay, seq = hit
+        grp = self.groups[lay.group]
+        elapsed = None
+        if grp.base is None:
+            started = [(g.hi + 1) * g.T for g in self.groups.values() if g.base is not None]
+            grp.start(seq, max(started) // grp.T if started else None)
+            if self._origin is None:
+                self._origin = self._pos = grp.done()
+                self._first_wall = now
+        elif self._resync.pop(lay.group, False):
+            elapsed = (msg.timestamp - self._last_ts[lay.group]) * self.fs_hz / grp.T
+        self._last_ts[lay.group], self._last_seen[lay.group], self._last_wall = msg.timestamp, now, now
+        if self._silent:
+            self._silent.discard(lay.group)
+        base = grp.base
+        problem = grp.put(seq, lay.slot, msg.data, elapsed)
+        if problem:
+            self._count(problem, now, group=lay.group, id=hex(msg.arbitration_id))
+        else:
+            self._good += 1
+        self._dirty = self._dirty or grp.base != base
+        if grp.lost:
+            self._report_lost(grp, now)
+
+    def _on_error_frame(self, msg: can.Message, bus_i: int, now: float) -> None:
+        cls, data = msg.arbitration_id, bytes(msg.data)
+        if cls & _BUS_OFF:
+            self._bus_state(bus_i, "bus_off", now, why=f"error frame class {cls:#x}")
+        elif cls & _RESTARTED or (cls & _CRTL and len(data) > 1 and data[1] & _CRTL_ACTIVE):
+            self._bus_state(bus_i, "active", now, why=f"error frame class {cls:#x}")
+        else:
+            self._count("error_frame", now, error_class=hex(cls), data=data.hex())
+
+    def _bus_state(self, bus_i: int, state: str, now: float, why: str) -> None:
+        bus = self._names[bus_i]
+        before = self._states.get(bus, "active")
+        self._states[bus] = state
+        if state == "bus_off" and before != "bus_off":
+            self._fault("bus_off", self._t_ns(), bus=bus, reason=why)
+            self._off_since[bus] = now
+            self._resync.update(dict.fromkeys(self.groups, True))
+        elif state == "active" and before == "bus_off":
+            self._fault("bus_recovered", self._t_ns(), bus=bus, reason=why,
+                        off_s=round(now - self._off_since.pop(bus, now), 3))
+        elif state == "passive" and before == "active":
+            self._count("error_passive", now, bus=bus)
+
+    def _poll(self, now: float) -> None:
+        """Periodic work: bus states, silent groups, idle end, due fault reports."""
+        self._next_poll = now + 0.05
+        for i, bus in enumerate(self._buses):
+            if not self._stateful[i]:
+                continue  # the interface does not report its state
+            try:
+                state = bus.state
+            except Exception:  # noqa: BLE001 - a state that cannot be read is not a fault
+                continue
+            name = {can.BusState.ERROR: "bus_off", can.BusState.PASSIVE: "passive"}.get(state, "active")
+            if name != self._states.get(self._names[i], "active"):
+                self._bus_state(i, name, now, why=f"bus.state {state.name}")
+        started = [g for g in self.groups.values() if g.base is not None]
+        if started and len(self.groups) > 1 and now - self._last_wall < self.group_timeout_s:
+            lead = max(g.done() for g in started)
+            for g, grp in self.groups.items():
+                quiet = now - self._last_seen.get(g, self._first_wall)
+                if quiet > self.group_timeout_s and (grp.base is None or grp.done() < lead):
+                    if g not in self._silent:
+                        self._silent.add(g)
+                        self._fault("group_timeout", self._t_ns(), group=g, silent_s=round(quiet, 3))
+                    grp.skip_to(lead // grp.T)
+                    self._report_lost(grp, now)
+                    self._dirty = True
+        if self.idle_s is not None and self._origin is not None and now - self._last_wall > self.idle_s:
+            self._finish()
+        for kind in list(self._pending):
+            if now - self._reported.get(kind, -math.inf) >= self.report_s:
+                self._report(kind, now)
+
+    def _finish(self) -> None:
+        for grp in self.groups.values():
+            if grp.base is not None:
+                grp.finalize_to(grp.hi + 1)
+                self._report_lost(grp, math.inf)
+        self._final = True
+
+    # -- faults ------------------------------------------------------------------------------
+    def _t_ns(self, sample: int | None = None) -> int:
+        """Device time of ``sample`` (absolute), default the newest sample seen."""
+        s = max(((g.hi + 1) * g.T for g in self.groups.values()), default=0) if sample is None else sample
+        return sample_time_ns(max(0, s - (self._origin or 0)), self.fs_hz)
+
+    @property
+    def counters(self) -> Counter:
+        """Frames received, good sample frames, and each fault counted so far."""
+        return Counter(frames=self._frames, good_frames=self._good, **self._counts)
+
+    def _count(self, kind: str, now: float, t_ns: int | None = None, **detail: object) -> None:
+        self._counts[kind] += 1
+        p = self._pending.setdefault(kind, {"count": 0, "t_ns": self._t_ns() if t_ns is None else t_ns})
+        p["count"] += 1
+        for key in ("missing_samples", "missing_cycles", "incomplete_cycles"):
+            if key in detail:
+                p[key] = p.get(key, 0) + detail.pop(key)
+        if "groups" in detail:
+            p["groups"] = sorted(set(p.get("groups", [])) | set(detail.pop("groups")))
+        p.update(detail)
+        if now - self._reported.get(kind, -math.inf) >= self.report_s:
+            self._report(kind, now)
+
+    def _report(self, kind: str, now: float) -> None:
+        p = self._pending.pop(kind, None)
+        if p:
+            t_ns = p.pop("t_ns")
+            self._fault(kind, t_ns, total=self._counts[kind], **p)
+            self._reported[kind] = now
+
+    def _report_lost(self, grp: CycleAssembler, now: float) -> None:
+        for first, n, incomplete in grp.lost:
+            self._count("seq_gap", now, self._t_ns(first * grp.T), groups=[grp.lay.group],
+                        missing_cycles=n, incomplete_cycles=incomplete, missing_samples=n * grp.T)
+        grp.lost = []
+
+    # -- blocks ------------------------------------------------------------------------------
+    def _next_block(self) -> Block | None:
+        if self._origin is None or self._ended:
+            self._ended = self._ended or self._final
+            return None
+        groups = list(self.groups.values())
+        if any(g.base is None for g in groups):
+            self._ended = self._final
+            return None
+        ready = min(g.done() for g in groups)
+        limit = None if self.total_n is None else self._origin + self.total_n
+        if limit is not None:
+            ready = min(ready, limit)
+        last = self._final or ready == limit
+        if ready - self._pos < self.block_n and not last:
+            return None
+        if last:  # report what is pending while blocks remain to carry it
+            for kind in list(self._pending):
+                self._report(kind, math.inf)
+        for g in groups:
+            g.decode(self.codec)
+        p = self._pos
+        while p < ready:
+            spans = [g.present_from(p) for g in groups]
+            start = max((s[0] if s else ready) for s in spans)
+            if start > p:
+                p = min(start, ready)
+                continue
+            end = min(min(s[1] for s in spans), ready, p + self.block_n)
+            if end - p < self.block_n and not (last or end < ready):
+                break  # wait for the rest of the block
+            counts = np.concatenate([g.take(p, end) for g in groups])
+            if len(groups) > 1:
+                counts = counts[self.order]
+            first = p - self._origin
+            self._pos = end
+            self._seq += 1
+            return Block(seq=self._seq - 1, first_sample=first, t0_ns=sample_time_ns(first, self.fs_hz),
+                         fs_hz=self.fs_hz, counts=np.ascontiguousarray(counts, dtype=np.int32),
+                         scale=self.scale)
+        self._pos = p
+        if last and p >= ready:
+            self._ended = True
+        return None
