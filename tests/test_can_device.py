@@ -344,6 +344,7 @@ def test_emulator_gone_ends_the_stream(tmp_path, rigs):
     assert [f.kind for f in faults if f.kind == "bus_lost"] == ["bus_lost"]
 
 
+@pytest.mark.timeout(300)  # hang guard: a full trial with its analysis on a loaded 2-core box
 def test_ramdaq_trial_against_the_slcan_emulator(tmp_path, rigs):
     from daq.cli import main
 

@@ -233,6 +233,7 @@ def test_port_that_never_comes_back_ends_the_stream_naming_the_url(tmp_path):
         assert [f.kind for f in dev.take_faults()][-1] == "port_lost"
 
 
+@pytest.mark.timeout(300)  # hang guard: two full analyses run side by side on a 2-core box
 def test_cli_trial_over_serial_gives_the_simulator_trials_numbers(tmp_path):
     """``ramdaq trial --device serial://...`` against the emulator, with garbage on the line:
     every garbage burst is shown live and logged as a resync, no sample is lost, and the final
@@ -248,7 +249,7 @@ def test_cli_trial_over_serial_gives_the_simulator_trials_numbers(tmp_path):
         try:  # meanwhile, the same trial straight from the simulator
             direct = Session(SimDevice(RIG, seed=SEED, duration_s=6.0, impacts=[3.0]),
                              readout=False).run()
-            stdout, stderr = cli.communicate(timeout=50)
+            stdout, stderr = cli.communicate(timeout=240)
         finally:
             cli.kill()
         s = summary(proc)
