@@ -182,6 +182,47 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording."""
+    from daq.record import record
+    from drivers.import_common import parse_channel_map
+    from drivers.registry import open_device
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_suffix(".mcap")
+    if out.exists() and not args.overwrite:
+        raise FileExistsError(f"{out} exists; --overwrite replaces it")
+    options: dict = {"rig": load_rig(args.rig), "channels": parse_channel_map(args.channels)}
+    if args.medium:
+        options["medium"] = args.medium
+    device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
+    info, imp = device.info, device.info.extra.get("import", {})
+    chans = imp.get("channels", {}).values()
+    exact = sum(c["method"] != "requantised" for c in chans)
+    worst = max((c["max_error_m_s2"] for c in chans), default=0.0)
+    s = record(device, out, readout=False, overwrite=args.overwrite)
+    print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
+          f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
+          f"({imp.get('missing_samples', 0)} samples missing)")
+    print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
+          f"requantised to 24 bits; largest error {worst:.3g} m/s^2")
+    return 0
+
+
+def cmd_export_uff(args: argparse.Namespace) -> int:
+    """A recording's identified modes and decay records as UFF 15/55/58 for modal software."""
+    from daq.analyze import run_analysis
+    from drivers.export_uff import export_uff
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_suffix(".uff")
+    rig, hits = run_analysis(src, progress=lambda m: print(m, flush=True))
+    r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
+    print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
+          f"records from {r.hits} accepted of {len(hits)} hits")
+    return 0
+
+
 def _json_default(o: object) -> object:
     import numpy as np
 
@@ -286,6 +327,23 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
     g.add_argument("rig")
     g.set_defaults(func=cmd_rig)
+
+    m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
+    m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
+    m.add_argument("--rig", required=True, help="rig file (TOML) of the trial")
+    m.add_argument("--out", help="output recording (default FILE.mcap)")
+    m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
+                   " (default: names like g01, gage 1, 1)")
+    m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
+    m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
+    m.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    m.set_defaults(func=cmd_import)
+
+    x = sub.add_parser("export-uff", help="modes and decay records as UFF 15/55/58")
+    x.add_argument("file", help="a recording (MCAP), analysed as by ramdaq analyze")
+    x.add_argument("--out", help="output file (default FILE.uff)")
+    x.add_argument("--binary", action="store_true", help="binary 58b decay records")
+    x.set_defaults(func=cmd_export_uff)
     return p
 
 
