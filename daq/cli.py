@@ -1,8 +1,10 @@
 """``ramdaq`` command line: thin -- it parses, builds a device and a recorder, runs, prints.
 
-Commands: ``record`` (a device into an MCAP file, with a live readout), ``info`` (what a
-recording holds), ``recover`` (a valid copy of a recording whose writer was killed), ``rig``
-(a rig's modes in air and in water, and Eq 18 on them).
+Commands: ``trial`` (record, detect hits, analyse and show them live), ``replay`` (a recording
+through the same pipeline), ``analyze`` (the trial report), ``record`` (a device into an MCAP
+file, with a live readout), ``info`` (what a recording holds), ``recover`` (a valid copy of a
+recording whose writer was killed), ``rig`` (a rig's modes in air and in water, and Eq 18 on
+them), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff`` (modes and decays as UFF).
 """
 
 from __future__ import annotations
