@@ -114,6 +114,7 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
 
 
 def _print_outcome(outcome, args: argparse.Namespace) -> None:
+    """The trial summary on the terminal and, with ``--json``, the per-hit results in a file."""
     from daq.analyze import summary_table
 
     for k, why in outcome.summary["rejected"].items():
@@ -121,6 +122,9 @@ def _print_outcome(outcome, args: argparse.Namespace) -> None:
     print("\n".join(summary_table(outcome.summary, args.units)))
     print(f"{outcome.first_looks} first looks shown while ringing, {outcome.skipped_updates} "
           f"skipped because the analyzer was busy (no samples skipped)")
+    if args.json:
+        Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
+                                              default=_json_default))
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
@@ -133,9 +137,6 @@ def cmd_trial(args: argparse.Namespace) -> int:
     print(f"{'interrupted: ' if outcome.interrupted else ''}wrote {out}"
           + (f" and {rrd}" if rrd else ""))
     _print_outcome(outcome, args)
-    if args.json:
-        Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
-                                              default=_json_default))
     return 0
 
 
@@ -148,9 +149,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
           flush=True)
     outcome = _run_session(device, args, None, rrd)
     _print_outcome(outcome, args)
-    if args.json:
-        Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
-                                              default=_json_default))
     return 0
 
 
