@@ -3,9 +3,10 @@
 Each case decodes a simulated trial and prints frames and samples (per channel x channels) per
 second of CPU time in the decoding thread, and the share of one core the adapter would take at
 16 channels x 2.048 kHz (target < 10 %). CAN cases: the codec alone (fast path and its cantools
-twin), and the whole adapter (python-can bus, checks, cycle assembly, blocks) on a pre-filled
-virtual bus and on slcan over a pseudo-terminal (emulator in its own process), as fast as it goes
-(CPU share computed from CPU per frame) and at the sample clock (CPU share measured).
+twin), the slcan line parser alone, and the whole adapter (bus, checks, cycle assembly, blocks) on
+a pre-filled python-can virtual bus and on slcan over a pseudo-terminal (the adapter's own bulk
+reader, :mod:`drivers.slcan_reader`; emulator in its own process), as fast as it goes (CPU share
+computed from CPU per frame) and at the sample clock (CPU share measured).
 
     python benchmarks/driver_throughput.py [--seconds 5]
 
@@ -28,9 +29,10 @@ import can
 import numpy as np
 
 from drivers.can_device import CanDevice
-from drivers.can_emulator import CanEmulator, Wire, rig_with_adc_bits, send_frames
+from drivers.can_emulator import CanEmulator, Wire, rig_with_adc_bits, send_frames, slcan_line
 from drivers.can_frames import FrameCodec
 from drivers.sim import SimDevice
+from drivers.slcan_reader import READ_EVERY_S, parse_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 RIG = ROOT / "recordings" / "rigs" / "sampson.toml"
@@ -100,6 +102,21 @@ def _codec_case(dbc: str, reference: bool) -> Callable[[float], Row]:
     return run
 
 
+def _slcan_parse_case(dbc: str) -> Callable[[float], Row]:
+    def run(seconds: float) -> Row:
+        with tempfile.TemporaryDirectory() as tmp:
+            codec, msgs, _ = _frames(dbc, seconds, Path(tmp))
+        lines = b"".join(slcan_line(m) for m in msgs).decode("latin-1").split("\r")[:-1]
+        per_read = max(1, round(N_CH * FS_HZ / _per_frame(codec) * READ_EVERY_S))  # lines of one read
+        t = time.thread_time()
+        frames = sum(len(parse_lines(lines[i : i + per_read], 0.0)) for i in range(0, len(lines), per_read))
+        cpu = time.thread_time() - t
+        assert frames == len(msgs)
+        return _row("slcan lines", f"{dbc}: Lawicel lines -> frames", frames, cpu, _per_frame(codec),
+                    f"parse_lines, {per_read} lines a call (one read at 16 ch x 2.048 kHz)")
+    return run
+
+
 def _virtual_case(dbc: str) -> Callable[[float], Row]:
     def run(seconds: float) -> Row:
         with tempfile.TemporaryDirectory() as tmp:
@@ -148,9 +165,10 @@ def _slcan_case(dbc: str, pace: str) -> Callable[[float], Row]:
 
 
 def can_cases() -> list[Callable[[float], Row]]:
-    """The CAN rows: codec (fast and reference), adapter on virtual and slcan buses."""
+    """The CAN rows: codec (fast and reference), slcan parser, adapter on virtual and slcan buses."""
     return [_codec_case("classic", False), _codec_case("classic", True), _codec_case("fd24", False),
-            _codec_case("fd24", True), _virtual_case("classic"), _virtual_case("fd24"),
+            _codec_case("fd24", True), _slcan_parse_case("classic"), _slcan_parse_case("fd24"),
+            _virtual_case("classic"), _virtual_case("fd24"),
             _slcan_case("classic", "fast"), _slcan_case("fd24", "fast"), _slcan_case("classic", "realtime"),
             _slcan_case("fd24", "realtime")]
 

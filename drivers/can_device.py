@@ -10,8 +10,10 @@ The address is ``INTERFACE/CHANNEL`` of any python-can interface (``socketcan/ca
 query: ``rig``, ``dbc``, ``channels``, ``fs_hz``, ``block_s``, ``bitrate``, ``data_bitrate``, ``fd``,
 ``duration_s``, ``idle_s``, ``group_timeout_s``, ``bus`` (one more ``INTERFACE/CHANNEL``,
 repeatable); any other key goes to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan). slcan
-is python-can's, with a reader that takes every byte waiting at most every 4 ms instead of one
-byte per call (python-can's own cannot keep up with 16 ch x 2.048 kHz).
+is opened as python-can opens it but read by :class:`drivers.slcan_reader.SlcanReader`: every
+byte waiting at most every ``read_every_s`` (default 4 ms), the lines parsed in bulk without a
+``can.Message`` each (python-can's one byte per call cannot keep up with 16 ch x 2.048 kHz);
+with ``can_filters`` it is python-can's own bus.
 
 The frames are described by a DBC (:mod:`drivers.can_frames`). Each channel group's frames are
 put together cycle by cycle by their SEQ counter; a block holds every channel, so a sample is
@@ -28,16 +30,15 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   counted modulo the wrap. A SEQ jump of more than 3 cycles is believed only when the group's next
   frame agrees (a lone one is a ``seq_outlier``);
 * frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
-  (``bad_frame``), late and duplicate frames are counted; these faults are reported at most once
-  per ``report_s`` with their counts. ``bus_lost`` (the interface failed) ends that bus; when
-  none is left the stream ends.
+  (``bad_frame``, with the line), late and duplicate frames are counted; these faults are
+  reported at most once per ``report_s`` with their counts. ``bus_lost`` (the interface failed)
+  ends that bus; when none is left the stream ends.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
-import select
 import time
 from collections import Counter
 from pathlib import Path
@@ -52,11 +53,11 @@ from drivers.base import TIMED_OUT, Device
 from drivers.block import Block, StreamInfo, sample_time_ns
 from drivers.can_frames import UNRELATED, CycleAssembler, FrameCodec
 from drivers.errors import DeviceNotFound
+from drivers.slcan_reader import SlcanFrame, SlcanReader
 
 __all__ = ["CanDevice", "parse_address"]
 
 _BUS_OFF, _RESTARTED, _CRTL, _CRTL_ACTIVE = 0x40, 0x100, 0x04, 0x40  # linux/can/error.h
-_READ_EVERY_S = 0.004  # slcan: read the port at most this often (adds at most this latency)
 _OPTIONS = {"rig", "dbc", "channels", "fs_hz", "block_s", "bitrate", "data_bitrate", "fd", "bus",
             "duration_s", "idle_s", "group_timeout_s", "scale"}
 
@@ -89,41 +90,11 @@ def parse_address(address: str) -> tuple[str, str, dict[str, object], list[str]]
     return interface, channel, options, buses
 
 
-def _open_bus(interface: str, channel: str, options: dict) -> can.BusABC:
-    """``can.Bus``, except slcan: python-can's, with a reader that takes all the bytes waiting."""
-    if interface != "slcan":
-        return can.Bus(interface=interface, channel=channel, **options)
-    from can.interfaces.slcan import slcanBus
-
-    class BufferedSlcan(slcanBus):
-        def __init__(self, **kwargs: object) -> None:
-            self._lines: list[str] = []  # parsed lines, last first
-            self._read_at = 0.0
-            super().__init__(**kwargs)
-
-        def _read(self, timeout: float | None) -> str | None:
-            port = self.serialPortOrig
-            deadline = None if timeout is None else time.monotonic() + timeout
-            while not self._lines:
-                if port.in_waiting:
-                    # let lines gather for up to _READ_EVERY_S: fewer wake-ups, more lines each
-                    time.sleep(max(0.0, self._read_at + _READ_EVERY_S - time.monotonic()))
-                    self._read_at = time.monotonic()
-                    self._buffer += port.read(port.in_waiting).replace(b"\a", b"\a\r")
-                    *done, rest = self._buffer.split(b"\r")
-                    self._buffer = bytearray(rest)
-                    self._lines = [d.decode("ascii", "replace") + "\r" for d in reversed(done)]
-                    continue
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    return None
-                try:  # sleep until bytes come, not in 1 ms polls
-                    select.select([port.fileno()], [], [], left)
-                except (AttributeError, OSError, ValueError):  # a port without a file descriptor
-                    time.sleep(0.001)
-            return self._lines.pop()
-
-    return BufferedSlcan(channel=channel, **options)
+def _open_bus(interface: str, channel: str, options: dict) -> can.BusABC | SlcanReader:
+    """``can.Bus``, except slcan: :class:`SlcanReader` (python-can's bus for ``can_filters``)."""
+    if interface == "slcan" and "can_filters" not in options:
+        return SlcanReader(channel, **options)
+    return can.Bus(interface=interface, channel=channel, **options)
 
 
 class CanDevice(Device):
@@ -263,7 +234,7 @@ class CanDevice(Device):
                 raise
             self._buses.append(bus)
             self._names.append(f"{interface}/{channel}")
-            self._stateful.append(type(bus).state is not can.BusABC.state)
+            self._stateful.append(getattr(type(bus), "state", can.BusABC.state) is not can.BusABC.state)
         n = len(self.scale)
         numbers = [g.number for g in self.rig.gages_by_channel()[:n]] if self.rig else range(1, n + 1)
         return StreamInfo(
@@ -308,26 +279,38 @@ class CanDevice(Device):
             got = self._recv(wait)
             now = time.monotonic()
             if got is not None:
-                self._on_message(got[0], got[1], now)
+                frames, i = got
+                for msg in frames:
+                    if type(msg) is str:  # an unparseable slcan line
+                        self._count("bad_frame", now, reason=msg[:80])
+                    else:
+                        self._on_message(msg, i, now)
             if now >= self._next_poll or got is None:
                 self._poll(now)
 
     # -- receiving ---------------------------------------------------------------------------
-    def _recv(self, timeout: float) -> tuple[can.Message, int] | None:
+    def _recv(self, timeout: float) -> tuple[list[can.Message | SlcanFrame | str], int] | None:
+        """Frames of the next bus that has some (round robin), and its index; slcan: all waiting,
+        with a reason string in place of each unparseable line."""
         n = len(self._buses)
         for k in range(n):
             i = (self._rr + k) % n
+            bus = self._buses[i]
             try:
-                msg = self._buses[i].recv(timeout if n == 1 else 0.0)
+                if type(bus) is SlcanReader:
+                    got = bus.recv_batch(timeout if n == 1 else 0.0)
+                else:
+                    msg = bus.recv(timeout if n == 1 else 0.0)
+                    got = None if msg is None else [msg]
             except (ValueError, IndexError, UnicodeDecodeError) as err:  # an unparseable serial line
                 self._count("bad_frame", time.monotonic(), reason=f"unparseable: {err}"[:80])
                 return None
             except (can.CanError, OSError) as err:
                 self._lose_bus(i, err)
                 return None
-            if msg is not None:
+            if got:
                 self._rr = (i + 1) % n
-                return msg, i
+                return got, i
         if n > 1:
             time.sleep(min(timeout, 0.001))
         return None
@@ -343,7 +326,7 @@ class CanDevice(Device):
         if not self._buses:
             self._finish()
 
-    def _on_message(self, msg: can.Message, bus_i: int, now: float) -> None:
+    def _on_message(self, msg: can.Message | SlcanFrame, bus_i: int, now: float) -> None:
         self._frames += 1
         if msg.is_error_frame:
             self._on_error_frame(msg, bus_i, now)
@@ -379,7 +362,7 @@ class CanDevice(Device):
         if grp.lost:
             self._report_lost(grp, now)
 
-    def _on_error_frame(self, msg: can.Message, bus_i: int, now: float) -> None:
+    def _on_error_frame(self, msg: can.Message | SlcanFrame, bus_i: int, now: float) -> None:
         cls, data = msg.arbitration_id, bytes(msg.data)
         if cls & _BUS_OFF:
             self._bus_state(bus_i, "bus_off", now, why=f"error frame class {cls:#x}")

@@ -10,9 +10,11 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import select
 import subprocess
 import sys
 import threading
+import tty
 import uuid
 from pathlib import Path
 
@@ -25,11 +27,12 @@ from crccheck.crc import Crc8Autosar, Crc16CcittFalse
 import drivers.can_frames as cf
 from daq.recorder import Recorder
 from drivers.can_device import CanDevice, parse_address
-from drivers.can_emulator import CanEmulator, Wire, rig_with_adc_bits, send_frames
+from drivers.can_emulator import CanEmulator, Wire, rig_with_adc_bits, send_frames, slcan_line
 from drivers.errors import DeviceNotFound
 from drivers.mcap_replay import McapReplayDevice
 from drivers.registry import open_device
 from drivers.sim import SimDevice
+from drivers.slcan_reader import SlcanReader
 
 RIGS = Path(__file__).resolve().parent.parent / "recordings" / "rigs"
 pytestmark = pytest.mark.timeout(60)
@@ -184,6 +187,12 @@ def test_address_options_and_refusals(rigs, tmp_path):
     try:
         with pytest.raises(ValueError, match="Invalid bitrate"):  # python-can's own refusal
             open_device(f"can://slcan/{os.ttyname(slave)}?sleep_after_open=0&bitrate=123")
+        for extra, kind in (({}, SlcanReader), ({"can_filters": [{"can_id": 0x110, "can_mask": 0x7F0}]},
+                                                can.interfaces.slcan.slcanBus)):
+            dev = CanDevice(f"slcan/{os.ttyname(slave)}?sleep_after_open=0", bus_options=extra)
+            dev.open()
+            assert type(dev._buses[0]) is kind  # the lean reader, python-can's bus to filter
+            dev.close()
     finally:
         os.close(master)
         os.close(slave)
@@ -326,8 +335,62 @@ def test_slcan_emulator_process(tmp_path, rigs, dbc, faults):
     _check_against_truth(blocks, events, truth, _missing_from_report(report, truth.shape[1]))
     totals = {e["kind"]: e["detail"]["total"] for e in events if "total" in e["detail"]}
     assert totals["bad_frame"] == report["injected"]["garble"]
+    assert all(e["detail"]["reason"].startswith("unparseable slcan line '")
+               for e in events if e["kind"] == "bad_frame")
     assert totals.get("wrong_dlc", 0) == report["injected"].get("wrong_dlc", 0)
     assert totals.get("bad_crc", 0) == report["injected"].get("corrupt", 0)
+
+
+def test_slcan_line_faults_from_a_pty(tmp_path, rigs):
+    """Torn, merged, non-ASCII, status, reply, remote and unrelated lines written by the test to a
+    pseudo-terminal: each counted, the frames they cost are gaps, the rest bit for bit."""
+    emu = CanEmulator(cf.FrameCodec("classic"), _sim(rigs["classic"]))
+    lines, bad = [], 0
+    for k, w in enumerate(emu.frames()):
+        line = slcan_line(w.msg)
+        if k in (300, 600, 601, 900):
+            emu.lost[w.group].add(w.cycle)
+            bad += k != 601
+        lines.append({300: line[:9] + b"\r", 600: line[:-1],  # torn; its "\r" lost: merged with 601
+                      900: line[:5] + b"\xff" + line[6:]}.get(k, line))
+        if k == 100:  # status (bus error, error passive), zero status, replies: one error frame
+            lines += [b"FA0\r", b"F00\r", b"\a", b"z\r", b"\r", b"V1013\r"]
+        elif k == 200:  # a remote frame with a sample frame's identifier, another node's frame
+            lines += [b"r1108\r", b"t7E8804410D3700000000\r"]
+            bad += 1
+    stream = b"".join(lines)
+    master, slave = os.openpty()
+    tty.setraw(slave)
+
+    def write() -> None:  # once the adapter opened the channel, in pieces
+        got = b""
+        while b"O\r" not in got:
+            if not select.select([master], [], [], 5.0)[0]:
+                return  # never opened: the test fails on what it read
+            got += os.read(master, 100)
+        for at in range(0, len(stream), 777):
+            os.write(master, stream[at : at + 777])
+
+    th = threading.Thread(target=write, name="slcan-writer", daemon=True)
+    th.start()
+    try:
+        dev = open_device(f"can://slcan/{os.ttyname(slave)}?sleep_after_open=0&idle_s=0.5", dbc="classic",
+                          rig=str(rigs["classic"]))
+        _record(dev, tmp_path / "trial.mcap")
+    finally:
+        th.join(10)
+        os.close(master)
+        os.close(slave)
+    blocks, events, _ = _replay(tmp_path / "trial.mcap")
+    truth = _truth(rigs["classic"])
+    _check_against_truth(blocks, events, truth, emu.missing(truth.shape[1]))
+    totals = {e["kind"]: e["detail"]["total"] for e in events if "total" in e["detail"]}
+    assert (totals["bad_frame"], totals["error_frame"], totals["unrelated_frame"]) == (bad, 1, 1)
+    assert {"bus_off", "bus_lost"}.isdisjoint(e["kind"] for e in events)
+    assert any(e["detail"].get("reason", "").startswith("unparseable slcan line") for e in events
+               if e["kind"] == "bad_frame")
+    # every sample frame but the 4 lines lost (600 and 601 are one), plus status, remote, unrelated
+    assert dev.counters["frames"] == k + 1 - 4 + 3
 
 
 def test_emulator_gone_ends_the_stream(tmp_path, rigs):
