@@ -203,7 +203,8 @@ def point_dofs(rig: Rig, body: str, point_m: tuple[float, float, float], n_dof: 
     hull_g = np.zeros(n_dof)
     hull_a = np.zeros(n_dof)
     for k, mode in enumerate(rig.hull_modes):
-        hull_v[3 + k], hull_g[3 + k], hull_a[3 + k] = mode.v_b, mode.gamma_b, mode.alpha_b
+        if body != "hull" or mode.moves_hull:
+            hull_v[3 + k], hull_g[3 + k], hull_a[3 + k] = mode.v_b, mode.gamma_b, mode.alpha_b
     if body == "hull":
         zh = b + ell
         U[0] = -y * hull_g

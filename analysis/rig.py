@@ -137,6 +137,9 @@ class HullMode:
     gamma_b: float
     alpha_b: float
     added_mass_ratio_water: float = 0.0
+    moves_hull: bool = True
+    """False for a degree of freedom that moves the stock's top but not the hull around it (a
+    tiller on its steering gear): the hull gages do not see it."""
 
 
 @dataclass(frozen=True)

@@ -182,6 +182,33 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_gap(args: argparse.Namespace) -> int:
+    """Sim-to-real gap diagnosis of a recording, or the benchmark that proves it."""
+    from analysis.gap.diagnose import Settings
+    from analysis.gap.effects import get_effect
+
+    effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
+    for e in effects or ():
+        get_effect(e)
+    if args.file == "benchmark":
+        from daq.gap_bench import run_benchmark
+
+        out = Path(args.out or "gap_benchmark")
+        return run_benchmark(out, per_class=args.per_class, dev=args.dev, jobs=args.jobs,
+                             progress=lambda m: print(m, flush=True))
+    from daq.gap import run_gap, summary_lines, write_report
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
+    lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
+                        progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
+                        post_max_s=args.post_s, held_out_every=args.held_out_every)
+    files = write_report(d, out, plots=not args.no_plots, source=str(src))
+    print("\n".join(summary_lines(d)))
+    print(f"\nwrote {len(files)} files to {out}/ (gap.json with every number)")
+    return 0
+
+
 def cmd_import(args: argparse.Namespace) -> int:
     """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording."""
     from daq.record import record
@@ -324,6 +351,22 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     a.set_defaults(func=cmd_analyze)
 
+    gp = sub.add_parser("gap", help="sim-to-real gap: where the model misses, which unmodelled "
+                       "effect, how far adding it closes the gap ('gap benchmark' proves it)")
+    gp.add_argument("file", help="recording (.mcap; ramdaq's own or imported), or the word 'benchmark'")
+    gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
+    gp.add_argument("--out", help="output folder (default FILE_gap/, or gap_benchmark/)")
+    gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
+    gp.add_argument("--pre-s", type=float, default=1.0, help="pre-trigger window, s (default 1)")
+    gp.add_argument("--post-s", type=float, default=4.0, help="longest decay compared, s (default 4)")
+    gp.add_argument("--held-out-every", type=int, default=3,
+                   help="every Nth impact is held out of the calibration (default 3)")
+    gp.add_argument("--per-class", type=int, default=20, help="benchmark: scenarios per effect class")
+    gp.add_argument("--dev", action="store_true", help="benchmark: the development seeds (for tuning)")
+    gp.add_argument("--jobs", type=int, default=2, help="benchmark: worker processes (default 2)")
+    gp.set_defaults(func=cmd_gap)
+
     g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
     g.add_argument("rig")
     g.set_defaults(func=cmd_rig)
@@ -352,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (RigError, DeviceError, RecordingError, FileExistsError, FileNotFoundError,
-            ValueError) as err:
+            ValueError, KeyError) as err:
         print(f"ramdaq {args.command}: {err}", file=sys.stderr)
         return 2
 

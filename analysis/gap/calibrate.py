@@ -1,0 +1,262 @@
+"""Calibration: the nominal model's uncertain constants fitted to the trial's fitted impacts, so
+that what is left is the model's form, not a mistuned constant.
+
+Maximum a posteriori: the whitened residual of the fitted impacts (pre and decay windows) plus
+the constants' Gaussian priors (:func:`~analysis.gap.forward.base_params`), minimised by
+``scipy.optimize.least_squares`` (trust region, bounds). Each prediction re-solves every
+impact's force and onset shift (linear), so the calibration never sees them as parameters.
+The held-out impacts enter only through their own forces.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis.gap.effects.base import Term
+from analysis.gap.forward import Fit, Forward
+
+
+@dataclass
+class Calibration:
+    """Result of a (re)fit: base constants ``theta`` (log multipliers), the terms with their
+    fitted parameters, the fit, ``chi2`` (sum of squared whitened residuals of the fitted
+    impacts, priors excluded), ``prior`` (the prior's part of the cost, x2), ``jac`` the data
+    rows of the Jacobian of the whitened residual in the base constants then the terms'
+    parameters, ``n_params``."""
+
+    theta: np.ndarray
+    terms: list[Term]
+    fit: Fit
+    chi2: float
+    prior: float
+    jac: np.ndarray
+    n_params: int
+    nfev: int
+    cache: dict = field(default_factory=dict)
+
+    def pred_rate(self, fw: Forward) -> np.ndarray:
+        """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached)."""
+        if "pred_rate" not in self.cache:
+            U, dU, _ = fw.last_columns_for(self)
+            self.cache["pred_rate"] = np.tensordot(self.fit.force, dU, axes=1)
+        return self.cache["pred_rate"]
+
+
+def _pack(fw: Forward, terms: list[Term]):
+    sd = np.array([p.prior_sd for p in fw.params])
+    bd = np.array([p.bound for p in fw.params])
+    lo = [-bd] + [t.placement.lo for t in terms]
+    hi = [bd] + [t.placement.hi for t in terms]
+    return sd, np.concatenate(lo), np.concatenate(hi)
+
+
+def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None = None,
+              max_iter: int = 60, free_base: bool = True, jac0: np.ndarray | None = None) -> Calibration:
+    """Fit the base constants (and the terms' parameters) to the fitted impacts.
+
+    ``terms`` carry their start values in ``Term.x``; ``free_base=False`` keeps ``theta0``
+    fixed and fits the terms alone (quicker, for screening). ``jac0``, the data rows of an
+    earlier calibration's Jacobian in the base constants, saves recomputing them: only the
+    terms' columns are differenced.
+    """
+    terms = list(terms)
+    n_b = len(fw.params)
+    theta0 = prefit_frequencies(fw) if theta0 is None else np.asarray(theta0, float)
+    sd, lo, hi = _pack(fw, terms)
+    sizes = [len(t.x) for t in terms]
+    fitted = np.flatnonzero(fw.td.fitted)
+
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, list[Term]]:
+        th = p[:n_b] if free_base else theta0
+        out, i = [], n_b if free_base else 0
+        for t, k in zip(terms, sizes, strict=True):
+            out.append(t.with_x(p[i:i + k]))
+            i += k
+        return th, out
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        th, ts = unpack(p)
+        r = fw.whitened(fw.fit(th, ts), fitted)
+        return np.concatenate([r, th / sd]) if free_base else r
+
+    x_start = np.concatenate(([theta0] if free_base else []) + [t.x for t in terms])
+    lo_, hi_ = (lo, hi) if free_base else (lo[n_b:], hi[n_b:])
+    x_start = np.clip(x_start, lo_ + 1e-9 * (hi_ - lo_), hi_ - 1e-9 * (hi_ - lo_))
+    if len(x_start) == 0:
+        fit = fw.fit(theta0, terms)
+        r = fw.whitened(fit, fitted)
+        return Calibration(theta0, terms, fit, float(r @ r), 0.0, np.zeros((len(r), 0)), 0, 1)
+    x_scale = np.concatenate(([sd] if free_base else []) + [(t.placement.hi - t.placement.lo) / 10
+                                                             for t in terms])
+    J0 = None
+    if jac0 is not None and free_base:
+        J0 = np.zeros((len(jac0) + n_b, len(x_start)))
+        J0[: len(jac0), :n_b] = jac0[:, :n_b]
+        J0[len(jac0):, :n_b] = np.diag(1 / sd)
+    res = levenberg_marquardt(residual, x_start, lo_, hi_, x_scale, max_iter=max_iter, J0=J0)
+    th, ts = unpack(res.x)
+    fit = fw.fit(th, ts)
+    r = fw.whitened(fit, fitted)
+    n_data = len(r)
+    jac = res.jac[:n_data] if free_base else np.zeros((n_data, 0))
+    prior = float(np.sum((th / sd) ** 2)) if free_base else 0.0
+    return Calibration(th, ts, fit, float(r @ r), prior, np.asarray(jac), len(res.x), res.nfev)
+
+
+def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.2,
+                   prominence: float = 20.0) -> np.ndarray:
+    """Where the data's decays actually ring near each of ``f_guess`` (Hz): the peak of the
+    summed, whitened, Hann-windowed and zero-padded spectrum of the fitted impacts' decay
+    windows within +-``rel``, interpolated (parabola on log power); NaN where no peak stands
+    ``prominence`` times above the median of that range."""
+    td = fw.td
+    a, b = td.windows.early.start, td.n_s
+    r = np.nan_to_num(td.x[td.fitted][:, :, a:b] * fw.W[td.fitted][:, :, a:b])
+    n = r.shape[-1]
+    nfft = 8 * int(2 ** math.ceil(math.log2(n)))
+    P = (np.abs(np.fft.rfft(r * np.hanning(n), n=nfft, axis=-1)) ** 2).sum(axis=(0, 1))
+    f = np.fft.rfftfreq(nfft, 1 / td.fs_hz)
+    out = np.full(len(f_guess), np.nan)
+    for k, fg in enumerate(f_guess):
+        sel = np.flatnonzero((f > fg * (1 - rel)) & (f < fg * (1 + rel)))
+        if len(sel) < 5:
+            continue
+        i = sel[np.argmax(P[sel])]
+        if i in (sel[0], sel[-1]) or P[i] < prominence * np.median(P[sel]):
+            continue
+        y0, y1, y2 = np.log(P[i - 1: i + 2])
+        d = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
+        out[k] = f[i] + d * (f[1] - f[0])
+    return out
+
+
+def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None) -> np.ndarray:
+    """Base constants moved so the model's modes ring where the data's do.
+
+    A time-domain fit cannot find a frequency off by more than about one cycle over the decay
+    (4 % of a 24 Hz mode over 4 s is four cycles): it would settle in a wrong valley. So the
+    stiffness-like constants (stock bending and torsion, hull frequencies, added mass) are
+    first fitted to the spectrum peaks of the data (log frequency, with the same priors); the
+    time-domain calibration starts from there.
+    """
+    theta0 = np.zeros(len(fw.params)) if theta0 is None else np.asarray(theta0, float)
+    ms = fw.modes(theta0)
+    f0 = ms.f_hz
+    comp = np.flatnonzero((f0 > 0) & (f0 < fw.td.lowpass_hz))
+    f_obs = spectrum_peaks(fw, f0[comp])
+    ok = np.isfinite(f_obs)
+    if not ok.any():
+        return theta0
+    free = [i for i, p in enumerate(fw.params) if p.name in ("stock_EI", "stock_GJ", "added_mass")
+            or (p.name.startswith("hull") and p.name.endswith("_f"))]
+    sd = np.array([fw.params[i].prior_sd for i in free])
+    bd = np.array([fw.params[i].bound for i in free])
+
+    def resid(v: np.ndarray) -> np.ndarray:
+        th = theta0.copy()
+        th[free] = v
+        try:
+            f = fw.modes(th).f_hz
+        except (ValueError, np.linalg.LinAlgError):
+            return np.full(ok.sum() + len(v), 1e3)
+        # each mode keeps its place in frequency order
+        fm = f[(f > 0)][comp] if len(f[f > 0]) > comp.max() else np.full(len(comp), np.nan)
+        r = np.log(fm[ok] / f_obs[ok]) / 1e-3     # frequencies read to ~0.1 %
+        return np.concatenate([np.nan_to_num(r, nan=1e3), v / sd])
+
+    import scipy.optimize
+    res = scipy.optimize.least_squares(resid, theta0[free], bounds=(-bd, bd), method="trf",
+                                       x_scale=sd, max_nfev=200)
+    th = theta0.copy()
+    th[free] = res.x
+    return th
+
+
+@dataclass
+class _Result:
+    x: np.ndarray
+    jac: np.ndarray
+    nfev: int
+
+
+def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, *,
+                        max_iter: int = 60, J0: np.ndarray | None = None, rel_step: float = 1e-3,
+                        tol: float = 1e-6) -> _Result:
+    """Bounded Levenberg-Marquardt on ``sum(fun(x)^2)`` with Broyden updates of the Jacobian.
+
+    The Jacobian is differenced once (forward, step ``rel_step * scale``; columns given in
+    ``J0`` are taken as they are -- non-zero columns only), then corrected by Broyden's rank-one
+    update after every step, and differenced afresh when steps fail or stall. Each iteration
+    thus costs one prediction instead of one per parameter; convergence (relative decrease
+    below ``tol``) is only accepted on a freshly differenced Jacobian, so a fit and its refit
+    with an effect end equally converged and their chi-square difference is the effect's.
+    """
+    x = np.asarray(x0, float).copy()
+    r = fun(x)
+    nfev = 1
+
+    def difference(J: np.ndarray | None, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+        nonlocal nfev
+        out = np.zeros((len(r), len(x))) if J is None else J.copy()
+        for i in range(len(x)):
+            if J is not None and np.any(J[:, i] != 0):
+                continue
+            h = rel_step * scale[i]
+            xi = x.copy()
+            for sign in (1, -1):
+                xi[i] = x[i] + sign * h
+                if not lo[i] <= xi[i] <= hi[i]:
+                    continue
+                try:
+                    out[:, i] = (fun(xi) - r) / (xi[i] - x[i])
+                    break
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+            nfev += 1
+        return out
+
+    J = difference(J0, x, r)
+    fresh = J0 is None
+    cost = float(r @ r)
+    mu = 1e-3
+    fails = 0
+    for _ in range(max_iter):
+        Js = J * scale[None, :]
+        A = Js.T @ Js
+        g = Js.T @ r
+        d = np.sqrt(np.maximum(np.diag(A), 1e-30))
+        step = -np.linalg.solve(A + mu * np.diag(d**2) + 1e-12 * np.eye(len(x)), g) * scale
+        x_new = np.clip(x + step, lo, hi)
+        step = x_new - x
+        if not np.any(step):
+            break
+        try:
+            r_new = fun(x_new)
+        except (ValueError, np.linalg.LinAlgError):   # e.g. a mode turned overdamped
+            r_new = None
+        nfev += 1
+        c_new = float(r_new @ r_new) if r_new is not None else math.inf
+        if r_new is not None:
+            J = J + np.outer(r_new - r - J @ step, step) / float(step @ step)
+        if c_new < cost:
+            small = (cost - c_new) < tol * cost
+            x, r, cost = x_new, r_new, c_new
+            mu = max(mu / 3, 1e-7)
+            fails = 0
+            if small:
+                if fresh:
+                    break             # converged on a true Jacobian
+                J, fresh = difference(None, x, r), True
+                continue
+            fresh = False
+        else:
+            mu *= 4
+            fails += 1
+            if fails >= 2 and not fresh:
+                J, fresh, fails = difference(None, x, r), True, 0
+            elif fails >= 6 or mu > 1e8:
+                break
+    return _Result(x, J, nfev)

@@ -1,0 +1,185 @@
+"""What an unmodelled effect is to the gap diagnosis: a term that switches on in the simulator,
+where it can sit in a trial, and how it shows.
+
+An :class:`Effect` is a stateless object with
+
+* :meth:`Effect.placements` -- the discrete ways the effect could sit in this trial (which gage,
+  which mode, which frequency...), each a :class:`Placement` with its continuous parameters'
+  start values, bounds and *probe* values. The probe is a modest size of the effect: the
+  prediction with it, less the calibrated prediction, is the effect's **signature** -- the
+  template the residual is matched against (a score test, see :mod:`analysis.gap.evidence`);
+* hooks into the four stages of :class:`~analysis.gap.forward.Forward` -- ``rig``, ``model``,
+  ``modes``, ``pulses`` / ``columns`` / ``units`` (signals) and ``output`` -- each the identity
+  unless the effect overrides it.
+
+A new effect is one new module in :mod:`analysis.gap.effects` defining a subclass with a
+``name``; the registry finds it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from analysis.model import StructuralModel
+from analysis.rig import Rig
+
+if TYPE_CHECKING:
+    from analysis.gap.calibrate import Calibration
+    from analysis.gap.forward import Fit, Forward, ModeSet
+
+
+@dataclass(frozen=True)
+class Placement:
+    """One way an effect could sit in a trial.
+
+    ``key`` names the discrete choice (JSON-able, e.g. ``{"gage": 5}``); ``names``/``units`` its
+    continuous parameters; ``x0`` the effect switched off (or as good as), ``lo``/``hi`` bounds;
+    ``probes`` (k, n_params) parameter values whose predictions span the effect's signature --
+    the score test's projection on them gives the refit's start, ``x0 + sum c_k (probe_k - x0)``.
+    ``gages`` (report numbers),
+    ``mode_hz`` and ``window`` say where the effect would show.
+    """
+
+    key: dict
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    x0: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    probes: np.ndarray
+    gages: tuple[int, ...] = ()
+    mode_hz: float | None = None
+    window: str = "all"
+
+
+@dataclass(frozen=True)
+class Term:
+    """An effect switched on: the effect, where it sits, and its parameter values."""
+
+    effect: Effect
+    placement: Placement
+    x: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def with_x(self, x: np.ndarray) -> Term:
+        return Term(self.effect, self.placement, np.asarray(x, dtype=float))
+
+    def value(self, name: str) -> float:
+        return float(self.x[self.placement.names.index(name)])
+
+    def to_json(self) -> dict:
+        p = self.placement
+        return {"effect": self.effect.name, "where": p.key,
+                "params": {n: {"value": float(v), "unit": u}
+                           for n, v, u in zip(p.names, self.x, p.units, strict=True)}}
+
+
+class Effect:
+    """Base of every candidate effect; hooks default to "no change"."""
+
+    name: ClassVar[str] = ""
+    label: ClassVar[str] = ""
+    needs_force: ClassVar[bool] = False
+    """True when the term depends on each impact's force (amplitude-dependent effects)."""
+
+    def placements(self, fw: Forward, fit: Fit) -> list[Placement]:
+        raise NotImplementedError
+
+    def templates(self, fw: Forward, cal: Calibration, pl: Placement) -> np.ndarray | None:
+        """Signature templates (k, N) when the effect can give them cheaper than by running
+        the forward model at each probe (the default, ``None``)."""
+        return None
+
+    def direct_score(self, fw: Forward, cal: Calibration) -> tuple[float, Placement | None] | None:
+        """A score (z) and placement read straight off the data, for effects whose signature
+        is not a template (e.g. a converter at its rail); ``None`` to use templates."""
+        return None
+
+    def rig(self, rig: Rig, term: Term) -> Rig:
+        return rig
+
+    def model(self, model: StructuralModel, term: Term) -> StructuralModel:
+        return model
+
+    def modes(self, ms: ModeSet, fw: Forward, term: Term) -> ModeSet:
+        return ms
+
+    def pulses(self, term: Term) -> list[tuple[float, float]]:
+        """Extra ram contacts of every impact: (delay s, peak ratio) pairs."""
+        return []
+
+    def columns(self, fw: Forward, term: Term) -> np.ndarray | None:
+        """Extra linear columns (k, n_seg, n_gages, n_s) whose coefficients are solved with the
+        impacts' forces."""
+        return None
+
+    def units(self, U: np.ndarray, dU: np.ndarray, ms: ModeSet, fw: Forward,
+              force: np.ndarray | None, term: Term) -> tuple[np.ndarray, np.ndarray]:
+        return U, dU
+
+    def output(self, pred: np.ndarray, fw: Forward, term: Term) -> tuple[np.ndarray, np.ndarray | None]:
+        """Last word on the prediction; may return a mask (n_seg, n_g, n_s) of samples that
+        still count."""
+        return pred, None
+
+
+def placement(key: dict, names: tuple[str, ...], units: tuple[str, ...], x0, lo, hi, probes,
+              **where) -> Placement:
+    """A :class:`Placement` from plain lists."""
+    a = lambda v: np.atleast_1d(np.asarray(v, dtype=float))  # noqa: E731
+    return Placement(key, names, units, a(x0), a(lo), a(hi), np.atleast_2d(np.asarray(probes, float)),
+                     **where)
+
+
+def gage_row(fw: Forward, number: int) -> int:
+    """Row of report gage ``number`` in the trial's arrays."""
+    return fw.td.gage_numbers.index(number)
+
+
+def rudder_gages(rig: Rig) -> tuple[int, ...]:
+    return tuple(g.number for g in rig.gages_by_channel() if g.body == "rudder")
+
+
+def compared_modes(fw: Forward, fit: Fit) -> list[tuple[int, float]]:
+    """(index, frequency Hz) of the fit's modes inside the compared band."""
+    f = fit.modes.f_hz
+    return [(i, float(f[i])) for i in range(len(f))
+            if 0 < f[i] < fw.td.lowpass_hz and not fit.modes.exp_only[i]]
+
+
+def whiten_fitted(fw: Forward, d: np.ndarray) -> np.ndarray:
+    """A prediction difference (n_seg, n_g, n_s) as a template over the fitted segments."""
+    fitted = np.flatnonzero(fw.td.fitted)
+    return np.nan_to_num((d[fitted] * fw.mask[fitted] * fw.W[fitted]).ravel())
+
+
+def residual_peaks(fw: Forward, fit: Fit, windows: tuple[str, ...], n: int,
+                   rows: list[int] | None = None, avoid_hz: list[float] = (),
+                   min_hz: float = 0.0) -> list[float]:
+    """The ``n`` strongest narrow peaks (Hz) of the whitened residual's spectrum in ``windows``
+    (summed over fitted segments and ``rows``), at least 4 % from every ``avoid_hz``."""
+    td = fw.td
+    rows = list(range(td.n_gages)) if rows is None else rows
+    total = None
+    n_fft = 4 * td.n_s
+    for w in windows:
+        sl = getattr(td.windows, w)
+        r = np.nan_to_num(fit.resid[td.fitted][:, rows, sl] * fw.W[td.fitted][:, rows, sl])
+        P = (np.abs(np.fft.rfft(r * np.hanning(r.shape[-1]), n=n_fft, axis=-1)) ** 2).sum(axis=(0, 1))
+        total = P if total is None else total + P
+    f = np.fft.rfftfreq(n_fft, 1 / td.fs_hz)
+    ok = (f > max(min_hz, 2 * td.fs_hz / td.n_s)) & (f < td.lowpass_hz)
+    for a in avoid_hz:
+        ok &= np.abs(f - a) > 0.04 * a
+    peaks = [i for i in range(1, len(f) - 1)
+             if ok[i] and total[i] >= total[i - 1] and total[i] > total[i + 1]]
+    peaks.sort(key=lambda i: -total[i])
+    out: list[float] = []
+    for i in peaks:
+        if all(abs(f[i] - o) > 0.04 * o for o in out):
+            out.append(float(f[i]))
+        if len(out) == n:
+            break
+    return out

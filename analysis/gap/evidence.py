@@ -1,0 +1,313 @@
+"""What is beyond chance: the trial's noise, repeated simulations of the calibrated model, the gap
+map, and each candidate effect's signature strength.
+
+* :func:`noise_model` -- each gage's noise spectrum from the residual of the pre windows, with
+  narrow lines replaced by a running median over frequency (a steady tone is a finding, not
+  noise) and smoothed by a running mean.
+* :func:`replicate_residuals` -- the calibrated prediction plus fresh noise of that spectrum, the
+  impacts' forces re-solved: what the residual looks like when the calibrated model *is* true.
+* :func:`cell_energies` / :class:`GapMap` -- residual energy per gage x band x window (pre,
+  early, late), standardised by the replicates: ``z = (E - mean_rep) / sd_rep``.
+* :func:`signature_scores` -- for an effect's placements, the residual's projection on the
+  effect's signature (its probe prediction less the calibrated one), with the calibration's own
+  directions (constants, forces, onsets) projected out: a score test. Its null spread comes from
+  the same replicates, so coloured noise does not inflate it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.ndimage
+import scipy.signal
+import scipy.stats
+
+from analysis.gap.calibrate import Calibration
+from analysis.gap.effects.base import Effect, Placement, Term
+from analysis.gap.forward import Forward
+
+WINDOWS = ("pre", "early", "late")
+GAP_CELL_Z = 3.0
+"""A map cell counts into the gap when its z exceeds this (one-sided 0.13 %)."""
+
+
+@dataclass
+class NoiseModel:
+    """One-sided noise PSD per gage on the rfft grid of a segment: ``psd`` (n_gages, n_f)
+    (m/s^2)^2/Hz, ``sigma`` (n_gages,) its rms, m/s^2."""
+
+    psd: np.ndarray
+    sigma: np.ndarray
+    fs_hz: float
+    n_s: int
+
+    def draw(self, rng: np.random.Generator, n_seg: int) -> np.ndarray:
+        """Noise of this spectrum, (n_seg, n_gages, n_s), m/s^2."""
+        w = rng.standard_normal((n_seg, self.psd.shape[0], self.n_s))
+        X = np.fft.rfft(w, axis=-1) * np.sqrt(self.psd * self.fs_hz / 2)[None]
+        return np.fft.irfft(X, n=self.n_s, axis=-1)
+
+
+def noise_model(fw: Forward, resid: np.ndarray) -> NoiseModel:
+    """Noise spectrum of each gage from ``resid`` (n_seg, n_g, n_s) in the pre windows.
+
+    A front-end's noise floor is smooth: white above a corner, rising as ``1/f^a`` below it.
+    So each gage's Welch spectrum (narrow lines replaced by a running median: a steady tone is
+    a finding, not noise) is fitted by ``w (1 + (f_k / f)^a)``; the few bins of a short
+    window's low end would otherwise set the low band's floor by chance.
+    """
+    td = fw.td
+    pre = np.nan_to_num(resid[:, :, td.windows.pre])
+    n_pre = pre.shape[-1]
+    nper = int(min(n_pre, max(64, 2 ** int(math.log2(max(n_pre, 64))))))
+    f, P = scipy.signal.welch(pre, fs=td.fs_hz, nperseg=nper, axis=-1, detrend=False)
+    n_avg = pre.shape[0] * max(1, 2 * n_pre // nper - 1)
+    P = P.mean(axis=0)
+    S = scipy.ndimage.median_filter(P, size=(1, 9), mode="nearest")
+    line = scipy.ndimage.binary_dilation(P > 4 * S, structure=np.ones((1, 5)))  # Hann spreads a line
+    fg = np.fft.rfftfreq(td.n_s, 1 / td.fs_hz)
+    band = (f > 0) & (f < td.lowpass_hz)
+    psd = np.empty((P.shape[0], len(fg)))
+    for g in range(P.shape[0]):
+        keep = band & ~line[g]
+        if keep.sum() < 4:
+            keep = band
+        psd[g] = _floor_fit(f[keep], P[g, keep], fg, 2 * n_avg)
+    sigma = np.sqrt(np.trapezoid(psd, fg, axis=1))
+    return NoiseModel(psd, sigma, td.fs_hz, td.n_s)
+
+
+def _floor_fit(f: np.ndarray, P: np.ndarray, f_out: np.ndarray, dof: float) -> np.ndarray:
+    """``w (1 + (f_k/f)^a)`` fitted to a spectrum in log power, evaluated at ``f_out``
+    (the DC bin takes the lowest bin's value). The level is set by the median ratio of the
+    spectrum to the fit, corrected for the median of a chi-square of ``dof`` degrees of freedom
+    (Wilson-Hilferty) -- a median, so a line the masking missed does not lift the floor."""
+    import scipy.optimize
+
+    y = np.log(np.maximum(P, 1e-300))
+    w0 = np.median(P)
+
+    def model(p, ff):
+        lw, lk, a = p
+        return lw + np.log1p(np.exp(a * (lk - np.log(ff))))
+
+    res = scipy.optimize.least_squares(lambda p: model(p, f) - y, [math.log(w0), math.log(f[0]), 1.0],
+                                       bounds=([-np.inf, math.log(f[0] / 100), 0.3],
+                                               [np.inf, math.log(f[-1]), 2.5]), loss="soft_l1")
+    ff = np.maximum(f_out, f_out[1] if len(f_out) > 1 else 1.0)
+    out = np.exp(model(res.x, ff))
+    med = (1 - 2 / (9 * dof)) ** 3
+    return out * np.median(P / np.exp(model(res.x, f))) / med
+
+
+def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep: int,
+                        seed: int = 0, form_tol: float = 0.0) -> np.ndarray:
+    """Residuals of ``n_rep`` simulated trials of the calibrated model, (n_rep, n_seg, n_g, n_s).
+
+    Each replicate is the calibrated prediction with fresh noise of the trial's spectrum and,
+    for a model-form tolerance ``form_tol``, every gage's amplitude of every mode perturbed by
+    a random complex factor ``1 + form_tol (a + j b) / sqrt(2)`` (a, b standard normal): what a
+    model "right to within form_tol" leaves when it is right."""
+    rng = np.random.default_rng(seed)
+    U, dU, extra = fw.last_columns_for(cal)
+    out = np.empty((n_rep,) + fw.td.x.shape)
+    needs_force = any(t.effect.needs_force for t in cal.terms)
+    for r in range(n_rep):
+        x = cal.fit.pred + noise.draw(rng, fw.td.n_seg)
+        if form_tol > 0:
+            ms = cal.fit.modes.copy()
+            xi = rng.standard_normal(ms.A.shape) + 1j * rng.standard_normal(ms.A.shape)
+            ms.A = ms.A * (1 + form_tol * xi / math.sqrt(2))
+            Ur, _ = fw.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)
+            x = x + np.tensordot(cal.fit.force, Ur - U, axes=1)
+        _, pred = fw._solve(U, dU, extra, x)
+        out[r] = np.where(fw.mask, x - pred, np.nan)
+    return out
+
+
+@dataclass
+class Bands:
+    """Frequency bands of the map: ``low`` below the first compared mode, then one band around
+    each mode. ``edges_hz`` (n_bands + 1,), ``labels``, ``center_hz`` (n_bands,)."""
+
+    edges_hz: np.ndarray
+    labels: list[str]
+    center_hz: np.ndarray
+
+
+def bands_for(f_modes: np.ndarray, top_hz: float) -> Bands:
+    f = np.sort(np.asarray([x for x in f_modes if 0 < x < top_hz]))
+    edges = [0.0, f[0] / 1.5] + [math.sqrt(a * b) for a, b in zip(f[:-1], f[1:], strict=True)] + [top_hz]
+    labels = ["low"] + [f"{x:.1f} Hz" for x in f]
+    center = np.concatenate([[f[0] / 3], f])
+    return Bands(np.array(edges), labels, center)
+
+
+def cell_energies(fw: Forward, resid: np.ndarray, bands: Bands) -> np.ndarray:
+    """Whitened residual energy per segment x gage x band x window,
+    (..., n_seg, n_g, n_bands, 3); ``resid`` may carry leading replicate axes."""
+    td = fw.td
+    out = []
+    for name in WINDOWS:
+        sl = getattr(td.windows, name)
+        r = np.nan_to_num(resid[..., sl]) * fw.W[..., sl]
+        n = r.shape[-1]
+        P = np.abs(np.fft.rfft(r, axis=-1)) ** 2 / n
+        P[..., 1: (n + 1) // 2] *= 2
+        f = np.fft.rfftfreq(n, 1 / td.fs_hz)
+        idx = np.clip(np.searchsorted(bands.edges_hz, f, side="right") - 1, 0, len(bands.labels) - 1)
+        E = np.stack([P[..., idx == b].sum(axis=-1) for b in range(len(bands.labels))], axis=-1)
+        out.append(E)
+    return np.stack(out, axis=-1)
+
+
+@dataclass
+class GapMap:
+    """Standardised discrepancy ``z`` (n_gages, n_bands, 3 windows) of a set of segments, with
+    the observed and expected energies (whitened units) it came from."""
+
+    z: np.ndarray
+    observed: np.ndarray
+    expected: np.ndarray
+    spread: np.ndarray
+    bands: Bands
+    gage_numbers: tuple[int, ...]
+
+    def gap_cells(self, z_min: float = GAP_CELL_Z) -> np.ndarray:
+        """Cells where the gap is beyond chance (z > ``z_min``), bool (n_gages, n_bands, 3)."""
+        return self.z > z_min
+
+    def excess(self, cells: np.ndarray | None = None) -> float:
+        """The gap: energy beyond the noise expectation (whitened units: noise variances) summed
+        over ``cells`` (default: this map's own :meth:`gap_cells`)."""
+        return float(np.sum(self.excess_by_gage(cells)))
+
+    def excess_by_gage(self, cells: np.ndarray | None = None) -> np.ndarray:
+        cells = self.gap_cells() if cells is None else cells
+        return np.where(cells, np.maximum(self.observed - self.expected, 0), 0).sum(axis=(1, 2))
+
+    def to_json(self) -> dict:
+        return {"gages": list(self.gage_numbers), "bands": self.bands.labels,
+                "band_edges_hz": [round(float(e), 3) for e in self.bands.edges_hz],
+                "windows": list(WINDOWS), "z": np.round(self.z, 2).tolist()}
+
+
+def gap_map(fw: Forward, resid: np.ndarray, rep_cells: np.ndarray, bands: Bands,
+            segments: np.ndarray) -> GapMap:
+    """The map of ``segments`` (bool or index) given the replicates' cells."""
+    obs = cell_energies(fw, resid, bands)[segments].sum(axis=0)
+    rep = rep_cells[:, segments].sum(axis=1)
+    mean, sd = rep.mean(axis=0), rep.std(axis=0, ddof=1)
+    sd = np.maximum(sd, 1e-9 + 0.05 * mean)
+    return GapMap(energy_z(obs, mean, sd), obs, mean, sd, bands, fw.td.gage_numbers)
+
+
+def energy_z(obs: np.ndarray, mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """Normal score of an energy against a scaled chi-square of the replicates' mean and spread
+    (``k = 2 mean^2 / sd^2`` degrees of freedom): a cell of few bins is skewed, and a plain
+    ``(E - mean) / sd`` would call its upper tail a gap."""
+    k = np.maximum(2 * mean**2 / sd**2, 0.5)
+    a = mean / k
+    p = scipy.stats.chi2.sf(obs / a, k)
+    return scipy.stats.norm.isf(np.clip(p, 1e-300, 1.0))
+
+
+@dataclass
+class Signature:
+    """How strongly the residual carries an effect's signature: the best placement, its
+    statistic ``chi2`` (deflated for coloured noise), dof ``k``, the equivalent normal score
+    ``z`` after charging for the number of placements tried, and the start parameters the
+    projection suggests."""
+
+    effect: Effect
+    placement: Placement | None
+    chi2: float
+    k: int
+    z: float
+    x0: np.ndarray
+    n_placements: int
+    kappa: float = 1.0
+
+
+class ScoreBasis:
+    """The calibration's own directions in the fitted segments' whitened sample space, to be
+    projected out of every signature; and the replicates' residuals in the same space."""
+
+    def __init__(self, fw: Forward, cal: Calibration, reps: np.ndarray) -> None:
+        self.fw = fw
+        self.fitted = np.flatnonzero(fw.td.fitted)
+        U, dU, extra = fw.last_columns_for(cal)
+        X = fw.design(U, dU, extra)[:, self.fitted]
+        w = (fw.mask[self.fitted] * fw.W[self.fitted]).ravel()
+        cols = [X.reshape(X.shape[0], -1) * w[None, :]]
+        if cal.jac.shape[1]:
+            cols.append(cal.jac.T)
+        B = np.concatenate(cols)
+        q, _ = np.linalg.qr(B.T)
+        self.Q = q                                      # (N, n_basis) orthonormal
+        self.w = w
+        self.r = self._white(cal.fit.resid[self.fitted])
+        self.reps = np.stack([self._white(rr[self.fitted]) for rr in reps])
+
+    def _white(self, resid: np.ndarray) -> np.ndarray:
+        return np.nan_to_num(resid * self.fw.W[self.fitted]).ravel()
+
+    def project(self, D: np.ndarray) -> np.ndarray:
+        """Templates (k, N) with the calibration's directions removed."""
+        return D - (D @ self.Q) @ self.Q.T
+
+    def score(self, D: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """(chi2 of the residual on span(D), its replicates' mean, coefficients)."""
+        Dp = self.project(D)
+        G = Dp @ Dp.T
+        if not np.all(np.isfinite(G)) or np.trace(G) <= 0:
+            return 0.0, 1.0, np.zeros(D.shape[0])
+        Gi = np.linalg.pinv(G, rcond=1e-10)
+        b = Dp @ self.r
+        chi2 = float(b @ Gi @ b)
+        br = self.reps @ Dp.T
+        chi2_rep = np.einsum("ri,ij,rj->r", br, Gi, br)
+        return chi2, float(np.mean(chi2_rep)), Gi @ b
+
+
+def template(fw: Forward, cal: Calibration, term: Term) -> np.ndarray:
+    """The signature of one probe: prediction with the term less the calibrated one, whitened,
+    over the fitted segments, flattened."""
+    f = fw.fit(cal.theta, list(cal.terms) + [term])
+    fitted = np.flatnonzero(fw.td.fitted)
+    d = (f.pred - cal.fit.pred)[fitted] * fw.mask[fitted] * fw.W[fitted]
+    return np.nan_to_num(d.ravel())
+
+
+def signature_scores(fw: Forward, cal: Calibration, basis: ScoreBasis, effect: Effect) -> Signature:
+    """The effect's best placement and its score (see module docstring)."""
+    direct = effect.direct_score(fw, cal)
+    if direct is not None:
+        return Signature(effect, direct[1], 0.0, 0, direct[0], direct[1].x0 if direct[1] else np.zeros(0), 1)
+    places = effect.placements(fw, cal.fit)
+    best = Signature(effect, None, 0.0, 1, -np.inf, np.zeros(0), len(places))
+    best_p = 1.0
+    for pl in places:
+        try:
+            D = effect.templates(fw, cal, pl)
+            if D is None:
+                D = np.stack([template(fw, cal, Term(effect, pl, probe)) for probe in pl.probes])
+        except (ValueError, np.linalg.LinAlgError):   # a probe the model cannot take (overdamped)
+            continue
+        chi2, chi2_rep, coef = basis.score(D)
+        k = D.shape[0]
+        kappa = max(chi2_rep / k, 1.0)   # coloured noise carries more along some signatures
+        p = float(scipy.stats.chi2.sf(chi2 / kappa, k))
+        if p < best_p or best.placement is None:
+            # the placement's x0 is the effect switched off; the probes are steps from it
+            x0 = pl.x0 + (coef @ (pl.probes - pl.x0[None, :]) if len(coef) == len(pl.probes) else 0)
+            x0 = np.clip(x0, pl.lo, pl.hi)
+            best = Signature(effect, pl, chi2 / kappa, k, 0.0, x0, len(places), kappa)
+            best_p = p
+    if best.placement is None:
+        return best
+    p_any = min(1.0, best_p * max(1, len(places)))      # Bonferroni over placements
+    best.z = float(scipy.stats.norm.isf(max(p_any, 1e-300))) if p_any < 1 else -np.inf
+    return best

@@ -1,0 +1,352 @@
+"""The simulator the gap diagnosis holds a trial against: the rig's model, its uncertain constants,
+and the hooks through which an unmodelled effect switches on.
+
+A prediction of a whole trial is built in four stages, each with a hook for effect terms
+(:class:`~analysis.gap.effects.base.Effect`):
+
+1. **rig** -- the nominal rig with the calibrated constants (:func:`apply_base`), then each
+   term's change to it (an extra hull mode, a tiller...);
+2. **model** -- ``M, C, K`` from :func:`analysis.model.build_model`, then each term's change;
+3. **modes** -- the exact modal form: per mode its eigenvalue and its acceleration at every gage
+   per newton of ram force, including the anti-alias filter ``H_AA(lambda)`` and the decimation
+   low-pass ``|H|^2``; terms may rescale, delay, split or add modes;
+4. **signals** -- every impact's response per newton of peak force and its time derivative (exact
+   half-sine response, superposed over all later segments, since a blow still rings when the
+   next one lands), extra linear columns (a steady tone), and terms acting on signals.
+
+The peak force of every impact and a small onset correction (via the derivative column:
+``F u(t - d) ~ F u - F d u'``) are nuisance parameters solved by weighted linear least squares
+for each prediction, so nothing the calibration fits is an impact's own force.
+
+Weights are ``1 / sigma_g``, the noise rms of gage ``g`` in the decimated band.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.signal
+
+from analysis.gap.trialdata import TrialData
+from analysis.model import StructuralModel, build_model
+from analysis.response import half_sine_response, modal_form
+from analysis.rig import Rig
+
+if TYPE_CHECKING:
+    from analysis.gap.effects.base import Term
+
+
+@dataclass(frozen=True)
+class BaseParam:
+    """A calibrated constant: its value is ``nominal * exp(theta)``; ``prior_sd`` (in theta) is
+    how far from nominal the rig's author would believe it, ``bound`` the hard limit on |theta|."""
+
+    name: str
+    prior_sd: float
+    bound: float
+    unit: str
+
+
+def base_params(rig: Rig) -> list[BaseParam]:
+    """The rig's uncertain constants the calibration fits.
+
+    Stock bending (``I``) and torsion (``J``) stiffness: +-30 % a priori (welds, bearings,
+    the stock's taper); damping constants: a factor e (damping is the least known); the added
+    mass factor in water +-30 %; the ram's contact time +-50 %; each hull mode's frequency
+    +-30 % and damping a factor e.
+    """
+    p = [BaseParam("stock_EI", 0.3, 1.2, "x nominal"), BaseParam("stock_GJ", 0.3, 1.2, "x nominal"),
+         BaseParam("C", 1.0, 3.0, "x nominal"), BaseParam("c", 1.0, 3.0, "x nominal"),
+         BaseParam("c_alpha", 1.0, 3.0, "x nominal")]
+    if rig.medium == "water":
+        p.append(BaseParam("added_mass", 0.3, 1.2, "x nominal"))
+    p.append(BaseParam("impact_T", 0.5, 1.5, "x nominal"))
+    for k in range(len(rig.hull_modes)):
+        p += [BaseParam(f"hull{k + 1}_f", 0.3, 1.2, "x nominal"),
+              BaseParam(f"hull{k + 1}_zeta", 1.0, 3.0, "x nominal")]
+    return p
+
+
+def apply_base(rig: Rig, params: list[BaseParam], theta: np.ndarray) -> Rig:
+    """The rig with its constants scaled by ``exp(theta)``."""
+    v = {p.name: math.exp(t) for p, t in zip(params, theta, strict=True)}
+    st = replace(rig.stock, I_m4=rig.stock.I_m4 * v.get("stock_EI", 1.0),
+                 J_m4=rig.stock.J_m4 * v.get("stock_GJ", 1.0))
+    d = rig.active_damping
+    d = replace(d, C_N_s_per_m=d.C_N_s_per_m * v.get("C", 1.0),
+                c_N_m_s_per_rad=d.c_N_m_s_per_rad * v.get("c", 1.0),
+                c_alpha_N_m_s_per_rad=d.c_alpha_N_m_s_per_rad * v.get("c_alpha", 1.0))
+    rud = replace(rig.rudder, added_mass_factor=rig.rudder.added_mass_factor * v.get("added_mass", 1.0))
+    imp = replace(rig.impact, duration_s=rig.impact.duration_s * v.get("impact_T", 1.0))
+    hull = tuple(replace(h, frequency_hz=h.frequency_hz * v.get(f"hull{k + 1}_f", 1.0),
+                         damping_ratio=h.damping_ratio * v.get(f"hull{k + 1}_zeta", 1.0))
+                 for k, h in enumerate(rig.hull_modes))
+    return replace(rig, stock=st, rudder=rud, impact=imp, hull_modes=hull,
+                   damping={**rig.damping, rig.medium: d})
+
+
+@dataclass
+class ModeSet:
+    """Modes as the gages see them.
+
+    ``lam`` (m,) eigenvalues 1/s; ``A`` (n_gages, m) complex gage acceleration (m/s^2) per
+    newton of peak force per unit of the half-sine response ``J`` (conjugate weight 2 and the
+    filters included), so a blow of peak ``F`` gives ``F Re(A J(t))``; ``dof`` (n_dof, m) the
+    same for the model's degrees of freedom; ``feed`` (n_gages,) the direct feed-through
+    (m/s^2 per N) while the ram pushes; ``exp_only`` (m,) marks terms that start as a plain
+    exponential at the onset (a filter's own pole) rather than through ``J``.
+    """
+
+    lam: np.ndarray
+    A: np.ndarray
+    dof: np.ndarray
+    feed: np.ndarray
+    exp_only: np.ndarray
+    model: StructuralModel
+    duration_s: float
+
+    @property
+    def f_hz(self) -> np.ndarray:
+        return self.lam.imag / (2 * math.pi)
+
+    def copy(self) -> ModeSet:
+        return replace(self, lam=self.lam.copy(), A=self.A.copy(), dof=self.dof.copy(),
+                       feed=self.feed.copy(), exp_only=self.exp_only.copy())
+
+
+@dataclass
+class Fit:
+    """A prediction and how it matches the data.
+
+    ``pred`` and ``resid`` (n_seg, n_gages, n_s) m/s^2 (resid NaN where there is no data);
+    ``force`` (n_seg,) peak forces N; ``shift_s`` (n_seg,) onset corrections s;
+    ``lin`` the extra linear coefficients; ``modes`` the :class:`ModeSet` used.
+    """
+
+    pred: np.ndarray
+    resid: np.ndarray
+    force: np.ndarray
+    shift_s: np.ndarray
+    lin: np.ndarray
+    modes: ModeSet
+    rig: Rig
+
+
+class Forward:
+    """Predictions of one trial for given constants and effect terms.
+
+    Parameters
+    ----------
+    td : TrialData
+    sigma : ndarray (n_gages,)
+        Noise rms of each gage in the decimated band, m/s^2 (the weights).
+    """
+
+    def __init__(self, td: TrialData, sigma: np.ndarray) -> None:
+        self.td = td
+        self.sigma = np.asarray(sigma, dtype=float)
+        self.params = base_params(td.rig)
+        self.weight = 1.0 / self.sigma
+        valid = td.valid
+        self.mask = valid.copy()
+        self.mask[:, :, : td.windows.early.start] = False
+        self.mask[:, :, td.windows.pre] = valid[:, :, td.windows.pre]
+        self.x0 = np.where(valid, td.x, 0.0)
+        self.set_weights(np.broadcast_to(self.weight[None, :, None], td.x.shape))
+        d = td.rig.daq
+        self._aa = None
+        if d.anti_alias_hz < td.fs_full_hz / 2:
+            self._aa = scipy.signal.butter(d.anti_alias_order, d.anti_alias_hz, fs=td.fs_full_hz,
+                                           output="sos")
+
+    def set_weights(self, W: np.ndarray) -> None:
+        """Per-sample weights ``1 / sigma_eff`` (n_seg, n_gages, n_s), 1/(m/s^2)."""
+        self.W = np.array(W, dtype=float)
+        self._w2 = (self.mask * self.W**2).ravel()
+
+    # -- stages ---------------------------------------------------------------------------
+    def rig_for(self, theta: np.ndarray, terms: list[Term] = ()) -> Rig:
+        rig = apply_base(self.td.rig, self.params, theta)
+        for t in terms:
+            rig = t.effect.rig(rig, t)
+        return rig
+
+    def modes(self, theta: np.ndarray, terms: list[Term] = ()) -> ModeSet:
+        rig = self.rig_for(theta, terms)
+        model = build_model(rig)
+        for t in terms:
+            model = t.effect.model(model, t)
+        form = modal_form(model)
+        imp = rig.impact
+        force = model.force_vector(imp.location_m, imp.direction)
+        beta = form.input_vector(force)
+        lam = form.eigenvalues
+        gain = self._filter_gain(lam)
+        scale = form.weights * beta * gain
+        n = model.n_dof
+        dof = form.right[n:] * lam * scale[None, :]
+        A = form.gage_acc * scale[None, :]
+        feed = form.feedthrough(force)
+        ms = ModeSet(lam, A, dof, feed, np.zeros(len(lam), bool), model, imp.duration_s)
+        keep = ms.f_hz < self.td.fs_full_hz / 2
+        ms = replace(ms, lam=lam[keep], A=A[:, keep], dof=dof[:, keep], exp_only=ms.exp_only[keep])
+        for t in terms:
+            ms = t.effect.modes(ms, self, t)
+        return ms
+
+    def _filter_gain(self, lam: np.ndarray) -> np.ndarray:
+        g = self.td.lowpass_gain(lam.imag / (2 * math.pi)).astype(complex)
+        if self._aa is not None:
+            z = np.exp(lam / self.td.fs_full_hz)
+            h = np.ones_like(z)
+            for b0, b1, b2, a0, a1, a2 in self._aa:
+                zi = 1 / z
+                h *= (b0 + b1 * zi + b2 * zi**2) / (a0 + a1 * zi + a2 * zi**2)
+            g = g * h
+        return g
+
+    def unit_responses(self, ms: ModeSet, terms: list[Term] = (),
+                       force: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Response of every impact per newton of peak force and its time derivative,
+        each (n_imp, n_seg, n_gages, n_s); impact ``j`` is zero before its onset.
+
+        After the ram lets go a mode is ``J(T) e^{lambda (t - T)}``: on a segment's uniform grid
+        that is one complex factor per mode times ``e^{lambda k dt}`` (computed once); only the
+        few samples inside a contact use the closed form of :func:`half_sine_response`."""
+        td = self.td
+        pulses = [(0.0, 1.0)]
+        for t in terms:
+            pulses += t.effect.pulses(t)
+        dt = 1.0 / td.fs_hz
+        k = np.arange(td.n_s) * dt
+        lam, T = ms.lam, ms.duration_s
+        E = np.exp(lam[:, None] * k[None, :])                      # (m, n_s)
+        JT = half_sine_response(lam, T, np.array([T]))[:, 0]
+        JT = np.where(ms.exp_only, 1.0, JT)
+        w = math.pi / T
+        U = np.zeros((td.n_seg, td.n_seg, td.n_gages, td.n_s))
+        dU = np.zeros_like(U)
+        for j in range(td.n_seg):
+            for s_ in range(j, td.n_seg):
+                for delay, ratio in pulses:
+                    tau0 = td.seg_t0_s[s_] - td.onsets_s[j] - delay   # time of sample 0 after contact
+                    if tau0 + k[-1] <= 0:
+                        continue
+                    lag = np.where(ms.exp_only, tau0, tau0 - T)
+                    Z = (JT * np.exp(lam * lag))[:, None] * E            # valid for t >= T
+                    t = tau0 + k
+                    early = t < T
+                    if early.any():
+                        Z[:, early & (t <= 0)] = 0.0
+                        during = early & (t > 0)
+                        if during.any():
+                            Jd = half_sine_response(lam, T, t[during])
+                            Z[:, during] = np.where(ms.exp_only[:, None], Z[:, during], Jd)
+                    dZ = lam[:, None] * Z
+                    u = np.real(ms.A @ Z)
+                    du = np.real(ms.A @ dZ)
+                    inside = (t > 0) & (t < T)
+                    if inside.any():
+                        f = np.sin(w * t[inside])
+                        u[:, inside] += ms.feed[:, None] * f[None, :]
+                        du[:, inside] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
+                            f, (int((~ms.exp_only).sum()), f.size)))
+                    U[j, s_] += ratio * u
+                    dU[j, s_] += ratio * du
+        for t in terms:
+            U, dU = t.effect.units(U, dU, ms, self, force, t)
+        return U, dU
+
+    def mode_unit(self, ms: ModeSet, i: int, j: int) -> np.ndarray:
+        """Mode ``i``'s part of impact ``j``'s unit response after the contact,
+        (n_seg, n_gages, n_s); zero before ``onset + T``."""
+        td = self.td
+        lam, T = ms.lam[i], ms.duration_s
+        t = td.seg_t0_s[:, None] + np.arange(td.n_s)[None, :] / td.fs_hz - td.onsets_s[j]
+        JT = 1.0 if ms.exp_only[i] else half_sine_response(np.array([lam]), T, np.array([T]))[0, 0]
+        lag = t if ms.exp_only[i] else t - T
+        z = np.where(lag >= 0, JT * np.exp(lam * np.maximum(lag, 0)), 0.0)
+        return np.real(ms.A[:, i][None, :, None] * z[:, None, :])
+
+    def last_columns_for(self, cal) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The linear columns of a calibration's prediction (see :meth:`fit`)."""
+        ms = cal.fit.modes
+        needs_force = any(t.effect.needs_force for t in cal.terms)
+        U, dU = self.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)
+        return U, dU, self.columns(list(cal.terms))
+
+    def columns(self, theta_terms: list[Term]) -> np.ndarray | None:
+        cols = [c for t in theta_terms if (c := t.effect.columns(self, t)) is not None]
+        return np.concatenate(cols) if cols else None
+
+    # -- the prediction -------------------------------------------------------------------
+    def fit(self, theta: np.ndarray, terms: list[Term] = (), *, x: np.ndarray | None = None,
+            modes: ModeSet | None = None) -> Fit:
+        """Predict the trial and solve every impact's force (and onset shift) and the terms'
+        linear coefficients by weighted least squares against ``x`` (default: the data)."""
+        ms = modes if modes is not None else self.modes(theta, terms)
+        needs_force = any(t.effect.needs_force for t in terms)
+        U, dU = self.unit_responses(ms, terms)
+        extra = self.columns(list(terms))
+        data = self.x0 if x is None else np.where(self.td.valid, x, 0.0)
+        coef, pred = self._solve(U, dU, extra, data)
+        if needs_force:
+            U, dU = self.unit_responses(ms, terms, force=coef[: self.td.n_seg])
+            coef, pred = self._solve(U, dU, extra, data)
+        mask = self.mask
+        for t in terms:
+            pred, m = t.effect.output(pred, self, t)
+            if m is not None:
+                mask = mask & m
+        n = self.td.n_seg
+        force = coef[:n]
+        shift = -coef[n: 2 * n] / np.where(force != 0, force, 1.0)
+        src = self.td.x if x is None else x
+        resid = np.where(mask, src - pred, np.nan)
+        return Fit(pred, resid, force, shift, coef[2 * n:], ms, self.rig_for(theta, terms))
+
+    def design(self, U: np.ndarray, dU: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
+        """The linear columns (forces, onset shifts, terms' own), (n_cols, n_seg, n_g, n_s)."""
+        cols = [U[j] for j in range(U.shape[0])] + [dU[j] for j in range(U.shape[0])]
+        if extra is not None:
+            cols += list(extra)
+        return np.stack(cols)
+
+    def _solve(self, U, dU, extra, data) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted least squares of ``data`` on the linear columns, segment by segment: impact
+        ``j`` is zero before segment ``j`` and a term's column may live in one segment only, so
+        each segment's normal equations hold just the columns alive there."""
+        n = U.shape[0]
+        e = 0 if extra is None else extra.shape[0]
+        G = np.zeros((2 * n + e, 2 * n + e))
+        b = np.zeros(2 * n + e)
+        w2 = self._w2.reshape(self.td.n_seg, -1)
+        alive = []
+        for s in range(self.td.n_seg):
+            act = [j for j in range(n) if j <= s]
+            live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
+            idx = act + [n + j for j in act] + [2 * n + i for i in live_e]
+            parts = [U[act, s], dU[act, s]] + ([extra[live_e, s]] if live_e else [])
+            X = np.concatenate(parts).reshape(len(idx), -1)
+            Xw = X * w2[s]
+            G[np.ix_(idx, idx)] += Xw @ X.T
+            b[idx] += Xw @ data[s].ravel()
+            alive.append((idx, X))
+        scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
+        Gs = G / scale[:, None] / scale[None, :]
+        coef = np.linalg.lstsq(Gs, b / scale, rcond=1e-10)[0] / scale
+        pred = np.empty_like(data)
+        for s, (idx, X) in enumerate(alive):
+            pred[s] = (coef[idx] @ X).reshape(data.shape[1:])
+        return coef, pred
+
+    def whitened(self, fit: Fit, segments: np.ndarray | None = None) -> np.ndarray:
+        """Residual divided by each gage's sigma, flattened, over ``segments`` (default all);
+        samples not compared are 0, so the length never changes."""
+        r = fit.resid * self.W
+        if segments is not None:
+            r = r[segments]
+        return np.nan_to_num(r.ravel(), nan=0.0)

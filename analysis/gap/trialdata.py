@@ -1,0 +1,267 @@
+"""A trial cut into the pieces the gap diagnosis compares: one segment per impact, decimated.
+
+Every impact ``j`` gets a segment from ``pre_s`` before its onset to the end of its decay (the
+same length for all, so the segments stack into one array). Three windows of a segment are
+compared separately: ``pre`` (before the onset: what the hull does on its own), ``early`` (the
+first third of the decay after the ram has let go) and ``late`` (the rest).
+
+The data are low-passed with a zero-phase Butterworth (``sosfiltfilt``, so no phase error) and
+decimated to a rate about 2.5x the low-pass corner, which sits between the highest mode worth
+comparing and the next one. The forward model corrects each kept mode's amplitude by the
+low-pass's ``|H|^2`` at its frequency. What the trial's noise is comes from the pre windows.
+
+Shapes: ``x`` is (n_segments, n_gages, n_samples) in m/s^2, gages in DAQ channel order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.signal
+
+from analysis.model import build_model
+from analysis.response import impact_amplitudes, modal_form, predominant_mode
+from analysis.rig import Rig
+
+DEC_ORDER = 8
+"""Order of the decimation low-pass (applied forward and back: 16 in magnitude)."""
+SMEAR_CYCLES = 8.0
+"""How far (in periods of the low-pass corner) the zero-phase low-pass spreads the ram's
+impulsive content either side of the onset: measured, noise-free, the residual of the exact
+model is above 1 % of the noise 15 samples (6.8 periods) after a blow; windows keep clear."""
+
+
+@dataclass(frozen=True)
+class Windows:
+    """Sample slices of a segment: ``pre`` before the onset, ``early``/``late`` of the decay.
+    ``skip`` samples after the onset are left out (the ram's contact and the low-pass's smear)."""
+
+    pre: slice
+    early: slice
+    late: slice
+
+    def items(self) -> list[tuple[str, slice]]:
+        return [("pre", self.pre), ("early", self.early), ("late", self.late)]
+
+
+@dataclass
+class TrialData:
+    """A trial ready for the gap diagnosis.
+
+    Attributes
+    ----------
+    rig : Rig
+        The nominal rig (its ``[[ambient]]`` entries removed: a steady tone is an effect to find).
+    x : ndarray (n_seg, n_gages, n_s)
+        Decimated accelerations, m/s^2; NaN where the stream had a gap.
+    fs_hz : float
+        Decimated sample rate, Hz.
+    fs_full_hz : float
+        The recording's own rate, Hz.
+    seg_t0_s : ndarray (n_seg,)
+        Time of each segment's first sample, s from the stream's start.
+    onsets_s : ndarray (n_seg,)
+        Impact onsets, s from the stream's start (segment j holds impact j).
+    windows : Windows
+    lowpass_hz : float
+        Corner of the decimation low-pass, Hz.
+    fitted : ndarray (n_seg,) bool
+        Impacts the calibration may use; the others are held out.
+    clip : ndarray (n_seg, n_gages) int
+        Samples at the ADC rails (full rate) in each segment, when the rails are known, else 0.
+    flat : ndarray (n_seg, n_gages) int
+        Runs of >= 3 equal extreme samples at full rate (a clipped channel without known rails).
+    peak_full : ndarray (n_seg, n_gages)
+        Largest |x| at full rate in each segment, m/s^2.
+    """
+
+    rig: Rig
+    x: np.ndarray
+    fs_hz: float
+    fs_full_hz: float
+    seg_t0_s: np.ndarray
+    onsets_s: np.ndarray
+    windows: Windows
+    lowpass_hz: float
+    fitted: np.ndarray
+    clip: np.ndarray
+    flat: np.ndarray
+    peak_full: np.ndarray
+    gage_numbers: tuple[int, ...] = field(default=())
+
+    @property
+    def n_seg(self) -> int:
+        return self.x.shape[0]
+
+    @property
+    def n_gages(self) -> int:
+        return self.x.shape[1]
+
+    @property
+    def n_s(self) -> int:
+        return self.x.shape[2]
+
+    @property
+    def t_rel(self) -> np.ndarray:
+        """Time of each sample relative to the segment's own onset, s, (n_seg, n_s)."""
+        k = np.arange(self.n_s) / self.fs_hz
+        return self.seg_t0_s[:, None] + k[None, :] - self.onsets_s[:, None]
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Samples that carry data, (n_seg, n_gages, n_s) bool."""
+        return np.isfinite(self.x)
+
+    def lowpass_gain(self, f_hz: np.ndarray) -> np.ndarray:
+        """Power gain ``|H(f)|^2`` of the zero-phase decimation low-pass at ``f_hz``."""
+        if self.fs_hz >= self.fs_full_hz:
+            return np.ones_like(np.asarray(f_hz, dtype=float))
+        sos = _lowpass(self.lowpass_hz, self.fs_full_hz)
+        _, h = scipy.signal.sosfreqz(sos, worN=np.atleast_1d(np.abs(f_hz)), fs=self.fs_full_hz)
+        return np.abs(h) ** 2
+
+
+def strip_ambient(rig: Rig) -> Rig:
+    """The rig without its ``[[ambient]]`` tone: the nominal model the diagnosis starts from."""
+    from dataclasses import replace
+    return replace(rig, ambient=())
+
+
+def _lowpass(corner_hz: float, fs_hz: float) -> np.ndarray:
+    return scipy.signal.butter(DEC_ORDER, corner_hz, fs=fs_hz, output="sos")
+
+
+def analysis_band(rig: Rig, fs_hz: float, *, max_hz: float | None = None) -> tuple[float, list[float]]:
+    """Low-pass corner (Hz) and the nominal model's modes (Hz) worth comparing.
+
+    A mode is worth comparing when a nominal blow gives it an acceleration at some gage of at
+    least 5x the noise floor and it lies below 0.8x the anti-alias corner and below ``max_hz``
+    (default 5x the predominant mode of the rudder gages: the report's decrements are of the
+    predominant modes; far higher modes cost samples and say little of the rudder on its stock).
+    The corner sits at
+    the geometric mean of the highest such mode and the next mode (or the anti-alias corner).
+    """
+    form = modal_form(build_model(rig))
+    f = form.eigenvalues.imag / (2 * math.pi)
+    imp = rig.impact
+    amp = impact_amplitudes(form, imp.peak_force_N, imp.duration_s, imp.location_m, imp.direction)
+    acc = amp * np.abs(form.eigenvalues)[None, :] ** 2
+    limit = 0.8 * min(rig.daq.anti_alias_hz, fs_hz / 2)
+    if max_hz is None:
+        k = predominant_mode(form, imp.peak_force_N, imp.duration_s, imp.location_m, imp.direction)
+        max_hz = 5 * f[k]
+    limit = min(limit, max_hz)
+    keep = [i for i in range(len(f)) if f[i] < limit and acc[:, i].max() >= 5 * rig.daq.noise_m_s2_rms]
+    if not keep:
+        keep = [int(np.argmax(acc.max(axis=0)))]
+    top = max(f[i] for i in keep)
+    above = [fi for fi in f if fi > top * 1.05]
+    nxt = min(above + [rig.daq.anti_alias_hz, fs_hz / 2])
+    corner = min(math.sqrt(top * nxt), 0.45 * fs_hz)
+    return corner, [float(f[i]) for i in keep]
+
+
+def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
+            pre_s: float = 1.0, post_max_s: float = 4.0, held_out_every: int = 3,
+            rails: tuple[float, float] | None = None, max_hz: float | None = None) -> TrialData:
+    """Cut, filter and decimate a whole trial.
+
+    Parameters
+    ----------
+    x_full : ndarray (n_gages, n)
+        The trial at its recorded rate, m/s^2, DAQ channel order; NaN in gaps.
+    fs_hz : float
+        Its sample rate, Hz.
+    onsets_s : ndarray (n_impacts,)
+        Impact onsets (s from the first sample), e.g. from the trigger.
+    rig : Rig
+        Nominal rig.
+    pre_s, post_max_s : float
+        Pre-trigger window and longest decay compared, s. The decay stops ``pre_s`` before the
+        next impact, so no segment overlaps the next one's pre window.
+    held_out_every : int
+        Every ``held_out_every``-th impact (the 3rd, 6th, ...) is held out of the calibration.
+    rails : (low, high) in m/s^2 per gage row, or None
+        ADC rails when known (``x`` equal to them is clipped).
+    max_hz : float, optional
+        Compare no mode above this frequency.
+    """
+    rig = strip_ambient(rig)
+    onsets = np.sort(np.asarray(onsets_s, dtype=float))
+    if len(onsets) == 0:
+        raise ValueError("no impacts to compare: the gap diagnosis needs at least one ram blow")
+    n_g, n = x_full.shape
+    corner, _ = analysis_band(rig, fs_hz, max_hz=max_hz)
+    q = max(1, int(fs_hz // (2.5 * corner)))
+    fs_d = fs_hz / q
+    gaps = ~np.isfinite(x_full)
+    xf = np.where(gaps, 0.0, x_full)
+    if q > 1:
+        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
+        # a gap's samples and the filter's reach around them carry no data
+        if gaps.any():
+            reach = int(math.ceil(3 * fs_hz / corner))
+            bad = _dilate(gaps, reach)
+            xf[bad] = np.nan
+    skip_s = rig.impact.duration_s + SMEAR_CYCLES / corner
+    gaps_next = np.diff(np.append(onsets, n / fs_hz + pre_s))
+    post_s = float(min(post_max_s, np.min(gaps_next) - pre_s))
+    if post_s < skip_s + 0.25:
+        raise ValueError(f"impacts {np.min(gaps_next):.2f} s apart leave too short a decay to "
+                         f"compare (need {pre_s + skip_s + 0.25:.2f} s)")
+    n_pre = int(round(pre_s * fs_d))
+    n_s = n_pre + int(round(post_s * fs_d))
+    starts = np.rint((onsets - pre_s) * fs_hz).astype(int)
+    starts = np.maximum(starts, 0) // q * q  # on the decimation grid
+    idx = starts[:, None] + q * np.arange(n_s)[None, :]
+    idx_c = np.clip(idx, 0, n - 1)
+    x = xf[:, idx_c].transpose(1, 0, 2).copy()
+    x[:, :, :][np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan
+    seg_t0 = starts / fs_hz
+    k_on = np.rint((onsets - seg_t0) * fs_d).astype(int)
+    n_skip = int(math.ceil(skip_s * fs_d))
+    k0 = int(np.max(k_on)) + n_skip
+    k_early = k0 + (n_s - k0) // 3
+    n_smear = int(math.ceil(SMEAR_CYCLES / corner * fs_d)) if q > 1 else 2  # the filter reaches back
+    windows = Windows(pre=slice(0, int(np.min(k_on)) - n_smear), early=slice(k0, k_early),
+                      late=slice(k_early, n_s))
+    fitted = np.array([(j + 1) % held_out_every != 0 for j in range(len(onsets))])
+    if fitted.all() and len(onsets) > 1:
+        fitted[-1] = False
+    clip, flat, peak = _full_rate_stats(x_full, fs_hz, onsets, pre_s, post_s, rails)
+    return TrialData(rig=rig, x=x, fs_hz=fs_d, fs_full_hz=fs_hz, seg_t0_s=seg_t0, onsets_s=onsets,
+                     windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
+                     clip=clip, flat=flat, peak_full=peak,
+                     gage_numbers=tuple(g.number for g in rig.gages_by_channel()))
+
+
+def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
+    """``mask`` widened by ``reach`` samples either way along axis 1."""
+    c = np.cumsum(np.pad(mask, ((0, 0), (reach + 1, reach))), axis=1)
+    return (c[:, 2 * reach + 1:] - c[:, : -2 * reach - 1]) > 0
+
+
+def _full_rate_stats(x: np.ndarray, fs_hz: float, onsets: np.ndarray, pre_s: float,
+                     post_s: float, rails) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n_seg, n_g = len(onsets), x.shape[0]
+    clip = np.zeros((n_seg, n_g), dtype=int)
+    flat = np.zeros((n_seg, n_g), dtype=int)
+    peak = np.zeros((n_seg, n_g))
+    for j, t in enumerate(onsets):
+        a = max(0, int((t - pre_s) * fs_hz))
+        b = min(x.shape[1], int((t + post_s) * fs_hz))
+        seg = x[:, a:b]
+        ok = np.isfinite(seg)
+        s = np.where(ok, seg, 0.0)
+        peak[j] = np.abs(s).max(axis=1) if s.shape[1] else 0.0
+        if rails is not None:
+            lo, hi = rails
+            clip[j] = ((s <= np.asarray(lo)[:, None]) | (s >= np.asarray(hi)[:, None])).sum(axis=1)
+        # runs of three equal samples at the segment's extreme value: a converter at its rail
+        top = peak[j][:, None]
+        at = np.isclose(np.abs(s), top, rtol=0, atol=1e-12 + 1e-9 * top) & (top > 0)
+        run = at[:, 2:] & at[:, 1:-1] & at[:, :-2] & (s[:, 2:] == s[:, :-2])
+        flat[j] = run.sum(axis=1)
+    return clip, flat, peak

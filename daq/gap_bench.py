@@ -1,0 +1,250 @@
+"""``ramdaq gap benchmark``: the gap diagnosis proven on trials whose effect was withheld from it.
+
+Each scenario is a six-impact, 16-channel trial made by the *richer* simulator of
+:mod:`analysis.gap.truth` (a stock with its own mass in several elements, a different integrator,
+coloured noise, the effect injected physically) with one hidden effect or none, written to an
+MCAP recording through the ordinary recorder, and diagnosed from that file and the nominal rig
+alone -- exactly as ``ramdaq gap`` would a drydock recording.
+
+Sizes are spread log-uniformly across each effect's detection threshold. The thresholds (the
+size above which an effect makes a gap the diagnosis can see) and the verdict's own thresholds
+are tuned on the **development** seeds (``--dev``), stored in ``benchmarks/gap_thresholds.json``,
+and only then applied to the benchmark's seeds, which never feed back.
+
+Printed: confusion matrix, top-1 and top-3 identification over effects above their threshold,
+false alarms on no-effect trials, localisation (gages, mode band, window), the fraction of the
+gap closed on held-out impacts, and the cost.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+RIGS = (("albacore", "air"), ("albacore", "water"), ("sampson", "water"))
+DEV_SEED0, BENCH_SEED0 = 1_000, 500_000
+SIZE_RANGE = (0.05, 2.0)
+THRESHOLDS = Path(__file__).resolve().parents[1] / "benchmarks" / "gap_thresholds.json"
+RIG_DIR = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
+
+
+def scenarios(per_class: int, dev: bool, effects: tuple[str, ...] | None = None) -> list[dict]:
+    """The fixed scenario list: every effect class x ``per_class`` sizes, rigs in turn."""
+    from analysis.gap.truth import EFFECTS
+
+    base = DEV_SEED0 if dev else BENCH_SEED0
+    sizes = np.geomspace(*SIZE_RANGE, per_class)
+    out = []
+    for k, eff in enumerate(effects or EFFECTS):
+        rigs = [r for r in RIGS if r[1] == "water"] if eff == "added_mass" else list(RIGS)
+        for i in range(per_class):
+            # sizes in a seeded order so rigs and sizes are not locked together
+            j = int(np.random.default_rng(base + k).permutation(per_class)[i])
+            name, medium = rigs[i % len(rigs)]
+            out.append({"effect": eff, "size": 0.0 if eff == "none" else float(sizes[j]),
+                        "rig": name, "medium": medium, "seed": base + 1000 * k + i})
+    return out
+
+
+def run_one(sc: dict, workdir: str) -> dict:
+    """Generate, record, diagnose one scenario; the result as plain JSON."""
+    from analysis.gap.diagnose import Settings
+    from analysis.gap.truth import generate_trial
+    from analysis.rig import load_rig
+    from daq.gap import run_gap
+    from daq.record import record
+    from drivers.array_device import ArrayDevice
+
+    t0 = time.perf_counter()
+    rig = load_rig(RIG_DIR / f"{sc['rig']}.toml").with_medium(sc["medium"])
+    tt = generate_trial(rig, sc["effect"], sc["size"], sc["seed"])
+    t_gen = time.perf_counter() - t0
+    path = Path(workdir) / f"{sc['effect']}-{sc['seed']}.mcap"
+    gages = tuple(g.number for g in tt.rig.gages_by_channel())
+    dev = ArrayDevice(tt.counts, tt.scale, tt.fs_hz, gages=gages, rig_toml=tt.rig.text,
+                      extra={"medium": tt.rig.medium, "adc_bits": tt.rig.daq.adc_bits})
+    record(dev, path, readout=False, overwrite=True)
+    t1 = time.perf_counter()
+    try:
+        lt, td, d = run_gap(path, settings=Settings())
+    except Exception as exc:  # a scenario that breaks the diagnosis is a result, not a crash
+        return sc | {"error": f"{type(exc).__name__}: {exc}", "seconds": time.perf_counter() - t1}
+    finally:
+        path.unlink(missing_ok=True)
+    t_diag = time.perf_counter() - t1
+    te = tt.effect
+    return sc | {
+        "truth": {"gages": list(te.gages), "mode_hz": te.mode_hz, "window": te.window},
+        "n_impacts_found": int(len(lt.onsets_s)), "n_impacts_true": int(len(tt.onsets_s)),
+        "verdict": d.verdict, "named": d.best.name if d.best else None,
+        "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
+        "candidates": [{"name": c.name, "dbic": c.dbic, "closed_held": c.closed_held,
+                        "location": c.location} for c in d.candidates],
+        "signatures": [s.effect.name for s in d.signatures],
+        "closed_held": d.best.closed_held if d.best else None,
+        "location": d.best.location if d.best else None,
+        "band_edges_hz": d.map_fit.bands.edges_hz.tolist(),
+        "seconds": t_diag, "seconds_generate": t_gen,
+    }
+
+
+def _decide(r: dict, z_gap: float, bic_min: float) -> str:
+    """The verdict's choice re-evaluated for other thresholds (for tuning)."""
+    if "error" in r or r["zmax"] <= z_gap:
+        return "none"
+    c = [x for x in r["candidates"] if x["dbic"] < -bic_min and not (x["closed_held"] <= 0)]
+    if not c:
+        return "unexplained"
+    best = min(c, key=lambda x: x["dbic"])
+    if "+" in best["name"]:
+        singles = [x for x in c if "+" not in x["name"]]
+        if singles and best["dbic"] > min(s["dbic"] for s in singles) - bic_min:
+            best = min(singles, key=lambda x: x["dbic"])
+    return best["name"]
+
+
+def _in_band(edges: list[float], f_true: float | None, f_rep: float | None) -> bool:
+    if f_true is None:
+        return True
+    if f_rep is None:
+        return False
+    b = np.searchsorted(edges, [f_true, f_rep])
+    return bool(b[0] == b[1]) or abs(f_rep - f_true) <= 0.1 * f_true
+
+
+def _located(r: dict) -> dict[str, bool]:
+    loc, tr = r["location"], r["truth"]
+    gages = set(loc["gages"]) | set(loc.get("effect_gages") or [])
+    ok_g = not tr["gages"] or bool(gages & set(tr["gages"]))
+    f_rep = loc.get("effect_mode_hz") or loc.get("band_hz")
+    ok_m = _in_band(r["band_edges_hz"], tr["mode_hz"], f_rep)
+    ok_w = tr["window"] == "all" or loc["window"] == tr["window"]
+    return {"gages": ok_g, "mode": ok_m, "window": ok_w}
+
+
+def size_thresholds(results: list[dict], z_gap: float) -> dict[str, float]:
+    """Per effect, the smallest size from which >= 80 % of (dev) trials show a gap."""
+    out = {}
+    for eff in sorted({r["effect"] for r in results} - {"none"}):
+        rs = sorted((r for r in results if r["effect"] == eff and "error" not in r), key=lambda r: r["size"])
+        thr = math.inf
+        for i in range(len(rs)):
+            tail = rs[i:]
+            if np.mean([t["zmax"] > z_gap for t in tail]) >= 0.8:
+                thr = rs[i]["size"]
+                break
+        out[eff] = thr
+    return out
+
+
+def score(results: list[dict], thresholds: dict[str, float], z_gap: float, bic_min: float) -> dict:
+    """Identification, false alarms, localisation, closure of a results list."""
+    ok = [r for r in results if "error" not in r]
+    none = [r for r in ok if r["effect"] == "none"]
+    above = [r for r in ok if r["effect"] != "none" and r["size"] >= thresholds.get(r["effect"], math.inf)]
+    pred = {id(r): _decide(r, z_gap, bic_min) for r in ok}
+    top1 = [pred[id(r)] == r["effect"] for r in above]
+    top3 = [r["effect"] in [c["name"] for c in sorted(r["candidates"], key=lambda c: c["dbic"])][:3]
+            or r["effect"] in r["signatures"][:3] for r in above]
+    alarms = [pred[id(r)] != "none" for r in none]
+    hits = [r for r in above if pred[id(r)] == r["effect"] and r["location"]]
+    loc = [_located(r) for r in hits]
+    closed = [r["closed_held"] for r in above if r["closed_held"] is not None and pred[id(r)] == r["effect"]]
+    labels = sorted({r["effect"] for r in ok}) + ["unexplained"]
+    conf = {t: {p: 0 for p in labels} for t in labels[:-1]}
+    for r in ok:
+        p = pred[id(r)]
+        conf[r["effect"]][p if p in conf[r["effect"]] else "unexplained"] += 1
+    return {
+        "n": len(results), "errors": len(results) - len(ok), "n_above": len(above),
+        "top1": float(np.mean(top1)) if top1 else float("nan"),
+        "top3": float(np.mean(top3)) if top3 else float("nan"),
+        "false_alarms": float(np.mean(alarms)) if alarms else float("nan"),
+        "localisation": {k: float(np.mean([x[k] for x in loc])) if loc else float("nan")
+                         for k in ("gages", "mode", "window")},
+        "closed_held_median": float(np.median(closed)) if closed else float("nan"),
+        "per_class_top1": {e: float(np.mean([pred[id(r)] == e for r in above if r["effect"] == e]))
+                           for e in sorted({r["effect"] for r in above})},
+        "confusion": conf,
+        "seconds_median": float(np.median([r["seconds"] for r in results])) if results else 0.0,
+        "seconds_max": float(np.max([r["seconds"] for r in results])) if results else 0.0,
+    }
+
+
+def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
+    out = [f"scenarios: {s['n']} ({s['errors']} failed), {s['n_above']} with the effect above its "
+           f"detection threshold",
+           f"top-1 identification (above threshold): {100 * s['top1']:.1f} %   (target >= 85 %)",
+           f"top-3 identification (above threshold): {100 * s['top3']:.1f} %",
+           f"false alarms on no-effect trials: {100 * s['false_alarms']:.1f} %   (target <= 5 %)",
+           "localisation of correct identifications: " + ", ".join(
+               f"{k} {100 * v:.0f} %" for k, v in s["localisation"].items()),
+           f"median fraction of the gap closed on held-out impacts: {100 * s['closed_held_median']:.0f} %"
+           "   (target >= 70 %)",
+           f"cost per diagnosis: median {s['seconds_median']:.1f} s, max {s['seconds_max']:.1f} s "
+           "(target < 60 s)",
+           "detection thresholds (size, from the development seeds): " + ", ".join(
+               f"{k} {v:.2f}" for k, v in sorted(thresholds.items())),
+           "per-class top-1: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in s["per_class_top1"].items()),
+           "confusion matrix (rows: hidden effect, columns: named):"]
+    labels = list(next(iter(s["confusion"].values())).keys()) if s["confusion"] else []
+    short = [lab[:6] for lab in labels]
+    out.append(" " * 18 + " ".join(f"{x:>6s}" for x in short))
+    for t, row in s["confusion"].items():
+        out.append(f"{t:17s} " + " ".join(f"{row[p]:6d}" for p in labels))
+    return out
+
+
+def run_benchmark(out: Path, *, per_class: int = 20, dev: bool = False, jobs: int = 2,
+                  effects: tuple[str, ...] | None = None,
+                  progress: Callable[[str], None] | None = None) -> int:
+    """Run the benchmark (or its development half) and print its figures; 0 when done."""
+    from analysis.gap.diagnose import Settings
+
+    say = progress or (lambda s: None)
+    out.mkdir(parents=True, exist_ok=True)
+    scs = scenarios(per_class, dev, effects)
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    say(f"{'development' if dev else 'benchmark'} seeds: {len(scs)} scenarios on {jobs} processes")
+    t0 = time.perf_counter()
+    results = []
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futs = [pool.submit(run_one, sc, str(out)) for sc in scs]
+        for i, f in enumerate(futs):
+            r = f.result()
+            results.append(r)
+            tag = r.get("named") or r.get("verdict") or r.get("error")
+            say(f"[{i + 1}/{len(scs)}] {r['effect']:16s} size {r['size']:.2f} {r['rig']}/{r['medium']}: "
+                f"{tag} ({r['seconds']:.1f} s)")
+    wall = time.perf_counter() - t0
+    name = "dev" if dev else "benchmark"
+    (out / f"{name}_results.json").write_text(json.dumps(results, indent=1, default=float))
+    st = Settings()
+    if dev:
+        thr = size_thresholds(results, st.z_gap)
+        sizes = {k: (v if np.isfinite(v) else None) for k, v in thr.items()}
+        THRESHOLDS.write_text(json.dumps({"z_gap": st.z_gap, "bic_min": st.bic_min, "sizes": sizes,
+                                          "per_class": per_class}, indent=1))
+        say("tuning table (development seeds): z_gap, bic_min -> top-1, false alarms")
+        for zg in (4.0, 5.0, 6.0, 8.0):
+            for bm in (0.0, 10.0, 30.0, 100.0):
+                s = score(results, size_thresholds(results, zg), zg, bm)
+                say(f"  z_gap {zg:4.1f} bic_min {bm:5.1f}: top-1 {100 * s['top1']:5.1f} %, "
+                    f"false alarms {100 * s['false_alarms']:5.1f} %, n above {s['n_above']}")
+    else:
+        if not THRESHOLDS.exists():
+            raise FileNotFoundError(f"{THRESHOLDS} missing: run 'ramdaq gap benchmark --dev' first")
+        saved = json.loads(THRESHOLDS.read_text())
+        thr = {k: (math.inf if v is None else v) for k, v in saved["sizes"].items()}
+    s = score(results, thr, st.z_gap, st.bic_min)
+    (out / f"{name}_score.json").write_text(json.dumps(s, indent=1, default=float))
+    print("\n".join(format_score(s, thr)))
+    print(f"whole run: {wall / 60:.1f} min wall on {jobs} processes (target < 20 min)")
+    return 0
