@@ -85,12 +85,14 @@ def _clipping(x: np.ndarray, adc_full_scale: float | None, clip_run: int) -> str
         if runs.size and (runs.max() >= 2 or runs.sum() >= clip_run):
             return (f"{int(runs.sum())} samples at the ±{adc_full_scale:g} rail "
                     f"(longest run {int(runs.max())})")
-    period = _dominant_period_samples(x)
+    period = None  # dominant period: an FFT, needed only when a flat run is found
     for name, ext in (("maximum", x.max()), ("minimum", x.min())):
         runs = _runs(x == ext)
         runs = runs[runs >= 2]
         if runs.size == 0 or runs.max() < clip_run:
             continue
+        if period is None and runs.size < 2:
+            period = _dominant_period_samples(x)
         if runs.size >= 2 or runs.max() >= 0.03 * period:
             return (f"{int(runs.sum())} samples flat at the {name} {ext:.6g} on {runs.size} "
                     f"peak(s) (longest run {int(runs.max())})")

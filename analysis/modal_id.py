@@ -56,6 +56,45 @@ Pipeline
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
 7. Terms with less than one cycle in the record (drift, a slow step) are kept in the model but
    not reported (``info["nuisance_terms_hz"]``).
+
+Speed
+-----
+Same estimator and decisions, computed faster (see ``analysis/modal_select.py`` for the order
+search, ``analysis/modal_varpro.py`` for one NLS evaluation, ``analysis/modal_subspace.py`` for the
+pencil). On an ALBACORE-like simulated record (16 channels × 10 384 samples at 2048 Hz, 4 modes),
+2-core machine, ``OPENBLAS_NUM_THREADS=1``: ``identify_modes`` 2.25 s → 0.34 s, one channel
+0.69 s → 0.083 s, :func:`~analysis.modal_assess.assess_decay` 5.2 s → 0.84 s. Most of the former
+time went to trial fits of noise candidates that the likelihood-ratio test then rejected; they
+now hold the accepted poles.
+One behavioural change: a Levenberg–Marquardt step that the box bounds cut to nothing is no
+longer taken for convergence away from a Karush–Kuhn–Tucker point. A candidate that slides to
+(f_min, δ_max) to take up a drift now comes back down in δ and is kept as a nuisance term;
+before, this depended on the other poles moving at the same time. On drifting records this
+fits the drift with one more sub-cycle term (residual at the true noise level instead of
+1–45 % above it, so standard errors are no longer inflated by it; reported modes moved by
+≤ 1 s.e. in f and ≤ 2.3 s.e. in δ in 150 random records, none changed otherwise).
+
+Threads
+-------
+A live trial fits in an analyzer thread while the main thread reads the device, and its numbers
+must equal those of a replay to the last bit. The estimators therefore keep no state between
+calls (the only cache, of window functions, holds read-only arrays), leave every buffer they
+allocate fully written before it is read, and change nothing process-wide: results depend on
+the inputs and on the process's BLAS thread count alone, not on the calling thread, on
+concurrent calls, or on call order (``tests/test_modal_id.py`` checks all three).
+
+The BLAS thread count is not set here. An earlier version limited BLAS to one thread around
+each call (threadpoolctl); with OpenBLAS's pthreads build (the NumPy/SciPy wheels) that limit
+is process-wide, and threadpoolctl 3.8 lets only the first thread that sets it change it (until
+that thread ends) and silently ignores the others, so a fit in the analyzer thread ran with two
+BLAS threads or one depending on which thread had called first (different last bits: LAPACK's
+reductions are split differently); with any version every call also switched the thread count
+under the other threads' BLAS calls. Set the count once for the process instead, before NumPy
+is imported: the fits make thousands of small BLAS calls, and OpenBLAS's thread pool only adds
+latency to them — on a loaded 2-core machine ``identify_modes`` above took 0.4–3.7 s and
+``assess_decay`` 0.85–10 s with the default two threads, 0.34 s and 0.84 s with
+``OPENBLAS_NUM_THREADS=1`` (``benchmarks/decrement_accuracy.py`` sets it). Live trial and replay
+must run with the same setting to give identical digits.
 """
 
 from __future__ import annotations
@@ -67,11 +106,13 @@ from scipy import linalg, stats
 from analysis.damping import damping_ratio_from_decrement
 from analysis.modal_select import ModeSelector, floor_noise
 from analysis.modal_signal import (
+    _noise_std,
+    _periodogram,
+    _significant_band,
     decimate_valid,
     estimate_noise_std,
     fir_gain,
     fir_noise_variance_factor,
-    significant_band_hz,
 )
 from analysis.modal_subspace import (
     default_pencil_length,
@@ -81,7 +122,7 @@ from analysis.modal_subspace import (
     poles_to_modes,
 )
 from analysis.modal_table import ModeTable
-from analysis.modal_varpro import fit_modes_varpro, linear_amplitudes
+from analysis.modal_varpro import _basis, _Projector, _uniform_grid, fit_modes_varpro
 
 __all__ = ["ModeTable", "identify_modes"]
 
@@ -125,9 +166,10 @@ def _rank(
     """Candidates sorted by whitened energy, strongest first."""
     if f.size == 0:
         return f, d
-    amp, _, _ = linear_amplitudes(t, Y * w[:, None], f, d, fit_offset=fit_offset)
-    env2 = np.sum(np.exp(-2.0 * (d * f)[:, None] * t[None, :]), axis=1)
-    energy = np.sum(np.abs(amp) ** 2, axis=0) * env2 / 2.0
+    B = _Projector(_basis(t, f, d, fit_offset, _uniform_grid(t))).coef((Y * w[:, None]).T)
+    amp2 = B[0 : 2 * f.size : 2] ** 2 + B[1 : 2 * f.size : 2] ** 2  # |a|² (linear_amplitudes)
+    env2 = _sum_exp(t, -2.0 * d * f)
+    energy = np.sum(amp2, axis=1) * env2 / 2.0
     o = np.argsort(energy)[::-1]
     return f[o], d[o]
 
@@ -200,8 +242,9 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    sig0 = floor_noise(estimate_noise_std(Xa), Xa)
-    band = significant_band_hz(Xa, fs_hz, sig0, false_alarm=false_alarm)
+    P0 = _periodogram(Xa)  # shared by the noise estimate and the band test
+    sig0 = floor_noise(_noise_std(P0), Xa)
+    band = _significant_band(Xa, fs_hz, sig0, false_alarm, P0)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -232,7 +275,7 @@ def identify_modes(
     threshold = float(stats.chi2.isf(false_alarm / (2.0 * Y.shape[-1]), 2 * Y.shape[0]))
     sel = ModeSelector(Y, t, fit_offset, threshold, zeta_max, f_lim, w0)
     if n_modes is not None:
-        sel.fit = sel.refit(fc[:n_modes], dc[:n_modes]) if fc.size else None
+        sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
         if sel.fit is not None:  # refit with weights from its own residual
             sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
             sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
@@ -261,9 +304,24 @@ def identify_modes(
     return _table(sel, X, active, fs_hz, d_nls, taps, f_range_hz, per_channel, method, info)
 
 
+def _sum_exp(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Σₙ exp(rate_k tₙ) for each k: a geometric series on a uniform grid, else summed."""
+    grid = _uniform_grid(t)
+    if grid is None:
+        return np.sum(np.exp(rate[:, None] * t[None, :]), axis=1)
+    t0, dt = grid
+    x = rate * dt
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        ratio = np.where(x != 0, np.expm1(t.size * x) / np.where(x != 0, np.expm1(x), 1.0),
+                         float(t.size))
+        return np.exp(rate * t0) * ratio
+
+
 def _synth(t, f, d, amp):
-    s = (-d * f + 2j * np.pi * f)[None, :] * t[:, None]
-    return np.real(amp @ np.exp(s).T)
+    """Model Σ_k Re(a_ck exp(s_k t)) per channel (rows of ``amp``), via :func:`_basis`."""
+    coef = np.empty((amp.shape[0], 2 * f.size))
+    coef[:, 0::2], coef[:, 1::2] = amp.real, -amp.imag  # Re(a e^{st}) = Re a·e·cos − Im a·e·sin
+    return coef @ _basis(t, f, d, False, _uniform_grid(t)).T
 
 
 def _empty(n_ch, fs_hz, n, method, info) -> ModeTable:
@@ -288,7 +346,7 @@ def _table(sel, X, active, fs_hz, d_nls, taps, f_range, per_channel, method, inf
     ch_f, ch_fse, ch_d, ch_dse = (np.full((n_ch, K), np.nan) for _ in range(4))
     if per_channel:
         thr_c = stats.chi2.isf(1e-3, 2)
-        env2 = np.sum(np.exp(-2.0 * (d * f)[:, None] * sel.t[None, :]), axis=1) / 2.0
+        env2 = _sum_exp(sel.t, -2.0 * d * f) / 2.0
         for j, c in enumerate(np.flatnonzero(active)):
             snr = np.abs(fit.amplitude[j]) ** 2 * env2 / max(fit.noise_std[j] ** 2, 1e-300)
             ks = np.flatnonzero(snr > thr_c)

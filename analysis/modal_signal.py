@@ -7,9 +7,16 @@
 - :func:`decimate_valid` — linear-phase FIR decimation that keeps only fully-covered outputs, so
   no filter edge transient is mixed into a free decay (the model is exact on what is returned:
   a pole z maps to the same pole, its amplitude scaled by :func:`fir_gain`).
+
+Nothing here (nor in the estimators that use it) changes process-wide state such as the BLAS
+thread count, and nothing is cached between calls except read-only arrays, so results depend
+only on the inputs, whichever thread calls and in whatever order (see ``analysis/modal_id.py``,
+"Threads").
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -69,12 +76,23 @@ def damped_sinusoids(
     return y[0] if one_d else y
 
 
+@functools.lru_cache(maxsize=32)
+def _kaiser14(n: int) -> tuple[np.ndarray, float]:
+    """Periodic Kaiser window (β = 14) of length n and Σw² (cached: ~20 lengths per record).
+
+    The cached window is shared by every caller (and thread): it is read-only, so an in-place
+    write raises instead of changing later results.
+    """
+    w = signal.windows.kaiser(n, 14.0, sym=False)
+    w.setflags(write=False)
+    return w, float(np.sum(w * w))
+
+
 def _periodogram(x: np.ndarray) -> np.ndarray:
     """Kaiser (β = 14, sidelobes ≈ −110 dB) periodogram; white noise of variance σ² has mean σ²."""
-    n = x.shape[-1]
-    w = signal.windows.kaiser(n, 14.0, sym=False)
+    w, w2 = _kaiser14(x.shape[-1])
     X = np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * w, axis=-1)
-    return np.abs(X) ** 2 / np.sum(w * w)
+    return np.abs(X) ** 2 / w2
 
 
 def estimate_noise_std(x: ArrayLike) -> np.ndarray:
@@ -93,8 +111,12 @@ def estimate_noise_std(x: ArrayLike) -> np.ndarray:
     a = np.asarray(x, dtype=float)
     if a.shape[-1] < 16:
         raise ValueError(f"n_samples ({a.shape[-1]}) must be at least 16")
-    P = _periodogram(a)[..., 1:-1]
-    return np.sqrt(np.median(P, axis=-1) / np.log(2.0))
+    return _noise_std(_periodogram(a))
+
+
+def _noise_std(P: np.ndarray) -> np.ndarray:
+    """:func:`estimate_noise_std` from the record's periodogram (DC and Nyquist bins included)."""
+    return np.sqrt(np.median(P[..., 1:-1], axis=-1) / np.log(2.0))
 
 
 def significant_band_hz(
@@ -123,6 +145,14 @@ def significant_band_hz(
         no bin is significant.
     """
     a = np.atleast_2d(np.asarray(x, dtype=float))
+    return _significant_band(a, fs_hz, noise_std, false_alarm, None)
+
+
+def _significant_band(
+    a: np.ndarray, fs_hz: float, noise_std: ArrayLike, false_alarm: float,
+    P_full: np.ndarray | None,
+) -> float | None:
+    """:func:`significant_band_hz` on 2-D ``a``; ``P_full``: its whole-record periodogram if known."""
     sig = np.maximum(np.asarray(noise_std, dtype=float), 1e-300)
     n_ch, n = a.shape
     # Periodograms of the whole record and of its first 1/4, 1/16, 1/64: a heavily damped
@@ -130,7 +160,8 @@ def significant_band_hz(
     lengths = [m for m in (n, n // 4, n // 16, n // 64) if m >= 64] or [n]
     spectra = []
     for m in lengths:
-        S = np.sum(_periodogram(a[:, :m]) / (sig[:, None] ** 2), axis=0)[1:-1]
+        P = P_full if m == n and P_full is not None else _periodogram(a[:, :m])
+        S = np.sum(P / (sig[:, None] ** 2), axis=0)[1:-1]
         spectra.append((S, np.arange(1, S.size + 1) * fs_hz / m))
     n_tests = sum(S.size for S, _ in spectra)
     threshold = stats.gamma.isf(false_alarm / max(n_tests, 1), n_ch)

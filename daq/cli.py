@@ -9,10 +9,17 @@ them), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff`` (modes and de
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-from pathlib import Path
+import os
+
+# one BLAS thread per process, set before numpy loads: the estimators make thousands of small
+# BLAS calls that threads only slow down (5-10x, measured), and a live trial and its replay
+# must run with the same setting to give the same digits (analysis/modal_id.py, "Threads")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from analysis.rig import RigError, load_rig
 from drivers.errors import DeviceError

@@ -1,3 +1,7 @@
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # as the ramdaq command sets it (daq/cli.py)
+
 from pathlib import Path
 
 import pytest
