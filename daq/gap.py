@@ -53,6 +53,11 @@ def load_trial(path: str | Path, rig: Rig | str | Path | None = None,
             rig = load_rig(rig)
         if "medium" in info.extra and info.extra["medium"] != rig.medium:
             rig = rig.with_medium(info.extra["medium"])
+        rows = {g: i for i, g in enumerate(info.gages) if g}
+        have = [g for g in rig.gages_by_channel() if g.number in rows]
+        if len(have) < 3:
+            raise RigError(f"{path}: only {len(have)} of the rig's gages are in the recording "
+                           f"(gages {sorted(rows)}); the gap diagnosis needs three or more")
         trigger = Trigger(info)
         blocks, events = [], []
         for b in dev:
@@ -63,11 +68,6 @@ def load_trial(path: str | Path, rig: Rig | str | Path | None = None,
         raise ValueError(f"{path}: the recording holds no samples")
     first = blocks[0].first_sample
     n = blocks[-1].first_sample + blocks[-1].counts.shape[1] - first
-    rows = {g: i for i, g in enumerate(info.gages) if g}
-    have = [g for g in rig.gages_by_channel() if g.number in rows]
-    if len(have) < 3:
-        raise RigError(f"{path}: only {len(have)} of the rig's gages are in the recording "
-                       f"(gages {sorted(rows)}); the gap diagnosis needs three or more")
     if len(have) < len(rig.gages):
         rig = replace(rig, gages=tuple(replace(g, channel=k) for k, g in enumerate(have)))
     x = np.full((len(have), n), np.nan)

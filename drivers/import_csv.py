@@ -276,15 +276,26 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
         if fs_hz is None:
             if t.size < 2:
                 raise ImportFormatError(f"{name}: one data row gives no sample rate; pass fs_hz=")
-            n_est = rel / float(np.median(dt))
-            if n_est[-1] > 2**40:
-                raise ImportFormatError(f"{name}: the time column spans {n_est[-1]:.3g} samples")
-            n = np.rint(n_est)
-            fs_fit = float(np.dot(n, rel) / np.dot(rel, rel))
+            fs_fit = 1.0 / float(np.median(dt))
+            if rel[-1] * fs_fit > 2**40:
+                raise ImportFormatError(f"{name}: the time column spans {rel[-1] * fs_fit:.3g} samples")
+            # printed times round each step (6 decimals at 2048 Hz: 0.000488 or 0.000489 s), so
+            # the median step is off by up to ~1e-3: good for a few hundred rows, not for a whole
+            # trial. Fit on a stretch short enough to count its samples right, then on one 8x
+            # longer with that rate, until the whole column is counted.
+            k = 256
+            while True:
+                m = min(k, rel.size)
+                n = np.rint(rel[:m] * fs_fit)
+                if np.dot(rel[:m], rel[:m]) > 0:
+                    fs_fit = float(np.dot(n, rel[:m]) / np.dot(rel[:m], rel[:m]))
+                if m == rel.size:
+                    break
+                k *= 8
             if not 1e-3 <= fs_fit <= 1e9:
                 raise ImportFormatError(f"{name}: the time column gives a sample rate of "
                                         f"{fs_fit:g} Hz")
-            fs = snap_rate(fs_fit, 0.5 * _GRID_TOL / max(float(n[-1]), 1.0))
+            fs = snap_rate(fs_fit, 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0))
         else:
             fs = float(fs_hz)
             if not fs > 0:

@@ -88,6 +88,8 @@ class Candidate:
     map_fit: GapMap | None = None
     map_held: GapMap | None = None
     modes_after: list[dict] = field(default_factory=list)
+    dbic_marginal: float | None = None
+    """For a pair: what the second term adds to the first alone, in BIC."""
 
     @property
     def name(self) -> str:
@@ -95,7 +97,9 @@ class Candidate:
 
     def to_json(self) -> dict:
         return {"effect": self.name, "terms": [t.to_json() for t in self.terms],
-                "dbic": round(self.dbic, 2), "gap_fitted": round(self.gap_fit, 2),
+                "dbic": round(self.dbic, 2),
+                "dbic_marginal": None if self.dbic_marginal is None else round(self.dbic_marginal, 2),
+                "gap_fitted": round(self.gap_fit, 2),
                 "gap_held_out": round(self.gap_held, 2),
                 "closed_fitted": round(self.closed_fit, 3), "closed_held_out": round(self.closed_held, 3),
                 "closed_held_out_ci95": [round(v, 3) for v in self.closed_held_ci],
@@ -229,7 +233,8 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     sigma = noise_model(fw0, fit0.resid).sigma
     fw = Forward(td, np.maximum(sigma, 1e-12))
     say(f"calibrating {len(fw.params)} constants on {int(td.fitted.sum())} of {td.n_seg} impacts")
-    base = calibrate(fw, theta0=prefit_frequencies(fw))
+    theta_pre = prefit_frequencies(fw)
+    base = calibrate(fw, theta0=theta_pre)
     noise = noise_model(fw, base.fit.resid)
     say(f"noise floor from {settings.n_rep} simulations of the calibrated model")
     reps = replicate_residuals(fw, base, noise, settings.n_rep, seed=settings.seed,
@@ -251,7 +256,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     names = settings.effects or tuple(EFFECTS)
     say(f"scoring {len(names)} candidate effects")
     sigs = sorted((signature_scores(fw, base, basis, EFFECTS[n]) for n in names),
-                  key=lambda s: -s.z if np.isfinite(s.z) else np.inf)
+                  key=lambda s: -s.z if not np.isnan(s.z) else np.inf)
     n_eff = basis.r.size
     cands: list[Candidate] = []
 
@@ -263,24 +268,29 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         known = [c.terms[0] for c in starts]
         terms = [done[s.effect.name].terms[0] if s.effect.name in done else _start(fw, ref, s, known)
                  for s in group]
-        theta0 = ref.theta.copy()
-        if not starts:
-            # damping is where a calibration hides what it cannot model (a tone becomes an
-            # undamped hull mode): the refit starts from the nominal damping
-            theta0[damping] = 0.0
+        # a single starts from the constants the data's spectrum gave, before the calibration
+        # hid what it cannot model in them (a tone becomes an undamped, detuned hull mode)
+        theta0 = ref.theta.copy() if starts else theta_pre.copy()
         say("refitting with " + " + ".join(t.effect.name for t in terms))
         try:
+            # the term's own parameters first, constants held (a tone's frequency must be found
+            # to a fraction of a cycle over the trial before anything else can move), then all
+            if any(len(t.x) for t in terms if t.effect.name not in done):
+                terms = calibrate(fw, terms, theta0=theta0, free_base=False, max_iter=15).terms
             cal = calibrate(fw, terms, theta0=theta0, max_iter=settings.refit_iter, jac0=base.jac)
         except (ValueError, np.linalg.LinAlgError) as exc:
             notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
             return
-        kappa = max([1.0] + [s.kappa for s in group])
+        d = np.nan_to_num(((cal.fit.pred - base.fit.pred) * fw.mask * fw.W)[td.fitted].ravel())
+        kappa = basis.null_inflation(d)
         k = sum(len(t.x) for t in terms)
+        # choosing where an effect sits among n placements costs ln n in evidence (2 ln n in BIC)
+        look = sum(2 * math.log(max(1, s.n_placements)) for s in group)
         # compare on the samples both fits keep (a clipping term leaves some out)
         keep = np.isfinite(cal.fit.resid[td.fitted])
         rb = base.fit.resid[td.fitted] * fw.W[td.fitted]
         chi_b = float(np.sum(np.where(keep, rb, 0.0) ** 2)) + base.prior
-        dbic = -(chi_b - cal.chi2 - cal.prior) / kappa + k * math.log(n_eff)
+        dbic = -(chi_b - cal.chi2 - cal.prior) / kappa + k * math.log(n_eff) + look
         # an effect read straight off the data (no template) counts by its detection score
         dbic -= sum(s.z ** 2 for s in group if s.k == 0 and np.isfinite(s.z))
         a_fit = gap_map(fw, cal.fit.resid, rep_cells, bands, td.fitted)
@@ -293,9 +303,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
                                a_held.excess(m_held.gap_cells()) if a_held else 0.0,
                                c_fit, c_held, ci, loc, a_fit, a_held, modes_of(cal, td.lowpass_hz)))
 
-    damping = [i for i, p in enumerate(fw.params)
-               if p.name in ("C", "c", "c_alpha") or p.name.endswith("_zeta")]
-    live = [s for s in sigs if s.placement is not None and np.isfinite(s.z)]
+    live = [s for s in sigs if s.placement is not None and s.z > -np.inf]
     for s in live[: settings.top_k]:
         consider([s])
     singles = sorted(cands, key=lambda c: c.dbic)
@@ -307,7 +315,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         basis1 = ScoreBasis(fw, c1.cal, reps)
         say(f"scoring a second effect on top of {c1.name}")
         second = sorted((signature_scores(fw, c1.cal, basis1, s.effect) for s in live[: settings.top_k + 2]
-                         if s.effect.name != c1.name), key=lambda s: -s.z if np.isfinite(s.z) else np.inf)
+                         if s.effect.name != c1.name), key=lambda s: -s.z if not np.isnan(s.z) else np.inf)
         if second and second[0].placement is not None and second[0].z > settings.z_pair:
             consider([first, second[0]])
     cands.sort(key=lambda c: c.dbic)
@@ -317,11 +325,19 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         held_ok = not held.any() or not c.closed_held <= 0     # NaN: no gap beyond chance held out
         if c.dbic < -settings.bic_min and held_ok:
             best = c
-            # a pair must beat its better single by the same margin
+            # a pair must beat the single it grew from by the same margin, counted on what
+            # the second term adds alone (deflated along that direction)
             if len(c.terms) == 2:
-                singles = [x for x in cands if len(x.terms) == 1]
-                if singles and c.dbic > singles[0].dbic - settings.bic_min:
-                    best = singles[0]
+                first = next((x for x in cands
+                              if len(x.terms) == 1 and x.name == c.terms[0].effect.name), None)
+                if first is not None:
+                    d = (c.cal.fit.pred - first.cal.fit.pred) * fw.mask * fw.W
+                    d = np.nan_to_num(d[td.fitted].ravel())
+                    gain = (first.cal.chi2 + first.cal.prior) - (c.cal.chi2 + c.cal.prior)
+                    k2 = len(c.terms[1].x)
+                    c.dbic_marginal = -gain / basis.null_inflation(d) + k2 * math.log(n_eff)
+                    if c.dbic_marginal > -settings.bic_min:
+                        best = first if first.dbic < -settings.bic_min else None
     verdict = "no gap beyond noise" if not significant else ("explained" if best else "unexplained")
     gap_fit, gap_held = m_fit.excess(), m_held.excess() if m_held else 0.0
     if best is not None:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.ndimage
 import scipy.signal
+import scipy.special
 import scipy.stats
 
 from analysis.gap.calibrate import Calibration
@@ -29,6 +30,8 @@ from analysis.gap.effects.base import Effect, Placement, Term
 from analysis.gap.forward import Forward
 
 WINDOWS = ("pre", "early", "late")
+DECAY_TOL_PER_FORM_TOL = 5.0
+"""A model whose mode shapes are right to 2 % has decay rates right to ~10 %."""
 GAP_CELL_Z = 3.0
 """A map cell counts into the gap when its z exceeds this (one-sided 0.13 %)."""
 
@@ -108,8 +111,9 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
 
     Each replicate is the calibrated prediction with fresh noise of the trial's spectrum and,
     for a model-form tolerance ``form_tol``, every gage's amplitude of every mode perturbed by
-    a random complex factor ``1 + form_tol (a + j b) / sqrt(2)`` (a, b standard normal): what a
-    model "right to within form_tol" leaves when it is right."""
+    a random complex factor ``1 + form_tol (a + j b) / sqrt(2)`` (a, b standard normal), its decay
+    rate by ``DECAY_TOL_PER_FORM_TOL * form_tol``: what a model "right to within form_tol" leaves
+    when it is right."""
     rng = np.random.default_rng(seed)
     U, dU, extra = fw.last_columns_for(cal)
     out = np.empty((n_rep,) + fw.td.x.shape)
@@ -120,6 +124,10 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
             ms = cal.fit.modes.copy()
             xi = rng.standard_normal(ms.A.shape) + 1j * rng.standard_normal(ms.A.shape)
             ms.A = ms.A * (1 + form_tol * xi / math.sqrt(2))
+            # and each mode's decay rate by DECAY_TOL_PER_FORM_TOL x as much: the damping
+            # constants are shared by all modes, so their per-mode rates are the loosest part
+            rel = DECAY_TOL_PER_FORM_TOL * form_tol * rng.standard_normal(ms.lam.shape)
+            ms.lam = ms.lam + ms.lam.real * rel
             Ur, _ = fw.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)
             x = x + np.tensordot(cal.fit.force, Ur - U, axes=1)
         _, pred = fw._solve(U, dU, extra, x)
@@ -231,6 +239,17 @@ class Signature:
     kappa: float = 1.0
 
 
+def chi2_logsf(x: float, k: int) -> float:
+    """``ln P(chi2_k > x)`` without underflow: scipy's where it is finite, else the
+    Wilson-Hilferty normal approximation, whose log tail is finite for any x."""
+    v = float(scipy.stats.chi2.logsf(x, k))
+    if np.isfinite(v):
+        return v
+    c = 2.0 / (9.0 * k)
+    z = ((x / k) ** (1.0 / 3.0) - (1.0 - c)) / math.sqrt(c)
+    return float(scipy.stats.norm.logsf(z))
+
+
 class ScoreBasis:
     """The calibration's own directions in the fitted segments' whitened sample space, to be
     projected out of every signature; and the replicates' residuals in the same space."""
@@ -253,6 +272,16 @@ class ScoreBasis:
 
     def _white(self, resid: np.ndarray) -> np.ndarray:
         return np.nan_to_num(resid * self.fw.W[self.fitted]).ravel()
+
+    def null_inflation(self, d: np.ndarray) -> float:
+        """How much more the replicates' residuals carry along the direction ``d`` (N,) than
+        white noise of unit variance would (>= 1): the factor a chi-square gain along ``d`` is
+        deflated by, for coloured noise and the model-form tolerance."""
+        dp = self.project(d[None, :])[0]
+        nrm = float(dp @ dp)
+        if not np.isfinite(nrm) or nrm <= 0:
+            return 1.0
+        return max(1.0, float(np.mean((self.reps @ dp) ** 2)) / nrm)
 
     def project(self, D: np.ndarray) -> np.ndarray:
         """Templates (k, N) with the calibration's directions removed."""
@@ -288,7 +317,7 @@ def signature_scores(fw: Forward, cal: Calibration, basis: ScoreBasis, effect: E
         return Signature(effect, direct[1], 0.0, 0, direct[0], direct[1].x0 if direct[1] else np.zeros(0), 1)
     places = effect.placements(fw, cal.fit)
     best = Signature(effect, None, 0.0, 1, -np.inf, np.zeros(0), len(places))
-    best_p = 1.0
+    best_p = 0.0
     for pl in places:
         try:
             D = effect.templates(fw, cal, pl)
@@ -299,7 +328,7 @@ def signature_scores(fw: Forward, cal: Calibration, basis: ScoreBasis, effect: E
         chi2, chi2_rep, coef = basis.score(D)
         k = D.shape[0]
         kappa = max(chi2_rep / k, 1.0)   # coloured noise carries more along some signatures
-        p = float(scipy.stats.chi2.sf(chi2 / kappa, k))
+        p = chi2_logsf(chi2 / kappa, k)
         if p < best_p or best.placement is None:
             # the placement's x0 is the effect switched off; the probes are steps from it
             x0 = pl.x0 + (coef @ (pl.probes - pl.x0[None, :]) if len(coef) == len(pl.probes) else 0)
@@ -308,6 +337,6 @@ def signature_scores(fw: Forward, cal: Calibration, basis: ScoreBasis, effect: E
             best_p = p
     if best.placement is None:
         return best
-    p_any = min(1.0, best_p * max(1, len(places)))      # Bonferroni over placements
-    best.z = float(scipy.stats.norm.isf(max(p_any, 1e-300))) if p_any < 1 else -np.inf
+    log_p_any = min(0.0, best_p + math.log(max(1, len(places))))      # Bonferroni over placements
+    best.z = float(-scipy.special.ndtri_exp(log_p_any)) if log_p_any < 0 else -np.inf
     return best
