@@ -85,8 +85,8 @@ def run_one(sc: dict, workdir: str) -> dict:
         "n_impacts_found": int(len(lt.onsets_s)), "n_impacts_true": int(len(tt.onsets_s)),
         "verdict": d.verdict, "named": d.best.name if d.best else None,
         "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
-        "candidates": [{"name": c.name, "dbic": c.dbic, "closed_held": c.closed_held,
-                        "location": c.location} for c in d.candidates],
+        "candidates": [{"name": c.name, "dbic": c.dbic, "dbic_marginal": c.dbic_marginal,
+                        "closed_held": c.closed_held, "location": c.location} for c in d.candidates],
         "signatures": [s.effect.name for s in d.signatures],
         "closed_held": d.best.closed_held if d.best else None,
         "location": d.best.location if d.best else None,
@@ -104,9 +104,9 @@ def _decide(r: dict, z_gap: float, bic_min: float) -> str:
         return "unexplained"
     best = min(c, key=lambda x: x["dbic"])
     if "+" in best["name"]:
-        singles = [x for x in c if "+" not in x["name"]]
-        if singles and best["dbic"] > min(s["dbic"] for s in singles) - bic_min:
-            best = min(singles, key=lambda x: x["dbic"])
+        if best.get("dbic_marginal") is None or best["dbic_marginal"] > -bic_min:
+            first = [x for x in c if x["name"] == best["name"].split("+")[0]]
+            return first[0]["name"] if first else "unexplained"
     return best["name"]
 
 
