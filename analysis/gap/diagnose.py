@@ -59,13 +59,15 @@ class Settings:
     noise alone); ``z_gap`` the map cell score beyond which a gap is called real; ``bic_min``
     how much better (in BIC) a candidate must be; ``top_k`` candidates refitted; ``z_pair`` the
     score a second effect needs on what the best single one leaves; ``n_rep`` replicate
-    simulations for the noise floor."""
+    simulations for the noise floor; ``min_closure`` the least fraction of the gap an effect must
+    close to be named (see :func:`choose`)."""
 
     z_gap: float = 5.0
     form_tol: float = 0.02
     bic_min: float = 10.0
     top_k: int = 3
     z_pair: float = 5.0
+    min_closure: float = 0.05
     n_rep: int = 24
     refit_iter: int = 40
     effects: tuple[str, ...] | None = None
@@ -94,6 +96,11 @@ class Candidate:
     @property
     def name(self) -> str:
         return "+".join(t.effect.name for t in self.terms)
+
+    def record(self) -> dict:
+        """What :func:`choose` decides on."""
+        return {"name": self.name, "dbic": self.dbic, "dbic_marginal": self.dbic_marginal,
+                "closed_held": self.closed_held, "closed_fit": self.closed_fit}
 
     def to_json(self) -> dict:
         return {"effect": self.name, "terms": [t.to_json() for t in self.terms],
@@ -203,6 +210,39 @@ def _location(before: list[GapMap], after: list[GapMap], terms: list[Term]) -> d
             "effect_mode_hz": next((t.placement.mode_hz for t in terms if t.placement.mode_hz), None)}
 
 
+def choose(records: list[dict], significant: bool, bic_min: float, min_closure: float) -> str | None:
+    """The explanation to name, from candidates' ``name``, ``dbic``, ``dbic_marginal`` (pairs),
+    ``closed_held`` and ``closed_fit``: ``None`` when there is no gap, ``"unexplained"`` when no
+    candidate will do.
+
+    A candidate must beat the calibrated model by ``bic_min``; among those, the single effect
+    that closes most of the held-out gap (the fitted gap where none was held out) is named if
+    it closes at least ``min_closure`` -- an effect at one gage that fits its own gage well but
+    leaves the rest of a widespread gap open is not the cause. A pair replaces it only if its
+    second term earns ``bic_min`` on its own and closes 10 % more.
+    """
+    if not significant:
+        return None
+
+    def closed(r: dict) -> float:
+        v = r.get("closed_held")
+        if v is None or not np.isfinite(v):
+            v = r.get("closed_fit")
+        return float(v) if v is not None and np.isfinite(v) else 0.0
+
+    ok = [r for r in records if r["dbic"] < -bic_min]
+    singles = sorted((r for r in ok if "+" not in r["name"]), key=lambda r: (-closed(r), r["dbic"]))
+    if not singles or closed(singles[0]) < min_closure:
+        return "unexplained"
+    best = singles[0]
+    for r in ok:
+        if (r["name"].split("+")[0] == best["name"] and "+" in r["name"]
+                and r.get("dbic_marginal") is not None and r["dbic_marginal"] < -bic_min
+                and closed(r) >= closed(best) + 0.1):
+            best = r
+    return best["name"]
+
+
 def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = ()) -> Term:
     """The refit's start for one effect: the best of the score test's estimate, the first probe
     and the effect switched off (a linearised estimate can overshoot far into nonsense)."""
@@ -249,6 +289,9 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     notes = []
     if not held.any():
         notes.append("one impact only: nothing held out, closure on held-out impacts not measured")
+    if td.dropped_onsets_s:
+        notes.append("events too soon after the previous impact to compare, left out: "
+                     + ", ".join(f"{t:.3f} s" for t in td.dropped_onsets_s))
     if td.fitted.sum() < 3:
         notes.append(f"only {int(td.fitted.sum())} impact(s) fitted: a steady tone and a slowly decaying "
                      "mode at its frequency are hard to tell apart; six impacts or more are advised")
@@ -318,26 +361,17 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
                          if s.effect.name != c1.name), key=lambda s: -s.z if not np.isnan(s.z) else np.inf)
         if second and second[0].placement is not None and second[0].z > settings.z_pair:
             consider([first, second[0]])
+    for c in cands:
+        if len(c.terms) == 2:
+            # what the second term adds to the single it grew from, deflated along that direction
+            first = next((x for x in cands if len(x.terms) == 1 and x.name == c.terms[0].effect.name), None)
+            if first is not None:
+                d = np.nan_to_num(((c.cal.fit.pred - first.cal.fit.pred) * fw.mask * fw.W)[td.fitted].ravel())
+                gain = (first.cal.chi2 + first.cal.prior) - (c.cal.chi2 + c.cal.prior)
+                c.dbic_marginal = -gain / basis.null_inflation(d) + len(c.terms[1].x) * math.log(n_eff)
     cands.sort(key=lambda c: c.dbic)
-    best = None
-    if significant and cands:
-        c = cands[0]
-        held_ok = not held.any() or not c.closed_held <= 0     # NaN: no gap beyond chance held out
-        if c.dbic < -settings.bic_min and held_ok:
-            best = c
-            # a pair must beat the single it grew from by the same margin, counted on what
-            # the second term adds alone (deflated along that direction)
-            if len(c.terms) == 2:
-                first = next((x for x in cands
-                              if len(x.terms) == 1 and x.name == c.terms[0].effect.name), None)
-                if first is not None:
-                    d = (c.cal.fit.pred - first.cal.fit.pred) * fw.mask * fw.W
-                    d = np.nan_to_num(d[td.fitted].ravel())
-                    gain = (first.cal.chi2 + first.cal.prior) - (c.cal.chi2 + c.cal.prior)
-                    k2 = len(c.terms[1].x)
-                    c.dbic_marginal = -gain / basis.null_inflation(d) + k2 * math.log(n_eff)
-                    if c.dbic_marginal > -settings.bic_min:
-                        best = first if first.dbic < -settings.bic_min else None
+    pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
+    best = next((c for c in cands if c.name == pick), None)
     verdict = "no gap beyond noise" if not significant else ("explained" if best else "unexplained")
     gap_fit, gap_held = m_fit.excess(), m_held.excess() if m_held else 0.0
     if best is not None:

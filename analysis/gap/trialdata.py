@@ -90,6 +90,8 @@ class TrialData:
     flat: np.ndarray
     peak_full: np.ndarray
     gage_numbers: tuple[int, ...] = field(default=())
+    dropped_onsets_s: list[float] = field(default_factory=list)
+    """Trigger events too soon after the previous impact to compare (s)."""
 
     @property
     def n_seg(self) -> int:
@@ -194,6 +196,15 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
         raise ValueError("no impacts to compare: the gap diagnosis needs at least one ram blow")
     n_g, n = x_full.shape
     corner, _ = analysis_band(rig, fs_hz, max_hz=max_hz)
+    # an event too close after the previous one to leave a decay (a re-trigger on a tone, a
+    # bounce the trigger split off) is not compared; its ringing stays in the data
+    min_gap = pre_s + rig.impact.duration_s + SMEAR_CYCLES / corner + 0.25
+    keep = [0]
+    for j in range(1, len(onsets)):
+        if onsets[j] - onsets[keep[-1]] >= min_gap:
+            keep.append(j)
+    dropped = [float(t) for j, t in enumerate(onsets) if j not in keep]
+    onsets = onsets[keep]
     q = max(1, int(fs_hz // (2.5 * corner)))
     fs_d = fs_hz / q
     gaps = ~np.isfinite(x_full)
@@ -234,7 +245,8 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
     return TrialData(rig=rig, x=x, fs_hz=fs_d, fs_full_hz=fs_hz, seg_t0_s=seg_t0, onsets_s=onsets,
                      windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
                      clip=clip, flat=flat, peak_full=peak,
-                     gage_numbers=tuple(g.number for g in rig.gages_by_channel()))
+                     gage_numbers=tuple(g.number for g in rig.gages_by_channel()),
+                     dropped_onsets_s=dropped)
 
 
 def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:

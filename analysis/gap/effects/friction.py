@@ -35,7 +35,7 @@ class Friction(Effect):
         for j in range(td.n_seg):
             u = fw.mode_unit(ms, i, j)                                 # (n_seg, n_g, n_s)
             t = td.seg_t0_s[:, None] + np.arange(td.n_s)[None, :] / td.fs_hz - td.onsets_s[j]
-            g = 1 + (kappa / max(a0[j], 1e-3)) * (1 - np.exp(sigma * np.clip(t, 0, None)))
+            g = 1 + (kappa / max(a0[j], 1e-3)) * (1 - np.exp(np.minimum(sigma * np.clip(t, 0, None), 50.0)))
             g = np.clip(g, 0.0, 1.0)
             U[j] += (g[:, None, :] - 1.0) * u
         return U, dU

@@ -7,7 +7,7 @@ import numpy as np
 
 from analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
 
-SPLITS = (-0.015, 0.015)
+SPLITS = (-0.035, -0.02, -0.01, 0.01, 0.02, 0.035)
 
 
 class SplitMode(Effect):
