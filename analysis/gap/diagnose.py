@@ -67,7 +67,7 @@ class Settings:
     bic_min: float = 10.0
     top_k: int = 3
     z_pair: float = 5.0
-    min_closure: float = 0.05
+    min_closure: float = 0.0
     n_rep: int = 24
     refit_iter: int = 40
     effects: tuple[str, ...] | None = None
