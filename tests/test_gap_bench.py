@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from daq.gap_bench import _located, score, scenarios
+from daq.gap_bench import _located, scenarios, score
 
 SUBSET = [("none", 1001), ("hull_coupling", 2001), ("gage_alignment", 9005), ("time_skew", 11005)]
 
