@@ -14,8 +14,6 @@ hypothesis is a hundred times slower. A timeout on every test catches a hang.
 
 from __future__ import annotations
 
-import os
-import time
 from collections import Counter
 
 import can
@@ -25,6 +23,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from drivers.can_frames import REJECTIONS, CycleAssembler, FrameCodec
+from tests.conftest import tallied_long_run
 
 CODECS = {name: FrameCodec(name) for name in ("classic", "fd24", "fd16")}
 NAMES = sorted(CODECS)
@@ -194,15 +193,7 @@ def test_assembler_never_delivers_a_wrong_sample(seed):
 @pytest.fixture
 def long_run(request: pytest.FixtureRequest, capsys: pytest.CaptureFixture):
     """Long runs only with ``pytest -m slow`` or ``RAMDAQ_LONG_FUZZ=1`` (CI runs every test)."""
-    expr = request.config.getoption("markexpr") or ""
-    if os.environ.get("RAMDAQ_LONG_FUZZ") != "1" and ("slow" not in expr or "not slow" in expr):
-        pytest.skip("long fuzz run: use pytest -m slow or RAMDAQ_LONG_FUZZ=1")
-    TALLY.clear()
-    t = time.perf_counter()
-    yield TALLY
-    with capsys.disabled():
-        print(f"\n{request.node.name}: {sum(TALLY.values())} inputs in {time.perf_counter() - t:.0f} s: "
-              f"{dict(TALLY)}")
+    yield from tallied_long_run(request, capsys, TALLY, "inputs")
 
 
 _LONG = dict(deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])

@@ -14,7 +14,6 @@ builds the input, since drawing every byte through hypothesis is a hundred times
 
 from __future__ import annotations
 
-import os
 import struct
 import time
 from datetime import timedelta
@@ -34,6 +33,7 @@ from drivers.serial_frames import (
     crc16_reference,
     encode_frame,
 )
+from tests.conftest import skip_unless_long_fuzz
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -234,11 +234,8 @@ def seeded_cuts(seed: int, n: int, ends: list[int] = ()) -> list[int]:
 
 @pytest.fixture
 def long_run(request: pytest.FixtureRequest) -> None:
-    """The 100 000-example runs go only with ``pytest -m slow`` or ``RAMDAQ_LONG_FUZZ=1`` (the
-    CI command runs every test, marked or not)."""
-    expr = request.config.getoption("markexpr") or ""
-    if os.environ.get("RAMDAQ_LONG_FUZZ") != "1" and ("slow" not in expr or "not slow" in expr):
-        pytest.skip("long fuzz run: use pytest -m slow or RAMDAQ_LONG_FUZZ=1")
+    """The 100 000-example runs go only with ``pytest -m slow`` or ``RAMDAQ_LONG_FUZZ=1``."""
+    skip_unless_long_fuzz(request)
 
 
 def _bytes_from_seed(seed: int) -> None:

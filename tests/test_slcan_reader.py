@@ -28,6 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from drivers.slcan_reader import SlcanFrame, SlcanReader, parse_lines
+from tests.conftest import tallied_long_run
 
 pytestmark = pytest.mark.timeout(300)
 SHORT = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -422,15 +423,7 @@ def seeded_cases(seed: int, n: int = 10) -> list[tuple[bytes, can.Message | None
 @pytest.fixture
 def long_run(request: pytest.FixtureRequest, capsys: pytest.CaptureFixture):
     """Long runs only with ``pytest -m slow`` or ``RAMDAQ_LONG_FUZZ=1`` (CI runs every test)."""
-    expr = request.config.getoption("markexpr") or ""
-    if os.environ.get("RAMDAQ_LONG_FUZZ") != "1" and ("slow" not in expr or "not slow" in expr):
-        pytest.skip("long fuzz run: use pytest -m slow or RAMDAQ_LONG_FUZZ=1")
-    TALLY.clear()
-    t = time.perf_counter()
-    yield TALLY
-    with capsys.disabled():
-        print(f"\n{request.node.name}: {sum(TALLY.values())} lines in {time.perf_counter() - t:.0f} s: "
-              f"{dict(TALLY)}")
+    yield from tallied_long_run(request, capsys, TALLY, "lines")
 
 
 @pytest.mark.slow
