@@ -293,8 +293,9 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         notes.append("events too soon after the previous impact to compare, left out: "
                      + ", ".join(f"{t:.3f} s" for t in td.dropped_onsets_s))
     if td.fitted.sum() < 3:
-        notes.append(f"only {int(td.fitted.sum())} impact(s) fitted: a steady tone and a slowly decaying "
-                     "mode at its frequency are hard to tell apart; six impacts or more are advised")
+        notes.append(f"only {int(td.fitted.sum())} impact(s) fitted: constants and effects are weakly "
+                     "separated (a steady tone and a slow decay at its frequency look alike); six impacts "
+                     "or more are advised")
     basis = ScoreBasis(fw, base, reps)
     names = settings.effects or tuple(EFFECTS)
     say(f"scoring {len(names)} candidate effects")
