@@ -37,11 +37,20 @@ class Calibration:
     nfev: int
     cache: dict = field(default_factory=dict)
 
+    def columns(self, fw: Forward) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The linear columns of this calibration's prediction -- every impact's unit response,
+        its time derivative, the terms' own columns (see :meth:`Forward.fit`); computed once."""
+        if "columns" not in self.cache:
+            needs_force = any(t.effect.needs_force for t in self.terms)
+            U, dU = fw.unit_responses(self.fit.modes, self.terms,
+                                      force=self.fit.force if needs_force else None)
+            self.cache["columns"] = (U, dU, fw.columns(self.terms))
+        return self.cache["columns"]
+
     def pred_rate(self, fw: Forward) -> np.ndarray:
         """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached)."""
         if "pred_rate" not in self.cache:
-            U, dU, _ = fw.last_columns_for(self)
-            self.cache["pred_rate"] = np.tensordot(self.fit.force, dU, axes=1)
+            self.cache["pred_rate"] = np.tensordot(self.fit.force, self.columns(fw)[1], axes=1)
         return self.cache["pred_rate"]
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
 from analysis.gap.effects import EFFECTS
-from analysis.gap.effects.base import Term
+from analysis.gap.effects.base import Term, whiten_fitted
 from analysis.gap.evidence import (
     WINDOWS,
     GapMap,
@@ -325,8 +325,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         except (ValueError, np.linalg.LinAlgError) as exc:
             notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
             return
-        d = np.nan_to_num(((cal.fit.pred - base.fit.pred) * fw.mask * fw.W)[td.fitted].ravel())
-        kappa = basis.null_inflation(d)
+        kappa = basis.null_inflation(whiten_fitted(fw, cal.fit.pred - base.fit.pred))
         k = sum(len(t.x) for t in terms)
         # choosing where an effect sits among n placements costs ln n in evidence (2 ln n in BIC)
         look = sum(2 * math.log(max(1, s.n_placements)) for s in group)
@@ -367,7 +366,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
             # what the second term adds to the single it grew from, deflated along that direction
             first = next((x for x in cands if len(x.terms) == 1 and x.name == c.terms[0].effect.name), None)
             if first is not None:
-                d = np.nan_to_num(((c.cal.fit.pred - first.cal.fit.pred) * fw.mask * fw.W)[td.fitted].ravel())
+                d = whiten_fitted(fw, c.cal.fit.pred - first.cal.fit.pred)
                 gain = (first.cal.chi2 + first.cal.prior) - (c.cal.chi2 + c.cal.prior)
                 c.dbic_marginal = -gain / basis.null_inflation(d) + len(c.terms[1].x) * math.log(n_eff)
     cands.sort(key=lambda c: c.dbic)

@@ -26,7 +26,7 @@ import scipy.special
 import scipy.stats
 
 from analysis.gap.calibrate import Calibration
-from analysis.gap.effects.base import Effect, Placement, Term
+from analysis.gap.effects.base import Effect, Placement, Term, whiten_fitted
 from analysis.gap.forward import Forward
 
 WINDOWS = ("pre", "early", "late")
@@ -115,7 +115,7 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
     rate by ``DECAY_TOL_PER_FORM_TOL * form_tol``: what a model "right to within form_tol" leaves
     when it is right."""
     rng = np.random.default_rng(seed)
-    U, dU, extra = fw.last_columns_for(cal)
+    U, dU, extra = cal.columns(fw)
     out = np.empty((n_rep,) + fw.td.x.shape)
     needs_force = any(t.effect.needs_force for t in cal.terms)
     for r in range(n_rep):
@@ -257,8 +257,7 @@ class ScoreBasis:
     def __init__(self, fw: Forward, cal: Calibration, reps: np.ndarray) -> None:
         self.fw = fw
         self.fitted = np.flatnonzero(fw.td.fitted)
-        U, dU, extra = fw.last_columns_for(cal)
-        X = fw.design(U, dU, extra)[:, self.fitted]
+        X = fw.design(*cal.columns(fw))[:, self.fitted]
         w = (fw.mask[self.fitted] * fw.W[self.fitted]).ravel()
         cols = [X.reshape(X.shape[0], -1) * w[None, :]]
         if cal.jac.shape[1]:
@@ -266,7 +265,6 @@ class ScoreBasis:
         B = np.concatenate(cols)
         q, _ = np.linalg.qr(B.T)
         self.Q = q                                      # (N, n_basis) orthonormal
-        self.w = w
         self.r = self._white(cal.fit.resid[self.fitted])
         self.reps = np.stack([self._white(rr[self.fitted]) for rr in reps])
 
@@ -304,10 +302,7 @@ class ScoreBasis:
 def template(fw: Forward, cal: Calibration, term: Term) -> np.ndarray:
     """The signature of one probe: prediction with the term less the calibrated one, whitened,
     over the fitted segments, flattened."""
-    f = fw.fit(cal.theta, list(cal.terms) + [term])
-    fitted = np.flatnonzero(fw.td.fitted)
-    d = (f.pred - cal.fit.pred)[fitted] * fw.mask[fitted] * fw.W[fitted]
-    return np.nan_to_num(d.ravel())
+    return whiten_fitted(fw, fw.fit(cal.theta, list(cal.terms) + [term]).pred - cal.fit.pred)
 
 
 def signature_scores(fw: Forward, cal: Calibration, basis: ScoreBasis, effect: Effect) -> Signature:

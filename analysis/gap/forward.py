@@ -271,15 +271,9 @@ class Forward:
         z = np.where(lag >= 0, JT * np.exp(lam * np.maximum(lag, 0)), 0.0)
         return np.real(ms.A[:, i][None, :, None] * z[:, None, :])
 
-    def last_columns_for(self, cal) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """The linear columns of a calibration's prediction (see :meth:`fit`)."""
-        ms = cal.fit.modes
-        needs_force = any(t.effect.needs_force for t in cal.terms)
-        U, dU = self.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)
-        return U, dU, self.columns(list(cal.terms))
-
-    def columns(self, theta_terms: list[Term]) -> np.ndarray | None:
-        cols = [c for t in theta_terms if (c := t.effect.columns(self, t)) is not None]
+    def columns(self, terms: list[Term]) -> np.ndarray | None:
+        """The terms' own linear columns, (k, n_seg, n_gages, n_s), or None."""
+        cols = [c for t in terms if (c := t.effect.columns(self, t)) is not None]
         return np.concatenate(cols) if cols else None
 
     # -- the prediction -------------------------------------------------------------------

@@ -229,7 +229,7 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
     idx = starts[:, None] + q * np.arange(n_s)[None, :]
     idx_c = np.clip(idx, 0, n - 1)
     x = xf[:, idx_c].transpose(1, 0, 2).copy()
-    x[:, :, :][np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan
+    x[np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan   # past the stream's end
     seg_t0 = starts / fs_hz
     k_on = np.rint((onsets - seg_t0) * fs_d).astype(int)
     n_skip = int(math.ceil(skip_s * fs_d))
