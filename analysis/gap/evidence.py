@@ -236,7 +236,6 @@ class Signature:
     z: float
     x0: np.ndarray
     n_placements: int
-    kappa: float = 1.0
 
 
 def chi2_logsf(x: float, k: int) -> float:
@@ -328,7 +327,7 @@ def signature_scores(fw: Forward, cal: Calibration, basis: ScoreBasis, effect: E
             # the placement's x0 is the effect switched off; the probes are steps from it
             x0 = pl.x0 + (coef @ (pl.probes - pl.x0[None, :]) if len(coef) == len(pl.probes) else 0)
             x0 = np.clip(x0, pl.lo, pl.hi)
-            best = Signature(effect, pl, chi2 / kappa, k, 0.0, x0, len(places), kappa)
+            best = Signature(effect, pl, chi2 / kappa, k, 0.0, x0, len(places))
             best_p = p
     if best.placement is None:
         return best
