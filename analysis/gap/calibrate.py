@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.gap.effects.base import Term
+from analysis.gap.effects.base import Term, summed_spectrum
 from analysis.gap.forward import Fit, Forward
 
 
@@ -124,10 +124,7 @@ def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.2,
     td = fw.td
     a, b = td.windows.early.start, td.n_s
     r = np.nan_to_num(td.x[td.fitted][:, :, a:b] * fw.W[td.fitted][:, :, a:b])
-    n = r.shape[-1]
-    nfft = 8 * int(2 ** math.ceil(math.log2(n)))
-    P = (np.abs(np.fft.rfft(r * np.hanning(n), n=nfft, axis=-1)) ** 2).sum(axis=(0, 1))
-    f = np.fft.rfftfreq(nfft, 1 / td.fs_hz)
+    f, P = summed_spectrum(r, td.fs_hz)
     out = np.full(len(f_guess), np.nan)
     for k, fg in enumerate(f_guess):
         sel = np.flatnonzero((f > fg * (1 - rel)) & (f < fg * (1 + rel)))

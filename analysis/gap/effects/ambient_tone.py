@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from analysis.gap.effects.base import Effect, Placement, Term, placement
+from analysis.gap.effects.base import Effect, Placement, Term, placement, summed_spectrum
 from analysis.model import build_model
 from analysis.response import ambient_gage_amplitudes
 
@@ -85,10 +85,7 @@ def first_quiet_lines(fw, n: int) -> list[float]:
     m = x.shape[-1]
     if m < 16:
         return []
-    nfft = 8 * int(2 ** math.ceil(math.log2(m)))
-    P = (np.abs(np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * np.hanning(m), n=nfft, axis=-1)) ** 2
-         ).sum(axis=0)
-    f = np.fft.rfftfreq(nfft, 1 / td.fs_hz)
+    f, P = summed_spectrum(x - x.mean(axis=-1, keepdims=True), td.fs_hz)
     ok = (f > 1.5 * td.fs_hz / m) & (f < td.lowpass_hz)
     ref = np.median(P[ok])
     idx = [i for i in np.flatnonzero(ok)[1:-1]

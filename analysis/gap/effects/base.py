@@ -18,6 +18,7 @@ A new effect is one new module in :mod:`analysis.gap.effects` defining a subclas
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
@@ -155,6 +156,15 @@ def whiten_fitted(fw: Forward, d: np.ndarray) -> np.ndarray:
     return np.nan_to_num((d[fitted] * fw.mask[fitted] * fw.W[fitted]).ravel())
 
 
+def summed_spectrum(x: np.ndarray, fs_hz: float, nfft: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Hann-windowed power spectrum of ``x`` (..., n), zero-padded to ``nfft`` (default 8x the
+    next power of two), summed over the leading axes: (frequencies Hz, power)."""
+    n = x.shape[-1]
+    nfft = nfft or 8 * int(2 ** math.ceil(math.log2(n)))
+    P = np.abs(np.fft.rfft(x * np.hanning(n), n=nfft, axis=-1)) ** 2
+    return np.fft.rfftfreq(nfft, 1 / fs_hz), P.reshape(-1, P.shape[-1]).sum(axis=0)
+
+
 def residual_peaks(fw: Forward, fit: Fit, windows: tuple[str, ...], n: int,
                    rows: list[int] | None = None, avoid_hz: list[float] = (),
                    min_hz: float = 0.0) -> list[float]:
@@ -167,9 +177,8 @@ def residual_peaks(fw: Forward, fit: Fit, windows: tuple[str, ...], n: int,
     for w in windows:
         sl = getattr(td.windows, w)
         r = np.nan_to_num(fit.resid[td.fitted][:, rows, sl] * fw.W[td.fitted][:, rows, sl])
-        P = (np.abs(np.fft.rfft(r * np.hanning(r.shape[-1]), n=n_fft, axis=-1)) ** 2).sum(axis=(0, 1))
+        f, P = summed_spectrum(r, td.fs_hz, n_fft)
         total = P if total is None else total + P
-    f = np.fft.rfftfreq(n_fft, 1 / td.fs_hz)
     ok = (f > max(min_hz, 2 * td.fs_hz / td.n_s)) & (f < td.lowpass_hz)
     for a in avoid_hz:
         ok &= np.abs(f - a) > 0.04 * a
