@@ -150,6 +150,8 @@ class Forward:
         self.sigma = np.asarray(sigma, dtype=float)
         self.params = base_params(td.rig)
         self.weight = 1.0 / self.sigma
+        self.cache: dict = {}
+        """What effects compute once per trial (a tone's gage patterns), keyed by the effect."""
         valid = td.valid
         self.mask = valid.copy()
         self.mask[:, :, : td.windows.early.start] = False

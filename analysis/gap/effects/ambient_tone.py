@@ -51,7 +51,7 @@ class AmbientTone(Effect):
     def _cols(self, fw, f_hz: float, wander: bool) -> np.ndarray:
         td = fw.td
         key = ("ambient_patterns", round(f_hz, 9), wander)
-        cache = fw.__dict__.setdefault("_effect_cache", {})
+        cache = fw.cache
         if key not in cache:
             model = build_model(td.rig)
             gain = fw._filter_gain(np.array([2j * math.pi * f_hz]))[0]
