@@ -213,54 +213,83 @@ class Forward:
     def unit_responses(self, ms: ModeSet, terms: list[Term] = (),
                        force: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Response of every impact per newton of peak force and its time derivative,
-        each (n_imp, n_seg, n_gages, n_s); impact ``j`` is zero before its onset.
-
-        After the ram lets go a mode is ``J(T) e^{lambda (t - T)}``: on a segment's uniform grid
-        that is one complex factor per mode times ``e^{lambda k dt}`` (computed once); only the
-        few samples inside a contact use the closed form of :func:`half_sine_response`."""
+        each (n_imp, n_seg, n_gages, n_s); impact ``j`` is zero before its onset."""
         td = self.td
         pulses = [(0.0, 1.0)]
         for t in terms:
             pulses += t.effect.pulses(t)
-        dt = 1.0 / td.fs_hz
-        k = np.arange(td.n_s) * dt
-        lam, T = ms.lam, ms.duration_s
-        E = np.exp(lam[:, None] * k[None, :])                      # (m, n_s)
-        JT = half_sine_response(lam, T, np.array([T]))[:, 0]
-        JT = np.where(ms.exp_only, 1.0, JT)
-        w = math.pi / T
+        basis = self.pulse_basis(ms)
+        E, JT = basis
+        T = ms.duration_s
         U = np.zeros((td.n_seg, td.n_seg, td.n_gages, td.n_s))
         dU = np.zeros_like(U)
+        free = []      # (impact, segment, modal factors) of pulses over before the segment began
         for j in range(td.n_seg):
             for s_ in range(j, td.n_seg):
                 for delay, ratio in pulses:
-                    tau0 = td.seg_t0_s[s_] - td.onsets_s[j] - delay   # time of sample 0 after contact
-                    if tau0 + k[-1] <= 0:
+                    d_j = delay[j] if np.ndim(delay) else delay      # one per impact, or shared
+                    tau0 = td.seg_t0_s[s_] - td.onsets_s[j] - d_j   # time of sample 0 after contact
+                    if tau0 + (td.n_s - 1) / td.fs_hz <= 0:
                         continue
-                    lag = np.where(ms.exp_only, tau0, tau0 - T)
-                    Z = (JT * np.exp(lam * lag))[:, None] * E            # valid for t >= T
-                    t = tau0 + k
-                    early = t < T
-                    if early.any():
-                        Z[:, early & (t <= 0)] = 0.0
-                        during = early & (t > 0)
-                        if during.any():
-                            Jd = half_sine_response(lam, T, t[during])
-                            Z[:, during] = np.where(ms.exp_only[:, None], Z[:, during], Jd)
-                    dZ = lam[:, None] * Z
-                    u = np.real(ms.A @ Z)
-                    du = np.real(ms.A @ dZ)
-                    inside = (t > 0) & (t < T)
-                    if inside.any():
-                        f = np.sin(w * t[inside])
-                        u[:, inside] += ms.feed[:, None] * f[None, :]
-                        du[:, inside] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
-                            f, (int((~ms.exp_only).sum()), f.size)))
+                    if tau0 >= T:
+                        lag = np.where(ms.exp_only, tau0, tau0 - T)
+                        free.append((j, s_, ratio * JT * np.exp(ms.lam * lag)))
+                        continue
+                    u, du = self.pulse_response(ms, tau0, basis)
                     U[j, s_] += ratio * u
                     dU[j, s_] += ratio * du
+        if free:
+            # a free decay is A diag(c) e^{lambda k dt}: all of them in one product
+            C = np.stack([c for _, _, c in free])                         # (P, m)
+            AC = ms.A[None, :, :] * C[:, None, :]                          # (P, g, m)
+            AC = np.concatenate([AC, AC * ms.lam]).reshape(-1, len(ms.lam))
+            # only the real part is wanted: Re(a) Re(E) - Im(a) Im(E), one real product
+            X = np.hstack([AC.real, -AC.imag]) @ np.vstack([E.real, E.imag])
+            X = X.reshape(2, len(free), td.n_gages, td.n_s)
+            for p_, (j, s_, _) in enumerate(free):
+                U[j, s_] += X[0, p_]
+                dU[j, s_] += X[1, p_]
         for t in terms:
             U, dU = t.effect.units(U, dU, ms, self, force, t)
         return U, dU
+
+    def pulse_basis(self, ms: ModeSet) -> tuple[np.ndarray, np.ndarray]:
+        """What every pulse of a mode set shares: ``e^{lambda k dt}`` on a segment's grid
+        (m, n_s) and each mode's state at the end of a contact ``J(T)`` (m,)."""
+        k = np.arange(self.td.n_s) / self.td.fs_hz
+        E = np.exp(ms.lam[:, None] * k[None, :])
+        JT = half_sine_response(ms.lam, ms.duration_s, np.array([ms.duration_s]))[:, 0]
+        return E, np.where(ms.exp_only, 1.0, JT)
+
+    def pulse_response(self, ms: ModeSet, tau0: float,
+                       basis: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """One half-sine contact of unit peak force at every gage on a segment's grid whose
+        sample 0 is ``tau0`` s after the contact began, and its time derivative, (n_gages, n_s).
+
+        After the ram lets go a mode is ``J(T) e^{lambda (t - T)}``: on the uniform grid that is
+        one complex factor per mode times ``e^{lambda k dt}``; only the few samples inside a
+        contact use the closed form of :func:`half_sine_response`."""
+        E, JT = basis if basis is not None else self.pulse_basis(ms)
+        lam, T = ms.lam, ms.duration_s
+        lag = np.where(ms.exp_only, tau0, tau0 - T)
+        Z = (JT * np.exp(lam * lag))[:, None] * E            # valid for t >= T
+        t = tau0 + np.arange(self.td.n_s) / self.td.fs_hz
+        early = t < T
+        if early.any():
+            Z[:, early & (t <= 0)] = 0.0
+            during = early & (t > 0)
+            if during.any():
+                Jd = half_sine_response(lam, T, t[during])
+                Z[:, during] = np.where(ms.exp_only[:, None], Z[:, during], Jd)
+        u = np.real(ms.A @ Z)
+        du = np.real(ms.A @ (lam[:, None] * Z))
+        inside = (t > 0) & (t < T)
+        if inside.any():
+            f = np.sin(math.pi / T * t[inside])
+            u[:, inside] += ms.feed[:, None] * f[None, :]
+            du[:, inside] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
+                f, (int((~ms.exp_only).sum()), f.size)))
+        return u, du
 
     def mode_unit(self, ms: ModeSet, i: int, j: int) -> np.ndarray:
         """Mode ``i``'s part of impact ``j``'s unit response after the contact,

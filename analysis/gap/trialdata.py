@@ -15,6 +15,7 @@ Shapes: ``x`` is (n_segments, n_gages, n_samples) in m/s^2, gages in DAQ channel
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -131,7 +132,10 @@ def strip_ambient(rig: Rig) -> Rig:
     return replace(rig, ambient=())
 
 
+@functools.lru_cache(maxsize=16)
 def _lowpass(corner_hz: float, fs_hz: float) -> np.ndarray:
+    """The decimation low-pass's second-order sections, designed once per corner and rate
+    (every modal prediction asks for its gains); callers must not write to them."""
     return scipy.signal.butter(DEC_ORDER, corner_hz, fs=fs_hz, output="sos")
 
 
