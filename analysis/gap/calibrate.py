@@ -139,7 +139,8 @@ def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.2,
     return out
 
 
-def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None) -> np.ndarray:
+def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None, terms: list[Term] = (), *,
+                       max_nfev: int = 200) -> np.ndarray:
     """Base constants moved so the model's modes ring where the data's do.
 
     A time-domain fit cannot find a frequency off by more than about one cycle over the decay
@@ -147,6 +148,10 @@ def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None) -> np.ndar
     stiffness-like constants (stock bending and torsion, hull frequencies, added mass) are
     first fitted to the spectrum peaks of the data (log frequency, with the same priors); the
     time-domain calibration starts from there.
+
+    With ``terms`` (an effect that changes the structure, e.g. adds a mode) the peaks are still
+    those near the base model's modes, each matched to the nearest mode of the model with the
+    terms on.
     """
     theta0 = np.zeros(len(fw.params)) if theta0 is None else np.asarray(theta0, float)
     ms = fw.modes(theta0)
@@ -165,17 +170,21 @@ def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None) -> np.ndar
         th = theta0.copy()
         th[free] = v
         try:
-            f = fw.modes(th).f_hz
+            f = fw.modes(th, terms).f_hz
         except (ValueError, np.linalg.LinAlgError):
             return np.full(ok.sum() + len(v), 1e3)
-        # each mode keeps its place in frequency order
-        fm = f[(f > 0)][comp] if len(f[f > 0]) > comp.max() else np.full(len(comp), np.nan)
+        f = f[f > 0]
+        if terms:
+            fm = np.full(len(comp), np.nan)
+            fm[ok] = f[np.argmin(np.abs(np.log(f[None, :] / f_obs[ok][:, None])), axis=1)]
+        else:   # each mode keeps its place in frequency order
+            fm = f[comp] if len(f) > comp.max() else np.full(len(comp), np.nan)
         r = np.log(fm[ok] / f_obs[ok]) / 1e-3     # frequencies read to ~0.1 %
         return np.concatenate([np.nan_to_num(r, nan=1e3), v / sd])
 
     import scipy.optimize
     res = scipy.optimize.least_squares(resid, theta0[free], bounds=(-bd, bd), method="trf",
-                                       x_scale=sd, max_nfev=200)
+                                       x_scale=sd, max_nfev=max_nfev)
     th = theta0.copy()
     th[free] = res.x
     return th

@@ -40,7 +40,8 @@ class Placement:
     continuous parameters; ``x0`` the effect switched off (or as good as), ``lo``/``hi`` bounds;
     ``probes`` (k, n_params) parameter values whose predictions span the effect's signature --
     the score test's projection on them gives the refit's start, ``x0 + sum c_k (probe_k - x0)``.
-    ``gages`` (report numbers),
+    ``starts`` (k, n_params) further refit starts to try where the effect's size is far from
+    linear (an extra mode's stiffness spans decades). ``gages`` (report numbers),
     ``mode_hz`` and ``window`` say where the effect would show.
     """
 
@@ -54,6 +55,7 @@ class Placement:
     gages: tuple[int, ...] = ()
     mode_hz: float | None = None
     window: str = "all"
+    starts: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -101,14 +103,21 @@ class Effect:
     def rig(self, rig: Rig, term: Term) -> Rig:
         return rig
 
+    @classmethod
+    def moves_modes(cls) -> bool:
+        """True when the term changes the structure (its ``rig``, ``model`` or ``modes`` hook):
+        the base constants that tune the modes must then be re-tuned with it."""
+        return any(getattr(cls, h) is not getattr(Effect, h) for h in ("rig", "model", "modes"))
+
     def model(self, model: StructuralModel, term: Term) -> StructuralModel:
         return model
 
     def modes(self, ms: ModeSet, fw: Forward, term: Term) -> ModeSet:
         return ms
 
-    def pulses(self, term: Term) -> list[tuple[float, float]]:
-        """Extra ram contacts of every impact: (delay s, peak ratio) pairs."""
+    def pulses(self, term: Term) -> list[tuple[float | np.ndarray, float]]:
+        """Extra ram contacts of every impact: (delay s, peak ratio) pairs; a delay may be an
+        array (n_seg,), one per impact."""
         return []
 
     def columns(self, fw: Forward, term: Term) -> np.ndarray | None:
@@ -130,6 +139,8 @@ def placement(key: dict, names: tuple[str, ...], units: tuple[str, ...], x0, lo,
               **where) -> Placement:
     """A :class:`Placement` from plain lists."""
     a = lambda v: np.atleast_1d(np.asarray(v, dtype=float))  # noqa: E731
+    if where.get("starts") is not None:
+        where["starts"] = np.atleast_2d(np.asarray(where["starts"], float))
     return Placement(key, names, units, a(x0), a(lo), a(hi), np.atleast_2d(np.asarray(probes, float)),
                      **where)
 

@@ -1,5 +1,8 @@
-"""A mode that is really two close ones (asymmetry of the rudder or its bearings): a share of the
-mode's response rings at a frequency ``split`` (relative) away, so the envelope beats."""
+"""A mode that is really two close ones (a tuned absorber, asymmetry of the rudder or its
+bearings): the mode's response rings at two frequencies ``split`` (relative) apart, ``share`` of
+it in the upper one, so the envelope beats. The two sit either side of the calibrated mode so
+that their amplitude-weighted mean frequency stays where the data's single peak put it:
+``f (1 - split share)`` and ``f (1 + split (1 - share))``. ``share = 0`` is the effect off."""
 
 from __future__ import annotations
 
@@ -7,7 +10,9 @@ import numpy as np
 
 from analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
 
-SPLITS = (-0.035, -0.02, -0.01, 0.01, 0.02, 0.035)
+SPLITS = (0.004, 0.007, 0.012, 0.02, 0.03, 0.045, 0.065)
+"""Separations the refit starts from: a beat's period is 1 / (f split), and a time-domain fit
+finds it only from within about half a beat over the decay."""
 
 
 class SplitMode(Effect):
@@ -15,21 +20,19 @@ class SplitMode(Effect):
     label = "closely spaced / split modes"
 
     def placements(self, fw, fit) -> list[Placement]:
-        out = []
-        for _, f in compared_modes(fw, fit):
-            for s in SPLITS:
-                lo, hi = (-0.08, -0.002) if s < 0 else (0.002, 0.08)
-                out.append(placement({"mode_hz": round(f, 3), "side": "below" if s < 0 else "above"},
-                                     ("split", "share"), ("1", "1"), [s, 0.0], [lo, 0.0], [hi, 0.9],
-                                     [[s, 0.1]], mode_hz=f, window="late"))
-        return out
+        return [placement({"mode_hz": round(f, 3)}, ("split", "share"), ("1", "1"), [0.02, 0.0],
+                          [0.002, 0.0], [0.1, 0.9], [[0.02, 0.3], [0.007, 0.3]], mode_hz=f, window="late",
+                          starts=[[s, 0.5] for s in SPLITS])
+                for _, f in compared_modes(fw, fit)]
 
     def modes(self, ms, fw, term: Term):
         i = int(np.argmin(np.abs(ms.f_hz - term.placement.mode_hz)))
         s, share = term.value("split"), term.value("share")
         out = ms.copy()
-        lam2 = ms.lam[i].real + 1j * ms.lam[i].imag * (1 + s)
-        out.lam = np.append(ms.lam, lam2)
+        lam = ms.lam[i]
+        out.lam = ms.lam.copy()
+        out.lam[i] = lam.real + 1j * lam.imag * (1 - s * share)
+        out.lam = np.append(out.lam, lam.real + 1j * lam.imag * (1 + s * (1 - share)))
         out.A = np.hstack([ms.A, share * ms.A[:, i:i + 1]])
         out.A[:, i] *= 1 - share
         out.dof = np.hstack([ms.dof, share * ms.dof[:, i:i + 1]])
