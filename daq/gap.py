@@ -112,8 +112,9 @@ def summary_lines(d: Diagnosis) -> list[str]:
            f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
            f"verdict: {d.verdict.upper()}"]
     zf = float(np.max(d.map_fit.z))
-    out.append(f"  largest map cell z = {zf:.1f} on the fitted impacts"
-               + (f", {float(np.max(d.map_held.z)):.1f} held out" if d.map_held else ""))
+    held = (f", {float(np.max(d.map_held.z)):.1f} held out; the largest the held-out impacts reproduce "
+            f"z = {d.z_detect:.1f}" if d.map_held else "")
+    out.append(f"  largest map cell z = {zf:.1f} on the fitted impacts{held}")
     cal = ", ".join(f"{p.name} x{math.exp(t):.3f}"
                     for p, t in zip(d.forward.params, d.base.theta, strict=True)
                     if abs(t) > 0.01)

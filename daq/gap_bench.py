@@ -88,6 +88,7 @@ def run_one(sc: dict, workdir: str) -> dict:
         "n_impacts_found": int(len(lt.onsets_s)), "n_impacts_true": int(len(tt.onsets_s)),
         "verdict": d.verdict, "named": d.best.name if d.best else None,
         "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
+        "zdetect": float(d.z_detect),
         "candidates": [c.record() | {"location": c.location} for c in d.candidates],
         "signatures": [s.effect.name for s in d.signatures],
         "closed_held": d.best.closed_held if d.best else None,
@@ -104,7 +105,12 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
 
     if "error" in r:
         return "none"
-    return choose(r["candidates"], r["zmax"] > z_gap, bic_min, min_closure) or "none"
+    return choose(r["candidates"], _z(r) > z_gap, bic_min, min_closure) or "none"
+
+
+def _z(r: dict) -> float:
+    """The trial's detection score (results stored before it existed: the map's largest)."""
+    return r.get("zdetect", r["zmax"])
 
 
 def _in_band(edges: list[float], f_true: float | None, f_rep: float | None) -> bool:
@@ -136,7 +142,7 @@ def size_thresholds(results: list[dict], z_gap: float) -> dict[str, float]:
         thr = math.inf
         for i in range(len(rs)):
             tail = rs[i:]
-            if np.mean([t["zmax"] > z_gap for t in tail]) >= 0.8:
+            if np.mean([_z(t) > z_gap for t in tail]) >= 0.8:
                 thr = rs[i]["size"]
                 break
         out[eff] = thr

@@ -6,19 +6,24 @@ Steps (:func:`diagnose`):
 1. **Calibrate** the nominal model's constants on the fitted impacts (every third impact is
    held out) -- :mod:`analysis.gap.calibrate`.
 2. **Where**: the gap map (gage x band x window) of the calibrated model, standardised by
-   repeated simulations of that model with the trial's own noise -- :mod:`analysis.gap.evidence`.
+   repeated simulations of that model with the trial's own noise and a model-form tolerance --
+   :mod:`analysis.gap.evidence`. From then on every fit weighs each gage x window by what it
+   tells beyond that tolerance (a rudder gage's small mode-shape error is thousands of noise
+   variances and would otherwise steer every refit); the constants are refitted so weighed.
 3. **Which**: every registered effect's signature score (score test, best placement, charged
    for the placements tried); the ``top_k`` strongest are refitted with the base constants free,
    and the two strongest together; each is charged for its extra parameters by the Bayesian
-   information criterion (``dBIC = -dchi2 / kappa + k ln N_eff``; ``kappa`` the coloured-noise
-   inflation the replicates measured).
-4. **How far**: the gap (energy beyond the noise expectation, summed over the map) before and
-   after, on the fitted and on the held-out impacts, with a bootstrap interval over gages.
+   information criterion, its chi-square gain deflated map cell by map cell by the replicates'
+   own excess there (``dBIC = -sum_cells dE / kappa_cell + k ln N + 2 ln n_placements``).
+4. **How far**: the gap (energy beyond the noise expectation, summed over the map cells that
+   both the fitted and the held-out impacts show) before and after, on the fitted and on the
+   held-out impacts, with a bootstrap interval over gages.
 
-The verdict is "no gap beyond noise" when no map cell reaches ``z_gap``; "explained" when the
-best candidate beats the calibrated model by ``bic_min`` and shrinks the held-out gap; otherwise
-"unexplained". Localisation comes from the data: the gages, band and window whose map cells
-shrink most when the effect is added.
+The verdict is "no gap beyond noise" unless a map cell of the fitted impacts reaches ``z_gap``
+where the held-out impacts' map also stands out (:func:`detection_score`); "explained" when a
+candidate beats the calibrated model by ``bic_min`` (:func:`choose`); otherwise "unexplained".
+Localisation comes from the data: the gages, band and window whose map cells shrink most when
+the effect is added.
 """
 
 from __future__ import annotations
@@ -32,18 +37,23 @@ import numpy as np
 
 from analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
 from analysis.gap.effects import EFFECTS
-from analysis.gap.effects.base import Term, whiten_fitted
+from analysis.gap.effects.base import Term
 from analysis.gap.evidence import (
+    GAP_CELL_Z,
     WINDOWS,
     GapMap,
     ScoreBasis,
     Signature,
     bands_for,
+    cell_chi2,
     cell_energies,
+    cell_inflation,
+    form_weights,
     gap_map,
     noise_model,
     replicate_residuals,
     signature_scores,
+    window_inflation,
 )
 from analysis.gap.forward import Forward
 from analysis.gap.trialdata import TrialData
@@ -131,11 +141,14 @@ class Diagnosis:
     forward: Forward
     seconds: float
     notes: list[str] = field(default_factory=list)
+    z_detect: float = float("nan")
+    """:func:`detection_score` of the calibrated model's maps, compared with ``z_gap``."""
 
     def to_json(self) -> dict:
         fw = self.forward
         return {
             "verdict": self.verdict,
+            "detection_z": round(self.z_detect, 2) if np.isfinite(self.z_detect) else None,
             "effect": self.best.name if self.best else None,
             "best": self.best.to_json() if self.best else None,
             "gap": {"fitted": round(self.gap_fit, 2), "held_out": round(self.gap_held, 2),
@@ -158,6 +171,16 @@ class Diagnosis:
         }
 
 
+def detection_score(fitted: GapMap, held: GapMap | None) -> float:
+    """The largest cell score of the fitted impacts' map among the cells that the held-out
+    impacts' map also shows beyond chance (z > ``GAP_CELL_Z``): a gap must reproduce on impacts
+    the calibration never saw -- a model-form effect is in every blow, a chance excursion of
+    the noise in one map is not. Without held-out impacts, the fitted map's largest."""
+    if held is None:
+        return float(fitted.z.max())
+    return float(np.max(np.where(held.z > GAP_CELL_Z, fitted.z, -np.inf)))
+
+
 def modes_of(cal: Calibration, top_hz: float) -> list[dict]:
     """Frequency and decrement of the compared modes of a calibrated model."""
     lam = cal.fit.modes.lam
@@ -169,10 +192,16 @@ def modes_of(cal: Calibration, top_hz: float) -> list[dict]:
     return out
 
 
-def _closure(before: GapMap, after: GapMap, rng: np.random.Generator) -> tuple[float, tuple[float, float]]:
+def _closure(before: GapMap, after: GapMap, rng: np.random.Generator,
+             other: GapMap | None = None) -> tuple[float, tuple[float, float]]:
     """Fraction of the gap closed -- the excess energy in the cells where the calibrated model
-    misses beyond chance, before and after -- with a 95 % bootstrap interval over gages."""
+    misses beyond chance, before and after -- with a 95 % bootstrap interval over gages.
+    With ``other`` (the map of the other impacts, held-out for fitted and vice versa) only the
+    cells both show count, when there are any: a cell one map shows by chance (a noise burst
+    before one blow) would otherwise weigh as much as the model's real miss."""
     cells = before.gap_cells()
+    if other is not None and (cells & other.gap_cells()).any():
+        cells = cells & other.gap_cells()
     b, a = before.excess_by_gage(cells), after.excess_by_gage(cells)
     tot = b.sum()
     if tot <= 0:
@@ -210,16 +239,23 @@ def _location(before: list[GapMap], after: list[GapMap], terms: list[Term]) -> d
             "effect_mode_hz": next((t.placement.mode_hz for t in terms if t.placement.mode_hz), None)}
 
 
+CLOSURE_TIE = 0.05
+"""Closures within this of each other are not told apart by closure (its bootstrap interval over
+gages is wider): the evidence decides."""
+
+
 def choose(records: list[dict], significant: bool, bic_min: float, min_closure: float) -> str | None:
     """The explanation to name, from candidates' ``name``, ``dbic``, ``dbic_marginal`` (pairs),
     ``closed_held`` and ``closed_fit``: ``None`` when there is no gap, ``"unexplained"`` when no
     candidate will do.
 
-    A candidate must beat the calibrated model by ``bic_min``; among those, the single effect
-    that closes most of the held-out gap (the fitted gap where none was held out) is named if
-    it closes at least ``min_closure`` -- an effect at one gage that fits its own gage well but
-    leaves the rest of a widespread gap open is not the cause. A pair replaces it only if its
-    second term earns ``bic_min`` on its own and closes 10 % more.
+    A candidate must beat the calibrated model by ``bic_min``; among those, the single effects
+    that close most of the held-out gap (the fitted gap where none was held out; within
+    ``CLOSURE_TIE`` of the most) are the contenders -- an effect at one gage that fits its own
+    gage well but leaves the rest of a widespread gap open is not the cause -- and of them the
+    one with the best evidence (lowest dBIC, which charges for parameters) is named if it closes
+    at least ``min_closure``. A pair replaces it only if its second term earns ``bic_min`` on
+    its own and closes 10 % more.
     """
     if not significant:
         return None
@@ -231,10 +267,13 @@ def choose(records: list[dict], significant: bool, bic_min: float, min_closure: 
         return float(v) if v is not None and np.isfinite(v) else 0.0
 
     ok = [r for r in records if r["dbic"] < -bic_min]
-    singles = sorted((r for r in ok if "+" not in r["name"]), key=lambda r: (-closed(r), r["dbic"]))
-    if not singles or closed(singles[0]) < min_closure:
+    singles = [r for r in ok if "+" not in r["name"]]
+    if not singles:
         return "unexplained"
-    best = singles[0]
+    top = max(closed(r) for r in singles)
+    best = min((r for r in singles if closed(r) >= top - CLOSURE_TIE), key=lambda r: r["dbic"])
+    if closed(best) < min_closure:
+        return "unexplained"
     for r in ok:
         if (r["name"].split("+")[0] == best["name"] and "+" in r["name"]
                 and r.get("dbic_marginal") is not None and r["dbic_marginal"] < -bic_min
@@ -243,21 +282,48 @@ def choose(records: list[dict], significant: bool, bic_min: float, min_closure: 
     return best["name"]
 
 
-def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = ()) -> Term:
-    """The refit's start for one effect: the best of the score test's estimate, the first probe
-    and the effect switched off (a linearised estimate can overshoot far into nonsense)."""
+def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = (),
+           theta_pre: np.ndarray | None = None, n_short: int = 3) -> tuple[Term, np.ndarray]:
+    """The refit's start for one effect, and the base constants to start with: the best of the
+    score test's estimate, the probes, the placement's own starts and the effect switched off
+    (a linearised estimate can overshoot far into nonsense).
+
+    For a term that changes the structure (``theta_pre`` given), each start is judged with the
+    constants re-tuned to the data's spectrum peaks with it on: the nominal tuning with the
+    term on rings a fraction of a percent off, which at these signal-to-noise ratios hides what
+    the term does. Where the placement has starts of its own (a stiffness spanning decades), the
+    ``n_short`` best are each refitted briefly with every constant free -- the calibration may
+    have hidden the effect in constants far from where the re-tuning leaves them (a blow's
+    duration, a damping) -- and the best of those is the start."""
     pl = sig.placement
     fitted = np.flatnonzero(fw.td.fitted)
-    best, cost = Term(sig.effect, pl, pl.x0), math.inf
-    for x in (sig.x0, pl.probes[0], pl.x0):
+    retune = theta_pre is not None and sig.effect.moves_modes()
+    starts = [sig.x0, *pl.probes, pl.x0, *(pl.starts if pl.starts is not None else [])]
+    tried: list[tuple[float, Term, np.ndarray]] = []
+    for x in starts:
         t = Term(sig.effect, pl, np.clip(x, pl.lo, pl.hi))
         try:
-            r = fw.whitened(fw.fit(base.theta, list(others) + [t]), fitted)
+            th = prefit_frequencies(fw, theta_pre, [*others, t], max_nfev=60) if retune else base.theta
+            r = fw.whitened(fw.fit(th, list(others) + [t]), fitted)
         except (ValueError, np.linalg.LinAlgError):
             continue
-        if r @ r < cost:
-            best, cost = t, float(r @ r)
-    return best
+        tried.append((float(r @ r), t, th))
+    if not tried:
+        return Term(sig.effect, pl, pl.x0), base.theta
+    tried.sort(key=lambda c: c[0])
+    if not retune or pl.starts is None:
+        return tried[0][1], tried[0][2]
+    best = None
+    for _, t, th in tried[:n_short]:
+        try:
+            cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jac)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if best is None or cal.chi2 + cal.prior < best.chi2 + best.prior:
+            best = cal
+    if best is None:
+        return tried[0][1], tried[0][2]
+    return best.terms[-1], best.theta
 
 
 def diagnose(td: TrialData, settings: Settings = Settings(),
@@ -281,11 +347,21 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
                                form_tol=settings.form_tol)
     bands = bands_for(base.fit.modes.f_hz, td.lowpass_hz)
     rep_cells = cell_energies(fw, reps, bands)
+    # from here on every fit weighs each gage x window by what it tells beyond the model's form
+    # tolerance (a rudder gage's 2 % mode-shape error is thousands of noise variances, and would
+    # otherwise steer every refit); the constants are refitted under those weights first, so
+    # that no candidate gains merely from the reweighting
+    W_old = fw.W
+    fw.set_weights(form_weights(fw, window_inflation(fw, rep_cells, td.fitted)))
+    # the whitened residual's Jacobian scales with the weights, sample by sample
+    ratio = (fw.W / W_old)[td.fitted].ravel()
+    base = calibrate(fw, theta0=base.theta, max_iter=settings.refit_iter, jac0=base.jac * ratio[:, None])
+    rep_cells = cell_energies(fw, reps, bands)
     held = ~td.fitted
     m_fit = gap_map(fw, base.fit.resid, rep_cells, bands, td.fitted)
     m_held = gap_map(fw, base.fit.resid, rep_cells, bands, held) if held.any() else None
-    zmax = max(m_fit.z.max(), m_held.z.max() if m_held else -np.inf)
-    significant = zmax > settings.z_gap
+    z_detect = detection_score(m_fit, m_held)
+    significant = z_detect > settings.z_gap
     notes = []
     if not held.any():
         notes.append("one impact only: nothing held out, closure on held-out impacts not measured")
@@ -297,6 +373,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
                      "separated (a steady tone and a slow decay at its frequency look alike); six impacts "
                      "or more are advised")
     basis = ScoreBasis(fw, base, reps)
+    kappa_cells = cell_inflation(fw, rep_cells, bands, td.fitted)
     names = settings.effects or tuple(EFFECTS)
     say(f"scoring {len(names)} candidate effects")
     sigs = sorted((signature_scores(fw, base, basis, EFFECTS[n]) for n in names),
@@ -310,11 +387,17 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         starts = [done[s.effect.name] for s in group if s.effect.name in done]
         ref = min(starts, key=lambda c: c.dbic).cal if starts else base
         known = [c.terms[0] for c in starts]
-        terms = [done[s.effect.name].terms[0] if s.effect.name in done else _start(fw, ref, s, known)
-                 for s in group]
         # a single starts from the constants the data's spectrum gave, before the calibration
         # hid what it cannot model in them (a tone becomes an undamped, detuned hull mode)
         theta0 = ref.theta.copy() if starts else theta_pre.copy()
+        terms = []
+        for s in group:
+            if s.effect.name in done:
+                terms.append(done[s.effect.name].terms[0])
+                continue
+            t, th = _start(fw, ref, s, known, None if starts else theta_pre)
+            terms.append(t)
+            theta0 = theta0 if starts else th
         say("refitting with " + " + ".join(t.effect.name for t in terms))
         try:
             # the term's own parameters first, constants held (a tone's frequency must be found
@@ -325,21 +408,22 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         except (ValueError, np.linalg.LinAlgError) as exc:
             notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
             return
-        kappa = basis.null_inflation(whiten_fitted(fw, cal.fit.pred - base.fit.pred))
         k = sum(len(t.x) for t in terms)
         # choosing where an effect sits among n placements costs ln n in evidence (2 ln n in BIC)
         look = sum(2 * math.log(max(1, s.n_placements)) for s in group)
-        # compare on the samples both fits keep (a clipping term leaves some out)
-        keep = np.isfinite(cal.fit.resid[td.fitted])
-        rb = base.fit.resid[td.fitted] * fw.W[td.fitted]
-        chi_b = float(np.sum(np.where(keep, rb, 0.0) ** 2)) + base.prior
-        dbic = -(chi_b - cal.chi2 - cal.prior) / kappa + k * math.log(n_eff) + look
+        # the gain in chi-square, cell by cell deflated by the replicates' own excess there (a
+        # gain where the model's form tolerance already spreads the replicates counts little),
+        # on the samples both fits keep (a clipping term leaves some out)
+        keep = np.isfinite(cal.fit.resid)
+        gain = (cell_chi2(fw, np.where(keep, base.fit.resid, np.nan), bands, td.fitted, kappa_cells)
+                - cell_chi2(fw, cal.fit.resid, bands, td.fitted, kappa_cells) + base.prior - cal.prior)
+        dbic = -gain + k * math.log(n_eff) + look
         # an effect read straight off the data (no template) counts by its detection score
         dbic -= sum(s.z ** 2 for s in group if s.k == 0 and np.isfinite(s.z))
         a_fit = gap_map(fw, cal.fit.resid, rep_cells, bands, td.fitted)
         a_held = gap_map(fw, cal.fit.resid, rep_cells, bands, held) if held.any() else None
-        c_fit, _ = _closure(m_fit, a_fit, rng)
-        c_held, ci = _closure(m_held, a_held, rng) if a_held else (float("nan"), (np.nan, np.nan))
+        c_fit, _ = _closure(m_fit, a_fit, rng, m_held)
+        c_held, ci = _closure(m_held, a_held, rng, m_fit) if a_held else (float("nan"), (np.nan, np.nan))
         loc = _location([m_fit] + ([m_held] if m_held else []), [a_fit] + ([a_held] if a_held else []),
                         cal.terms)
         cands.append(Candidate(cal.terms, cal, dbic, a_fit.excess(m_fit.gap_cells()),
@@ -366,9 +450,9 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
             # what the second term adds to the single it grew from, deflated along that direction
             first = next((x for x in cands if len(x.terms) == 1 and x.name == c.terms[0].effect.name), None)
             if first is not None:
-                d = whiten_fitted(fw, c.cal.fit.pred - first.cal.fit.pred)
-                gain = (first.cal.chi2 + first.cal.prior) - (c.cal.chi2 + c.cal.prior)
-                c.dbic_marginal = -gain / basis.null_inflation(d) + len(c.terms[1].x) * math.log(n_eff)
+                gain = (cell_chi2(fw, first.cal.fit.resid, bands, td.fitted, kappa_cells) + first.cal.prior
+                        - cell_chi2(fw, c.cal.fit.resid, bands, td.fitted, kappa_cells) - c.cal.prior)
+                c.dbic_marginal = -gain + len(c.terms[1].x) * math.log(n_eff)
     cands.sort(key=lambda c: c.dbic)
     pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
     best = next((c for c in cands if c.name == pick), None)
@@ -383,12 +467,12 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         cells2 = cell_energies(fw, reps2, bands)
         b_fit = gap_map(fw, base.fit.resid, cells2, bands, td.fitted)
         best.map_fit = gap_map(fw, best.cal.fit.resid, cells2, bands, td.fitted)
-        best.closed_fit, _ = _closure(b_fit, best.map_fit, rng)
+        b_held = gap_map(fw, base.fit.resid, cells2, bands, held) if held.any() else None
+        best.closed_fit, _ = _closure(b_fit, best.map_fit, rng, b_held)
         best.gap_fit, gap_fit = best.map_fit.excess(b_fit.gap_cells()), b_fit.excess()
-        if held.any():
-            b_held = gap_map(fw, base.fit.resid, cells2, bands, held)
+        if b_held is not None:
             best.map_held = gap_map(fw, best.cal.fit.resid, cells2, bands, held)
-            best.closed_held, best.closed_held_ci = _closure(b_held, best.map_held, rng)
+            best.closed_held, best.closed_held_ci = _closure(b_held, best.map_held, rng, b_fit)
             best.gap_held, gap_held = best.map_held.excess(b_held.gap_cells()), b_held.excess()
     return Diagnosis(verdict, best, cands, sigs, base, m_fit, m_held, gap_fit, gap_held,
-                     modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes)
+                     modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes, z_detect)

@@ -171,6 +171,60 @@ def cell_energies(fw: Forward, resid: np.ndarray, bands: Bands) -> np.ndarray:
     return np.stack(out, axis=-1)
 
 
+def _band_bins(fw: Forward, bands: Bands) -> np.ndarray:
+    """Expected whitened energy of unit white noise per band x window for one segment: the
+    spectral bins each band holds (one-sided, so interior bins count twice), (n_bands, 3)."""
+    out = np.zeros((len(bands.labels), len(WINDOWS)))
+    for w, name in enumerate(WINDOWS):
+        sl = getattr(fw.td.windows, name)
+        n = len(range(*sl.indices(fw.td.n_s)))
+        f = np.fft.rfftfreq(n, 1 / fw.td.fs_hz)
+        wt = np.full(len(f), 2.0)
+        wt[0] = 1.0
+        if n % 2 == 0:
+            wt[-1] = 1.0
+        idx = np.clip(np.searchsorted(bands.edges_hz, f, side="right") - 1, 0, len(bands.labels) - 1)
+        out[:, w] = np.bincount(idx, weights=wt, minlength=len(bands.labels))
+    return out
+
+
+def cell_inflation(fw: Forward, rep_cells: np.ndarray, bands: Bands, segments: np.ndarray) -> np.ndarray:
+    """Per gage x band x window, how much more energy the replicates of the calibrated model
+    carry than white noise would (>= 1): coloured noise and the model-form tolerance, where
+    they are. (n_gages, n_bands, 3)."""
+    seg = np.flatnonzero(np.asarray(segments)) if np.asarray(segments).dtype == bool else segments
+    mean = rep_cells[:, seg].sum(axis=1).mean(axis=0)
+    white = len(seg) * _band_bins(fw, bands)[None, :, :]
+    return np.maximum(1.0, mean / white)
+
+
+def window_inflation(fw: Forward, rep_cells: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Per gage x window, the replicates' energy against white noise's (>= 1), all bands
+    together, (n_gages, 3): how much the model's form tolerance and coloured noise add to each
+    gage's noise there -- a big-signal gage's form error dwarfs its noise."""
+    seg = np.flatnonzero(np.asarray(segments)) if np.asarray(segments).dtype == bool else segments
+    mean = rep_cells[:, seg].sum(axis=(1, 3)).mean(axis=0)
+    n = np.array([len(range(*getattr(fw.td.windows, w).indices(fw.td.n_s))) for w in WINDOWS])
+    return np.maximum(1.0, mean / (len(seg) * n[None, :]))
+
+
+def form_weights(fw: Forward, inflation: np.ndarray) -> np.ndarray:
+    """``fw.W`` with each gage x window deflated by ``sqrt(inflation)`` (n_gages, 3), so a fit
+    weighs every gage by what it can tell beyond the model's known form error."""
+    W = fw.W.copy()
+    for w, name in enumerate(WINDOWS):
+        W[:, :, getattr(fw.td.windows, name)] /= np.sqrt(inflation[:, w])[None, :, None]
+    return W
+
+
+def cell_chi2(fw: Forward, resid: np.ndarray, bands: Bands, segments: np.ndarray,
+              inflation: np.ndarray) -> float:
+    """A residual's whitened energy over ``segments``, each map cell deflated by its
+    ``inflation`` (:func:`cell_inflation`): a chi-square that charges the model for what it
+    misses beyond its known form error, cell by cell."""
+    return float(np.sum(cell_energies(fw, resid, bands)[segments].sum(axis=0) / inflation))
+
+
 @dataclass
 class GapMap:
     """Standardised discrepancy ``z`` (n_gages, n_bands, 3 windows) of a set of segments, with
