@@ -101,7 +101,7 @@ def run_one(sc: dict, workdir: str) -> dict:
 def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
     """The verdict's choice re-evaluated for other thresholds (for tuning): the diagnosis' own
     :func:`~analysis.gap.diagnose.choose` on the stored candidates."""
-    from analysis.gap.diagnose import choose
+    from analysis.gap.verdict import choose
 
     if "error" in r:
         return "none"

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.gap.diagnose import detection_score, diagnose
+from analysis.gap.diagnose import diagnose
 from analysis.gap.evidence import (
     GAP_CELL_Z,
     WINDOWS,
@@ -23,6 +23,7 @@ from analysis.gap.evidence import (
 from analysis.gap.forward import Forward
 from analysis.gap.trialdata import prepare
 from analysis.gap.truth import generate_trial
+from analysis.gap.verdict import detection_score
 from analysis.rig import load_rig
 
 RIGS = Path(__file__).resolve().parents[1] / "recordings" / "rigs"

@@ -39,8 +39,6 @@ from analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
 from analysis.gap.effects import EFFECTS
 from analysis.gap.effects.base import Term
 from analysis.gap.evidence import (
-    GAP_CELL_Z,
-    WINDOWS,
     GapMap,
     ScoreBasis,
     Signature,
@@ -57,6 +55,7 @@ from analysis.gap.evidence import (
 )
 from analysis.gap.forward import Forward
 from analysis.gap.trialdata import TrialData
+from analysis.gap.verdict import choose, closure, detection_score, location
 
 
 @dataclass(frozen=True)
@@ -171,16 +170,6 @@ class Diagnosis:
         }
 
 
-def detection_score(fitted: GapMap, held: GapMap | None) -> float:
-    """The largest cell score of the fitted impacts' map among the cells that the held-out
-    impacts' map also shows beyond chance (z > ``GAP_CELL_Z``): a gap must reproduce on impacts
-    the calibration never saw -- a model-form effect is in every blow, a chance excursion of
-    the noise in one map is not. Without held-out impacts, the fitted map's largest."""
-    if held is None:
-        return float(fitted.z.max())
-    return float(np.max(np.where(held.z > GAP_CELL_Z, fitted.z, -np.inf)))
-
-
 def modes_of(cal: Calibration, top_hz: float) -> list[dict]:
     """Frequency and decrement of the compared modes of a calibrated model."""
     lam = cal.fit.modes.lam
@@ -190,96 +179,6 @@ def modes_of(cal: Calibration, top_hz: float) -> list[dict]:
         if 0 < f < top_hz:
             out.append({"f_hz": round(float(f), 4), "delta": round(float(-2 * math.pi * v.real / v.imag), 5)})
     return out
-
-
-def _closure(before: GapMap, after: GapMap, rng: np.random.Generator,
-             other: GapMap | None = None) -> tuple[float, tuple[float, float]]:
-    """Fraction of the gap closed -- the excess energy in the cells where the calibrated model
-    misses beyond chance, before and after -- with a 95 % bootstrap interval over gages.
-    With ``other`` (the map of the other impacts, held-out for fitted and vice versa) only the
-    cells both show count, when there are any: a cell one map shows by chance (a noise burst
-    before one blow) would otherwise weigh as much as the model's real miss."""
-    cells = before.gap_cells()
-    if other is not None and (cells & other.gap_cells()).any():
-        cells = cells & other.gap_cells()
-    b, a = before.excess_by_gage(cells), after.excess_by_gage(cells)
-    tot = b.sum()
-    if tot <= 0:
-        return float("nan"), (float("nan"), float("nan"))
-    frac = 1 - a.sum() / tot
-    idx = rng.integers(0, len(b), size=(400, len(b)))
-    bs = b[idx].sum(axis=1)
-    fr = 1 - a[idx].sum(axis=1) / np.where(bs > 0, bs, np.nan)
-    lo, hi = np.nanpercentile(fr, [2.5, 97.5])
-    return float(frac), (float(lo), float(hi))
-
-
-def _location(before: list[GapMap], after: list[GapMap], terms: list[Term]) -> dict:
-    drop = sum(np.maximum(b.z, 0) - np.maximum(a.z, 0) for b, a in zip(before, after, strict=True))
-    gnums = before[0].gage_numbers
-    by_gage = drop.sum(axis=(1, 2))
-    top = by_gage.max()
-    gages = [gnums[i] for i in np.argsort(-by_gage) if top > 0 and by_gage[i] >= 0.5 * top]
-    by_band = drop.sum(axis=(0, 2))
-    by_win = drop.sum(axis=(0, 1))
-    b = int(np.argmax(by_band))
-    bands = before[0].bands
-    # an effect with a frequency of its own (a tone, an extra mode) says which band it is in
-    f_own = [t.value("f_hz") if "f_hz" in t.placement.names else t.placement.mode_hz for t in terms]
-    f_own = [f for f in f_own if f]
-    if f_own:
-        b = int(np.searchsorted(bands.edges_hz, f_own[0], side="right")) - 1
-        b = int(np.clip(b, 0, len(bands.labels) - 1))
-    own = [g for t in terms for g in t.placement.gages]
-    # a discrepancy already there before the blow is the hull's own, not the blow's: where a
-    # quarter or more of the shrinkage is in the pre window, that is where it is localised
-    w = 0 if by_win[0] >= 0.25 * by_win.max() > 0 else int(np.argmax(by_win))
-    return {"gages": gages[:6], "band": bands.labels[b], "band_hz": round(float(bands.center_hz[b]), 3),
-            "window": WINDOWS[w], "effect_gages": own,
-            "effect_mode_hz": next((t.placement.mode_hz for t in terms if t.placement.mode_hz), None)}
-
-
-CLOSURE_TIE = 0.05
-"""Closures within this of each other are not told apart by closure (its bootstrap interval over
-gages is wider): the evidence decides."""
-
-
-def choose(records: list[dict], significant: bool, bic_min: float, min_closure: float) -> str | None:
-    """The explanation to name, from candidates' ``name``, ``dbic``, ``dbic_marginal`` (pairs),
-    ``closed_held`` and ``closed_fit``: ``None`` when there is no gap, ``"unexplained"`` when no
-    candidate will do.
-
-    A candidate must beat the calibrated model by ``bic_min``; among those, the single effects
-    that close most of the held-out gap (the fitted gap where none was held out; within
-    ``CLOSURE_TIE`` of the most) are the contenders -- an effect at one gage that fits its own
-    gage well but leaves the rest of a widespread gap open is not the cause -- and of them the
-    one with the best evidence (lowest dBIC, which charges for parameters) is named if it closes
-    at least ``min_closure``. A pair replaces it only if its second term earns ``bic_min`` on
-    its own and closes 10 % more.
-    """
-    if not significant:
-        return None
-
-    def closed(r: dict) -> float:
-        v = r.get("closed_held")
-        if v is None or not np.isfinite(v):
-            v = r.get("closed_fit")
-        return float(v) if v is not None and np.isfinite(v) else 0.0
-
-    ok = [r for r in records if r["dbic"] < -bic_min]
-    singles = [r for r in ok if "+" not in r["name"]]
-    if not singles:
-        return "unexplained"
-    top = max(closed(r) for r in singles)
-    best = min((r for r in singles if closed(r) >= top - CLOSURE_TIE), key=lambda r: r["dbic"])
-    if closed(best) < min_closure:
-        return "unexplained"
-    for r in ok:
-        if (r["name"].split("+")[0] == best["name"] and "+" in r["name"]
-                and r.get("dbic_marginal") is not None and r["dbic_marginal"] < -bic_min
-                and closed(r) >= closed(best) + 0.1):
-            best = r
-    return best["name"]
 
 
 def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = (),
@@ -422,9 +321,9 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         dbic -= sum(s.z ** 2 for s in group if s.k == 0 and np.isfinite(s.z))
         a_fit = gap_map(fw, cal.fit.resid, rep_cells, bands, td.fitted)
         a_held = gap_map(fw, cal.fit.resid, rep_cells, bands, held) if held.any() else None
-        c_fit, _ = _closure(m_fit, a_fit, rng, m_held)
-        c_held, ci = _closure(m_held, a_held, rng, m_fit) if a_held else (float("nan"), (np.nan, np.nan))
-        loc = _location([m_fit] + ([m_held] if m_held else []), [a_fit] + ([a_held] if a_held else []),
+        c_fit, _ = closure(m_fit, a_fit, rng, m_held)
+        c_held, ci = closure(m_held, a_held, rng, m_fit) if a_held else (float("nan"), (np.nan, np.nan))
+        loc = location([m_fit] + ([m_held] if m_held else []), [a_fit] + ([a_held] if a_held else []),
                         cal.terms)
         cands.append(Candidate(cal.terms, cal, dbic, a_fit.excess(m_fit.gap_cells()),
                                a_held.excess(m_held.gap_cells()) if a_held else 0.0,
@@ -468,11 +367,11 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         b_fit = gap_map(fw, base.fit.resid, cells2, bands, td.fitted)
         best.map_fit = gap_map(fw, best.cal.fit.resid, cells2, bands, td.fitted)
         b_held = gap_map(fw, base.fit.resid, cells2, bands, held) if held.any() else None
-        best.closed_fit, _ = _closure(b_fit, best.map_fit, rng, b_held)
+        best.closed_fit, _ = closure(b_fit, best.map_fit, rng, b_held)
         best.gap_fit, gap_fit = best.map_fit.excess(b_fit.gap_cells()), b_fit.excess()
         if b_held is not None:
             best.map_held = gap_map(fw, best.cal.fit.resid, cells2, bands, held)
-            best.closed_held, best.closed_held_ci = _closure(b_held, best.map_held, rng, b_fit)
+            best.closed_held, best.closed_held_ci = closure(b_held, best.map_held, rng, b_fit)
             best.gap_held, gap_held = best.map_held.excess(b_held.gap_cells()), b_held.excess()
     return Diagnosis(verdict, best, cands, sigs, base, m_fit, m_held, gap_fit, gap_held,
                      modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes, z_detect)
