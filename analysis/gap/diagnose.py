@@ -202,7 +202,7 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     for x in starts:
         t = Term(sig.effect, pl, np.clip(x, pl.lo, pl.hi))
         try:
-            th = prefit_frequencies(fw, theta_pre, [*others, t], max_nfev=60) if retune else base.theta
+            th = prefit_frequencies(fw, theta_pre, [*others, t], max_nfev=24) if retune else base.theta
             r = fw.whitened(fw.fit(th, list(others) + [t]), fitted)
         except (ValueError, np.linalg.LinAlgError):
             continue
