@@ -102,3 +102,39 @@ def test_bounce_is_named_with_each_blows_delay(trial):
     step = 1 / td.fs_hz
     np.testing.assert_allclose(found, true, atol=step)
     assert term.value("ratio") == pytest.approx(0.3 * 0.5, rel=0.2)   # 0.3 x size (truth_effects)
+
+
+def test_the_refit_steps_stay_in_their_trust_region_and_still_converge():
+    """A beat's phase makes a Gauss-Newton step land far beyond where its linearisation holds;
+    the refit's steps are capped at ``max_step`` scales. On a decaying two-tone signal (the
+    split mode's shape: frequencies f (1 -+ s/2), 8 Hz, 4 s, noise 1e-3 of the amplitude) the
+    split is found from a start 40 % off it, and no step is longer than the cap."""
+    from analysis.gap.calibrate import levenberg_marquardt
+
+    t = np.arange(0.0, 4.0, 1 / 256)
+    rng = np.random.default_rng(7)
+
+    def signal(x: np.ndarray) -> np.ndarray:
+        f, s, zeta = 8.0, x[0], x[1]
+        env = np.exp(-2 * np.pi * f * zeta * t)
+        return env * (np.sin(2 * np.pi * f * (1 - s / 2) * t) + np.sin(2 * np.pi * f * (1 + s / 2) * t))
+
+    truth = np.array([0.05, 0.004])
+    y = signal(truth) + 1e-3 * rng.standard_normal(t.size)
+    seen: list[np.ndarray] = []
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        seen.append(x.copy())
+        return (signal(x) - y) / 1e-3
+
+    scale = np.array([0.01, 0.002])
+    res = levenberg_marquardt(fun, np.array([0.03, 0.01]), np.array([0.002, 0.0]), np.array([0.1, 0.05]),
+                              scale, max_iter=100, max_step=3.0)
+    # noise 1e-3 on 1024 samples of an O(1) signal: the split is known to ~1e-5; 1e-4 is 10 sd
+    assert res.x[0] == pytest.approx(truth[0], abs=1e-4)
+    assert res.x[1] == pytest.approx(truth[1], abs=1e-4)
+    # every trial point is the current one (an earlier trial point) plus a step of at most the
+    # cap, or plus a difference step (rel_step 1e-3 of a scale)
+    for k in range(1, len(seen)):
+        nearest = min(np.linalg.norm((seen[k] - p) / scale) for p in seen[:k])
+        assert nearest <= 3.0 + 1e-6, (k, nearest)

@@ -115,19 +115,24 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
     return Calibration(th, ts, fit, float(r @ r), prior, np.asarray(jac), len(res.x), res.nfev)
 
 
-def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.2,
+def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.35,
                    prominence: float = 20.0) -> np.ndarray:
-    """Where the data's decays actually ring near each of ``f_guess`` (Hz): the peak of the
-    summed, whitened, Hann-windowed and zero-padded spectrum of the fitted impacts' decay
-    windows within +-``rel``, interpolated (parabola on log power); NaN where no peak stands
+    """Where the data's decays actually ring near each of ``f_guess`` (Hz, ascending): the peak
+    of the summed, whitened, Hann-windowed and zero-padded spectrum of the fitted impacts'
+    decay windows within +-``rel`` and no nearer a neighbouring guess than the geometric mean
+    of the two (a stiffness error of a factor two moves a mode 30 %; the neighbour's peak is
+    the neighbour's), interpolated (parabola on log power); NaN where no peak stands
     ``prominence`` times above the median of that range."""
     td = fw.td
     a, b = td.windows.early.start, td.n_s
     r = np.nan_to_num(td.x[td.fitted][:, :, a:b] * fw.W[td.fitted][:, :, a:b])
     f, P = summed_spectrum(r, td.fs_hz)
     out = np.full(len(f_guess), np.nan)
-    for k, fg in enumerate(f_guess):
-        sel = np.flatnonzero((f > fg * (1 - rel)) & (f < fg * (1 + rel)))
+    g = np.asarray(f_guess, float)
+    for k, fg in enumerate(g):
+        lo = max([fg * (1 - rel)] + [np.sqrt(fg * x) for x in g if x < fg])
+        hi = min([fg * (1 + rel)] + [np.sqrt(fg * x) for x in g if x > fg])
+        sel = np.flatnonzero((f > lo) & (f < hi))
         if len(sel) < 5:
             continue
         i = sel[np.argmax(P[sel])]
@@ -199,12 +204,14 @@ class _Result:
 
 def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, *,
                         max_iter: int = 60, J0: np.ndarray | None = None, rel_step: float = 1e-3,
-                        tol: float = 1e-6) -> _Result:
+                        tol: float = 1e-6, max_step: float = 3.0) -> _Result:
     """Bounded Levenberg-Marquardt on ``sum(fun(x)^2)`` with Broyden updates of the Jacobian.
 
     The Jacobian is differenced once (forward, step ``rel_step * scale``; columns given in
     ``J0`` are taken as they are -- non-zero columns only), then corrected by Broyden's rank-one
-    update after every step, and differenced afresh when steps fail or stall. Each iteration
+    update after every step, and differenced afresh when steps fail or stall. No step is longer
+    than ``max_step`` in units of ``scale`` (for the base constants their prior's sd, for an
+    effect's parameters a tenth of their range). Each iteration
     thus costs one prediction instead of one per parameter; convergence (relative decrease
     below ``tol``) is only accepted on a freshly differenced Jacobian, so a fit and its refit
     with an effect end equally converged and their chi-square difference is the effect's.
@@ -244,6 +251,12 @@ def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sca
         g = Js.T @ r
         d = np.sqrt(np.maximum(np.diag(A), 1e-30))
         step = -np.linalg.solve(A + mu * np.diag(d**2) + 1e-12 * np.eye(len(x)), g) * scale
+        # a trust region: no step longer than ``max_step`` scales (a Gauss-Newton step across a
+        # beat's phase or a mode's crossing lands where the linearisation means nothing, and
+        # from there back off only slowly)
+        n_step = float(np.linalg.norm(step / scale))
+        if n_step > max_step:
+            step *= max_step / n_step
         x_new = np.clip(x + step, lo, hi)
         step = x_new - x
         if not np.any(step):
