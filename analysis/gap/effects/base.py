@@ -109,6 +109,13 @@ class Effect:
         the base constants that tune the modes must then be re-tuned with it."""
         return any(getattr(cls, h) is not getattr(Effect, h) for h in ("rig", "model", "modes"))
 
+    @classmethod
+    def retunes(cls) -> bool:
+        """True when the constants that tune the modes must be re-tuned to the data's spectrum
+        with the term on before its refit starts (an extra mode pulls the others): by default,
+        when it changes the structure."""
+        return cls.moves_modes()
+
     def model(self, model: StructuralModel, term: Term) -> StructuralModel:
         return model
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement, residual_peaks
 from analysis.rig import HullMode
 
@@ -22,6 +24,7 @@ class _ExtraMode(Effect):
     """Names of the free ratios of the other two stock-end motions to the main one (a local hull
     structure rarely sways without rocking): each adds a parameter, rad per m."""
     above_band: bool = False
+    scan_f: bool = False
     """Also place the mode above the compared band, where only its static compliance shows."""
 
     def _k_ref(self, rig) -> float:
@@ -37,6 +40,10 @@ class _ExtraMode(Effect):
         probes += [[f, 2.0] + [0.3 * (i == j) for i in range(nt)] for j in range(nt)]
         # the stiffness spans decades and acts far from linearly: start the refit from a scan
         starts = [[g, L] + [0.0] * nt for g in fs for L in (0.0, 0.5, 1.0, 1.5, 2.5, 3.5)]
+        if self.scan_f:
+            # a heavy tiller's own frequency may sit between the residual's peaks and the band's
+            # top (a soft gear pulls the torsion mode 40 % down and rings itself far from both)
+            starts += [[g, L] + [0.0] * nt for g in np.geomspace(lo, hi, 6)[1:-1] for L in (-0.3, 0.3)]
         return placement({"f_hz": round(f, 3)}, ("f_hz", "log10_k_ratio") + self.tilts,
                          ("Hz", "log10 x stock") + ("rad/m",) * nt,
                          [f, 6.0] + [0.0] * nt, [lo, -1.0] + [-1.0] * nt, [hi, 6.0] + [1.0] * nt, probes,
@@ -74,6 +81,7 @@ class Tiller(_ExtraMode):
     bodies = ("rudder", "stock")
     moves_hull = False
     above_band = True
+    scan_f = True
 
     def _k_ref(self, rig) -> float:
         return rig.stock.G_Pa * rig.stock.J_m4 / rig.stock.torsion_length_m

@@ -19,6 +19,12 @@ class SplitMode(Effect):
     name = "split_mode"
     label = "closely spaced / split modes"
 
+    @classmethod
+    def retunes(cls) -> bool:
+        # the halves keep the calibrated mode's weighted mean frequency: re-tuning the constants
+        # to the spectrum with the term on would pull them off the calibration that was right
+        return False
+
     def placements(self, fw, fit) -> list[Placement]:
         return [placement({"mode_hz": round(f, 3)}, ("split", "share"), ("1", "1"), [0.02, 0.0],
                           [0.002, 0.0], [0.1, 0.9], [[0.02, 0.3], [0.007, 0.3]], mode_hz=f, window="late",
