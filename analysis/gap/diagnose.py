@@ -196,7 +196,7 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     duration, a damping) -- and the best of those is the start."""
     pl = sig.placement
     fitted = np.flatnonzero(fw.td.fitted)
-    retune = theta_pre is not None and sig.effect.moves_modes()
+    retune = theta_pre is not None and sig.effect.retunes()
     starts = [sig.x0, *pl.probes, pl.x0, *(pl.starts if pl.starts is not None else [])]
     tried: list[tuple[float, Term, np.ndarray]] = []
     for x in starts:
@@ -298,12 +298,23 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
             terms.append(t)
             theta0 = theta0 if starts else th
         say("refitting with " + " + ".join(t.effect.name for t in terms))
-        try:
+
+        def refit(terms: list[Term], theta0: np.ndarray) -> Calibration:
             # the term's own parameters first, constants held (a tone's frequency must be found
             # to a fraction of a cycle over the trial before anything else can move), then all
             if any(len(t.x) for t in terms if t.effect.name not in done):
                 terms = calibrate(fw, terms, theta0=theta0, free_base=False, max_iter=15).terms
-            cal = calibrate(fw, terms, theta0=theta0, max_iter=settings.refit_iter, jac0=base.jac)
+            return calibrate(fw, terms, theta0=theta0, max_iter=settings.refit_iter, jac0=base.jac)
+
+        try:
+            cal = refit(terms, theta0)
+            if not starts and cal.chi2 + cal.prior > base.chi2 + base.prior:
+                # the re-tuned start led somewhere worse than the calibration itself: again
+                # from the calibrated constants, the term where its score test put it
+                s = group[0]
+                alt = refit([Term(s.effect, s.placement, np.clip(s.x0, s.placement.lo, s.placement.hi))],
+                            base.theta)
+                cal = min(cal, alt, key=lambda c: c.chi2 + c.prior)
         except (ValueError, np.linalg.LinAlgError) as exc:
             notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
             return
