@@ -9,7 +9,8 @@ import pytest
 
 from daq.gap_bench import _located, scenarios, score
 
-SUBSET = [("none", 1001), ("hull_coupling", 2001), ("gage_alignment", 9005), ("time_skew", 11005)]
+SUBSET = [("none", 1001), ("hull_coupling", 2001), ("tiller", 5001), ("gage_alignment", 9005),
+          ("time_skew", 11005)]
 
 
 @pytest.fixture(scope="module")
@@ -36,5 +37,5 @@ def test_subset_is_diagnosed(results):
 def test_score_counts_the_subset(results):
     thr = {e: 0.0 for e, _ in SUBSET}
     s = score(results, thr, 5.0, 10.0, 0.0)
-    assert s["top1"] == 1.0 and s["false_alarms"] == 0.0 and s["n_above"] == 3
+    assert s["top1"] == 1.0 and s["false_alarms"] == 0.0 and s["n_above"] == 4
     assert s["confusion"]["time_skew"]["time_skew"] == 1
