@@ -198,7 +198,12 @@ def score(results: list[dict], thresholds: dict[str, float], z_gap: float, bic_m
 
 
 def _jsonable(thr: dict[str, float]) -> dict[str, float | None]:
+    """Thresholds for JSON: an effect never detected (inf) as null."""
     return {k: (v if np.isfinite(v) else None) for k, v in thr.items()}
+
+
+def _from_json(sizes: dict[str, float | None]) -> dict[str, float]:
+    return {k: (math.inf if v is None else v) for k, v in sizes.items()}
 
 
 def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
@@ -285,8 +290,8 @@ def run_benchmark(out: Path, *, per_class: int = 20, dev: bool = False, jobs: in
         if not THRESHOLDS.exists():
             raise FileNotFoundError(f"{THRESHOLDS} missing: run 'ramdaq gap benchmark --dev' first")
         saved = json.loads(THRESHOLDS.read_text())
-        thr = {k: (math.inf if v is None else v) for k, v in saved["sizes"].items()}
-        lax = {k: (math.inf if v is None else v) for k, v in saved.get("sizes_lax", {}).items()}
+        thr = _from_json(saved["sizes"])
+        lax = _from_json(saved.get("sizes_lax", {}))
     s = score(results, thr, st.z_gap, st.bic_min, st.min_closure)
     s_lax = score(results, lax, st.z_gap, st.bic_min, st.min_closure) if lax else None
     (out / f"{name}_score.json").write_text(json.dumps(s | {"lax": s_lax}, indent=1, default=float))

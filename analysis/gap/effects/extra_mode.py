@@ -24,8 +24,9 @@ class _ExtraMode(Effect):
     """Names of the free ratios of the other two stock-end motions to the main one (a local hull
     structure rarely sways without rocking): each adds a parameter, rad per m."""
     above_band: bool = False
-    scan_f: bool = False
     """Also place the mode above the compared band, where only its static compliance shows."""
+    scan_f: bool = False
+    """Also start refits from frequencies spread between the lowest start and the upper bound."""
 
     def _k_ref(self, rig) -> float:
         raise NotImplementedError
