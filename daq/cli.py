@@ -202,7 +202,7 @@ def cmd_gap(args: argparse.Namespace) -> int:
 
         out = Path(args.out or "gap_benchmark")
         return run_benchmark(out, per_class=args.per_class, dev=args.dev, jobs=args.jobs,
-                             rescore=args.rescore, progress=lambda m: print(m, flush=True))
+                             rescore=args.rescore, check=args.check, progress=lambda m: print(m, flush=True))
     from daq.gap import run_gap, summary_lines, write_report
 
     src = Path(args.file)
@@ -371,6 +371,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every Nth impact is held out of the calibration (default 3)")
     gp.add_argument("--per-class", type=int, default=20, help="benchmark: scenarios per effect class")
     gp.add_argument("--dev", action="store_true", help="benchmark: the development seeds (for tuning)")
+    gp.add_argument("--check", action="store_true",
+                    help="benchmark: a second development seed set, scored with the first set's thresholds")
     gp.add_argument("--jobs", type=int, default=2, help="benchmark: worker processes (default 2)")
     gp.add_argument("--rescore", action="store_true",
                     help="benchmark: score the results stored in --out again instead of running")

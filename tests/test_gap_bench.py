@@ -5,6 +5,7 @@ A regression guard for the whole chain (the benchmark's figures come from its ow
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from daq.gap_bench import _located, scenarios, score
@@ -39,3 +40,36 @@ def test_score_counts_the_subset(results):
     s = score(results, thr, 5.0, 10.0, 0.0)
     assert s["top1"] == 1.0 and s["false_alarms"] == 0.0 and s["n_above"] == 4
     assert s["confusion"]["time_skew"]["time_skew"] == 1
+
+
+def test_pod_threshold_recovers_a_known_pod_curve():
+    """The hit/miss a90 of trials drawn from a known logistic POD curve, within four of its
+    asymptotic standard errors (from the Fisher information at the true curve; a false failure
+    once in ~16 000 seeds)."""
+    from daq.gap_bench import pod_threshold
+
+    b0, b1 = 2.0, 3.0
+    a = np.geomspace(0.01, 10.0, 2000)
+    x = np.log(a)
+    p = 1 / (1 + np.exp(-(b0 + b1 * x)))
+    hits = np.random.default_rng(7).random(a.size) < p
+    logit90 = np.log(0.9 / 0.1)
+    true = (logit90 - b0) / b1
+    w = p * (1 - p)
+    info = np.array([[w.sum(), (w * x).sum()], [(w * x).sum(), (w * x * x).sum()]])
+    g = np.array([-1 / b1, -(logit90 - b0) / b1**2])
+    se = float(np.sqrt(g @ np.linalg.solve(info, g)))
+    assert abs(np.log(pod_threshold(a, hits, 0.9)) - true) < 4 * se
+
+
+def test_pod_threshold_edge_cases():
+    from daq.gap_bench import pod_threshold
+
+    a = np.array([0.1, 0.2, 0.5, 1.0, 2.0])
+    # complete separation: the step lies between the largest miss and the smallest hit
+    assert pod_threshold(a, np.array([0, 0, 1, 1, 1], bool)) == 0.5
+    # every trial a hit: not resolved below the smallest size tried
+    assert pod_threshold(a, np.ones(5, bool)) == 0.1
+    assert pod_threshold(a, np.zeros(5, bool)) == np.inf
+    # detection falling with size, or never reaching 90 % within the sizes tried
+    assert pod_threshold(a, np.array([1, 1, 0, 1, 0], bool)) == np.inf
