@@ -138,3 +138,26 @@ def test_the_refit_steps_stay_in_their_trust_region_and_still_converge():
     for k in range(1, len(seen)):
         nearest = min(np.linalg.norm((seen[k] - p) / scale) for p in seen[:k])
         assert nearest <= 3.0 + 1e-6, (k, nearest)
+
+
+def test_a_pulse_long_before_its_contact_stays_finite_and_exact(trial):
+    """A strongly damped mode's response to a contact that begins long after a segment's start
+    (a second hit; an overdamped calibrated hull mode) is J(T) e^{lambda (t - T)} after the
+    contact and nothing before it -- not an overflow of e^{-lambda lag} at the segment's start."""
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    ms = fw.fit(np.zeros(len(fw.params))).modes.copy()
+    ms.lam[0] = -3000.0 + 1j * ms.lam[0].imag          # |lambda lag| = 1500 at lag -0.5 s
+    E, JT = fw.pulse_basis(ms)
+    T = ms.duration_s
+    for tau0 in (-0.5, -0.01, 0.02):
+        u, _ = fw.pulse_response(ms, tau0, (E, JT))
+        t = tau0 + np.arange(td.n_s) / td.fs_hz
+        after = t >= T + 1e-9
+        lag = np.where(ms.exp_only[:, None], t[None, after], t[None, after] - T)
+        direct = np.real(ms.A @ (JT[:, None] * np.exp(ms.lam[:, None] * lag)))
+        assert np.all(np.isfinite(u))
+        assert np.all(u[:, t <= 0] == 0)
+        # the same sums in another order: rounding only (1e-9 of the largest response)
+        assert np.max(np.abs(u[:, after] - direct)) <= 1e-9 * np.max(np.abs(direct))
+

@@ -272,7 +272,16 @@ class Forward:
         E, JT = basis if basis is not None else self.pulse_basis(ms)
         lam, T = ms.lam, ms.duration_s
         lag = np.where(ms.exp_only, tau0, tau0 - T)
-        Z = (JT * np.exp(lam * lag))[:, None] * E            # valid for t >= T
+        # valid for t >= T (and t >= 0 where exp_only); a sample before then is overwritten
+        # below, so a mode whose factor for sample 0 would overflow (a strongly damped one long
+        # before its contact) starts from its first valid sample: e^{lambda (lag + k0 dt)} E[k - k0]
+        k0 = np.ceil(np.maximum(-lag, 0.0) * self.td.fs_hz).astype(int)
+        Z = (JT * np.exp(lam * (lag + k0 / self.td.fs_hz)))[:, None] * E
+        for m in np.flatnonzero(k0):
+            Z[m, k0[m]:] = Z[m, :self.td.n_s - k0[m]]
+            kk = np.arange(min(k0[m], self.td.n_s))
+            with np.errstate(over="ignore", invalid="ignore"):   # overwritten below but at the edge
+                Z[m, kk] = JT[m] * np.exp(lam[m] * (lag[m] + kk / self.td.fs_hz))
         t = tau0 + np.arange(self.td.n_s) / self.td.fs_hz
         early = t < T
         if early.any():
