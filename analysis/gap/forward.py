@@ -50,6 +50,12 @@ class BaseParam:
     unit: str
 
 
+HULL_F_BOUND = math.log(1.5)
+"""A hull mode's frequency is calibrated within a factor 1.5 of the rig's (1.35 prior sd): further
+off, the model's hull mode would stop being that mode and become another -- a calibration
+free to carry it 3x up takes over an unmodelled hull mode's peak and loses its own."""
+
+
 def base_params(rig: Rig) -> list[BaseParam]:
     """The rig's uncertain constants the calibration fits.
 
@@ -65,7 +71,7 @@ def base_params(rig: Rig) -> list[BaseParam]:
         p.append(BaseParam("added_mass", 0.3, 1.2, "x nominal"))
     p.append(BaseParam("impact_T", 0.5, 1.5, "x nominal"))
     for k in range(len(rig.hull_modes)):
-        p += [BaseParam(f"hull{k + 1}_f", 0.3, 1.2, "x nominal"),
+        p += [BaseParam(f"hull{k + 1}_f", 0.3, HULL_F_BOUND, "x nominal"),
               BaseParam(f"hull{k + 1}_zeta", 1.0, 3.0, "x nominal")]
     return p
 
