@@ -161,3 +161,25 @@ def test_a_pulse_long_before_its_contact_stays_finite_and_exact(trial):
         # the same sums in another order: rounding only (1e-9 of the largest response)
         assert np.max(np.abs(u[:, after] - direct)) <= 1e-9 * np.max(np.abs(direct))
 
+
+def test_a_split_is_only_placed_where_the_widest_split_is_resolved(trial):
+    """Two modes are told apart only when further apart than the half-power bandwidth 2 zeta: a
+    mode damped beyond what the widest fitted split resolves gets no split placement."""
+    from dataclasses import replace
+
+    from analysis.gap.effects.base import compared_modes
+    from analysis.gap.effects.split_mode import MAX_SPLIT, SplitMode
+
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    fit = fw.fit(np.zeros(len(fw.params)))
+    modes = compared_modes(fw, fit)
+    placed = {pl.key["mode_hz"] for pl in SplitMode().placements(fw, fit)}
+    assert placed == {round(f, 3) for _, f in modes}          # the rig's modes are all lightly damped
+    i, f = modes[0]
+    ms = fit.modes.copy()
+    w = abs(ms.lam[i])
+    zeta = 0.6 * MAX_SPLIT                                    # 2 zeta = 1.2 x the widest split
+    ms.lam[i] = w * (-zeta + 1j * math.sqrt(1 - zeta**2))
+    placed = {pl.key["mode_hz"] for pl in SplitMode().placements(fw, replace(fit, modes=ms))}
+    assert round(ms.f_hz[i], 3) not in placed and len(placed) == len(modes) - 1

@@ -10,6 +10,8 @@ import numpy as np
 
 from analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
 
+MAX_SPLIT = 0.1
+"""The widest split fitted, relative: beyond it the two are modes of their own (an extra mode)."""
 SPLITS = (0.004, 0.007, 0.012, 0.02, 0.03, 0.045, 0.065)
 """Separations the refit starts from: a beat's period is 1 / (f split), and a time-domain fit
 finds it only from within about half a beat over the decay."""
@@ -26,10 +28,13 @@ class SplitMode(Effect):
         return False
 
     def placements(self, fw, fit) -> list[Placement]:
+        lam = fit.modes.lam
+        # two modes are told apart only when further apart than the half-power bandwidth 2 zeta:
+        # a mode damped beyond what the widest split resolves is no place for one
         return [placement({"mode_hz": round(f, 3)}, ("split", "share"), ("1", "1"), [0.02, 0.0],
-                          [0.002, 0.0], [0.1, 0.9], [[0.02, 0.3], [0.007, 0.3]], mode_hz=f, window="late",
-                          starts=[[s, 0.5] for s in SPLITS])
-                for _, f in compared_modes(fw, fit)]
+                          [0.002, 0.0], [MAX_SPLIT, 0.9], [[0.02, 0.3], [0.007, 0.3], [0.045, 0.3]],
+                          mode_hz=f, window="late", starts=[[s, 0.5] for s in SPLITS])
+                for i, f in compared_modes(fw, fit) if 2 * -lam[i].real / abs(lam[i]) < MAX_SPLIT]
 
     def modes(self, ms, fw, term: Term):
         i = int(np.argmin(np.abs(ms.f_hz - term.placement.mode_hz)))
