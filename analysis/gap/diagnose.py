@@ -182,7 +182,7 @@ def modes_of(cal: Calibration, top_hz: float) -> list[dict]:
 
 
 def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = (),
-           theta_pre: np.ndarray | None = None, n_short: int = 3) -> tuple[Term, np.ndarray]:
+           theta_pre: np.ndarray | None = None, n_short: int = 8) -> tuple[Term, np.ndarray]:
     """The refit's start for one effect, and the base constants to start with: the best of the
     score test's estimate, the probes, the placement's own starts and the effect switched off
     (a linearised estimate can overshoot far into nonsense).
@@ -190,10 +190,11 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     For a term that changes the structure (``theta_pre`` given), each start is judged with the
     constants re-tuned to the data's spectrum peaks with it on: the nominal tuning with the
     term on rings a fraction of a percent off, which at these signal-to-noise ratios hides what
-    the term does. Where the placement has starts of its own (a stiffness spanning decades), the
-    ``n_short`` best are each refitted briefly with every constant free -- the calibration may
-    have hidden the effect in constants far from where the re-tuning leaves them (a blow's
-    duration, a damping) -- and the best of those is the start."""
+    the term does. Where the placement has starts of its own (a stiffness spanning decades),
+    ``n_short`` starts -- the best half, then the best of each other starting frequency in turn --
+    are each refitted briefly with every constant free (the calibration may have hidden the
+    effect in constants far from where the re-tuning leaves them: a blow's duration, a damping),
+    and the best of those is the start."""
     pl = sig.placement
     fitted = np.flatnonzero(fw.td.fitted)
     retune = theta_pre is not None and sig.effect.retunes()
@@ -212,8 +213,17 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     tried.sort(key=lambda c: c[0])
     if not retune or pl.starts is None:
         return tried[0][1], tried[0][2]
+    # the best starts, then the best of each other starting frequency: a re-tuned start's
+    # residual says little about the basin it lies in (a mode parked below the band re-tunes as
+    # well as one at the truth)
+    short = tried[:n_short // 2]
+    freqs = {round(float(c[1].x[0]), 6) for c in short}
+    for c in tried:
+        if len(short) < n_short and round(float(c[1].x[0]), 6) not in freqs:
+            freqs.add(round(float(c[1].x[0]), 6))
+            short.append(c)
     best = None
-    for _, t, th in tried[:n_short]:
+    for _, t, th in short:
         try:
             cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jac)
         except (ValueError, np.linalg.LinAlgError):
