@@ -37,7 +37,7 @@ import numpy as np
 
 from analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
 from analysis.gap.effects import EFFECTS
-from analysis.gap.effects.base import Term
+from analysis.gap.effects.base import Placement, Term
 from analysis.gap.evidence import (
     GapMap,
     ScoreBasis,
@@ -235,6 +235,20 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     return best.terms[-1], best.theta
 
 
+N_REREAD = 3
+"""At most this many times a single effect's placement is read again after its refit (while
+each refit improves on the last): see :meth:`~analysis.gap.effects.base.Effect.placement_after`."""
+
+
+def _carry(t: Term, pl: Placement) -> np.ndarray:
+    """Start values on a re-read placement ``pl``: what it read anew (its start differs from the
+    old placement's) from it, the rest (the effect's size) as the term was fitted."""
+    old = dict(zip(t.placement.names, zip(t.placement.x0, t.x, strict=True), strict=True))
+    x = [old[n][1] if n in old and np.isclose(old[n][0], x0) else x0
+         for n, x0 in zip(pl.names, pl.x0, strict=True)]
+    return np.clip(np.array(x, float), pl.lo, pl.hi)
+
+
 def diagnose(td: TrialData, settings: Settings = Settings(),
              progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Diagnose one trial (see the module docstring)."""
@@ -325,6 +339,15 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
                 alt = refit([Term(s.effect, s.placement, np.clip(s.x0, s.placement.lo, s.placement.hi))],
                             base.theta)
                 cal = min(cal, alt, key=lambda c: c.chi2 + c.prior)
+            for _ in range(N_REREAD if not starts else 0):
+                # the placement read again with the refit's constants, refitted from there
+                pl = group[0].effect.placement_after(fw, cal)
+                if pl is None or pl.key == cal.terms[0].placement.key:
+                    break
+                alt = refit([Term(group[0].effect, pl, _carry(cal.terms[0], pl))], cal.theta)
+                if alt.chi2 + alt.prior >= cal.chi2 + cal.prior:
+                    break
+                cal = alt
         except (ValueError, np.linalg.LinAlgError) as exc:
             notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
             return

@@ -116,6 +116,12 @@ class Effect:
         when it changes the structure."""
         return cls.moves_modes()
 
+    def placement_after(self, fw: Forward, cal: Calibration) -> Placement | None:
+        """The placement read again from the data once a refit with the term on has moved the
+        constants that hid it (``cal``: that refit); ``None`` (the default) when the placement
+        does not depend on the constants."""
+        return None
+
     def model(self, model: StructuralModel, term: Term) -> StructuralModel:
         return model
 
