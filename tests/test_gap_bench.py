@@ -31,7 +31,13 @@ def test_subset_is_diagnosed(results):
             assert r["verdict"] == "no gap beyond noise"
             continue
         assert r["named"] == r["effect"], (r["effect"], r["named"], r["candidates"][:3])
-        assert all(_located(r, r["location"]).values()), (r["location"], r["truth"])
+        loc = _located(r, r["location"])
+        # a mode above the compared band (its top edge is the record's low-pass) is seen only
+        # through its static compliance, where frequency and stiffness trade: no band to name
+        f_true = r["truth"]["mode_hz"]
+        if f_true is not None and f_true > r["band_edges_hz"][-1]:
+            del loc["mode"]
+        assert all(loc.values()), (r["location"], r["truth"])
         assert r["closed_held"] > 0.7
 
 

@@ -53,8 +53,7 @@ def location(before: list[GapMap], after: list[GapMap], terms: list[Term]) -> di
     b = int(np.argmax(by_band))
     bands = before[0].bands
     # an effect with a frequency of its own (a tone, an extra mode) says which band it is in
-    f_own = [t.value("f_hz") if "f_hz" in t.placement.names else t.placement.mode_hz for t in terms]
-    f_own = [f for f in f_own if f]
+    f_own = [f for f in (_own_hz(t) for t in terms) if f]
     if f_own:
         b = int(np.searchsorted(bands.edges_hz, f_own[0], side="right")) - 1
         b = int(np.clip(b, 0, len(bands.labels) - 1))
@@ -64,7 +63,13 @@ def location(before: list[GapMap], after: list[GapMap], terms: list[Term]) -> di
     w = 0 if by_win[0] >= 0.25 * by_win.max() > 0 else int(np.argmax(by_win))
     return {"gages": gages[:6], "band": bands.labels[b], "band_hz": round(float(bands.center_hz[b]), 3),
             "window": WINDOWS[w], "effect_gages": own,
-            "effect_mode_hz": next((t.placement.mode_hz for t in terms if t.placement.mode_hz), None)}
+            "effect_mode_hz": round(float(f_own[0]), 3) if f_own else None}
+
+
+def _own_hz(t: Term) -> float | None:
+    """The frequency an effect term has of its own, Hz: its fitted one (a tone, an extra mode),
+    else the mode it sits on (a split), else None."""
+    return float(t.value("f_hz")) if "f_hz" in t.placement.names else t.placement.mode_hz
 
 
 CLOSURE_TIE = 0.05
