@@ -79,3 +79,13 @@ def test_pod_threshold_edge_cases():
     assert pod_threshold(a, np.zeros(5, bool)) == np.inf
     # detection falling with size, or never reaching 90 % within the sizes tried
     assert pod_threshold(a, np.array([1, 1, 0, 1, 0], bool)) == np.inf
+
+
+def test_false_alarm_bound_is_clopper_pearson():
+    from daq.gap_bench import N_NONE_DEV, false_alarm_bound
+
+    # with no alarms the one-sided bound has the closed form 1 - (1 - c)^(1/n) ("rule of three")
+    for n in (20, 40, 59, 60):
+        assert false_alarm_bound(0, n) == pytest.approx(1 - 0.05 ** (1 / n), rel=1e-9)
+    assert false_alarm_bound(0, N_NONE_DEV) <= 0.05 < false_alarm_bound(0, 58)
+    assert false_alarm_bound(2, 40) > 0.05 and false_alarm_bound(3, 3) == 1.0

@@ -71,7 +71,7 @@ class Settings:
     simulations for the noise floor; ``min_closure`` the least fraction of the gap an effect must
     close to be named (see :func:`choose`)."""
 
-    z_gap: float = 7.0
+    z_gap: float = 8.0
     form_tol: float = 0.02
     bic_min: float = 10.0
     top_k: int = 3
