@@ -7,10 +7,10 @@ MCAP recording through the ordinary recorder, and diagnosed from that file and t
 alone -- exactly as ``ramdaq gap`` would a drydock recording.
 
 Sizes are spread log-uniformly across each effect's detection threshold. The thresholds (the
-size from which 90 % of the trials show a gap the diagnosis can see: :data:`POD`) and the
+size at which the fitted probability that the diagnosis sees a gap reaches :data:`POD`) and the
 verdict's own thresholds are tuned on the **development** seeds (``--dev``), stored in
 ``benchmarks/gap_thresholds.json``, and only then applied to the benchmark's seeds, which never
-feed back.
+feed back. A second development set (``--check``) is scored with them too.
 
 Printed: confusion matrix, top-1 and top-3 identification over effects above their threshold (a
 pair of effects counts by its first, primary term),
