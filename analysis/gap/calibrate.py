@@ -37,6 +37,11 @@ class Calibration:
     nfev: int
     cache: dict = field(default_factory=dict)
 
+    @property
+    def cost(self) -> float:
+        """What the fit minimised: ``chi2 + prior``."""
+        return self.chi2 + self.prior
+
     def columns(self, fw: Forward) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The linear columns of this calibration's prediction -- every impact's unit response,
         its time derivative, the terms' own columns (see :meth:`Forward.fit`); computed once."""

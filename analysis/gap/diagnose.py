@@ -219,8 +219,9 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     short = tried[:n_short // 2]
     freqs = {round(float(c[1].x[0]), 6) for c in short}
     for c in tried:
-        if len(short) < n_short and round(float(c[1].x[0]), 6) not in freqs:
-            freqs.add(round(float(c[1].x[0]), 6))
+        f0 = round(float(c[1].x[0]), 6)
+        if len(short) < n_short and f0 not in freqs:
+            freqs.add(f0)
             short.append(c)
     best = None
     for _, t, th in short:
@@ -228,7 +229,7 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
             cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jac)
         except (ValueError, np.linalg.LinAlgError):
             continue
-        if best is None or cal.chi2 + cal.prior < best.chi2 + best.prior:
+        if best is None or cal.cost < best.cost:
             best = cal
     if best is None:
         return tried[0][1], tried[0][2]
@@ -332,20 +333,20 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
 
         try:
             cal = refit(terms, theta0)
-            if not starts and cal.chi2 + cal.prior > base.chi2 + base.prior:
+            if not starts and cal.cost > base.cost:
                 # the re-tuned start led somewhere worse than the calibration itself: again
                 # from the calibrated constants, the term where its score test put it
                 s = group[0]
                 alt = refit([Term(s.effect, s.placement, np.clip(s.x0, s.placement.lo, s.placement.hi))],
                             base.theta)
-                cal = min(cal, alt, key=lambda c: c.chi2 + c.prior)
+                cal = min(cal, alt, key=lambda c: c.cost)
             for _ in range(N_REREAD if not starts else 0):
                 # the placement read again with the refit's constants, refitted from there
                 pl = group[0].effect.placement_after(fw, cal)
                 if pl is None or pl.key == cal.terms[0].placement.key:
                     break
                 alt = refit([Term(group[0].effect, pl, _carry(cal.terms[0], pl))], cal.theta)
-                if alt.chi2 + alt.prior >= cal.chi2 + cal.prior:
+                if alt.cost >= cal.cost:
                     break
                 cal = alt
         except (ValueError, np.linalg.LinAlgError) as exc:
