@@ -89,6 +89,29 @@ def test_inflation_is_one_for_white_noise_and_grows_where_the_form_error_is(tria
     assert kc2[3, b13, 1] > 10 * kw2[3, 1] / 2      # concentrated in its own band's cell
 
 
+def test_a_band_without_a_bin_in_a_window_is_neutral_not_nan(trial):
+    """A band narrower than a short window's bin spacing holds no spectral bin there: its cell
+    expects and holds no energy, so its inflation is 1 and its score 0 -- not 0/0, which made
+    every candidate's dBIC NaN on trials whose lowest bands are narrow."""
+    from analysis.gap.evidence import Bands, gap_map
+
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    n_pre = len(range(*td.windows.pre.indices(td.n_s)))
+    df = td.fs_hz / n_pre                                   # the pre window's bin spacing, Hz
+    lo = 1.25 * df                                          # a band between two bins: (1.25, 1.75) df
+    bands = Bands(np.array([0.0, lo, lo + 0.5 * df, td.lowpass_hz]), ["low", "narrow", "rest"],
+                  np.array([0.5 * lo, lo + 0.25 * df, 0.5 * td.lowpass_hz]))
+    rng = np.random.default_rng(3)
+    reps = rng.standard_normal((6, td.n_seg, td.n_gages, td.n_s)) / fw.W
+    cells = cell_energies(fw, reps, bands)
+    assert np.all(cells[..., 1, 0] == 0)                    # the premise: no bin, no energy
+    kc = cell_inflation(fw, cells, bands, td.fitted)
+    assert np.all(np.isfinite(kc)) and np.all(kc[:, 1, 0] == 1.0)
+    m = gap_map(fw, reps[0], cells, bands, td.fitted)
+    assert np.all(np.isfinite(m.z)) and np.all(m.z[:, 1, 0] == 0.0)
+
+
 def test_bounce_is_named_with_each_blows_delay(trial):
     tt, td = trial
     d = diagnose(td)

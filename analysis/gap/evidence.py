@@ -195,7 +195,8 @@ def cell_inflation(fw: Forward, rep_cells: np.ndarray, bands: Bands, segments: n
     seg = np.flatnonzero(np.asarray(segments)) if np.asarray(segments).dtype == bool else segments
     mean = rep_cells[:, seg].sum(axis=1).mean(axis=0)
     white = len(seg) * _band_bins(fw, bands)[None, :, :]
-    return np.maximum(1.0, mean / white)
+    # a band narrower than a short window's bin spacing holds no bin there: nothing to inflate
+    return np.maximum(1.0, np.divide(mean, white, out=np.ones_like(mean), where=white > 0))
 
 
 def window_inflation(fw: Forward, rep_cells: np.ndarray, segments: np.ndarray) -> np.ndarray:
@@ -272,8 +273,10 @@ def energy_z(obs: np.ndarray, mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
     ``(E - mean) / sd`` would call its upper tail a gap."""
     k = np.maximum(2 * mean**2 / sd**2, 0.5)
     a = mean / k
-    p = scipy.stats.chi2.sf(obs / a, k)
-    return scipy.stats.norm.isf(np.clip(p, 1e-300, 1.0))
+    # a cell with no spectral bin (a band narrower than a short window's bin spacing) expects
+    # and holds nothing: it says nothing either way, z = 0
+    p = scipy.stats.chi2.sf(np.divide(obs, a, out=np.zeros_like(obs), where=a > 0), k)
+    return np.where(a > 0, scipy.stats.norm.isf(np.clip(p, 1e-300, 1.0)), 0.0)
 
 
 @dataclass
