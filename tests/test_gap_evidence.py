@@ -127,6 +127,47 @@ def test_bounce_is_named_with_each_blows_delay(trial):
     assert term.value("ratio") == pytest.approx(0.3 * 0.5, rel=0.2)   # 0.3 x size (truth_effects)
 
 
+def test_a_split_sits_about_the_calibrated_mode_or_beside_it(trial):
+    """``centre = share`` keeps the halves' amplitude-weighted mean frequency at the calibrated
+    mode (a narrow split read as one mode); ``centre`` 0 keeps the lower half there and puts the
+    other ``split`` above it (a wide split, where the calibration locked on one peak)."""
+    from analysis.gap.effects.base import Term
+    from analysis.gap.effects.split_mode import SplitMode
+
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    ms = fw.fit(np.zeros(len(fw.params))).modes
+    pl = SplitMode().placements(fw, fw.fit(np.zeros(len(fw.params))))[0]
+    i = int(np.argmin(np.abs(ms.f_hz - pl.mode_hz)))
+    f = ms.f_hz[i]
+    for s, share, c in [(0.03, 0.3, 0.3), (0.08, 0.5, 0.0), (0.08, 0.4, 1.0)]:
+        out = SplitMode().modes(ms, fw, Term(SplitMode(), pl, np.array([s, share, c])))
+        f_lo, f_hi = out.f_hz[i], out.f_hz[-1]
+        assert f_hi / f_lo - 1 == pytest.approx(s / (1 - s * c), rel=1e-9)     # split apart
+        assert f_lo == pytest.approx(f * (1 - s * c), rel=1e-9)
+        np.testing.assert_allclose(out.A[:, i] + out.A[:, -1], ms.A[:, i], rtol=1e-12)
+        np.testing.assert_allclose(out.A[:, -1], share * ms.A[:, i], rtol=1e-12)
+        if c == share:
+            assert (1 - share) * f_lo + share * f_hi == pytest.approx(f, rel=1e-9)
+
+
+def test_more_candidates_are_refitted_only_while_none_closes_the_gap(trial):
+    """Beyond the ``top_k`` strongest signatures, up to ``top_k_more`` further effects are
+    refitted, in signature order, only while no refit closes ``close_enough`` of the gap."""
+    from analysis.gap.diagnose import Settings
+    from analysis.gap.verdict import closed_share
+
+    _, td = trial
+    d = diagnose(td, Settings(top_k=1, top_k_more=2))
+    singles = [c for c in d.candidates if len(c.terms) == 1]
+    assert closed_share(singles[0].record()) >= 0.8                 # the bounce closes its gap
+    assert len(singles) == 1
+    d = diagnose(td, Settings(top_k=1, top_k_more=2, close_enough=1.5))   # nothing closes 150 %
+    live = [s.effect.name for s in d.signatures if s.placement is not None and s.z > -np.inf]
+    # candidates come ranked by evidence, not in the order refitted
+    assert {c.name for c in d.candidates if len(c.terms) == 1} == set(live[:3])
+
+
 def test_the_refit_steps_stay_in_their_trust_region_and_still_converge():
     """A beat's phase makes a Gauss-Newton step land far beyond where its linearisation holds;
     the refit's steps are capped at ``max_step`` scales. On a decaying two-tone signal (the
