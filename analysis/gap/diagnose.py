@@ -55,7 +55,7 @@ from analysis.gap.evidence import (
 )
 from analysis.gap.forward import Forward
 from analysis.gap.trialdata import TrialData
-from analysis.gap.verdict import choose, closure, detection_score, location
+from analysis.gap.verdict import choose, closed_share, closure, detection_score, location
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,11 @@ class Settings:
     10^4-10^5 a 0.1 % error in a mode shape is hundreds of noise rms; the replicate simulations
     carry it, so the map and every score are judged against it (the fit itself weights by the
     noise alone); ``z_gap`` the map cell score beyond which a gap is called real; ``bic_min``
-    how much better (in BIC) a candidate must be; ``top_k`` candidates refitted; ``z_pair`` the
+    how much better (in BIC) a candidate must be; ``top_k`` candidates refitted, and up to
+    ``top_k_more`` more (in signature order) while no single one closes ``close_enough`` of the
+    gap -- a score test ranks effects by how strongly the residual carries their template, not
+    by whether their refit explains it, and a flexible term's template (a split's) picks up part
+    of any residual; ``z_pair`` the
     score a second effect needs on what the best single one leaves; ``n_rep`` replicate
     simulations for the noise floor; ``min_closure`` the least fraction of the gap an effect must
     close to be named (see :func:`choose`)."""
@@ -75,6 +79,8 @@ class Settings:
     form_tol: float = 0.02
     bic_min: float = 10.0
     top_k: int = 3
+    top_k_more: int = 2
+    close_enough: float = 0.8
     z_pair: float = 5.0
     min_closure: float = 0.0
     n_rep: int = 24
@@ -376,6 +382,11 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
 
     live = [s for s in sigs if s.placement is not None and s.z > -np.inf]
     for s in live[: settings.top_k]:
+        consider([s])
+    for s in live[settings.top_k: settings.top_k + settings.top_k_more]:
+        if not significant or max(map(closed_share, (c.record() for c in cands)),
+                                  default=0.0) >= settings.close_enough:
+            break
         consider([s])
     singles = sorted(cands, key=lambda c: c.dbic)
     if singles and len(live) >= 2:

@@ -77,6 +77,15 @@ CLOSURE_TIE = 0.05
 gages is wider): the evidence decides."""
 
 
+def closed_share(r: dict) -> float:
+    """The share of the gap a candidate's record closes: on the held-out impacts, else (none
+    held out) on the fitted ones; 0 when neither was measured."""
+    v = r.get("closed_held")
+    if v is None or not np.isfinite(v):
+        v = r.get("closed_fit")
+    return float(v) if v is not None and np.isfinite(v) else 0.0
+
+
 def choose(records: list[dict], significant: bool, bic_min: float, min_closure: float) -> str | None:
     """The explanation to name, from candidates' ``name``, ``dbic``, ``dbic_marginal`` (pairs),
     ``closed_held`` and ``closed_fit``: ``None`` when there is no gap, ``"unexplained"`` when no
@@ -92,24 +101,17 @@ def choose(records: list[dict], significant: bool, bic_min: float, min_closure: 
     """
     if not significant:
         return None
-
-    def closed(r: dict) -> float:
-        v = r.get("closed_held")
-        if v is None or not np.isfinite(v):
-            v = r.get("closed_fit")
-        return float(v) if v is not None and np.isfinite(v) else 0.0
-
     ok = [r for r in records if r["dbic"] < -bic_min]
     singles = [r for r in ok if "+" not in r["name"]]
     if not singles:
         return "unexplained"
-    top = max(closed(r) for r in singles)
-    best = min((r for r in singles if closed(r) >= top - CLOSURE_TIE), key=lambda r: r["dbic"])
-    if closed(best) < min_closure:
+    top = max(closed_share(r) for r in singles)
+    best = min((r for r in singles if closed_share(r) >= top - CLOSURE_TIE), key=lambda r: r["dbic"])
+    if closed_share(best) < min_closure:
         return "unexplained"
     for r in ok:
         if (r["name"].split("+")[0] == best["name"] and "+" in r["name"]
                 and r.get("dbic_marginal") is not None and r["dbic_marginal"] < -bic_min
-                and closed(r) >= closed(best) + 0.1):
+                and closed_share(r) >= closed_share(best) + 0.1):
             best = r
     return best["name"]
