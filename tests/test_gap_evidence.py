@@ -140,6 +140,8 @@ def test_a_split_sits_about_the_calibrated_mode_or_beside_it(trial):
     pl = SplitMode().placements(fw, fw.fit(np.zeros(len(fw.params))))[0]
     i = int(np.argmin(np.abs(ms.f_hz - pl.mode_hz)))
     f = ms.f_hz[i]
+    off = SplitMode().modes(ms, fw, Term(SplitMode(), pl, pl.x0))        # x0 is the effect off
+    assert off.f_hz[i] == f and np.all(off.A[:, -1] == 0) and np.all(off.A[:, i] == ms.A[:, i])
     for s, share, c in [(0.03, 0.3, 0.3), (0.08, 0.5, 0.0), (0.08, 0.4, 1.0)]:
         out = SplitMode().modes(ms, fw, Term(SplitMode(), pl, np.array([s, share, c])))
         f_lo, f_hi = out.f_hz[i], out.f_hz[-1]

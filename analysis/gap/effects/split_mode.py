@@ -5,7 +5,8 @@ between them: the halves ring at ``f (1 - split centre)`` and ``f (1 + split (1 
 ``centre = share`` keeps their amplitude-weighted mean frequency where the data's single peak put
 it (a narrow split, which the calibration reads as one mode); ``centre`` 0 or 1 keeps the lower
 or the upper half at the calibrated frequency (a wide split, where the calibration locks on one
-of the two peaks and reads the other as a faster decay). ``share = 0`` is the effect off."""
+of the two peaks and reads the other as a faster decay). ``share = 0`` with ``centre = 0`` is
+the effect off."""
 
 from __future__ import annotations
 
@@ -42,10 +43,12 @@ class SplitMode(Effect):
     def placements(self, fw, fit) -> list[Placement]:
         lam = fit.modes.lam
         starts = [[s, 0.5, 0.5] for s in SPLITS] + [[s, 0.5, c] for s in WIDE_SPLITS for c in (0.0, 1.0)]
-        # two modes are told apart only when further apart than the half-power bandwidth 2 zeta:
-        # a mode damped beyond what the widest split resolves is no place for one
+        # x0 is the effect off: no share above, the mode itself where the calibration put it
+        # (centre 0). Two modes are told apart only when further apart than the half-power
+        # bandwidth 2 zeta: a mode damped beyond what the widest split resolves is no place
+        # for one
         return [placement({"mode_hz": round(f, 3)}, ("split", "share", "centre"), ("1", "1", "1"),
-                          [0.02, 0.0, 0.5], [0.002, 0.0, 0.0], [MAX_SPLIT, 0.9, 1.0], PROBES,
+                          [0.02, 0.0, 0.0], [0.002, 0.0, 0.0], [MAX_SPLIT, 0.9, 1.0], PROBES,
                           mode_hz=f, window="late", starts=starts)
                 for i, f in compared_modes(fw, fit) if 2 * -lam[i].real / abs(lam[i]) < MAX_SPLIT]
 
