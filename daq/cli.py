@@ -22,6 +22,7 @@ import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from analysis.rig import RigError, load_rig
+from daq.gap_bench import SEED_SETS
 from drivers.errors import DeviceError
 from drivers.mcap_format import RecordingError
 
@@ -200,9 +201,12 @@ def cmd_gap(args: argparse.Namespace) -> int:
     if args.file == "benchmark":
         from daq.gap_bench import run_benchmark
 
+        if sum((args.dev, args.check, args.seeds is not None)) > 1:
+            raise SystemExit("ramdaq gap benchmark: give one of --dev, --check, --seeds")
+        seeds = "dev" if args.dev else "check" if args.check else args.seeds or "benchmark"
         out = Path(args.out or "gap_benchmark")
-        return run_benchmark(out, per_class=args.per_class, dev=args.dev, jobs=args.jobs,
-                             rescore=args.rescore, check=args.check, progress=lambda m: print(m, flush=True))
+        return run_benchmark(out, per_class=args.per_class, seeds=seeds, jobs=args.jobs,
+                             rescore=args.rescore, progress=lambda m: print(m, flush=True))
     from daq.gap import run_gap, summary_lines, write_report
 
     src = Path(args.file)
@@ -370,9 +374,11 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--held-out-every", type=int, default=3,
                    help="every Nth impact is held out of the calibration (default 3)")
     gp.add_argument("--per-class", type=int, default=20, help="benchmark: scenarios per effect class")
-    gp.add_argument("--dev", action="store_true", help="benchmark: the development seeds (for tuning)")
-    gp.add_argument("--check", action="store_true",
-                    help="benchmark: a second development seed set, scored with the first set's thresholds")
+    gp.add_argument("--seeds", choices=list(SEED_SETS),
+                    help="benchmark: the seed set: " + "; ".join(f"{k}, {v[1]}" for k, v in SEED_SETS.items())
+                    + " (default benchmark)")
+    gp.add_argument("--dev", action="store_true", help="benchmark: --seeds dev (tunes the thresholds)")
+    gp.add_argument("--check", action="store_true", help="benchmark: --seeds check")
     gp.add_argument("--jobs", type=int, default=2, help="benchmark: worker processes (default 2)")
     gp.add_argument("--rescore", action="store_true",
                     help="benchmark: score the results stored in --out again instead of running")

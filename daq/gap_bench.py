@@ -8,9 +8,9 @@ alone -- exactly as ``ramdaq gap`` would a drydock recording.
 
 Sizes are spread log-uniformly across each effect's detection threshold. The thresholds (the
 size at which the fitted probability that the diagnosis sees a gap reaches :data:`POD`) and the
-verdict's own thresholds are tuned on the **development** seeds (``--dev``), stored in
-``benchmarks/gap_thresholds.json``, and only then applied to the benchmark's seeds, which never
-feed back. A second development set (``--check``) is scored with them too.
+verdict's own thresholds are tuned on the **development** seeds (``--seeds dev``), stored in
+``benchmarks/gap_thresholds.json``, and only then applied to the other seed sets, which never
+feed back (:data:`SEED_SETS`).
 
 Printed: confusion matrix, top-1 and top-3 identification over effects above their threshold (a
 pair of effects counts by its first, primary term),
@@ -31,9 +31,15 @@ from pathlib import Path
 import numpy as np
 
 RIGS = (("albacore", "air"), ("albacore", "water"), ("sampson", "water"))
-DEV_SEED0, CHECK_SEED0, BENCH_SEED0 = 1_000, 100_000, 500_000
-"""First seeds of the development set (tuning), of a second development set that only checks
-the tuning did not fit the first set's particular trials, and of the benchmark."""
+SEED_SETS = {
+    "dev": (1_000, "development seeds: tune the thresholds (written to benchmarks/gap_thresholds.json)"),
+    "check": (100_000, "second development set: shows whether tuning fitted the first set's trials"),
+    "benchmark": (500_000, "the benchmark's own seeds: the issue's figures"),
+    "holdout": (900_000, "held back: run once, after the work is final, never looked at before"),
+}
+"""Seed sets by name: (first seed, its role). Only ``dev`` writes thresholds; the others are
+scored with them. Scenario seeds are ``first + 1000 * class + i`` with i < 100, so the sets never
+meet."""
 SIZE_RANGE = (0.05, 2.0)
 THRESHOLDS = Path(__file__).resolve().parents[1] / "benchmarks" / "gap_thresholds.json"
 RIG_DIR = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
@@ -52,18 +58,22 @@ def false_alarm_bound(n_alarms: int, n_trials: int, confidence: float = 0.95) ->
     return 1.0 if n_alarms >= n_trials else float(beta.ppf(confidence, n_alarms + 1, n_trials - n_alarms))
 
 
-def scenarios(per_class: int, dev: bool, effects: tuple[str, ...] | None = None,
-              check: bool = False) -> list[dict]:
-    """The fixed scenario list: every effect class x ``per_class`` sizes, rigs in turn; ``dev``
-    the development seeds, ``check`` the second development set, else the benchmark's."""
+def scenarios(per_class: int, seeds: str = "benchmark",
+              effects: tuple[str, ...] | None = None) -> list[dict]:
+    """The fixed scenario list: every effect class x ``per_class`` sizes, rigs in turn, from the
+    seed set named ``seeds`` (a key of :data:`SEED_SETS`)."""
     from analysis.gap.truth import EFFECTS
 
-    base = CHECK_SEED0 if check else DEV_SEED0 if dev else BENCH_SEED0
+    if seeds not in SEED_SETS:
+        raise ValueError(f"seed set {seeds!r}: not one of {', '.join(SEED_SETS)}")
+    if not 0 < per_class <= 100:
+        raise ValueError(f"--per-class {per_class}: from 1 to 100 (seed sets are 1000 apart per class)")
+    base = SEED_SETS[seeds][0]
     out = []
     for k, eff in enumerate(effects or EFFECTS):
         rigs = [r for r in RIGS if r[1] == "water"] if eff == "added_mass" else list(RIGS)
         # the false-alarm threshold is a tail quantile: tune it on at least N_NONE_DEV trials
-        n = max(per_class, N_NONE_DEV) if (dev and not check and eff == "none") else per_class
+        n = max(per_class, N_NONE_DEV) if (seeds == "dev" and eff == "none") else per_class
         sizes = np.geomspace(*SIZE_RANGE, n)
         for i in range(n):
             # sizes in a seeded order so rigs and sizes are not locked together
@@ -286,9 +296,9 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
     return out
 
 
-def _run(scs: list[dict], out: Path, dev: bool, jobs: int, say: Callable[[str], None]) -> list[dict]:
+def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str], None]) -> list[dict]:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    say(f"{'development' if dev else 'benchmark'} seeds: {len(scs)} scenarios on {jobs} processes")
+    say(f"{SEED_SETS[seeds][1]}: {len(scs)} scenarios on {jobs} processes")
     results = []
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         futs = [pool.submit(run_one, sc, str(out)) for sc in scs]
@@ -301,29 +311,30 @@ def _run(scs: list[dict], out: Path, dev: bool, jobs: int, say: Callable[[str], 
     return results
 
 
-def run_benchmark(out: Path, *, per_class: int = 20, dev: bool = False, jobs: int = 2,
-                  effects: tuple[str, ...] | None = None, rescore: bool = False, check: bool = False,
+def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", jobs: int = 2,
+                  effects: tuple[str, ...] | None = None, rescore: bool = False,
                   progress: Callable[[str], None] | None = None) -> int:
-    """Run the benchmark (or its development half) and print its figures; 0 when done.
+    """Run the benchmark on the seed set ``seeds`` (:data:`SEED_SETS`) and print its figures; 0
+    when done. ``dev`` writes the thresholds; every other set is scored with the stored ones.
     ``rescore``: score the results an earlier run stored in ``out`` again (after re-tuning on
-    the development seeds) instead of running the scenarios. ``check``: the second development
-    set, scored with the first set's thresholds (which it does not change)."""
+    the development seeds) instead of running the scenarios."""
     from analysis.gap.diagnose import Settings
 
     say = progress or (lambda s: None)
     out.mkdir(parents=True, exist_ok=True)
-    dev = dev and not check
-    name = "check" if check else "dev" if dev else "benchmark"
+    stored = out / f"{seeds}_results.json"
     t0 = time.perf_counter()
     if rescore:
-        results = json.loads((out / f"{name}_results.json").read_text())
-        say(f"re-scoring {len(results)} stored {name} scenarios from {out}")
+        if not stored.exists():
+            raise FileNotFoundError(f"{stored}: no stored results to re-score (run without --rescore)")
+        results = json.loads(stored.read_text())
+        say(f"re-scoring {len(results)} stored {seeds} scenarios from {out}")
     else:
-        results = _run(scenarios(per_class, dev, effects, check), out, dev or check, jobs, say)
-        (out / f"{name}_results.json").write_text(json.dumps(results, indent=1, default=float))
+        results = _run(scenarios(per_class, seeds, effects), out, seeds, jobs, say)
+        stored.write_text(json.dumps(results, indent=1, default=float))
     wall = time.perf_counter() - t0
     st = Settings()
-    if dev:
+    if seeds == "dev":
         thr = size_thresholds(results, st.z_gap)
         lax = size_thresholds(results, st.z_gap, POD_LAX)
         tail = size_thresholds(results, st.z_gap, rule="tail")
@@ -358,7 +369,7 @@ def run_benchmark(out: Path, *, per_class: int = 20, dev: bool = False, jobs: in
     also = {f"the a{100 * POD_LAX:.0f} thresholds": lax,
             f"the tail rule's a{100 * POD:.0f} (>= {100 * POD:.0f} % of the trials from that size up)": tail}
     s_also = {k: score(results, t, st.z_gap, st.bic_min, st.min_closure) for k, t in also.items() if t}
-    (out / f"{name}_score.json").write_text(json.dumps(s | {"also": s_also}, indent=1, default=float))
+    (out / f"{seeds}_score.json").write_text(json.dumps(s | {"also": s_also}, indent=1, default=float))
     print("\n".join(format_score(s, thr)))
     for k, sa in s_also.items():
         print(f"top-1 over effects above {k}: {100 * sa['top1']:.1f} % of {sa['n_above']} "

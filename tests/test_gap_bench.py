@@ -18,7 +18,7 @@ SUBSET = [("none", 1001), ("hull_coupling", 2001), ("tiller", 5001), ("gage_alig
 def results(tmp_path_factory):
     from daq.gap_bench import run_one
 
-    pick = {(s["effect"], s["seed"]): s for s in scenarios(6, dev=True)}
+    pick = {(s["effect"], s["seed"]): s for s in scenarios(6, "dev")}
     out = tmp_path_factory.mktemp("gap_bench")
     return [run_one(pick[key], str(out)) for key in SUBSET]
 
@@ -89,3 +89,26 @@ def test_false_alarm_bound_is_clopper_pearson():
         assert false_alarm_bound(0, n) == pytest.approx(1 - 0.05 ** (1 / n), rel=1e-9)
     assert false_alarm_bound(0, N_NONE_DEV) <= 0.05 < false_alarm_bound(0, 58)
     assert false_alarm_bound(2, 40) > 0.05 and false_alarm_bound(3, 3) == 1.0
+
+
+def test_seed_sets_never_share_a_trial():
+    """Every named seed set at the largest size allowed: no seed twice, so thresholds tuned on
+    ``dev`` never see a trial of ``benchmark`` or ``holdout``."""
+    from daq.gap_bench import SEED_SETS
+
+    seeds = [sc["seed"] for name in SEED_SETS for sc in scenarios(100, name)]
+    assert len(seeds) == len(set(seeds))
+    with pytest.raises(ValueError, match="seed set 'bench'"):
+        scenarios(6, "bench")
+    with pytest.raises(ValueError, match="--per-class 101"):
+        scenarios(101, "holdout")
+
+
+def test_benchmark_command_takes_one_seed_set(tmp_path, capsys):
+    from daq.cli import main
+
+    with pytest.raises(SystemExit, match="one of --dev, --check, --seeds"):
+        main(["gap", "benchmark", "--dev", "--seeds", "holdout", "--out", str(tmp_path)])
+    # a re-score of results that were never stored names the file it looked for
+    assert main(["gap", "benchmark", "--seeds", "holdout", "--rescore", "--out", str(tmp_path)]) == 2
+    assert "holdout_results.json: no stored results" in capsys.readouterr().err
