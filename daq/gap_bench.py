@@ -138,7 +138,7 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
 
 def _z(r: dict) -> float:
     """The trial's detection score (results stored before it existed: the map's largest)."""
-    return r.get("zdetect", r["zmax"])
+    return r["zdetect"] if "zdetect" in r else r["zmax"]
 
 
 def _in_band(edges: list[float], f_true: float | None, f_rep: float | None) -> bool:
@@ -151,15 +151,21 @@ def _in_band(edges: list[float], f_true: float | None, f_rep: float | None) -> b
 
 
 def _located(r: dict, loc: dict) -> dict[str, bool]:
+    """Whether a diagnosis' location ``loc`` names the truth's gages, mode and window: a key per
+    judged part. No ``mode`` when the truth's mode lies above the compared band (its top edge is
+    the record's low-pass): such a mode is seen only through its static compliance, where
+    frequency and stiffness trade, so there is no band to name."""
     tr = r["truth"]
     gages = set(loc["gages"]) | set(loc.get("effect_gages") or [])
-    ok_g = not tr["gages"] or bool(gages & set(tr["gages"]))
-    # the report names the band where the gap shrinks most and, for an effect with a frequency
-    # of its own (a tone, an extra mode), that frequency: either may point at the truth's mode
-    reported = [f for f in (loc.get("band_hz"), loc.get("effect_mode_hz")) if f is not None]
-    ok_m = tr["mode_hz"] is None or any(_in_band(r["band_edges_hz"], tr["mode_hz"], f) for f in reported)
-    ok_w = tr["window"] == "all" or loc["window"] == tr["window"]
-    return {"gages": ok_g, "mode": ok_m, "window": ok_w}
+    out = {"gages": not tr["gages"] or bool(gages & set(tr["gages"]))}
+    if tr["mode_hz"] is None or tr["mode_hz"] <= r["band_edges_hz"][-1]:
+        # the report names the band where the gap shrinks most and, for an effect with a
+        # frequency of its own (a tone, an extra mode), that frequency: either may point at it
+        reported = [f for f in (loc.get("band_hz"), loc.get("effect_mode_hz")) if f is not None]
+        out["mode"] = tr["mode_hz"] is None or any(_in_band(r["band_edges_hz"], tr["mode_hz"], f)
+                                                   for f in reported)
+    out["window"] = tr["window"] == "all" or loc["window"] == tr["window"]
+    return out
 
 
 POD = 0.9
@@ -250,7 +256,7 @@ def score(results: list[dict], thresholds: dict[str, float], z_gap: float, bic_m
         "top1": float(np.mean(top1)) if top1 else float("nan"),
         "top3": float(np.mean(top3)) if top3 else float("nan"),
         "false_alarms": float(np.mean(alarms)) if alarms else float("nan"),
-        "localisation": {k: float(np.mean([x[k] for x in loc])) if loc else float("nan")
+        "localisation": {k: float(np.mean(v)) if (v := [x[k] for x in loc if k in x]) else float("nan")
                          for k in ("gages", "mode", "window")},
         "closed_held_median": float(np.median(closed)) if closed else float("nan"),
         "per_class_top1": {e: float(np.mean([pred[id(r)] == e for r in above if r["effect"] == e]))

@@ -32,11 +32,6 @@ def test_subset_is_diagnosed(results):
             continue
         assert r["named"] == r["effect"], (r["effect"], r["named"], r["candidates"][:3])
         loc = _located(r, r["location"])
-        # a mode above the compared band (its top edge is the record's low-pass) is seen only
-        # through its static compliance, where frequency and stiffness trade: no band to name
-        f_true = r["truth"]["mode_hz"]
-        if f_true is not None and f_true > r["band_edges_hz"][-1]:
-            del loc["mode"]
         assert all(loc.values()), (r["location"], r["truth"])
         assert r["closed_held"] > 0.7
 
@@ -46,6 +41,24 @@ def test_score_counts_the_subset(results):
     s = score(results, thr, 5.0, 10.0, 0.0)
     assert s["top1"] == 1.0 and s["false_alarms"] == 0.0 and s["n_above"] == 4
     assert s["confusion"]["time_skew"]["time_skew"] == 1
+
+
+def test_located_judges_a_mode_only_within_the_compared_band():
+    edges = [0.0, 5.0, 30.0, 120.0]
+    r = {"truth": {"gages": [3], "mode_hz": 25.0, "window": "late"}, "band_edges_hz": edges}
+    here = {"gages": [3, 4], "band_hz": 26.0, "effect_mode_hz": None, "window": "late"}
+    assert _located(r, here) == {"gages": True, "mode": True, "window": True}
+    assert _located(r, here | {"band_hz": 80.0, "gages": [5], "window": "early"}) == {
+        "gages": False, "mode": False, "window": False}
+    # a stiff steering gear's mode above the band's top edge: its mode is not judged
+    r["truth"]["mode_hz"] = 215.5
+    assert _located(r, here | {"band_hz": 80.0}) == {"gages": True, "window": True}
+    # nor counted in the benchmark's mode localisation
+    res = [r | {"effect": "tiller", "size": 1.0, "seconds": 1.0, "signatures": ["tiller"], "zdetect": 20.0,
+                "candidates": [{"name": "tiller", "dbic": -50.0, "closed_held": 0.9,
+                                "location": here | {"band_hz": 80.0}}]}]
+    s = score(res, {"tiller": 0.5}, 5.0, 10.0, 0.0)
+    assert s["top1"] == 1.0 and s["localisation"]["gages"] == 1.0 and np.isnan(s["localisation"]["mode"])
 
 
 def test_pod_threshold_recovers_a_known_pod_curve():
