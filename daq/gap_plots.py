@@ -1,5 +1,7 @@
-"""Plots of a gap diagnosis: the gap map as heat maps, the decays before and after the named
-effect on the worst gages, and the ranking of candidates."""
+"""Plots of a gap diagnosis: the gap map as heat maps, the gap in physical terms (frequency,
+decrement, amplitude, envelope, rigid-body and line discrepancies, MAC) before and after the
+named effect, the decays before and after it on the worst gages, and the ranking of
+candidates."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import numpy as np  # noqa: E402
 
 from analysis.gap.diagnose import Diagnosis  # noqa: E402
 from analysis.gap.evidence import WINDOWS, GapMap  # noqa: E402
+from analysis.gap.features import DECAY_WINDOWS, FEATURES, FeatureMap  # noqa: E402
 
 
 def _heat(ax_row, m: GapMap, title: str, vmax: float) -> None:
@@ -35,6 +38,52 @@ def plot_map(d: Diagnosis, out: Path) -> Path:
         _heat(row, m, t, vmax)
     fig.suptitle(f"gap map (gage x band x window), verdict: {d.verdict}")
     path = out / "gap_map.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _feature_row(axes, fm: FeatureMap, title: str, vmax: float) -> None:
+    cols = [f"{f:.1f} {w[0]}" for f in fm.mode_hz for w in DECAY_WINDOWS]
+    gl = [f"g{g}" for g in fm.gage_numbers]
+    kw = {"aspect": "auto", "cmap": "RdBu_r", "vmin": -vmax, "vmax": vmax, "interpolation": "nearest"}
+    for ax, name in zip(axes, FEATURES, strict=False):
+        z = fm.z[name].reshape(len(gl), -1)                 # modes x windows, windows fastest
+        im = ax.imshow(np.ma.masked_invalid(z), **kw)
+        ax.set_title(f"{title}: {name}", fontsize=8)
+        ax.set_xticks(range(len(cols)), cols, rotation=60, fontsize=6)
+        ax.set_yticks(range(len(gl)), gl, fontsize=6)
+    ax = axes[len(FEATURES)]
+    ax.imshow(np.ma.masked_invalid(fm.line_z), **kw)
+    ax.set_title(f"{title}: lines before the blows", fontsize=8)
+    ax.set_xticks(range(len(fm.bands.labels)), fm.bands.labels, rotation=60, fontsize=6)
+    ax.set_yticks(range(len(gl)), gl, fontsize=6)
+    ax = axes[len(FEATURES) + 1]
+    ax.imshow(np.ma.masked_invalid(fm.mac_z.T), **kw)
+    ax.set_title(f"{title}: MAC (z > 0: less alike)", fontsize=8)
+    ax.set_xticks(range(len(fm.mode_hz)), [f"{f:.1f} Hz" for f in fm.mode_hz], rotation=60, fontsize=6)
+    ax.set_yticks(range(len(DECAY_WINDOWS)), DECAY_WINDOWS, fontsize=6)
+    plt.colorbar(im, ax=axes, label="z against the replicates", shrink=0.8)
+
+
+def plot_features(d: Diagnosis, out: Path) -> Path | None:
+    """The gap in physical terms as signed z heat maps (red: the trial above the model),
+    calibrated model and, when named, with the effect."""
+    rows = [(d.features, "calibrated")] if d.features else []
+    if d.best and d.best.features is not None:
+        rows.append((d.best.features, f"+ {d.best.name}"))
+    if not rows:
+        return None
+    level = max(3.0, rows[0][0].z_family) if np.isfinite(rows[0][0].z_family) else 3.0
+    vmax = max(2 * level, 8.0)
+    n = len(FEATURES) + 2
+    fig, axes = plt.subplots(len(rows), n, figsize=(2.4 * n, 3.8 * len(rows)), squeeze=False,
+                             layout="constrained")
+    for ax_row, (fm, title) in zip(axes, rows, strict=True):
+        _feature_row(ax_row, fm, title, vmax)
+    fig.suptitle(f"the gap in physical terms (columns: mode Hz, e/l = early/late decay); beyond z "
+                 f"{level:.1f} stands out of the whole map", fontsize=10)
+    path = out / "gap_features.png"
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
@@ -89,4 +138,5 @@ def plot_ranking(d: Diagnosis, out: Path) -> Path:
 
 
 def plot_diagnosis(d: Diagnosis, out: Path) -> list[Path]:
-    return [plot_map(d, out), plot_decays(d, out), plot_ranking(d, out)]
+    feats = plot_features(d, out)
+    return [plot_map(d, out), *([feats] if feats else []), plot_decays(d, out), plot_ranking(d, out)]

@@ -62,7 +62,15 @@ def test_imported_csv_trial_is_diagnosed(csv_trial, capsys):
     k = labels.index(loc["band"])
     assert edges[k] <= f_true < edges[k + 1]
     assert doc["best"]["closed_held_out"] > 0.7
-    for png in ("gap_map.png", "gap_decays.png", "gap_ranking.png"):
+    # in physical terms: the strongest discrepancy is that line before the blows, at the tone's
+    # frequency to the pre window's resolution 1/T, beyond the map's own chance level
+    top = doc["features"]["strongest"][0]
+    assert top["feature"] == "line" and top["window"] == "pre", top
+    pre_s = doc["features"]["pre_trigger_lines"]["pre_window_s"]
+    assert top["mode_hz"] == pytest.approx(f_true, abs=1 / pre_s)
+    assert top["z"] > doc["features"]["z_family"]
+    assert "in physical terms" in text and doc["best"]["features"] is not None
+    for png in ("gap_map.png", "gap_features.png", "gap_decays.png", "gap_ranking.png"):
         assert (out / png).stat().st_size > 10_000
 
 

@@ -10,6 +10,10 @@ Steps (:func:`diagnose`):
    :mod:`analysis.gap.evidence`. From then on every fit weighs each gage x window by what it
    tells beyond that tolerance (a rudder gage's small mode-shape error is thousands of noise
    variances and would otherwise steer every refit); the constants are refitted so weighed.
+   The same replicates standardise the gap read in physical terms -- frequency, decrement,
+   amplitude, envelope, mode shape, rigid-body consistency per gage x mode x window, and the
+   lines before the blows (:mod:`analysis.gap.features`), for the model before and after the
+   named effect: the report's reading, not the verdict's.
 3. **Which**: every registered effect's signature score (score test, best placement, charged
    for the placements tried); the ``top_k`` strongest are refitted with the base constants free,
    and the two strongest together; each is charged for its extra parameters by the Bayesian
@@ -53,6 +57,7 @@ from analysis.gap.evidence import (
     signature_scores,
     window_inflation,
 )
+from analysis.gap.features import FeatureMap, feature_map
 from analysis.gap.forward import Forward
 from analysis.gap.trialdata import TrialData
 from analysis.gap.verdict import choose, closed_share, closure, detection_score, location
@@ -107,6 +112,8 @@ class Candidate:
     modes_after: list[dict] = field(default_factory=list)
     dbic_marginal: float | None = None
     """For a pair: what the second term adds to the first alone, in BIC."""
+    features: FeatureMap | None = None
+    """The named explanation's discrepancies in physical terms (set for the best only)."""
 
     @property
     def name(self) -> str:
@@ -125,7 +132,8 @@ class Candidate:
                 "gap_held_out": round(self.gap_held, 2),
                 "closed_fitted": round(self.closed_fit, 3), "closed_held_out": round(self.closed_held, 3),
                 "closed_held_out_ci95": [round(v, 3) for v in self.closed_held_ci],
-                "location": self.location, "modes": self.modes_after}
+                "location": self.location, "modes": self.modes_after,
+                "features": self.features.to_json() if self.features else None}
 
 
 @dataclass
@@ -148,6 +156,9 @@ class Diagnosis:
     notes: list[str] = field(default_factory=list)
     z_detect: float = float("nan")
     """:func:`detection_score` of the calibrated model's maps, compared with ``z_gap``."""
+    features: FeatureMap | None = None
+    """Where the calibrated model misses, in physical terms (:mod:`analysis.gap.features`);
+    report only, the verdict rests on the energy maps."""
 
     def to_json(self) -> dict:
         fw = self.forward
@@ -165,6 +176,7 @@ class Diagnosis:
             "modes": self.modes_before,
             "map_fitted": self.map_fit.to_json(),
             "map_held_out": self.map_held.to_json() if self.map_held else None,
+            "features": self.features.to_json() if self.features else None,
             "ranking": [c.to_json() for c in self.candidates],
             "signatures": [{"effect": s.effect.name, "z": round(s.z, 2) if np.isfinite(s.z) else None,
                             "where": s.placement.key if s.placement else None,
@@ -429,5 +441,10 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
             best.map_held = gap_map(fw, best.cal.fit.resid, cells2, bands, held)
             best.closed_held, best.closed_held_ci = closure(b_held, best.map_held, rng, b_fit)
             best.gap_held, gap_held = best.map_held.excess(b_held.gap_cells()), b_held.excess()
+        best.features = feature_map(fw, best.cal, reps2, bands)
+    # last, and drawing nothing at random: the report's physical reading of the gap
+    say("reading the gap as frequency, decrement, shape and line discrepancies")
+    features = feature_map(fw, base, reps, bands)
     return Diagnosis(verdict, best, cands, sigs, base, m_fit, m_held, gap_fit, gap_held,
-                     modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes, z_detect)
+                     modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes, z_detect,
+                     features)
