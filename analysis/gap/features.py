@@ -37,13 +37,13 @@ from analysis.gap.forward import Forward
 
 DECAY_WINDOWS = ("early", "late")
 FEATURES = {
-    "frequency": ("frequency error", "%"),
-    "decrement": ("decrement error", "%"),
-    "scale": ("amplitude ratio (trial / model)", "x"),
-    "envelope": ("log-envelope curvature over the window", ""),
-    "rigid": ("share off the body's rigid-body motion", "%"),
+    "frequency": "frequency error (fraction of the model's)",
+    "decrement": "decrement error (fraction of the model's)",
+    "scale": "amplitude ratio, trial / model",
+    "envelope": "log-envelope curvature over the window (dimensionless, 0 for an exponential)",
+    "rigid": "share of the motion off the body's rigid-body motion (fraction)",
 }
-"""Per gage x mode x window features: name -> (what it is, unit as shown)."""
+"""Per gage x mode x window features: name -> what it is, in what unit."""
 MIN_SNR = 3.0
 """A gage is judged on a mode only where the model's amplitude there is this many times the
 spread of the replicates' amplitude about it (the estimate's own noise and form tolerance):
@@ -56,9 +56,8 @@ class FeatureMap:
     """Discrepancies of a trial from a calibrated model, with their replicate z-scores.
 
     ``value`` and ``z``: name -> (n_g, n_m, 2) for :data:`FEATURES` (NaN where not judged:
-    too weak, or a gage on no rigid body); ``value`` is the trial's (in the unit of
-    :data:`FEATURES`: frequency and decrement errors as fractions, ``scale`` a ratio, ``rigid``
-    a fraction); ``expected`` the replicates' median of the same. ``mac`` and ``mac_z``
+    too weak, or a gage on no rigid body); ``value`` is the trial's, in the unit
+    :data:`FEATURES` gives; ``expected`` the replicates' median of the same. ``mac`` and ``mac_z``
     (n_m, 2): each mode's shape against the model's (1 = same; ``mac_z`` > 0 when lower than the
     replicates'). ``line_amp`` (n_g, n_b) the largest spectral line in each band before the blows
     (m/s^2 amplitude), ``line_hz`` its frequency, ``line_z`` its score against the replicates."""
@@ -127,7 +126,7 @@ class FeatureMap:
 
         return {"gages": list(self.gage_numbers), "modes_hz": r(self.mode_hz, 3),
                 "windows": list(DECAY_WINDOWS),
-                "features": {k: {"what": FEATURES[k][0], "value": r(self.value[k]),
+                "features": {k: {"what": FEATURES[k], "value": r(self.value[k]),
                                  "expected": r(self.expected[k]), "z": r(self.z[k], 2)}
                              for k in self.value},
                 "mac": {"value": r(self.mac), "z": r(self.mac_z, 2)},
@@ -163,7 +162,7 @@ def describe(row: dict) -> str:
     if f == "rigid":
         return (f"gage {row['gage']}, {where}: {100 * v:.1f} % off its body's rigid-body motion "
                 f"(model {100 * row['expected']:.1f} %; z {row['z']:.1f})")
-    return f"gage {row['gage']}, {where}: {FEATURES[f][0]} {100 * v:+.1f} % (z {row['z']:.1f})"
+    return f"gage {row['gage']}, {where}: {f} error {100 * v:+.1f} % (z {row['z']:.1f})"
 
 
 def decay_amplitudes(x: np.ndarray, fs_hz: float, lam: np.ndarray,
