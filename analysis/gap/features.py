@@ -290,10 +290,12 @@ def line_spectrum(x: np.ndarray, fs_hz: float, edges_hz: np.ndarray,
     band = np.clip(np.searchsorted(edges_hz, grid, side="right") - 1, 0, n_b - 1)
     free = np.ones((r.shape[0], n_g, n_b), bool)
     ii, gg = np.meshgrid(np.arange(r.shape[0]), np.arange(n_g), indexing="ij")
-    S = Pinv[:, :2].reshape(-1, n).T                                                   # (n, 2 n_f)
+    # the scan only ranks frequencies: single precision (1e-7) is ample and 2.5x as fast; each
+    # line's own fit and its subtraction below stay in double
+    S = Pinv[:, :2].reshape(-1, n).T.astype(np.float32)                                # (n, 2 n_f)
     for _ in range(n_b):
-        ab = (r.reshape(-1, n) @ S).reshape(r.shape[:3] + (len(grid), 2))             # one BLAS product
-        power = np.sum(ab**2, axis=-1).mean(axis=1)                                   # (L, n_g, n_f)
+        ab = (r.reshape(-1, n).astype(np.float32) @ S).reshape(r.shape[:3] + (len(grid), 2))
+        power = np.einsum("lsgfk,lsgfk->lgf", ab, ab).astype(np.float64) / n_seg    # (L, n_g, n_f)
         power = np.where(free[..., band], power, -np.inf)
         k = np.argmax(power, axis=-1)                                                  # (L, n_g)
         b = band[k]
