@@ -25,7 +25,7 @@ import math
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -305,14 +305,16 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
 def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str], None]) -> list[dict]:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     say(f"{SEED_SETS[seeds][1]}: {len(scs)} scenarios on {jobs} processes")
-    results = []
+    # the slowest first (a 512 Hz in-air trial takes 2-4x a water one), so that no process
+    # idles at the end behind one long diagnosis; results keep the scenarios' order
+    order = sorted(range(len(scs)), key=lambda i: scs[i]["medium"] != "air")
+    results: list[dict] = [{}] * len(scs)
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futs = [pool.submit(run_one, sc, str(out)) for sc in scs]
-        for i, f in enumerate(futs):
-            r = f.result()
-            results.append(r)
+        futs = {pool.submit(run_one, scs[i], str(out)): i for i in order}
+        for n, f in enumerate(as_completed(futs)):
+            r = results[futs[f]] = f.result()
             tag = r.get("named") or r.get("verdict") or r.get("error")
-            say(f"[{i + 1}/{len(scs)}] {r['effect']:16s} size {r['size']:.2f} {r['rig']}/{r['medium']}: "
+            say(f"[{n + 1}/{len(scs)}] {r['effect']:16s} size {r['size']:.2f} {r['rig']}/{r['medium']}: "
                 f"{tag} ({r['seconds']:.1f} s)")
     return results
 
