@@ -172,8 +172,9 @@ def feature_lines(d: Diagnosis, n: int = 5) -> list[str]:
         key = (r["feature"], r.get("band") or round(r["mode_hz"], 1), r["window"])
         groups.setdefault(key, []).append(r)
     rows = list(groups.values())[:n]
-    head = (f"  in physical terms (z against the replicate simulations; listed beyond z {level:.1f}, "
-            "which a trial of the calibrated model reaches anywhere on the map at most 1 time in 20)")
+    head = (f"  in physical terms (read in {d.features_seconds:.1f} s; z against the replicate "
+            f"simulations; listed beyond z {level:.1f}, which a trial of the calibrated model reaches "
+            "anywhere on the map at most 1 time in 20)")
     if not rows:
         return [head + ": nothing stands out"]
     out = [head + ":"]

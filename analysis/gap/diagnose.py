@@ -32,6 +32,7 @@ the effect is added.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -112,8 +113,18 @@ class Candidate:
     modes_after: list[dict] = field(default_factory=list)
     dbic_marginal: float | None = None
     """For a pair: what the second term adds to the first alone, in BIC."""
-    features: FeatureMap | None = None
-    """The named explanation's discrepancies in physical terms (set for the best only)."""
+    cal_forward: Forward | None = field(default=None, repr=False)
+    reps: np.ndarray | None = field(default=None, repr=False)
+    """The replicates of this candidate's model (set for the named one only): what its
+    :attr:`features` are read against."""
+
+    @functools.cached_property
+    def features(self) -> FeatureMap | None:
+        """The named explanation's discrepancies in physical terms, read when first asked for
+        (the report asks; the benchmark, which scores none of it, does not)."""
+        if self.reps is None or self.map_fit is None:
+            return None
+        return feature_map(self.cal_forward, self.cal, self.reps, self.map_fit.bands)
 
     @property
     def name(self) -> str:
@@ -156,9 +167,24 @@ class Diagnosis:
     notes: list[str] = field(default_factory=list)
     z_detect: float = float("nan")
     """:func:`detection_score` of the calibrated model's maps, compared with ``z_gap``."""
-    features: FeatureMap | None = None
-    """Where the calibrated model misses, in physical terms (:mod:`analysis.gap.features`);
-    report only, the verdict rests on the energy maps."""
+    reps: np.ndarray | None = field(default=None, repr=False)
+    """The calibrated model's replicate residuals (n_rep, n_seg, n_g, n_s), m/s^2."""
+    features_seconds: float = 0.0
+    """What reading :attr:`features` cost, s (0 until it is read)."""
+
+    @functools.cached_property
+    def features(self) -> FeatureMap | None:
+        """Where the calibrated model misses, in physical terms (:mod:`analysis.gap.features`),
+        and with the named effect (``best.features``): the report's reading, computed when
+        first asked for; the verdict rests on the energy maps and does not use it."""
+        if self.reps is None:
+            return None
+        t0 = time.perf_counter()
+        fm = feature_map(self.forward, self.base, self.reps, self.map_fit.bands)
+        if self.best is not None:
+            _ = self.best.features
+        self.features_seconds = time.perf_counter() - t0
+        return fm
 
     def to_json(self) -> dict:
         fw = self.forward
@@ -441,10 +467,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
             best.map_held = gap_map(fw, best.cal.fit.resid, cells2, bands, held)
             best.closed_held, best.closed_held_ci = closure(b_held, best.map_held, rng, b_fit)
             best.gap_held, gap_held = best.map_held.excess(b_held.gap_cells()), b_held.excess()
-        best.features = feature_map(fw, best.cal, reps2, bands)
-    # last, and drawing nothing at random: the report's physical reading of the gap
-    say("reading the gap as frequency, decrement, shape and line discrepancies")
-    features = feature_map(fw, base, reps, bands)
+        best.reps, best.cal_forward = reps2, fw
     return Diagnosis(verdict, best, cands, sigs, base, m_fit, m_held, gap_fit, gap_held,
                      modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes, z_detect,
-                     features)
+                     reps)
