@@ -360,14 +360,12 @@ def family_level(nulls: list[tuple[np.ndarray, bool]], alpha: float = 0.05) -> f
     return float(np.sort(worst)[rank - 1]) if rank <= n_rep else math.inf
 
 
-def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Bands,
-                resid: np.ndarray | None = None) -> FeatureMap:
-    """The trial's discrepancies from the calibrated ``cal``, standardised by the replicates'
-    residuals ``resid_reps`` (n_rep, n_seg, n_g, n_s) of the same model (see the module
-    docstring). ``resid`` the trial's residual (default ``cal.fit.resid``). All impacts count."""
+def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Bands) -> FeatureMap:
+    """The trial's discrepancies from the calibrated ``cal`` (its residual ``cal.fit.resid``),
+    standardised by the replicates' residuals ``resid_reps`` (n_rep, n_seg, n_g, n_s) of the
+    same model (see the module docstring). All impacts count."""
     td = fw.td
-    pred = cal.fit.pred
-    resid = cal.fit.resid if resid is None else resid
+    pred, resid = cal.fit.pred, cal.fit.resid
     ms = cal.fit.modes
     idx = [i for i, _ in sorted(compared_modes(fw, cal.fit), key=lambda t: t[1])]
     others = [i for i in range(len(ms.lam)) if i not in idx]
@@ -405,16 +403,16 @@ def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Ba
                    "scale": feats["amp"] / feats["amp"][1], "envelope": feats["curv"],
                    "rigid": rigid_share(c, bodies)}
         for k, v in per.items():
-            v = np.where(seen, v, np.nan)
+            v = np.where(seen, v, np.nan)                # unseen cells stay NaN from here on
             # a ratio is judged in log: its spread is relative
             judged = np.log(v) if k == "scale" else v
             zz, med = robust_z(judged[0], judged[2:])
-            med = np.exp(med) if k == "scale" else med
             nulls.append((judged[2:], True))
-            value[k][..., w] = np.where(seen, v[0], np.nan)
-            expected[k][..., w] = np.where(seen, med, np.nan)
-            z[k][..., w] = np.where(seen, zz, np.nan)
-        # a mode's shape over the gages that see it, trial and replicates against the model
+            value[k][..., w] = v[0]
+            expected[k][..., w] = np.exp(med) if k == "scale" else med
+            z[k][..., w] = zz
+        # each mode's shape over all gages (amplitude-weighted, as MAC is), trial and replicates
+        # against the model
         m_all = _nanmean(mac(c[1][None], c), axis=1)                    # (2 + n_rep, m)
         mac_v[:, w] = m_all[0]
         zz, _ = robust_z(-m_all[0], -m_all[2:])
