@@ -10,13 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.signal
 
 from analysis.gap.calibrate import calibrate
 from analysis.gap.diagnose import diagnose
 from analysis.gap.effects import EFFECTS, Term, get_effect
 from analysis.gap.evidence import template
 from analysis.gap.forward import Forward
-from analysis.gap.trialdata import prepare
+from analysis.gap.trialdata import _lowpass, prepare, sos_response
 from analysis.rig import load_rig
 from drivers.sim import SimDevice
 
@@ -50,6 +51,18 @@ def test_forward_is_exact_on_its_own_model(albacore_air):
     assert np.sqrt(np.mean(r**2)) < 1e-4 * signal
     np.testing.assert_allclose(fit.force, albacore_air.impact.peak_force_N, rtol=1e-4)
     assert np.all(np.abs(fit.shift_s) < 1e-6)
+
+
+def test_the_lowpass_response_is_scipys_to_the_last_bit():
+    """The decimation low-pass's response is evaluated by hand (every modal prediction asks for
+    it, and sosfreqz's checks make it 6x dearer); it must be scipy's to the bit, or every
+    benchmark figure measured with scipy's would have to be measured again."""
+    rng = np.random.default_rng(3)
+    for corner, fs in [(40.0, 1024.0), (61.3, 512.0), (25.7, 256.0)]:
+        sos = _lowpass(corner, fs)
+        f = np.abs(rng.normal(corner, corner, 5000))
+        _, h = scipy.signal.sosfreqz(sos, worN=f, fs=fs)
+        assert np.array_equal(sos_response(sos, f, fs).view(float), h.view(float))
 
 
 def test_calibration_takes_up_mistuned_constants(albacore_air):

@@ -24,6 +24,7 @@ from analysis.gap.forward import Forward
 from analysis.gap.trialdata import prepare
 from analysis.gap.truth import generate_trial
 from analysis.gap.verdict import detection_score
+from analysis.response import half_sine_response
 from analysis.rig import load_rig
 
 RIGS = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
@@ -226,6 +227,31 @@ def test_a_pulse_long_before_its_contact_stays_finite_and_exact(trial):
         assert np.all(u[:, t <= 0] == 0)
         # the same sums in another order: rounding only (1e-9 of the largest response)
         assert np.max(np.abs(u[:, after] - direct)) <= 1e-9 * np.max(np.abs(direct))
+
+
+def test_a_pulse_is_exact_at_every_sample_wherever_its_contact_falls(trial):
+    """Each sample of a contact's response is 0 before the contact, the closed form J(t) during
+    it and J(T) e^{lambda (t - T)} after it, wherever the contact falls between samples --
+    also where a sample sits on t = 0 or t = T to within an ulp, where the segment's clock
+    ``t`` and the decay's clock ``t - T`` may put it on different sides."""
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    ms = fw.fit(np.zeros(len(fw.params))).modes
+    E, JT = fw.pulse_basis(ms)
+    T, dt = ms.duration_s, 1 / td.fs_hz
+    taus = [c + e for k in (0, 1, 2, 7, 40) for c in (T - k * dt, -k * dt)
+            for e in (-2e-16, -1e-16, 0.0, 1e-16, 2e-16, 0.37 * dt)]
+    for tau0 in taus:
+        u, _ = fw.pulse_response(ms, tau0, (E, JT))
+        t = tau0 + np.arange(td.n_s) / td.fs_hz
+        ref = np.zeros_like(u)
+        during, after = (t > 0) & (t < T), t >= T
+        ref[:, during] = (np.real(ms.A @ half_sine_response(ms.lam, T, t[during]))
+                          + ms.feed[:, None] * np.sin(math.pi / T * t[during]))
+        ref[:, after] = np.real(ms.A @ (JT[:, None] * np.exp(ms.lam[:, None] * (t[after] - T))))
+        # J is continuous at 0 and T, so a sample an ulp to either side differs by rounding
+        # only (1e-9 of the largest response); a sample left unset would be off by O(1)
+        assert np.max(np.abs(u - ref)) <= 1e-9 * np.max(np.abs(ref)), tau0
 
 
 def test_a_split_is_only_placed_where_the_widest_split_is_resolved(trial):

@@ -273,7 +273,9 @@ def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sca
         nfev += 1
         c_new = float(r_new @ r_new) if r_new is not None else math.inf
         if r_new is not None:
-            J = J + np.outer(r_new - r - J @ step, step) / float(step @ step)
+            dJ = np.outer(r_new - r - J @ step, step)
+            dJ /= float(step @ step)
+            J += dJ        # in place: J is n_data x n_params, no fresh copy of it each step
         if c_new < cost:
             small = (cost - c_new) < tol * cost
             x, r, cost = x_new, r_new, c_new

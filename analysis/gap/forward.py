@@ -138,7 +138,11 @@ class Fit:
     shift_s: np.ndarray
     lin: np.ndarray
     modes: ModeSet
-    rig: Rig
+
+    @property
+    def rig(self) -> Rig:
+        """The rig the prediction was made for (calibrated constants, the terms' changes)."""
+        return self.modes.model.rig
 
 
 class Forward:
@@ -281,15 +285,21 @@ class Forward:
         # valid for t >= T (and t >= 0 where exp_only); a sample before then is overwritten
         # below, so a mode whose factor for sample 0 would overflow (a strongly damped one long
         # before its contact) starts from its first valid sample: e^{lambda (lag + k0 dt)} E[k - k0]
-        k0 = np.ceil(np.maximum(-lag, 0.0) * self.td.fs_hz).astype(int)
-        Z = (JT * np.exp(lam * (lag + k0 / self.td.fs_hz)))[:, None] * E
-        for m in np.flatnonzero(k0):
-            Z[m, k0[m]:] = Z[m, :self.td.n_s - k0[m]]
-            kk = np.arange(min(k0[m], self.td.n_s))
-            with np.errstate(over="ignore", invalid="ignore"):   # overwritten below but at the edge
-                Z[m, kk] = JT[m] * np.exp(lam[m] * (lag[m] + kk / self.td.fs_hz))
-        t = tau0 + np.arange(self.td.n_s) / self.td.fs_hz
+        n_s, fs = self.td.n_s, self.td.fs_hz
+        k0 = np.ceil(np.maximum(-lag, 0.0) * fs).astype(int)
+        Z = (JT * np.exp(lam * (lag + k0 / fs)))[:, None] * E
+        k = np.arange(n_s)
+        t = tau0 + k / fs
         early = t < T
+        if k0.any():
+            Z = np.take_along_axis(Z, np.maximum(k[None, :] - k0[:, None], 0), axis=1)
+            # samples before k0 are set below -- to 0 before the contact, to J(t) during it
+            # (exp_only: kept) -- but for a rounding edge, where t and lag disagree by an ulp:
+            # only those are computed from the closed form
+            kept = np.where(ms.exp_only[:, None], ~(early & (t <= 0)), ~early)
+            for m, kk in _rows(kept & (k[None, :] < k0[:, None])):
+                with np.errstate(over="ignore", invalid="ignore"):
+                    Z[m, kk] = JT[m] * np.exp(lam[m] * (lag[m] + kk / fs))
         if early.any():
             Z[:, early & (t <= 0)] = 0.0
             during = early & (t > 0)
@@ -346,7 +356,7 @@ class Forward:
         shift = -coef[n: 2 * n] / np.where(force != 0, force, 1.0)
         src = self.td.x if x is None else x
         resid = np.where(mask, src - pred, np.nan)
-        return Fit(pred, resid, force, shift, coef[2 * n:], ms, self.rig_for(theta, terms))
+        return Fit(pred, resid, force, shift, coef[2 * n:], ms)
 
     def design(self, U: np.ndarray, dU: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
         """The linear columns (forces, onset shifts, terms' own), (n_cols, n_seg, n_g, n_s)."""
@@ -366,11 +376,14 @@ class Forward:
         w2 = self._w2.reshape(self.td.n_seg, -1)
         alive = []
         for s in range(self.td.n_seg):
-            act = [j for j in range(n) if j <= s]
+            a = min(s + 1, n)                  # the impacts alive in segment s: 0 .. s
             live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
-            idx = act + [n + j for j in act] + [2 * n + i for i in live_e]
-            parts = [U[act, s], dU[act, s]] + ([extra[live_e, s]] if live_e else [])
-            X = np.concatenate(parts).reshape(len(idx), -1)
+            idx = list(range(a)) + list(range(n, n + a)) + [2 * n + i for i in live_e]
+            X = np.empty((len(idx), w2.shape[1]))
+            X[:a] = U[:a, s].reshape(a, -1)
+            X[a:2 * a] = dU[:a, s].reshape(a, -1)
+            if live_e:
+                X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
             Xw = X * w2[s]
             G[np.ix_(idx, idx)] += Xw @ X.T
             b[idx] += Xw @ data[s].ravel()
@@ -390,3 +403,9 @@ class Forward:
         if segments is not None:
             r = r[segments]
         return np.nan_to_num(r.ravel(), nan=0.0)
+
+
+def _rows(mask: np.ndarray):
+    """``(row, columns)`` of every row of a 2-d bool ``mask`` holding any True."""
+    for m in np.flatnonzero(mask.any(axis=1)):
+        yield m, np.flatnonzero(mask[m])

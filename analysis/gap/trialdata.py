@@ -121,8 +121,7 @@ class TrialData:
         """Power gain ``|H(f)|^2`` of the zero-phase decimation low-pass at ``f_hz``."""
         if self.fs_hz >= self.fs_full_hz:
             return np.ones_like(np.asarray(f_hz, dtype=float))
-        sos = _lowpass(self.lowpass_hz, self.fs_full_hz)
-        _, h = scipy.signal.sosfreqz(sos, worN=np.atleast_1d(np.abs(f_hz)), fs=self.fs_full_hz)
+        h = sos_response(_lowpass(self.lowpass_hz, self.fs_full_hz), np.abs(f_hz), self.fs_full_hz)
         return np.abs(h) ** 2
 
 
@@ -130,6 +129,24 @@ def strip_ambient(rig: Rig) -> Rig:
     """The rig without its ``[[ambient]]`` tone: the nominal model the diagnosis starts from."""
     from dataclasses import replace
     return replace(rig, ambient=())
+
+
+def sos_response(sos: np.ndarray, f_hz: np.ndarray, fs_hz: float) -> np.ndarray:
+    """Complex response ``H(f)`` of the second-order sections ``sos`` (n_sections, 6) at
+    ``f_hz`` (any shape, flattened to 1-d), Hz, for a sample rate ``fs_hz``.
+
+    The same operations in the same order as ``scipy.signal.sosfreqz(sos, worN=f_hz, fs=fs_hz)``
+    (``e^{-i w}``, each section's numerator and denominator by Horner, sections multiplied in
+    turn), so the very same numbers, without its per-call checks: every modal prediction asks
+    for the gain, and with them it took 200 us a call against 31 us (measured).
+    """
+    w = 2 * math.pi * np.atleast_1d(np.asarray(f_hz, dtype=float)) / float(fs_hz)
+    z = np.exp(-1j * w)
+    h = 1.0
+    for b0, b1, b2, a0, a1, a2 in sos:
+        # in place, as scipy does it: numpy rounds an in-place complex product differently
+        h *= (b0 + (b1 + b2 * z) * z) / (a0 + (a1 + a2 * z) * z)
+    return h
 
 
 @functools.lru_cache(maxsize=16)
