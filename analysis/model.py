@@ -36,6 +36,7 @@ Damping (viscous): ``C`` on v (absolute, Eq 62a), ``c`` on ``gamma - gamma_b`` (
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -109,10 +110,18 @@ def added_mass(rig: Rig) -> dict[str, float]:
     """
     if rig.medium == "air":
         return {"m_vir": 0.0, "Iz_vir": 0.0, "Ix_vir": 0.0}
-    r, rho, f = rig.rudder, rig.water_density_kg_m3, rig.rudder.added_mass_factor
-    m_vir = m_vir_flat_plate(rho, r.chord_m, r.span_m)
-    iz_vir = Iz_vir_elliptic(rho, r.chord_m, r.thickness_m, r.span_m)
-    return {"m_vir": f * m_vir, "Iz_vir": f * iz_vir, "Ix_vir": f * Ix_vir(m_vir, r.span_m)}
+    r, f = rig.rudder, rig.rudder.added_mass_factor
+    m_vir, iz_vir, ix_vir = _added_mass_as_printed(rig.water_density_kg_m3, r.chord_m, r.span_m,
+                                                   r.thickness_m)
+    return {"m_vir": f * m_vir, "Iz_vir": f * iz_vir, "Ix_vir": f * ix_vir}
+
+
+@functools.lru_cache(maxsize=64)
+def _added_mass_as_printed(rho: float, chord: float, span: float, thickness: float) -> tuple:
+    """Eq 19-21 as printed (kg, kg m^2, kg m^2), once per geometry: a calibration builds the
+    model thousands of times with only the factor changing."""
+    m_vir = m_vir_flat_plate(rho, chord, span)
+    return m_vir, Iz_vir_elliptic(rho, chord, thickness, span), Ix_vir(m_vir, span)
 
 
 def stock_element(rig: Rig) -> np.ndarray:
@@ -177,12 +186,35 @@ def build_model(rig: Rig) -> StructuralModel:
         C[i, i] += 2 * mode.damping_ratio * wk * mode.modal_mass_kg
 
     gages = rig.gages_by_channel()
-    G = np.vstack([g.direction @ point_dofs(rig, g.body, g.position_m, n) for g in gages])
     return StructuralModel(
         M=M, C=C, K=0.5 * (K + K.T), dofs=RUDDER_DOFS + tuple(f"eta{k + 1}" for k in range(len(modes))),
-        gage_dofs=G, gage_numbers=tuple(g.number for g in gages), medium=rig.medium,
+        gage_dofs=gage_map(rig, n), gage_numbers=tuple(g.number for g in gages), medium=rig.medium,
         added=add, rig=rig,
     )
+
+
+_GAGE_MAPS: dict[tuple, np.ndarray] = {}
+
+
+def gage_map(rig: Rig, n_dof: int) -> np.ndarray:
+    """Each gage's displacement along its sensing axis per unit DOF, (n_gages, n_dof), rows in
+    DAQ channel order; read-only.
+
+    Kept per geometry -- the gages, the stock's attachment and lengths, the hull modes' shapes at
+    the stock: all that :func:`point_dofs` reads -- since a calibration rebuilds the model
+    thousands of times changing only stiffness, damping and mass."""
+    r, st = rig.rudder, rig.stock
+    key = (rig.gages, r.stock_x_m, r.attach_z_m, st.bending_length_m, st.torsion_length_m,
+           tuple((m.v_b, m.gamma_b, m.alpha_b, m.moves_hull) for m in rig.hull_modes), n_dof)
+    G = _GAGE_MAPS.get(key)
+    if G is None:
+        G = np.vstack([g.direction @ point_dofs(rig, g.body, g.position_m, n_dof)
+                       for g in rig.gages_by_channel()])
+        G.flags.writeable = False
+        if len(_GAGE_MAPS) >= 256:        # an extra mode's fitted shape makes new keys
+            _GAGE_MAPS.clear()
+        _GAGE_MAPS[key] = G
+    return G
 
 
 def point_dofs(rig: Rig, body: str, point_m: tuple[float, float, float], n_dof: int) -> np.ndarray:

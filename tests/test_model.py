@@ -1,13 +1,14 @@
 """The physics model: structure of its matrices, its exactness, and the rigs' published modes."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import scipy.integrate
 import scipy.linalg
 
-from analysis.model import build_model, stock_element
+from analysis.model import build_model, point_dofs, stock_element
 from analysis.response import (
     ModalSimulator,
     modal_form,
@@ -148,3 +149,40 @@ def test_added_mass_only_in_water(albacore):
     r = albacore.rudder
     m_vir = math.pi / 4 * albacore.water_density_kg_m3 * r.chord_m**2 * r.span_m
     assert water.M[0, 0] - air.M[0, 0] == pytest.approx(m_vir, rel=1e-12)
+
+
+def _gage_map_afresh(rig):
+    n = 3 + len(rig.hull_modes)
+    return np.vstack([g.direction @ point_dofs(rig, g.body, g.position_m, n)
+                      for g in rig.gages_by_channel()])
+
+
+def test_the_kept_gage_map_follows_every_change_of_geometry(sampson):
+    """build_model keeps each geometry's gage map (a calibration rebuilds the model thousands of
+    times): a rig differing in anything the map depends on must get its own map, never the
+    last one's; a change of stiffness or mass alone keeps it."""
+    rig = sampson.with_medium("water")
+    h0 = rig.hull_modes[0]
+    g0 = rig.gages_by_channel()[0]
+    st, ru, rest = rig.stock, rig.rudder, rig.hull_modes[1:]
+    variants = {
+        "stock length": replace(rig, stock=replace(st, bending_length_m=st.bending_length_m * 1.2)),
+        "torsion length": replace(rig, stock=replace(st, torsion_length_m=st.torsion_length_m * 1.2)),
+        "attachment": replace(rig, rudder=replace(ru, attach_z_m=ru.attach_z_m + 0.1)),
+        "stock x": replace(rig, rudder=replace(ru, stock_x_m=ru.stock_x_m + 0.1)),
+        "hull shape": replace(rig, hull_modes=(replace(h0, gamma_b=h0.gamma_b + 0.01),) + rest),
+        "moves hull": replace(rig, hull_modes=(replace(h0, moves_hull=not h0.moves_hull),) + rest),
+        "extra mode": replace(rig, hull_modes=rig.hull_modes + (replace(h0, name="extra", v_b=0.5),)),
+        "gage position": replace(rig, gages=tuple(replace(g, position_m=(0.1, 0.2, 0.3)) if g == g0 else g
+                                                  for g in rig.gages)),
+    }
+    base = build_model(rig).gage_dofs
+    for what, v in variants.items():
+        G = build_model(v).gage_dofs
+        assert np.array_equal(G, _gage_map_afresh(v)), what
+        assert G.shape != base.shape or not np.array_equal(G, base), what   # the change shows
+    stiffer = replace(rig, stock=replace(rig.stock, I_m4=rig.stock.I_m4 * 2),
+                      rudder=replace(rig.rudder, added_mass_factor=1.3))
+    assert build_model(stiffer).gage_dofs is base
+    with pytest.raises(ValueError):
+        base[0, 0] = 1.0                      # shared between models: read-only

@@ -292,12 +292,16 @@ class Forward:
         t = tau0 + k / fs
         early = t < T
         if k0.any():
-            Z = np.take_along_axis(Z, np.maximum(k[None, :] - k0[:, None], 0), axis=1)
+            for v in np.unique(k0[(k0 > 0) & (k0 < n_s)]):   # one shift per kind of mode
+                rows = k0 == v
+                Z[rows, v:] = Z[rows, :n_s - v]
             # samples before k0 are set below -- to 0 before the contact, to J(t) during it
             # (exp_only: kept) -- but for a rounding edge, where t and lag disagree by an ulp:
-            # only those are computed from the closed form
-            kept = np.where(ms.exp_only[:, None], ~(early & (t <= 0)), ~early)
-            for m, kk in _rows(kept & (k[None, :] < k0[:, None])):
+            # only those are computed from the closed form (t rises, so what is set below is
+            # the first ``first`` samples)
+            first = np.where(ms.exp_only, np.count_nonzero(early & (t <= 0)), np.count_nonzero(early))
+            for m in np.flatnonzero(first < np.minimum(k0, n_s)):
+                kk = np.arange(first[m], min(k0[m], n_s))
                 with np.errstate(over="ignore", invalid="ignore"):
                     Z[m, kk] = JT[m] * np.exp(lam[m] * (lag[m] + kk / fs))
         if early.any():
@@ -403,9 +407,3 @@ class Forward:
         if segments is not None:
             r = r[segments]
         return np.nan_to_num(r.ravel(), nan=0.0)
-
-
-def _rows(mask: np.ndarray):
-    """``(row, columns)`` of every row of a 2-d bool ``mask`` holding any True."""
-    for m in np.flatnonzero(mask.any(axis=1)):
-        yield m, np.flatnonzero(mask[m])
