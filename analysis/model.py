@@ -224,6 +224,8 @@ def point_dofs(rig: Rig, body: str, point_m: tuple[float, float, float], n_dof: 
     with ``(v_b, gamma_b, alpha_b)`` about the hull attachment ``(h, 0, b + l)``. Stock: its axis
     deflects by the beam element's cubic (Hermite) shape between the rudder and hull attachments,
     and twists linearly from gamma at the rudder to gamma_b over the torsion length.
+
+    What it reads of ``rig`` is :func:`gage_map`'s key: anything it comes to read must join it.
     """
     r, st = rig.rudder, rig.stock
     h, b, ell = r.stock_x_m, r.attach_z_m, st.bending_length_m
