@@ -164,7 +164,7 @@ def feature_lines(d: Diagnosis, n: int = 5) -> list[str]:
     fm = d.features
     if fm is None:
         return []
-    level = max(3.0, fm.z_family) if np.isfinite(fm.z_family) else 3.0
+    level = fm.list_level
     # one line per finding: the same feature of the same mode (or line) and window on several
     # gages is one discrepancy seen several times
     groups: dict[tuple, list[dict]] = {}

@@ -74,7 +74,7 @@ def plot_features(d: Diagnosis, out: Path) -> Path | None:
         rows.append((d.best.features, f"+ {d.best.name}"))
     if not rows:
         return None
-    level = max(3.0, rows[0][0].z_family) if np.isfinite(rows[0][0].z_family) else 3.0
+    level = rows[0][0].list_level
     vmax = max(2 * level, 8.0)
     n = len(FEATURES) + 2
     fig, axes = plt.subplots(len(rows), n, figsize=(2.4 * n, 3.8 * len(rows)), squeeze=False,

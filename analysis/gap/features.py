@@ -83,12 +83,17 @@ class FeatureMap:
     pre_s: float
     """Length of the pre-trigger window, s: lines closer than 1/pre_s cannot be told apart."""
 
+    @property
+    def list_level(self) -> float:
+        """The z beyond which a cell is listed: :attr:`z_family`, and never below 3."""
+        return max(3.0, self.z_family) if np.isfinite(self.z_family) else 3.0
+
     def strongest(self, n: int = 6, z_min: float | None = None) -> list[dict]:
-        """The ``n`` largest discrepancies beyond ``z_min`` (default :attr:`z_family`, at least
-        3), most significant first: each a dict with ``feature``, ``gage`` (None for a mode's
-        shape), ``mode_hz`` or ``band``, ``window``, ``value``, ``expected``, ``z`` and a one-line
+        """The ``n`` largest discrepancies beyond ``z_min`` (default :attr:`list_level`), most
+        significant first: each a dict with ``feature``, ``gage`` (None for a mode's shape),
+        ``mode_hz`` or ``band``, ``window``, ``value``, ``expected``, ``z`` and a one-line
         ``text``."""
-        z_min = max(3.0, self.z_family if np.isfinite(self.z_family) else 3.0) if z_min is None else z_min
+        z_min = self.list_level if z_min is None else z_min
         rows = []
         for name, z in self.z.items():
             for g, m, w in zip(*np.nonzero(np.abs(np.nan_to_num(z)) > z_min), strict=True):
