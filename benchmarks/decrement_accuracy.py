@@ -20,7 +20,7 @@ amplitude; random phase per noise seed):
    mdof (``pip install mdof``; ERA with the decay as Markov parameters, 300 block rows); both
    are given the true number of modes, ours chooses it itself;
 4. ``--select``: subspace starts (Matrix Pencil, ESPRIT, ERA) with and without the NLS refinement,
-   the measurement behind the estimator choice in ``analysis/modal_id.py``.
+   the measurement behind the estimator choice in ``analysis/modal/identify.py``.
 
 A cell prints ``pass``/``FAIL``; ``n/s`` marks a bias above target but within two Monte-Carlo
 standard errors of it (more seeds needed to tell).
@@ -41,12 +41,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from analysis.damping import crb_damped_sinusoids  # noqa: E402
-from analysis.modal_id import identify_modes  # noqa: E402
-from analysis.modal_signal import damped_sinusoids  # noqa: E402
-from analysis.modal_subspace import era_poles, esprit_poles, matrix_pencil_poles, poles_to_modes  # noqa: E402
-from analysis.modal_varpro import fit_modes_varpro  # noqa: E402
-from analysis.peaks import decrement_from_peaks  # noqa: E402
+from ramdaq.analysis.modal.crb import crb_damped_sinusoids  # noqa: E402
+from ramdaq.analysis.modal.identify import identify_modes  # noqa: E402
+from ramdaq.analysis.modal.peaks import decrement_from_peaks  # noqa: E402
+from ramdaq.analysis.modal.signal import damped_sinusoids  # noqa: E402
+from ramdaq.analysis.modal.subspace import era_poles, esprit_poles, matrix_pencil_poles, poles_to_modes  # noqa: E402
+from ramdaq.analysis.modal.varpro import fit_modes_varpro  # noqa: E402
 
 FS_HZ = 2048.0
 F_HZ, DELTA = 24.5, 0.06

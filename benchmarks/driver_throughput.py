@@ -5,7 +5,7 @@ second of CPU time in the decoding thread, and the share of one core the adapter
 16 channels x 2.048 kHz (target < 10 %). CAN cases: the codec alone (fast path and its cantools
 twin), the slcan line parser alone, and the whole adapter (bus, checks, cycle assembly, blocks) on
 a pre-filled python-can virtual bus and on slcan over a pseudo-terminal (the adapter's own bulk
-reader, :mod:`drivers.slcan_reader`; emulator in its own process), as fast as it goes (CPU share
+reader, :mod:`ramdaq.drivers.slcan_reader`; emulator in its own process), as fast as it goes (CPU share
 computed from CPU per frame) and at the sample clock (CPU share measured).
 
     python benchmarks/driver_throughput.py [--seconds 5]
@@ -28,11 +28,17 @@ from pathlib import Path
 import can
 import numpy as np
 
-from drivers.can_device import CanDevice
-from drivers.can_emulator import CanEmulator, Wire, rig_with_adc_bits, send_frames, slcan_line
-from drivers.can_frames import FrameCodec
-from drivers.sim import SimDevice
-from drivers.slcan_reader import READ_EVERY_S, parse_lines
+from ramdaq.drivers.can_device import CanDevice
+from ramdaq.drivers.can_frames import FrameCodec
+from ramdaq.drivers.emulators.can_emulator import (
+    CanEmulator,
+    Wire,
+    rig_with_adc_bits,
+    send_frames,
+    slcan_line,
+)
+from ramdaq.drivers.sim import SimDevice
+from ramdaq.drivers.slcan_reader import READ_EVERY_S, parse_lines
 
 ROOT = Path(__file__).resolve().parent.parent
 RIG = ROOT / "recordings" / "rigs" / "sampson.toml"
@@ -142,7 +148,8 @@ def _slcan_case(dbc: str, pace: str) -> Callable[[float], Row]:
         with tempfile.TemporaryDirectory() as tmp:
             rig = _rig(dbc, Path(tmp))
             proc = subprocess.Popen(
-                [sys.executable, "-m", "drivers.can_emulator", "--interface", "slcan", "--rig", str(rig),
+                [sys.executable, "-m", "ramdaq.drivers.emulators.can_emulator",
+                 "--interface", "slcan", "--rig", str(rig),
                  "--dbc", dbc, "--duration", str(seconds), "--impacts", str(seconds / 2), "--pace", pace,
                  "--linger", "5"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
             port = proc.stdout.readline().split()[1]

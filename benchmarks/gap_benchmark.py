@@ -1,5 +1,5 @@
 """Gap diagnosis benchmark: ``ramdaq gap benchmark`` itself, with its own options (see
-daq/gap_bench.py).
+daq/commands/gap_bench.py).
 
     python benchmarks/gap_benchmark.py --seeds dev --per-class 20   # tune: writes the thresholds
     python benchmarks/gap_benchmark.py --per-class 20               # the benchmark's own seeds
@@ -12,11 +12,8 @@ closed on held-out impacts and the cost per diagnosis.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from daq.cli import main  # noqa: E402  (sets one BLAS thread per process before numpy loads)
+from ramdaq.daq.commands.cli import main  # sets one BLAS thread per process before numpy loads
 
 if __name__ == "__main__":
     sys.exit(main(["gap", "benchmark", *sys.argv[1:]]))

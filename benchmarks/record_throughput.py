@@ -15,8 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from daq.record import record
-from drivers.sim import SimDevice
+from ramdaq.daq.record import record
+from ramdaq.drivers.sim import SimDevice
 
 RIG = Path(__file__).resolve().parent.parent / "recordings" / "rigs" / "albacore.toml"
 

@@ -2,9 +2,9 @@
 
 Sixty seconds of realistic data (16 accelerometer channels at 25.6 kHz in 50 ms blocks: a ram
 blow every 5 s ringing four decaying modes, plus ADC noise, quantised to 24-bit counts) are
-encoded by :func:`drivers.mcap_format.encode_block` and by the protobuf runtime
+encoded by :func:`ramdaq.drivers.mcap_format.encode_block` and by the protobuf runtime
 (``counts.extend(array.tolist())``), decoded, compressed as the recorder's 0.25 s chunks are, and
-finally recorded end to end by :class:`daq.recorder.Recorder` into a temporary file.
+finally recorded end to end by :class:`ramdaq.daq.recorder.Recorder` into a temporary file.
 
     python benchmarks/record_throughput_format.py [--seconds 60]
 """
@@ -12,7 +12,6 @@ finally recorded end to end by :class:`daq.recorder.Recorder` into a temporary f
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -20,11 +19,9 @@ from pathlib import Path
 import numpy as np
 import zstandard
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from daq.recorder import Recorder  # noqa: E402
-from drivers.block import Block, StreamInfo, sample_time_ns  # noqa: E402
-from drivers.mcap_format import BlockProto, decode_block, encode_block  # noqa: E402
+from ramdaq.daq.recorder import Recorder
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.drivers.mcap_format import BlockProto, decode_block, encode_block
 
 FS_HZ = 25_600.0
 N_CH = 16

@@ -1,4 +1,4 @@
-"""Rerun logging throughput: how fast :meth:`daq.rerun_view.RerunView.log_block` takes a stream,
+"""Rerun logging throughput: how fast :meth:`ramdaq.daq.rerun_view.RerunView.log_block` takes a stream,
 and how big the .rrd grows per second of stream.
 
 For 16 channels at 2048 Hz and 25.6 kHz (simulated albacore trial, blocks pre-computed so only the
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from daq.rerun_view import RerunView
-from drivers.block import Block
-from drivers.sim import SimDevice
+from ramdaq.daq.rerun_view import RerunView
+from ramdaq.drivers.block import Block
+from ramdaq.drivers.sim import SimDevice
 
 RIG = Path(__file__).resolve().parent.parent / "recordings" / "rigs" / "albacore.toml"
 

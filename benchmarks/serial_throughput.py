@@ -2,9 +2,9 @@
 share of reading 16 channels x 2.048 kHz over a real pty from the emulator.
 
 1. Parser alone: a stream of 16-channel int24 frames (32 samples each, the emulator's default)
-   fed to :class:`~drivers.serial_frames.FrameParser` in 4 KiB reads, as a port delivers them.
+   fed to :class:`~ramdaq.drivers.serial_frames.FrameParser` in 4 KiB reads, as a port delivers them.
 2. Whole path, as fast as it goes: emulator (``--pace fast``) -> pty -> pyserial ->
-   :class:`~drivers.serial_device.SerialDevice` -> blocks.
+   :class:`~ramdaq.drivers.serial_device.SerialDevice` -> blocks.
 3. Real time: emulator (``--pace realtime``) -> pty -> ``SerialDevice``; the reader's CPU time
    over the wall time it streamed, as a percentage of one core. Target (issue): under 10 %.
 
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.serial_device import SerialDevice
-from drivers.serial_frames import FrameParser, encode_frame
+from ramdaq.drivers.serial_device import SerialDevice
+from ramdaq.drivers.serial_frames import FrameParser, encode_frame
 
 ROOT = Path(__file__).resolve().parent.parent
 RIG = ROOT / "recordings" / "rigs" / "albacore.toml"
@@ -48,7 +48,8 @@ def parser_rate(n_frames: int) -> tuple[float, float, float]:
 
 def through_pty(seconds: float, pace: str) -> dict:
     """Stream ``seconds`` of the simulator through the emulator and a pty into SerialDevice."""
-    emu = subprocess.Popen([sys.executable, "-m", "drivers.serial_emulator", "--pty", "--rig",
+    emu = subprocess.Popen([sys.executable, "-m", "ramdaq.drivers.emulators.serial_emulator",
+                            "--pty", "--rig",
                             str(RIG), "--duration", str(seconds), "--impacts", "1", "--pace", pace],
                            cwd=ROOT, stdout=subprocess.PIPE, text=True)
     address = emu.stdout.readline().strip()

@@ -14,8 +14,8 @@ import argparse
 import time
 from pathlib import Path
 
-from daq.trigger import Trigger
-from drivers.sim import SimDevice
+from ramdaq.daq.trigger import Trigger
+from ramdaq.drivers.sim import SimDevice
 
 RIG = Path(__file__).resolve().parent.parent / "recordings" / "rigs" / "albacore.toml"
 

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.impact_analysis import ImpactAnalysis, analyze_decay
-from analysis.rig import Rig
-from daq.trigger import ImpactEvent
-from drivers.block import StreamInfo
+from ramdaq.analysis.impact import ImpactAnalysis, analyze_decay
+from ramdaq.analysis.model.rig import Rig
+from ramdaq.daq.trigger import ImpactEvent
+from ramdaq.drivers.block import StreamInfo
 
 MIN_DECAY_S = 0.25
 """Shortest free decay analysed, s: fewer than a few periods of a 13 Hz mode is no decrement."""

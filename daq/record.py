@@ -12,11 +12,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from daq.readout import LiveReadout
-from daq.recorder import Recorder
-from drivers.base import Device, DeviceFault
-from drivers.block import Block
-from drivers.mcap_format import SIM_IMPACTS_TOPIC
+from ramdaq.daq.readout import LiveReadout
+from ramdaq.daq.recorder import Recorder
+from ramdaq.drivers.base import Device, DeviceFault
+from ramdaq.drivers.block import Block
+from ramdaq.drivers.mcap_format import SIM_IMPACTS_TOPIC
 
 
 def store_block(rec: Recorder, device: Device, block: Block, truth_written: int, *,

@@ -7,8 +7,8 @@
             rec.put(block)            # never blocks; False if the block had to be dropped
 
 The caller's thread only checks continuity, serializes JSON and hands items to a queue; the thread
-``ramdaq-recorder`` encodes them (:func:`drivers.mcap_format.encode_block`) and writes them. The
-file format is documented in :mod:`drivers.mcap_format`.
+``ramdaq-recorder`` encodes them (:func:`ramdaq.drivers.mcap_format.encode_block`) and writes them. The
+file format is documented in :mod:`ramdaq.drivers.mcap_format`.
 
 Nothing is lost silently:
 
@@ -20,7 +20,7 @@ Nothing is lost silently:
   too; and each chunk (at most ``chunk_seconds`` of samples, or one block if longer, or
   ``chunk_seconds`` of wall time) goes straight to the operating system when it is complete, so a
   SIGKILL or a crash of Python loses at most the chunk being filled and the blocks still queued.
-  ``ramdaq recover`` (:func:`daq.recover.recover`) turns such a file into a finished one.
+  ``ramdaq recover`` (:func:`ramdaq.daq.recover.recover`) turns such a file into a finished one.
 
 Events and JSON messages share the queue with blocks so the file keeps the order they were given
 in, but only blocks count against ``queue_blocks``: events are rare, and are never dropped.
@@ -40,9 +40,9 @@ from typing import Any, NamedTuple
 
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
-from daq.errors import RecordingError
-from drivers import mcap_format as fmt
-from drivers.block import Block, StreamInfo
+from ramdaq.daq.errors import RecordingError
+from ramdaq.drivers import mcap_format as fmt
+from ramdaq.drivers.block import Block, StreamInfo
 
 __all__ = ["Recorder", "RecorderStats"]
 

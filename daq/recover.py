@@ -11,7 +11,7 @@ what happened::
     report = recover("trial.mcap", "trial.recovered.mcap")
     print(report.blocks, report.last_sample, report.truncated, report.tail_bytes)
 
-:class:`RecordScanner` (the tolerant front-to-back reader) is shared with :mod:`daq.info`.
+:class:`RecordScanner` (the tolerant front-to-back reader) is shared with :mod:`ramdaq.daq.commands.info`.
 """
 
 from __future__ import annotations
@@ -41,9 +41,9 @@ from mcap.records import (
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import Writer
 
-from daq.errors import NotARamdaqRecording
-from drivers import mcap_format as fmt
-from drivers.errors import FrameError
+from ramdaq.daq.errors import NotARamdaqRecording
+from ramdaq.drivers import mcap_format as fmt
+from ramdaq.drivers.errors import FrameError
 
 __all__ = ["RecordScanner", "RecoverReport", "recover", "check_mcap_magic"]
 

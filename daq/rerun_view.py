@@ -1,6 +1,6 @@
 """Live and recorded view of a ram trial in Rerun: gage traces, impacts, results and mode shapes.
 
-:class:`RerunView` turns a stream of :class:`~drivers.block.Block` s into a Rerun recording, written
+:class:`RerunView` turns a stream of :class:`~ramdaq.drivers.block.Block` s into a Rerun recording, written
 to an ``.rrd`` file (``rerun file.rrd`` opens it), served to Rerun's web viewer on localhost, or
 streamed to a running viewer. Everything is on one timeline, ``time``: seconds since the stream's
 first sample (a duration timeline, integer ns from the sample clock, never wall time).
@@ -44,8 +44,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from analysis.rig import Rig, parse_rig
-from drivers.block import Block, StreamInfo
+from ramdaq.analysis.model.rig import Rig, parse_rig
+from ramdaq.drivers.block import Block, StreamInfo
 
 TIMELINE = "time"
 BODY_COLORS = {"rudder": (60, 130, 230), "stock": (240, 150, 40), "hull": (150, 150, 150)}

@@ -25,17 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.impact_analysis import FirstLook, first_look
-from analysis.rig import Rig, parse_rig
-from daq.analyze import analysis_to_json
-from daq.analyzer import HitResult, analyze_event, decay_skip_s, trial_summary
-from daq.readout import LiveReadout
-from daq.record import store_block
-from daq.recorder import Recorder
-from daq.trigger import ImpactEvent, Trigger
-from drivers.base import Device
-from drivers.errors import DeviceError
-from drivers.mcap_format import IMPACTS_TOPIC
+from ramdaq.analysis.impact import FirstLook, first_look
+from ramdaq.analysis.model.rig import Rig, parse_rig
+from ramdaq.daq.analyzer import HitResult, analyze_event, decay_skip_s, trial_summary
+from ramdaq.daq.commands.analyze import analysis_to_json
+from ramdaq.daq.readout import LiveReadout
+from ramdaq.daq.record import store_block
+from ramdaq.daq.recorder import Recorder
+from ramdaq.daq.trigger import ImpactEvent, Trigger
+from ramdaq.drivers.base import Device
+from ramdaq.drivers.errors import DeviceError
+from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""
@@ -79,7 +79,7 @@ class Session:
     update_s : float
         Stream seconds between first looks at a ringing decay.
     trigger_options : dict
-        Passed to :class:`~daq.trigger.Trigger`.
+        Passed to :class:`~ramdaq.daq.trigger.Trigger`.
     """
 
     def __init__(self, device: Device, *, record_path: str | Path | None = None,

@@ -9,12 +9,12 @@
 
 * **Detection.** With a ram load cell (a channel in ``"N"``; ``mode="force"``, or ``"auto"``
   when one exists) a level / slope trigger on ``|F|`` with hysteresis; otherwise recursive
-  STA/LTA (:mod:`analysis.onset`) on every gage, at least ``k`` of ``n`` agreeing. A steady tone
+  STA/LTA (:mod:`ramdaq.analysis.onset`) on every gage, at least ``k`` of ``n`` agreeing. A steady tone
   already present (SAMPSON's 2.18 Hz hull) is in the LTA too, so its ratio stays near 1-2 and
   does not trigger. The LTA is frozen while a blow rings, so the trigger is fully sensitive again
   as soon as it re-arms, and the frozen value is the *pre-event level*.
 * **Onset.** AIC (Maeda) over the responding gages, then a joint hinge fit of the rising edge
-  (:func:`analysis.onset.hinge_onset`) to a fraction of a sample, less the front end's delay
+  (:func:`ramdaq.analysis.onset.hinge_onset`) to a fraction of a sample, less the front end's delay
   (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``).
 * **Second contact.** 15-45 ms after the onset an AR prediction-error filter is fitted to the
   ringing (all gages share its poles, so it reaches the noise floor); the innovation of a new
@@ -51,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from analysis import onset as ons
-from drivers.block import Block, StreamInfo
+from ramdaq.analysis import onset as ons
+from ramdaq.drivers.block import Block, StreamInfo
 
 __all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "Trigger"]
 
@@ -259,7 +259,7 @@ class Trigger:
         The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset.
     delay_s : float, optional
         Front-end delay removed from onsets, s; default the rig's anti-alias filter
-        (:func:`analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
+        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
     keep_records : bool
         Attach the samples (:class:`ImpactRecord`) to each event.
     """

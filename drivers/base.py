@@ -1,6 +1,6 @@
 """The one small interface every device implements.
 
-A device is opened, streams :class:`~drivers.block.Block` s, and is closed::
+A device is opened, streams :class:`~ramdaq.drivers.block.Block` s, and is closed::
 
     with open_device("sim", rig=rig, duration_s=10) as dev:
         info = dev.info               # channel names, units, sample rate
@@ -20,8 +20,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
-from drivers.block import Block, StreamInfo
-from drivers.errors import DeviceClosed, DeviceTimeout
+from ramdaq.drivers.block import Block, StreamInfo
+from ramdaq.drivers.errors import DeviceClosed, DeviceTimeout
 
 
 @dataclass(frozen=True)

@@ -10,12 +10,12 @@ The address is ``INTERFACE/CHANNEL`` of any python-can interface (``socketcan/ca
 query: ``rig``, ``dbc``, ``channels``, ``fs_hz``, ``block_s``, ``bitrate``, ``data_bitrate``, ``fd``,
 ``duration_s``, ``idle_s``, ``group_timeout_s``, ``bus`` (one more ``INTERFACE/CHANNEL``,
 repeatable); any other key goes to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan). slcan
-is opened as python-can opens it but read by :class:`drivers.slcan_reader.SlcanReader`: every
+is opened as python-can opens it but read by :class:`ramdaq.drivers.slcan_reader.SlcanReader`: every
 byte waiting at most every ``read_every_s`` (default 4 ms), the lines parsed in bulk without a
 ``can.Message`` each (python-can's one byte per call cannot keep up with 16 ch x 2.048 kHz);
 with ``can_filters`` it is python-can's own bus.
 
-The frames are described by a DBC (:mod:`drivers.can_frames`). Each channel group's frames are
+The frames are described by a DBC (:mod:`ramdaq.drivers.can_frames`). Each channel group's frames are
 put together cycle by cycle by their SEQ counter; a block holds every channel, so a sample is
 delivered only when every group delivered it. Several buses may feed one trial: a frame's
 identifier names its group, whatever bus it came on. Nothing is filled in:
@@ -47,13 +47,13 @@ from urllib.parse import parse_qsl
 import can
 import numpy as np
 
-from analysis.rig import Rig, load_rig, parse_rig
-from analysis.sensor import channel_scales
-from drivers.base import TIMED_OUT, Device
-from drivers.block import Block, StreamInfo, sample_time_ns
-from drivers.can_frames import UNRELATED, CycleAssembler, FrameCodec
-from drivers.errors import DeviceNotFound
-from drivers.slcan_reader import SlcanFrame, SlcanReader
+from ramdaq.analysis.model.rig import Rig, load_rig, parse_rig
+from ramdaq.analysis.model.sensor import channel_scales
+from ramdaq.drivers.base import TIMED_OUT, Device
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.drivers.can_frames import UNRELATED, CycleAssembler, FrameCodec
+from ramdaq.drivers.errors import DeviceNotFound
+from ramdaq.drivers.slcan_reader import SlcanFrame, SlcanReader
 
 __all__ = ["CanDevice", "parse_address"]
 

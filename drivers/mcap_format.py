@@ -15,7 +15,7 @@ Topics
 ``/ramdaq/block``
     Message encoding ``protobuf``, schema ``ramdaq.Block`` (schema encoding ``protobuf``: a
     serialized ``google.protobuf.FileDescriptorSet``, so Foxglove and ``mcap-protobuf-support``
-    decode it without ramdaq). One message per :class:`~drivers.block.Block`::
+    decode it without ramdaq). One message per :class:`~ramdaq.drivers.block.Block`::
 
         syntax = "proto3";
         package ramdaq;
@@ -79,8 +79,8 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError
 
-from drivers.block import Block, StreamInfo
-from drivers.errors import FrameError
+from ramdaq.drivers.block import Block, StreamInfo
+from ramdaq.drivers.errors import FrameError
 
 __all__ = [
     "BLOCK_SCHEMA_NAME", "BLOCK_TOPIC", "EVENTS_TOPIC", "IMPACTS_TOPIC", "SIM_IMPACTS_TOPIC",
@@ -377,20 +377,10 @@ def make_event(kind: str, t_ns: int, detail: Mapping[str, Any]) -> dict:
 
 # -- stream metadata ---------------------------------------------------------------------------
 def ramdaq_version() -> str:
-    """The installed ramdaq version, or the source tree's ``pyproject.toml`` version."""
-    from importlib import metadata
+    """The installed ramdaq version (``ramdaq.__version__``)."""
+    from ramdaq import __version__
 
-    try:
-        return metadata.version("ramdaq")
-    except metadata.PackageNotFoundError:
-        import tomllib
-        from pathlib import Path
-
-        pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
-        try:
-            return str(tomllib.loads(pyproject.read_text())["project"]["version"]) + "+src"
-        except (OSError, KeyError, ValueError):
-            return "unknown"
+    return __version__
 
 
 def stream_info_to_metadata(info: StreamInfo, *, created_utc: str | None = None) -> dict[str, str]:

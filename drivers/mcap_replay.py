@@ -7,7 +7,7 @@
             ...
 
 The stream description is rebuilt from the ``ramdaq.stream`` metadata and the ``rig.toml``
-attachment (see :mod:`drivers.mcap_format`). Blocks are read chunk by chunk in file order, never
+attachment (see :mod:`ramdaq.drivers.mcap_format`). Blocks are read chunk by chunk in file order, never
 the whole file at once. ``pace="realtime"`` hands each block over when its last sample would
 have been acquired (``speed`` times faster); ``"fast"`` as fast as they decode.
 
@@ -27,10 +27,10 @@ from typing import Any, BinaryIO, NamedTuple
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, SeekingReader
 
-from drivers import mcap_format as fmt
-from drivers.base import TIMED_OUT, Device
-from drivers.block import Block, StreamInfo
-from drivers.errors import DeviceNotFound
+from ramdaq.drivers import mcap_format as fmt
+from ramdaq.drivers.base import TIMED_OUT, Device
+from ramdaq.drivers.block import Block, StreamInfo
+from ramdaq.drivers.errors import DeviceNotFound
 
 __all__ = ["McapReplayDevice", "JsonMessage"]
 

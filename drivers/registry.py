@@ -10,17 +10,17 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from drivers.base import Device
-from drivers.errors import DeviceNotFound
+from ramdaq.drivers.base import Device
+from ramdaq.drivers.errors import DeviceNotFound
 
 BACKENDS: dict[str, tuple[str, str]] = {
-    "sim": ("drivers.sim", "SimDevice"),
-    "mcap": ("drivers.mcap_replay", "McapReplayDevice"),
-    "can": ("drivers.can_device", "CanDevice"),
-    "serial": ("drivers.serial_device", "SerialDevice"),
-    "csv": ("drivers.import_csv", "CsvImportDevice"),
-    "uff": ("drivers.import_uff", "UffImportDevice"),
-    "tdms": ("drivers.import_tdms", "TdmsImportDevice"),
+    "sim": ("ramdaq.drivers.sim", "SimDevice"),
+    "mcap": ("ramdaq.drivers.mcap_replay", "McapReplayDevice"),
+    "can": ("ramdaq.drivers.can_device", "CanDevice"),
+    "serial": ("ramdaq.drivers.serial_device", "SerialDevice"),
+    "csv": ("ramdaq.drivers.files.import_csv", "CsvImportDevice"),
+    "uff": ("ramdaq.drivers.files.import_uff", "UffImportDevice"),
+    "tdms": ("ramdaq.drivers.files.import_tdms", "TdmsImportDevice"),
 }
 
 

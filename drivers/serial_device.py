@@ -1,4 +1,4 @@
-"""Serial back-end: framed ADC samples (:mod:`drivers.serial_frames`) over any pyserial URL.
+"""Serial back-end: framed ADC samples (:mod:`ramdaq.drivers.serial_frames`) over any pyserial URL.
 
 ::
 
@@ -15,7 +15,7 @@ handed to pyserial; any other key (``logging=debug``) is left for pyserial.
 Frames are gathered into blocks of at most ``block_s`` (and at least one frame); a block's
 ``first_sample`` is its first frame's own sample index, so frames that never arrived leave a
 gap that is never filled. Faults are reported through
-:meth:`~drivers.base.Device.take_faults`, never raised:
+:meth:`~ramdaq.drivers.base.Device.take_faults`, never raised:
 
 * ``crc_error`` -- frames whose header or payload CRC failed (``count``, ``total``);
 * ``resync`` -- sync regained after garbage or a torn frame (``bytes_discarded``, ``seq``);
@@ -26,7 +26,7 @@ gap that is never filled. Faults are reported through
 * ``frame_mismatch`` -- a CRC-valid frame with the wrong channel count, dropped.
 
 A lost port is reopened with the same URL every ``reconnect_s`` seconds; after ``give_up_s``
-seconds without it, :meth:`read` raises :class:`~drivers.errors.DeviceClosed` naming the URL.
+seconds without it, :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the URL.
 The block in progress when the port is lost is handed out at once, so the loss is recorded live.
 ``read`` checks its timeout once per ``read_slice_s`` (20 ms): a timeout may run over by that.
 """
@@ -43,12 +43,12 @@ from urllib.parse import unquote
 import numpy as np
 import serial
 
-from analysis.rig import Rig, load_rig, parse_rig
-from analysis.sensor import channel_scales
-from drivers.base import TIMED_OUT, Device
-from drivers.block import Block, StreamInfo, sample_time_ns
-from drivers.errors import DeviceClosed, DeviceNotFound
-from drivers.serial_frames import Frame, FrameParser
+from ramdaq.analysis.model.rig import Rig, load_rig, parse_rig
+from ramdaq.analysis.model.sensor import channel_scales
+from ramdaq.drivers.base import TIMED_OUT, Device
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
+from ramdaq.drivers.serial_frames import Frame, FrameParser
 
 __all__ = ["SerialDevice", "split_url"]
 
@@ -86,7 +86,7 @@ def _load_rig(rig: Rig | str | Path) -> Rig:
 
 
 class SerialDevice(Device):
-    """A front-end streaming :mod:`~drivers.serial_frames` frames (back-end name ``"serial"``).
+    """A front-end streaming :mod:`~ramdaq.drivers.serial_frames` frames (back-end name ``"serial"``).
 
     Parameters
     ----------

@@ -1,8 +1,8 @@
 """Simulated 16-channel device: the physics model of the rudder-stock-hull system behind a DAQ.
 
 ``SimDevice`` streams blocks exactly as hardware would (int32 counts, per-channel scale, sequence
-numbers, device time), computed by :class:`analysis.response.ModalSimulator` (exact response to
-half-sine ram blows) and :class:`analysis.sensor.SensorChain` (noise, anti-alias, ADC). It is
+numbers, device time), computed by :class:`ramdaq.analysis.model.response.ModalSimulator` (exact response to
+half-sine ram blows) and :class:`ramdaq.analysis.model.sensor.SensorChain` (noise, anti-alias, ADC). It is
 deterministic under its seed: the same rig, seed, block size and impacts give the same counts,
 whether paced in real time or run as fast as possible.
 
@@ -18,12 +18,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from analysis.model import build_model
-from analysis.response import ModalSimulator, modal_form
-from analysis.rig import AXES, Rig, load_rig
-from analysis.sensor import SensorChain
-from drivers.base import TIMED_OUT, Device
-from drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.analysis.model.response import ModalSimulator, modal_form
+from ramdaq.analysis.model.rig import AXES, Rig, load_rig
+from ramdaq.analysis.model.sensor import SensorChain
+from ramdaq.analysis.model.structure import build_model
+from ramdaq.drivers.base import TIMED_OUT, Device
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 import os
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # as the ramdaq command sets it (daq/cli.py)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # as the ramdaq command sets it (daq/commands/cli.py)
 
 import time
 from collections import Counter
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from analysis.rig import Rig, load_rig
+from ramdaq.analysis.model.rig import Rig, load_rig
 
 RIGS = Path(__file__).resolve().parent.parent / "recordings" / "rigs"
 

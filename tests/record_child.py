@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 import time
 
-from daq.recorder import Recorder
+from ramdaq.daq.recorder import Recorder
 from tests.recording_helpers import BLOCK_SAMPLES, FS_HZ, block, stream_info
 
 

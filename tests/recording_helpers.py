@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
 
 FS_HZ = 25_600.0
 N_CHANNELS = 16

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from daq.cli import main
+from ramdaq.daq.commands.cli import main
 from tests.conftest import RIGS
 
 SAMPLES = RIGS.parent

@@ -2,8 +2,8 @@
 
 import dataclasses
 
-from daq.session import Session
-from drivers.sim import Impact, SimDevice
+from ramdaq.daq.session import Session
+from ramdaq.drivers.sim import Impact, SimDevice
 
 
 def _run(rig, duration_s, impacts):

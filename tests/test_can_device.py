@@ -24,15 +24,21 @@ import numpy as np
 import pytest
 from crccheck.crc import Crc8Autosar, Crc16CcittFalse
 
-import drivers.can_frames as cf
-from daq.recorder import Recorder
-from drivers.can_device import CanDevice, parse_address
-from drivers.can_emulator import CanEmulator, Wire, rig_with_adc_bits, send_frames, slcan_line
-from drivers.errors import DeviceNotFound
-from drivers.mcap_replay import McapReplayDevice
-from drivers.registry import open_device
-from drivers.sim import SimDevice
-from drivers.slcan_reader import SlcanReader
+import ramdaq.drivers.can_frames as cf
+from ramdaq.daq.recorder import Recorder
+from ramdaq.drivers.can_device import CanDevice, parse_address
+from ramdaq.drivers.emulators.can_emulator import (
+    CanEmulator,
+    Wire,
+    rig_with_adc_bits,
+    send_frames,
+    slcan_line,
+)
+from ramdaq.drivers.errors import DeviceNotFound
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.registry import open_device
+from ramdaq.drivers.sim import SimDevice
+from ramdaq.drivers.slcan_reader import SlcanReader
 
 RIGS = Path(__file__).resolve().parent.parent / "recordings" / "rigs"
 pytestmark = pytest.mark.timeout(60)
@@ -299,7 +305,8 @@ def test_a_lone_bad_seq_is_not_believed(tmp_path, rigs):
 # -- slcan over a pseudo-terminal, the emulator a real process ---------------------------------
 def _emulator(rig: Path, dbc: str, report: Path, *args: str) -> tuple[subprocess.Popen, str]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "drivers.can_emulator", "--interface", "slcan", "--rig", str(rig),
+        [sys.executable, "-m", "ramdaq.drivers.emulators.can_emulator",
+         "--interface", "slcan", "--rig", str(rig),
          "--dbc", dbc, "--duration", "1", "--impacts", "0.3", "--seed", "3", "--report", str(report),
          "--linger", "10", *args], stdout=subprocess.PIPE, text=True, cwd=RIGS.parent.parent)
     line = proc.stdout.readline().split()
@@ -409,7 +416,7 @@ def test_emulator_gone_ends_the_stream(tmp_path, rigs):
 
 @pytest.mark.timeout(300)  # hang guard: a full trial with its analysis on a loaded 2-core box
 def test_ramdaq_trial_against_the_slcan_emulator(tmp_path, rigs):
-    from daq.cli import main
+    from ramdaq.daq.commands.cli import main
 
     proc, port = _emulator(rigs["fd24"], "fd24", tmp_path / "truth.json", "--pace", "fast",
                            "--duration", "4.5", "--impacts", "2.5")
@@ -429,7 +436,8 @@ def test_ramdaq_trial_against_the_slcan_emulator(tmp_path, rigs):
 @pytest.mark.skipif(not Path("/sys/class/net/vcan0").exists(), reason="no vcan0 on this kernel")
 def test_socketcan_vcan0(tmp_path, rigs):
     proc = subprocess.Popen(
-        [sys.executable, "-m", "drivers.can_emulator", "--interface", "socketcan", "--channel", "vcan0",
+        [sys.executable, "-m", "ramdaq.drivers.emulators.can_emulator",
+         "--interface", "socketcan", "--channel", "vcan0",
          "--rig", str(rigs["fd24"]), "--dbc", "fd24", "--duration", "1", "--impacts", "0.3", "--seed", "3",
          "--pace", "realtime", "--drop-every", "97"], stdout=subprocess.PIPE, text=True)
     dev = open_device("can://socketcan/vcan0?idle_s=0.5&fd=1", dbc="fd24", rig=str(rigs["fd24"]))

@@ -22,7 +22,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from drivers.can_frames import REJECTIONS, CycleAssembler, FrameCodec
+from ramdaq.drivers.can_frames import REJECTIONS, CycleAssembler, FrameCodec
 from tests.conftest import tallied_long_run
 
 CODECS = {name: FrameCodec(name) for name in ("classic", "fd24", "fd16")}

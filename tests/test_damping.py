@@ -1,4 +1,4 @@
-"""Tests for analysis.damping: δ ↔ ζ and the Cramér–Rao bound."""
+"""Tests for ramdaq.analysis.modal.crb: δ ↔ ζ and the Cramér–Rao bound."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from analysis.damping import (
+from ramdaq.analysis.modal.crb import (
     crb_damped_sinusoid,
     crb_damped_sinusoids,
     damping_ratio_from_decrement,

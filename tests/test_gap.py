@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from analysis.gap.calibrate import calibrate
-from analysis.gap.diagnose import diagnose
-from analysis.gap.effects import EFFECTS, Term, get_effect
-from analysis.gap.evidence import template
-from analysis.gap.forward import Forward
-from analysis.gap.trialdata import _lowpass, prepare, sos_response
-from analysis.rig import load_rig
-from drivers.sim import SimDevice
+from ramdaq.analysis.gap.calibrate import calibrate
+from ramdaq.analysis.gap.diagnose import diagnose
+from ramdaq.analysis.gap.effects import EFFECTS, Term, get_effect
+from ramdaq.analysis.gap.evidence import template
+from ramdaq.analysis.gap.forward import Forward
+from ramdaq.analysis.gap.trialdata import _lowpass, prepare, sos_response
+from ramdaq.analysis.model.rig import load_rig
+from ramdaq.drivers.sim import SimDevice
 
 RIGS = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
 IMPACTS = [3.0 + 5.0 * i for i in range(6)]
@@ -113,8 +113,8 @@ def test_sampson_tone_is_named_and_localised(sampson_case):
 
 def test_sampson_tone_biases_the_decrement_until_modelled(sampson_case):
     rig, d = sampson_case
-    from analysis.model import build_model
-    from analysis.response import modal_form, model_modes
+    from ramdaq.analysis.model.response import modal_form, model_modes
+    from ramdaq.analysis.model.structure import build_model
 
     true = model_modes(modal_form(build_model(rig)))
     k = int(np.argmin(np.abs(true.frequency_hz - 2.18)))

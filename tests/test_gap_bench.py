@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from daq.gap_bench import _located, scenarios, score
+from ramdaq.daq.commands.gap_bench import _located, scenarios, score
 
 SUBSET = [("none", 1001), ("hull_coupling", 2001), ("tiller", 5001), ("gage_alignment", 9005),
           ("time_skew", 11005)]
@@ -16,7 +16,7 @@ SUBSET = [("none", 1001), ("hull_coupling", 2001), ("tiller", 5001), ("gage_alig
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
-    from daq.gap_bench import run_one
+    from ramdaq.daq.commands.gap_bench import run_one
 
     pick = {(s["effect"], s["seed"]): s for s in scenarios(6, "dev")}
     out = tmp_path_factory.mktemp("gap_bench")
@@ -65,7 +65,7 @@ def test_pod_threshold_recovers_a_known_pod_curve():
     """The hit/miss a90 of trials drawn from a known logistic POD curve, within four of its
     asymptotic standard errors (from the Fisher information at the true curve; a false failure
     once in ~16 000 seeds)."""
-    from daq.gap_bench import pod_threshold
+    from ramdaq.daq.commands.gap_bench import pod_threshold
 
     b0, b1 = 2.0, 3.0
     a = np.geomspace(0.01, 10.0, 2000)
@@ -82,7 +82,7 @@ def test_pod_threshold_recovers_a_known_pod_curve():
 
 
 def test_pod_threshold_edge_cases():
-    from daq.gap_bench import pod_threshold
+    from ramdaq.daq.commands.gap_bench import pod_threshold
 
     a = np.array([0.1, 0.2, 0.5, 1.0, 2.0])
     # complete separation: the step lies between the largest miss and the smallest hit
@@ -95,7 +95,7 @@ def test_pod_threshold_edge_cases():
 
 
 def test_false_alarm_bound_is_clopper_pearson():
-    from daq.gap_bench import N_NONE_DEV, false_alarm_bound
+    from ramdaq.daq.commands.gap_bench import N_NONE_DEV, false_alarm_bound
 
     # with no alarms the one-sided bound has the closed form 1 - (1 - c)^(1/n) ("rule of three")
     for n in (20, 40, 59, 60):
@@ -107,7 +107,7 @@ def test_false_alarm_bound_is_clopper_pearson():
 def test_seed_sets_never_share_a_trial():
     """Every named seed set at the largest size allowed: no seed twice, so thresholds tuned on
     ``dev`` never see a trial of ``benchmark`` or ``holdout``."""
-    from daq.gap_bench import SEED_SETS
+    from ramdaq.daq.commands.gap_bench import SEED_SETS
 
     seeds = [sc["seed"] for name in SEED_SETS for sc in scenarios(100, name)]
     assert len(seeds) == len(set(seeds))
@@ -118,7 +118,7 @@ def test_seed_sets_never_share_a_trial():
 
 
 def test_benchmark_command_takes_one_seed_set(tmp_path, capsys):
-    from daq.cli import main
+    from ramdaq.daq.commands.cli import main
 
     with pytest.raises(SystemExit, match="one of --dev, --check, --seeds"):
         main(["gap", "benchmark", "--dev", "--seeds", "holdout", "--out", str(tmp_path)])

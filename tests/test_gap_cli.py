@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.gap.truth import generate_trial
-from analysis.rig import load_rig, parse_rig
-from daq.cli import main
+from ramdaq.analysis.model.rig import load_rig, parse_rig
+from ramdaq.analysis.truth.trial import generate_trial
+from ramdaq.daq.commands.cli import main
 
 RIGS = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
 G = 9.80665

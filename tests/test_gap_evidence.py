@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.gap.diagnose import diagnose
-from analysis.gap.evidence import (
+from ramdaq.analysis.gap.diagnose import diagnose
+from ramdaq.analysis.gap.evidence import (
     GAP_CELL_Z,
     WINDOWS,
     GapMap,
@@ -20,12 +20,12 @@ from analysis.gap.evidence import (
     cell_inflation,
     window_inflation,
 )
-from analysis.gap.forward import Forward
-from analysis.gap.trialdata import prepare
-from analysis.gap.truth import generate_trial
-from analysis.gap.verdict import detection_score
-from analysis.response import half_sine_response
-from analysis.rig import load_rig
+from ramdaq.analysis.gap.forward import Forward
+from ramdaq.analysis.gap.trialdata import prepare
+from ramdaq.analysis.gap.verdict import detection_score
+from ramdaq.analysis.model.response import half_sine_response
+from ramdaq.analysis.model.rig import load_rig
+from ramdaq.analysis.truth.trial import generate_trial
 
 RIGS = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
 
@@ -94,7 +94,7 @@ def test_a_band_without_a_bin_in_a_window_is_neutral_not_nan(trial):
     """A band narrower than a short window's bin spacing holds no spectral bin there: its cell
     expects and holds no energy, so its inflation is 1 and its score 0 -- not 0/0, which made
     every candidate's dBIC NaN on trials whose lowest bands are narrow."""
-    from analysis.gap.evidence import Bands, gap_map
+    from ramdaq.analysis.gap.evidence import Bands, gap_map
 
     _, td = trial
     fw = Forward(td, np.full(td.n_gages, 1e-3))
@@ -132,8 +132,8 @@ def test_a_split_sits_about_the_calibrated_mode_or_beside_it(trial):
     """``centre = share`` keeps the halves' amplitude-weighted mean frequency at the calibrated
     mode (a narrow split read as one mode); ``centre`` 0 keeps the lower half there and puts the
     other ``split`` above it (a wide split, where the calibration locked on one peak)."""
-    from analysis.gap.effects.base import Term
-    from analysis.gap.effects.split_mode import SplitMode
+    from ramdaq.analysis.gap.effects.base import Term
+    from ramdaq.analysis.gap.effects.split_mode import SplitMode
 
     _, td = trial
     fw = Forward(td, np.full(td.n_gages, 1e-3))
@@ -157,8 +157,8 @@ def test_a_split_sits_about_the_calibrated_mode_or_beside_it(trial):
 def test_more_candidates_are_refitted_only_while_none_closes_the_gap(trial):
     """Beyond the ``top_k`` strongest signatures, up to ``top_k_more`` further effects are
     refitted, in signature order, only while no refit closes ``close_enough`` of the gap."""
-    from analysis.gap.diagnose import Settings
-    from analysis.gap.verdict import closed_share
+    from ramdaq.analysis.gap.diagnose import Settings
+    from ramdaq.analysis.gap.verdict import closed_share
 
     _, td = trial
     d = diagnose(td, Settings(top_k=1, top_k_more=2))
@@ -176,7 +176,7 @@ def test_the_refit_steps_stay_in_their_trust_region_and_still_converge():
     the refit's steps are capped at ``max_step`` scales. On a decaying two-tone signal (the
     split mode's shape: frequencies f (1 -+ s/2), 8 Hz, 4 s, noise 1e-3 of the amplitude) the
     split is found from a start 40 % off it, and no step is longer than the cap."""
-    from analysis.gap.calibrate import levenberg_marquardt
+    from ramdaq.analysis.gap.calibrate import levenberg_marquardt
 
     t = np.arange(0.0, 4.0, 1 / 256)
     rng = np.random.default_rng(7)
@@ -259,8 +259,8 @@ def test_a_split_is_only_placed_where_the_widest_split_is_resolved(trial):
     mode damped beyond what the widest fitted split resolves gets no split placement."""
     from dataclasses import replace
 
-    from analysis.gap.effects.base import compared_modes
-    from analysis.gap.effects.split_mode import MAX_SPLIT, SplitMode
+    from ramdaq.analysis.gap.effects.base import compared_modes
+    from ramdaq.analysis.gap.effects.split_mode import MAX_SPLIT, SplitMode
 
     _, td = trial
     fw = Forward(td, np.full(td.n_gages, 1e-3))

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.gap.features import (
+from ramdaq.analysis.gap.features import (
     decay_amplitudes,
     decay_features,
     family_level,
@@ -20,7 +20,7 @@ from analysis.gap.features import (
     rigid_share,
     robust_z,
 )
-from analysis.rig import load_rig
+from ramdaq.analysis.model.rig import load_rig
 
 RIGS = Path(__file__).resolve().parents[1] / "recordings" / "rigs"
 FS = 200.0

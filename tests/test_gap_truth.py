@@ -10,13 +10,18 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from analysis.gap.truth import EFFECTS, WINDOWS, generate_trial, nominal_rig, outputs, reference_size
-from analysis.gap.truth_model import build_truth_model
-from analysis.gap.truth_sim import half_sine_moments, half_sine_samples, modal_recursion, run_physical
-from analysis.model import build_model
-from analysis.response import ModalSimulator, modal_form, model_modes
-from analysis.rig import parse_rig
-from analysis.sensor import SensorChain
+from ramdaq.analysis.model.response import ModalSimulator, modal_form, model_modes
+from ramdaq.analysis.model.rig import parse_rig
+from ramdaq.analysis.model.sensor import SensorChain
+from ramdaq.analysis.model.structure import build_model
+from ramdaq.analysis.truth.integrate import (
+    half_sine_moments,
+    half_sine_samples,
+    modal_recursion,
+    run_physical,
+)
+from ramdaq.analysis.truth.structure import build_truth_model
+from ramdaq.analysis.truth.trial import EFFECTS, WINDOWS, generate_trial, nominal_rig, outputs, reference_size
 
 CASES = [("albacore", "air"), ("albacore", "water"), ("sampson", "water")]
 
@@ -80,7 +85,7 @@ def test_modal_recursion_is_the_plain_state_space_loop(albacore):
 
 @pytest.mark.parametrize("name", ["albacore", "sampson"])
 def test_integrator_matches_the_exact_modal_response(request, name):
-    """Massless stock, noise off: the hold recursion against analysis.response's closed form. Its
+    """Massless stock, noise off: the hold recursion against ramdaq.analysis.model.response's closed form. Its
     only error is the part of the half-sine that is neither constant nor linear within a step,
     ~(pi dt/T)^2/12 = 5e-4 of the force seen through (lambda dt)^2 < 0.07: ~1e-6 of the response
     (measured 1.1e-6). Bound: 1 % of the rig's noise floor, i.e. far inside the noise."""

@@ -7,9 +7,10 @@ and Eq 8 the hull's alpha_b."""
 import numpy as np
 import pytest
 
-from analysis.geometry import gage_geometry
-from analysis.model import build_model
-from analysis.report1836 import (
+from ramdaq.analysis.model.geometry import gage_geometry
+from ramdaq.analysis.model.response import modal_form
+from ramdaq.analysis.model.structure import build_model
+from ramdaq.analysis.report1836.motions import (
     alpha,
     alpha_b_from_13_14,
     alpha_b_from_15_16,
@@ -18,7 +19,6 @@ from analysis.report1836 import (
     v_from_2_6,
     v_from_4_8,
 )
-from analysis.response import modal_form
 
 
 @pytest.mark.parametrize("part", [np.real, np.imag], ids=["real", "imag"])

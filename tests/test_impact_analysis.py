@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from analysis.damping_inertia import C_translational_full, c_rotational_full, stock_stiffness_k_s
-from analysis.impact_analysis import analyze_decay
-from analysis.model import build_model
-from analysis.response import modal_form
-from analysis.rig_modes import modes_in
-from drivers.sim import SimDevice
+from ramdaq.analysis.impact import analyze_decay
+from ramdaq.analysis.model.response import modal_form
+from ramdaq.analysis.model.rig_modes import modes_in
+from ramdaq.analysis.model.structure import build_model
+from ramdaq.analysis.report1836.damping import C_translational_full, c_rotational_full, stock_stiffness_k_s
+from ramdaq.drivers.sim import SimDevice
 
 
 def _true_motions(rig):

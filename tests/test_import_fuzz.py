@@ -24,11 +24,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from analysis.rig import load_rig
-from drivers.import_common import ImportFormatError
-from drivers.import_csv import CsvImportDevice
-from drivers.import_tdms import TdmsImportDevice
-from drivers.import_uff import UffImportDevice
+from ramdaq.analysis.model.rig import load_rig
+from ramdaq.drivers.files.import_common import ImportFormatError
+from ramdaq.drivers.files.import_csv import CsvImportDevice
+from ramdaq.drivers.files.import_tdms import TdmsImportDevice
+from ramdaq.drivers.files.import_uff import UffImportDevice
 from tests.test_imports import RIG, write_csv, write_tdms, write_uff58
 
 SHORT = 200

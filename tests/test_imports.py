@@ -16,20 +16,20 @@ import pyuff
 from nptdms import ChannelObject, TdmsWriter
 from scipy.signal import lfilter
 
-from daq.cli import main
-from drivers.export_uff import AXIS_CODES, export_uff
-from drivers.import_common import (
+from ramdaq.daq.commands.cli import main
+from ramdaq.drivers.files.export_uff import AXIS_CODES, export_uff
+from ramdaq.drivers.files.import_common import (
     G0,
     ImportFormatError,
     detect_step,
     gage_of_name,
     parse_channel_map,
 )
-from drivers.import_csv import CsvImportDevice
-from drivers.import_tdms import TdmsImportDevice
-from drivers.import_uff import UffImportDevice
-from drivers.registry import open_device
-from drivers.sim import SimDevice
+from ramdaq.drivers.files.import_csv import CsvImportDevice
+from ramdaq.drivers.files.import_tdms import TdmsImportDevice
+from ramdaq.drivers.files.import_uff import UffImportDevice
+from ramdaq.drivers.registry import open_device
+from ramdaq.drivers.sim import SimDevice
 from tests.conftest import RIGS
 
 RIG = RIGS / "albacore.toml"
@@ -325,7 +325,7 @@ def test_cli_import_refuses_in_one_line(tmp_path, sim, capsys):
 
 
 def test_cli_import_format_channels_medium(sim, tmp_path, capsys):
-    from drivers.mcap_replay import McapReplayDevice
+    from ramdaq.drivers.mcap_replay import McapReplayDevice
 
     counts, scale, _ = sim
     src = write_csv(tmp_path / "logger.txt", _t(300), counts[:1, :300] * scale[:1, None],
@@ -365,7 +365,7 @@ def test_csv_import_then_analyze_finds_the_predominant_mode(imported_trial, caps
 
 
 def test_export_uff_round_trip(imported_trial, tmp_path):
-    from daq.analyze import run_analysis
+    from ramdaq.daq.commands.analyze import run_analysis
 
     _, mcap, _ = imported_trial
     rig, hits = run_analysis(mcap)

@@ -11,9 +11,9 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from drivers.block import Block, StreamInfo
-from drivers.errors import FrameError
-from drivers.mcap_format import (
+from ramdaq.drivers.block import Block, StreamInfo
+from ramdaq.drivers.errors import FrameError
+from ramdaq.drivers.mcap_format import (
     BlockProto,
     NotARamdaqRecording,
     decode_block,

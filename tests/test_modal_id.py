@@ -1,6 +1,6 @@
-"""Tests for the parametric modal estimator (analysis.modal_id) and decay verdicts.
+"""Tests for the parametric modal estimator (ramdaq.analysis.modal.identify) and decay verdicts.
 
-SNR is A²/(2σ²) of each mode's initial amplitude (analysis.damping's convention). Tolerances:
+SNR is A²/(2σ²) of each mode's initial amplitude (ramdaq.analysis.modal.crb's convention). Tolerances:
 single-mode δ and f within 4 Cramér–Rao standard deviations (a 4σ event, probability 6·10⁻⁵ per
 check for an efficient estimator); Monte-Carlo checks use 150 noise seeds, for which the sample
 std has a relative standard error of 1/√(2·149) ≈ 5.8 %, so ±20 % is a 3.4σ tolerance.
@@ -9,18 +9,18 @@ std has a relative standard error of 1/√(2·149) ≈ 5.8 %, so ±20 % is a 3.4
 import numpy as np
 import pytest
 
-from analysis.damping import crb_damped_sinusoid
-from analysis.modal_assess import Verdict, assess_decay
-from analysis.modal_id import identify_modes
-from analysis.modal_signal import damped_sinusoids
-from analysis.modal_varpro import _Problem
+from ramdaq.analysis.modal.crb import crb_damped_sinusoid
+from ramdaq.analysis.modal.identify import identify_modes
+from ramdaq.analysis.modal.signal import damped_sinusoids
+from ramdaq.analysis.modal.varpro import _Problem
+from ramdaq.analysis.modal.verdicts import Verdict, assess_decay
 
 pytestmark = pytest.mark.timeout(120)
 
 FS_HZ = 2048.0
 
 
-def _noise_std(snr_db, amplitude=1.0):
+def noise_std_from_periodogram(snr_db, amplitude=1.0):
     return amplitude / np.sqrt(2 * 10 ** (snr_db / 10))
 
 
@@ -28,7 +28,7 @@ def _noise_std(snr_db, amplitude=1.0):
 def test_single_mode_at_40_db_within_four_crb(seed):
     rng = np.random.default_rng(seed)
     f0, d0, n = 24.5, 0.06, int(20 * FS_HZ / 24.5)
-    sigma = _noise_std(40)
+    sigma = noise_std_from_periodogram(40)
     x = damped_sinusoids(FS_HZ, n, [f0], [d0], [1.0], [rng.uniform(0, 2 * np.pi)])
     x = x + sigma * rng.standard_normal(n)
     tab = identify_modes(x, FS_HZ)
@@ -47,7 +47,7 @@ def test_two_modes_three_percent_apart_are_separated(n_channels):
     n = int(30 * FS_HZ / 24.5)
     amp = np.abs(rng.normal(1.0, 0.3, (n_channels, 2)))
     x = damped_sinusoids(FS_HZ, n, f, d, amp, rng.uniform(0, 2 * np.pi, amp.shape))
-    x = x + _noise_std(30) * rng.standard_normal(x.shape)
+    x = x + noise_std_from_periodogram(30) * rng.standard_normal(x.shape)
     tab = identify_modes(x, FS_HZ)
     assert len(tab) == 2
     np.testing.assert_allclose(tab.frequency_hz, f, rtol=2e-3)
@@ -55,7 +55,7 @@ def test_two_modes_three_percent_apart_are_separated(n_channels):
 
 
 def test_standard_errors_agree_with_monte_carlo():
-    f0, d0, n, sigma = 24.5, 0.08, int(10 * FS_HZ / 24.5), _noise_std(25)
+    f0, d0, n, sigma = 24.5, 0.08, int(10 * FS_HZ / 24.5), noise_std_from_periodogram(25)
     est, se = [], []
     for seed in range(150):
         rng = np.random.default_rng(1000 + seed)
@@ -215,23 +215,23 @@ def test_verdicts():
 
 
 def test_blocked_basis_matches_direct_exponentials():
-    from analysis.modal_varpro import _basis, _uniform_grid
+    from ramdaq.analysis.modal.varpro import damped_basis, uniform_grid
 
     f, d = np.array([6.8, 59.8, 215.5, 334.0]), np.array([0.12, 0.015, 0.002, -0.01])
     for t in (np.arange(14296) / FS_HZ, (40 + 3 * np.arange(3000)) / FS_HZ):
-        grid = _uniform_grid(t)
+        grid = uniform_grid(t)
         assert grid is not None
-        blocked, direct = _basis(t, f, d, True, grid), _basis(t, f, d, True)
+        blocked, direct = damped_basis(t, f, d, True, grid), damped_basis(t, f, d, True)
         np.testing.assert_allclose(blocked, direct, rtol=0, atol=1e-11 * np.max(np.abs(direct)))
     # an envelope beyond the clamp (e^300) takes the direct path: identical
     t = np.arange(2000) / FS_HZ
     f, d = np.array([300.0]), np.array([-2.0])
-    np.testing.assert_array_equal(_basis(t, f, d, False, _uniform_grid(t)), _basis(t, f, d, False))
-    assert _uniform_grid(np.sort(np.random.default_rng(0).uniform(0, 1, 500))) is None
+    np.testing.assert_array_equal(damped_basis(t, f, d, False, uniform_grid(t)), damped_basis(t, f, d, False))
+    assert uniform_grid(np.sort(np.random.default_rng(0).uniform(0, 1, 500))) is None
 
 
 def test_hankel_gram_recursion_and_partial_eigensolver_match_explicit():
-    from analysis.modal_subspace import _hankel_gram, hankel_row_space
+    from ramdaq.analysis.modal.subspace import _hankel_gram, hankel_row_space
 
     rng = np.random.default_rng(8)
     for n_ch, n, L, cplx in ((1, 2000, 400, False), (5, 900, 300, False), (2, 60, 20, True)):
@@ -252,7 +252,7 @@ def test_hankel_gram_recursion_and_partial_eigensolver_match_explicit():
 
 
 def test_held_poles_problem_is_the_theta_block_of_the_full_problem():
-    from analysis.modal_varpro import _basis
+    from ramdaq.analysis.modal.varpro import damped_basis
 
     rng = np.random.default_rng(6)
     t = np.arange(3000) / FS_HZ
@@ -261,7 +261,7 @@ def test_held_poles_problem_is_the_theta_block_of_the_full_problem():
     held = np.array([13.02, 0.11, 59.7, 0.016])
     free = np.array([120.3, 0.02])
     full_theta = np.r_[free, held]
-    p_held = _Problem(t, Y.T, True, fixed=_basis(t, held[0::2], held[1::2], True))
+    p_held = _Problem(t, Y.T, True, fixed=damped_basis(t, held[0::2], held[1::2], True))
     p_full = _Problem(t, Y.T, True)
     r_h, proj_h, B_h = p_held.residual(free)
     r_f, proj_f, B_f = p_full.residual(full_theta)
@@ -274,7 +274,7 @@ def test_held_poles_problem_is_the_theta_block_of_the_full_problem():
 
 
 def test_buffer_reuse_does_not_change_fits(monkeypatch):
-    from analysis import modal_varpro
+    from ramdaq.analysis.modal import varpro as modal_varpro
 
     rng = np.random.default_rng(12)
     t = np.arange(5000) / FS_HZ
@@ -289,8 +289,8 @@ def test_buffer_reuse_does_not_change_fits(monkeypatch):
 
 
 def test_one_factorisation_significance_matches_drop_one_refits():
-    from analysis.modal_select import ModeSelector
-    from analysis.modal_varpro import fit_modes_varpro, linear_amplitudes
+    from ramdaq.analysis.modal.order import ModeSelector
+    from ramdaq.analysis.modal.varpro import fit_modes_varpro, linear_amplitudes
 
     rng = np.random.default_rng(10)
     t = np.arange(4000) / FS_HZ
@@ -392,7 +392,7 @@ def test_no_uninitialised_memory_reaches_the_results(monkeypatch):
 
 
 def test_cached_window_is_read_only():
-    from analysis.modal_signal import _kaiser14
+    from ramdaq.analysis.modal.signal import _kaiser14
 
     w, _ = _kaiser14(256)
     with pytest.raises(ValueError, match="read-only"):
@@ -403,7 +403,7 @@ def test_fit_started_in_a_corner_of_the_box_leaves_it():
     # A ramp (drift) fitted by one mode started at (f_min, δ_max): the Gauss–Newton step points
     # out of the corner in both coordinates. The fit must hold f on its bound and bring δ down,
     # not stop where the clipped step vanishes.
-    from analysis.modal_varpro import fit_modes_varpro
+    from ramdaq.analysis.modal.varpro import fit_modes_varpro
 
     t = np.arange(4096) / FS_HZ
     y = 0.05 * t + 0.0025 * np.random.default_rng(1).standard_normal(t.size)

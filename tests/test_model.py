@@ -8,14 +8,14 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 
-from analysis.model import build_model, point_dofs, stock_element
-from analysis.response import (
+from ramdaq.analysis.model.response import (
     ModalSimulator,
     modal_form,
     model_modes,
     predominant_mode,
     state_matrix,
 )
+from ramdaq.analysis.model.structure import build_model, point_dofs, stock_element
 
 # Table 2a (Report 1836): predominant rudder frequencies of ALBACORE, Hz.
 ALBACORE_AIR_HZ = 24.5

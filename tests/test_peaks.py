@@ -1,10 +1,10 @@
-"""Tests for analysis.peaks: the report's band-pass + successive-peak decrement."""
+"""Tests for ramdaq.analysis.modal.peaks: the report's band-pass + successive-peak decrement."""
 
 import numpy as np
 import pytest
 
-from analysis.modal_signal import damped_sinusoids
-from analysis.peaks import bandpass_mode, decrement_from_peaks
+from ramdaq.analysis.modal.peaks import bandpass_mode, decrement_from_peaks
+from ramdaq.analysis.modal.signal import damped_sinusoids
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -5,8 +5,8 @@ import io
 import numpy as np
 from rich.console import Console
 
-from daq.readout import LiveReadout
-from drivers.sim import SimDevice
+from ramdaq.daq.readout import LiveReadout
+from ramdaq.drivers.sim import SimDevice
 
 
 def _feed(console, albacore):

@@ -7,11 +7,11 @@ import sys
 
 import numpy as np
 
-from analysis.rig_modes import eq18_check
-from daq.record import record
-from drivers.mcap_replay import McapReplayDevice
-from drivers.registry import open_device
-from drivers.sim import SimDevice
+from ramdaq.analysis.model.rig_modes import eq18_check
+from ramdaq.daq.record import record
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.registry import open_device
+from ramdaq.drivers.sim import SimDevice
 from tests.conftest import RIGS
 
 
@@ -32,7 +32,7 @@ def test_sim_recording_replays_bit_identical(albacore, tmp_path):
 
 
 def _ramdaq(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "daq.cli", *args], cwd=cwd, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "ramdaq", *args], cwd=cwd, capture_output=True,
                           text=True, timeout=120)
 
 

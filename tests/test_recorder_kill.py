@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from daq.errors import TruncatedRecording
-from daq.recover import recover
-from drivers.mcap_replay import McapReplayDevice
+from ramdaq.daq.errors import TruncatedRecording
+from ramdaq.daq.recover import recover
+from ramdaq.drivers.mcap_replay import McapReplayDevice
 from tests.recording_helpers import FS_HZ, block
 
 pytestmark = pytest.mark.timeout(60)

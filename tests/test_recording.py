@@ -14,14 +14,14 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from daq.errors import NotARamdaqRecording, RecordingError, TruncatedRecording
-from daq.info import describe_recording, format_info
-from daq.recorder import Recorder
-from daq.recover import recover
-from drivers.block import Block
-from drivers.errors import DeviceNotFound, DeviceTimeout
-from drivers.mcap_replay import McapReplayDevice
-from drivers.registry import open_device
+from ramdaq.daq.commands.info import describe_recording, format_info
+from ramdaq.daq.errors import NotARamdaqRecording, RecordingError, TruncatedRecording
+from ramdaq.daq.recorder import Recorder
+from ramdaq.daq.recover import recover
+from ramdaq.drivers.block import Block
+from ramdaq.drivers.errors import DeviceNotFound, DeviceTimeout
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.registry import open_device
 from tests.recording_helpers import BLOCK_SAMPLES, FS_HZ, block, stream, stream_info
 
 pytestmark = pytest.mark.timeout(60)
@@ -303,7 +303,7 @@ def test_json_topics_and_realtime_pace(tmp_path):
 
 def test_sim_device_back_to_back(tmp_path, albacore):
     """The simulator recorded and replayed: same StreamInfo (rig text included), same blocks."""
-    from drivers.sim import SimDevice
+    from ramdaq.drivers.sim import SimDevice
 
     path = tmp_path / "albacore.mcap"
     with SimDevice(albacore, duration_s=1.0, impacts=[0.2]) as dev:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis import damping_inertia as di
-from analysis import report1836 as r
-from analysis import stock_length as sl
-from analysis import units as u
-from analysis import virtual_inertia as vi
+from ramdaq.analysis.model import units as u
+from ramdaq.analysis.report1836 import damping as di
+from ramdaq.analysis.report1836 import motions as r
+from ramdaq.analysis.report1836 import stock_length as sl
+from ramdaq.analysis.report1836 import virtual_mass as vi
 
 GEOM = r.GageGeometry(
     x1=1.10, x2=0.85, z1=0.95, z2=1.30, x5=0.70, x6=0.55, x7=0.12, x10=0.10,

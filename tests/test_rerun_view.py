@@ -15,9 +15,9 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from daq.rerun_view import RerunView
-from drivers.block import Block
-from drivers.sim import SimDevice
+from ramdaq.daq.rerun_view import RerunView
+from ramdaq.drivers.block import Block
+from ramdaq.drivers.sim import SimDevice
 
 RIG = Path(__file__).resolve().parent.parent / "recordings" / "rigs" / "albacore.toml"
 DURATION_S = 3.0

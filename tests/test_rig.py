@@ -4,7 +4,7 @@ import re
 
 import pytest
 
-from analysis.rig import RigError, load_rig, parse_rig
+from ramdaq.analysis.model.rig import RigError, load_rig, parse_rig
 from tests.conftest import RIGS
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from daq.cli import main
-from drivers.registry import open_device
+from ramdaq.daq.commands.cli import main
+from ramdaq.drivers.registry import open_device
 from tests.conftest import RIGS
 
 README = RIGS.parent / "README.md"

@@ -1,7 +1,7 @@
 """Serial back-end against the emulator: real processes, real ptys and loopback sockets, the real
 pyserial stack, no mocks.
 
-Each test runs ``python -m drivers.serial_emulator`` with a rig, seed and impacts, streams it
+Each test runs ``python -m ramdaq.drivers.emulators.serial_emulator`` with a rig, seed and impacts, streams it
 through :class:`SerialDevice` into :class:`Recorder` (the ``ramdaq record`` loop), replays the file
 with :class:`McapReplayDevice`, and holds the samples against a :class:`SimDevice` with the same
 rig, seed and impacts: bit for bit where they were delivered, and exactly the frames the emulator
@@ -21,14 +21,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daq.record import record
-from daq.session import Session
-from drivers.block import sample_time_ns
-from drivers.errors import DeviceClosed, DeviceNotFound
-from drivers.mcap_replay import McapReplayDevice
-from drivers.registry import open_device
-from drivers.serial_device import SerialDevice, split_url
-from drivers.sim import SimDevice
+from ramdaq.daq.record import record
+from ramdaq.daq.session import Session
+from ramdaq.drivers.block import sample_time_ns
+from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.registry import open_device
+from ramdaq.drivers.serial_device import SerialDevice, split_url
+from ramdaq.drivers.sim import SimDevice
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -43,7 +43,8 @@ def emulator(tmp_path: Path, transport: str, *args: str, duration: float = DURAT
     """Start the emulator; yield ``(process, address)``; make sure it is gone afterwards."""
     where = ["--pty", "--link", str(tmp_path / "tty")] if transport == "pty" else [
         "--tcp", "127.0.0.1:0"]
-    cmd = [sys.executable, "-m", "drivers.serial_emulator", *where, "--rig", str(RIG),
+    cmd = [sys.executable, "-m", "ramdaq.drivers.emulators.serial_emulator",
+           *where, "--rig", str(RIG),
            "--duration", str(duration), "--impacts", ",".join(map(str, impacts)), "--seed",
            str(SEED), "--pace", "fast", "--linger", "5", *args]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -241,7 +242,7 @@ def test_cli_trial_over_serial_gives_the_simulator_trials_numbers(tmp_path):
     out, results = tmp_path / "trial.mcap", tmp_path / "results.json"
     with emulator(tmp_path, "tcp", "--garbage-every", "25", duration=6.0,
                   impacts=[3.0]) as (proc, address):
-        cli = subprocess.Popen([sys.executable, "-m", "daq.cli", "trial", "--device",
+        cli = subprocess.Popen([sys.executable, "-m", "ramdaq.daq.commands.cli", "trial", "--device",
                                 f"serial://{address}?rig={RIG}", "--no-rerun", "--out", str(out),
                                 "--json", str(results)],
                                cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

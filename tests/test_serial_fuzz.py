@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from drivers.serial_frames import (
+from ramdaq.drivers.serial_frames import (
     FLAG_END,
     HEADER_BYTES,
     MAX_PAYLOAD_BYTES,

@@ -5,10 +5,10 @@ import json
 import pytest
 from rerun.chunk import RrdReader
 
-from daq.rerun_view import RerunView
-from daq.session import RESULTS_TOPIC, Session
-from drivers.mcap_replay import McapReplayDevice
-from drivers.sim import SimDevice
+from ramdaq.daq.rerun_view import RerunView
+from ramdaq.daq.session import RESULTS_TOPIC, Session
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.sim import SimDevice
 
 
 @pytest.fixture(scope="module")

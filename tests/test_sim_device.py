@@ -5,10 +5,10 @@ import time
 import numpy as np
 import pytest
 
-from drivers.block import sample_time_ns
-from drivers.errors import DeviceClosed, DeviceNotFound
-from drivers.registry import open_device
-from drivers.sim import SimDevice
+from ramdaq.drivers.block import sample_time_ns
+from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
+from ramdaq.drivers.registry import open_device
+from ramdaq.drivers.sim import SimDevice
 
 
 def _all(dev):

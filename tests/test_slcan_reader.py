@@ -27,7 +27,7 @@ from can.util import CAN_FD_DLC, len2dlc
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from drivers.slcan_reader import SlcanFrame, SlcanReader, parse_lines
+from ramdaq.drivers.slcan_reader import SlcanFrame, SlcanReader, parse_lines
 from tests.conftest import tallied_long_run
 
 pytestmark = pytest.mark.timeout(300)

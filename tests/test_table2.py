@@ -10,10 +10,10 @@ import math
 
 import pytest
 
-from analysis import units as u
-from analysis.damping_inertia import C_translational, c_rotational
-from analysis.table2 import Row, check_report_consistency, reproduce_table2
-from analysis.virtual_inertia import (
+from ramdaq.analysis.model import units as u
+from ramdaq.analysis.report1836.damping import C_translational, c_rotational
+from ramdaq.analysis.report1836.table2 import Row, check_report_consistency, reproduce_table2
+from ramdaq.analysis.report1836.virtual_mass import (
     Ix_vir,
     Iz_vir_elliptic,
     m_vir_flat_plate,

@@ -18,14 +18,14 @@ import scipy.signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analysis import onset as ons
-from analysis.rig import Rig
-from daq.info import describe_recording
-from daq.recorder import Recorder
-from daq.trigger import IMPACT_JSON_SCHEMA, Trigger
-from drivers.block import Block, StreamInfo, sample_time_ns
-from drivers.mcap_format import IMPACTS_TOPIC
-from drivers.sim import Impact, SimDevice
+from ramdaq.analysis import onset as ons
+from ramdaq.analysis.model.rig import Rig
+from ramdaq.daq.commands.info import describe_recording
+from ramdaq.daq.recorder import Recorder
+from ramdaq.daq.trigger import IMPACT_JSON_SCHEMA, Trigger
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
+from ramdaq.drivers.sim import Impact, SimDevice
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -78,7 +78,7 @@ def blow(rig: Rig, t_s: float, scale: float = 1.0) -> Impact:
     return Impact(t_s, i.peak_force_N * scale, i.duration_s, i.location_m, i.direction)
 
 
-# -- analysis.onset ---------------------------------------------------------------------------
+# -- ramdaq.analysis.onset ---------------------------------------------------------------------------
 def test_sta_lta_fast_equals_reference_and_obspy_warmup():
     x = np.random.default_rng(1).standard_normal((3, 3000)) * [[1.0], [1e-3], [50.0]]
     ratio, state = ons.recursive_sta_lta(x, 25, 800)

@@ -2,7 +2,7 @@
 that what is left is the model's form, not a mistuned constant.
 
 Maximum a posteriori: the whitened residual of the fitted impacts (pre and decay windows) plus
-the constants' Gaussian priors (:func:`~analysis.gap.forward.base_params`), minimised by
+the constants' Gaussian priors (:func:`~ramdaq.analysis.gap.forward.base_params`), minimised by
 ``scipy.optimize.least_squares`` (trust region, bounds). Each prediction re-solves every
 impact's force and onset shift (linear), so the calibration never sees them as parameters.
 The held-out impacts enter only through their own forces.
@@ -15,8 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.gap.effects.base import Term, summed_spectrum
-from analysis.gap.forward import Fit, Forward
+from ramdaq.analysis.gap.forward import Fit, Forward
+from ramdaq.analysis.gap.terms import Term
+from ramdaq.analysis.gap.trialdata import summed_spectrum
 
 
 @dataclass

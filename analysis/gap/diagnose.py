@@ -4,15 +4,15 @@ unmodelled effect causes it, and how far adding that effect closes the gap on he
 Steps (:func:`diagnose`):
 
 1. **Calibrate** the nominal model's constants on the fitted impacts (every third impact is
-   held out) -- :mod:`analysis.gap.calibrate`.
+   held out) -- :mod:`ramdaq.analysis.gap.calibrate`.
 2. **Where**: the gap map (gage x band x window) of the calibrated model, standardised by
    repeated simulations of that model with the trial's own noise and a model-form tolerance --
-   :mod:`analysis.gap.evidence`. From then on every fit weighs each gage x window by what it
+   :mod:`ramdaq.analysis.gap.evidence`. From then on every fit weighs each gage x window by what it
    tells beyond that tolerance (a rudder gage's small mode-shape error is thousands of noise
    variances and would otherwise steer every refit); the constants are refitted so weighed.
    The same replicates standardise the gap read in physical terms -- frequency, decrement,
    amplitude, envelope, mode shape, rigid-body consistency per gage x mode x window, and the
-   lines before the blows (:mod:`analysis.gap.features`), for the model before and after the
+   lines before the blows (:mod:`ramdaq.analysis.gap.features`), for the model before and after the
    named effect: the report's reading, not the verdict's.
 3. **Which**: every registered effect's signature score (score test, best placement, charged
    for the placements tried); the ``top_k`` strongest are refitted with the base constants free,
@@ -40,10 +40,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
-from analysis.gap.effects import EFFECTS
-from analysis.gap.effects.base import Placement, Term
-from analysis.gap.evidence import (
+from ramdaq.analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
+from ramdaq.analysis.gap.effects import EFFECTS
+from ramdaq.analysis.gap.evidence import (
     GapMap,
     ScoreBasis,
     Signature,
@@ -58,10 +57,11 @@ from analysis.gap.evidence import (
     signature_scores,
     window_inflation,
 )
-from analysis.gap.features import FeatureMap, feature_map
-from analysis.gap.forward import Forward
-from analysis.gap.trialdata import TrialData
-from analysis.gap.verdict import choose, closed_share, closure, detection_score, location
+from ramdaq.analysis.gap.features import FeatureMap, feature_map
+from ramdaq.analysis.gap.forward import Forward
+from ramdaq.analysis.gap.terms import Placement, Term
+from ramdaq.analysis.gap.trialdata import TrialData
+from ramdaq.analysis.gap.verdict import choose, closed_share, closure, detection_score, location
 
 
 @dataclass(frozen=True)
@@ -174,7 +174,7 @@ class Diagnosis:
 
     @functools.cached_property
     def features(self) -> FeatureMap | None:
-        """Where the calibrated model misses, in physical terms (:mod:`analysis.gap.features`),
+        """Where the calibrated model misses, in physical terms (:mod:`ramdaq.analysis.gap.features`),
         and with the named effect (``best.features``): the report's reading, computed when
         first asked for; the verdict rests on the energy maps and does not use it."""
         if self.reps is None:
@@ -282,7 +282,7 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
 
 N_REREAD = 3
 """At most this many times a single effect's placement is read again after its refit (while
-each refit improves on the last): see :meth:`~analysis.gap.effects.base.Effect.placement_after`."""
+each refit improves on the last): see :meth:`~ramdaq.analysis.gap.effects.base.Effect.placement_after`."""
 
 
 def _carry(t: Term, pl: Placement) -> np.ndarray:

@@ -2,7 +2,7 @@
 calibrated model's -- frequency, decrement, amplitude (a per-gage scale), envelope shape, mode
 shape (MAC), rigid-body consistency of the rudder's and the hull's gages -- and, before each blow,
 the spectral lines the model does not have. Each is standardised against the same replicate
-simulations of the calibrated model as the energy map (:mod:`analysis.gap.evidence`), so its
+simulations of the calibrated model as the energy map (:mod:`ramdaq.analysis.gap.evidence`), so its
 ``z`` says what is beyond the trial's noise and the model's form tolerance.
 
 How a decay is read: in each decay window every segment of every gage is fitted, by linear
@@ -30,10 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.gap.calibrate import Calibration
-from analysis.gap.effects.base import compared_modes
-from analysis.gap.evidence import Bands
-from analysis.gap.forward import Forward
+from ramdaq.analysis.gap.calibrate import Calibration
+from ramdaq.analysis.gap.effects.base import compared_modes
+from ramdaq.analysis.gap.evidence import Bands
+from ramdaq.analysis.gap.forward import Forward
 
 DECAY_WINDOWS = ("early", "late")
 FEATURES = {

@@ -2,11 +2,11 @@
 and the hooks through which an unmodelled effect switches on.
 
 A prediction of a whole trial is built in four stages, each with a hook for effect terms
-(:class:`~analysis.gap.effects.base.Effect`):
+(:class:`~ramdaq.analysis.gap.effects.base.Effect`):
 
 1. **rig** -- the nominal rig with the calibrated constants (:func:`apply_base`), then each
    term's change to it (an extra hull mode, a tiller...);
-2. **model** -- ``M, C, K`` from :func:`analysis.model.build_model`, then each term's change;
+2. **model** -- ``M, C, K`` from :func:`ramdaq.analysis.model.structure.build_model`, then each term's change;
 3. **modes** -- the exact modal form: per mode its eigenvalue and its acceleration at every gage
    per newton of ram force, including the anti-alias filter ``H_AA(lambda)`` and the decimation
    low-pass ``|H|^2``; terms may rescale, delay, split or add modes;
@@ -30,13 +30,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.signal
 
-from analysis.gap.trialdata import TrialData
-from analysis.model import StructuralModel, build_model
-from analysis.response import half_sine_response, modal_form
-from analysis.rig import Rig
+from ramdaq.analysis.gap.trialdata import TrialData
+from ramdaq.analysis.model.response import half_sine_response, modal_form
+from ramdaq.analysis.model.rig import Rig
+from ramdaq.analysis.model.structure import StructuralModel, build_model
 
 if TYPE_CHECKING:
-    from analysis.gap.effects.base import Term
+    from ramdaq.analysis.gap.terms import Term
 
 
 @dataclass(frozen=True)

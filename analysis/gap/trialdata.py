@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
-from analysis.model import build_model
-from analysis.response import impact_amplitudes, modal_form, predominant_mode
-from analysis.rig import Rig
+from ramdaq.analysis.model.response import impact_amplitudes, modal_form, predominant_mode
+from ramdaq.analysis.model.rig import Rig
+from ramdaq.analysis.model.structure import build_model
 
 DEC_ORDER = 8
 """Order of the decimation low-pass (applied forward and back: 16 in magnitude)."""
@@ -298,3 +298,12 @@ def _full_rate_stats(x: np.ndarray, fs_hz: float, onsets: np.ndarray, pre_s: flo
         run = at[:, 2:] & at[:, 1:-1] & at[:, :-2] & (s[:, 2:] == s[:, :-2])
         flat[j] = run.sum(axis=1)
     return clip, flat, peak
+
+
+def summed_spectrum(x: np.ndarray, fs_hz: float, nfft: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Hann-windowed power spectrum of ``x`` (..., n), zero-padded to ``nfft`` (default 8x the
+    next power of two), summed over the leading axes: (frequencies Hz, power)."""
+    n = x.shape[-1]
+    nfft = nfft or 8 * int(2 ** math.ceil(math.log2(n)))
+    P = np.abs(np.fft.rfft(x * np.hanning(n), n=nfft, axis=-1)) ** 2
+    return np.fft.rfftfreq(nfft, 1 / fs_hz), P.reshape(-1, P.shape[-1]).sum(axis=0)

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.gap.effects.base import Term
-from analysis.gap.evidence import GAP_CELL_Z, WINDOWS, GapMap
+from ramdaq.analysis.gap.evidence import GAP_CELL_Z, WINDOWS, GapMap
+from ramdaq.analysis.gap.terms import Term
 
 
 def detection_score(fitted: GapMap, held: GapMap | None) -> float:

@@ -1,6 +1,6 @@
 """Registry of candidate unmodelled effects, by name (as python-can's interfaces).
 
-Every module of this package that defines a subclass of :class:`~analysis.gap.effects.base.Effect`
+Every module of this package that defines a subclass of :class:`~ramdaq.analysis.gap.effects.base.Effect`
 with a ``name`` registers it: adding an effect is writing one module, nothing else changes.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from analysis.gap.effects.base import Effect, Placement, Term
+from ramdaq.analysis.gap.effects.base import Effect, Placement, Term
 
 __all__ = ["Effect", "Placement", "Term", "EFFECTS", "get_effect"]
 

@@ -7,76 +7,32 @@ An :class:`Effect` is a stateless object with
   which mode, which frequency...), each a :class:`Placement` with its continuous parameters'
   start values, bounds and *probe* values. The probe is a modest size of the effect: the
   prediction with it, less the calibrated prediction, is the effect's **signature** -- the
-  template the residual is matched against (a score test, see :mod:`analysis.gap.evidence`);
-* hooks into the four stages of :class:`~analysis.gap.forward.Forward` -- ``rig``, ``model``,
+  template the residual is matched against (a score test, see :mod:`ramdaq.analysis.gap.evidence`);
+* hooks into the four stages of :class:`~ramdaq.analysis.gap.forward.Forward` -- ``rig``, ``model``,
   ``modes``, ``pulses`` / ``columns`` / ``units`` (signals) and ``output`` -- each the identity
   unless the effect overrides it.
 
-A new effect is one new module in :mod:`analysis.gap.effects` defining a subclass with a
+A new effect is one new module in :mod:`ramdaq.analysis.gap.effects` defining a subclass with a
 ``name``; the registry finds it.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from analysis.model import StructuralModel
-from analysis.rig import Rig
+from ramdaq.analysis.gap.terms import Placement, Term, placement
+from ramdaq.analysis.gap.trialdata import summed_spectrum
+from ramdaq.analysis.model.rig import Rig
+from ramdaq.analysis.model.structure import StructuralModel
+
+__all__ = ["Effect", "Placement", "Term", "compared_modes", "gage_row", "placement", "residual_peaks",
+           "rudder_gages", "summed_spectrum", "whiten_fitted"]
 
 if TYPE_CHECKING:
-    from analysis.gap.calibrate import Calibration
-    from analysis.gap.forward import Fit, Forward, ModeSet
-
-
-@dataclass(frozen=True)
-class Placement:
-    """One way an effect could sit in a trial.
-
-    ``key`` names the discrete choice (JSON-able, e.g. ``{"gage": 5}``); ``names``/``units`` its
-    continuous parameters; ``x0`` the effect switched off (or as good as), ``lo``/``hi`` bounds;
-    ``probes`` (k, n_params) parameter values whose predictions span the effect's signature --
-    the score test's projection on them gives the refit's start, ``x0 + sum c_k (probe_k - x0)``.
-    ``starts`` (k, n_params) further refit starts to try where the effect's size is far from
-    linear (an extra mode's stiffness spans decades). ``gages`` (report numbers),
-    ``mode_hz`` and ``window`` say where the effect would show.
-    """
-
-    key: dict
-    names: tuple[str, ...]
-    units: tuple[str, ...]
-    x0: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-    probes: np.ndarray
-    gages: tuple[int, ...] = ()
-    mode_hz: float | None = None
-    window: str = "all"
-    starts: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class Term:
-    """An effect switched on: the effect, where it sits, and its parameter values."""
-
-    effect: Effect
-    placement: Placement
-    x: np.ndarray = field(default_factory=lambda: np.zeros(0))
-
-    def with_x(self, x: np.ndarray) -> Term:
-        return Term(self.effect, self.placement, np.asarray(x, dtype=float))
-
-    def value(self, name: str) -> float:
-        return float(self.x[self.placement.names.index(name)])
-
-    def to_json(self) -> dict:
-        p = self.placement
-        return {"effect": self.effect.name, "where": p.key,
-                "params": {n: {"value": float(v), "unit": u}
-                           for n, v, u in zip(p.names, self.x, p.units, strict=True)}}
+    from ramdaq.analysis.gap.calibrate import Calibration
+    from ramdaq.analysis.gap.forward import Fit, Forward, ModeSet
 
 
 class Effect:
@@ -148,16 +104,6 @@ class Effect:
         return pred, None
 
 
-def placement(key: dict, names: tuple[str, ...], units: tuple[str, ...], x0, lo, hi, probes,
-              **where) -> Placement:
-    """A :class:`Placement` from plain lists."""
-    a = lambda v: np.atleast_1d(np.asarray(v, dtype=float))  # noqa: E731
-    if where.get("starts") is not None:
-        where["starts"] = np.atleast_2d(np.asarray(where["starts"], float))
-    return Placement(key, names, units, a(x0), a(lo), a(hi), np.atleast_2d(np.asarray(probes, float)),
-                     **where)
-
-
 def gage_row(fw: Forward, number: int) -> int:
     """Row of report gage ``number`` in the trial's arrays."""
     return fw.td.gage_numbers.index(number)
@@ -178,15 +124,6 @@ def whiten_fitted(fw: Forward, d: np.ndarray) -> np.ndarray:
     """A prediction difference (n_seg, n_g, n_s) as a template over the fitted segments."""
     fitted = np.flatnonzero(fw.td.fitted)
     return np.nan_to_num((d[fitted] * fw.mask[fitted] * fw.W[fitted]).ravel())
-
-
-def summed_spectrum(x: np.ndarray, fs_hz: float, nfft: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Hann-windowed power spectrum of ``x`` (..., n), zero-padded to ``nfft`` (default 8x the
-    next power of two), summed over the leading axes: (frequencies Hz, power)."""
-    n = x.shape[-1]
-    nfft = nfft or 8 * int(2 ** math.ceil(math.log2(n)))
-    P = np.abs(np.fft.rfft(x * np.hanning(n), n=nfft, axis=-1)) ** 2
-    return np.fft.rfftfreq(nfft, 1 / fs_hz), P.reshape(-1, P.shape[-1]).sum(axis=0)
 
 
 def residual_peaks(fw: Forward, fit: Fit, windows: tuple[str, ...], n: int,

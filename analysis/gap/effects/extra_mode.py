@@ -13,8 +13,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement, residual_peaks
-from analysis.rig import HullMode
+from ramdaq.analysis.gap.effects.base import (
+    Effect,
+    Placement,
+    Term,
+    compared_modes,
+    placement,
+    residual_peaks,
+)
+from ramdaq.analysis.model.rig import HullMode
 
 
 class _ExtraMode(Effect):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
+from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
 
 
 class Friction(Effect):

@@ -1,0 +1,381 @@
+"""One impact's free decay turned into Report 1836's numbers.
+
+Per gage and mode: frequency, logarithmic decrement, damping ratio, amplitude and phase with
+standard errors (the multi-channel estimator of :mod:`ramdaq.analysis.modal.identify`), beside the
+report's own peak-ratio decrement (:mod:`ramdaq.analysis.modal.peaks`). Then the report's chain on the
+predominant mode:
+the rudder motions gamma, alpha, v (Eq 1-3b) and their decrements (Eq 4-6b), the modal decrement
+averaged over the rudder gages (Eq 7), the hull motions and the decrements relative to the hull
+(Eq 8-13), the damping constants C and c (Eq 16, 17) and the effective stock lengths
+(Appendix B, Figures 8 and 9).
+
+Accelerations stand in for the report's displacements: for one damped mode they differ by the
+same complex factor lambda^2 at every gage, so frequencies, decrements and amplitude ratios are
+the same.
+
+Hull yaw gamma_b, which the report read off Figure 9, is taken here from hull gages 5 and 13 at
+one height (the hull section's rigid yaw, ``(d13 - d5) / (x13 - x5)``) when they are level, and
+is otherwise left out as the report left it out (its Eq 9, 13 footnotes).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ramdaq.analysis.modal.identify import identify_modes
+from ramdaq.analysis.modal.peaks import decrement_from_peaks
+from ramdaq.analysis.modal.table import ModeTable
+from ramdaq.analysis.modal.verdicts import assess_decay
+from ramdaq.analysis.model.geometry import gage_geometry, stock_pair
+from ramdaq.analysis.model.rig import ALIGN_TOL_M, Rig
+from ramdaq.analysis.model.structure import added_mass
+from ramdaq.analysis.report1836.damping import (
+    C_translational,
+    C_translational_full,
+    c_rotational,
+    c_rotational_full,
+    stock_stiffness_k_s,
+)
+from ramdaq.analysis.report1836.motions import (
+    alpha,
+    alpha_b_from_13_14,
+    d_rudder_hull,
+    gamma,
+    geometry_constants,
+    percent_deviation_from_average,
+    v_from_2_6,
+    v_from_4_8,
+)
+
+MOTIONS = ("gamma", "alpha", "v_2_6", "v_4_8")
+"""Rudder motions of Eq 1, 2, 3a, 3b, whose decrements are Eq 4, 5, 6a, 6b."""
+
+
+def mode_energy(amplitude: np.ndarray, decay_rate_per_s: np.ndarray) -> np.ndarray:
+    """Time-integrated squared amplitude of each mode, ``sum_c A_ck^2 / (2 sigma_k)``.
+
+    ``amplitude`` (n_channels, n_modes), ``decay_rate_per_s`` (n_modes,) the envelope's rate
+    ``sigma = delta * f``. The predominant mode, the one that stands out on an oscillogram, is
+    the largest: large *and* lasting.
+    """
+    return np.nansum(amplitude**2, axis=0) / (2 * np.abs(decay_rate_per_s))
+
+
+@dataclass(frozen=True)
+class Decrement:
+    """A decrement with its standard error, from the estimator and from the report's peaks."""
+
+    f_hz: float
+    delta: float
+    delta_se: float
+    peak_delta: float
+    peak_delta_se: float
+
+    def to_json(self) -> dict:
+        return {k: _num(v) for k, v in self.__dict__.items()}
+
+
+@dataclass(frozen=True)
+class ImpactAnalysis:
+    """Everything one impact gives. Frequencies Hz, damping constants N s/m and N m s/rad,
+    lengths m. Per-gage dicts are keyed by gage number."""
+
+    onset_s: float
+    decay_start_s: float
+    duration_s: float
+    modes: ModeTable
+    predominant: int
+    gage_numbers: tuple[int, ...]
+    verdicts: dict[int, tuple[str, str]]
+    gages: dict[int, Decrement]
+    motions: dict[str, Decrement]
+    relative: dict[str, Decrement]
+    alpha1_over_gamma1: float
+    damping: dict[str, float]
+    stock_lengths: dict[str, float] = field(default_factory=dict)
+    stock_curves: dict[str, list[float]] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def f_hz(self) -> float:
+        return float(self.modes.frequency_hz[self.predominant])
+
+    def table2b(self) -> dict:
+        """Table 2b done automatically: delta_gamma, delta_alpha, delta_v, delta_modal, their
+        average and each one's percent deviation from it."""
+        names = ("gamma", "alpha", "v_2_6")
+        vals = [self.motions[n].delta for n in names] + [self.damping["delta_modal"]]
+        mean, dev, mean_abs = percent_deviation_from_average(vals)
+        rows = dict(zip((*names, "modal"), zip(vals, dev, strict=True), strict=True))
+        return {"rows": {k: {"delta": v, "deviation_pct": d} for k, (v, d) in rows.items()},
+                "average": mean, "mean_abs_deviation_pct": mean_abs}
+
+
+def _num(v: float) -> float | None:
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
+def _nearest(table: ModeTable, f_hz: float) -> int | None:
+    if len(table) == 0:
+        return None
+    i = int(np.argmin(np.abs(table.frequency_hz - f_hz)))
+    return i if abs(table.frequency_hz[i] / f_hz - 1) < 0.1 else None
+
+
+def _peak_decrement(x: np.ndarray, fs_hz: float, f_hz: float) -> tuple[float, float]:
+    """The report's peak-ratio decrement and its standard error; NaN where the mode is too weak
+    in this signal to show three peaks above the noise."""
+    try:
+        peak = decrement_from_peaks(x, fs_hz, f_hz)
+    except ValueError:
+        return np.nan, np.nan
+    return peak.delta, peak.std_error
+
+
+def signal_decrement(x: np.ndarray, fs_hz: float, f_hz: float,
+                     n_modes: int | None = None) -> tuple[Decrement, complex]:
+    """Decrement of the mode near ``f_hz`` in one signal (n_samples,), both ways, and the mode's
+    complex amplitude there. ``n_modes``: how many modes to fit (the multi-channel fit's count
+    skips the order search, ten times faster); ``None`` searches."""
+    table = identify_modes(x[None, :], fs_hz, per_channel=False, n_modes=n_modes)
+    i = _nearest(table, f_hz)
+    peak = _peak_decrement(x, fs_hz, f_hz)
+    if i is None:
+        return Decrement(f_hz, np.nan, np.nan, *peak), complex("nan")
+    return (Decrement(float(table.frequency_hz[i]), float(table.delta[i]), float(table.delta_se[i]),
+                      *peak), complex(table.complex_amplitude[0, i]))
+
+
+def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
+                  onset_s: float = 0.0, decay_start_s: float = 0.0,
+                  adc_full_scale: float | None = None) -> ImpactAnalysis:
+    """Analyse one free decay.
+
+    Parameters
+    ----------
+    x : ndarray, (n_channels, n_samples)
+        Accelerations (m/s^2) from the start of the free decay (after the forced part).
+    fs_hz : float
+        Sample rate, Hz.
+    rig : Rig
+        Gage positions, masses and medium.
+    gage_numbers : tuple of int
+        Report gage number of each row of ``x``.
+    onset_s, decay_start_s : float
+        Impact onset and start of ``x``, seconds in the stream (for the record).
+    adc_full_scale : float, optional
+        Converter full scale in m/s^2 (the smallest over channels), to judge clipping.
+    """
+    notes: list[str] = []
+    rows = {n: i for i, n in enumerate(gage_numbers)}
+    verdict_list = assess_decay(x, fs_hz, adc_full_scale=adc_full_scale)
+    verdicts = {gage_numbers[a.channel]: (str(a.verdict), a.reason) for a in verdict_list}
+    good = [i for i, n in enumerate(gage_numbers) if verdicts[n][0] == "ok"]
+    if not good:
+        raise ValueError("no channel holds a usable free decay: "
+                         + "; ".join(f"g{n:02d} {v[0]}" for n, v in verdicts.items()))
+    table = identify_modes(x[good], fs_hz, per_channel=True)
+    if len(table) == 0:
+        raise ValueError(f"no mode found above the noise ({table.info.get('reason', '')})")
+    rudder_rows = [j for j, i in enumerate(good) if rig.gage(gage_numbers[i]).body == "rudder"]
+    # accelerations in, displacement amplitudes (a / w^2) judged, as on the report's records
+    disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
+    energy = mode_energy(disp[rudder_rows or slice(None)], table.delta * table.frequency_hz)
+    k = int(np.argmax(energy))
+    f = float(table.frequency_hz[k])
+
+    gages: dict[int, Decrement] = {}
+    for j, i in enumerate(good):
+        gages[gage_numbers[i]] = Decrement(float(table.channel_frequency_hz[j, k]),
+                                           float(table.channel_delta[j, k]),
+                                           float(table.channel_delta_se[j, k]),
+                                           *_peak_decrement(x[i], fs_hz, f))
+
+    K = geometry_constants(gage_geometry(rig))
+    geom = gage_geometry(rig)
+
+    def d(n: int) -> np.ndarray:
+        return x[rows[n]]
+
+    signals = {
+        "gamma": gamma(d(4), d(8), K["K1"]),
+        "alpha": alpha(d(6), d(2), K["K2"]),
+        "v_2_6": v_from_2_6(d(2), d(6), K["K3"], K["K4"]),
+        "v_4_8": v_from_4_8(d(4), d(8), K["K5"], K["K6"]),
+    }
+    needed = {"gamma": (4, 8), "alpha": (2, 6), "v_2_6": (2, 6), "v_4_8": (4, 8)}
+    motions: dict[str, Decrement] = {}
+    amps: dict[str, complex] = {}
+    for name, sig in signals.items():
+        bad = [n for n in needed[name] if verdicts[n][0] != "ok"]
+        if bad:
+            notes.append(f"{name}: not computed, gage(s) {bad} unusable")
+            continue
+        motions[name], amps[name] = signal_decrement(np.asarray(sig), fs_hz, f, len(table))
+
+    # hull motions and motions relative to the hull (Eq 8-13)
+    alpha_b = alpha_b_from_13_14(d(13), d(14), geom.L_P)
+    p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
+    gamma_b = 0.0
+    if abs(p5[2] - p13[2]) <= ALIGN_TOL_M and abs(p13[0] - p5[0]) > ALIGN_TOL_M:
+        gamma_b = (d(13) - d(5)) / (p13[0] - p5[0])
+    else:
+        notes.append("gamma_b left out: hull gages 5 and 13 are not level")
+    d_rh = d_rudder_hull(d(13), d(14), geom.L_H, geom.L_P, geom.h, gamma_b)
+    relative: dict[str, Decrement] = {}
+    rel_signals = {"gamma_R": signals["gamma"] - gamma_b, "alpha_R": signals["alpha"] - alpha_b,
+                   "v_R_2_6": signals["v_2_6"] - d_rh, "v_R_4_8": signals["v_4_8"] - d_rh}
+    for name, sig in rel_signals.items():
+        relative[name] = signal_decrement(np.asarray(sig), fs_hz, f, len(table))[0]
+
+    # damping constants, Eq 16 and 17, with the rig's masses (plus added mass in water)
+    add = added_mass(rig)
+    r = rig.rudder
+    m_y = r.mass_kg + add["m_vir"]
+    I_z = r.Iz_kg_m2 + add["Iz_vir"]
+    ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
+    delta_modal = float(np.nanmean([gages[n].delta for n in gages if rig.gage(n).body == "rudder"]))
+    damping = {"m_y_kg": m_y, "I_z_kg_m2": I_z, "I_xz_kg_m2": r.Ixz_kg_m2,
+               "delta_modal": delta_modal,
+               "C_N_s_per_m": float(C_translational(m_y, f, motions["v_2_6"].delta))
+               if "v_2_6" in motions else np.nan,
+               "c_N_m_s_per_rad": float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f,
+                                                     motions["gamma"].delta))
+               if "gamma" in motions and np.isfinite(ratio) else np.nan}
+    lengths, curves = _stock_lengths(table, k, good, gage_numbers, rig, notes)
+    damping |= _full_damping(table, k, good, gage_numbers, rig, m_y, I_z, curves, notes)
+    return ImpactAnalysis(
+        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
+        modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
+        gages=gages, motions=motions, relative=relative, alpha1_over_gamma1=ratio,
+        damping=damping, stock_lengths=lengths, stock_curves=curves, notes=tuple(notes))
+
+
+def _stock_lengths(table: ModeTable, k: int, good: list[int], gage_numbers: tuple[int, ...],
+                   rig: Rig, notes: list[str]) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """Effective stock lengths (Figures 8, 9) from the predominant mode's amplitudes, and the
+    curves they were read from: heights z' (m above the rudder top), (d_v,alpha) and gamma of the
+    stock points, and the hull points 13, 14 -- in the mode's amplitude units, signed by the
+    phase of gage 4."""
+    from ramdaq.analysis.report1836.stock_length import effective_length_bending, effective_length_torsion
+
+    amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
+    needed = (1, 3, 7, 11, 10, 12, 13, 14)
+    if any(n not in amp for n in needed):
+        notes.append("stock lengths: not computed, a stock, rudder-top or hull gage is unusable")
+        return {}, {}
+    ref = amp.get(4, amp[needed[0]])
+    rot = np.conj(ref) / abs(ref)  # project on the phase of gage 4: real, signed values
+    a = {n: float(np.real(v * rot)) for n, v in amp.items()}
+    b = rig.rudder.attach_z_m
+    h = rig.rudder.stock_x_m
+    z_stock, d_stock, g_stock = [], [], []
+    for pair in (stock_pair(rig, 1, 3), stock_pair(rig, 7, 11), stock_pair(rig, 10, 12)):
+        xa = rig.gage(pair.aft).position_m[0] - h
+        xf = h - rig.gage(pair.forward).position_m[0]
+        da, df = a[pair.aft], a[pair.forward]
+        z_stock.append(pair.z_m - b)
+        d_stock.append((xf * da + xa * df) / (xa + xf))  # on the stock line (B-7, B-8, B-11)
+        g_stock.append((da - df) / (xa + xf))  # B-3, B-6, B-12
+    z13, z14 = rig.gage(13).position_m[2] - b, rig.gage(14).position_m[2] - b
+    curves = {"z_stock_m": z_stock, "d_v_alpha": d_stock, "gamma": g_stock,
+              "z_hull_m": [z13, z14], "d_hull": [a[13], a[14]]}
+    out: dict[str, float] = {}
+    try:
+        bend = effective_length_bending(z_stock, d_stock, [z13, z14], [a[13], a[14]], b)
+        out["bending_m"] = bend.length
+        curves["z_attach_bending_m"] = [bend.z_attach]
+    except ValueError as err:
+        notes.append(f"stock bending length: {err}")
+    p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
+    if 5 in a and abs(p5[2] - p13[2]) <= ALIGN_TOL_M and abs(p13[0] - p5[0]) > ALIGN_TOL_M:
+        gamma_b = (a[13] - a[5]) / (p13[0] - p5[0])  # the hull section's yaw, as for Eq 10
+        try:
+            tors = effective_length_torsion(z_stock, g_stock, b, gamma_b=gamma_b)
+            out["torsion_m"] = tors.length
+            curves["z_attach_torsion_m"] = [tors.z_attach]
+        except ValueError as err:
+            notes.append(f"stock torsion length: {err}")
+    else:
+        notes.append("stock torsion length: needs gamma_b from level hull gages 5 and 13")
+    return out, curves
+
+
+def _full_damping(table: ModeTable, k: int, good: list[int], gage_numbers: tuple[int, ...],
+                  rig: Rig, m_y: float, I_z: float, curves: dict, notes: list[str]) -> dict:
+    """Eq 14 and 15: C and c with the hull motions and the phases between motions kept.
+
+    The predominant mode's complex amplitudes give every motion's sine (in phase with v) and
+    cosine parts: displacement amplitudes are the accelerations' divided by lambda^2, then turned
+    so that v = v1 sin(wt). The stock constants come from the rig (EI, kappa A G, G J) and the
+    effective bending length read off Figure 8 (the rig's own when it could not be read).
+    """
+    a = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
+    if any(n not in a for n in (2, 4, 5, 6, 8, 13, 14)):
+        notes.append("Eq 14/15: not computed, a rudder or hull gage is unusable")
+        return {}
+    f, delta = float(table.frequency_hz[k]), float(table.delta[k])
+    lam = -delta * f + 2j * np.pi * f
+    K = geometry_constants(gage_geometry(rig))
+    geom = gage_geometry(rig)
+    D = {n: v / lam**2 for n, v in a.items()}
+    ell = curves.get("z_attach_bending_m", [rig.stock.bending_length_m])[0]
+    z_hull_attach = rig.rudder.attach_z_m + ell
+    p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
+    motion = {
+        "v": K["K3"] * (D[2] + K["K4"] * D[6]),
+        "gamma": K["K1"] * (D[4] - D[8]),
+        "alpha": K["K2"] * (D[6] - D[2]),
+        "alpha_b": (D[13] - D[14]) / geom.L_P,
+        "gamma_b": (D[13] - D[5]) / (p13[0] - p5[0]),
+    }
+    motion["v_b"] = D[13] + (p13[2] - z_hull_attach) * motion["alpha_b"]
+    turn = -1j * abs(motion["v"]) / motion["v"]
+    sin = {m: float(-np.imag(v * turn)) for m, v in motion.items()}
+    cos = {m: float(np.real(v * turn)) for m, v in motion.items()}
+    st, r = rig.stock, rig.rudder
+    k_s = float(stock_stiffness_k_s(st.E_Pa * st.I_m4, st.shear_area_m2 * st.G_Pa, ell))
+    # the model's torsion is G J / l_T; Eq 62b writes G J_e / l, so scale J_e to keep it
+    GJ_e = st.G_Pa * st.J_m4 * ell / st.torsion_length_m
+    C = C_translational_full(m_y, f, delta, sin["v"], k_s, r.stock_x_m, r.attach_z_m, ell,
+                             v_b2=cos["v_b"], gamma2=cos["gamma"], alpha2=cos["alpha"],
+                             alpha_b2=cos["alpha_b"])
+    c = c_rotational_full(I_z, r.Ixz_kg_m2, f, delta, sin["gamma"], sin["alpha"], k_s,
+                          r.stock_x_m, r.attach_z_m, ell, GJ_e, gamma2=cos["gamma"],
+                          alpha2=cos["alpha"], v_b2=cos["v_b"], alpha_b2=cos["alpha_b"],
+                          gamma_b1=sin["gamma_b"], gamma_b2=cos["gamma_b"])
+    return {"C_eq14_N_s_per_m": float(C), "c_eq15_N_m_s_per_rad": float(c),
+            "k_s_N_per_m": k_s, "ell_m": ell}
+
+
+@dataclass(frozen=True)
+class FirstLook:
+    """A preliminary reading while the rudder still rings: the predominant mode's frequency and
+    decrement per gage, from the decay so far (``duration_s`` of it)."""
+
+    duration_s: float
+    f_hz: float
+    delta: float
+    gages: dict[int, tuple[float, float, float]]  # gage -> (f_hz, delta, delta_se)
+
+
+def first_look(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
+               max_samples: int = 40_000) -> FirstLook | None:
+    """Quick per-gage frequency and decrement on the decay so far, (n_gages, n) m/s^2.
+
+    The same estimator as the final analysis, on a decimated copy (``max_samples``) and
+    without verdicts or the report's chain: a first look, refined as the decay goes on.
+    Returns None when no mode stands above the noise yet.
+    """
+    table = identify_modes(x, fs_hz, per_channel=True, max_samples=max_samples)
+    if len(table) == 0:
+        return None
+    rudder = [i for i, n in enumerate(gage_numbers) if rig.gage(n).body == "rudder"]
+    disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
+    k = int(np.argmax(mode_energy(disp[rudder or slice(None)], table.delta * table.frequency_hz)))
+    gages = {n: (float(table.channel_frequency_hz[i, k]), float(table.channel_delta[i, k]),
+                 float(table.channel_delta_se[i, k])) for i, n in enumerate(gage_numbers)}
+    return FirstLook(x.shape[1] / fs_hz, float(table.frequency_hz[k]), float(table.delta[k]),
+                     gages)

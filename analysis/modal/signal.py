@@ -1,0 +1,282 @@
+"""Signal helpers shared by the decrement and modal estimators.
+
+- :func:`damped_sinusoids` — synthetic free decays (tests, benchmarks, simulators);
+- :func:`estimate_noise_std` — per-channel white-noise level from the median of a Kaiser-windowed
+  periodogram (robust to a few strong spectral peaks);
+- :func:`significant_band_hz` — highest frequency whose spectrum rises significantly above noise;
+- :func:`decimate_valid` — linear-phase FIR decimation that keeps only fully-covered outputs, so
+  no filter edge transient is mixed into a free decay (the model is exact on what is returned:
+  a pole z maps to the same pole, its amplitude scaled by :func:`fir_gain`).
+
+Nothing here (nor in the estimators that use it) changes process-wide state such as the BLAS
+thread count, and nothing is cached between calls except read-only arrays, so results depend
+only on the inputs, whichever thread calls and in whatever order (see ``analysis/modal/identify.py``,
+"Threads").
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import signal, stats
+
+__all__ = [
+    "damped_sinusoids",
+    "decimate_valid",
+    "estimate_noise_std",
+    "fir_gain",
+    "fir_noise_variance_factor",
+    "significant_band_hz",
+]
+
+
+def damped_sinusoids(
+    fs_hz: float,
+    n_samples: int,
+    f_hz: ArrayLike,
+    delta: ArrayLike,
+    amplitude: ArrayLike,
+    phase_rad: ArrayLike = 0.0,
+) -> np.ndarray:
+    """Sum of exponentially damped sinusoids A·exp(−δ f t)·cos(2π f t + φ), t = n / fs_hz.
+
+    Parameters
+    ----------
+    fs_hz : float
+        Sample rate (Hz).
+    n_samples : int
+        Number of samples.
+    f_hz, delta : array_like, shape (n_modes,)
+        Damped frequency (Hz) and logarithmic decrement of each mode.
+    amplitude : array_like, shape (n_modes,) or (n_channels, n_modes)
+        Initial amplitude of each mode (per channel for 2-D input).
+    phase_rad : array_like
+        Phase at t = 0 (rad), broadcast like `amplitude`.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n_samples,) for 1-D `amplitude`, else (n_channels, n_samples).
+    """
+    f = np.atleast_1d(np.asarray(f_hz, dtype=float))
+    d = np.broadcast_to(np.asarray(delta, dtype=float), f.shape)
+    amp = np.asarray(amplitude, dtype=float)
+    one_d = amp.ndim <= 1
+    amp2 = np.atleast_2d(np.broadcast_to(amp, f.shape) if one_d else amp)
+    ph = np.broadcast_to(np.asarray(phase_rad, dtype=float), amp2.shape)
+    t = np.arange(n_samples) / fs_hz
+    env = np.exp(-(d * f)[:, None] * t)  # (n_modes, n_samples)
+    arg = 2.0 * np.pi * f[:, None] * t
+    # sum_k A_ck cos(arg_k + phi_ck) = sum_k A cos phi cos arg - A sin phi sin arg
+    cos_part = (amp2 * np.cos(ph)) @ (env * np.cos(arg))
+    sin_part = (amp2 * np.sin(ph)) @ (env * np.sin(arg))
+    y = cos_part - sin_part
+    return y[0] if one_d else y
+
+
+@functools.lru_cache(maxsize=32)
+def _kaiser14(n: int) -> tuple[np.ndarray, float]:
+    """Periodic Kaiser window (β = 14) of length n and Σw² (cached: ~20 lengths per record).
+
+    The cached window is shared by every caller (and thread): it is read-only, so an in-place
+    write raises instead of changing later results.
+    """
+    w = signal.windows.kaiser(n, 14.0, sym=False)
+    w.setflags(write=False)
+    return w, float(np.sum(w * w))
+
+
+def kaiser_periodogram(x: np.ndarray) -> np.ndarray:
+    """Kaiser (β = 14, sidelobes ≈ −110 dB) periodogram; white noise of variance σ² has mean σ²."""
+    w, w2 = _kaiser14(x.shape[-1])
+    X = np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * w, axis=-1)
+    return np.abs(X) ** 2 / w2
+
+
+def estimate_noise_std(x: ArrayLike) -> np.ndarray:
+    """White-noise standard deviation of each channel from the median periodogram bin.
+
+    Parameters
+    ----------
+    x : array_like, shape (n_channels, n_samples) or (n_samples,)
+        Signal (any unit).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_channels,) or ()
+        Noise std (signal unit). Biased high when modes cover most of the band.
+    """
+    a = np.asarray(x, dtype=float)
+    if a.shape[-1] < 16:
+        raise ValueError(f"n_samples ({a.shape[-1]}) must be at least 16")
+    return noise_std_from_periodogram(kaiser_periodogram(a))
+
+
+def noise_std_from_periodogram(P: np.ndarray) -> np.ndarray:
+    """:func:`estimate_noise_std` from the record's periodogram (DC and Nyquist bins included)."""
+    return np.sqrt(np.median(P[..., 1:-1], axis=-1) / np.log(2.0))
+
+
+def significant_band_hz(
+    x: ArrayLike, fs_hz: float, noise_std: ArrayLike, *, false_alarm: float = 1e-3
+) -> float | None:
+    """Highest frequency whose channel-summed, whitened spectrum is significantly above noise.
+
+    Kaiser-windowed periodograms of the whole record and of its first quarter, sixteenth and 1/64 are
+    tested, so that lightly and heavily damped modes are both seen.
+
+    Parameters
+    ----------
+    x : array_like, shape (n_channels, n_samples)
+        Signal.
+    fs_hz : float
+        Sample rate (Hz).
+    noise_std : array_like, shape (n_channels,)
+        Noise std of each channel (signal unit).
+    false_alarm : float
+        Probability that pure noise shows any significant bin (Bonferroni over bins).
+
+    Returns
+    -------
+    float or None
+        Frequency (Hz) of the highest significant spectral peak (its largest bin), or None when
+        no bin is significant.
+    """
+    a = np.atleast_2d(np.asarray(x, dtype=float))
+    return significant_band(a, fs_hz, noise_std, false_alarm, None)
+
+
+def significant_band(
+    a: np.ndarray, fs_hz: float, noise_std: ArrayLike, false_alarm: float,
+    P_full: np.ndarray | None,
+) -> float | None:
+    """:func:`significant_band_hz` on 2-D ``a``; ``P_full``: its whole-record periodogram if known."""
+    sig = np.maximum(np.asarray(noise_std, dtype=float), 1e-300)
+    n_ch, n = a.shape
+    # Periodograms of the whole record and of its first 1/4, 1/16, 1/64: a heavily damped
+    # mode lives in the first few per cent of a long record, where a full-length window is ~0.
+    lengths = [m for m in (n, n // 4, n // 16, n // 64) if m >= 64] or [n]
+    spectra = []
+    for m in lengths:
+        P = P_full if m == n and P_full is not None else kaiser_periodogram(a[:, :m])
+        S = np.sum(P / (sig[:, None] ** 2), axis=0)[1:-1]
+        spectra.append((S, np.arange(1, S.size + 1) * fs_hz / m))
+    n_tests = sum(S.size for S, _ in spectra)
+    threshold = stats.gamma.isf(false_alarm / max(n_tests, 1), n_ch)
+    # A peak spreads over the window's main lobe (±4.6 bins): report the centre (largest bin)
+    # of the highest run of significant bins, in whichever record length shows it.
+    tops = []
+    for S, f in spectra:
+        hit = np.flatnonzero(S > threshold)
+        if hit.size:
+            run_start = hit[np.flatnonzero(np.diff(hit) > 1)[-1] + 1] if np.any(np.diff(hit) > 1) \
+                else hit[0]
+            run = np.arange(run_start, hit[-1] + 1)
+            tops.append(f[run[np.argmax(S[run])]])
+    top = max(tops, default=None)
+    return None if top is None else float(top)
+
+
+def _fir_taps(factor: int, band_hz: float, fs_hz: float) -> np.ndarray:
+    fs_d = fs_hz / factor
+    width = max(fs_d - 2.0 * band_hz, 0.1 * fs_d)  # passband to band_hz, alias-free band
+    numtaps, beta = signal.kaiserord(80.0, width / (0.5 * fs_hz))
+    numtaps |= 1  # odd: integer centre delay
+    h = signal.firwin(numtaps, 0.5 * fs_d, window=("kaiser", beta), fs=fs_hz)
+    return h / h.sum()
+
+
+def decimate_valid(
+    x: ArrayLike, fs_hz: float, factor: int, band_hz: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Low-pass and decimate, returning only outputs whose filter window lies inside the record.
+
+    Parameters
+    ----------
+    x : array_like, shape (n_channels, n_samples)
+        Signal.
+    fs_hz : float
+        Sample rate of `x` (Hz).
+    factor : int
+        Decimation factor (≥ 1; 1 returns `x` unchanged).
+    band_hz : float
+        Highest frequency to keep undistorted (Hz); must be below fs_hz / (2 factor).
+
+    Returns
+    -------
+    y : numpy.ndarray, shape (n_channels, n_out)
+        Filtered, decimated signal.
+    n_index : numpy.ndarray, shape (n_out,)
+        Index into the original samples that each output is centred on (time = n_index / fs_hz).
+    taps : numpy.ndarray
+        The zero-phase FIR taps (centre at len // 2), for :func:`fir_gain`.
+    """
+    a = np.atleast_2d(np.asarray(x, dtype=float))
+    factor = int(factor)
+    if factor < 1:
+        raise ValueError(f"factor ({factor}) must be >= 1")
+    if factor == 1:
+        return a, np.arange(a.shape[-1]), np.ones(1)
+    if not 0 < band_hz < 0.5 * fs_hz / factor:
+        raise ValueError(f"band_hz ({band_hz}) must lie in (0, {0.5 * fs_hz / factor})")
+    h = _fir_taps(factor, band_hz, fs_hz)
+    c = (h.size - 1) // 2
+    full = signal.upfirdn(h, a, up=1, down=factor, axis=-1)  # full[k] = conv[k * factor]
+    j = np.arange(full.shape[-1]) * factor
+    keep = (j >= h.size - 1) & (j <= a.shape[-1] - 1)
+    if not np.any(keep):
+        raise ValueError(f"record ({a.shape[-1]} samples) is shorter than the FIR ({h.size})")
+    return full[:, keep], j[keep] - c, h
+
+
+def fir_gain(taps: np.ndarray, z: ArrayLike) -> np.ndarray:
+    """Complex gain of a centred FIR on the sequence zⁿ (z a pole at the original rate).
+
+    Parameters
+    ----------
+    taps : numpy.ndarray
+        Taps from :func:`decimate_valid`.
+    z : array_like
+        Discrete-time poles exp(s / fs_hz).
+
+    Returns
+    -------
+    numpy.ndarray
+        Σ_m h[m] z^(c − m), same shape as `z`; the output of the filter on zⁿ is gain · zⁿ.
+    """
+    zz = np.asarray(z, dtype=complex)
+    c = (taps.size - 1) // 2
+    powers = c - np.arange(taps.size)
+    return np.sum(taps[:, None] * zz.reshape(1, -1) ** powers[:, None], axis=0).reshape(zz.shape)
+
+
+def fir_noise_variance_factor(
+    taps: np.ndarray, factor: int, f_hz: ArrayLike, fs_hz: float
+) -> np.ndarray:
+    """Ratio of the decimated noise density at f to that of white noise of the same variance.
+
+    Standard errors computed on decimated data as if its noise were white are multiplied by the
+    square root of this factor (≈ 1.05–1.15 for the filters of :func:`decimate_valid`).
+
+    Parameters
+    ----------
+    taps : numpy.ndarray
+        Taps from :func:`decimate_valid`.
+    factor : int
+        Decimation factor used with them.
+    f_hz : array_like
+        Frequencies (Hz) at which the ratio is wanted.
+    fs_hz : float
+        Sample rate before decimation (Hz).
+
+    Returns
+    -------
+    numpy.ndarray
+        |H(f)|² / (factor · Σh²), same shape as `f_hz` (1 for ``factor == 1``).
+    """
+    if factor == 1:
+        return np.ones_like(np.asarray(f_hz, dtype=float))
+    z = np.exp(2j * np.pi * np.asarray(f_hz, dtype=float) / fs_hz)
+    return np.abs(fir_gain(taps, z)) ** 2 / (factor * np.sum(taps * taps))

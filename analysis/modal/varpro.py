@@ -1,0 +1,620 @@
+"""Nonlinear least squares for damped modes shared by all channels (variable projection).
+
+Model, per channel c (weights w_c = 1/σ_c whiten the channels):
+
+    y_c(t) = o_c + Σ_k e^(−δ_k f_k t) [b_ck cos(2π f_k t) + b'_ck sin(2π f_k t)]
+
+The nonlinear parameters θ = [f₁, δ₁, f₂, δ₂, …] are shared by all channels; the linear ones
+(offsets o_c, amplitudes b, b') are solved for every θ by least squares (Golub & Pereyra's
+variable projection), so the optimiser sees 2·n_modes unknowns whatever the number of channels.
+A Levenberg–Marquardt iteration (box bounds by projection) uses Kaufman's
+Jacobian, −P⊥ (∂Φ/∂θᵢ) B, through its small normal equations; at the optimum JᵀJ equals the
+Schur complement of the full (linear + nonlinear) Fisher matrix, so s²(JᵀJ)⁻¹ is the covariance
+of θ with the linear parameters profiled out, s² the weighted residual variance. Parametrising
+directly in f (Hz) and δ gives their standard errors without a delta method.
+
+The complex amplitude a_ck = b_ck − j b'_ck makes y_c(t) = o_c + Σ_k Re(a_ck e^{(−δ_k f_k + j2πf_k) t}),
+with t measured from the first sample of the free decay.
+
+Cost of one evaluation (same results to rounding; see the functions for each)
+------------------------------------------------------------------------------
+- Basis on a uniform grid: exp(s t) as a product of two √N-long tables (:func:`damped_basis`), one
+  complex multiply per sample instead of an exp, a cos and a sin (≤ 3 ulp apart).
+- Arrays are laid out samples-last (Φ is the transpose of a C-ordered array), so every product
+  with Φ runs along contiguous memory; Φᵀ buffers are reused within a fit.
+- Normal equations from the 2K × 2K Schur complement Tᵀ P⊥ T, T = t·Φ, instead of the
+  n_samples × 4K derivative matrix projected explicitly (:class:`_Problem`).
+- Small factorisations call LAPACK/BLAS directly (potrf/potrs/posv/trsm, as scipy's wrappers).
+- Modes whose poles are held (the order search's trial fits) are projected out once
+  (:class:`HeldPoleFitter`).
+Measured on 16 channels × 14 296 samples, 5 modes, one core: residual + normal equations
+8.5 ms → 2.4 ms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import linalg
+from scipy.linalg import blas, lapack
+
+__all__ = ["VarProFit", "fit_modes_varpro", "linear_amplitudes"]
+
+_TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class VarProFit:
+    """Result of :func:`fit_modes_varpro`.
+
+    Attributes
+    ----------
+    f_hz, delta : numpy.ndarray, shape (n_modes,)
+        Frequencies (Hz) and logarithmic decrements.
+    covariance : numpy.ndarray, shape (2 n_modes, 2 n_modes)
+        Covariance of [f₁, δ₁, f₂, δ₂, …] (white-noise assumption).
+    amplitude : numpy.ndarray, shape (n_channels, n_modes), complex
+        Complex amplitudes at t = 0.
+    offset : numpy.ndarray, shape (n_channels,)
+        Constant offsets (0 when not fitted).
+    rss : numpy.ndarray, shape (n_channels,)
+        Unweighted residual sum of squares per channel.
+    noise_std : numpy.ndarray, shape (n_channels,)
+        Residual std per channel, corrected for the parameters used.
+    n_eval : int
+        Function evaluations.
+    success : bool
+        Optimiser's convergence flag.
+    """
+
+    f_hz: np.ndarray
+    delta: np.ndarray
+    covariance: np.ndarray
+    amplitude: np.ndarray
+    offset: np.ndarray
+    rss: np.ndarray
+    noise_std: np.ndarray
+    n_eval: int
+    success: bool
+
+
+def uniform_grid(t: np.ndarray) -> tuple[float, float] | None:
+    """(t₀, Δt) when t is a uniform grid to rounding (t = t₀ + n Δt), else None."""
+    if t.size < 64:
+        return None
+    t0, dt = float(t[0]), float(t[-1] - t[0]) / (t.size - 1)
+    if not dt > 0:
+        return None
+    tol = 1e-12 * (abs(t0) + abs(float(t[-1])) + dt)
+    if np.max(np.abs(t - (t0 + dt * np.arange(t.size)))) > tol:
+        return None
+    return t0, dt
+
+
+def damped_basis(
+    t: np.ndarray, f: np.ndarray, d: np.ndarray, offset: bool,
+    grid: tuple[float, float] | None = None, scratch: dict | None = None,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """Φ, shape (n_samples, 2K [+1]): columns e·cos, e·sin per mode (+ a constant), e = exp(−δ f t).
+
+    Returned as the transpose of a C-ordered (2K [+1], n_samples) array, so that every product
+    with Φ runs along contiguous samples. On a uniform grid (``grid`` from
+    :func:`uniform_grid`) the complex exponentials exp(s (t₀ + n Δt)) are products of two short
+    tables, exp(s (t₀ + j Δt)) · exp(s i m Δt) with n = i m + j and m ≈ √N: one complex multiply
+    per sample instead of an exp, a cos and a sin, equal to within a few ulp. ``scratch``: a dict
+    in which the complex work array is kept between calls (fewer large allocations); ``out``:
+    a (2K [+1], n_samples) array to fill with Φᵀ.
+    """
+    K, n = f.size, t.size
+    PhiT = np.empty((2 * K + int(offset), n)) if out is None else out
+    s = -(d * f) + 1j * (_TWO_PI * f)
+    blocked = False
+    if grid is not None and K:
+        t0, dt = grid
+        ends = np.maximum(s.real * t0, s.real * (t0 + dt * (n - 1)))
+        blocked = bool(np.all(ends < 300.0))  # else the envelope clamp below is active
+    if blocked:
+        grids = None if scratch is None else scratch.get("grids")
+        if grids is None:
+            m = int(np.ceil(np.sqrt(n)))
+            grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
+            if scratch is not None:
+                scratch["grids"] = grids
+        m, rows = grids[0].size, grids[1].size
+        lo = np.exp(s[:, None] * grids[0][None, :])  # (K, m)
+        hi = np.exp(s[:, None] * grids[1][None, :])  # (K, rows)
+        work = None if scratch is None else scratch.get("z")
+        if work is None or work.shape != (K, rows, m):
+            work = np.empty((K, rows, m), dtype=complex)
+            if scratch is not None:
+                scratch["z"] = work
+        np.multiply(hi[:, :, None], lo[:, None, :], out=work)
+        Z = work.reshape(K, rows * m)[:, :n]
+        PhiT[0 : 2 * K : 2] = Z.real
+        PhiT[1 : 2 * K : 2] = Z.imag
+    elif K:
+        env = np.exp(np.minimum(-(d * f)[:, None] * t[None, :], 300.0))
+        arg = _TWO_PI * f[:, None] * t[None, :]
+        PhiT[0 : 2 * K : 2] = env * np.cos(arg)
+        PhiT[1 : 2 * K : 2] = env * np.sin(arg)
+    if offset:
+        PhiT[-1] = 1.0
+    return PhiT.T
+
+
+def linear_amplitudes(
+    t_s: np.ndarray, y: np.ndarray, f_hz: ArrayLike, delta: ArrayLike, *, fit_offset: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares complex amplitudes for fixed poles.
+
+    Parameters
+    ----------
+    t_s : numpy.ndarray, shape (n_samples,)
+        Sample times (s) from the start of the decay.
+    y : numpy.ndarray, shape (n_channels, n_samples)
+        Data.
+    f_hz, delta : array_like, shape (n_modes,)
+        Fixed poles.
+    fit_offset : bool
+        Include a constant per channel.
+
+    Returns
+    -------
+    amplitude : numpy.ndarray, shape (n_channels, n_modes), complex
+    offset : numpy.ndarray, shape (n_channels,)
+    rss : numpy.ndarray, shape (n_channels,)
+    """
+    f = np.atleast_1d(np.asarray(f_hz, dtype=float))
+    d = np.atleast_1d(np.asarray(delta, dtype=float))
+    proj = Projector(damped_basis(t_s, f, d, fit_offset, uniform_grid(t_s)))
+    B = proj.coef(y.T)
+    rss = np.sum((y.T - proj.Phi @ B) ** 2, axis=0)
+    K = f.size
+    amp = (B[0 : 2 * K : 2] - 1j * B[1 : 2 * K : 2]).T
+    off = B[-1] if fit_offset else np.zeros(y.shape[0])
+    return amp, off, rss
+
+
+class Projector:
+    """Least squares on the basis Φ: Cholesky of the column-scaled Gram, QR if ill-conditioned.
+
+    The small factorisations call LAPACK directly (potrf / potrs: the routines
+    ``scipy.linalg.cho_factor`` and ``cho_solve`` wrap, with identical results) — their argument
+    checking cost more than the 2 × 2 to 25 × 25 solves themselves. The triangular solve is
+    BLAS trsm, not LAPACK trtrs (``solve_triangular``): the same bits, but with OpenBLAS's
+    default two threads on a loaded 2-core machine trtrs took up to 8 ms for these 2 × 2 to
+    11 × 11 solves (its thread pool is woken whatever the size), trsm at most 0.2 ms.
+    """
+
+    def __init__(self, Phi: np.ndarray) -> None:
+        self.Phi = self.raw = Phi  # raw: Φ before any projection (see _Problem)
+        G = Phi.T @ Phi
+        norm = np.sqrt(G.diagonal())
+        self.inv_norm = 1.0 / np.where(norm > 0, norm, 1.0)
+        G = G * self.inv_norm[:, None] * self.inv_norm[None, :]
+        self.cho = None
+        c, info = lapack.dpotrf(G, lower=1)
+        if info == 0 and np.min(np.abs(c.diagonal())) ** 2 > 1e-10:  # cond(Φ) below ~1e5
+            self.cho = (c, True)
+        if self.cho is None:
+            self.Q, self.R = linalg.qr(Phi, mode="economic", check_finite=False)
+
+    def coef(self, M: np.ndarray) -> np.ndarray:
+        """Coefficients C minimising ‖M − Φ C‖ (columns of M independently)."""
+        if self.cho is not None:
+            return self.coef_from(self.Phi.T @ M)
+        return linalg.lstsq(self.R, self.Q.T @ M, check_finite=False)[0]
+
+    def coef_from(self, PhiT_M: np.ndarray) -> np.ndarray:
+        """As :meth:`coef` given Φᵀ M (Cholesky path only)."""
+        rhs = PhiT_M * self.inv_norm[:, None]
+        return lapack.dpotrs(self.cho[0], rhs, lower=1)[0] * self.inv_norm[:, None]
+
+    def whitened(self, PhiT_M: np.ndarray) -> np.ndarray:
+        """L⁻¹ (scaled Φᵀ M): (Φᵀ M)ᵀ (ΦᵀΦ)⁻¹ (Φᵀ M) = Vᵀ V for the returned V (Cholesky path)."""
+        return blas.dtrsm(1.0, self.cho[0], PhiT_M * self.inv_norm[:, None], lower=1)
+
+
+class _Problem:
+    """Residual, gradient and Gauss–Newton matrix of the weighted variable-projection functional.
+
+    Kaufman's Jacobian column for θᵢ is −P⊥ (∂Φ/∂θᵢ) B. Every derivative column of mode k is a
+    combination of t·e·cos and t·e·sin of that mode, so with T = t·Φ_osc (n_samples × 2K),
+    ∂Φ/∂θᵢ B_c = T gᵢ_c for a vector gᵢ_c with two non-zeros (mode k's entries, from B and θ).
+    Then JᵀJ = Σ_c gᵢ_cᵀ (Tᵀ P⊥ T) gⱼ_c and Jᵀr = −Σ_c gᵢ_cᵀ Tᵀ r_c: only the 2K × 2K Schur
+    complement Tᵀ P⊥ T (from the Grams ΦᵀΦ, ΦᵀT, TᵀT and the projector's Cholesky) and Tᵀr
+    (2K × n_channels) touch the samples. When that complement has lost more than half the
+    digits, or Φ needed the QR path, P⊥T is formed explicitly instead.
+
+    ``fixed`` (n_samples × m): further basis columns whose coefficients are fitted but that do
+    not depend on θ (the offset and modes whose poles are held). They are projected out once
+    (one QR): the data become P⊥_F Y and the basis P⊥_F Φ(θ), whose span with F is the same, so
+    residual, B (coefficients of the unprojected Φ) and JᵀJ, Jᵀr (the θ block of the problem
+    with all columns) are unchanged while every evaluation touches 2K + m columns, not
+    (2K + m)².
+    """
+
+    def __init__(
+        self, t: np.ndarray, Yw: np.ndarray, offset: bool, fixed: np.ndarray | None = None
+    ) -> None:
+        self.t, self.offset = t, offset
+        self.Yc = np.ascontiguousarray(np.asarray(Yw).T)  # (n_channels, n_samples)
+        self.grid = uniform_grid(t)
+        self.scratch: dict = {}
+        self._pool: list[np.ndarray] = []  # Φᵀ buffers of projectors the caller released
+        self.QfT = None
+        if fixed is not None and fixed.shape[1]:
+            Q, R = linalg.qr(fixed, mode="economic", check_finite=False)
+            rd = np.abs(np.diag(R))
+            Q = Q[:, rd > 1e-10 * rd.max()]  # drop dependent fixed columns (same span)
+            self.QfT = np.ascontiguousarray(Q.T)  # (m, n_samples)
+            self.Yc = self.Yc - (self.Yc @ self.QfT.T) @ self.QfT
+            self.offset = False  # a fitted constant, if any, is among the fixed columns
+        self.Yw = self.Yc.T  # (n_samples, n_channels)
+
+    def _perp(self, A: np.ndarray) -> np.ndarray:
+        """P⊥_F A for A of shape (n_samples, k) (A itself without fixed columns)."""
+        if self.QfT is None:
+            return A
+        AT = A.T
+        return (AT - (AT @ self.QfT.T) @ self.QfT).T
+
+    def residual(self, theta: np.ndarray) -> tuple[np.ndarray, Projector, np.ndarray]:
+        """(r, projector, B): r = Yw − Φ B, shape (n_samples, n_channels) (a transposed view)."""
+        shape = (theta.size + int(self.offset), self.t.size)
+        buf = self._pool.pop() if self._pool and self._pool[-1].shape == shape else None
+        raw = damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
+                     out=buf)
+        proj = Projector(self._perp(raw))
+        proj.raw = raw
+        B = proj.coef(self.Yw)
+        return (self.Yc - B.T @ proj.Phi.T).T, proj, B
+
+    def release(self, proj: Projector) -> None:
+        """Hand back a projector from :meth:`residual` that will not be used again (its Φᵀ
+        buffer is reused by a later call; without release every call allocates)."""
+        buf = proj.raw.base  # Φ is the transposed view of the (2K [+1], n_samples) array
+        if (buf is not None and buf.flags.owndata and buf.flags.c_contiguous and buf.ndim == 2
+                and buf.shape[1] == self.t.size and len(self._pool) < 4):
+            self._pool.append(buf)
+
+    def normal_equations(
+        self, theta: np.ndarray, resid: np.ndarray, proj: Projector, B: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(JᵀJ, Jᵀr) at θ for the residual computed there."""
+        f, d = theta[0::2], theta[1::2]
+        K = f.size
+        Phi = proj.Phi
+        work = self.scratch.get("T")
+        if work is None or work.shape != (2 * K, self.t.size):
+            work = self.scratch["T"] = np.empty((2 * K, self.t.size))
+        np.multiply(proj.raw[:, : 2 * K].T, self.t[None, :], out=work)
+        T = self._perp(work.T)  # t·e·cos, t·e·sin per mode (a scratch array: not kept)
+        TT = T.T @ T
+        M = None
+        if proj.cho is not None:
+            V = proj.whitened(Phi.T @ T)
+            M = TT - V.T @ V
+            if not np.all(M.diagonal() > 1e-8 * TT.diagonal()):
+                M = None
+        if M is None:
+            Tp = T - Phi @ proj.coef(T)
+            M = Tp.T @ Tp
+        Tr = T.T @ resid  # (2K, n_channels); P⊥ r = r
+        # H[k, p, a, c]: weight of T column (k, a) (a: t·c, t·s) in ∂Φ/∂θ_(k,p) B_c (p: f, δ).
+        # With (b, b') = B[2k:2k+2]: ∂/∂f: t·c (−δ b + 2π b') + t·s (−2π b − δ b');
+        # ∂/∂δ: −f (t·c b + t·s b'). Then JᵀJ = Σ_c Hᵀ M H blockwise and Jᵀr = −Σ_c Hᵀ Tᵀr.
+        b, bp = B[0 : 2 * K : 2], B[1 : 2 * K : 2]  # (K, n_channels)
+        dd, ff = d[:, None], f[:, None]
+        H = np.empty((K, 2, 2, B.shape[1]))
+        H[:, 0, 0] = _TWO_PI * bp - dd * b
+        H[:, 0, 1] = -_TWO_PI * b - dd * bp
+        H[:, 1, 0] = -ff * b
+        H[:, 1, 1] = -ff * bp
+        HM = np.einsum("kpac,kalb->kplbc", H, M.reshape(K, 2, K, 2))
+        JtJ = np.einsum("kplbc,lqbc->kplq", HM, H).reshape(2 * K, 2 * K)
+        JtJ = 0.5 * (JtJ + JtJ.T)
+        Jtr = -np.einsum("kpac,kac->kp", H, Tr.reshape(K, 2, -1)).reshape(2 * K)
+        return JtJ, Jtr
+
+
+def _gauss_newton_decrease(JtJ: np.ndarray, Jtr: np.ndarray) -> float:
+    """Decrease of Σr² the undamped Gauss–Newton step promises: (Jᵀr)ᵀ (JᵀJ)⁺ (Jᵀr)."""
+    sc = 1.0 / np.sqrt(np.maximum(JtJ.diagonal(), 1e-300))
+    g = Jtr * sc
+    A = JtJ * sc[:, None] * sc[None, :]
+    c, x, info = lapack.dposv(A, g, lower=0)
+    if info == 0 and np.min(np.abs(c.diagonal())) ** 2 > 1e-12:  # well conditioned: = pinv
+        return float(g @ x)
+    return float(g @ linalg.pinv(A, atol=1e-12) @ g)
+
+
+def _free_descent(
+    A: np.ndarray, g: np.ndarray, theta: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> float:
+    """Gauss–Newton decrease left on the coordinates that no active bound blocks.
+
+    A coordinate at a bound whose descent direction (−g) points out of the box is held; the
+    decrease the (scaled) model promises on the others is gᵀ A⁺ g over them: zero at a
+    Karush–Kuhn–Tucker point of the box-constrained problem.
+    """
+    blocked = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
+    free = ~blocked
+    if not np.any(free):
+        return 0.0
+    gf = g[free]
+    return float(gf @ linalg.pinv(A[np.ix_(free, free)], atol=1e-12) @ gf)
+
+
+_EXTRAPOLATE_RATIO = 1.5  # actual / predicted decrease above which a step is doubled
+_MAX_DOUBLINGS = 6
+
+
+def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, first=None):
+    """Levenberg–Marquardt with step doubling where the Gauss–Newton model is too pessimistic.
+
+    A fit whose residual is not small next to its signal (a weak mode at the noise level: the
+    candidates the order search tries and rejects) sees curvature from the residual that JᵀJ
+    does not: there the accepted steps gain about twice the decrease the model predicts, the
+    damping falls to its floor and the iteration creeps along a nearly straight valley in
+    ~50 equal steps. When an accepted step gains more than 1.5× its prediction the step is
+    doubled while the cost keeps falling (one residual per try; every accepted point is still a
+    descent step, so the iteration reaches the same kind of minimum). Fits of modes well above
+    the noise gain what the model predicts and never double: their path is unchanged.
+
+    Converged: a step changes θ by < 1e-10 relative, or Σr² by < 1e-11 relative, or (with
+    ``chi2_tol`` > 0) an accepted step lowered Σr² by less than ``chi2_tol`` · Σr²/dof and the
+    undamped Gauss–Newton model promises less than that from the new point as well.
+    ``first``: ``prob.residual(theta)`` when the caller has it already.
+
+    Box bounds: coordinates on a bound whose descent direction leaves the box are held and the
+    step solved for the others; a step the bounds still cut to (almost) nothing is not
+    convergence unless the point is a Karush–Kuhn–Tucker point (:func:`_free_descent`), it
+    counts as a rejected step (the larger damping turns the next one towards the gradient).
+    (A noise candidate that slides to f = f_min, δ = δ_max to take up a drift must come back
+    down in δ along f = f_min; the plain clipped step kept pointing out of the corner.)
+    """
+    resid, proj, B = prob.residual(theta) if first is None else first
+    cost = float(np.sum(resid**2))
+    JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
+    lam, n_eval, converged = 1e-4, 1, False
+    for _ in range(max_iter):
+        sc = 1.0 / np.sqrt(np.maximum(JtJ.diagonal(), 1e-300))
+        A = JtJ * sc[:, None] * sc[None, :]
+        g = Jtr * sc
+        # = linalg.solve(..., assume_a="pos") (same LAPACK call and triangle, less overhead)
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
+            raise ValueError("array must not contain infs or NaNs")
+        # Coordinates on a bound whose descent direction (−g) leaves the box are held; the
+        # step is solved for the others (projected, active-set LM; all free inside the box).
+        held = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
+        if np.any(held):
+            u, free = np.zeros_like(g), ~held
+            _, u_free, info = lapack.dposv(A[np.ix_(free, free)] + lam * np.eye(np.sum(free)),
+                                           -g[free], lower=0)
+            u[free] = u_free
+        else:
+            _, u, info = lapack.dposv(A + lam * np.eye(A.shape[0]), -g, lower=0)
+        if info != 0:  # not positive definite (scipy: LinAlgError)
+            lam *= 10.0
+            continue
+        new = np.clip(theta + u * sc, lo, hi)
+        r_new, p_new, B_new = prob.residual(new)
+        n_eval += 1
+        cost_new = float(np.sum(r_new**2))
+        if cost_new <= cost:
+            small = np.all(np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc))
+            rel = (cost - cost_new) / max(cost, 1e-300)
+            if (small or rel < 1e-11) and np.any((new <= lo) | (new >= hi)):
+                tol = max(1e-11 * cost, chi2_tol * cost / max(dof, 1))
+                if _free_descent(A, g, theta, lo, hi) > tol:  # stuck on a bound, not at a minimum
+                    prob.release(p_new)
+                    lam *= 8.0
+                    if lam > 1e10:
+                        converged = True
+                        break
+                    continue
+            predicted = -(2.0 * (g @ u) + u @ A @ u)  # Gauss–Newton decrease of Σr² (≥ 0)
+            if not (small or rel < 1e-11) and cost - cost_new > _EXTRAPOLATE_RATIO * predicted:
+                step = new - theta
+                for _ in range(_MAX_DOUBLINGS):
+                    step = 2.0 * step
+                    far = np.clip(theta + step, lo, hi)
+                    r_far, p_far, B_far = prob.residual(far)
+                    n_eval += 1
+                    cost_far = float(np.sum(r_far**2))
+                    if not cost_far < cost_new:
+                        prob.release(p_far)
+                        break
+                    prob.release(p_new)
+                    new, cost_new, r_new, p_new, B_new = far, cost_far, r_far, p_far, B_far
+                rel = (cost - cost_new) / max(cost, 1e-300)
+            drop = cost - cost_new
+            prob.release(proj)
+            theta, cost, resid, proj, B = new, cost_new, r_new, p_new, B_new
+            JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
+            lam = max(lam / 5.0, 1e-12)
+            if not (small or rel < 1e-11) and chi2_tol > 0:
+                ftol = chi2_tol * cost / max(dof, 1)
+                small = drop < ftol and _gauss_newton_decrease(JtJ, Jtr) < ftol
+            if small or rel < 1e-11:
+                converged = True
+                break
+        else:
+            prob.release(p_new)
+            if cost_new - cost <= 1e-11 * cost:  # equal to rounding: at the minimum
+                converged = True
+                break
+            lam *= 8.0
+            if lam > 1e10:
+                converged = True  # no descent direction left: at a minimum to precision
+                break
+    prob.release(proj)
+    return theta, resid, B, JtJ, n_eval, converged
+
+
+def fit_modes_varpro(
+    t_s: ArrayLike,
+    y: ArrayLike,
+    f0_hz: ArrayLike,
+    delta0: ArrayLike,
+    *,
+    weights: ArrayLike | None = None,
+    fit_offset: bool = True,
+    f_bounds_hz: tuple[float, float] = (0.0, np.inf),
+    delta_bounds: tuple[float, float] = (-2.0, 20.0),
+    max_iter: int = 100,
+    chi2_tol: float = 0.0,
+) -> VarProFit:
+    """Fit damped modes with poles shared by all channels by variable projection.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n_samples,)
+        Sample times (s) from the start of the free decay (need not be uniform).
+    y : array_like, shape (n_channels, n_samples)
+        Data.
+    f0_hz, delta0 : array_like, shape (n_modes,)
+        Starting frequencies (Hz) and decrements.
+    weights : array_like, shape (n_channels,), optional
+        1/σ_c per channel (default 1): the fit is weighted least squares.
+    fit_offset : bool
+        Fit a constant offset per channel.
+    f_bounds_hz, delta_bounds : tuple of float
+        Box bounds on every f (Hz) and δ.
+    max_iter : int
+        Levenberg–Marquardt iteration limit.
+    chi2_tol : float
+        Also stop when an accepted step lowers the weighted residual sum of squares by less than
+        ``chi2_tol`` times its variance per degree of freedom (0: to rounding). The order search
+        uses 1e-3 for its trial fits, which only decide a likelihood-ratio test (Λ then within
+        ~1e-3 of its converged value, against thresholds of tens); final fits use 0.
+
+    Returns
+    -------
+    VarProFit
+    """
+    t = np.asarray(t_s, dtype=float)
+    Y = np.atleast_2d(np.asarray(y, dtype=float))
+    f0 = np.atleast_1d(np.asarray(f0_hz, dtype=float))
+    d0 = np.broadcast_to(np.asarray(delta0, dtype=float), f0.shape)
+    w = np.ones(Y.shape[0]) if weights is None else np.asarray(weights, dtype=float)
+    K, (C, N) = f0.size, Y.shape
+    P = 2 * K + int(fit_offset)
+    if N <= P + 2 * K:
+        raise ValueError(f"n_samples ({N}) too small for {K} modes")
+    prob = _Problem(t, (Y * w[:, None]).T, fit_offset)
+    lo = np.tile([f_bounds_hz[0], delta_bounds[0]], K)
+    hi = np.tile([f_bounds_hz[1], delta_bounds[1]], K)
+    theta0 = np.empty(2 * K)
+    theta0[0::2], theta0[1::2] = f0, d0
+    theta0 = np.clip(theta0, lo, hi)
+    dof = C * N - C * P - 2 * K
+    theta, resid_w, B, JtJ, n_eval, ok = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
+                                                              chi2_tol, dof)
+    B = B / w[None, :]
+    rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
+    s2 = float(np.sum(resid_w**2) / max(dof, 1))
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(JtJ), 1e-300))
+    cov = s2 * scale[:, None] * linalg.pinv(scale[:, None] * JtJ * scale[None, :]) * scale[None, :]
+    amp = (B[0 : 2 * K : 2] - 1j * B[1 : 2 * K : 2]).T
+    return VarProFit(
+        f_hz=theta[0::2].copy(),
+        delta=theta[1::2].copy(),
+        covariance=cov,
+        amplitude=amp,
+        offset=B[-1] if fit_offset else np.zeros(C),
+        rss=rss,
+        noise_std=np.sqrt(rss / max(N - P - 2 * K / C, 1)),
+        n_eval=int(n_eval),
+        success=bool(ok),
+    )
+
+
+class HeldPoleFitter:
+    """Fits of further modes to weighted data with the poles (f_fixed, d_fixed) held.
+
+    All amplitudes (and the offset) are fitted; the held modes' columns are projected out once
+    here (:class:`_Problem` ``fixed``) and reused for every candidate tried against them.
+    """
+
+    def __init__(
+        self, t: np.ndarray, y: np.ndarray, f_fixed: np.ndarray, d_fixed: np.ndarray, *,
+        weights: np.ndarray, fit_offset: bool,
+    ) -> None:
+        Y = np.atleast_2d(y)
+        self.C, self.N = Y.shape
+        self.K_fixed, self.fit_offset, self.weights = f_fixed.size, fit_offset, weights
+        fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, uniform_grid(t))
+        self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed)
+
+    def weighted_rss(self, f: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Σ (w r)² per channel of the linear fit with the new poles (f, δ) fixed too."""
+        theta = np.empty(2 * f.size)
+        theta[0::2], theta[1::2] = f, d
+        self._last = (theta, self.prob.residual(theta))  # the first step of a fit from there
+        return np.sum(self._last[1][0] ** 2, axis=0)
+
+    def fit(
+        self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
+        delta_bounds: tuple[float, float], chi2_tol: float = 0.0, max_iter: int = 100,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+        """(f, δ, rss, noise_std, n_eval): f and δ of the new modes; unweighted residual sum of
+        squares and noise std per channel (degrees of freedom as :func:`fit_modes_varpro`)."""
+        C, N = self.C, self.N
+        K = f0.size + self.K_fixed
+        P = 2 * K + int(self.fit_offset)
+        if N <= P + 2 * K:
+            raise ValueError(f"n_samples ({N}) too small for {K} modes")
+        lo = np.tile([f_bounds_hz[0], delta_bounds[0]], f0.size)
+        hi = np.tile([f_bounds_hz[1], delta_bounds[1]], f0.size)
+        theta0 = np.empty(2 * f0.size)
+        theta0[0::2], theta0[1::2] = f0, d0
+        dof = C * N - C * P - 2 * K
+        theta0 = np.clip(theta0, lo, hi)
+        last, self._last = getattr(self, "_last", None), None
+        first = last[1] if last is not None and np.array_equal(last[0], theta0) else None
+        theta, resid_w, _, _, n_eval, _ = _levenberg_marquardt(
+            self.prob, theta0, lo, hi, max_iter, chi2_tol, dof, first)
+        rss = np.sum((resid_w / self.weights[None, :]) ** 2, axis=0)
+        noise_std = np.sqrt(rss / max(N - P - 2 * K / C, 1))
+        return theta[0::2].copy(), theta[1::2].copy(), rss, noise_std, int(n_eval)
+
+
+def gauss_newton_gain(
+    t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray, *, weights: np.ndarray,
+    fit_offset: bool,
+) -> float:
+    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises."""
+    prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset)
+    theta = np.empty(2 * f.size)
+    theta[0::2], theta[1::2] = f, d
+    resid, proj, B = prob.residual(theta)
+    return _gauss_newton_decrease(*prob.normal_equations(theta, resid, proj, B))
+
+
+def drop_one_rss_increase(
+    t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray, *, fit_offset: bool
+) -> np.ndarray | None:
+    """Rise of each channel's least-squares RSS when one mode's two columns are dropped.
+
+    Returns shape (n_modes, n_channels): for mode k, β_Sᵀ [(ΦᵀΦ)⁻¹_SS]⁻¹ β_S per channel (S its
+    two columns, β the full fit's coefficients) — the drop-one refits of all modes from one
+    factorisation. None when Φ needs the QR path (ill-conditioned): refit those directly.
+    """
+    Y = np.atleast_2d(y)
+    proj = Projector(damped_basis(t, f, d, fit_offset, uniform_grid(t)))
+    if proj.cho is None:
+        return None
+    B = proj.coef(Y.T)  # (P, C)
+    P = B.shape[0]
+    Ginv = proj.coef_from(np.eye(P))  # coef_from(X) = (ΦᵀΦ)⁻¹ X
+    out = np.empty((f.size, Y.shape[0]))
+    for k in range(f.size):
+        S = slice(2 * k, 2 * k + 2)
+        b = B[S]  # (2, C)
+        out[k] = np.sum(b * np.linalg.solve(Ginv[S, S], b), axis=0)
+    return out

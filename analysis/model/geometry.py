@@ -1,0 +1,60 @@
+"""The report's gage distances (Figures 1, 2, 7) read off a rig's gage positions.
+
+The report's equations name distances (x1, z1, L_H, ...); a rig names positions. This module is
+the one place that turns one into the other, and checks that the gages sit where the equations
+assume: 2 and 6 on the vertical through the centre of mass, 4 and 8 on the horizontal, 13 and 14
+on one vertical, 15 and 16 on one horizontal. Which gage of a stock pair is aft is read from the
+positions, not assumed (the report's B-4/B-5 and B-6 disagree on it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ramdaq.analysis.model.rig import ALIGN_TOL_M, Rig, RigError
+from ramdaq.analysis.report1836.motions import GageGeometry
+
+
+@dataclass(frozen=True)
+class StockPair:
+    """A pair of stock gages at one height: ``aft`` and ``forward`` gage numbers, their height
+    ``z_m`` above the centre of mass and half-spacing ``half_spacing_m`` about the stock axis."""
+
+    aft: int
+    forward: int
+    z_m: float
+    half_spacing_m: float
+
+
+def _pos(rig: Rig, n: int) -> tuple[float, float, float]:
+    return rig.gage(n).position_m
+
+
+def stock_pair(rig: Rig, a: int, b: int) -> StockPair:
+    """Order a stock (or rudder-top) gage pair by which is aft of the stock axis."""
+    pa, pb = _pos(rig, a), _pos(rig, b)
+    if abs(pa[2] - pb[2]) > ALIGN_TOL_M:
+        raise RigError(f"{rig.source}: gages {a} and {b} must be at one height "
+                       f"(z {pa[2]} vs {pb[2]} m)")
+    aft, fwd = (a, b) if pa[0] > pb[0] else (b, a)
+    half = abs(pa[0] - pb[0]) / 2
+    return StockPair(aft, fwd, pa[2], half)
+
+
+def gage_geometry(rig: Rig) -> GageGeometry:
+    """The report's distances for ``rig`` (metres), checked against its assumptions."""
+    p = {n: _pos(rig, n) for n in range(1, 17)}
+    h, b = rig.rudder.stock_x_m, rig.rudder.attach_z_m
+    for n, axis in ((2, 0), (6, 0), (4, 2), (8, 2)):
+        if abs(p[n][axis]) > ALIGN_TOL_M:
+            line = "vertical" if axis == 0 else "horizontal"
+            raise RigError(f"{rig.source}: gage {n} is off the {line} through the centre of mass "
+                           f"({p[n]}); Eq 1-3 assume it on it")
+    if abs(p[13][0] - p[14][0]) > ALIGN_TOL_M:
+        raise RigError(f"{rig.source}: gages 13 and 14 are not on one vertical ({p[13]}, {p[14]})")
+    return GageGeometry(
+        x1=p[4][0], x2=-p[8][0], z1=p[2][2], z2=-p[6][2],
+        x5=p[3][0] - h, x6=h - p[1][0],
+        x7=stock_pair(rig, 7, 11).half_spacing_m, x10=stock_pair(rig, 10, 12).half_spacing_m,
+        L_H=p[13][2], L_P=p[14][2] - p[13][2], Y_P=abs(p[16][1] - p[15][1]), h=h, b=b,
+    )

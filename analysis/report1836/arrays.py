@@ -1,0 +1,40 @@
+"""Argument checks and return shapes shared by the report's equations: every function takes floats
+or numpy arrays (broadcast) and returns a float for scalar input, an array otherwise."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+Number = float | np.ndarray
+
+
+def as_number(x: np.ndarray) -> Number:
+    return float(x) if np.ndim(x) == 0 else x
+
+
+_RULES = {
+    "finite": (lambda a: np.ones_like(a, dtype=bool), "must be finite"),
+    "positive": (lambda a: a > 0, "must be positive"),
+    "nonnegative": (lambda a: a >= 0, "must not be negative"),
+    "nonzero": (lambda a: a != 0, "must not be zero"),
+}
+
+
+def checked(name: str, value: ArrayLike, rule: str = "finite") -> np.ndarray:
+    """``value`` as a float array; ValueError naming ``name`` if not finite or breaking ``rule``."""
+    arr = np.asarray(value, dtype=float)
+    test, why = _RULES[rule]
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} ({value!r}) must be finite")
+    if not np.all(test(arr)):
+        raise ValueError(f"{name} ({value!r}) {why}")
+    return arr
+
+
+def finite(name: str, value: ArrayLike) -> np.ndarray:
+    return checked(name, value, "finite")
+
+
+def positive(name: str, value: ArrayLike) -> np.ndarray:
+    return checked(name, value, "positive")

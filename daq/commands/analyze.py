@@ -1,0 +1,188 @@
+"""``ramdaq analyze``: a recording replayed through the trigger and the analyzer into a trial
+report -- a JSON document of every number with units and standard errors, PNG plots, and a
+summary table for the terminal.
+
+The recording is replayed as a device (``ramdaq.drivers.mcap_replay``), block by block, through the
+same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.analyze_event` as a live trial.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ramdaq.analysis.impact import ImpactAnalysis
+from ramdaq.analysis.model.geometry import gage_geometry
+from ramdaq.analysis.model.rig import Rig, parse_rig
+from ramdaq.analysis.model.structure import added_mass
+from ramdaq.analysis.model.units import from_si
+from ramdaq.daq.analyzer import HitResult, analyze_event, trial_summary
+from ramdaq.daq.trigger import Trigger
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+
+UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "m",
+         "mass": "kg", "inertia": "kg m^2", "time": "s"}
+
+
+def run_analysis(path: str | Path, *, impact: int | None = None,
+                 progress: Callable[[str], None] | None = None) -> tuple[Rig, list[HitResult]]:
+    """Replay ``path`` through the trigger and analyse each hit (or only hit ``impact``)."""
+    with McapReplayDevice(path) as dev:
+        info = dev.info
+        if not info.rig_toml:
+            raise ValueError(f"{path}: the recording carries no rig; analysis needs gage positions")
+        rig = parse_rig(info.rig_toml, source=f"{path}:rig.toml")
+        if "medium" in info.extra and info.extra["medium"] != rig.medium:
+            rig = rig.with_medium(info.extra["medium"])
+        trigger = Trigger(info)
+        hits: list[HitResult] = []
+
+        def take(events: list) -> None:
+            for ev in events:
+                k = len(hits)
+                if impact is not None and k != impact:
+                    hits.append(HitResult(k, ev, False, "not requested", None))
+                    continue
+                if progress:
+                    progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
+                             f"{(ev.last_sample - ev.onset_sample) / info.fs_hz:.1f} s of decay")
+                hits.append(analyze_event(k, ev, info, rig))
+
+        for block in dev:
+            take(trigger.process(block))
+        take(trigger.flush())
+    if impact is not None and impact >= len(hits):
+        raise ValueError(f"{path}: --impact {impact} asked for, but {len(hits)} impacts found")
+    return rig, hits
+
+
+def _num(v: object) -> object:
+    if isinstance(v, float | np.floating):
+        return float(v) if np.isfinite(v) else None
+    return v
+
+
+def analysis_to_json(a: ImpactAnalysis) -> dict:
+    """Every number of one impact, SI, with standard errors."""
+    m = a.modes
+    return {
+        "onset_s": a.onset_s, "decay_start_s": a.decay_start_s, "decay_duration_s": a.duration_s,
+        "predominant_mode": a.predominant, "f_hz": a.f_hz,
+        "modes": [{"f_hz": _num(m.frequency_hz[i]), "f_se_hz": _num(m.frequency_se_hz[i]),
+                   "delta": _num(m.delta[i]), "delta_se": _num(m.delta_se[i]),
+                   "zeta": _num(m.zeta[i]), "zeta_se": _num(m.zeta_se[i]),
+                   "shape": {f"g{n:02d}": [_num(float(abs(s))), _num(float(np.angle(s)))]
+                             for n, s in zip(_active_gages(a), m.mode_shape[:, i], strict=False)}}
+                  for i in range(len(m))],
+        "verdicts": {f"g{n:02d}": {"verdict": v, "reason": r} for n, (v, r) in a.verdicts.items()},
+        "gages": {f"g{n:02d}": d.to_json() for n, d in sorted(a.gages.items())},
+        "motions": {k: d.to_json() for k, d in a.motions.items()},
+        "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
+        "alpha1_over_gamma1": _num(a.alpha1_over_gamma1),
+        "damping": {k: _num(v) for k, v in a.damping.items()},
+        "stock_lengths_m": a.stock_lengths,
+        "table2b": json.loads(json.dumps(a.table2b(), default=float)),
+        "notes": list(a.notes),
+    }
+
+
+def _active_gages(a: ImpactAnalysis) -> list[int]:
+    return [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
+
+
+def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
+                     f_water_hz: float | None = None) -> dict:
+    """Eq 19-21 from the rig's geometry; Eq 18 when both trials' frequencies are given."""
+    add = added_mass(rig.with_medium("water"))
+    out = {"m_vir_eq19_kg": add["m_vir"], "Iz_vir_eq20_kg_m2": add["Iz_vir"],
+           "Ix_vir_eq21_kg_m2": add["Ix_vir"]}
+    if f_air_hz and f_water_hz:
+        eq18 = rig.rudder.mass_kg * ((f_air_hz / f_water_hz) ** 2 - 1)
+        out |= {"m_vir_eq18_kg": eq18, "f_air_hz": f_air_hz, "f_water_hz": f_water_hz,
+                "eq18_vs_eq19_pct": 100 * (eq18 / add["m_vir"] - 1)}
+    return out
+
+
+def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
+                 air: tuple[Rig, list[HitResult]] | None = None) -> dict:
+    """The trial report as a JSON-serialisable dict."""
+    summary = trial_summary(hits)
+    f_other = trial_summary(air[1])["f_hz"]["mean"] if air else None
+    f_here = summary["f_hz"]["mean"]
+    vi = virtual_inertias(rig, f_other, f_here) if air and rig.medium == "water" else \
+        virtual_inertias(rig)
+    return {
+        "recording": str(path), "rig": rig.name, "medium": rig.medium,
+        "geometry_m": gage_geometry(rig).__dict__,
+        "units": UNITS,
+        "impacts": [{"index": h.index, "onset_s": h.event.onset_s, "accepted": h.accepted,
+                     "reason": h.reason, "flags": {"double_hit": h.event.double_hit,
+                                                   "clipped": list(h.event.clipped),
+                                                   "too_short": h.event.too_short},
+                     "snr_db": _num(h.event.snr_db),
+                     "analysis": analysis_to_json(h.analysis) if h.analysis else None}
+                    for h in hits],
+        "summary": summary,
+        "virtual_inertias": vi,
+    }
+
+
+def format_summary(report: dict, units: str = "si") -> str:
+    """A readable table: each hit, then per gage and motion the mean decrement and scatter."""
+    lines = [f"{report['recording']}: rig {report['rig']} in {report['medium']}"]
+    for imp in report["impacts"]:
+        a = imp["analysis"]
+        if a:
+            lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  accepted   "
+                         f"f = {a['f_hz']:.3f} Hz  delta_modal = {a['damping']['delta_modal']:.4f}")
+        else:
+            lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
+                         f"{imp['reason']}")
+    lines += summary_table(report["summary"], units)
+    vi = report["virtual_inertias"]
+    conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
+    mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
+    lines.append(f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
+                 f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
+                 f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g}"
+                 f" {iu}")
+    if "m_vir_eq18_kg" in vi:
+        lines.append(f"virtual mass, Eq 18 (air {vi['f_air_hz']:.3f} Hz, water "
+                     f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
+                     f" {vi['eq18_vs_eq19_pct']:+.1f} % against Eq 19")
+    return "\n".join(lines)
+
+
+def summary_table(s: dict, units: str = "si") -> list[str]:
+    """Lines of the trial summary: per motion and gage the mean decrement over accepted hits
+    with its standard deviation; C and c in SI or, with ``units="report"``, ton/ft units."""
+    lines = [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
+             f"(+- std, n):", "  quantity          mean        std     n"]
+
+    def row(name: str, d: dict, fmt: str = "{:.4f}") -> None:
+        if d["mean"] is None:
+            return
+        std = "-" if d["std"] is None else fmt.format(d["std"])
+        lines.append(f"  {name:14s} {fmt.format(d['mean']):>9s} {std:>10s} {d['n']:5d}")
+
+    row("f (Hz)", s["f_hz"], "{:.3f}")
+    for m, d in s["delta_motion"].items():
+        row(f"delta_{m}", d)
+    row("delta_modal", s["delta_modal"])
+    for g, d in s["delta_gage"].items():
+        row(f"delta {g}", d)
+    for key, q in (("C_N_s_per_m", "damping_translational"), ("c_N_m_s_per_rad",
+                                                               "damping_rotational")):
+        d = dict(s[key])
+        name = key.split("_")[0]
+        if units == "report" and d["mean"] is not None:
+            d = {**d, "mean": from_si(d["mean"], q),
+                 "std": None if d["std"] is None else from_si(d["std"], q)}
+            name += " (ton s/ft)" if key.startswith("C") else " (ft ton s)"
+        else:
+            name += " (N s/m)" if key.startswith("C") else " (N m s)"
+        row(name, d, "{:.4g}")
+    return lines

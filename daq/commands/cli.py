@@ -1,0 +1,425 @@
+"""``ramdaq`` command line: thin -- it parses, builds a device and a recorder, runs, prints.
+
+Commands: ``trial`` (record, detect hits, analyse and show them live), ``replay`` (a recording
+through the same pipeline), ``analyze`` (the trial report), ``record`` (a device into an MCAP
+file, with a live readout), ``info`` (what a recording holds), ``recover`` (a valid copy of a
+recording whose writer was killed), ``rig`` (a rig's modes in air and in water, and Eq 18 on
+them), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff`` (modes and decays as UFF).
+"""
+
+from __future__ import annotations
+
+import os
+
+# one BLAS thread per process, set before numpy loads: the estimators make thousands of small
+# BLAS calls that threads only slow down (5-10x, measured), and a live trial and its replay
+# must run with the same setting to give the same digits (analysis/modal/identify.py, "Threads")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from ramdaq.analysis.model.rig import RigError, load_rig
+from ramdaq.daq.commands.gap_bench import SEED_SETS
+from ramdaq.drivers.errors import DeviceError
+from ramdaq.drivers.mcap_format import RecordingError
+
+RECORDINGS = Path("recordings")
+
+
+def _parse_impacts(text: str) -> list[float]:
+    try:
+        return [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--impacts {text!r}: expected seconds separated by commas, e.g. 1,4.5,8") from None
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from ramdaq.daq.record import record
+
+    device, out = _device_and_output(args)
+    print(f"recording {device.info.device} ({device.info.n_channels} ch at "
+          f"{device.info.fs_hz:g} Hz) into {out}; Ctrl-C ends it cleanly", flush=True)
+    s = record(device, out, readout=not args.quiet, overwrite=args.overwrite)
+    print(f"{'interrupted: ' if s.interrupted else ''}wrote {out}: {s.duration_s:.2f} s, "
+          f"{s.blocks} blocks, {s.samples * device.info.n_channels:,} samples, {s.gaps} gaps, "
+          f"{s.overflows} overflows, {s.impacts} impacts, in {s.wall_s:.1f} s wall time")
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from ramdaq.daq.commands.info import describe_recording, format_info
+
+    d = describe_recording(args.file)
+    print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
+    return 0
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    from ramdaq.daq.recover import recover
+
+    src = Path(args.file)
+    dst = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
+    report = recover(src, dst)
+    print(f"recovered {dst}: {report}")
+    return 0
+
+
+def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
+    """Device options and a default recording name for ``--device sim``."""
+    if not args.rig:
+        raise SystemExit(f"ramdaq {args.command}: --rig is required with --device sim")
+    rig = load_rig(args.rig)
+    if args.medium:
+        rig = rig.with_medium(args.medium)
+    impacts = list(args.impacts or [])
+    if args.impact_every:
+        t = args.impact_every / 2
+        while t < args.duration:
+            impacts.append(t)
+            t += args.impact_every
+    return (dict(rig=rig, seed=args.seed, duration_s=args.duration, impacts=impacts, pace=pace,
+                 fs_hz=args.fs), f"{rig.name}-{rig.medium}")
+
+
+def _device_and_output(args: argparse.Namespace):
+    """Open the device named by ``--device`` and choose the recording's path."""
+    from ramdaq.drivers.registry import open_device
+
+    options: dict = {}
+    name = args.name
+    if args.device == "sim":
+        options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
+        name = name or default_name
+    elif args.rig:
+        options = {"rig": args.rig}
+    out = Path(args.out) if args.out else RECORDINGS / f"{name or 'trial'}.mcap"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return open_device(args.device, **options), out
+
+
+def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd: Path | None):
+    from ramdaq.daq.session import Session
+
+    view = None
+    if rrd is not None or args.web:
+        from ramdaq.daq.rerun_view import RerunView
+
+        view = RerunView(device.info, rrd_path=rrd, serve_web=args.web)
+        if args.web:
+            print(f"Rerun web viewer: {view.web_url}", flush=True)
+    try:
+        outcome = Session(device, record_path=record_path, overwrite=args.overwrite, view=view,
+                          readout=False if args.quiet else None,
+                          log=print).run()
+    finally:
+        if view is not None:
+            view.close()
+    return outcome
+
+
+def _print_outcome(outcome, args: argparse.Namespace) -> None:
+    """The trial summary on the terminal and, with ``--json``, the per-hit results in a file."""
+    from ramdaq.daq.commands.analyze import summary_table
+
+    for k, why in outcome.summary["rejected"].items():
+        print(f"hit {k} rejected: {why}")
+    print("\n".join(summary_table(outcome.summary, args.units)))
+    print(f"{outcome.first_looks} first looks shown while ringing, {outcome.skipped_updates} "
+          f"skipped because the analyzer was busy (no samples skipped)")
+    if args.json:
+        Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
+                                              default=_json_default))
+
+
+def cmd_trial(args: argparse.Namespace) -> int:
+    device, out = _device_and_output(args)
+    rrd = None if args.no_rerun else (Path(args.rrd) if args.rrd else out.with_suffix(".rrd"))
+    print(f"trial: {device.info.device} ({device.info.n_channels} ch at {device.info.fs_hz:g} Hz)"
+          f" recording into {out}" + (f", Rerun view into {rrd}" if rrd else "")
+          + "; Ctrl-C ends it cleanly", flush=True)
+    outcome = _run_session(device, args, out, rrd)
+    print(f"{'interrupted: ' if outcome.interrupted else ''}wrote {out}"
+          + (f" and {rrd}" if rrd else ""))
+    _print_outcome(outcome, args)
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from ramdaq.drivers.mcap_replay import McapReplayDevice
+
+    device = McapReplayDevice(args.file, pace="realtime" if args.realtime else "fast")
+    rrd = Path(args.rrd) if args.rrd else None
+    print(f"replaying {args.file} ({'real time' if args.realtime else 'as fast as possible'})",
+          flush=True)
+    outcome = _run_session(device, args, None, rrd)
+    _print_outcome(outcome, args)
+    return 0
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from ramdaq.daq.commands.analyze import build_report, format_summary, run_analysis
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
+
+    def progress(msg: str) -> None:
+        print(msg, flush=True)
+
+    rig, hits = run_analysis(src, impact=args.impact, progress=progress)
+    air = run_analysis(Path(args.air), progress=progress) if args.air else None
+    report = build_report(src, rig, hits, air)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.json").write_text(json.dumps(report, indent=1, default=_json_default))
+    files = [out / "report.json"]
+    if not args.no_plots:
+        from ramdaq.daq.reports.impact_plots import plot_impact
+
+        for h in hits:
+            if h.accepted and h.analysis is not None and h.event.record is not None:
+                rec = h.event.record
+                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
+                rows = [i for i, g in enumerate(rig.gages_by_channel())]
+                x = rec.values()[rows, i0:]
+                files += plot_impact(h.analysis, x, rec.fs_hz, rig, out, h.index)
+    print(format_summary(report, args.units))
+    print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
+    return 0
+
+
+def cmd_gap(args: argparse.Namespace) -> int:
+    """Sim-to-real gap diagnosis of a recording, or the benchmark that proves it."""
+    from ramdaq.analysis.gap.diagnose import Settings
+    from ramdaq.analysis.gap.effects import get_effect
+
+    effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
+    for e in effects or ():
+        get_effect(e)
+    if args.file == "benchmark":
+        from ramdaq.daq.commands.gap_bench import run_benchmark
+
+        if sum((args.dev, args.check, args.seeds is not None)) > 1:
+            raise SystemExit("ramdaq gap benchmark: give one of --dev, --check, --seeds")
+        seeds = "dev" if args.dev else "check" if args.check else args.seeds or "benchmark"
+        out = Path(args.out or "gap_benchmark")
+        return run_benchmark(out, per_class=args.per_class, seeds=seeds, jobs=args.jobs,
+                             rescore=args.rescore, thresholds=args.thresholds,
+                             progress=lambda m: print(m, flush=True))
+    from ramdaq.daq.commands.gap import run_gap, summary_lines, write_report
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
+    lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
+                        progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
+                        post_max_s=args.post_s, held_out_every=args.held_out_every)
+    files = write_report(d, out, plots=not args.no_plots, source=str(src))
+    print("\n".join(summary_lines(d)))
+    print(f"\nwrote {len(files)} files to {out}/ (gap.json with every number)")
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording."""
+    from ramdaq.daq.record import record
+    from ramdaq.drivers.files.import_common import parse_channel_map
+    from ramdaq.drivers.registry import open_device
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_suffix(".mcap")
+    if out.exists() and not args.overwrite:
+        raise FileExistsError(f"{out} exists; --overwrite replaces it")
+    options: dict = {"rig": load_rig(args.rig), "channels": parse_channel_map(args.channels)}
+    if args.medium:
+        options["medium"] = args.medium
+    device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
+    info, imp = device.info, device.info.extra.get("import", {})
+    chans = imp.get("channels", {}).values()
+    exact = sum(c["method"] != "requantised" for c in chans)
+    worst = max((c["max_error_m_s2"] for c in chans), default=0.0)
+    s = record(device, out, readout=False, overwrite=args.overwrite)
+    print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
+          f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
+          f"({imp.get('missing_samples', 0)} samples missing)")
+    print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
+          f"requantised to 24 bits; largest error {worst:.3g} m/s^2")
+    return 0
+
+
+def cmd_export_uff(args: argparse.Namespace) -> int:
+    """A recording's identified modes and decay records as UFF 15/55/58 for modal software."""
+    from ramdaq.daq.commands.analyze import run_analysis
+    from ramdaq.drivers.files.export_uff import export_uff
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_suffix(".uff")
+    rig, hits = run_analysis(src, progress=lambda m: print(m, flush=True))
+    r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
+    print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
+          f"records from {r.hits} accepted of {len(hits)} hits")
+    return 0
+
+
+def _json_default(o: object) -> object:
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def cmd_rig(args: argparse.Namespace) -> int:
+    from ramdaq.analysis.model.rig_modes import eq18_check, modes_in
+
+    rig = load_rig(args.rig)
+    print(f"rig {rig.name} ({args.rig}): {len(rig.gages)} gages, "
+          f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
+    for medium in ("air", "water"):
+        if medium not in rig.damping:
+            continue
+        m = modes_in(rig, medium)
+        print(f"\nmodes in {medium}:  (* predominant after the rig's default ram blow)")
+        print("   f (Hz)    delta     zeta")
+        for i, (f, d, z) in enumerate(zip(m.table.frequency_hz, m.table.decrement,
+                                          m.table.damping_ratio, strict=True)):
+            print(f"{'*' if i == m.predominant else ' '} {f:8.3f}  {d:7.4f}  {z:7.4f}")
+    if {"air", "water"} <= set(rig.damping):
+        c = eq18_check(rig)
+        print(f"\nEq 18: m_vir = m_a[(f_air/f_water)^2 - 1] = {c.m_a_kg:.0f} kg x "
+              f"[({c.f_air_hz:.2f}/{c.f_water_hz:.2f})^2 - 1] = {c.m_vir_eq18_kg:.0f} kg")
+        print(f"model's own added mass (Eq 19): {c.m_vir_model_kg:.0f} kg; Eq 18 is "
+              f"{100 * c.difference:+.1f} % off it. Eq 18 assumes an uncoupled translation mode;"
+              f" the predominant mode couples v with alpha and gamma, whose added inertias "
+              f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
+              f"0.2735 ton s^2/ft, -18 %).")
+    return 0
+
+
+def _device_args(r: argparse.ArgumentParser) -> None:
+    r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
+    r.add_argument("--rig", help="rig file (TOML), required for the simulator")
+    r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
+    r.add_argument("--duration", type=float, default=10.0, help="seconds to record (sim)")
+    r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
+    r.add_argument("--impact-every", type=float, help="a ram blow every S seconds")
+    r.add_argument("--seed", type=int, default=0, help="noise seed (sim)")
+    r.add_argument("--fs", type=float, help="override the rig's sample rate, Hz")
+    r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
+    r.add_argument("--name", help="recording name: writes recordings/NAME.mcap")
+    r.add_argument("--out", help="output file (overrides --name)")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    r.add_argument("--quiet", action="store_true", help="no live readout")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ramdaq", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("record", help="record a device into an MCAP file")
+    _device_args(r)
+    r.set_defaults(func=cmd_record)
+
+    t = sub.add_parser("trial", help="the live trial: record, detect hits, analyse, show live")
+    _device_args(t)
+    t.add_argument("--rrd", help="Rerun recording of the live view (default: beside the MCAP)")
+    t.add_argument("--no-rerun", action="store_true", help="no Rerun view")
+    t.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    t.add_argument("--units", choices=("si", "report"), default="si", help="summary units")
+    t.add_argument("--json", help="also write the final per-hit results here (JSON)")
+    t.set_defaults(func=cmd_trial)
+
+    p_ = sub.add_parser("replay", help="a recording through the same trigger and analyzer")
+    p_.add_argument("file")
+    p_.add_argument("--realtime", action="store_true", help="at the recording's own pace")
+    p_.add_argument("--rrd", help="write a Rerun view of the replay here")
+    p_.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    p_.add_argument("--quiet", action="store_true", help="no live table")
+    p_.add_argument("--overwrite", action="store_true", help=argparse.SUPPRESS)
+    p_.add_argument("--units", choices=("si", "report"), default="si", help="summary units")
+    p_.add_argument("--json", help="also write the final per-hit results here (JSON)")
+    p_.set_defaults(func=cmd_replay)
+
+    i = sub.add_parser("info", help="describe a recording")
+    i.add_argument("file")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=cmd_info)
+
+    c = sub.add_parser("recover", help="write a valid copy of a recording that lost its footer")
+    c.add_argument("file")
+    c.add_argument("-o", "--out", help="output file (default FILE.recovered.mcap)")
+    c.set_defaults(func=cmd_recover)
+
+    a = sub.add_parser("analyze", help="trial report: frequency, decrement, Report 1836 chain")
+    a.add_argument("file")
+    a.add_argument("--impact", type=int, help="analyse only this hit (0-based)")
+    a.add_argument("--air", help="the same rudder's in-air recording, for Eq 18 (file is in water)")
+    a.add_argument("--out", help="output folder (default FILE_analysis/)")
+    a.add_argument("--units", choices=("si", "report"), default="si",
+                   help="terminal units: SI, or the report's ft / long ton / s")
+    a.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    a.set_defaults(func=cmd_analyze)
+
+    gp = sub.add_parser("gap", help="sim-to-real gap: where the model misses, which unmodelled "
+                       "effect, how far adding it closes the gap ('gap benchmark' proves it)")
+    gp.add_argument("file", help="recording (.mcap; ramdaq's own or imported), or the word 'benchmark'")
+    gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
+    gp.add_argument("--out", help="output folder (default FILE_gap/, or gap_benchmark/)")
+    gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
+    gp.add_argument("--pre-s", type=float, default=1.0, help="pre-trigger window, s (default 1)")
+    gp.add_argument("--post-s", type=float, default=4.0, help="longest decay compared, s (default 4)")
+    gp.add_argument("--held-out-every", type=int, default=3,
+                   help="every Nth impact is held out of the calibration (default 3)")
+    gp.add_argument("--per-class", type=int, default=20, help="benchmark: scenarios per effect class")
+    gp.add_argument("--seeds", choices=list(SEED_SETS),
+                    help="benchmark: the seed set: " + "; ".join(f"{k}, {v[1]}" for k, v in SEED_SETS.items())
+                    + " (default benchmark)")
+    gp.add_argument("--dev", action="store_true", help="benchmark: --seeds dev (tunes the thresholds)")
+    gp.add_argument("--check", action="store_true", help="benchmark: --seeds check")
+    gp.add_argument("--jobs", type=int, default=2, help="benchmark: worker processes (default 2)")
+    gp.add_argument("--rescore", action="store_true",
+                    help="benchmark: score the results stored in --out again instead of running")
+    gp.add_argument("--thresholds", type=Path,
+                    help="benchmark: thresholds file to score with (default: the shipped ones; --dev "
+                         "writes new ones to OUT/gap_thresholds.json)")
+    gp.set_defaults(func=cmd_gap)
+
+    g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
+    g.add_argument("rig")
+    g.set_defaults(func=cmd_rig)
+
+    m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
+    m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
+    m.add_argument("--rig", required=True, help="rig file (TOML) of the trial")
+    m.add_argument("--out", help="output recording (default FILE.mcap)")
+    m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
+                   " (default: names like g01, gage 1, 1)")
+    m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
+    m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
+    m.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    m.set_defaults(func=cmd_import)
+
+    x = sub.add_parser("export-uff", help="modes and decay records as UFF 15/55/58")
+    x.add_argument("file", help="a recording (MCAP), analysed as by ramdaq analyze")
+    x.add_argument("--out", help="output file (default FILE.uff)")
+    x.add_argument("--binary", action="store_true", help="binary 58b decay records")
+    x.set_defaults(func=cmd_export_uff)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (RigError, DeviceError, RecordingError, FileExistsError, FileNotFoundError,
+            ValueError, KeyError) as err:
+        print(f"ramdaq {args.command}: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Plots written by the commands: one analysed impact, and a gap diagnosis."""

@@ -1,0 +1,467 @@
+"""What the CSV, UFF 58 and TDMS importers share: channel mapping, units, lossless counts, blocks.
+
+An importer reads another system's recording into a :class:`SourceTable` (channel names, units,
+the sample index of each row, a reader of each channel's floats); :class:`FileImportDevice` maps
+channels to the rig's gages, converts g to m/s^2, turns each channel into int32 counts with a
+per-channel scale and streams blocks like any device: ``ramdaq import`` is ``open_device(FILE,
+rig=...)`` into a recorder.
+
+Counts and scale, per channel, in the file's own unit:
+
+* **quantised** -- the values are integer multiples of a common step (an ADC's counts written as
+  ``counts * scale``). The step is the smallest gap between distinct values (or 1/2, 1/3, 1/4 of
+  it), refined by least squares, or set to the float that reproduces every value bit for bit
+  when one lies within an ulp of ``value / count`` at the largest counts. Accepted when every
+  value lies within ``STEP_TOLERANCE`` (1 %) of the grid and the counts fit int32: the counts are
+  then the source's own, bit-exact from full-precision files (float64, ``%.17g`` text), exact to
+  the count from UFF's 13-digit E20.12 (and from float32 up to about 160 000 counts).
+* **requantised** -- otherwise (filtered, resampled or computed data), 24 bits:
+  ``scale = max|x| / (2**23 - 1)``, ``counts = rint(x / scale)``, so ``|counts| <= 2**23 - 1``
+  and ``|x - counts*scale| <= scale/2 = max|x| / (2**24 - 2)``: 6.0e-8 of the channel's peak,
+  far below any accelerometer's noise.
+
+``StreamInfo.extra["import"]["channels"]["g01"]`` says which, with the step, the scale, the
+measured largest error and the guaranteed bound (m/s^2). A row with a missing value (NaN, empty)
+in any imported channel is not streamed: the blocks split there, a gap, never interpolated.
+Units: m/s^2 and g (9.80665 m/s^2); anything else is refused naming the channel. Every problem
+with a file is an :class:`ImportFormatError`: one line naming the file and what.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from ramdaq.analysis.model.rig import Rig, load_rig
+from ramdaq.drivers.base import Device
+from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
+from ramdaq.drivers.errors import DeviceError, DeviceNotFound
+
+__all__ = ["G0", "FULL_SCALE_COUNTS", "STEP_TOLERANCE", "ImportFormatError", "SourceTable",
+           "Quantisation", "FileImportDevice", "gage_of_name", "parse_channel_map",
+           "map_channels", "unit_factor", "quantise", "detect_step", "snap_rate"]
+
+G0 = 9.80665
+"""Standard gravity, m/s^2 per g."""
+FULL_SCALE_COUNTS = 2**23 - 1
+"""Largest count of a requantised channel (24-bit)."""
+STEP_TOLERANCE = 0.01
+"""Largest distance of a value from its step grid, in steps, for the channel to count as
+quantised."""
+_INT32_MAX = 2**31 - 1
+_STEP_SAMPLE = 200_000  # values searched for the step (all values are checked against it)
+_TINY, _HUGE = 1e-290, 1e290  # m/s^2: a channel's peak beyond these is refused, not scaled
+_MAX_TIME_S = 4e9  # |start| and length, s: device time in int64 ns stays far from overflow
+
+
+class ImportFormatError(DeviceError, ValueError):
+    """A file that cannot be imported; the message is one line naming the file and what."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(" ".join(str(message).split()))
+
+
+# -- channels and units --------------------------------------------------------------------------
+_GAGE_NAME = re.compile(r"^(?:g|gage|gauge)?[\s_\-#]*0*(\d{1,4})$", re.IGNORECASE)
+
+
+def gage_of_name(name: str) -> int | None:
+    """Gage number named by ``"g01"``, ``"G1"``, ``"gage 1"``, ``"gauge_01"`` or ``"1"``."""
+    m = _GAGE_NAME.match(str(name).strip())
+    return int(m.group(1)) if m else None
+
+
+def parse_channel_map(text: str | None) -> dict[str, int] | None:
+    """``"colA=1,colB=g02"`` -> ``{"colA": 1, "colB": 2}`` (source name -> gage number).
+
+    Raises
+    ------
+    ValueError
+        An item without ``=`` or whose right side names no gage.
+    """
+    if not text:
+        return None
+    out: dict[str, int] = {}
+    for item in text.split(","):
+        if not item.strip():
+            continue
+        name, sep, gage = item.rpartition("=")
+        n = gage_of_name(gage)
+        if not sep or not name.strip() or n is None:
+            raise ValueError(f"--channels item {item.strip()!r}: expected SOURCE=GAGE, e.g. "
+                             f"'Accel 3=g03'")
+        out[name.strip()] = n
+    return out
+
+
+def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
+                 source: str) -> list[tuple[int, int]]:
+    """Pick the source channels to import and their gages, in the rig's channel order.
+
+    Parameters
+    ----------
+    names : list of str
+        Source channel names, in the file's order.
+    rig : Rig
+        Gage numbers and DAQ channel order.
+    channels : mapping of str to int, optional
+        Explicit source name -> gage number; only these are imported. Without it every channel
+        must be named like a gage (``g01``, ``gage 1``, ``1``).
+    source : str
+        The file, for messages.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(index into names, gage number)``, sorted by the gage's rig channel.
+    """
+    known = {g.number: g.channel for g in rig.gages}
+    if channels is None:
+        pairs = [(i, n, gage_of_name(n)) for i, n in enumerate(names)]
+    else:
+        index = {n: i for i, n in enumerate(names)}
+        missing = [k for k in channels if k not in index]
+        if missing:
+            have = ", ".join(repr(n) for n in names[:20])
+            raise ImportFormatError(f"{source}: channel map names {missing[0]!r}, which the "
+                                    f"file does not have (it has {have})")
+        pairs = [(index[k], k, int(g)) for k, g in channels.items()]
+    picked: dict[int, tuple[int, str]] = {}
+    for i, n, gage in pairs:
+        if gage is None:
+            raise ImportFormatError(f"{source}: channel {n!r} is not a gage name (g01, gage 1 "
+                                    f"or 1); map it with channels=")
+        if gage not in known:
+            raise ImportFormatError(f"{source}: channel {n!r} is gage {gage}, which rig "
+                                    f"{rig.name!r} does not have")
+        if gage in picked:
+            raise ImportFormatError(f"{source}: channels {picked[gage][1]!r} and {n!r} are "
+                                    f"both gage {gage}")
+        picked[gage] = (i, n)
+    if not picked:
+        raise ImportFormatError(f"{source}: no channels to import")
+    return sorted(((i, g) for g, (i, _) in picked.items()), key=lambda p: known[p[1]])
+
+
+_MS2 = {"m/s^2", "m/s2", "m/s/s", "ms^-2", "m*s^-2", "m.s^-2", "ms-2", "m/sec^2", "m/sec2"}
+_GEE = {"g", "gn", "g_n", "g0", "g's"}
+
+
+def unit_factor(unit: str | None, channel: str, source: str) -> float:
+    """m/s^2 per unit of ``unit``: 1 for m/s^2 (and for no unit), 9.80665 for g.
+
+    Raises
+    ------
+    ImportFormatError
+        Any other unit, naming the channel.
+    """
+    if unit is None or not unit.strip() or unit.strip().upper() == "NONE":
+        return 1.0
+    u = unit.strip().lower().replace(" ", "").replace("**", "^").replace("\u00b2", "^2")
+    if u in _MS2:
+        return 1.0
+    if u in _GEE:
+        return G0
+    raise ImportFormatError(f"{source}: channel {channel!r} is in {unit.strip()!r}; only m/s^2 "
+                            f"and g are accepted")
+
+
+# -- counts and scale ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Quantisation:
+    """How one channel became counts.
+
+    Attributes
+    ----------
+    method : {"quantised", "requantised", "zero"}
+        Source step detected; 24-bit requantisation; or an all-zero channel.
+    step : float
+        The step in the file's unit (``nan`` when requantised).
+    scale : float
+        SI units per count (m/s^2).
+    max_error : float
+        Largest ``|counts*scale - x|`` over the channel, m/s^2 (measured).
+    bound : float
+        Guaranteed bound on that error, m/s^2.
+    exact : bool
+        Every value was reproduced bit for bit (before the unit factor).
+    """
+
+    method: str
+    step: float
+    scale: float
+    max_error: float
+    bound: float
+    exact: bool
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "step": _finite(self.step), "scale": self.scale,
+                "max_error_m_s2": self.max_error, "error_bound_m_s2": self.bound,
+                "exact": self.exact}
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+def detect_step(v: np.ndarray) -> tuple[float, bool] | None:
+    """Common step of ``v`` (finite, non-zero values): ``(step, exact)`` or ``None``.
+
+    ``exact`` is True when ``rint(v/step)*step == v`` bit for bit. See the module docstring.
+    """
+    if v.size == 0:
+        return None
+    sample = v if v.size <= _STEP_SAMPLE else v[:: -(-v.size // _STEP_SAMPLE)]
+    u = np.unique(np.abs(sample))
+    gaps = np.diff(u, prepend=0.0)
+    gaps = gaps[gaps > 0]
+    if gaps.size == 0:
+        return None
+    g = float(gaps.min())
+    mag = np.abs(sample)
+    peak = float(np.max(np.abs(v)))
+    for m in (1, 2, 3, 4):
+        s = g / m
+        if not s > 1e-300:  # a step this small is no ADC's
+            return None
+        for limit in (2.0**4, 2.0**8, 2.0**12, 2.0**16, 2.0**20):  # the gap is not exact:
+            near = sample[mag <= limit * s]  # refine on small counts first, then larger
+            kn = np.rint(near / s)
+            if kn.size and np.any(kn):
+                s = float(np.dot(kn, near) / np.dot(kn, kn))
+        if not s > 0 or peak / s > _INT32_MAX - 1:
+            return None
+        k = np.rint(v / s)
+        err = float(np.max(np.abs(v - k * s)))
+        if err > STEP_TOLERANCE * s:
+            continue
+        s_ls = float(np.dot(k, v) / np.dot(k, k))
+        # the exact float step, if any, is within an ulp of v/k at the largest counts
+        top = np.argpartition(np.abs(k), -min(16, k.size))[-16:]
+        near = np.unique(v[top] / k[top])
+        cands = np.unique(np.concatenate([near, np.nextafter(near, 0), np.nextafter(near, 1),
+                                          [s_ls, s]]))
+        head_k, head_v = k[:64], v[:64]
+        for c in cands[np.argsort(np.abs(cands - s_ls))]:
+            if np.array_equal(head_k * c, head_v) and np.array_equal(k * c, v):
+                return float(c), True
+        err_ls = float(np.max(np.abs(v - k * s_ls)))
+        return (s_ls, False) if err_ls <= err else (s, False)
+    return None
+
+
+def quantise(x: np.ndarray, factor: float) -> tuple[np.ndarray, Quantisation]:
+    """Counts (int32, 0 where ``x`` is not finite) and how they were made.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        One channel in the file's unit, float64; NaN for missing samples.
+    factor : float
+        m/s^2 per file unit.
+
+    Raises
+    ------
+    ValueError
+        The channel's largest value is beyond 1e-290 .. 1e290 m/s^2.
+    """
+    finite = np.isfinite(x)
+    v = x[finite]
+    v = v[v != 0]
+    if v.size == 0:
+        return np.zeros(x.shape, np.int32), Quantisation("zero", math.nan, 1.0, 0.0, 0.0, True)
+    peak = float(np.max(np.abs(v))) * factor
+    if not _TINY <= peak <= _HUGE:
+        raise ValueError(f"its largest value {peak:g} m/s^2 is out of range")
+    found = detect_step(v)
+    xf = np.where(finite, x, 0.0)
+    if found is not None and found[0] * factor >= _TINY:
+        step, exact = found
+        scale = step * factor
+        counts = np.rint(xf / step)
+        err = float(np.max(np.abs(counts * scale - xf * factor)))
+        bound = max(err, STEP_TOLERANCE * scale)
+        return counts.astype(np.int32), Quantisation("quantised", step, scale, err, bound, exact)
+    scale = peak / FULL_SCALE_COUNTS
+    xs = xf * factor
+    counts = np.rint(xs / scale)
+    err = float(np.max(np.abs(counts * scale - xs)))
+    return counts.astype(np.int32), Quantisation("requantised", math.nan, scale, err, scale / 2,
+                                                  False)
+
+
+def snap_rate(fs_hz: float, rel_tol: float) -> float:
+    """The value with the fewest significant digits within ``rel_tol`` of ``fs_hz``, Hz.
+
+    A rate recovered from printed times or increments (``1/4.88281e-04 = 2048.0016``) comes back
+    as the rate the recorder was set to (``2048.0``).
+    """
+    for digits in range(1, 16):
+        c = float(f"{fs_hz:.{digits}g}")
+        if c > 0 and abs(c / fs_hz - 1) <= rel_tol:
+            return c
+    return fs_hz
+
+
+# -- the source and the device -------------------------------------------------------------------
+@dataclass
+class SourceTable:
+    """A file's samples as its importer found them.
+
+    Attributes
+    ----------
+    names : list of str
+        Source channel names.
+    units : list of str or None
+        Each channel's unit as the file states it (None: not stated).
+    sample_index : numpy.ndarray
+        int64 sample index of each row from the first row's sample, strictly increasing.
+    fs_hz : float
+        Sample rate, Hz.
+    t0_s : float
+        Time of sample index 0, s (the file's own time origin).
+    read : callable
+        ``read(i)`` -> float64 values of channel ``i``, one per row, NaN where missing.
+    fmt : str
+        ``"csv"``, ``"uff58"``, ``"tdms"``.
+    notes : dict
+        Format-specific facts for ``StreamInfo.extra["import"]`` (JSON-serialisable).
+    close : callable, optional
+        Releases the file once every channel has been read.
+    """
+
+    names: list[str]
+    units: list[str | None]
+    sample_index: np.ndarray
+    fs_hz: float
+    t0_s: float
+    read: Callable[[int], np.ndarray]
+    fmt: str
+    notes: dict = field(default_factory=dict)
+    close: Callable[[], None] | None = None
+
+
+class FileImportDevice(Device):
+    """Base of the file importers: a finite stream of the file's samples as counts.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The file.
+    rig : Rig or path
+        The rig the recording was made on (gage numbers, channel order, medium).
+    channels : mapping of str to int, optional
+        Source channel name -> gage number; only these are imported.
+    medium : str, optional
+        Override the rig's medium ("air" or "water").
+    block_s : float
+        Longest block, s.
+    """
+
+    kind = "import"
+    pace = "fast"  # a file has no clock to keep: the record loop waits for the recorder
+
+    def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
+                 channels: Mapping[str, int] | None = None, medium: str | None = None,
+                 block_s: float = 0.1) -> None:
+        super().__init__()
+        if not block_s > 0:
+            raise ValueError(f"{self.kind}: block_s ({block_s}) must be positive")
+        self.path = Path(path)
+        rig = rig if isinstance(rig, Rig) else load_rig(rig)
+        self.rig = rig.with_medium(medium) if medium else rig
+        self.channels = dict(channels) if channels is not None else None
+        self.block_s = float(block_s)
+        self._blocks: Iterator[Block] | None = None
+
+    def _load(self) -> SourceTable:
+        """Read the file (subclasses)."""
+        raise NotImplementedError
+
+    def _open(self) -> StreamInfo:
+        if not self.path.is_file():
+            raise DeviceNotFound(f"{self.kind}: no file at {self.path}")
+        src = self._load()
+        try:
+            return self._convert(src)
+        finally:
+            if src.close is not None:
+                src.close()
+
+    def _convert(self, src: SourceTable) -> StreamInfo:
+        name = str(self.path)
+        idx = np.asarray(src.sample_index, dtype=np.int64)
+        if idx.size == 0 or idx[0] < 0 or np.any(np.diff(idx) <= 0):
+            raise ImportFormatError(f"{name}: no samples, or samples overlap or go back in time")
+        fs, t0 = float(src.fs_hz), float(src.t0_s)
+        if not (1e-3 <= fs <= 1e9 and abs(t0) < _MAX_TIME_S and (idx[-1] + 1) / fs < _MAX_TIME_S):
+            raise ImportFormatError(f"{name}: sample rate {fs:g} Hz, start {t0:g} s or length "
+                                    f"{int(idx[-1]) + 1} samples is out of range")
+        picks = map_channels(src.names, self.rig, self.channels, name)
+        counts = np.empty((len(picks), idx.size), np.int32)
+        missing = np.zeros(idx.size, bool)
+        scales, notes = [], {}
+        for row, (i, gage) in enumerate(picks):
+            x = np.asarray(src.read(i), dtype=np.float64)
+            what = f"{name}: channel {src.names[i]!r}"
+            if x.shape != idx.shape:
+                raise ImportFormatError(f"{what} has {x.size} samples, expected {idx.size}")
+            if np.any(np.isinf(x)):
+                raise ImportFormatError(f"{what} is infinite at sample {np.argmax(np.isinf(x))}")
+            try:
+                counts[row], q = quantise(x, unit_factor(src.units[i], src.names[i], name))
+            except ImportFormatError:
+                raise
+            except ValueError as err:
+                raise ImportFormatError(f"{what}: {err}") from None
+            missing |= np.isnan(x)
+            scales.append(q.scale)
+            notes[f"g{gage:02d}"] = {"source": src.names[i],
+                                     "unit": src.units[i] or "m/s^2 (assumed)", **q.to_json()}
+        if missing.all():
+            raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
+        # samples count from the file's time zero, so times in ramdaq are the file's times
+        offset = round(t0 * fs) if t0 >= 0 else 0
+        self._idx, self._counts = idx[~missing] + offset, counts[:, ~missing]
+        self._scale, self._fs = np.asarray(scales, np.float64), fs
+        self._t0_ns = round((t0 - offset / fs) * 1e9)  # the sub-sample part of the start
+        self._block_n = max(1, round(self.block_s * fs))
+        breaks = np.flatnonzero(np.diff(self._idx) != 1) + 1
+        self._segments = list(zip(np.r_[0, breaks], np.r_[breaks, self._idx.size], strict=True))
+        report = {**src.notes, "format": src.fmt, "file": self.path.name, "bytes": self.path.stat().st_size,
+                  "rows": int(idx.size), "fs_hz": src.fs_hz, "t0_s": t0,
+                  "first_sample": int(self._idx[0]), "segments": len(self._segments),
+                  "missing_samples": int(idx[-1] - idx[0] + 1 - self._idx.size),
+                  "channels": notes}
+        self._blocks = self._iter_blocks()
+        gages = tuple(g for _, g in picks)
+        return StreamInfo(
+            device=f"{self.kind}://{self.path}", fs_hz=fs,
+            channels=tuple(f"g{g:02d}" for g in gages), units=("m/s^2",) * len(gages),
+            gages=gages, rig_toml=self.rig.text,
+            extra={"medium": self.rig.medium, "rig_name": self.rig.name,
+                   "block_samples": self._block_n, "import": report})
+
+    def _iter_blocks(self) -> Iterator[Block]:
+        seq = 0
+        for a, b in self._segments:
+            for s in range(a, b, self._block_n):
+                first = int(self._idx[s])
+                yield Block(seq=seq, first_sample=first,
+                            t0_ns=self._t0_ns + sample_time_ns(first, self._fs), fs_hz=self._fs,
+                            counts=np.ascontiguousarray(self._counts[:, s:min(b, s + self._block_n)]),
+                            scale=self._scale.copy())
+                seq += 1
+
+    def _read(self, timeout: float | None) -> Block | None:
+        return next(self._blocks, None) if self._blocks is not None else None
+
+    def _close(self) -> None:
+        self._blocks = None
+        self._counts = np.empty((0, 0), np.int32)

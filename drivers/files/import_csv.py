@@ -1,0 +1,319 @@
+"""Import a CSV recording (a time column and one column per gage) as a device.
+
+::
+
+    with open_device("trial.csv", rig=rig) as dev:       # or CsvImportDevice("trial.csv", rig=rig)
+        for block in dev:
+            ...
+
+The file
+--------
+UTF-8 text (a byte-order mark is allowed), lines ending in LF or CRLF:
+
+* optional comment lines starting with ``#`` before the header;
+* a header of column names separated by ``,``, ``;`` or a tab (the most frequent of the three
+  in the header is the delimiter); the **first column is time**, the others are channels named
+  like gages (``g01``, ``gage 1``, ``1``) unless ``channels=`` maps them;
+* units either in the names, ``"g01 [m/s^2]"`` or ``"g01 (g)"``, or in a row right after the
+  header whose first cell is not a number (``s,m/s^2,g,...``). Time may be in s, ms or us;
+  channels in m/s^2 or g. A channel without a unit is taken as m/s^2 (and said so in
+  ``StreamInfo.extra``);
+* one row per sample, decimal point, no thousands separators. An empty cell or ``nan`` is a
+  missing sample: that row is not streamed (a gap). Blank lines and ``#`` lines are skipped.
+
+The times must lie on one sample grid: the rate is fitted to them and snapped to the value
+with the fewest digits that keeps every row within 0.1 sample of its grid point (times printed
+with six decimals at 2048 Hz give 2048.0 exactly). A step of a whole number of samples is a gap
+(those samples are missing); a time off the grid, repeated or going back is refused naming the
+line, as are a row with too few or too many fields and a cell that is not a number.
+
+Parsing is numpy's C reader on 4 MB pieces; a piece it refuses (empty cells, a bad cell) is
+parsed again line by line, which finds the line to name. Memory: the whole table as float64.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+from collections.abc import Callable, Mapping
+from os import PathLike
+
+import numpy as np
+
+from ramdaq.analysis.model.rig import Rig
+from ramdaq.drivers.files.import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+
+__all__ = ["CsvImportDevice", "read_csv_table", "sample_grid"]
+
+_CHUNK_BYTES = 4 << 20
+_SLOW_BYTES = 64 << 10  # pieces numpy refuses are halved down to this, then read line by line
+_GRID_TOL = 0.1  # samples: how far a row's time may lie from its grid point
+_NUMBER = re.compile(r"^[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)$",
+                     re.IGNORECASE)
+_NAME_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]$")
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "\u00b5s": 1e-6}
+
+
+class CsvImportDevice(FileImportDevice):
+    """A CSV file streamed as blocks (back-end name ``"csv"``).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The CSV file.
+    rig : Rig or path
+        The rig of the trial.
+    channels : mapping of str to int, optional
+        Column name -> gage number; only these columns are imported.
+    medium : str, optional
+        Override the rig's medium.
+    block_s : float
+        Longest block, s.
+    fs_hz : float, optional
+        Sample rate, Hz, instead of the one fitted to the time column (needed for one row).
+    """
+
+    kind = "csv"
+
+    def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
+                 channels: Mapping[str, int] | None = None, medium: str | None = None,
+                 block_s: float = 0.1, fs_hz: float | None = None) -> None:
+        super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s)
+        self.fs_hz = fs_hz
+
+    def _load(self) -> SourceTable:
+        return read_csv_table(self.path.read_bytes(), str(self.path), fs_hz=self.fs_hz)
+
+
+def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = None) -> SourceTable:
+    """Parse CSV bytes into a :class:`SourceTable`; see the module docstring for the format.
+
+    Raises
+    ------
+    ImportFormatError
+        One line naming ``name``, the line of the file and what is wrong.
+    """
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise ImportFormatError(f"{name}: not a text file (byte {nul} is NUL)")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise ImportFormatError(f"{name}: not UTF-8 text (byte {err.start})") from None
+    lines = _Lines(text)
+    header_no, header = lines.next_content(skip_comments=True)
+    if header is None:
+        raise ImportFormatError(f"{name}: empty file (no header line)")
+    delim = max((",", ";", "\t"), key=header.count)
+    if header.count(delim) == 0:
+        raise ImportFormatError(f"{name}: line {header_no}: the header has one column; expected "
+                                f"time and channels separated by ',', ';' or a tab")
+    names, units = [], []
+    for cell in header.split(delim):
+        cell = cell.strip().strip('"').strip()
+        m = _NAME_UNIT.match(cell)
+        names.append(m.group(1) if m else cell)
+        units.append(m.group(2) if m else None)
+    ncols = len(names)
+    if any(not n for n in names):
+        raise ImportFormatError(f"{name}: line {header_no}: column {names.index('') + 1} has no "
+                                f"name")
+    if len(set(names)) != ncols:
+        dup = next(n for n in names if names.count(n) > 1)
+        raise ImportFormatError(f"{name}: line {header_no}: column name {dup!r} appears twice")
+    mark = lines.pos
+    row_no, row = lines.next_content(skip_comments=True)
+    first_cell = row.split(delim)[0].strip().strip('"').strip() if row is not None else ""
+    if first_cell and not _NUMBER.match(first_cell):
+        cells = [c.strip().strip('"').strip() for c in row.split(delim)]
+        if len(cells) != ncols:
+            raise ImportFormatError(f"{name}: line {row_no}: units row has {len(cells)} fields, "
+                                    f"expected {ncols}")
+        units = [u or c or None for u, c in zip(units, cells, strict=True)]
+    else:
+        lines.pos, lines.number = mark, header_no
+    table, line_of_row = _parse_rows(text, lines.pos, lines.number, delim, names, name)
+    if table.shape[0] == 0:
+        raise ImportFormatError(f"{name}: no data rows after the header")
+    t_unit = (units[0] or "s").strip().lower()
+    if t_unit not in _TIME_UNITS:
+        raise ImportFormatError(f"{name}: time column {names[0]!r} is in {units[0]!r}; expected "
+                                f"s, ms or us")
+    t = table[:, 0] * _TIME_UNITS[t_unit]
+    index, fs, notes = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name)
+    channel_units = units[1:]
+    return SourceTable(names=names[1:], units=channel_units, sample_index=index, fs_hz=fs,
+                       t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
+                       notes={"delimiter": delim, "time_column": names[0], **notes})
+
+
+class _Lines:
+    """Walks the text line by line from ``pos`` (1-based line ``number`` of the last line read)."""
+
+    def __init__(self, text: str) -> None:
+        self.text, self.pos, self.number = text, 0, 0
+
+    def next_content(self, skip_comments: bool) -> tuple[int, str | None]:
+        while self.pos < len(self.text):
+            end = self.text.find("\n", self.pos)
+            end = len(self.text) if end < 0 else end
+            line = self.text[self.pos:end].rstrip("\r")
+            self.pos, self.number = end + 1, self.number + 1
+            if line.strip() and not (skip_comments and line.lstrip().startswith("#")):
+                return self.number, line
+        return self.number + 1, None
+
+
+def _parse_rows(text: str, pos: int, line_no: int, delim: str, names: list[str],
+                name: str) -> tuple[np.ndarray, np.ndarray]:
+    """All data rows (n_rows, n_cols) float64 and the file line of each row (1-based)."""
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    while pos < len(text):
+        end = text.find("\n", min(pos + _CHUNK_BYTES, len(text)))
+        end = len(text) if end < 0 else end + 1
+        chunk = text[pos:end]
+        _parse_piece(chunk, line_no + 1, delim, names, name, parts)
+        pos, line_no = end, line_no + chunk.count("\n") + (not chunk.endswith("\n"))
+    if not parts:
+        return np.empty((0, len(names))), np.empty(0, np.int64)
+    return np.concatenate([a for a, _ in parts]), np.concatenate([r for _, r in parts])
+
+
+def _parse_piece(chunk: str, first: int, delim: str, names: list[str], name: str,
+                 parts: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """numpy's reader on a piece of whole lines; where it refuses, halves down to 64 kB, then
+    line by line (which names the line)."""
+    if not chunk.strip():
+        return
+    if "#" not in chunk and '"' not in chunk:
+        try:
+            arr = np.loadtxt(io.StringIO(chunk), delimiter=delim, dtype=np.float64, ndmin=2,
+                             comments=None)
+        except Exception:  # any refusal: read again below, in smaller pieces
+            arr = None
+        if arr is not None and arr.shape[1] == len(names):
+            lines = chunk.split("\n")
+            rows = first + np.flatnonzero([bool(s.strip()) for s in lines])
+            if rows.size == arr.shape[0]:
+                parts.append((arr, rows))
+                return
+    mid = chunk.find("\n", len(chunk) // 2)
+    if len(chunk) > _SLOW_BYTES and 0 <= mid < len(chunk) - 1:
+        _parse_piece(chunk[:mid + 1], first, delim, names, name, parts)
+        _parse_piece(chunk[mid + 1:], first + chunk.count("\n", 0, mid + 1), delim, names, name,
+                     parts)
+    else:
+        parts.append(_parse_slow(chunk, first, delim, names, name))
+
+
+def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
+                name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Line by line: empty cells are NaN, anything else not a number is named."""
+    ncols = len(names)
+    values: list[list[float]] = []
+    rows: list[int] = []
+    for k, line in enumerate(chunk.split("\n")):
+        line = line.rstrip("\r")
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        cells = line.split(delim)
+        if len(cells) != ncols:
+            raise ImportFormatError(f"{name}: line {first + k}: {len(cells)} fields, expected "
+                                    f"{ncols} (a truncated or damaged line?)")
+        row = []
+        for j, cell in enumerate(cells):
+            c = cell.strip().strip('"').strip()
+            if not c:
+                row.append(math.nan)
+            elif _NUMBER.match(c):
+                row.append(float(c))
+            else:
+                raise ImportFormatError(f"{name}: line {first + k}, column {names[j]!r}: "
+                                        f"{c[:24]!r} is not a number")
+        values.append(row)
+        rows.append(first + k)
+    return np.array(values, dtype=np.float64).reshape(-1, ncols), np.array(rows, np.int64)
+
+
+def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
+                name: str) -> tuple[np.ndarray, float, dict]:
+    """Place rows with times ``t`` (s) on one sample grid; refuse a non-uniform clock.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Time of each row, s.
+    fs_hz : float, optional
+        The rate, Hz; by default fitted to ``t`` and snapped to the value with the fewest
+        digits that keeps every row within 0.05 sample (see :func:`snap_rate`).
+    where : callable
+        ``where(row)`` -> where that row is in the file (``"line 12"``), for messages.
+    name : str
+        The file, for messages.
+
+    Returns
+    -------
+    index : numpy.ndarray
+        int64 sample index of each row, 0 for the first; a step above 1 is a gap.
+    fs_hz : float
+        The rate, Hz.
+    notes : dict
+        ``{"time_gaps": n}``.
+    """
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # odd times: refused
+        bad = ~np.isfinite(t)
+        if bad.any():
+            r = int(np.argmax(bad))
+            raise ImportFormatError(f"{name}: {where(r)}: the time is missing or not "
+                                    f"finite")
+        dt = np.diff(t)
+        if dt.size and np.any(dt <= 0):
+            r = int(np.argmax(dt <= 0)) + 1
+            raise ImportFormatError(f"{name}: {where(r)}: time {float(t[r])!r} s does not come "
+                                    f"after the previous row's {float(t[r - 1])!r} s")
+        rel = t - t[0]
+        if fs_hz is None:
+            if t.size < 2:
+                raise ImportFormatError(f"{name}: one data row gives no sample rate; pass fs_hz=")
+            fs_fit = 1.0 / float(np.median(dt))
+            if rel[-1] * fs_fit > 2**40:
+                raise ImportFormatError(f"{name}: the time column spans {rel[-1] * fs_fit:.3g} samples")
+            # printed times round each step (6 decimals at 2048 Hz: 0.000488 or 0.000489 s), so
+            # the median step is off by up to ~1e-3: good for a few hundred rows, not for a whole
+            # trial. Fit on a stretch short enough to count its samples right, then on one 8x
+            # longer with that rate, until the whole column is counted.
+            k = 256
+            while True:
+                m = min(k, rel.size)
+                n = np.rint(rel[:m] * fs_fit)
+                if np.dot(rel[:m], rel[:m]) > 0:
+                    fs_fit = float(np.dot(n, rel[:m]) / np.dot(rel[:m], rel[:m]))
+                if m == rel.size:
+                    break
+                k *= 8
+            if not 1e-3 <= fs_fit <= 1e9:
+                raise ImportFormatError(f"{name}: the time column gives a sample rate of "
+                                        f"{fs_fit:g} Hz")
+            fs = snap_rate(fs_fit, 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0))
+        else:
+            fs = float(fs_hz)
+            if not fs > 0:
+                raise ValueError(f"fs_hz ({fs_hz}) must be positive")
+        pos = rel * fs
+        if pos[-1] > 2**40:
+            raise ImportFormatError(f"{name}: the time column spans {pos[-1]:.3g} samples")
+        n = np.rint(pos)
+        off = np.abs(pos - n) > _GRID_TOL
+        if off.any():
+            r = int(np.argmax(off))
+            raise ImportFormatError(f"{name}: {where(r)}: time {float(t[r])!r} s is "
+                                    f"{pos[r] - n[r]:+.2f} samples off the {fs:g} Hz grid from "
+                                    f"{float(t[0])!r} s (a non-uniform time column)")
+        index = n.astype(np.int64)
+        dn = np.diff(index)
+        if dn.size and np.any(dn < 1):
+            r = int(np.argmax(dn < 1)) + 1
+            raise ImportFormatError(f"{name}: {where(r)}: time {float(t[r])!r} s falls on the "
+                                    f"same sample as the previous row at {fs:g} Hz")
+        return index, fs, {"time_gaps": int(np.count_nonzero(dn > 1))}

@@ -1,0 +1,1 @@
+"""The shipped rigs (package data ``ramdaq.rigs``): ``--rig albacore`` finds ``albacore.toml`` here."""
