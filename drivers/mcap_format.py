@@ -58,7 +58,16 @@ Topics
     "location_m": [x, y, z]}``; ``log_time`` = device time of the impact.
 
 ``/ramdaq/impacts``
-    Reserved for the trigger's detections (JSON, schema to be fixed with the trigger).
+    The trigger's detections, written by a live trial (``ramdaq trial``): one JSON message per
+    detected blow, ``ImpactEvent.to_json()`` of :mod:`ramdaq.daq.trigger` (onset, flags, end
+    reason; the samples are not included); ``log_time`` = device time of the onset. The schema
+    registered for it is a placeholder, ``{"title": "ramdaq.Impact", "type": "object"}``, not
+    the trigger's ``IMPACT_JSON_SCHEMA``.
+
+``/ramdaq/results``
+    The final result of each hit, written by a live trial: ``{"index", "accepted", "reason",
+    "analysis"}``, the analysis in SI as in ``ramdaq analyze``'s report.json (null when the hit
+    was rejected); ``log_time`` = device time of the hit's onset.
 
 Stream metadata
 ---------------

@@ -1,36 +1,17 @@
 """Parametric identification of damped modes on a multi-channel free decay.
 
-:func:`identify_modes` returns a :class:`~ramdaq.analysis.modal.table.ModeTable`: per mode the damped
-frequency, logarithmic decrement δ and damping ratio ζ with standard errors; per channel the
-complex amplitude (amplitude, phase, normalised mode shape) and a per-channel δ and f.
+:func:`identify_modes` takes a free decay ``x`` of shape (n_channels, n_samples) or (n_samples,),
+t = 0 at its first sample, one unit per channel (m/s^2 in ramdaq), and returns a
+:class:`~ramdaq.analysis.modal.table.ModeTable`: per mode the damped frequency (Hz), logarithmic
+decrement δ and damping ratio ζ with standard errors; per channel the complex amplitude (in the
+channel's unit; phase in rad; normalised mode shape) and a per-channel δ and f.
 
-Estimator: Matrix Pencil start + variable-projection nonlinear least squares
----------------------------------------------------------------------------------
-Chosen by measurement: ``benchmarks/decrement_accuracy.py --select`` (2048 Hz, one channel,
-f = 24.5 Hz, 100 noise seeds; δ error as bias in % of δ, and std / Cramér–Rao bound; pencil
-length L = min(N/3, 400); time per fit on one core):
-
-==========================  ===========  ===========  ===========  ==============
-case                        MP           ESPRIT-TLS   ERA          any start + NLS
-==========================  ===========  ===========  ===========  ==============
-1 mode, 20 dB, 10 cycles    +0.32 %      +0.31 %      +0.38 %      +0.14 %
-                            1.12×        1.12×        1.12×        1.03×
-1 mode, 40 dB, 5 cycles     +0.11 %      +0.11 %      +0.11 %      +0.13 %
-                            1.06×        1.06×        1.08×        0.97×
-2 modes 3 % apart, 30 dB    +0.65/+0.18  +0.61/+0.08  +1.09/+1.23  +0.50/−0.21
-                            1.48/1.54×   1.48/1.54×   1.52/1.55×   1.09/1.06×
-2 modes 1 % apart, 40 dB    −0.25/+0.58  −0.32/+0.40  +1.87/+5.21  −0.32/+0.22
-                            2.16/2.26×   2.16/2.26×   2.24/2.22×   1.09/1.00×
-time (1 mode / 2 modes)     11 / 35 ms   11 / 34 ms   11 / 36 ms   +1.5 / +4 ms
-==========================  ===========  ===========  ===========  ==============
-
-The subspace estimates alone spread 1.5× (pair 3 % apart) to 2.3× (1 % apart) wider than the
-bound, and ERA's block Hankel is biased by up to 5 % on the 1 % pair; refined by NLS every start
-lands on the same optimum (identical to the printed digits) at 0.97–1.09× the bound. The
-starts cost the same, so the simplest (least-squares Matrix Pencil) starts the NLS. The NLS is
-maximum likelihood for white Gaussian noise, so its Jacobian covariance is also the standard
-error (checked against Monte Carlo in the tests). The whole pipeline (automatic order, offset
-fitted) measures 0.83–1.11× the bound with |bias| < 1 % of δ at SNR ≥ 20 dB, 5–50 cycles.
+Estimator: a least-squares Matrix Pencil start (:mod:`~ramdaq.analysis.modal.subspace`) refined
+by variable-projection nonlinear least squares (:mod:`~ramdaq.analysis.modal.varpro`). The
+subspace estimates alone spread well beyond the Cramér–Rao bound on close modes; refined, every
+start (``method`` ``"mp"``, ``"esprit"``, ``"era"``) reaches the same optimum near the bound, so
+the cheapest starts it. The NLS is maximum likelihood for white Gaussian noise, so its Jacobian
+covariance is also the standard error. The measurements behind this choice: ``docs/estimators.md``.
 
 Pipeline
 --------
@@ -43,36 +24,18 @@ Pipeline
 4. Start: the data are decimated to ~4× the band, cropped to 2000 samples, whitened, compressed to
    at most 8 principal channels, and the Matrix Pencil is run with a generous order. Poles with
    |ζ| ≤ ``zeta_max`` inside the band become candidates, ranked by whitened energy.
-5. Order selection (``n_modes=None``): forward selection, strongest candidate first, stopping
-   after four rejections in a row. A candidate is accepted when the likelihood ratio
-   Λ = Σ_c (RSS_c,without − RSS_c,with) / σ̂²_c of the refitted model exceeds the χ²(2·n_channels)
-   quantile at ``false_alarm`` / (2·n_samples) — a Bonferroni correction for the search over
-   frequency and damping cells, so a record yields a spurious mode with probability about
-   ``false_alarm`` (measured on one mode at 30 dB: 1 record in 600 at 10⁻³, 0 in 600 at the
-   default 10⁻⁴; pure noise stops earlier, at the spectral test of step 2). A second round takes
-   candidates from the residual (weak modes hidden by strong ones), and accepted modes whose Λ
-   falls below the threshold are removed again. With ``n_modes`` given, the strongest n
-   candidates are fitted as they are.
+5. Order selection (``n_modes=None``, :mod:`~ramdaq.analysis.modal.order`): forward selection,
+   strongest candidate first, stopping after four rejections in a row. A candidate is accepted
+   when the likelihood ratio Λ = Σ_c (RSS_c,without − RSS_c,with) / σ̂²_c of the refitted model
+   exceeds the χ²(2·n_channels) quantile at ``false_alarm`` / (2·n_samples) — a Bonferroni
+   correction for the search over frequency and damping cells, so a record yields a spurious
+   mode with probability about ``false_alarm``. A second round takes candidates from the
+   residual (weak modes hidden by strong ones), and accepted modes whose Λ falls below the
+   threshold are removed again. With ``n_modes`` given, the strongest n candidates are fitted
+   as they are.
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
 7. Terms with less than one cycle in the record (drift, a slow step) are kept in the model but
    not reported (``info["nuisance_terms_hz"]``).
-
-Speed
------
-Same estimator and decisions, computed faster (see ``analysis/modal/order.py`` for the order
-search, ``analysis/modal/varpro.py`` for one NLS evaluation, ``analysis/modal/subspace.py`` for the
-pencil). On an ALBACORE-like simulated record (16 channels × 10 384 samples at 2048 Hz, 4 modes),
-2-core machine, ``OPENBLAS_NUM_THREADS=1``: ``identify_modes`` 2.25 s → 0.34 s, one channel
-0.69 s → 0.083 s, :func:`~ramdaq.analysis.modal.verdicts.assess_decay` 5.2 s → 0.84 s. Most of the former
-time went to trial fits of noise candidates that the likelihood-ratio test then rejected; they
-now hold the accepted poles.
-One behavioural change: a Levenberg–Marquardt step that the box bounds cut to nothing is no
-longer taken for convergence away from a Karush–Kuhn–Tucker point. A candidate that slides to
-(f_min, δ_max) to take up a drift now comes back down in δ and is kept as a nuisance term;
-before, this depended on the other poles moving at the same time. On drifting records this
-fits the drift with one more sub-cycle term (residual at the true noise level instead of
-1–45 % above it, so standard errors are no longer inflated by it; reported modes moved by
-≤ 1 s.e. in f and ≤ 2.3 s.e. in δ in 150 random records, none changed otherwise).
 
 Threads
 -------
@@ -83,18 +46,11 @@ allocate fully written before it is read, and change nothing process-wide: resul
 the inputs and on the process's BLAS thread count alone, not on the calling thread, on
 concurrent calls, or on call order (``tests/test_modal_id.py`` checks all three).
 
-The BLAS thread count is not set here. An earlier version limited BLAS to one thread around
-each call (threadpoolctl); with OpenBLAS's pthreads build (the NumPy/SciPy wheels) that limit
-is process-wide, and threadpoolctl 3.8 lets only the first thread that sets it change it (until
-that thread ends) and silently ignores the others, so a fit in the analyzer thread ran with two
-BLAS threads or one depending on which thread had called first (different last bits: LAPACK's
-reductions are split differently); with any version every call also switched the thread count
-under the other threads' BLAS calls. Set the count once for the process instead, before NumPy
-is imported: the fits make thousands of small BLAS calls, and OpenBLAS's thread pool only adds
-latency to them — on a loaded 2-core machine ``identify_modes`` above took 0.4–3.7 s and
-``assess_decay`` 0.85–10 s with the default two threads, 0.34 s and 0.84 s with
-``OPENBLAS_NUM_THREADS=1`` (``benchmarks/decrement_accuracy.py`` sets it). Live trial and replay
-must run with the same setting to give identical digits.
+The BLAS thread count is not set here: set it once for the process, before NumPy is imported
+(``OPENBLAS_NUM_THREADS=1``, as the ``ramdaq`` command does). A limit set around each call is
+process-wide under OpenBLAS and would change the count under other threads' calls; one thread
+is also the faster for the thousands of small BLAS calls a fit makes. Live trial and replay
+must run with the same setting to give identical digits (``docs/estimators.md``, "Threads").
 """
 
 from __future__ import annotations

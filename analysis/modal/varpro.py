@@ -14,10 +14,11 @@ of θ with the linear parameters profiled out, s² the weighted residual varianc
 directly in f (Hz) and δ gives their standard errors without a delta method.
 
 The complex amplitude a_ck = b_ck − j b'_ck makes y_c(t) = o_c + Σ_k Re(a_ck e^{(−δ_k f_k + j2πf_k) t}),
-with t measured from the first sample of the free decay.
+with t (s) measured from the first sample of the free decay. Data arrays are
+(n_channels, n_samples), samples last.
 
-Cost of one evaluation (same results to rounding; see the functions for each)
-------------------------------------------------------------------------------
+How one evaluation is kept cheap (same results to rounding; see the functions for each)
+----------------------------------------------------------------------------------------
 - Basis on a uniform grid: exp(s t) as a product of two √N-long tables (:func:`damped_basis`), one
   complex multiply per sample instead of an exp, a cos and a sin (≤ 3 ulp apart).
 - Arrays are laid out samples-last (Φ is the transpose of a C-ordered array), so every product
@@ -27,8 +28,7 @@ Cost of one evaluation (same results to rounding; see the functions for each)
 - Small factorisations call LAPACK/BLAS directly (potrf/potrs/posv/trsm, as scipy's wrappers).
 - Modes whose poles are held (the order search's trial fits) are projected out once
   (:class:`HeldPoleFitter`).
-Measured on 16 channels × 14 296 samples, 5 modes, one core: residual + normal equations
-8.5 ms → 2.4 ms.
+Their measured effect is in ``docs/estimators.md`` ("Speed").
 """
 
 from __future__ import annotations

@@ -1,9 +1,12 @@
 """The report's gage distances (Figures 1, 2, 7) read off a rig's gage positions.
 
 The report's equations name distances (x1, z1, L_H, ...); a rig names positions. This module is
-the one place that turns one into the other, and checks that the gages sit where the equations
-assume: 2 and 6 on the vertical through the centre of mass, 4 and 8 on the horizontal, 13 and 14
-on one vertical, 15 and 16 on one horizontal. Which gage of a stock pair is aft is read from the
+the one place that turns one into the other (:func:`gage_geometry`, all in m), and checks that
+the gages sit where the equations assume, refusing a rig that does not with a
+:class:`~ramdaq.analysis.model.rig.RigError`: 2 and 6 on the vertical through the centre of mass
+(x = 0), 4 and 8 on the horizontal (z = 0), 13 and 14 on one vertical, each stock pair (7/11,
+10/12) at one height, all to ``ALIGN_TOL_M``. Gages 15 and 16 give ``Y_P`` as the difference of
+their y; their heights are not checked. Which gage of a stock pair is aft is read from the
 positions, not assumed (the report's B-4/B-5 and B-6 disagree on it).
 """
 
