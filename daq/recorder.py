@@ -167,7 +167,8 @@ class Recorder:
         self._file = _OsFile(self.path, overwrite)
         try:
             self._writer = Writer(
-                self._file, chunk_size=chunk_bytes, compression=_COMPRESSION[compression]
+                self._file, chunk_size=chunk_bytes, compression=_COMPRESSION[compression],
+                enable_data_crcs=True,  # guards the metadata too (fs_hz), which no chunk CRC covers
             )
             self._writer.start(profile="", library=f"ramdaq/{fmt.ramdaq_version()} {LIBRARY_IDENTIFIER}")
             self._writer.add_metadata(fmt.STREAM_METADATA, fmt.stream_info_to_metadata(info))

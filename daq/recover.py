@@ -1,126 +1,71 @@
-"""Salvage a recording whose writer was killed: copy every complete record into a finished file.
+"""Salvage a recording whose writer was killed, or whose bytes were damaged: copy every intact
+record into a finished file.
 
 A recorder killed by SIGKILL, a power cut or a crash of Python leaves an MCAP file without its
-summary and footer, and possibly with a torn last record. Such a file is read front to back
-(``mcap.stream_reader.StreamReader``, the reader under ``NonSeekingReader``, in file order);
-each chunk is opened and its CRC checked; copying stops cleanly at the first record that is
-incomplete or corrupt, and everything before it - schemas, channels, messages, metadata,
-attachments - is written to a new, finished file with a ``ramdaq.recovery`` metadata record saying
-what happened::
+summary and footer, and possibly with a torn last record; a bad disk or a faulty copy flips bits
+anywhere. Such a file is read front to back by
+:class:`~ramdaq.drivers.mcap_replay.RecordScanner`, which checks every chunk's CRC, steps over a
+damaged record to the next intact chunk and stops at a torn tail. Everything intact - schemas,
+channels, messages, metadata, attachments - is written to a new, finished file with a
+``ramdaq.recovery`` metadata record saying what was left out and why::
 
     report = recover("trial.mcap", "trial.recovered.mcap")
-    print(report.blocks, report.last_sample, report.truncated, report.tail_bytes)
+    print(report.blocks, report.last_sample, report.truncated, report.tail_bytes, report.damage)
 
-:class:`RecordScanner` (the tolerant front-to-back reader) is shared with :mod:`ramdaq.daq.commands.info`.
+The samples of a damaged chunk are lost (the recovered file has a gap there, which ``ramdaq
+info`` shows); the chunks after it are kept. A file without ramdaq's stream metadata (not a
+recording, or cut inside its first record) is refused and no output is left behind.
 """
 
 from __future__ import annotations
 
-import os
-import struct
-from collections.abc import Iterator
+import json
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
-from typing import BinaryIO
 
-import zstandard
-from mcap.exceptions import McapError
-from mcap.records import (
-    Attachment,
-    Channel,
-    Chunk,
-    DataEnd,
-    Header,
-    McapRecord,
-    Message,
-    Metadata,
-    Schema,
-)
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import Writer
 
 from ramdaq.daq.errors import NotARamdaqRecording
 from ramdaq.drivers import mcap_format as fmt
 from ramdaq.drivers.errors import FrameError
+from ramdaq.drivers.mcap_replay import Damage, RecordScanner
 
-__all__ = ["RecordScanner", "RecoverReport", "recover", "check_mcap_magic"]
-
-# What a torn or corrupt tail raises inside the mcap reader: short reads (struct.error,
-# EndOfFile), bad lengths (McapError), failed CRC (ValueError), truncated zstd or lz4 frames.
-_TORN = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, RuntimeError)
+__all__ = ["RecoverReport", "recover"]
 
 
-def check_mcap_magic(f: BinaryIO, path: str | PathLike) -> None:
-    """Raise :class:`NotARamdaqRecording` unless ``f`` starts with the MCAP magic; rewinds ``f``."""
-    head = f.read(len(fmt.MCAP_MAGIC))
-    f.seek(0)
-    if head != fmt.MCAP_MAGIC:
-        raise NotARamdaqRecording(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
-
-
-class RecordScanner:
-    """The data-section records of an MCAP file in file order, chunks opened, torn tail tolerated.
-
-    Iterating yields ``Header``, ``Schema``, ``Channel``, ``Message``, ``Metadata``,
-    ``Attachment`` and index records until the ``DataEnd`` record (then :attr:`complete` is
-    true) or until a record is incomplete or corrupt (then :attr:`reason` says why). A chunk is
-    yielded record by record, and only once it is whole and its CRC matches.
+@dataclass(frozen=True)
+class Skipped:
+    """A damaged stretch of the source that :func:`recover` left out, and the blocks either side.
 
     Attributes
     ----------
-    complete : bool
-        The data section ended with its ``DataEnd`` record.
-    reason : str
-        Why reading stopped early, ``""`` if it did not.
-    good_bytes : int
-        Offset just past the last complete record.
-    chunks : int
-        Chunks read.
+    damage : Damage
+        Where it is (bytes) and which check failed.
+    after_seq, next_seq : int
+        ``seq`` of the last block copied before it and of the first after it (-1: none).
+    missing_samples : int
+        Samples per channel between those two blocks that the damage took (and any device gap
+        that happened to fall there); 0 when either side has no block.
     """
 
-    def __init__(self, f: BinaryIO, path: str | PathLike) -> None:
-        check_mcap_magic(f, path)
-        self._f = f
-        self.path = path
-        self.size = os.fstat(f.fileno()).st_size
-        self.complete = False
-        self.reason = ""
-        self.good_bytes = 0
-        self.chunks = 0
+    damage: Damage
+    after_seq: int = -1
+    next_seq: int = -1
+    missing_samples: int = 0
 
-    def __iter__(self) -> Iterator[McapRecord]:
-        reader = StreamReader(self._f, emit_chunks=True, record_size_limit=max(self.size, 1))
-        records = reader.records
-        while True:
-            try:
-                record = next(records)
-                inner = breakup_chunk(record, validate_crc=True) if isinstance(record, Chunk) else None
-            except StopIteration:
-                self.reason = "footer reached without a DataEnd record"
-                return
-            except _TORN as err:
-                if self.good_bytes == self.size:
-                    self.reason = f"file ends after byte {self.size} with no DataEnd record or footer"
-                else:
-                    what = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
-                    self.reason = f"torn or corrupt record after byte {self.good_bytes} ({what})"
-                return
-            self.good_bytes = self._f.tell()
-            if inner is not None:
-                self.chunks += 1
-                yield from inner
-            elif isinstance(record, DataEnd):
-                self.complete = True
-                return
-            else:
-                yield record
+    def to_json(self) -> dict:
+        d = self.damage
+        return {"start": d.start, "end": d.end, "what": d.what, "reason": d.reason,
+                "after_seq": self.after_seq, "next_seq": self.next_seq,
+                "missing_samples": self.missing_samples}
 
-    @property
-    def tail_bytes(self) -> int:
-        """Bytes after the last complete record of the data section (0 if complete)."""
-        return 0 if self.complete else self.size - self.good_bytes
+    def __str__(self) -> str:
+        lost = (f", {self.missing_samples} samples lost after block seq {self.after_seq}"
+                if self.next_seq >= 0 and self.after_seq >= 0 else "")
+        return f"{self.damage}{lost}"
 
 
 @dataclass(frozen=True)
@@ -146,9 +91,15 @@ class RecoverReport:
         Bytes at the end of the source that could not be used: the chunk being written when
         the recorder died and anything after it.
     reason : str
-        Why reading stopped, ``""`` if the source was complete.
+        Why reading stopped, ``""`` if the source's data section was read to its end.
     chunks, metadata, attachments : int
         Records of each kind copied.
+    skipped : tuple of Skipped
+        Damaged stretches left out, with what each cost.
+    data_crc_failed : bool
+        The source's data-section CRC failed although every record passed its own checks: a
+        record without a CRC of its own (the stream metadata, the header) may be damaged, and
+        was copied as it was (said in the ``ramdaq.recovery`` metadata, and by ``ramdaq info``).
     """
 
     src: Path
@@ -165,6 +116,8 @@ class RecoverReport:
     chunks: int
     metadata: int
     attachments: int
+    skipped: tuple[Skipped, ...] = ()
+    data_crc_failed: bool = False
 
     @property
     def duration_s(self) -> float:
@@ -173,13 +126,85 @@ class RecoverReport:
 
     def __str__(self) -> str:
         lost = (f"the source had no footer; {self.tail_bytes} bytes of torn tail dropped ({self.reason})"
-                if self.truncated else "the source was complete")
+                if self.truncated else "the source's data section was read to its end")
+        damaged = "".join(f"; DAMAGED {s}" for s in self.skipped)
+        if self.data_crc_failed:
+            damaged += f"; WARNING: {_DATA_CRC_FAILED}"
         return (f"{self.messages} messages, {self.blocks} blocks, samples {self.first_sample}.."
-                f"{self.last_sample} ({self.duration_s:.3f} s); {lost}")
+                f"{self.last_sample} ({self.duration_s:.3f} s); {lost}{damaged}")
+
+
+_DATA_CRC_FAILED = ("the source's data-section CRC failed although every chunk passed its own: "
+                    "its stream metadata or header may be damaged, and was copied as it was")
+
+
+class _Copy:
+    """Writes the intact records of the source into a new MCAP file, counting what it copies."""
+
+    def __init__(self, fout) -> None:
+        self.writer = Writer(fout, enable_data_crcs=True)
+        self.started = False
+        self.schemas: dict[int, int] = {0: 0}
+        self.channels: dict[int, tuple[int, str]] = {}
+        self.n = dict.fromkeys(("messages", "blocks", "samples", "metadata", "attachments"), 0)
+        self.first_sample, self.fs_hz = -1, 0.0
+        self.last: fmt.BlockHeader | None = None
+        self.skipped: list[Skipped] = []
+        self.data_crc_failed = False
+        self.has_stream = False
+
+    def start(self, header: Header) -> None:
+        if not self.started:
+            self.writer.start(profile=header.profile, library=header.library or "ramdaq")
+            self.started = True
+
+    def add(self, record) -> None:
+        self.start(record if isinstance(record, Header) else Header("", ""))
+        if isinstance(record, Damage) and record.what == "data section":
+            self.data_crc_failed = True
+        elif isinstance(record, Damage):
+            self.skipped.append(Skipped(record, self.last.seq if self.last else -1))
+        elif isinstance(record, Schema) and record.id not in self.schemas:
+            self.schemas[record.id] = self.writer.register_schema(record.name, record.encoding,
+                                                                  record.data)
+        elif isinstance(record, Channel) and record.id not in self.channels:
+            cid = self.writer.register_channel(record.topic, record.message_encoding,
+                                               self.schemas.get(record.schema_id, 0), record.metadata)
+            self.channels[record.id] = (cid, record.topic)
+        elif isinstance(record, Message) and record.channel_id in self.channels:
+            self._message(record)
+        elif isinstance(record, Metadata):
+            self.writer.add_metadata(record.name, record.metadata)
+            self.n["metadata"] += 1
+            self.has_stream |= record.name == fmt.STREAM_METADATA
+        elif isinstance(record, Attachment):
+            self.writer.add_attachment(record.create_time, record.log_time, record.name,
+                                       record.media_type, record.data)
+            self.n["attachments"] += 1
+
+    def _message(self, record: Message) -> None:
+        cid, topic = self.channels[record.channel_id]
+        self.writer.add_message(cid, log_time=record.log_time, data=record.data,
+                                publish_time=record.publish_time, sequence=record.sequence)
+        self.n["messages"] += 1
+        if topic != fmt.BLOCK_TOPIC:
+            return
+        try:
+            h = fmt.decode_header(record.data)
+        except FrameError:
+            return
+        for i, s in enumerate(self.skipped):  # the first block after a damaged stretch
+            if s.next_seq < 0:
+                missing = h.first_sample - self.last.next_sample if self.last else 0
+                self.skipped[i] = Skipped(s.damage, s.after_seq, h.seq, missing)
+        self.n["blocks"] += 1
+        self.n["samples"] += h.n_samples
+        self.first_sample = h.first_sample if self.first_sample < 0 else self.first_sample
+        self.last, self.fs_hz = h, h.fs_hz
 
 
 def recover(src: str | PathLike, dst: str | PathLike, *, overwrite: bool = False) -> RecoverReport:
-    """Copy every complete record of a (possibly footer-less) MCAP file into a finished file.
+    """Copy every intact record of a killed or damaged MCAP recording into a finished file.
 
     Parameters
     ----------
@@ -197,70 +222,47 @@ def recover(src: str | PathLike, dst: str | PathLike, *, overwrite: bool = False
     Raises
     ------
     NotARamdaqRecording
-        ``src`` is not an MCAP file.
+        ``src`` is not an MCAP file, or holds no ``ramdaq.stream`` metadata (then ``dst`` is
+        not left behind).
     """
     src, dst = Path(src), Path(dst)
     if dst.exists() and src.resolve() == dst.resolve():
         raise ValueError(f"{src}: recover needs a different destination file")
-    n = dict.fromkeys(("messages", "blocks", "samples", "metadata", "attachments"), 0)
-    first_sample, last_sample, fs_hz = -1, -1, 0.0
     with open(src, "rb") as fin:
         scanner = RecordScanner(fin, src)
         with open(dst, "wb" if overwrite else "xb") as fout:
-            writer = Writer(fout)
-            started = False
-            schemas: dict[int, int] = {0: 0}
-            channels: dict[int, tuple[int, str]] = {}
-            for record in scanner:
-                if not started:
-                    header = record if isinstance(record, Header) else Header("", "")
-                    writer.start(profile=header.profile, library=header.library or "ramdaq")
-                    started = True
-                if isinstance(record, Schema) and record.id not in schemas:
-                    schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
-                elif isinstance(record, Channel) and record.id not in channels:
-                    schema_id = schemas.get(record.schema_id, 0)
-                    cid = writer.register_channel(
-                        record.topic, record.message_encoding, schema_id, record.metadata
-                    )
-                    channels[record.id] = (cid, record.topic)
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    cid, topic = channels[record.channel_id]
-                    writer.add_message(
-                        cid, log_time=record.log_time, data=record.data,
-                        publish_time=record.publish_time, sequence=record.sequence,
-                    )
-                    n["messages"] += 1
-                    if topic == fmt.BLOCK_TOPIC:
-                        try:
-                            h = fmt.decode_header(record.data)
-                        except FrameError:
-                            continue
-                        n["blocks"] += 1
-                        n["samples"] += h.n_samples
-                        first_sample = h.first_sample if first_sample < 0 else first_sample
-                        last_sample, fs_hz = h.next_sample - 1, h.fs_hz
-                elif isinstance(record, Metadata):
-                    writer.add_metadata(record.name, record.metadata)
-                    n["metadata"] += 1
-                elif isinstance(record, Attachment):
-                    writer.add_attachment(
-                        record.create_time, record.log_time, record.name, record.media_type,
-                        record.data,
-                    )
-                    n["attachments"] += 1
-            if not started:
-                writer.start(profile="", library="ramdaq")
-            writer.add_metadata("ramdaq.recovery", {
-                "source": src.name,
-                "truncated": str(not scanner.complete).lower(),
-                "tail_bytes": str(scanner.tail_bytes),
-                "reason": scanner.reason,
-                "recovered_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-            })
-            writer.finish()
+            try:
+                copy = _copy(scanner, fout, src)
+            except BaseException:
+                fout.close()
+                dst.unlink(missing_ok=True)
+                raise
     return RecoverReport(
-        src=src, dst=dst, first_sample=first_sample, last_sample=last_sample, fs_hz=fs_hz,
+        src=src, dst=dst, first_sample=copy.first_sample,
+        last_sample=copy.last.next_sample - 1 if copy.last else -1, fs_hz=copy.fs_hz,
         truncated=not scanner.complete, tail_bytes=scanner.tail_bytes, reason=scanner.reason,
-        chunks=scanner.chunks, **n,
+        chunks=scanner.chunks, skipped=tuple(copy.skipped), data_crc_failed=copy.data_crc_failed,
+        **copy.n,
     )
+
+
+def _copy(scanner: RecordScanner, fout, src: Path) -> _Copy:
+    """Every record ``scanner`` yields into ``fout``, then the ``ramdaq.recovery`` metadata."""
+    copy = _Copy(fout)
+    for record in scanner:
+        copy.add(record)
+    if not copy.has_stream:
+        raise NotARamdaqRecording(
+            f"{src}: nothing to recover: no {fmt.STREAM_METADATA} metadata in its "
+            f"{scanner.size} bytes (not a ramdaq recording, or cut inside its first records)")
+    copy.writer.add_metadata("ramdaq.recovery", {
+        "source": src.name,
+        "truncated": str(not scanner.complete).lower(),
+        "tail_bytes": str(scanner.tail_bytes),
+        "reason": scanner.reason,
+        "damaged": json.dumps([s.to_json() for s in copy.skipped]),
+        "data_crc": "failed" if copy.data_crc_failed else {True: "ok", None: "none"}[scanner.data_crc_ok],
+        "recovered_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    })
+    copy.writer.finish()
+    return copy

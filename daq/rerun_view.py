@@ -45,6 +45,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ramdaq.analysis.model.rig import Rig, parse_rig
+from ramdaq.daq.errors import ViewError
 from ramdaq.drivers.block import Block, StreamInfo
 
 TIMELINE = "time"
@@ -83,6 +84,22 @@ def _listening(port: int, timeout_s: float = 0.0) -> bool:
         time.sleep(0.05)
 
 
+def check_ports(web_port: int, grpc_port: int) -> None:
+    """Raise :class:`~ramdaq.daq.errors.ViewError` naming the port unless both ports are free on
+    localhost: each is bound for real, as the servers will bind it (``SO_REUSEADDR``, so a
+    connection of a previous run still in TIME_WAIT does not count as taken)."""
+    if web_port == grpc_port:
+        raise ViewError(f"Rerun web viewer and gRPC server cannot share port {web_port}")
+    for port, what in ((grpc_port, "gRPC server"), (web_port, "web viewer")):
+        with socket.socket() as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind((LOCALHOST, port))
+            except OSError as err:
+                raise ViewError(f"Rerun {what}: port {port} on {LOCALHOST} is taken by another "
+                                f"program ({err.strerror})") from err
+
+
 def _run(args: list[str], **kw: object) -> subprocess.Popen:
     """Start the wheel's ``rerun`` binary, quiet."""
     return subprocess.Popen([str(rerun_binary()), *args], stdin=subprocess.DEVNULL,
@@ -102,11 +119,14 @@ class RerunView:
         Human-readable name shown in the viewer.
     rrd_path : Path, optional
         Write the recording to this ``.rrd`` file (overwritten). The default when no display.
+        :meth:`close` finishes it (footer); a process killed before that (SIGKILL, power cut)
+        leaves it without one.
     serve_web : bool
         Serve Rerun's web viewer on ``http://127.0.0.1:<web_port>`` (a child ``rerun`` process bound to
         localhost only) fed by a gRPC server in this process on ``127.0.0.1:<grpc_port>``.
     web_port, grpc_port : int
-        Localhost TCP ports of the web viewer (HTTP) and of the gRPC server.
+        Localhost TCP ports of the web viewer (HTTP) and of the gRPC server; both are checked
+        (:func:`check_ports`) before anything starts.
     connect : str, optional
         Also stream to a running viewer, e.g. ``"rerun+http://127.0.0.1:9876/proxy"``.
     live_rate_hz : float
@@ -120,7 +140,9 @@ class RerunView:
 
     With none of ``rrd_path``, ``serve_web``, ``connect``: a native viewer is spawned when a display
     exists (bound to localhost, reused if already there, left open after :meth:`close`), otherwise
-    ``ValueError``. Not thread-safe: log from one thread.
+    ``ValueError``. A taken port, an ``.rrd`` that cannot be created or a web viewer that does
+    not start raise :class:`~ramdaq.daq.errors.ViewError` (an unwritable folder: ``OSError``).
+    Not thread-safe: log from one thread.
     """
 
     def __init__(self, info: StreamInfo, *, application_id: str = "ramdaq",
@@ -130,6 +152,8 @@ class RerunView:
                  live_batch_s: float = 0.2, memory_limit: str = "25%") -> None:
         if live_rate_hz <= 0:
             raise ValueError(f"live_rate_hz must be positive, got {live_rate_hz}")
+        if serve_web:
+            check_ports(web_port, grpc_port)
         self.info = info
         self.rig: Rig | None = parse_rig(info.rig_toml, "<stream>") if info.rig_toml else None
         self.bucket = max(1, round(info.fs_hz / live_rate_hz))  # samples per live row
@@ -170,7 +194,10 @@ class RerunView:
                       "--expect-data-soon"], start_new_session=True)
                 _listening(grpc_port, 10.0)
             sinks.append(rr.GrpcSink(self.grpc_url))
-        self.rec.set_sinks(*sinks, default_blueprint=self.blueprint())
+        try:
+            self.rec.set_sinks(*sinks, default_blueprint=self.blueprint())
+        except RuntimeError as err:  # how rerun reports an .rrd it cannot create
+            raise ViewError(f"Rerun view did not start ({' '.join(str(err).split())})") from err
         if recording_name:
             self.rec.send_recording_name(recording_name)
         self.rec.send_property("stream", rr.AnyValues(
@@ -243,9 +270,9 @@ class RerunView:
         """Start the bundled web viewer (HTTP, localhost only) pointing at our gRPC server."""
         self._web_proc = _run(["--serve-web", "--bind", LOCALHOST, "--web-viewer-port", str(web_port),
                                self.grpc_url])
-        if not _listening(web_port, 15.0):
+        if not _listening(web_port, 15.0) or self._web_proc.poll() is not None:
             self._stop_web()
-            raise RuntimeError(f"Rerun web viewer did not start on {LOCALHOST}:{web_port}")
+            raise ViewError(f"Rerun web viewer did not start on {LOCALHOST}:{web_port}")
         self.web_url = f"http://{LOCALHOST}:{web_port}/?url={quote(self.grpc_url, safe='')}"
 
     def _stop_web(self) -> None:

@@ -9,6 +9,10 @@ Attachment   ``rig.toml`` (media type ``application/toml``): ``StreamInfo.rig_to
 Chunks       zstd-compressed (by default), each closed after ``chunk_seconds`` (0.25 s) of
              samples, one block if a block is longer, or ``chunk_seconds`` of wall time, and
              handed to the OS at once: a killed recorder loses at most the open chunk.
+             Each chunk carries the CRC-32 of its uncompressed records.
+DataEnd      the CRC-32 of the whole data section (header, metadata, attachment, chunks and
+             their indexes; 0 means none); the footer, the CRC-32 of the summary. Readers
+             check every one (:mod:`ramdaq.drivers.mcap_replay`, *Integrity*).
 
 Topics
 ------
@@ -79,6 +83,7 @@ Record ``ramdaq.stream``, every value a string: ``format`` (``"1"``), ``device``
 from __future__ import annotations
 
 import json
+import math
 import struct
 from collections.abc import Mapping
 from datetime import UTC, datetime
@@ -95,8 +100,8 @@ __all__ = [
     "BLOCK_SCHEMA_NAME", "BLOCK_TOPIC", "EVENTS_TOPIC", "IMPACTS_TOPIC", "SIM_IMPACTS_TOPIC",
     "STREAM_METADATA", "RIG_ATTACHMENT", "RIG_MEDIA_TYPE", "FORMAT_VERSION", "JSON_SCHEMAS",
     "MCAP_MAGIC", "BlockHeader", "BlockProto", "RecordingError", "TruncatedRecording",
-    "NotARamdaqRecording", "block_schema_data", "encode_block", "decode_block", "decode_header",
-    "encode_json", "decode_json", "json_schema_for", "make_event", "ramdaq_version",
+    "NotARamdaqRecording", "CorruptRecording", "block_schema_data", "encode_block", "decode_block",
+    "decode_header", "encode_json", "decode_json", "json_schema_for", "make_event", "ramdaq_version",
     "stream_info_to_metadata", "stream_info_from_metadata",
 ]
 
@@ -123,6 +128,11 @@ class TruncatedRecording(RecordingError):
 
 class NotARamdaqRecording(RecordingError):
     """Not an MCAP file, or an MCAP file without ramdaq's stream metadata and block topic."""
+
+
+class CorruptRecording(RecordingError):
+    """A record of the file fails its CRC check or does not parse (a flipped bit, a bad disk):
+    its samples cannot be trusted; ``ramdaq recover`` copies every intact record to a new file."""
 
 
 # -- the ramdaq.Block protobuf schema, built at run time ---------------------------------------
@@ -415,10 +425,11 @@ def stream_info_from_metadata(meta: Mapping[str, str], rig_toml: str = "") -> St
     Raises
     ------
     NotARamdaqRecording
-        A key is missing or does not parse.
+        A key is missing or does not parse, ``fs_hz`` is not positive and finite, or ``extra``
+        is not a JSON object.
     """
     try:
-        return StreamInfo(
+        info = StreamInfo(
             device=meta["device"],
             fs_hz=float(meta["fs_hz"]),
             channels=tuple(json.loads(meta["channels"])),
@@ -431,3 +442,10 @@ def stream_info_from_metadata(meta: Mapping[str, str], rig_toml: str = "") -> St
         raise NotARamdaqRecording(
             f"{STREAM_METADATA} metadata is incomplete or malformed ({type(err).__name__}: {err})"
         ) from err
+    if not (math.isfinite(info.fs_hz) and info.fs_hz > 0):
+        raise NotARamdaqRecording(f"{STREAM_METADATA} metadata: fs_hz {meta['fs_hz']!r} is not a "
+                                  f"positive sample rate")
+    if not isinstance(info.extra, dict):
+        raise NotARamdaqRecording(f"{STREAM_METADATA} metadata: extra is a "
+                                  f"{type(info.extra).__name__}, not a JSON object")
+    return info

@@ -13,29 +13,70 @@ have been acquired (``speed`` times faster); ``"fast"`` as fast as they decode.
 
 A file without a footer (its recorder was killed) is refused with a hint to run
 ``ramdaq recover``; an MCAP file that is not a ramdaq recording is refused too.
+
+Integrity
+---------
+Every check the file offers is made, on every read: each chunk's CRC (of its uncompressed
+records), each attachment's CRC, the summary's CRC (in the footer) and, for files that carry one,
+the data section's CRC (which also covers the metadata records). A record that fails one, or
+does not parse, raises :class:`~ramdaq.drivers.mcap_format.CorruptRecording` naming the file,
+the byte where the damaged record starts and the last block read before it; no sample of a
+damaged chunk is ever handed out. :class:`RecordScanner` is the reader under it: strict for
+replay, tolerant for ``ramdaq info`` and ``ramdaq recover``, which step over a damaged record to
+the next intact chunk (:class:`Damage`) and read on.
 """
 
 from __future__ import annotations
 
 import os
+import struct
 import time
+import zlib
 from collections.abc import Iterator
+from dataclasses import dataclass
+from io import BytesIO
 from os import PathLike
 from pathlib import Path
 from typing import Any, BinaryIO, NamedTuple
 
+import numpy as np
+import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, SeekingReader
+from mcap.opcode import Opcode
+from mcap.reader import SeekingReader
+from mcap.records import (
+    Attachment,
+    Channel,
+    Chunk,
+    DataEnd,
+    Header,
+    McapRecord,
+    Message,
+    Metadata,
+    Schema,
+)
+from mcap.stream_reader import breakup_chunk
 
 from ramdaq.drivers import mcap_format as fmt
 from ramdaq.drivers.base import TIMED_OUT, Device
 from ramdaq.drivers.block import Block, StreamInfo
-from ramdaq.drivers.errors import DeviceNotFound
+from ramdaq.drivers.errors import DeviceNotFound, FrameError
 
-__all__ = ["McapReplayDevice", "JsonMessage"]
+__all__ = ["McapReplayDevice", "JsonMessage", "RecordScanner", "Damage", "FileEnd", "read_file_end",
+           "check_mcap_magic"]
 
-_FOOTER_RECORD_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset, crc
-_FOOTER_OPCODE = 0x02
+_HEAD = struct.Struct("<BQ")  # every record: opcode, length of what follows
+_FOOTER = struct.Struct("<BQQQI")  # opcode, length (20), summary_start, summary_offset_start, crc
+_DATA_END_BYTES = _HEAD.size + 4  # opcode, length, data_section_crc
+_CHUNK_FIXED = struct.Struct("<QQQII")  # start, end time, uncompressed size, crc, len(compression)
+_COMPRESSIONS = (b"zstd", b"lz4", b"")
+_KNOWN = frozenset(int(o) for o in Opcode)
+_SCAN_WINDOW = 1 << 20  # bytes searched at a time for the next intact chunk
+# What a damaged record raises inside the mcap record parsers and the decompressors: short reads
+# (EndOfFile, struct.error), bad lengths (McapError), a failed CRC or bad UTF-8 (ValueError),
+# broken zstd or lz4 frames.
+_DAMAGE = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, RuntimeError)
 
 
 class JsonMessage(NamedTuple):
@@ -45,6 +86,283 @@ class JsonMessage(NamedTuple):
     obj: Any
 
 
+# -- the file's end: footer and summary ---------------------------------------------------------
+@dataclass(frozen=True)
+class FileEnd:
+    """What the end of an MCAP file says.
+
+    Attributes
+    ----------
+    footer : bool
+        The file ends with a footer record and the magic (its writer finished it).
+    summary_ok : bool or None
+        The summary section and the footer pass the footer's CRC; ``None`` without a footer or
+        when the writer wrote no CRC.
+    data_end : int or None
+        Byte offset of the ``DataEnd`` record the footer points to (``None`` if unknown).
+    """
+
+    footer: bool
+    summary_ok: bool | None
+    data_end: int | None
+
+
+def check_mcap_magic(f: BinaryIO, path: str | PathLike) -> None:
+    """Raise :class:`NotARamdaqRecording` unless ``f`` starts with the MCAP magic; rewinds ``f``."""
+    f.seek(0)
+    head = f.read(len(fmt.MCAP_MAGIC))
+    f.seek(0)
+    if head != fmt.MCAP_MAGIC:
+        raise fmt.NotARamdaqRecording(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
+
+
+def read_file_end(f: BinaryIO, size: int) -> FileEnd:
+    """Read the footer of an MCAP file of ``size`` bytes and check the summary against its CRC."""
+    magic = fmt.MCAP_MAGIC
+    footer_at = size - len(magic) - _FOOTER.size
+    if footer_at < len(magic):
+        return FileEnd(False, None, None)
+    f.seek(footer_at)
+    tail = f.read(_FOOTER.size + len(magic))
+    opcode, length, summary_start, _, crc = _FOOTER.unpack_from(tail)
+    if opcode != Opcode.FOOTER or length != _FOOTER.size - _HEAD.size or not tail.endswith(magic):
+        return FileEnd(False, None, None)
+    start = summary_start or footer_at
+    if not len(magic) + _DATA_END_BYTES <= start <= footer_at:
+        return FileEnd(True, False, None)  # the footer's own fields are damaged
+    summary_ok = None
+    if crc:
+        f.seek(start)
+        summary_ok = zlib.crc32(f.read(footer_at + _FOOTER.size - 4 - start)) == crc
+    data_end = start - _DATA_END_BYTES
+    f.seek(data_end)
+    opcode, length = _HEAD.unpack(f.read(_HEAD.size))
+    ok = opcode == Opcode.DATA_END and length == _DATA_END_BYTES - _HEAD.size
+    return FileEnd(True, summary_ok, data_end if ok else None)
+
+
+# -- the tolerant, CRC-checking front-to-back reader --------------------------------------------
+@dataclass(frozen=True)
+class Damage:
+    """A stretch of a recording's data section that failed its check or did not parse.
+
+    Attributes
+    ----------
+    start, end : int
+        Byte offsets of the stretch: the damaged record's first byte, and where reading went on
+        (the next intact chunk, or the ``DataEnd`` record).
+    what : str
+        ``"chunk"``, ``"record"`` (outside the chunks: metadata, attachment, index) or ``"data
+        section"`` (the data section's CRC failed while every record passed its own checks).
+    reason : str
+        One line: the check that failed.
+    """
+
+    start: int
+    end: int
+    what: str
+    reason: str
+
+    @property
+    def bytes(self) -> int:
+        return self.end - self.start
+
+    def __str__(self) -> str:
+        if self.what == "data section":
+            return f"{self.what}: {self.reason}"
+        return f"{self.what} at byte {self.start} ({self.bytes} bytes skipped): {self.reason}"
+
+
+class _Bad(Exception):
+    """A record at a given offset failed: why, and what it was."""
+
+    def __init__(self, what: str, reason: str) -> None:
+        super().__init__(reason)
+        self.what = what
+
+
+def _why(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+class RecordScanner:
+    """The data-section records of an MCAP file in file order, every check made, damage located.
+
+    Iterating yields ``Header``, ``Schema``, ``Channel``, ``Message``, ``Metadata`` and
+    ``Attachment`` records (a chunk's records only once it is whole and its CRC matches; index
+    records are read and dropped) until the ``DataEnd`` record (then :attr:`complete` is true)
+    or until the file ends inside a record, with no intact chunk after it (a torn tail: then
+    :attr:`reason` says why). A damaged record (failed CRC, does not parse, impossible length)
+    is, with ``strict``, a :class:`~ramdaq.drivers.mcap_format.CorruptRecording`; without, a
+    :class:`Damage` is yielded in its place, listed in :attr:`damage`, and reading resumes at
+    the next chunk that passes its CRC (or at the ``DataEnd`` record the footer points to).
+
+    Attributes
+    ----------
+    size : int
+        File size, bytes.
+    end : FileEnd
+        Footer and summary state.
+    complete : bool
+        The data section ended with its ``DataEnd`` record.
+    reason : str
+        Why reading stopped before a ``DataEnd`` record, ``""`` if it did not.
+    good_bytes : int
+        Offset just past the last intact record.
+    chunks : int
+        Intact chunks read.
+    damage : list of Damage
+        The damaged stretches stepped over.
+    data_crc_ok : bool or None
+        The data section's CRC matched (``None``: not reached, not written, or already damaged).
+    """
+
+    def __init__(self, f: BinaryIO, path: str | PathLike, *, strict: bool = False) -> None:
+        check_mcap_magic(f, path)
+        self._f = f
+        self.path = path
+        self.strict = strict
+        self.size = os.fstat(f.fileno()).st_size
+        self.end = read_file_end(f, self.size)
+        self.complete = False
+        self.reason = ""
+        self.good_bytes = len(fmt.MCAP_MAGIC)
+        self.chunks = 0
+        self.damage: list[Damage] = []
+        self.data_crc_ok: bool | None = None
+
+    @property
+    def tail_bytes(self) -> int:
+        """Bytes after the last intact record of the data section (0 if complete)."""
+        return 0 if self.complete else self.size - self.good_bytes
+
+    def __iter__(self) -> Iterator[McapRecord | Damage]:
+        pos = len(fmt.MCAP_MAGIC)
+        crc = zlib.crc32(fmt.MCAP_MAGIC)  # the data section's CRC, while nothing was skipped
+        while True:
+            if pos == self.size:
+                self.reason = f"file ends after byte {self.size} with no DataEnd record or footer"
+                return
+            try:
+                opcode, raw = self._record_at(pos)
+                records = self._parse(opcode, raw)
+            except _Bad as bad:
+                if self.strict:
+                    raise fmt.CorruptRecording(
+                        f"{self.path}: damaged {bad.what} at byte {pos} ({bad})") from None
+                resume = self._resync(pos)
+                if resume is None:
+                    self.reason = f"torn or damaged {bad.what} after byte {pos} ({bad})"
+                    return
+                self.damage.append(Damage(pos, resume, bad.what, str(bad)))
+                yield self.damage[-1]
+                pos = resume
+                continue
+            if opcode == Opcode.DATA_END:
+                self._check_data_crc(records[0], crc, pos)
+                self.complete, self.good_bytes = True, pos + len(raw)
+                if self.data_crc_ok is False:
+                    yield self.damage[-1]
+                return
+            if opcode == Opcode.FOOTER:
+                self.reason = "footer reached without a DataEnd record"
+                return
+            crc = zlib.crc32(raw, crc)
+            pos = self.good_bytes = pos + len(raw)
+            yield from records
+
+    def _check_data_crc(self, data_end: DataEnd, crc: int, pos: int) -> None:
+        if not data_end.data_section_crc or self.damage:
+            return
+        self.data_crc_ok = data_end.data_section_crc == crc
+        if self.data_crc_ok:
+            return
+        reason = (f"the data section fails its CRC (expected {data_end.data_section_crc}, "
+                  f"calculated {crc}) although every chunk passed its own: a record outside the "
+                  f"chunks (metadata, attachment or index) is damaged")
+        if self.strict:
+            raise fmt.CorruptRecording(f"{self.path}: {reason}")
+        self.damage.append(Damage(len(fmt.MCAP_MAGIC), pos, "data section", reason))
+
+    def _record_at(self, pos: int) -> tuple[int, bytes]:
+        """Opcode and bytes (header included) of the record at ``pos``; ``_Bad`` if impossible."""
+        self._f.seek(pos)
+        head = self._f.read(_HEAD.size)
+        if len(head) < _HEAD.size:
+            raise _Bad("record", f"the file ends inside a record header ({len(head)} bytes)")
+        opcode, length = _HEAD.unpack(head)
+        what = "chunk" if opcode == Opcode.CHUNK else "record"
+        if opcode not in _KNOWN:
+            raise _Bad("record", f"unknown record type 0x{opcode:02x}")
+        if length > self.size - pos - _HEAD.size:
+            raise _Bad(what, f"a {length}-byte record runs past the end of the file")
+        return opcode, head + self._f.read(length)
+
+    def _parse(self, opcode: int, raw: bytes) -> list[McapRecord]:
+        """The records a record holds (a chunk's, checked against its CRC); ``_Bad`` if damaged."""
+        body = ReadDataStream(BytesIO(raw[_HEAD.size:]))
+        length = len(raw) - _HEAD.size
+        try:
+            if opcode == Opcode.CHUNK:
+                records = breakup_chunk(Chunk.read(body), validate_crc=True)
+                self.chunks += 1
+                return records
+            if opcode == Opcode.ATTACHMENT:
+                (crc,) = struct.unpack_from("<I", raw, len(raw) - 4)
+                if crc and zlib.crc32(raw[_HEAD.size:-4]) != crc:
+                    raise ValueError(f"attachment CRC {crc} does not match its bytes")
+                return [Attachment.read(body)]
+            if opcode == Opcode.MESSAGE:
+                return [Message.read(body, length)]
+            reader = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
+                      Opcode.METADATA: Metadata, Opcode.DATA_END: DataEnd}.get(Opcode(opcode))
+            return [reader.read(body)] if reader else []
+        except _DAMAGE as err:
+            raise _Bad("chunk" if opcode == Opcode.CHUNK else "record", _why(err)) from err
+
+    # -- stepping over damage ------------------------------------------------------------------
+    def _resync(self, bad: int) -> int | None:
+        """Where reading goes on after a damaged record at ``bad``: the next intact chunk, else
+        the footer's ``DataEnd`` record, else ``None`` (a torn tail)."""
+        data_end = self.end.data_end if self.end.data_end and self.end.data_end > bad else None
+        found = self._next_chunk(bad + 1, data_end or self.size)
+        return found if found is not None else data_end
+
+    def _next_chunk(self, lo: int, hi: int) -> int | None:
+        """Offset of the first chunk in ``[lo, hi)`` that parses and passes a non-zero CRC."""
+        p = lo
+        while p < hi:
+            self._f.seek(p)
+            buf = np.frombuffer(self._f.read(min(_SCAN_WINDOW + _HEAD.size, hi - p)), np.uint8)
+            at = np.flatnonzero(buf[: max(len(buf) - _HEAD.size + 1, 0)] == Opcode.CHUNK)
+            if at.size:
+                lengths = buf[at[:, None] + np.arange(1, _HEAD.size)].copy().view("<u8")[:, 0]
+                room = (hi - (p + at) - _HEAD.size).astype(np.uint64)  # >= 0: the header fits
+                fits = (lengths >= _CHUNK_FIXED.size + 8) & (lengths <= room)
+                for q in (p + at[fits]).tolist():
+                    if self._intact_chunk(q):
+                        return q
+            p += _SCAN_WINDOW
+        return None
+
+    def _intact_chunk(self, q: int) -> bool:
+        try:
+            opcode, raw = self._record_at(q)
+            body = raw[_HEAD.size:]
+            *_, crc, n = _CHUNK_FIXED.unpack_from(body)
+            if not crc or body[_CHUNK_FIXED.size:_CHUNK_FIXED.size + n] not in _COMPRESSIONS:
+                return False
+            (n_data,) = struct.unpack_from("<Q", body, _CHUNK_FIXED.size + n)
+            if n_data != len(body) - _CHUNK_FIXED.size - n - 8:
+                return False
+            breakup_chunk(Chunk.read(ReadDataStream(BytesIO(body))), validate_crc=True)
+        except (_Bad, *_DAMAGE):
+            return False
+        return opcode == Opcode.CHUNK
+
+
+# -- the device ---------------------------------------------------------------------------------
 class McapReplayDevice(Device):
     """A recorded ramdaq MCAP file, streamed back as blocks.
 
@@ -57,6 +375,9 @@ class McapReplayDevice(Device):
         sample is due, counted from when the first block was read.
     speed : float
         Multiplier of the real-time pace (2.0 replays twice as fast).
+
+    Reading raises :class:`~ramdaq.drivers.mcap_format.CorruptRecording` at the first damaged
+    record (see *Integrity* above), after the blocks before it.
     """
 
     kind = "mcap"
@@ -79,34 +400,81 @@ class McapReplayDevice(Device):
     def _open(self) -> StreamInfo:
         if not self.path.is_file():
             raise DeviceNotFound(f"mcap: no recording at {self.path}")
-        with open(self.path, "rb") as f:
-            _check_finished(f, self.path)
-            reader = SeekingReader(f)
-            try:
-                summary = reader.get_summary()
-                meta = {m.name: m.metadata for m in reader.iter_metadata()}
-                rig = next(
-                    (a.data for a in reader.iter_attachments() if a.name == fmt.RIG_ATTACHMENT), b""
-                )
-            except (McapError, ValueError, EOFError) as err:
-                raise fmt.NotARamdaqRecording(f"{self.path}: unreadable MCAP summary ({err})") from err
+        f = open(self.path, "rb")  # noqa: SIM115 - closed by _close, or below on failure
+        try:
+            info = self._read_info(f)
+            self._blocks = self._iter_blocks(RecordScanner(f, self.path, strict=True), info.fs_hz)
+        except BaseException:
+            f.close()
+            raise
+        self._file = f
+        return info
+
+    def _read_info(self, f: BinaryIO) -> StreamInfo:
+        """The stream description, from a summary that passed its CRC."""
+        check_mcap_magic(f, self.path)
+        end = read_file_end(f, os.fstat(f.fileno()).st_size)
+        if not end.footer:
+            raise fmt.TruncatedRecording(
+                f"{self.path}: recording has no footer (its recorder was killed?); "
+                f"run `ramdaq recover {self.path}` to salvage it")
+        if end.summary_ok is False:
+            raise fmt.CorruptRecording(
+                f"{self.path}: the summary section or footer fails its CRC check; the samples may "
+                f"be intact: `ramdaq recover {self.path}` writes a new file from them")
+        f.seek(0)
+        try:
+            reader = SeekingReader(f, validate_crcs=True)
+            summary = reader.get_summary()
+            meta = {m.name: m.metadata for m in reader.iter_metadata()}
+            rig = next(
+                (a.data for a in reader.iter_attachments() if a.name == fmt.RIG_ATTACHMENT), b""
+            )
+        except (*_DAMAGE, OSError) as err:
+            raise fmt.CorruptRecording(f"{self.path}: unreadable MCAP summary ({_why(err)})") from err
         topics = {ch.topic: ch for ch in summary.channels.values()} if summary else {}
-        block_channel = topics.get(fmt.BLOCK_TOPIC)
-        if fmt.STREAM_METADATA not in meta or block_channel is None:
+        if fmt.STREAM_METADATA not in meta or fmt.BLOCK_TOPIC not in topics:
             raise fmt.NotARamdaqRecording(
                 f"{self.path}: not a ramdaq recording (no {fmt.STREAM_METADATA} metadata "
                 f"or no {fmt.BLOCK_TOPIC} topic)"
             )
         try:
-            info = fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())
-        except fmt.NotARamdaqRecording as err:
+            return fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())
+        except (fmt.NotARamdaqRecording, UnicodeDecodeError) as err:
             raise fmt.NotARamdaqRecording(f"{self.path}: {err}") from err
-        self._file = open(self.path, "rb")  # noqa: SIM115 - closed by _close
-        messages = NonSeekingReader(self._file).iter_messages(
-            topics=[fmt.BLOCK_TOPIC], log_time_order=False
-        )
-        self._blocks = (fmt.decode_block(m.data) for _, _, m in messages)
-        return info
+
+    def _iter_blocks(self, scanner: RecordScanner, fs_hz: float) -> Iterator[Block]:
+        """The block messages of the data section, in file order; a damaged record raises
+        ``CorruptRecording`` saying which block was the last good one."""
+        topics: dict[int, str] = {}
+        last: Block | None = None
+        records = iter(scanner)
+        while True:
+            try:
+                record = next(records, None)
+            except fmt.CorruptRecording as err:
+                raise fmt.CorruptRecording(f"{err}; {self._read_so_far(last)}") from err
+            if record is None:
+                return
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Message) and topics.get(record.channel_id) == fmt.BLOCK_TOPIC:
+                try:
+                    block = fmt.decode_block(record.data)
+                except FrameError as err:
+                    raise fmt.CorruptRecording(
+                        f"{self.path}: a block message in the chunk ending at byte "
+                        f"{scanner.good_bytes} does not decode ({err}); {self._read_so_far(last)}"
+                    ) from err
+                last = block
+                yield block
+
+    def _read_so_far(self, last: Block | None) -> str:
+        if last is None:
+            return "no block was read before it"
+        return (f"blocks were read up to seq {last.seq} (samples up to {last.next_sample - 1}, "
+                f"{last.next_sample / last.fs_hz:.3f} s); `ramdaq recover {self.path}` copies "
+                f"every intact chunk to a new file")
 
     def _read(self, timeout: float | None) -> Block | None:
         block = self._pending
@@ -143,34 +511,19 @@ class McapReplayDevice(Device):
         return self.info.rig_toml
 
     def json_messages(self, topic: str) -> list[JsonMessage]:
-        """All messages of a JSON topic, in log-time order (``[]`` if the topic is absent)."""
+        """All messages of a JSON topic, in log-time order (``[]`` if the topic is absent);
+        chunk CRCs checked."""
         self.open()
         with open(self.path, "rb") as f:
-            reader = SeekingReader(f)
-            return [
-                JsonMessage(m.log_time, fmt.decode_json(m.data))
-                for _, _, m in reader.iter_messages(topics=[topic])
-            ]
+            reader = SeekingReader(f, validate_crcs=True)
+            try:
+                return [
+                    JsonMessage(m.log_time, fmt.decode_json(m.data))
+                    for _, _, m in reader.iter_messages(topics=[topic])
+                ]
+            except (*_DAMAGE, OSError) as err:
+                raise fmt.CorruptRecording(f"{self.path}: topic {topic}: {_why(err)}") from err
 
     def events(self) -> list[dict]:
         """The ``/ramdaq/events`` messages: ``{"kind", "t_ns", "detail"}`` dicts, in time order."""
         return [m.obj for m in self.json_messages(fmt.EVENTS_TOPIC)]
-
-
-def _check_finished(f: BinaryIO, path: Path) -> None:
-    """Refuse a non-MCAP file, and an MCAP file whose writer never wrote the footer."""
-    size = os.fstat(f.fileno()).st_size
-    magic = fmt.MCAP_MAGIC
-    if f.read(len(magic)) != magic:
-        raise fmt.NotARamdaqRecording(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
-    tail_len = _FOOTER_RECORD_BYTES + len(magic)
-    if size >= len(magic) + tail_len:
-        f.seek(size - tail_len)
-        tail = f.read(tail_len)
-        if tail[0] == _FOOTER_OPCODE and tail.endswith(magic):
-            f.seek(0)
-            return
-    raise fmt.TruncatedRecording(
-        f"{path}: recording has no footer (its recorder was killed?); "
-        f"run `ramdaq recover {path}` to salvage it"
-    )

@@ -45,6 +45,6 @@ def test_units_report_in_terminal(air_report, capsys, tmp_path):
 def test_not_a_recording_is_one_line(tmp_path, capsys):
     bad = tmp_path / "x.mcap"
     bad.write_bytes(b"not an mcap file at all")
-    assert main(["analyze", str(bad)]) == 2
+    assert main(["analyze", str(bad)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "x.mcap" in err[0]

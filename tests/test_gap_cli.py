@@ -81,7 +81,7 @@ def test_truncated_recording_is_one_line(csv_trial, capsys):
         assert main(["import", str(csv), "--rig", str(rig), "--out", str(mcap)]) == 0
     cut = tmp / "cut.mcap"
     cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 3])
-    assert main(["gap", str(cut), "--no-plots", "--out", str(tmp / "cut_gap")]) == 2
+    assert main(["gap", str(cut), "--no-plots", "--out", str(tmp / "cut_gap")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cut.mcap" in err[0]
 
@@ -91,7 +91,7 @@ def test_unknown_effect_and_too_few_gages_are_refused(csv_trial, capsys, tmp_pat
     mcap = tmp / "other_daq.mcap"
     if not mcap.exists():
         assert main(["import", str(csv), "--rig", str(rig), "--out", str(mcap)]) == 0
-    assert main(["gap", str(mcap), "--effects", "ambient_tone,gremlins"]) == 2
+    assert main(["gap", str(mcap), "--effects", "ambient_tone,gremlins"]) == 1
     err = capsys.readouterr().err
     assert "unknown gap effect 'gremlins'" in err and err.count("\n") == 1
     two = tmp_path / "two.csv"
@@ -100,6 +100,6 @@ def test_unknown_effect_and_too_few_gages_are_refused(csv_trial, capsys, tmp_pat
     two.write_text(lines[0] + "\n" + "\n".join(",".join(c) for c in keep) + "\n")
     small = tmp_path / "two.mcap"
     assert main(["import", str(two), "--rig", str(rig), "--out", str(small)]) == 0
-    assert main(["gap", str(small), "--no-plots", "--out", str(tmp_path / "g")]) == 2
+    assert main(["gap", str(small), "--no-plots", "--out", str(tmp_path / "g")]) == 1
     err = capsys.readouterr().err
     assert "only 2 of the rig's gages" in err and err.count("\n") == 1

@@ -318,7 +318,7 @@ def test_bad_file_is_one_line_error(case, tmp_path, sim):
 
 def test_cli_import_refuses_in_one_line(tmp_path, sim, capsys):
     path = _bad_csv(lambda s: s.replace("g02 [m/s^2]", "g02 [V]"))(tmp_path, sim)
-    assert main(["import", str(path), "--rig", str(RIG), "--out", str(tmp_path / "x.mcap")]) == 2
+    assert main(["import", str(path), "--rig", str(RIG), "--out", str(tmp_path / "x.mcap")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.csv" in err[0] and "'g02'" in err[0]
     assert not (tmp_path / "x.mcap").exists()
@@ -338,7 +338,7 @@ def test_cli_import_format_channels_medium(sim, tmp_path, capsys):
     with McapReplayDevice(out) as dev:
         assert dev.info.gages == (4,) and dev.info.extra["medium"] == "water"
         assert np.array_equal(np.concatenate([b.counts for b in dev], axis=1), counts[:1, :300])
-    assert main(args) == 2 and "exists" in capsys.readouterr().err  # no silent overwrite
+    assert main(args) == 1 and "exists" in capsys.readouterr().err  # no silent overwrite
 
 
 # -- end to end: CSV -> ramdaq import -> ramdaq analyze, and export-uff ------------------------

@@ -15,7 +15,8 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from ramdaq.daq.rerun_view import RerunView
+from ramdaq.daq.errors import ViewError
+from ramdaq.daq.rerun_view import RerunView, check_ports
 from ramdaq.drivers.block import Block
 from ramdaq.drivers.sim import SimDevice
 
@@ -197,3 +198,20 @@ def test_needs_a_sink_without_display(monkeypatch: pytest.MonkeyPatch) -> None:
         pytest.skip("a display is assumed off Linux")
     with pytest.raises(ValueError, match="rrd_path"):
         RerunView(info)
+
+
+def test_a_taken_port_is_named_before_anything_starts(tmp_path: Path) -> None:
+    """Both ports are bound for real first: a port another program holds is refused by name,
+    and no .rrd, no gRPC server and no web viewer are started."""
+    with SimDevice(RIG, duration_s=0.1) as dev:
+        info = dev.open()
+    with socket.create_server(("127.0.0.1", 0)) as held:
+        busy = held.getsockname()[1]
+        for ports in ({"web_port": busy, "grpc_port": _free_port()},
+                      {"web_port": _free_port(), "grpc_port": busy}):
+            with pytest.raises(ViewError, match=f"port {busy} on 127.0.0.1 is taken by another"):
+                RerunView(info, rrd_path=tmp_path / "x.rrd", serve_web=True, **ports)
+        with pytest.raises(ViewError, match="cannot share port"):
+            check_ports(busy, busy)
+    assert not (tmp_path / "x.rrd").exists()
+    check_ports(_free_port(), _free_port())  # free ones pass

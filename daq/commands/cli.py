@@ -3,8 +3,28 @@
 Commands: ``trial`` (record, detect hits, analyse and show them live), ``replay`` (a recording
 through the same pipeline), ``analyze`` (the trial report), ``record`` (a device into an MCAP
 file, with a live readout), ``info`` (what a recording holds), ``recover`` (a valid copy of a
-recording whose writer was killed), ``rig`` (a rig's modes in air and in water, and Eq 18 on
-them), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff`` (modes and decays as UFF).
+recording whose writer was killed or whose bytes were damaged), ``rig`` (a rig's modes in air
+and in water, and Eq 18 on them), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff``
+(modes and decays as UFF).
+
+Outputs: ``--name NAME`` writes ``recordings/NAME.mcap`` and cannot leave ``recordings/`` (no
+absolute name, no ``..``); a rig's name used as the default is reduced to letters, digits,
+``-`` and ``_``. Only an explicit path (``--out``, ``--rrd``, ``--json``, ``-o``) writes
+elsewhere. Before anything is opened for writing, every refusal is checked: an existing output
+without ``--overwrite``, an output folder that cannot be written, a Rerun port that is taken.
+
+Exit codes::
+
+    0    done (also a recording or trial ended by Ctrl-C or SIGTERM: its files are finished)
+    1    bad input or a failure at run time, in one line on stderr: a file that is missing,
+         unreadable, damaged or not a recording, an output that exists or cannot be written, a
+         taken port, a device that failed or vanished (after the trial's summary)
+    2    usage: arguments argparse rejects
+    3    internal error (a bug): one line, and the traceback with ``--debug``
+    130  interrupted (Ctrl-C or SIGTERM) in a command with nothing to finish
+
+SIGTERM is handled like Ctrl-C: the recording and the ``.rrd`` get their footers. The reader of
+standard output going away (``ramdaq info FILE | head``) ends the command quietly, with 1.
 """
 
 from __future__ import annotations
@@ -17,16 +37,31 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import json  # noqa: E402
+import re  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
+import threading  # noqa: E402
+import traceback  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from ramdaq.analysis.model.rig import RigError, load_rig
 from ramdaq.daq.commands.gap_bench import SEED_SETS
+from ramdaq.daq.errors import RecordingError, ViewError
 from ramdaq.drivers.errors import DeviceError
-from ramdaq.drivers.mcap_format import RecordingError
 
 RECORDINGS = Path("recordings")
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2  # argparse's own
+EXIT_INTERNAL = 3
+EXIT_INTERRUPTED = 130
+
+# what a user can cause and read a one-line message about; anything else is a bug
+_FAILURES = (RigError, DeviceError, RecordingError, ViewError, OSError, ValueError, KeyError)
 
 
 def _parse_impacts(text: str) -> list[float]:
@@ -39,15 +74,23 @@ def _parse_impacts(text: str) -> list[float]:
 
 def cmd_record(args: argparse.Namespace) -> int:
     from ramdaq.daq.record import record
+    from ramdaq.drivers.registry import open_device
 
-    device, out = _device_and_output(args)
+    options, default_name = _device_options(args)
+    out = _recording_path(args, default_name)
+    _check_outputs([out], args.overwrite)
+    _make_folders([out])
+    device = open_device(args.device, **options)
     print(f"recording {device.info.device} ({device.info.n_channels} ch at "
           f"{device.info.fs_hz:g} Hz) into {out}; Ctrl-C ends it cleanly", flush=True)
-    s = record(device, out, readout=not args.quiet, overwrite=args.overwrite)
+    try:
+        s = record(device, out, readout=not args.quiet, overwrite=args.overwrite)
+    except DeviceError as err:  # the recorder finished the file before this got here
+        raise DeviceError(f"{err}; {out} holds what came before, finished") from err
     print(f"{'interrupted: ' if s.interrupted else ''}wrote {out}: {s.duration_s:.2f} s, "
           f"{s.blocks} blocks, {s.samples * device.info.n_channels:,} samples, {s.gaps} gaps, "
           f"{s.overflows} overflows, {s.impacts} impacts, in {s.wall_s:.1f} s wall time")
-    return 0
+    return EXIT_OK
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -55,7 +98,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
     d = describe_recording(args.file)
     print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
-    return 0
+    return EXIT_OK
 
 
 def cmd_recover(args: argparse.Namespace) -> int:
@@ -65,7 +108,7 @@ def cmd_recover(args: argparse.Namespace) -> int:
     dst = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
     report = recover(src, dst)
     print(f"recovered {dst}: {report}")
-    return 0
+    return EXIT_OK
 
 
 def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
@@ -85,20 +128,66 @@ def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
                  fs_hz=args.fs), f"{rig.name}-{rig.medium}")
 
 
-def _device_and_output(args: argparse.Namespace):
-    """Open the device named by ``--device`` and choose the recording's path."""
-    from ramdaq.drivers.registry import open_device
-
+def _device_options(args: argparse.Namespace) -> tuple[dict, str]:
+    """Options for ``open_device(args.device, ...)`` and the default recording name (made safe
+    for a file name); nothing is opened."""
     options: dict = {}
-    name = args.name
+    default_name = "trial"
     if args.device == "sim":
         options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
-        name = name or default_name
     elif args.rig:
         options = {"rig": args.rig}
-    out = Path(args.out) if args.out else RECORDINGS / f"{name or 'trial'}.mcap"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return open_device(args.device, **options), out
+    return options, safe_name(default_name)
+
+
+def safe_name(text: str) -> str:
+    """``text`` (a rig's name) as a file name: runs of anything but ASCII letters, digits, ``-``
+    and ``_`` become one ``_``; ``"trial"`` if nothing is left."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_") or "trial"
+
+
+def _recording_path(args: argparse.Namespace, default_name: str) -> Path:
+    """``--out`` as given, else ``recordings/NAME.mcap``; a ``--name`` that would leave
+    ``recordings/`` (absolute, ``..``) is refused."""
+    if args.out:
+        return Path(args.out)
+    name = default_name if args.name is None else args.name
+    path = RECORDINGS / f"{name}.mcap"
+    inside = path.resolve().is_relative_to(RECORDINGS.resolve())
+    if not name or Path(name).is_absolute() or ".." in Path(name).parts or not inside:
+        raise ValueError(f"--name {name!r}: a recording name, not a path; it must stay inside "
+                         f"{RECORDINGS}/ (--out takes a path)")
+    return path
+
+
+def _check_outputs(paths: list[Path | None], overwrite: bool) -> None:
+    """Refuse an output that exists (without ``overwrite``) or is a folder, or whose folder
+    cannot be written -- all before anything is opened for writing."""
+    for path in filter(None, paths):
+        if path.is_dir():
+            raise IsADirectoryError(21, "is a folder; an output file was expected", str(path))
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; --overwrite replaces it")
+        folder = next(p for p in path.absolute().parents if p.exists())
+        if not folder.is_dir():
+            raise NotADirectoryError(20, f"{folder} is not a folder", str(path))
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise PermissionError(13, f"cannot write into {folder}", str(path))
+
+
+def _make_folders(paths: list[Path | None]) -> None:
+    for path in filter(None, paths):
+        path.parent.mkdir(parents=True, exist_ok=True)
+
+
+def _check_ports(args: argparse.Namespace) -> None:
+    if getattr(args, "web", False):
+        from ramdaq.daq.rerun_view import check_ports
+
+        try:
+            check_ports(args.web_port, args.grpc_port)
+        except ViewError as err:
+            raise ViewError(f"{err}; --web-port and --grpc-port choose others") from err
 
 
 def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd: Path | None):
@@ -108,7 +197,8 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
     if rrd is not None or args.web:
         from ramdaq.daq.rerun_view import RerunView
 
-        view = RerunView(device.info, rrd_path=rrd, serve_web=args.web)
+        view = RerunView(device.info, rrd_path=rrd, serve_web=args.web, web_port=args.web_port,
+                         grpc_port=args.grpc_port)
         if args.web:
             print(f"Rerun web viewer: {view.web_url}", flush=True)
     try:
@@ -135,9 +225,24 @@ def _print_outcome(outcome, args: argparse.Namespace) -> None:
                                               default=_json_default))
 
 
+def _stream_result(outcome, args: argparse.Namespace) -> int:
+    """1 (with the reason on stderr) if the device failed or vanished before the stream's end."""
+    for note in outcome.notes:
+        print(f"ramdaq {args.command}: the device ended the stream: {note}", file=sys.stderr)
+    return EXIT_FAILED if outcome.notes else EXIT_OK
+
+
 def cmd_trial(args: argparse.Namespace) -> int:
-    device, out = _device_and_output(args)
+    from ramdaq.drivers.registry import open_device
+
+    options, default_name = _device_options(args)
+    out = _recording_path(args, default_name)
     rrd = None if args.no_rerun else (Path(args.rrd) if args.rrd else out.with_suffix(".rrd"))
+    outputs = [out, rrd, Path(args.json) if args.json else None]
+    _check_outputs(outputs, args.overwrite)
+    _check_ports(args)
+    _make_folders(outputs)
+    device = open_device(args.device, **options)
     print(f"trial: {device.info.device} ({device.info.n_channels} ch at {device.info.fs_hz:g} Hz)"
           f" recording into {out}" + (f", Rerun view into {rrd}" if rrd else "")
           + "; Ctrl-C ends it cleanly", flush=True)
@@ -145,19 +250,23 @@ def cmd_trial(args: argparse.Namespace) -> int:
     print(f"{'interrupted: ' if outcome.interrupted else ''}wrote {out}"
           + (f" and {rrd}" if rrd else ""))
     _print_outcome(outcome, args)
-    return 0
+    return _stream_result(outcome, args)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from ramdaq.drivers.mcap_replay import McapReplayDevice
 
-    device = McapReplayDevice(args.file, pace="realtime" if args.realtime else "fast")
     rrd = Path(args.rrd) if args.rrd else None
+    outputs = [rrd, Path(args.json) if args.json else None]
+    _check_outputs(outputs, args.overwrite)
+    _check_ports(args)
+    _make_folders(outputs)
+    device = McapReplayDevice(args.file, pace="realtime" if args.realtime else "fast")
     print(f"replaying {args.file} ({'real time' if args.realtime else 'as fast as possible'})",
           flush=True)
     outcome = _run_session(device, args, None, rrd)
     _print_outcome(outcome, args)
-    return 0
+    return _stream_result(outcome, args)
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -187,7 +296,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                 files += plot_impact(h.analysis, x, rec.fs_hz, rig, out, h.index)
     print(format_summary(report, args.units))
     print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
-    return 0
+    return EXIT_OK
 
 
 def cmd_gap(args: argparse.Namespace) -> int:
@@ -218,7 +327,7 @@ def cmd_gap(args: argparse.Namespace) -> int:
     files = write_report(d, out, plots=not args.no_plots, source=str(src))
     print("\n".join(summary_lines(d)))
     print(f"\nwrote {len(files)} files to {out}/ (gap.json with every number)")
-    return 0
+    return EXIT_OK
 
 
 def cmd_import(args: argparse.Namespace) -> int:
@@ -245,7 +354,7 @@ def cmd_import(args: argparse.Namespace) -> int:
           f"({imp.get('missing_samples', 0)} samples missing)")
     print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
           f"requantised to 24 bits; largest error {worst:.3g} m/s^2")
-    return 0
+    return EXIT_OK
 
 
 def cmd_export_uff(args: argparse.Namespace) -> int:
@@ -259,7 +368,7 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
     r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
     print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
           f"records from {r.hits} accepted of {len(hits)} hits")
-    return 0
+    return EXIT_OK
 
 
 def _json_default(o: object) -> object:
@@ -296,7 +405,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
               f" the predominant mode couples v with alpha and gamma, whose added inertias "
               f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
               f"0.2735 ton s^2/ft, -18 %).")
-    return 0
+    return EXIT_OK
 
 
 def _device_args(r: argparse.ArgumentParser) -> None:
@@ -309,8 +418,9 @@ def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--seed", type=int, default=0, help="noise seed (sim)")
     r.add_argument("--fs", type=float, help="override the rig's sample rate, Hz")
     r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
-    r.add_argument("--name", help="recording name: writes recordings/NAME.mcap")
-    r.add_argument("--out", help="output file (overrides --name)")
+    r.add_argument("--name", help="recording name: writes recordings/NAME.mcap (a name, not a "
+                   "path: it cannot leave recordings/; default: the rig's name and medium)")
+    r.add_argument("--out", help="output file, any path (overrides --name)")
     r.add_argument("--overwrite", action="store_true", help="replace an existing file")
     r.add_argument("--quiet", action="store_true", help="no live readout")
 
@@ -325,9 +435,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     t = sub.add_parser("trial", help="the live trial: record, detect hits, analyse, show live")
     _device_args(t)
-    t.add_argument("--rrd", help="Rerun recording of the live view (default: beside the MCAP)")
+    t.add_argument("--rrd", help="Rerun recording of the live view (default: beside the MCAP). "
+                   "Finished on Ctrl-C and SIGTERM; a SIGKILL or a power cut leaves it without "
+                   "its footer, and nothing repairs that (the MCAP recording: ramdaq recover)")
     t.add_argument("--no-rerun", action="store_true", help="no Rerun view")
-    t.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    _web_args(t)
     t.add_argument("--units", choices=("si", "report"), default="si", help="summary units")
     t.add_argument("--json", help="also write the final per-hit results here (JSON)")
     t.set_defaults(func=cmd_trial)
@@ -336,9 +448,9 @@ def build_parser() -> argparse.ArgumentParser:
     p_.add_argument("file")
     p_.add_argument("--realtime", action="store_true", help="at the recording's own pace")
     p_.add_argument("--rrd", help="write a Rerun view of the replay here")
-    p_.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    _web_args(p_)
     p_.add_argument("--quiet", action="store_true", help="no live table")
-    p_.add_argument("--overwrite", action="store_true", help=argparse.SUPPRESS)
+    p_.add_argument("--overwrite", action="store_true", help="replace existing --rrd, --json files")
     p_.add_argument("--units", choices=("si", "report"), default="si", help="summary units")
     p_.add_argument("--json", help="also write the final per-hit results here (JSON)")
     p_.set_defaults(func=cmd_replay)
@@ -348,7 +460,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=cmd_info)
 
-    c = sub.add_parser("recover", help="write a valid copy of a recording that lost its footer")
+    c = sub.add_parser("recover", help="write a valid copy of a recording that lost its footer "
+                       "or has damaged chunks (every intact record kept)")
     c.add_argument("file")
     c.add_argument("-o", "--out", help="output file (default FILE.recovered.mcap)")
     c.set_defaults(func=cmd_recover)
@@ -408,17 +521,94 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--out", help="output file (default FILE.uff)")
     x.add_argument("--binary", action="store_true", help="binary 58b decay records")
     x.set_defaults(func=cmd_export_uff)
+
+    p.add_argument("--debug", action="store_true", help="the traceback of an internal error")
+    for command in sub.choices.values():  # --debug after the command too
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help="the traceback of an internal error")
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def _port(text: str) -> int:
     try:
-        return args.func(args)
-    except (RigError, DeviceError, RecordingError, FileExistsError, FileNotFoundError,
-            ValueError, KeyError) as err:
-        print(f"ramdaq {args.command}: {err}", file=sys.stderr)
-        return 2
+        port = int(text)
+    except ValueError:
+        port = 0
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port (1-65535)")
+    return port
+
+
+def _web_args(r: argparse.ArgumentParser) -> None:
+    r.add_argument("--web", action="store_true", help="serve Rerun's web viewer on localhost")
+    r.add_argument("--web-port", type=_port, default=9090,
+                   help="port of the web viewer on 127.0.0.1 (default 9090)")
+    r.add_argument("--grpc-port", type=_port, default=9876,
+                   help="port of the gRPC server feeding it, on 127.0.0.1 (default 9876)")
+
+
+@contextlib.contextmanager
+def _sigterm_as_ctrl_c() -> Iterator[None]:
+    """While the command runs, SIGTERM raises KeyboardInterrupt in the main thread, so it ends a
+    recording or trial as Ctrl-C does (files finished); a second SIGTERM is ignored so that it
+    cannot cut the footers short. Off the main thread (a test calling main) nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum: int, frame: object) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt("SIGTERM")
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line(err: BaseException) -> str:
+    """An error as one line; an OSError as ``FILE: what`` (``[Errno 13] ...`` says less)."""
+    if isinstance(err, OSError) and err.filename is not None and err.strerror:
+        text = f"{err.filename}: {err.strerror}"
+    else:
+        text = str(err) or type(err).__name__
+    return " ".join(text.split())
+
+
+def _quiet_stdout() -> None:
+    """The reader of stdout went away: point stdout at /dev/null, so the flush at exit cannot
+    raise again."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (a test's capture)
+        pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns the exit code (module docstring, *Exit codes*)."""
+    args = build_parser().parse_args(argv)  # usage errors: SystemExit(2)
+    where = f"ramdaq {args.command}"
+    with _sigterm_as_ctrl_c():
+        try:
+            code = args.func(args)
+            sys.stdout.flush()  # here, where a reader that went away can still be caught
+            return code
+        except BrokenPipeError:
+            _quiet_stdout()
+            return EXIT_FAILED
+        except KeyboardInterrupt:
+            print(f"{where}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except _FAILURES as err:
+            print(f"{where}: {_one_line(err)}", file=sys.stderr)
+            return EXIT_FAILED
+        except Exception as err:
+            print(f"{where}: internal error, {type(err).__name__}: {_one_line(err)}"
+                  + ("" if args.debug else " (--debug shows where)"), file=sys.stderr)
+            if args.debug:
+                traceback.print_exc()
+            return EXIT_INTERNAL
 
 
 if __name__ == "__main__":
