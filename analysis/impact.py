@@ -27,7 +27,7 @@ import numpy as np
 from ramdaq.analysis.modal.identify import identify_modes
 from ramdaq.analysis.modal.peaks import decrement_from_peaks
 from ramdaq.analysis.modal.table import ModeTable
-from ramdaq.analysis.modal.verdicts import assess_decay
+from ramdaq.analysis.modal.verdicts import DecayAssessment, Verdict, assess_decay
 from ramdaq.analysis.model.geometry import gage_geometry, stock_pair
 from ramdaq.analysis.model.rig import ALIGN_TOL_M, Rig
 from ramdaq.analysis.model.structure import added_mass
@@ -78,6 +78,30 @@ class Decrement:
 
 
 @dataclass(frozen=True)
+class GageVerdict:
+    """Whether one gage's free decay can give a decrement (:func:`assess_decay`): ``code`` is
+    ``Verdict.OK`` or what is wrong, ``reason`` one line with the numbers behind it, ``f_hz``
+    and ``delta`` the dominant mode the verdict judged (Hz, 1; NaN where none was estimated)."""
+
+    code: Verdict
+    reason: str
+    f_hz: float = float("nan")
+    delta: float = float("nan")
+
+    @classmethod
+    def of(cls, a: DecayAssessment) -> GageVerdict:
+        return cls(a.verdict, a.reason, a.f_hz, a.delta)
+
+    @property
+    def ok(self) -> bool:
+        """The decay is usable: the mode fit takes this gage."""
+        return self.code is Verdict.OK
+
+    def to_json(self) -> dict:
+        return {"verdict": str(self.code), "reason": self.reason}
+
+
+@dataclass(frozen=True)
 class ImpactAnalysis:
     """Everything one impact gives. Frequencies Hz, damping constants N s/m and N m s/rad,
     lengths m. Per-gage dicts are keyed by gage number."""
@@ -88,7 +112,7 @@ class ImpactAnalysis:
     modes: ModeTable
     predominant: int
     gage_numbers: tuple[int, ...]
-    verdicts: dict[int, tuple[str, str]]
+    verdicts: dict[int, GageVerdict]
     gages: dict[int, Decrement]
     motions: dict[str, Decrement]
     relative: dict[str, Decrement]
@@ -101,6 +125,12 @@ class ImpactAnalysis:
     @property
     def f_hz(self) -> float:
         return float(self.modes.frequency_hz[self.predominant])
+
+    @property
+    def active_gages(self) -> tuple[int, ...]:
+        """The gages whose decay the mode fit used (verdict ok), in ``gage_numbers`` order: the
+        rows of ``modes.complex_amplitude``, ``modes.amplitude`` and ``modes.mode_shape``."""
+        return tuple(n for n in self.gage_numbers if self.verdicts[n].ok)
 
     def table2b(self) -> dict:
         """Table 2b done automatically: delta_gamma, delta_alpha, delta_v, delta_modal, their
@@ -171,11 +201,11 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     notes: list[str] = []
     rows = {n: i for i, n in enumerate(gage_numbers)}
     verdict_list = assess_decay(x, fs_hz, adc_full_scale=adc_full_scale)
-    verdicts = {gage_numbers[a.channel]: (str(a.verdict), a.reason) for a in verdict_list}
-    good = [i for i, n in enumerate(gage_numbers) if verdicts[n][0] == "ok"]
+    verdicts = {gage_numbers[a.channel]: GageVerdict.of(a) for a in verdict_list}
+    good = [i for i, n in enumerate(gage_numbers) if verdicts[n].ok]
     if not good:
         raise ValueError("no channel holds a usable free decay: "
-                         + "; ".join(f"g{n:02d} {v[0]}" for n, v in verdicts.items()))
+                         + "; ".join(f"g{n:02d} {v.code}" for n, v in verdicts.items()))
     table = identify_modes(x[good], fs_hz, per_channel=True)
     if len(table) == 0:
         raise ValueError(f"no mode found above the noise ({table.info.get('reason', '')})")
@@ -209,7 +239,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     motions: dict[str, Decrement] = {}
     amps: dict[str, complex] = {}
     for name, sig in signals.items():
-        bad = [n for n in needed[name] if verdicts[n][0] != "ok"]
+        bad = [n for n in needed[name] if not verdicts[n].ok]
         if bad:
             notes.append(f"{name}: not computed, gage(s) {bad} unusable")
             continue
