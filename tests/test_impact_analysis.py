@@ -85,6 +85,9 @@ def test_a_dead_gage_is_not_among_the_active_gages(water_decay):
     assert a.active_gages == tuple(n for n in gages if n != 1)
     assert a.modes.mode_shape.shape[0] == len(a.active_gages) == len(gages) - 1
     assert a.verdicts[2].to_json() == {"verdict": "ok", "reason": a.verdicts[2].reason}
+    # Eq 14/15 need no stock gage: computed; the stock lengths need gage 1: a note says so
+    assert a.damping.full is not None
+    assert any(n.startswith("stock lengths: not computed") for n in a.notes)
 
 
 def test_predominant_mode_and_decrements_match_model(water_clean):
@@ -116,5 +119,10 @@ def test_eq_14_on_estimated_motions(water_clean):
     and the phase between motions matter for this coupled mode."""
     rig, a = water_clean
     C = rig.active_damping.C_N_s_per_m
-    assert a.damping["C_eq14_N_s_per_m"] == pytest.approx(C, rel=0.02)
-    assert a.damping["C_N_s_per_m"] < 0.9 * C
+    assert a.damping.full.C_eq14_N_s_per_m == pytest.approx(C, rel=0.02)
+    assert a.damping.C_N_s_per_m < 0.9 * C
+    # report.json's damping: Eq 16/17 with what they used, then Eq 14/15's, under these keys
+    assert list(a.damping.to_json()) == [
+        "m_y_kg", "I_z_kg_m2", "I_xz_kg_m2", "delta_modal", "C_N_s_per_m", "c_N_m_s_per_rad",
+        "C_eq14_N_s_per_m", "c_eq15_N_m_s_per_rad", "k_s_N_per_m", "ell_m"]
+    assert a.damping["C_eq14_N_s_per_m"] == a.damping.full.C_eq14_N_s_per_m

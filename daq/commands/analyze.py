@@ -82,7 +82,7 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
         "motions": {k: d.to_json() for k, d in a.motions.items()},
         "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
         "alpha1_over_gamma1": _num(a.alpha1_over_gamma1),
-        "damping": {k: _num(v) for k, v in a.damping.items()},
+        "damping": a.damping.to_json(),
         "stock_lengths_m": a.stock_lengths,
         "table2b": json.loads(json.dumps(a.table2b(), default=float)),
         "notes": list(a.notes),
