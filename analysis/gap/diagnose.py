@@ -376,9 +376,11 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     significant = z_detect > settings.z_gap
     notes = _trial_notes(td)
     basis = ScoreBasis(fw, base, reps)
-    search = _Search(fw, settings, theta_pre, base, reps, bands, rep_cells,
-                     cell_inflation(fw, rep_cells, bands, td.fitted), m_fit, m_held,
-                     basis.r.size, np.random.default_rng(settings.seed), say, notes)
+    search = _Search(fw=fw, settings=settings, theta_pre=theta_pre, base=base, reps=reps,
+                     bands=bands, rep_cells=rep_cells,
+                     kappa_cells=cell_inflation(fw, rep_cells, bands, td.fitted), m_fit=m_fit,
+                     m_held=m_held, n_eff=basis.r.size, rng=np.random.default_rng(settings.seed),
+                     say=say, notes=notes)
     names = settings.effects or tuple(EFFECTS)
     say(f"scoring {len(names)} candidate effects")
     sigs = _by_z(signature_scores(fw, base, basis, EFFECTS[n]) for n in names)
