@@ -20,14 +20,15 @@ is otherwise left out as the report left it out (its Eq 9, 13 footnotes).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from ramdaq.analysis.modal.identify import identify_modes
 from ramdaq.analysis.modal.peaks import decrement_from_peaks
 from ramdaq.analysis.modal.table import ModeTable
-from ramdaq.analysis.modal.verdicts import assess_decay
+from ramdaq.analysis.modal.verdicts import DecayAssessment, Verdict, assess_decay
 from ramdaq.analysis.model.geometry import gage_geometry, stock_pair
 from ramdaq.analysis.model.rig import ALIGN_TOL_M, Rig
 from ramdaq.analysis.model.structure import added_mass
@@ -78,6 +79,72 @@ class Decrement:
 
 
 @dataclass(frozen=True)
+class GageVerdict:
+    """Whether one gage's free decay can give a decrement (:func:`assess_decay`): ``code`` is
+    ``Verdict.OK`` or what is wrong, ``reason`` one line with the numbers behind it, ``f_hz``
+    and ``delta`` the dominant mode the verdict judged (Hz, 1; NaN where none was estimated)."""
+
+    code: Verdict
+    reason: str
+    f_hz: float = float("nan")
+    delta: float = float("nan")
+
+    @classmethod
+    def of(cls, a: DecayAssessment) -> GageVerdict:
+        return cls(a.verdict, a.reason, a.f_hz, a.delta)
+
+    @property
+    def ok(self) -> bool:
+        """The decay is usable: the mode fit takes this gage."""
+        return self.code is Verdict.OK
+
+    def to_json(self) -> dict:
+        return {"verdict": str(self.code), "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class FullDamping:
+    """Eq 14 and 15: C (N s/m) and c (N m s/rad) with the hull motions and the phases between
+    motions kept, and the stock stiffness k_s (N/m) and bending length ell (m) they used."""
+
+    C_eq14_N_s_per_m: float
+    c_eq15_N_m_s_per_rad: float
+    k_s_N_per_m: float
+    ell_m: float
+
+
+@dataclass(frozen=True)
+class DampingConstants:
+    """The predominant mode's damping constants: C (N s/m) and c (N m s/rad) by Eq 16 and 17,
+    NaN where a motion they need is missing; the masses they used (the rig's, plus the added
+    mass in water: kg, kg m^2); the modal decrement (Eq 7, the mean over the rudder gages); and
+    ``full``, Eq 14 and 15, None where a gage they need is unusable."""
+
+    m_y_kg: float
+    I_z_kg_m2: float
+    I_xz_kg_m2: float
+    delta_modal: float
+    C_N_s_per_m: float
+    c_N_m_s_per_rad: float
+    full: FullDamping | None = None
+
+    def values(self) -> dict[str, float]:
+        """Every constant by its name in report.json, ``full``'s after the others when there."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "full"}
+        if self.full is not None:
+            out |= {f.name: getattr(self.full, f.name) for f in fields(self.full)}
+        return out
+
+    def __getitem__(self, key: str) -> float:
+        """A constant by its report.json name, e.g. ``damping["delta_modal"]`` (how the trial
+        summary and the live readout in ``ramdaq.daq`` read it)."""
+        return self.values()[key]
+
+    def to_json(self) -> dict[str, float | None]:
+        return {k: _num(v) for k, v in self.values().items()}
+
+
+@dataclass(frozen=True)
 class ImpactAnalysis:
     """Everything one impact gives. Frequencies Hz, damping constants N s/m and N m s/rad,
     lengths m. Per-gage dicts are keyed by gage number."""
@@ -88,12 +155,12 @@ class ImpactAnalysis:
     modes: ModeTable
     predominant: int
     gage_numbers: tuple[int, ...]
-    verdicts: dict[int, tuple[str, str]]
+    verdicts: dict[int, GageVerdict]
     gages: dict[int, Decrement]
     motions: dict[str, Decrement]
     relative: dict[str, Decrement]
     alpha1_over_gamma1: float
-    damping: dict[str, float]
+    damping: DampingConstants
     stock_lengths: dict[str, float] = field(default_factory=dict)
     stock_curves: dict[str, list[float]] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
@@ -102,11 +169,17 @@ class ImpactAnalysis:
     def f_hz(self) -> float:
         return float(self.modes.frequency_hz[self.predominant])
 
+    @property
+    def active_gages(self) -> tuple[int, ...]:
+        """The gages whose decay the mode fit used (verdict ok), in ``gage_numbers`` order: the
+        rows of ``modes.complex_amplitude``, ``modes.amplitude`` and ``modes.mode_shape``."""
+        return tuple(n for n in self.gage_numbers if self.verdicts[n].ok)
+
     def table2b(self) -> dict:
         """Table 2b done automatically: delta_gamma, delta_alpha, delta_v, delta_modal, their
         average and each one's percent deviation from it."""
         names = ("gamma", "alpha", "v_2_6")
-        vals = [self.motions[n].delta for n in names] + [self.damping["delta_modal"]]
+        vals = [self.motions[n].delta for n in names] + [self.damping.delta_modal]
         mean, dev, mean_abs = percent_deviation_from_average(vals)
         rows = dict(zip((*names, "modal"), zip(vals, dev, strict=True), strict=True))
         return {"rows": {k: {"delta": v, "deviation_pct": d} for k, (v, d) in rows.items()},
@@ -169,53 +242,91 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         Converter full scale in m/s^2 (the smallest over channels), to judge clipping.
     """
     notes: list[str] = []
-    rows = {n: i for i, n in enumerate(gage_numbers)}
-    verdict_list = assess_decay(x, fs_hz, adc_full_scale=adc_full_scale)
-    verdicts = {gage_numbers[a.channel]: (str(a.verdict), a.reason) for a in verdict_list}
-    good = [i for i, n in enumerate(gage_numbers) if verdicts[n][0] == "ok"]
+    verdicts = {gage_numbers[a.channel]: GageVerdict.of(a)
+                for a in assess_decay(x, fs_hz, adc_full_scale=adc_full_scale)}
+    good = [i for i, n in enumerate(gage_numbers) if verdicts[n].ok]
     if not good:
         raise ValueError("no channel holds a usable free decay: "
-                         + "; ".join(f"g{n:02d} {v[0]}" for n, v in verdicts.items()))
+                         + "; ".join(f"g{n:02d} {v.code}" for n, v in verdicts.items()))
     table = identify_modes(x[good], fs_hz, per_channel=True)
     if len(table) == 0:
         raise ValueError(f"no mode found above the noise ({table.info.get('reason', '')})")
-    rudder_rows = [j for j, i in enumerate(good) if rig.gage(gage_numbers[i]).body == "rudder"]
-    # accelerations in, displacement amplitudes (a / w^2) judged, as on the report's records
-    disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
-    energy = mode_energy(disp[rudder_rows or slice(None)], table.delta * table.frequency_hz)
-    k = int(np.argmax(energy))
+    k = predominant_mode(table, [j for j, i in enumerate(good)
+                                 if rig.gage(gage_numbers[i]).body == "rudder"])
     f = float(table.frequency_hz[k])
-
-    gages: dict[int, Decrement] = {}
-    for j, i in enumerate(good):
-        gages[gage_numbers[i]] = Decrement(float(table.channel_frequency_hz[j, k]),
-                                           float(table.channel_delta[j, k]),
-                                           float(table.channel_delta_se[j, k]),
-                                           *_peak_decrement(x[i], fs_hz, f))
-
-    K = geometry_constants(gage_geometry(rig))
-    geom = gage_geometry(rig)
+    gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),
+                                        float(table.channel_delta[j, k]),
+                                        float(table.channel_delta_se[j, k]),
+                                        *_peak_decrement(x[i], fs_hz, f))
+             for j, i in enumerate(good)}
+    rows = {n: i for i, n in enumerate(gage_numbers)}
 
     def d(n: int) -> np.ndarray:
         return x[rows[n]]
 
-    signals = {
+    def decrement(sig: np.ndarray) -> tuple[Decrement, complex]:
+        return signal_decrement(np.asarray(sig), fs_hz, f, len(table))
+
+    signals = _rudder_motions(d, rig)
+    motions, amps = _motion_decrements(signals, verdicts, decrement, notes)
+    relative = _relative_decrements(d, rig, signals, decrement, notes)
+    ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
+    amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
+    lengths, curves = _stock_lengths(amp, rig, notes)
+    damping = _damping(rig, f, float(table.delta[k]), gages, motions, ratio, amp, curves, notes)
+    return ImpactAnalysis(
+        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
+        modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
+        gages=gages, motions=motions, relative=relative, alpha1_over_gamma1=ratio,
+        damping=damping, stock_lengths=lengths, stock_curves=curves, notes=tuple(notes))
+
+
+def predominant_mode(table: ModeTable, rudder_rows: list[int]) -> int:
+    """Index in ``table`` of the predominant mode: the largest :func:`mode_energy` of the
+    displacement amplitudes (accelerations in, a / w^2 judged, as on the report's records) over
+    the table's rows ``rudder_rows`` (the rudder gages; all rows where there are none)."""
+    disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
+    energy = mode_energy(disp[rudder_rows or slice(None)], table.delta * table.frequency_hz)
+    return int(np.argmax(energy))
+
+
+MOTION_GAGES = {"gamma": (4, 8), "alpha": (2, 6), "v_2_6": (2, 6), "v_4_8": (4, 8)}
+"""The gages each rudder motion of :data:`MOTIONS` is computed from."""
+
+
+def _rudder_motions(d: Callable[[int], np.ndarray], rig: Rig) -> dict[str, np.ndarray]:
+    """The rudder motions of Eq 1, 2, 3a, 3b from the gages' decays (``d(n)``, gage n's)."""
+    K = geometry_constants(gage_geometry(rig))
+    return {
         "gamma": gamma(d(4), d(8), K["K1"]),
         "alpha": alpha(d(6), d(2), K["K2"]),
         "v_2_6": v_from_2_6(d(2), d(6), K["K3"], K["K4"]),
         "v_4_8": v_from_4_8(d(4), d(8), K["K5"], K["K6"]),
     }
-    needed = {"gamma": (4, 8), "alpha": (2, 6), "v_2_6": (2, 6), "v_4_8": (4, 8)}
+
+
+def _motion_decrements(signals: dict[str, np.ndarray], verdicts: dict[int, GageVerdict],
+                       decrement: Callable[[np.ndarray], tuple[Decrement, complex]],
+                       notes: list[str]) -> tuple[dict[str, Decrement], dict[str, complex]]:
+    """Eq 4-6b: each rudder motion's decrement and complex amplitude at the predominant mode,
+    where both of its gages are usable (a note says which are not)."""
     motions: dict[str, Decrement] = {}
     amps: dict[str, complex] = {}
     for name, sig in signals.items():
-        bad = [n for n in needed[name] if verdicts[n][0] != "ok"]
+        bad = [n for n in MOTION_GAGES[name] if not verdicts[n].ok]
         if bad:
             notes.append(f"{name}: not computed, gage(s) {bad} unusable")
             continue
-        motions[name], amps[name] = signal_decrement(np.asarray(sig), fs_hz, f, len(table))
+        motions[name], amps[name] = decrement(sig)
+    return motions, amps
 
-    # hull motions and motions relative to the hull (Eq 8-13)
+
+def _relative_decrements(d: Callable[[int], np.ndarray], rig: Rig, signals: dict[str, np.ndarray],
+                         decrement: Callable[[np.ndarray], tuple[Decrement, complex]],
+                         notes: list[str]) -> dict[str, Decrement]:
+    """Eq 8-13: the hull motions from gages 13, 14 (and 5 for the yaw, when level with 13) and
+    the decrements of the rudder motions relative to the hull."""
+    geom = gage_geometry(rig)
     alpha_b = alpha_b_from_13_14(d(13), d(14), geom.L_P)
     p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
     gamma_b = 0.0
@@ -224,44 +335,40 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     else:
         notes.append("gamma_b left out: hull gages 5 and 13 are not level")
     d_rh = d_rudder_hull(d(13), d(14), geom.L_H, geom.L_P, geom.h, gamma_b)
-    relative: dict[str, Decrement] = {}
     rel_signals = {"gamma_R": signals["gamma"] - gamma_b, "alpha_R": signals["alpha"] - alpha_b,
                    "v_R_2_6": signals["v_2_6"] - d_rh, "v_R_4_8": signals["v_4_8"] - d_rh}
-    for name, sig in rel_signals.items():
-        relative[name] = signal_decrement(np.asarray(sig), fs_hz, f, len(table))[0]
+    return {name: decrement(sig)[0] for name, sig in rel_signals.items()}
 
-    # damping constants, Eq 16 and 17, with the rig's masses (plus added mass in water)
+
+def _damping(rig: Rig, f: float, delta: float, gages: dict[int, Decrement],
+             motions: dict[str, Decrement], ratio: float, amp: dict[int, complex],
+             curves: dict[str, list[float]], notes: list[str]) -> DampingConstants:
+    """Eq 16 and 17 with the rig's masses (plus the added mass in water), the modal decrement
+    (Eq 7) over the rudder gages, and Eq 14 and 15 (:func:`_full_damping`). ``f``, ``delta``:
+    the predominant mode's; ``ratio``: alpha1 / gamma1."""
     add = added_mass(rig)
     r = rig.rudder
     m_y = r.mass_kg + add["m_vir"]
     I_z = r.Iz_kg_m2 + add["Iz_vir"]
-    ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
-    delta_modal = float(np.nanmean([gages[n].delta for n in gages if rig.gage(n).body == "rudder"]))
-    damping = {"m_y_kg": m_y, "I_z_kg_m2": I_z, "I_xz_kg_m2": r.Ixz_kg_m2,
-               "delta_modal": delta_modal,
-               "C_N_s_per_m": float(C_translational(m_y, f, motions["v_2_6"].delta))
-               if "v_2_6" in motions else np.nan,
-               "c_N_m_s_per_rad": float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f,
-                                                     motions["gamma"].delta))
-               if "gamma" in motions and np.isfinite(ratio) else np.nan}
-    lengths, curves = _stock_lengths(table, k, good, gage_numbers, rig, notes)
-    damping |= _full_damping(table, k, good, gage_numbers, rig, m_y, I_z, curves, notes)
-    return ImpactAnalysis(
-        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
-        modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
-        gages=gages, motions=motions, relative=relative, alpha1_over_gamma1=ratio,
-        damping=damping, stock_lengths=lengths, stock_curves=curves, notes=tuple(notes))
+    return DampingConstants(
+        m_y_kg=m_y, I_z_kg_m2=I_z, I_xz_kg_m2=r.Ixz_kg_m2,
+        delta_modal=float(np.nanmean([gages[n].delta for n in gages
+                                      if rig.gage(n).body == "rudder"])),
+        C_N_s_per_m=float(C_translational(m_y, f, motions["v_2_6"].delta))
+        if "v_2_6" in motions else np.nan,
+        c_N_m_s_per_rad=float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f, motions["gamma"].delta))
+        if "gamma" in motions and np.isfinite(ratio) else np.nan,
+        full=_full_damping(amp, f, delta, rig, m_y, I_z, curves, notes))
 
 
-def _stock_lengths(table: ModeTable, k: int, good: list[int], gage_numbers: tuple[int, ...],
-                   rig: Rig, notes: list[str]) -> tuple[dict[str, float], dict[str, list[float]]]:
-    """Effective stock lengths (Figures 8, 9) from the predominant mode's amplitudes, and the
-    curves they were read from: heights z' (m above the rudder top), (d_v,alpha) and gamma of the
-    stock points, and the hull points 13, 14 -- in the mode's amplitude units, signed by the
-    phase of gage 4."""
+def _stock_lengths(amp: dict[int, complex], rig: Rig,
+                   notes: list[str]) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """Effective stock lengths (Figures 8, 9) from the predominant mode's complex amplitudes
+    ``amp`` (by gage, the usable ones), and the curves they were read from: heights z' (m above
+    the rudder top), (d_v,alpha) and gamma of the stock points, and the hull points 13, 14 -- in
+    the mode's amplitude units, signed by the phase of gage 4."""
     from ramdaq.analysis.report1836.stock_length import effective_length_bending, effective_length_torsion
 
-    amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
     needed = (1, 3, 7, 11, 10, 12, 13, 14)
     if any(n not in amp for n in needed):
         notes.append("stock lengths: not computed, a stock, rudder-top or hull gage is unusable")
@@ -303,20 +410,20 @@ def _stock_lengths(table: ModeTable, k: int, good: list[int], gage_numbers: tupl
     return out, curves
 
 
-def _full_damping(table: ModeTable, k: int, good: list[int], gage_numbers: tuple[int, ...],
-                  rig: Rig, m_y: float, I_z: float, curves: dict, notes: list[str]) -> dict:
-    """Eq 14 and 15: C and c with the hull motions and the phases between motions kept.
+def _full_damping(a: dict[int, complex], f: float, delta: float, rig: Rig, m_y: float,
+                  I_z: float, curves: dict, notes: list[str]) -> FullDamping | None:
+    """Eq 14 and 15: C and c with the hull motions and the phases between motions kept; None
+    (and a note) where a gage they need is unusable.
 
-    The predominant mode's complex amplitudes give every motion's sine (in phase with v) and
-    cosine parts: displacement amplitudes are the accelerations' divided by lambda^2, then turned
-    so that v = v1 sin(wt). The stock constants come from the rig (EI, kappa A G, G J) and the
-    effective bending length read off Figure 8 (the rig's own when it could not be read).
+    The predominant mode's complex amplitudes ``a`` (by gage) give every motion's sine (in phase
+    with v) and cosine parts: displacement amplitudes are the accelerations' divided by
+    lambda^2, then turned so that v = v1 sin(wt). ``f`` (Hz), ``delta``: the mode's. The stock
+    constants come from the rig (EI, kappa A G, G J) and the effective bending length read off
+    Figure 8 (the rig's own when it could not be read).
     """
-    a = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
     if any(n not in a for n in (2, 4, 5, 6, 8, 13, 14)):
         notes.append("Eq 14/15: not computed, a rudder or hull gage is unusable")
-        return {}
-    f, delta = float(table.frequency_hz[k]), float(table.delta[k])
+        return None
     lam = -delta * f + 2j * np.pi * f
     K = geometry_constants(gage_geometry(rig))
     geom = gage_geometry(rig)
@@ -346,8 +453,8 @@ def _full_damping(table: ModeTable, k: int, good: list[int], gage_numbers: tuple
                           r.stock_x_m, r.attach_z_m, ell, GJ_e, gamma2=cos["gamma"],
                           alpha2=cos["alpha"], v_b2=cos["v_b"], alpha_b2=cos["alpha_b"],
                           gamma_b1=sin["gamma_b"], gamma_b2=cos["gamma_b"])
-    return {"C_eq14_N_s_per_m": float(C), "c_eq15_N_m_s_per_rad": float(c),
-            "k_s_N_per_m": k_s, "ell_m": ell}
+    return FullDamping(C_eq14_N_s_per_m=float(C), c_eq15_N_m_s_per_rad=float(c),
+                       k_s_N_per_m=k_s, ell_m=ell)
 
 
 @dataclass(frozen=True)
@@ -372,9 +479,8 @@ def first_look(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, .
     table = identify_modes(x, fs_hz, per_channel=True, max_samples=max_samples)
     if len(table) == 0:
         return None
-    rudder = [i for i, n in enumerate(gage_numbers) if rig.gage(n).body == "rudder"]
-    disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
-    k = int(np.argmax(mode_energy(disp[rudder or slice(None)], table.delta * table.frequency_hz)))
+    k = predominant_mode(table, [i for i, n in enumerate(gage_numbers)
+                                 if rig.gage(n).body == "rudder"])
     gages = {n: (float(table.channel_frequency_hz[i, k]), float(table.channel_delta[i, k]),
                  float(table.channel_delta_se[i, k])) for i, n in enumerate(gage_numbers)}
     return FirstLook(x.shape[1] / fs_hz, float(table.frequency_hz[k]), float(table.delta[k]),

@@ -298,10 +298,10 @@ class Session:
             if a is not None:
                 self._log_decays(hit, a)
                 k = a.predominant
-                active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
+                active = a.active_gages
                 self.view.log_mode_shape(hit.index, a.f_hz, {
                     f"g{n:02d}": complex(s) for n, s in zip(active, a.modes.mode_shape[:, k],
-                                                             strict=False)})
+                                                             strict=True)})
 
     def _log_decays(self, hit: HitResult, a) -> None:
         """Each gage's decay with the fitted envelope of the predominant mode, and its final
@@ -312,8 +312,8 @@ class Session:
         x = rec.values()[:, i0:]
         t_rel = np.arange(x.shape[1]) / fs
         envelope = np.exp(-m.delta[k] * m.frequency_hz[k] * t_rel)
-        active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
-        amp = dict(zip(active, m.amplitude[:, k], strict=False))
+        active = a.active_gages
+        amp = dict(zip(active, m.amplitude[:, k], strict=True))
         row = {g: i for i, g in enumerate(self.info.gages)}
         t_end = a.decay_start_s + a.duration_s
         for n, g in a.gages.items():

@@ -200,11 +200,27 @@ def test_the_refit_steps_stay_in_their_trust_region_and_still_converge():
     # noise 1e-3 on 1024 samples of an O(1) signal: the split is known to ~1e-5; 1e-4 is 10 sd
     assert res.x[0] == pytest.approx(truth[0], abs=1e-4)
     assert res.x[1] == pytest.approx(truth[1], abs=1e-4)
+    assert res.stop == "converged"
     # every trial point is the current one (an earlier trial point) plus a step of at most the
     # cap, or plus a difference step (rel_step 1e-3 of a scale)
     for k in range(1, len(seen)):
         nearest = min(np.linalg.norm((seen[k] - p) / scale) for p in seen[:k])
         assert nearest <= 3.0 + 1e-6, (k, nearest)
+
+
+def test_giving_up_is_not_convergence():
+    """A cost with a cusp at the start (sqrt|x|): the differenced slope points downhill but
+    every step it proposes raises the cost, so the solver gives up where it began, and says so
+    instead of calling it converged."""
+    from ramdaq.analysis.gap.calibrate import Stop, levenberg_marquardt
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return np.array([1.0 + 1e3 * np.sqrt(abs(x[0] - 0.5))])
+
+    res = levenberg_marquardt(fun, np.array([0.5]), np.array([0.0]), np.array([1.0]),
+                              np.array([0.1]), max_iter=100)
+    assert res.stop is Stop.GAVE_UP
+    assert res.x[0] == 0.5
 
 
 def test_a_pulse_long_before_its_contact_stays_finite_and_exact(trial):

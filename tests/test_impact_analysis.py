@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from ramdaq.analysis.impact import analyze_decay
+from ramdaq.analysis.modal.verdicts import Verdict
 from ramdaq.analysis.model.response import modal_form
 from ramdaq.analysis.model.rig_modes import modes_in
 from ramdaq.analysis.model.structure import build_model
@@ -53,15 +54,40 @@ def test_eq_14_and_15_recover_the_models_damping_constants(albacore, medium):
 
 
 @pytest.fixture(scope="module")
-def water_clean(request):
-    """A noise-free (24-bit quantised) decay of the ALBACORE-like rudder in water, analysed."""
+def water_decay(request):
+    """A noise-free (24-bit quantised) decay of the ALBACORE-like rudder in water: the rig,
+    (n_gages, n) m/s^2 from 1.03 s, the sample rate and the gage of each row."""
     rig = request.getfixturevalue("albacore").with_medium("water")
     with SimDevice(rig, duration_s=7.0, impacts=[1.0], noise=False) as dev:
         x = np.hstack([b.values() for b in dev])
         gages = dev.info.gages
     fs = rig.daq.sample_rate_hz
-    i0 = int(1.03 * fs)
-    return rig, analyze_decay(x[:, i0:], fs, rig, gages, onset_s=1.0, decay_start_s=1.03)
+    return rig, x[:, int(1.03 * fs):], fs, gages
+
+
+@pytest.fixture(scope="module")
+def water_clean(water_decay):
+    """That decay analysed."""
+    rig, x, fs, gages = water_decay
+    return rig, analyze_decay(x, fs, rig, gages, onset_s=1.0, decay_start_s=1.03)
+
+
+def test_a_dead_gage_is_not_among_the_active_gages(water_decay):
+    """A flat channel gets a DEAD verdict with its reason; the mode table's rows are the other
+    gages, in order, and ``active_gages`` names them."""
+    rig, x, fs, gages = water_decay
+    x = x.copy()
+    x[list(gages).index(1)] = 0.0
+    a = analyze_decay(x, fs, rig, gages)
+    assert a.verdicts[1].code is Verdict.DEAD and not a.verdicts[1].ok
+    assert "flat" in a.verdicts[1].reason
+    assert all(a.verdicts[n].ok for n in gages if n != 1)
+    assert a.active_gages == tuple(n for n in gages if n != 1)
+    assert a.modes.mode_shape.shape[0] == len(a.active_gages) == len(gages) - 1
+    assert a.verdicts[2].to_json() == {"verdict": "ok", "reason": a.verdicts[2].reason}
+    # Eq 14/15 need no stock gage: computed; the stock lengths need gage 1: a note says so
+    assert a.damping.full is not None
+    assert any(n.startswith("stock lengths: not computed") for n in a.notes)
 
 
 def test_predominant_mode_and_decrements_match_model(water_clean):
@@ -93,5 +119,10 @@ def test_eq_14_on_estimated_motions(water_clean):
     and the phase between motions matter for this coupled mode."""
     rig, a = water_clean
     C = rig.active_damping.C_N_s_per_m
-    assert a.damping["C_eq14_N_s_per_m"] == pytest.approx(C, rel=0.02)
-    assert a.damping["C_N_s_per_m"] < 0.9 * C
+    assert a.damping.full.C_eq14_N_s_per_m == pytest.approx(C, rel=0.02)
+    assert a.damping.C_N_s_per_m < 0.9 * C
+    # report.json's damping: Eq 16/17 with what they used, then Eq 14/15's, under these keys
+    assert list(a.damping.to_json()) == [
+        "m_y_kg", "I_z_kg_m2", "I_xz_kg_m2", "delta_modal", "C_N_s_per_m", "c_N_m_s_per_rad",
+        "C_eq14_N_s_per_m", "c_eq15_N_m_s_per_rad", "k_s_N_per_m", "ell_m"]
+    assert a.damping["C_eq14_N_s_per_m"] == a.damping.full.C_eq14_N_s_per_m

@@ -378,7 +378,7 @@ def test_export_uff_round_trip(imported_trial, tmp_path):
     for g in rig.gages:
         i = nodes["node_nums"].index(g.number)
         assert [nodes[k][i] for k in "xyz"] == pytest.approx(g.position_m, abs=1e-5)
-    active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
+    active = a.active_gages
     for k, s in enumerate(sets[2:2 + len(a.modes)]):
         f = s["eig"].imag / (2 * np.pi)
         assert f == pytest.approx(a.modes.frequency_hz[k], rel=1e-5)

@@ -3,15 +3,19 @@ that what is left is the model's form, not a mistuned constant.
 
 Maximum a posteriori: the whitened residual of the fitted impacts (pre and decay windows) plus
 the constants' Gaussian priors (:func:`~ramdaq.analysis.gap.forward.base_params`), minimised by
-``scipy.optimize.least_squares`` (trust region, bounds). Each prediction re-solves every
-impact's force and onset shift (linear), so the calibration never sees them as parameters.
-The held-out impacts enter only through their own forces.
+this module's own bounded Levenberg-Marquardt (:func:`levenberg_marquardt`: Broyden updates of
+the Jacobian, steps capped in length), which says how it stopped (:class:`Stop`). Only the
+spectrum prefit (:func:`prefit_frequencies`) uses ``scipy.optimize.least_squares``. Each
+prediction re-solves every impact's force and onset shift (linear), so the calibration never
+sees them as parameters. The held-out impacts enter only through their own forces.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -20,13 +24,30 @@ from ramdaq.analysis.gap.terms import Term
 from ramdaq.analysis.gap.trialdata import summed_spectrum
 
 
+class Stop(StrEnum):
+    """How a :func:`levenberg_marquardt` run ended. Only ``CONVERGED`` is convergence."""
+
+    CONVERGED = "converged"
+    """The cost fell by less than ``tol`` (relative) on a freshly differenced Jacobian."""
+    GAVE_UP = "gave up"
+    """Six failed steps in a row, or the damping beyond 1e8: no proposed step lowered the
+    cost. The point is where the solver stopped, not a minimum shown to be one."""
+    ITERATION_LIMIT = "iteration limit"
+    """``max_iter`` steps taken without converging."""
+    AT_BOUNDS = "stopped at the bounds"
+    """The bounds cut the step to nothing."""
+    NOTHING_TO_FIT = "nothing to fit"
+    """No free parameter (the terms' parameters alone were to be fitted, and they have none)."""
+
+
 @dataclass
 class Calibration:
     """Result of a (re)fit: base constants ``theta`` (log multipliers), the terms with their
     fitted parameters, the fit, ``chi2`` (sum of squared whitened residuals of the fitted
     impacts, priors excluded), ``prior`` (the prior's part of the cost, x2), ``jac`` the data
     rows of the Jacobian of the whitened residual in the base constants then the terms'
-    parameters, ``n_params``."""
+    parameters, ``n_params``, ``nfev`` the predictions it took, ``stop`` how the solver ended
+    (giving up is not convergence)."""
 
     theta: np.ndarray
     terms: list[Term]
@@ -36,6 +57,7 @@ class Calibration:
     jac: np.ndarray
     n_params: int
     nfev: int
+    stop: Stop
     cache: dict = field(default_factory=dict)
 
     @property
@@ -103,7 +125,8 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
     if len(x_start) == 0:
         fit = fw.fit(theta0, terms)
         r = fw.whitened(fit, fitted)
-        return Calibration(theta0, terms, fit, float(r @ r), 0.0, np.zeros((len(r), 0)), 0, 1)
+        return Calibration(theta0, terms, fit, chi2=float(r @ r), prior=0.0, jac=np.zeros((len(r), 0)),
+                           n_params=0, nfev=1, stop=Stop.NOTHING_TO_FIT)
     x_scale = np.concatenate(([sd] if free_base else []) + [(t.placement.hi - t.placement.lo) / 10
                                                              for t in terms])
     J0 = None
@@ -118,7 +141,8 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
     n_data = len(r)
     jac = res.jac[:n_data] if free_base else np.zeros((n_data, 0))
     prior = float(np.sum((th / sd) ** 2)) if free_base else 0.0
-    return Calibration(th, ts, fit, float(r @ r), prior, np.asarray(jac), len(res.x), res.nfev)
+    return Calibration(th, ts, fit, chi2=float(r @ r), prior=prior, jac=np.asarray(jac),
+                       n_params=len(res.x), nfev=res.nfev, stop=res.stop)
 
 
 def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.35,
@@ -202,15 +226,20 @@ def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None, terms: lis
 
 
 @dataclass
-class _Result:
+class LMResult:
+    """Where :func:`levenberg_marquardt` ended: ``x``, the Jacobian ``jac`` there (Broyden-updated
+    unless just differenced), ``nfev`` evaluations of ``fun`` and how it stopped."""
+
     x: np.ndarray
     jac: np.ndarray
     nfev: int
+    stop: Stop
 
 
-def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray, *,
-                        max_iter: int = 60, J0: np.ndarray | None = None, rel_step: float = 1e-3,
-                        tol: float = 1e-6, max_step: float = 3.0) -> _Result:
+def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: np.ndarray,
+                        hi: np.ndarray, scale: np.ndarray, *, max_iter: int = 60,
+                        J0: np.ndarray | None = None, rel_step: float = 1e-3, tol: float = 1e-6,
+                        max_step: float = 3.0) -> LMResult:
     """Bounded Levenberg-Marquardt on ``sum(fun(x)^2)`` with Broyden updates of the Jacobian.
 
     The Jacobian is differenced once (forward, step ``rel_step * scale``; columns given in
@@ -221,52 +250,25 @@ def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sca
     thus costs one prediction instead of one per parameter; convergence (relative decrease
     below ``tol``) is only accepted on a freshly differenced Jacobian, so a fit and its refit
     with an effect end equally converged and their chi-square difference is the effect's.
+    Six failed steps in a row (or the damping beyond 1e8) end it too, recorded as giving up
+    (``LMResult.stop``), not as convergence.
     """
+    def difference(J: np.ndarray | None, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
+        return _difference(fun, J, x, r, lo, hi, rel_step * scale)
+
     x = np.asarray(x0, float).copy()
     r = fun(x)
-    nfev = 1
-
-    def difference(J: np.ndarray | None, x: np.ndarray, r: np.ndarray) -> np.ndarray:
-        nonlocal nfev
-        out = np.zeros((len(r), len(x))) if J is None else J.copy()
-        for i in range(len(x)):
-            if J is not None and np.any(J[:, i] != 0):
-                continue
-            h = rel_step * scale[i]
-            xi = x.copy()
-            for sign in (1, -1):
-                xi[i] = x[i] + sign * h
-                if not lo[i] <= xi[i] <= hi[i]:
-                    continue
-                try:
-                    out[:, i] = (fun(xi) - r) / (xi[i] - x[i])
-                    break
-                except (ValueError, np.linalg.LinAlgError):
-                    continue
-            nfev += 1
-        return out
-
-    J = difference(J0, x, r)
+    J, n = difference(J0, x, r)
+    nfev = 1 + n
     fresh = J0 is None
     cost = float(r @ r)
     mu = 1e-3
     fails = 0
     for _ in range(max_iter):
-        Js = J * scale[None, :]
-        A = Js.T @ Js
-        g = Js.T @ r
-        d = np.sqrt(np.maximum(np.diag(A), 1e-30))
-        step = -np.linalg.solve(A + mu * np.diag(d**2) + 1e-12 * np.eye(len(x)), g) * scale
-        # a trust region: no step longer than ``max_step`` scales (a Gauss-Newton step across a
-        # beat's phase or a mode's crossing lands where the linearisation means nothing, and
-        # from there back off only slowly)
-        n_step = float(np.linalg.norm(step / scale))
-        if n_step > max_step:
-            step *= max_step / n_step
-        x_new = np.clip(x + step, lo, hi)
+        x_new = _trial_point(J, r, x, scale, mu, lo, hi, max_step)
         step = x_new - x
         if not np.any(step):
-            break
+            return LMResult(x, J, nfev, Stop.AT_BOUNDS)
         try:
             r_new = fun(x_new)
         except (ValueError, np.linalg.LinAlgError):   # e.g. a mode turned overdamped
@@ -284,15 +286,60 @@ def levenberg_marquardt(fun, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, sca
             fails = 0
             if small:
                 if fresh:
-                    break             # converged on a true Jacobian
-                J, fresh = difference(None, x, r), True
+                    return LMResult(x, J, nfev, Stop.CONVERGED)   # on a true Jacobian
+                (J, n), fresh = difference(None, x, r), True
+                nfev += n
                 continue
             fresh = False
         else:
             mu *= 4
             fails += 1
             if fails >= 2 and not fresh:
-                J, fresh, fails = difference(None, x, r), True, 0
+                (J, n), fresh, fails = difference(None, x, r), True, 0
+                nfev += n
             elif fails >= 6 or mu > 1e8:
+                return LMResult(x, J, nfev, Stop.GAVE_UP)
+    return LMResult(x, J, nfev, Stop.ITERATION_LIMIT)
+
+
+def _difference(fun: Callable[[np.ndarray], np.ndarray], J: np.ndarray | None, x: np.ndarray,
+                r: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                h: np.ndarray) -> tuple[np.ndarray, int]:
+    """The Jacobian of ``fun`` at ``x`` (where it is ``r``) by forward differences of step ``h``
+    (backward where the forward one leaves the bounds ``lo``, ``hi`` or fails), keeping the
+    non-zero columns of ``J``; and the number of columns differenced."""
+    out = np.zeros((len(r), len(x))) if J is None else J.copy()
+    n = 0
+    for i in range(len(x)):
+        if J is not None and np.any(J[:, i] != 0):
+            continue
+        xi = x.copy()
+        for sign in (1, -1):
+            xi[i] = x[i] + sign * h[i]
+            if not lo[i] <= xi[i] <= hi[i]:
+                continue
+            try:
+                out[:, i] = (fun(xi) - r) / (xi[i] - x[i])
                 break
-    return _Result(x, J, nfev)
+            except (ValueError, np.linalg.LinAlgError):
+                continue
+        n += 1
+    return out, n
+
+
+def _trial_point(J: np.ndarray, r: np.ndarray, x: np.ndarray, scale: np.ndarray, mu: float,
+                 lo: np.ndarray, hi: np.ndarray, max_step: float) -> np.ndarray:
+    """The damped Gauss-Newton step from ``x`` (damping ``mu`` on the scaled normal equations'
+    diagonal), at most ``max_step`` scales long, clipped to the bounds."""
+    Js = J * scale[None, :]
+    A = Js.T @ Js
+    g = Js.T @ r
+    d = np.sqrt(np.maximum(np.diag(A), 1e-30))
+    step = -np.linalg.solve(A + mu * np.diag(d**2) + 1e-12 * np.eye(len(x)), g) * scale
+    # a trust region: no step longer than ``max_step`` scales (a Gauss-Newton step across a
+    # beat's phase or a mode's crossing lands where the linearisation means nothing, and
+    # from there back off only slowly)
+    n_step = float(np.linalg.norm(step / scale))
+    if n_step > max_step:
+        step *= max_step / n_step
+    return np.clip(x + step, lo, hi)

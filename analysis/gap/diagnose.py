@@ -35,14 +35,15 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ramdaq.analysis.gap.calibrate import Calibration, calibrate, prefit_frequencies
+from ramdaq.analysis.gap.calibrate import Calibration, Stop, calibrate, prefit_frequencies
 from ramdaq.analysis.gap.effects import EFFECTS
 from ramdaq.analysis.gap.evidence import (
+    Bands,
     GapMap,
     ScoreBasis,
     Signature,
@@ -95,9 +96,14 @@ class Settings:
     seed: int = 0
 
 
-@dataclass
+@dataclass(frozen=True)
 class Candidate:
-    """An explanation: one effect or two, refitted, with what it does to the gap."""
+    """An explanation: one effect or two, refitted, with what it does to the gap: its evidence
+    ``dbic`` against the calibrated model, the gap (energy beyond the noise expectation, in
+    noise variances) left on the fitted and held-out impacts, the share of the calibrated
+    model's gap it closes there (with a 95 % bootstrap interval on the held-out share), where it
+    acts (:func:`~ramdaq.analysis.gap.verdict.location`), its maps and modes. The named one is
+    measured against the noise floor of its own residual (:func:`_against_its_own_noise`)."""
 
     terms: list[Term]
     cal: Calibration
@@ -240,35 +246,14 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     effect in constants far from where the re-tuning leaves them: a blow's duration, a damping),
     and the best of those is the start."""
     pl = sig.placement
-    fitted = np.flatnonzero(fw.td.fitted)
     retune = theta_pre is not None and sig.effect.retunes()
-    starts = [sig.x0, *pl.probes, pl.x0, *(pl.starts if pl.starts is not None else [])]
-    tried: list[tuple[float, Term, np.ndarray]] = []
-    for x in starts:
-        t = Term(sig.effect, pl, np.clip(x, pl.lo, pl.hi))
-        try:
-            th = prefit_frequencies(fw, theta_pre, [*others, t], max_nfev=24) if retune else base.theta
-            r = fw.whitened(fw.fit(th, list(others) + [t]), fitted)
-        except (ValueError, np.linalg.LinAlgError):
-            continue
-        tried.append((float(r @ r), t, th))
+    tried = _tried_starts(fw, base, sig, others, theta_pre if retune else None)
     if not tried:
         return Term(sig.effect, pl, pl.x0), base.theta
-    tried.sort(key=lambda c: c[0])
     if not retune or pl.starts is None:
         return tried[0][1], tried[0][2]
-    # the best starts, then the best of each other starting frequency: a re-tuned start's
-    # residual says little about the basin it lies in (a mode parked below the band re-tunes as
-    # well as one at the truth)
-    short = tried[:n_short // 2]
-    freqs = {round(float(c[1].x[0]), 6) for c in short}
-    for c in tried:
-        f0 = round(float(c[1].x[0]), 6)
-        if len(short) < n_short and f0 not in freqs:
-            freqs.add(f0)
-            short.append(c)
     best = None
-    for _, t, th in short:
+    for _, t, th in _shortlist(tried, n_short):
         try:
             cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jac)
         except (ValueError, np.linalg.LinAlgError):
@@ -278,6 +263,43 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     if best is None:
         return tried[0][1], tried[0][2]
     return best.terms[-1], best.theta
+
+
+def _tried_starts(fw: Forward, base: Calibration, sig: Signature, others: list[Term],
+                  theta_pre: np.ndarray | None) -> list[tuple[float, Term, np.ndarray]]:
+    """Each start of :func:`_start` as (chi-square of the fitted impacts, term, base constants),
+    best first; with ``theta_pre`` the constants re-tuned to the spectrum peaks with the term on,
+    else the calibrated ones. Starts whose prediction fails are left out."""
+    pl = sig.placement
+    fitted = np.flatnonzero(fw.td.fitted)
+    starts = [sig.x0, *pl.probes, pl.x0, *(pl.starts if pl.starts is not None else [])]
+    tried: list[tuple[float, Term, np.ndarray]] = []
+    for x in starts:
+        t = Term(sig.effect, pl, np.clip(x, pl.lo, pl.hi))
+        try:
+            th = (prefit_frequencies(fw, theta_pre, [*others, t], max_nfev=24) if theta_pre is not None
+                  else base.theta)
+            r = fw.whitened(fw.fit(th, list(others) + [t]), fitted)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        tried.append((float(r @ r), t, th))
+    tried.sort(key=lambda c: c[0])
+    return tried
+
+
+def _shortlist(tried: list[tuple[float, Term, np.ndarray]],
+               n_short: int) -> list[tuple[float, Term, np.ndarray]]:
+    """The best ``n_short // 2`` starts, then the best of each other starting frequency until
+    there are ``n_short``: a re-tuned start's residual says little about the basin it lies in
+    (a mode parked below the band re-tunes as well as one at the truth)."""
+    short = tried[:n_short // 2]
+    freqs = {round(float(c[1].x[0]), 6) for c in short}
+    for c in tried:
+        f0 = round(float(c[1].x[0]), 6)
+        if len(short) < n_short and f0 not in freqs:
+            freqs.add(f0)
+            short.append(c)
+    return short
 
 
 N_REREAD = 3
@@ -294,12 +316,97 @@ def _carry(t: Term, pl: Placement) -> np.ndarray:
     return np.clip(np.array(x, float), pl.lo, pl.hi)
 
 
+def _by_z(sigs: Iterable[Signature]) -> list[Signature]:
+    """Signatures strongest first (NaN scores last)."""
+    return sorted(sigs, key=lambda s: -s.z if not np.isnan(s.z) else np.inf)
+
+
+@dataclass
+class _Search:
+    """What the search for an explanation shares once the model is calibrated: the weighted
+    forward model, the settings, the spectrum prefit's constants ``theta_pre``, the calibrated
+    ``base``, its replicate residuals and their cell energies (``rep_cells``) and inflation
+    (``kappa_cells``) on ``bands``, the calibrated model's maps of the fitted and held-out
+    impacts, the effective number of data ``n_eff`` (BIC's ln N), the bootstrap's generator, and
+    where progress and notes go."""
+
+    fw: Forward
+    settings: Settings
+    theta_pre: np.ndarray
+    base: Calibration
+    reps: np.ndarray
+    bands: Bands
+    rep_cells: np.ndarray
+    kappa_cells: np.ndarray
+    m_fit: GapMap
+    m_held: GapMap | None
+    n_eff: int
+    rng: np.random.Generator
+    say: Callable[[str], None]
+    notes: list[str]
+
+    @property
+    def td(self) -> TrialData:
+        return self.fw.td
+
+    def chi2(self, cal: Calibration, keep: np.ndarray | None = None) -> float:
+        """The fitted impacts' chi-square of ``cal``, cell by cell deflated by the replicates'
+        own excess there; only the samples ``keep`` where given."""
+        resid = cal.fit.resid if keep is None else np.where(keep, cal.fit.resid, np.nan)
+        return cell_chi2(self.fw, resid, self.bands, self.td.fitted, self.kappa_cells)
+
+    def maps(self, resid: np.ndarray, rep_cells: np.ndarray) -> tuple[GapMap, GapMap | None]:
+        """The gap maps of ``resid`` on the fitted and (None if there are none) held-out impacts,
+        against replicates whose cell energies are ``rep_cells``."""
+        held = ~self.td.fitted
+        return (gap_map(self.fw, resid, rep_cells, self.bands, self.td.fitted),
+                gap_map(self.fw, resid, rep_cells, self.bands, held) if held.any() else None)
+
+
 def diagnose(td: TrialData, settings: Settings = Settings(),
              progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Diagnose one trial (see the module docstring)."""
     t_start = time.perf_counter()
     say = progress or (lambda s: None)
-    rng = np.random.default_rng(settings.seed)
+    fw, theta_pre, base, reps, bands, rep_cells = _calibrated(td, settings, say)
+    held = ~td.fitted
+    m_fit = gap_map(fw, base.fit.resid, rep_cells, bands, td.fitted)
+    m_held = gap_map(fw, base.fit.resid, rep_cells, bands, held) if held.any() else None
+    z_detect = detection_score(m_fit, m_held)
+    significant = z_detect > settings.z_gap
+    notes = _trial_notes(td)
+    basis = ScoreBasis(fw, base, reps)
+    search = _Search(fw=fw, settings=settings, theta_pre=theta_pre, base=base, reps=reps,
+                     bands=bands, rep_cells=rep_cells,
+                     kappa_cells=cell_inflation(fw, rep_cells, bands, td.fitted), m_fit=m_fit,
+                     m_held=m_held, n_eff=basis.r.size, rng=np.random.default_rng(settings.seed),
+                     say=say, notes=notes)
+    names = settings.effects or tuple(EFFECTS)
+    say(f"scoring {len(names)} candidate effects")
+    sigs = _by_z(signature_scores(fw, base, basis, EFFECTS[n]) for n in names)
+    cands = sorted(_candidates(search, sigs, significant), key=lambda c: c.dbic)
+    pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
+    best = next((c for c in cands if c.name == pick), None)
+    verdict = "no gap beyond noise" if not significant else ("explained" if best else "unexplained")
+    gap_fit, gap_held = m_fit.excess(), m_held.excess() if m_held else 0.0
+    if best is not None:
+        named, gap_fit, gap_held = _against_its_own_noise(search, best, gap_held)
+        cands = [named if c is best else c for c in cands]
+        best = named
+    notes += _solver_notes(base, best)
+    return Diagnosis(
+        verdict=verdict, best=best, candidates=cands, signatures=sigs, base=base, map_fit=m_fit,
+        map_held=m_held, gap_fit=gap_fit, gap_held=gap_held,
+        modes_before=modes_of(base, td.lowpass_hz), forward=fw,
+        seconds=time.perf_counter() - t_start, notes=notes, z_detect=z_detect, reps=reps)
+
+
+def _calibrated(td: TrialData, settings: Settings, say: Callable[[str], None]
+                ) -> tuple[Forward, np.ndarray, Calibration, np.ndarray, Bands, np.ndarray]:
+    """Step 1: the noise, the calibration and its replicates. Returns the forward model weighted
+    by what each gage x window tells beyond the model's form tolerance, the spectrum prefit's
+    constants, the calibration refitted under those weights, its replicate residuals
+    (n_rep, n_seg, n_g, n_s) m/s^2, the map's bands and the replicates' cell energies."""
     # noise first from the nominal model's residual, then everything is weighted by it
     sigma0 = np.full(td.n_gages, td.rig.daq.noise_m_s2_rms * math.sqrt(2 * td.lowpass_hz / td.fs_full_hz))
     fw0 = Forward(td, sigma0)
@@ -324,14 +431,13 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     # the whitened residual's Jacobian scales with the weights, sample by sample
     ratio = (fw.W / W_old)[td.fitted].ravel()
     base = calibrate(fw, theta0=base.theta, max_iter=settings.refit_iter, jac0=base.jac * ratio[:, None])
-    rep_cells = cell_energies(fw, reps, bands)
-    held = ~td.fitted
-    m_fit = gap_map(fw, base.fit.resid, rep_cells, bands, td.fitted)
-    m_held = gap_map(fw, base.fit.resid, rep_cells, bands, held) if held.any() else None
-    z_detect = detection_score(m_fit, m_held)
-    significant = z_detect > settings.z_gap
+    return fw, theta_pre, base, reps, bands, cell_energies(fw, reps, bands)
+
+
+def _trial_notes(td: TrialData) -> list[str]:
+    """What limits what the trial can show: nothing held out, events left out, few impacts."""
     notes = []
-    if not held.any():
+    if not (~td.fitted).any():
         notes.append("one impact only: nothing held out, closure on held-out impacts not measured")
     if td.dropped_onsets_s:
         notes.append("events too soon after the previous impact to compare, left out: "
@@ -340,134 +446,181 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         notes.append(f"only {int(td.fitted.sum())} impact(s) fitted: constants and effects are weakly "
                      "separated (a steady tone and a slow decay at its frequency look alike); six impacts "
                      "or more are advised")
-    basis = ScoreBasis(fw, base, reps)
-    kappa_cells = cell_inflation(fw, rep_cells, bands, td.fitted)
-    names = settings.effects or tuple(EFFECTS)
-    say(f"scoring {len(names)} candidate effects")
-    sigs = sorted((signature_scores(fw, base, basis, EFFECTS[n]) for n in names),
-                  key=lambda s: -s.z if not np.isnan(s.z) else np.inf)
-    n_eff = basis.r.size
-    cands: list[Candidate] = []
+    return notes
 
-    def consider(group: list[Signature]) -> None:
-        # a pair starts where its singles ended
-        done = {c.terms[0].effect.name: c for c in cands if len(c.terms) == 1}
-        starts = [done[s.effect.name] for s in group if s.effect.name in done]
-        ref = min(starts, key=lambda c: c.dbic).cal if starts else base
-        known = [c.terms[0] for c in starts]
-        # a single starts from the constants the data's spectrum gave, before the calibration
-        # hid what it cannot model in them (a tone becomes an undamped, detuned hull mode)
-        theta0 = ref.theta.copy() if starts else theta_pre.copy()
-        terms = []
-        for s in group:
-            if s.effect.name in done:
-                terms.append(done[s.effect.name].terms[0])
-                continue
-            t, th = _start(fw, ref, s, known, None if starts else theta_pre)
-            terms.append(t)
-            theta0 = theta0 if starts else th
-        say("refitting with " + " + ".join(t.effect.name for t in terms))
 
-        def refit(terms: list[Term], theta0: np.ndarray) -> Calibration:
-            # the term's own parameters first, constants held (a tone's frequency must be found
-            # to a fraction of a cycle over the trial before anything else can move), then all
-            if any(len(t.x) for t in terms if t.effect.name not in done):
-                terms = calibrate(fw, terms, theta0=theta0, free_base=False, max_iter=15).terms
-            return calibrate(fw, terms, theta0=theta0, max_iter=settings.refit_iter, jac0=base.jac)
-
-        try:
-            cal = refit(terms, theta0)
-            if not starts and cal.cost > base.cost:
-                # the re-tuned start led somewhere worse than the calibration itself: again
-                # from the calibrated constants, the term where its score test put it
-                s = group[0]
-                alt = refit([Term(s.effect, s.placement, np.clip(s.x0, s.placement.lo, s.placement.hi))],
-                            base.theta)
-                cal = min(cal, alt, key=lambda c: c.cost)
-            for _ in range(N_REREAD if not starts else 0):
-                # the placement read again with the refit's constants, refitted from there
-                pl = group[0].effect.placement_after(fw, cal)
-                if pl is None or pl.key == cal.terms[0].placement.key:
-                    break
-                alt = refit([Term(group[0].effect, pl, _carry(cal.terms[0], pl))], cal.theta)
-                if alt.cost >= cal.cost:
-                    break
-                cal = alt
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
-            return
-        k = sum(len(t.x) for t in terms)
-        # choosing where an effect sits among n placements costs ln n in evidence (2 ln n in BIC)
-        look = sum(2 * math.log(max(1, s.n_placements)) for s in group)
-        # the gain in chi-square, cell by cell deflated by the replicates' own excess there (a
-        # gain where the model's form tolerance already spreads the replicates counts little),
-        # on the samples both fits keep (a clipping term leaves some out)
-        keep = np.isfinite(cal.fit.resid)
-        gain = (cell_chi2(fw, np.where(keep, base.fit.resid, np.nan), bands, td.fitted, kappa_cells)
-                - cell_chi2(fw, cal.fit.resid, bands, td.fitted, kappa_cells) + base.prior - cal.prior)
-        dbic = -gain + k * math.log(n_eff) + look
-        # an effect read straight off the data (no template) counts by its detection score
-        dbic -= sum(s.z ** 2 for s in group if s.k == 0 and np.isfinite(s.z))
-        a_fit = gap_map(fw, cal.fit.resid, rep_cells, bands, td.fitted)
-        a_held = gap_map(fw, cal.fit.resid, rep_cells, bands, held) if held.any() else None
-        c_fit, _ = closure(m_fit, a_fit, rng, m_held)
-        c_held, ci = closure(m_held, a_held, rng, m_fit) if a_held else (float("nan"), (np.nan, np.nan))
-        loc = location([m_fit] + ([m_held] if m_held else []), [a_fit] + ([a_held] if a_held else []),
-                        cal.terms)
-        cands.append(Candidate(cal.terms, cal, dbic, a_fit.excess(m_fit.gap_cells()),
-                               a_held.excess(m_held.gap_cells()) if a_held else 0.0,
-                               c_fit, c_held, ci, loc, a_fit, a_held, modes_of(cal, td.lowpass_hz)))
-
-    live = [s for s in sigs if s.placement is not None and s.z > -np.inf]
-    for s in live[: settings.top_k]:
-        consider([s])
-    for s in live[settings.top_k: settings.top_k + settings.top_k_more]:
-        if not significant or max(map(closed_share, (c.record() for c in cands)),
-                                  default=0.0) >= settings.close_enough:
-            break
-        consider([s])
-    singles = sorted(cands, key=lambda c: c.dbic)
-    if singles and len(live) >= 2:
-        # a second effect only if its signature stands out in what the best single leaves:
-        # the score test again, conditional on the first effect
-        c1 = singles[0]
-        first = next(s for s in live if s.effect.name == c1.name)
-        basis1 = ScoreBasis(fw, c1.cal, reps)
-        say(f"scoring a second effect on top of {c1.name}")
-        second = sorted((signature_scores(fw, c1.cal, basis1, s.effect) for s in live[: settings.top_k + 2]
-                         if s.effect.name != c1.name), key=lambda s: -s.z if not np.isnan(s.z) else np.inf)
-        if second and second[0].placement is not None and second[0].z > settings.z_pair:
-            consider([first, second[0]])
-    for c in cands:
-        if len(c.terms) == 2:
-            # what the second term adds to the single it grew from, deflated along that direction
-            first = next((x for x in cands if len(x.terms) == 1 and x.name == c.terms[0].effect.name), None)
-            if first is not None:
-                gain = (cell_chi2(fw, first.cal.fit.resid, bands, td.fitted, kappa_cells) + first.cal.prior
-                        - cell_chi2(fw, c.cal.fit.resid, bands, td.fitted, kappa_cells) - c.cal.prior)
-                c.dbic_marginal = -gain + len(c.terms[1].x) * math.log(n_eff)
-    cands.sort(key=lambda c: c.dbic)
-    pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
-    best = next((c for c in cands if c.name == pick), None)
-    verdict = "no gap beyond noise" if not significant else ("explained" if best else "unexplained")
-    gap_fit, gap_held = m_fit.excess(), m_held.excess() if m_held else 0.0
+def _solver_notes(base: Calibration, best: Candidate | None) -> list[str]:
+    """The calibration's or the named explanation's solver gave up (:class:`Stop`): its
+    constants are where it stopped, not a minimum shown to be one."""
+    fits = [("the calibration", base.stop)]
     if best is not None:
-        # the noise floor again, from the explained residual: a tone or a drift left in the
-        # pre windows would otherwise count as noise and flatter the explanation
-        noise2 = noise_model(fw, best.cal.fit.resid)
-        reps2 = replicate_residuals(fw, best.cal, noise2, settings.n_rep, seed=settings.seed + 1,
-                                    form_tol=settings.form_tol)
-        cells2 = cell_energies(fw, reps2, bands)
-        b_fit = gap_map(fw, base.fit.resid, cells2, bands, td.fitted)
-        best.map_fit = gap_map(fw, best.cal.fit.resid, cells2, bands, td.fitted)
-        b_held = gap_map(fw, base.fit.resid, cells2, bands, held) if held.any() else None
-        best.closed_fit, _ = closure(b_fit, best.map_fit, rng, b_held)
-        best.gap_fit, gap_fit = best.map_fit.excess(b_fit.gap_cells()), b_fit.excess()
-        if b_held is not None:
-            best.map_held = gap_map(fw, best.cal.fit.resid, cells2, bands, held)
-            best.closed_held, best.closed_held_ci = closure(b_held, best.map_held, rng, b_fit)
-            best.gap_held, gap_held = best.map_held.excess(b_held.gap_cells()), b_held.excess()
-        best.reps, best.cal_forward = reps2, fw
-    return Diagnosis(verdict, best, cands, sigs, base, m_fit, m_held, gap_fit, gap_held,
-                     modes_of(base, td.lowpass_hz), fw, time.perf_counter() - t_start, notes, z_detect,
-                     reps)
+        fits.append((f"the refit with {best.name}", best.cal.stop))
+    return [f"{what} gave up before converging (no step lowered the cost): its constants are "
+            "where the solver stopped" for what, stop in fits if stop is Stop.GAVE_UP]
+
+
+def _candidates(search: _Search, sigs: list[Signature], significant: bool) -> list[Candidate]:
+    """Step 3: the ``top_k`` strongest signatures refitted, up to ``top_k_more`` more while none
+    closes ``close_enough`` of a significant gap, then the best single with the second effect
+    that stands out on top of it (:func:`_second_effect`). In the order refitted."""
+    st = search.settings
+    live = [s for s in sigs if s.placement is not None and s.z > -np.inf]
+    cands: list[Candidate] = []
+    for k, s in enumerate(live[: st.top_k + st.top_k_more]):
+        if k >= st.top_k and (not significant or max(map(closed_share, (c.record() for c in cands)),
+                                                     default=0.0) >= st.close_enough):
+            break
+        cands += _consider(search, cands, [s])
+    pair = _second_effect(search, cands, live)
+    if pair is not None:
+        cands += _consider(search, cands, pair)
+    return cands
+
+
+def _second_effect(search: _Search, cands: list[Candidate],
+                   live: list[Signature]) -> list[Signature] | None:
+    """[the best single's signature, the second's] when a second effect's signature stands out
+    (``z_pair``) in what the best single leaves: the score test again, conditional on the first
+    effect, over the ``top_k + 2`` strongest; else None."""
+    singles = sorted(cands, key=lambda c: c.dbic)
+    if not singles or len(live) < 2:
+        return None
+    c1 = singles[0]
+    first = next(s for s in live if s.effect.name == c1.name)
+    basis1 = ScoreBasis(search.fw, c1.cal, search.reps)
+    search.say(f"scoring a second effect on top of {c1.name}")
+    second = _by_z(signature_scores(search.fw, c1.cal, basis1, s.effect)
+                   for s in live[: search.settings.top_k + 2] if s.effect.name != c1.name)
+    if second and second[0].placement is not None and second[0].z > search.settings.z_pair:
+        return [first, second[0]]
+    return None
+
+
+def _consider(search: _Search, cands: list[Candidate], group: list[Signature]) -> list[Candidate]:
+    """The candidate of one signature, or of a pair whose first effect is among ``cands``
+    already (it starts where that single ended): started, refitted and judged. Empty, with a
+    note, when the refit fails."""
+    done = {c.terms[0].effect.name: c for c in cands if len(c.terms) == 1}
+    starts = [done[s.effect.name] for s in group if s.effect.name in done]
+    terms, theta0 = _group_start(search, group, done, starts)
+    search.say("refitting with " + " + ".join(t.effect.name for t in terms))
+    new = [t.effect.name not in done for t in terms]
+    try:
+        cal = _refit(search, terms, theta0, new)
+        if not starts:
+            cal = _refit_single(search, group[0], cal)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        search.notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
+        return []
+    first = done.get(cal.terms[0].effect.name) if len(cal.terms) == 2 else None
+    # parameters counted on the terms as they started: a placement read again after the refit
+    # (a double hit's) may fit another number of delays, which this count does not follow
+    return [_judged(search, group, cal, sum(len(t.x) for t in terms), first)]
+
+
+def _group_start(search: _Search, group: list[Signature], done: dict[str, Candidate],
+                 starts: list[Candidate]) -> tuple[list[Term], np.ndarray]:
+    """The terms to refit and the base constants to start from. A single starts from the
+    constants the data's spectrum gave, before the calibration hid what it cannot model in them
+    (a tone becomes an undamped, detuned hull mode), re-tuned with its term on; a pair from its
+    refitted single's constants and term."""
+    ref = min(starts, key=lambda c: c.dbic).cal if starts else search.base
+    known = [c.terms[0] for c in starts]
+    theta0 = ref.theta.copy() if starts else search.theta_pre.copy()
+    terms = []
+    for s in group:
+        if s.effect.name in done:
+            terms.append(done[s.effect.name].terms[0])
+            continue
+        t, th = _start(search.fw, ref, s, known, None if starts else search.theta_pre)
+        terms.append(t)
+        theta0 = theta0 if starts else th
+    return terms, theta0
+
+
+def _refit(search: _Search, terms: list[Term], theta0: np.ndarray, new: list[bool]) -> Calibration:
+    """The terms' own parameters first, the constants held (a tone's frequency must be found to
+    a fraction of a cycle over the trial before anything else can move), then all. ``new``: per
+    term, whether it is not refitted already (only those are fitted alone first)."""
+    if any(len(t.x) for t, n in zip(terms, new, strict=True) if n):
+        terms = calibrate(search.fw, terms, theta0=theta0, free_base=False, max_iter=15).terms
+    return calibrate(search.fw, terms, theta0=theta0, max_iter=search.settings.refit_iter,
+                     jac0=search.base.jac)
+
+
+def _refit_single(search: _Search, sig: Signature, cal: Calibration) -> Calibration:
+    """A single effect's refit made good: again from the calibrated constants (the term where
+    its score test put it) when the re-tuned start led somewhere worse than the calibration
+    itself; then its placement read again with the refit's constants and refitted from there,
+    up to :data:`N_REREAD` times while that improves."""
+    if cal.cost > search.base.cost:
+        pl = sig.placement
+        alt = _refit(search, [Term(sig.effect, pl, np.clip(sig.x0, pl.lo, pl.hi))],
+                     search.base.theta, [True])
+        cal = min(cal, alt, key=lambda c: c.cost)
+    for _ in range(N_REREAD):
+        pl = sig.effect.placement_after(search.fw, cal)
+        if pl is None or pl.key == cal.terms[0].placement.key:
+            break
+        alt = _refit(search, [Term(sig.effect, pl, _carry(cal.terms[0], pl))], cal.theta, [True])
+        if alt.cost >= cal.cost:
+            break
+        cal = alt
+    return cal
+
+
+def _judged(search: _Search, group: list[Signature], cal: Calibration, k: int,
+            first: Candidate | None) -> Candidate:
+    """A refit as a candidate: its evidence (dBIC, charged for ``k`` parameters), the gap maps
+    after it, how much of the gap it closes and where. ``first``: for a pair, the single it grew
+    from, against which the second term's own evidence (``dbic_marginal``) is measured."""
+    base = search.base
+    # choosing where an effect sits among n placements costs ln n in evidence (2 ln n in BIC)
+    look = sum(2 * math.log(max(1, s.n_placements)) for s in group)
+    # the gain in chi-square, cell by cell deflated by the replicates' own excess there (a
+    # gain where the model's form tolerance already spreads the replicates counts little),
+    # on the samples both fits keep (a clipping term leaves some out)
+    gain = (search.chi2(base, np.isfinite(cal.fit.resid)) - search.chi2(cal) + base.prior - cal.prior)
+    dbic = -gain + k * math.log(search.n_eff) + look
+    # an effect read straight off the data (no template) counts by its detection score
+    dbic -= sum(s.z ** 2 for s in group if s.k == 0 and np.isfinite(s.z))
+    a_fit, a_held = search.maps(cal.fit.resid, search.rep_cells)
+    m_fit, m_held = search.m_fit, search.m_held
+    c_fit, _ = closure(m_fit, a_fit, search.rng, m_held)
+    c_held, ci = closure(m_held, a_held, search.rng, m_fit) if a_held else (float("nan"), (np.nan, np.nan))
+    loc = location([m_fit] + ([m_held] if m_held else []), [a_fit] + ([a_held] if a_held else []),
+                   cal.terms)
+    marginal = None
+    if first is not None:
+        # what the second term adds to the single it grew from, deflated along that direction
+        gain2 = search.chi2(first.cal) + first.cal.prior - search.chi2(cal) - cal.prior
+        marginal = -gain2 + len(cal.terms[1].x) * math.log(search.n_eff)
+    return Candidate(
+        terms=cal.terms, cal=cal, dbic=dbic, gap_fit=a_fit.excess(m_fit.gap_cells()),
+        gap_held=a_held.excess(m_held.gap_cells()) if a_held else 0.0, closed_fit=c_fit,
+        closed_held=c_held, closed_held_ci=ci, location=loc, map_fit=a_fit, map_held=a_held,
+        modes_after=modes_of(cal, search.td.lowpass_hz), dbic_marginal=marginal)
+
+
+def _against_its_own_noise(search: _Search, best: Candidate,
+                           gap_held: float) -> tuple[Candidate, float, float]:
+    """The named explanation judged against the noise floor of its own residual: a tone or a
+    drift left in the pre windows would otherwise count as noise and flatter it. Returns the
+    candidate with its maps, closures and gaps so measured (its replicates attached, for its
+    features), and the calibrated model's gap on the fitted and held-out impacts against the
+    same floor (``gap_held`` as given when nothing is held out)."""
+    fw, st = search.fw, search.settings
+    noise2 = noise_model(fw, best.cal.fit.resid)
+    reps2 = replicate_residuals(fw, best.cal, noise2, st.n_rep, seed=st.seed + 1, form_tol=st.form_tol)
+    cells2 = cell_energies(fw, reps2, search.bands)
+    b_fit, b_held = search.maps(search.base.fit.resid, cells2)
+    a_fit, a_held = search.maps(best.cal.fit.resid, cells2)
+    closed_fit, _ = closure(b_fit, a_fit, search.rng, b_held)
+    named = replace(best, map_fit=a_fit, closed_fit=closed_fit, gap_fit=a_fit.excess(b_fit.gap_cells()),
+                    reps=reps2, cal_forward=fw)
+    if b_held is None:
+        return named, b_fit.excess(), gap_held
+    closed_held, ci = closure(b_held, a_held, search.rng, b_fit)
+    named = replace(named, map_held=a_held, closed_held=closed_held, closed_held_ci=ci,
+                    gap_held=a_held.excess(b_held.gap_cells()))
+    return named, b_fit.excess(), b_held.excess()

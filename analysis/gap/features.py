@@ -34,6 +34,7 @@ from ramdaq.analysis.gap.calibrate import Calibration
 from ramdaq.analysis.gap.effects.base import compared_modes
 from ramdaq.analysis.gap.evidence import Bands
 from ramdaq.analysis.gap.forward import Forward
+from ramdaq.analysis.gap.trialdata import TrialData
 
 DECAY_WINDOWS = ("early", "late")
 FEATURES = {
@@ -378,14 +379,7 @@ def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Ba
     # the trial, the model itself, and each replicate: (1 + 1 + n_rep, n_seg, n_g, n_s)
     signals = np.concatenate([(pred + resid)[None], pred[None], pred[None] + resid_reps])
     signals = np.where(fw.mask[None], signals, np.nan)
-    gages = td.rig.gages_by_channel()
-    by_num = {g.number: g for g in gages}
-    rig_gages = [by_num[n] for n in td.gage_numbers]
-    bodies = []
-    for body in ("rudder", "hull"):
-        rows = np.array([i for i, g in enumerate(rig_gages) if g.body == body])
-        if rows.size and (P := rigid_projector(rig_gages, rows)) is not None:
-            bodies.append((rows, P))
+    bodies = _rigid_bodies(td)
     shape = (td.n_gages, len(idx), len(DECAY_WINDOWS))
     value = {k: np.full(shape, np.nan) for k in FEATURES}
     expected = {k: np.full(shape, np.nan) for k in FEATURES}
@@ -394,21 +388,9 @@ def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Ba
     mac_z = np.full_like(mac_v, np.nan)
     nulls: list[tuple[np.ndarray, bool]] = []
     for w, name in enumerate(DECAY_WINDOWS):
-        sl = getattr(td.windows, name)
-        xs = signals[..., sl]
-        T = (xs.shape[-1] - 1) / td.fs_hz
-        # each window's amplitudes are read from its own start
-        c, d, e = decay_amplitudes(xs, td.fs_hz, lam, lam_o)
-        feats = decay_features(c, d, e, lam, T)                          # (2 + n_rep, n_g, m)
-        spread = np.sqrt(_nanmean(np.abs(c[2:] - c[1][None]) ** 2, axis=(0, 1)))   # (n_g, m)
-        seen = feats["amp"][1] > MIN_SNR * spread
-        f0, d0 = lam.imag / (2 * math.pi), -2 * math.pi * lam.real / lam.imag
-        with np.errstate(divide="ignore", invalid="ignore"):
-            per = {"frequency": feats["f_hz"] / f0 - 1, "decrement": feats["delta"] / d0 - 1,
-                   "scale": feats["amp"] / feats["amp"][1], "envelope": feats["curv"],
-                   "rigid": rigid_share(c, bodies)}
+        per, m_all = _window_features(signals[..., getattr(td.windows, name)], td.fs_hz, lam, lam_o,
+                                      bodies)
         for k, v in per.items():
-            v = np.where(seen, v, np.nan)                # unseen cells stay NaN from here on
             # a ratio is judged in log: its spread is relative
             judged = np.log(v) if k == "scale" else v
             zz, med = robust_z(judged[0], judged[2:])
@@ -416,9 +398,6 @@ def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Ba
             value[k][..., w] = v[0]
             expected[k][..., w] = np.exp(med) if k == "scale" else med
             z[k][..., w] = zz
-        # each mode's shape over all gages (amplitude-weighted, as MAC is), trial and replicates
-        # against the model
-        m_all = _nanmean(mac(c[1][None], c), axis=1)                    # (2 + n_rep, m)
         mac_v[:, w] = m_all[0]
         zz, _ = robust_z(-m_all[0], -m_all[2:])
         mac_z[:, w] = zz
@@ -426,15 +405,61 @@ def feature_map(fw: Forward, cal: Calibration, resid_reps: np.ndarray, bands: Ba
     pre = td.windows.pre
     n_pre = len(range(*pre.indices(td.n_s)))
     if n_pre >= 8:
-        A, F = line_spectrum(np.concatenate([resid[None], resid_reps])[..., pre], td.fs_hz, bands.edges_hz)
-        with np.errstate(divide="ignore"):
-            logA = np.log(A)                                     # an amplitude's spread is relative
-        line_z, _ = robust_z(logA[0], logA[1:])
-        line_amp, line_hz = A[0], F[0]
-        nulls.append((logA[1:], False))
+        line_amp, line_hz, line_z, null = _pre_lines(resid, resid_reps, pre, td.fs_hz, bands)
+        nulls.append(null)
     else:
         line_amp = line_hz = line_z = np.full((td.n_gages, len(bands.labels)), np.nan)
     f_all = ms.lam.imag[~ms.exp_only] / (2 * math.pi)
     return FeatureMap(td.gage_numbers, lam.imag / (2 * math.pi), value, expected, z, mac_v, mac_z,
                       bands, line_amp, line_hz, line_z, family_level(nulls), np.sort(f_all[f_all > 0]),
                       n_pre / td.fs_hz)
+
+
+def _rigid_bodies(td: TrialData) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(rows, rigid-body projector) of the rudder's and the hull's gages, where their layout
+    determines a rigid motion (:func:`rigid_projector`)."""
+    by_num = {g.number: g for g in td.rig.gages_by_channel()}
+    rig_gages = [by_num[n] for n in td.gage_numbers]
+    bodies = []
+    for body in ("rudder", "hull"):
+        rows = np.array([i for i, g in enumerate(rig_gages) if g.body == body])
+        if rows.size and (P := rigid_projector(rig_gages, rows)) is not None:
+            bodies.append((rows, P))
+    return bodies
+
+
+def _window_features(xs: np.ndarray, fs_hz: float, lam: np.ndarray, lam_o: np.ndarray,
+                     bodies: list[tuple[np.ndarray, np.ndarray]]
+                     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """One decay window of the trial, the model and each replicate (``xs`` (2 + n_rep, n_seg,
+    n_g, n) m/s^2): each of :data:`FEATURES` per signal x gage x compared mode (poles ``lam``,
+    the other modes ``lam_o``), NaN where the model's mode does not stand ``MIN_SNR`` times above
+    the replicates' spread; and each mode's shape over all gages against the model's
+    (amplitude-weighted, as MAC is), (2 + n_rep, m)."""
+    T = (xs.shape[-1] - 1) / fs_hz
+    # each window's amplitudes are read from its own start
+    c, d, e = decay_amplitudes(xs, fs_hz, lam, lam_o)
+    feats = decay_features(c, d, e, lam, T)                          # (2 + n_rep, n_g, m)
+    spread = np.sqrt(_nanmean(np.abs(c[2:] - c[1][None]) ** 2, axis=(0, 1)))   # (n_g, m)
+    seen = feats["amp"][1] > MIN_SNR * spread
+    f0, d0 = lam.imag / (2 * math.pi), -2 * math.pi * lam.real / lam.imag
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = {"frequency": feats["f_hz"] / f0 - 1, "decrement": feats["delta"] / d0 - 1,
+               "scale": feats["amp"] / feats["amp"][1], "envelope": feats["curv"],
+               "rigid": rigid_share(c, bodies)}
+    # unseen cells stay NaN from here on
+    per = {k: np.where(seen, v, np.nan) for k, v in per.items()}
+    return per, _nanmean(mac(c[1][None], c), axis=1)
+
+
+def _pre_lines(resid: np.ndarray, resid_reps: np.ndarray, pre: slice, fs_hz: float,
+               bands: Bands) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, bool]]:
+    """The lines before the blows (:func:`line_spectrum` of the pre windows) of the trial's
+    residual against its replicates' (``resid_reps``): per gage x band the trial's line
+    amplitude (m/s^2), frequency (Hz) and z; and the replicates' log amplitudes as a null of
+    :func:`family_level` (one-sided)."""
+    A, F = line_spectrum(np.concatenate([resid[None], resid_reps])[..., pre], fs_hz, bands.edges_hz)
+    with np.errstate(divide="ignore"):
+        logA = np.log(A)                                     # an amplitude's spread is relative
+    line_z, _ = robust_z(logA[0], logA[1:])
+    return A[0], F[0], line_z, (logA[1:], False)

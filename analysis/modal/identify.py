@@ -55,6 +55,8 @@ must run with the same setting to give identical digits (``docs/estimators.md``,
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg, stats
@@ -177,22 +179,8 @@ def identify_modes(
     ModeTable
         Modes sorted by frequency; empty when nothing is significant.
     """
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    if X.ndim != 2:
-        raise ValueError(f"x must have shape (n_channels, n_samples), got {X.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError("x contains non-finite samples")
-    if method not in _STARTS:
-        raise ValueError(f"method ({method!r}) must be one of {sorted(_STARTS)}")
-    if fs_hz <= 0:
-        raise ValueError(f"fs_hz ({fs_hz}) must be positive")
+    X = _checked(x, fs_hz, n_modes=n_modes, f_range_hz=f_range_hz, method=method)
     n_ch, n = X.shape
-    if n < 32:
-        raise ValueError(f"n_samples ({n}) must be at least 32")
-    if n_modes is not None and n_modes < 1:
-        raise ValueError(f"n_modes ({n_modes}) must be positive or None")
-    if f_range_hz is not None and not 0 <= f_range_hz[0] < f_range_hz[1]:
-        raise ValueError(f"f_range_hz ({f_range_hz}) must be (lo, hi) with 0 <= lo < hi")
     active = np.ptp(X, axis=1) > 0
     Xa = X[active]
     info: dict = {"active_channels": np.flatnonzero(active)}
@@ -205,9 +193,67 @@ def identify_modes(
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
 
-    # NLS data: decimate only when the record is too large.
+    Y, t, d_nls, taps, band_hi = _nls_data(Xa, fs_hz, band_hi, f_range_hz, max_samples)
+    fs_nls = fs_hz / d_nls
+    duration = t[-1] - t[0] + 1.0 / fs_nls
+    f_lo = 1.0 / duration
+    f_lim = (0.5 * f_lo, 0.49 * fs_nls)
+    sig = floor_noise(estimate_noise_std(Y), Y)
+    w0 = 1.0 / sig
+    order = 2 * (max_modes if n_modes is None else n_modes) + 4
+
+    def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by weights ``w``."""
+        f_c, d_c = _candidates(Z, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
+        return _rank(Z, t, w, f_c, d_c, fit_offset)
+
+    fc, dc = ranked_candidates(Y, w0)
+    info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": int(fc.size)}
+
+    threshold = float(stats.chi2.isf(false_alarm / (2.0 * Y.shape[-1]), 2 * Y.shape[0]))
+    sel = ModeSelector(Y, t, fit_offset, threshold, zeta_max, f_lim, w0)
+    if n_modes is not None:
+        sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
+    else:
+        _select_order(sel, fc, dc, ranked_candidates, max_modes)
+    if sel.fit is not None:  # refit with weights from its own residual
+        sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
+        sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
+    info |= {"lr_threshold": threshold}
+    if sel.fit is None:
+        return _empty(n_ch, fs_hz, n, method, info | {"reason": "no significant mode"})
+    return _table(sel, X, active, fs_hz, d_nls, taps, f_range_hz, per_channel, method, info)
+
+
+def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,
+             f_range_hz: tuple[float, float] | None, method: str) -> np.ndarray:
+    """``x`` as (n_channels, n_samples) floats, the arguments of :func:`identify_modes` checked."""
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    if X.ndim != 2:
+        raise ValueError(f"x must have shape (n_channels, n_samples), got {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError("x contains non-finite samples")
+    if method not in _STARTS:
+        raise ValueError(f"method ({method!r}) must be one of {sorted(_STARTS)}")
+    if fs_hz <= 0:
+        raise ValueError(f"fs_hz ({fs_hz}) must be positive")
+    if X.shape[1] < 32:
+        raise ValueError(f"n_samples ({X.shape[1]}) must be at least 32")
+    if n_modes is not None and n_modes < 1:
+        raise ValueError(f"n_modes ({n_modes}) must be positive or None")
+    if f_range_hz is not None and not 0 <= f_range_hz[0] < f_range_hz[1]:
+        raise ValueError(f"f_range_hz ({f_range_hz}) must be (lo, hi) with 0 <= lo < hi")
+    return X
+
+
+def _nls_data(Xa: np.ndarray, fs_hz: float, band_hi: float,
+              f_range_hz: tuple[float, float] | None, max_samples: int
+              ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, float]:
+    """The data the NLS fits, (Y, t s, decimation, FIR taps, band_hi Hz): ``Xa`` as it is unless
+    it holds over ``max_samples`` (channels x samples), then decimated within the band (limited
+    to 1.25 times ``f_range_hz``'s top) and cropped."""
     d_nls, taps = 1, np.ones(1)
-    Y, t = Xa, np.arange(n) / fs_hz
+    Y, t = Xa, np.arange(Xa.shape[1]) / fs_hz
     if Xa.size > max_samples:
         if f_range_hz is not None:
             band_hi = min(band_hi, 1.25 * f_range_hz[1])
@@ -217,47 +263,30 @@ def identify_modes(
             t = idx / fs_hz
         n_keep = max(max_samples // Xa.shape[0], 64)
         Y, t = Y[:, :n_keep], t[:n_keep]
-    fs_nls = fs_hz / d_nls
-    duration = t[-1] - t[0] + 1.0 / fs_nls
-    f_lo = 1.0 / duration
-    f_lim = (0.5 * f_lo, 0.49 * fs_nls)
-    sig = floor_noise(estimate_noise_std(Y), Y)
-    w0 = 1.0 / sig
-    order = 2 * (max_modes if n_modes is None else n_modes) + 4
-    fc, dc = _candidates(Y, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
-    fc, dc = _rank(Y, t, w0, fc, dc, fit_offset)
-    info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": int(fc.size)}
+    return Y, t, d_nls, taps, band_hi
 
-    threshold = float(stats.chi2.isf(false_alarm / (2.0 * Y.shape[-1]), 2 * Y.shape[0]))
-    sel = ModeSelector(Y, t, fit_offset, threshold, zeta_max, f_lim, w0)
-    if n_modes is not None:
-        sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
-        if sel.fit is not None:  # refit with weights from its own residual
-            sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
-            sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
-    else:
-        misses = 0
-        for f_c, d_c in zip(fc, dc, strict=True):  # strongest first
-            if misses >= 4 or (sel.fit is not None and sel.fit.f_hz.size >= max_modes):
+
+def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
+                  ranked_candidates: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+                  max_modes: int) -> None:
+    """Forward selection on ``sel`` (see the module docstring, step 5): the candidates (fc, dc),
+    strongest first, until four in a row are rejected; then up to four candidates from the
+    residual (``ranked_candidates(residual, weights)``); then the pruning of modes no longer
+    significant. Leaves the selected fit in ``sel.fit`` (None if none)."""
+    misses = 0
+    for f_c, d_c in zip(fc, dc, strict=True):  # strongest first
+        if misses >= 4 or (sel.fit is not None and sel.fit.f_hz.size >= max_modes):
+            break
+        misses = 0 if sel.try_add(f_c, d_c) else misses + 1
+    if sel.fit is not None and sel.fit.f_hz.size < max_modes:  # residual round
+        B = sel.fit.amplitude
+        model = _synth(sel.t, sel.fit.f_hz, sel.fit.delta, B) + sel.fit.offset[:, None]
+        fr, dr = ranked_candidates(sel.Y - model, sel.w)
+        for f_c, d_c in zip(fr[:4], dr[:4], strict=True):
+            if sel.fit.f_hz.size >= max_modes:
                 break
-            misses = 0 if sel.try_add(f_c, d_c) else misses + 1
-        if sel.fit is not None and sel.fit.f_hz.size < max_modes:  # residual round
-            B = sel.fit.amplitude
-            model = _synth(t, sel.fit.f_hz, sel.fit.delta, B) + sel.fit.offset[:, None]
-            fr, dr = _candidates(Y - model, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
-            fr, dr = _rank(Y - model, t, sel.w, fr, dr, fit_offset)
-            for f_c, d_c in zip(fr[:4], dr[:4], strict=True):
-                if sel.fit.f_hz.size >= max_modes:
-                    break
-                sel.try_add(f_c, d_c)
-        sel.prune()
-        if sel.fit is not None:
-            sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
-            sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
-    info |= {"lr_threshold": threshold}
-    if sel.fit is None:
-        return _empty(n_ch, fs_hz, n, method, info | {"reason": "no significant mode"})
-    return _table(sel, X, active, fs_hz, d_nls, taps, f_range_hz, per_channel, method, info)
+            sel.try_add(f_c, d_c)
+    sel.prune()
 
 
 def _sum_exp(t: np.ndarray, rate: np.ndarray) -> np.ndarray:

@@ -182,23 +182,9 @@ def decrement_from_peaks(
     sigma_noise = float(estimate_noise_std(y)) if noise_std is None else float(noise_std)
     sigma_filt = np.inf
     if bandpass:
-        sos = _bandpass_sos(fs_hz, f_hz, rel_bandwidth, order)
-        y = signal.sosfiltfilt(sos, y)
-        poles = np.concatenate([np.roots(s[3:]) for s in sos])
-        sigma_filt = float(np.min(-np.log(np.abs(poles)) * fs_hz))
-        w, H = signal.sosfreqz(sos, worN=4096, fs=fs_hz)
-        sigma_noise *= np.sqrt(np.mean(np.abs(H) ** 4))
-    idx, _ = signal.find_peaks(y, distance=max(1, int(0.6 * period_n)))
-    t_all, a_all = _parabolic_peaks(y, idx)
-    t_all = t_all / fs_hz
-    usable = a_all > min_snr * sigma_noise
-    # From the first peak above noise up to the first one lost in noise after it.
-    if usable.any():
-        i0 = int(np.argmax(usable))
-        lost = np.flatnonzero(~usable[i0:])
-        if lost.size:
-            usable[i0 + lost[0]:] = False
-    t_p, a_p = t_all[usable], a_all[usable]
+        y, sigma_filt, noise_gain = _bandpassed(y, fs_hz, f_hz, rel_bandwidth, order)
+        sigma_noise *= noise_gain
+    t_p, a_p = _peaks_above(y, fs_hz, period_n, min_snr * sigma_noise)
     if t_p.size < 3:
         raise ValueError(f"only {t_p.size} peaks above {min_snr} x noise; need at least 3")
     sigma_mode = max(np.polyfit(t_p, -np.log(a_p), 1)[0], 0.0)
@@ -206,20 +192,66 @@ def decrement_from_peaks(
     n_min = max(q + 1, 3)
     end_s = float(np.log(1e3) / (sigma_filt + sigma_mode)) if bandpass else 0.0
     if skip_s is None:
-        rate = sigma_filt - sigma_mode
-        skip_s = float(np.log(1e3) / rate) if rate > 0 and np.isfinite(rate) else 0.0
-        in_end = t_p <= y.size / fs_hz - end_s
-        if np.count_nonzero(in_end & (t_p >= skip_s)) < n_min:
-            # Not enough record after the filter transient: keep the last n_min peaks, flagged.
-            cand = t_p[in_end] if np.count_nonzero(in_end) >= n_min else t_p
-            skip_s = float(cand[-n_min]) if cand.size >= n_min else 0.0
-            filter_limited = True
+        skip_s, cut_short = _transient_skip_s(t_p, y.size / fs_hz - end_s,
+                                              sigma_filt - sigma_mode, n_min)
+        filter_limited = filter_limited or cut_short
     keep = (t_p >= skip_s) & (t_p <= y.size / fs_hz - end_s)
     if np.count_nonzero(keep) < n_min:
         keep = t_p >= skip_s
     t_p, a_p = t_p[keep], a_p[keep]
     if t_p.size < q + 1:
         raise ValueError(f"only {t_p.size} usable peaks for q = {q}")
+    return _from_peaks(t_p, a_p, q, float(skip_s), filter_limited)
+
+
+def _bandpassed(y: np.ndarray, fs_hz: float, f_hz: float, rel_bandwidth: float,
+                order: int) -> tuple[np.ndarray, float, float]:
+    """``y`` band-passed forward and backward around ``f_hz``; the slowest decay rate of the
+    filter's poles (1/s), which limits the decays it can pass; and the factor by which it scales
+    white noise's std (the forward-backward pass applies |H|^2)."""
+    sos = _bandpass_sos(fs_hz, f_hz, rel_bandwidth, order)
+    y = signal.sosfiltfilt(sos, y)
+    poles = np.concatenate([np.roots(s[3:]) for s in sos])
+    sigma_filt = float(np.min(-np.log(np.abs(poles)) * fs_hz))
+    _, H = signal.sosfreqz(sos, worN=4096, fs=fs_hz)
+    return y, sigma_filt, np.sqrt(np.mean(np.abs(H) ** 4))
+
+
+def _peaks_above(y: np.ndarray, fs_hz: float, period_n: float,
+                 floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Peak times (s) and amplitudes of ``y`` (parabola-interpolated maxima at least 0.6 period
+    apart) from the first one above ``floor`` up to the first one lost below it after that."""
+    idx, _ = signal.find_peaks(y, distance=max(1, int(0.6 * period_n)))
+    t_all, a_all = _parabolic_peaks(y, idx)
+    t_all = t_all / fs_hz
+    usable = a_all > floor
+    if usable.any():
+        i0 = int(np.argmax(usable))
+        lost = np.flatnonzero(~usable[i0:])
+        if lost.size:
+            usable[i0 + lost[0]:] = False
+    return t_all[usable], a_all[usable]
+
+
+def _transient_skip_s(t_p: np.ndarray, last_s: float, rate: float,
+                      n_min: int) -> tuple[float, bool]:
+    """Time to skip at the start (s) while the filter's transient (decaying at ``rate`` 1/s
+    faster than the mode) is above 1e-3; when that leaves fewer than ``n_min`` of the peaks
+    ``t_p`` up to ``last_s``, the start of the last ``n_min`` instead, flagged (True)."""
+    skip_s = float(np.log(1e3) / rate) if rate > 0 and np.isfinite(rate) else 0.0
+    in_end = t_p <= last_s
+    if np.count_nonzero(in_end & (t_p >= skip_s)) >= n_min:
+        return skip_s, False
+    # Not enough record after the filter transient: keep the last n_min peaks, flagged.
+    cand = t_p[in_end] if np.count_nonzero(in_end) >= n_min else t_p
+    return (float(cand[-n_min]) if cand.size >= n_min else 0.0), True
+
+
+def _from_peaks(t_p: np.ndarray, a_p: np.ndarray, q: int, skipped_s: float,
+                filter_limited: bool) -> PeakDecrement:
+    """The decrement from the peaks kept (times s, amplitudes): the mean of the log ratios of
+    peaks ``q`` periods apart, its standard error from the scatter about a straight line in
+    log amplitude, and that line's own decrement."""
     ln_a = np.log(a_p)
     ratios = (ln_a[:-q] - ln_a[q:]) / q
     m = ratios.size
@@ -242,6 +274,6 @@ def decrement_from_peaks(
         peak_times_s=t_p,
         peak_amplitudes=a_p,
         ratios=ratios,
-        skipped_s=float(skip_s),
+        skipped_s=skipped_s,
         filter_limited=filter_limited,
     )

@@ -34,6 +34,7 @@ Their measured effect is in ``docs/estimators.md`` ("Speed").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -43,6 +44,15 @@ from scipy.linalg import blas, lapack
 __all__ = ["VarProFit", "fit_modes_varpro", "linear_amplitudes"]
 
 _TWO_PI = 2.0 * np.pi
+
+
+class LMStop(StrEnum):
+    """How the Levenberg–Marquardt of a fit ended. Only ``CONVERGED`` is convergence."""
+
+    CONVERGED = "converged"
+    GAVE_UP = "gave up"
+    """The damping grew past 1e10 and no step lowered Σr² (or left a bound it was stuck on)."""
+    ITERATION_LIMIT = "iteration limit"
 
 
 @dataclass(frozen=True)
@@ -66,7 +76,9 @@ class VarProFit:
     n_eval : int
         Function evaluations.
     success : bool
-        Optimiser's convergence flag.
+        The optimiser converged (``stop`` is ``LMStop.CONVERGED``).
+    stop : LMStop
+        How the optimiser ended: converged, gave up or at the iteration limit.
     """
 
     f_hz: np.ndarray
@@ -78,6 +90,7 @@ class VarProFit:
     noise_std: np.ndarray
     n_eval: int
     success: bool
+    stop: LMStop
 
 
 def uniform_grid(t: np.ndarray) -> tuple[float, float] | None:
@@ -370,6 +383,10 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     undamped Gauss–Newton model promises less than that from the new point as well.
     ``first``: ``prob.residual(theta)`` when the caller has it already.
 
+    Gave up (not converged): the damping grew past 1e10 without a step that lowers Σr² (or,
+    stuck on a bound away from a Karush–Kuhn–Tucker point, without one that leaves it).
+    Returns (θ, residual, B, JᵀJ, evaluations, how it stopped: :class:`LMStop`).
+
     Box bounds: coordinates on a bound whose descent direction leaves the box are held and the
     step solved for the others; a step the bounds still cut to (almost) nothing is not
     convergence unless the point is a Karush–Kuhn–Tucker point (:func:`_free_descent`), it
@@ -380,24 +397,12 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     resid, proj, B = prob.residual(theta) if first is None else first
     cost = float(np.sum(resid**2))
     JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
-    lam, n_eval, converged = 1e-4, 1, False
+    lam, n_eval, stop = 1e-4, 1, LMStop.ITERATION_LIMIT
     for _ in range(max_iter):
         sc = 1.0 / np.sqrt(np.maximum(JtJ.diagonal(), 1e-300))
         A = JtJ * sc[:, None] * sc[None, :]
         g = Jtr * sc
-        # = linalg.solve(..., assume_a="pos") (same LAPACK call and triangle, less overhead)
-        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
-            raise ValueError("array must not contain infs or NaNs")
-        # Coordinates on a bound whose descent direction (−g) leaves the box are held; the
-        # step is solved for the others (projected, active-set LM; all free inside the box).
-        held = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
-        if np.any(held):
-            u, free = np.zeros_like(g), ~held
-            _, u_free, info = lapack.dposv(A[np.ix_(free, free)] + lam * np.eye(np.sum(free)),
-                                           -g[free], lower=0)
-            u[free] = u_free
-        else:
-            _, u, info = lapack.dposv(A + lam * np.eye(A.shape[0]), -g, lower=0)
+        u, info = _damped_step(A, g, lam, theta, lo, hi)
         if info != 0:  # not positive definite (scipy: LinAlgError)
             lam *= 10.0
             continue
@@ -414,23 +419,14 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
                     prob.release(p_new)
                     lam *= 8.0
                     if lam > 1e10:
-                        converged = True
+                        stop = LMStop.GAVE_UP
                         break
                     continue
             predicted = -(2.0 * (g @ u) + u @ A @ u)  # Gauss–Newton decrease of Σr² (≥ 0)
             if not (small or rel < 1e-11) and cost - cost_new > _EXTRAPOLATE_RATIO * predicted:
-                step = new - theta
-                for _ in range(_MAX_DOUBLINGS):
-                    step = 2.0 * step
-                    far = np.clip(theta + step, lo, hi)
-                    r_far, p_far, B_far = prob.residual(far)
-                    n_eval += 1
-                    cost_far = float(np.sum(r_far**2))
-                    if not cost_far < cost_new:
-                        prob.release(p_far)
-                        break
-                    prob.release(p_new)
-                    new, cost_new, r_new, p_new, B_new = far, cost_far, r_far, p_far, B_far
+                (new, cost_new, r_new, p_new, B_new), n = _extrapolate(
+                    prob, theta, (new, cost_new, r_new, p_new, B_new), lo, hi)
+                n_eval += n
                 rel = (cost - cost_new) / max(cost, 1e-300)
             drop = cost - cost_new
             prob.release(proj)
@@ -441,19 +437,61 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
                 ftol = chi2_tol * cost / max(dof, 1)
                 small = drop < ftol and _gauss_newton_decrease(JtJ, Jtr) < ftol
             if small or rel < 1e-11:
-                converged = True
+                stop = LMStop.CONVERGED
                 break
         else:
             prob.release(p_new)
             if cost_new - cost <= 1e-11 * cost:  # equal to rounding: at the minimum
-                converged = True
+                stop = LMStop.CONVERGED
                 break
             lam *= 8.0
-            if lam > 1e10:
-                converged = True  # no descent direction left: at a minimum to precision
+            if lam > 1e10:  # damped to nothing and still no descent
+                stop = LMStop.GAVE_UP
                 break
     prob.release(proj)
-    return theta, resid, B, JtJ, n_eval, converged
+    return theta, resid, B, JtJ, n_eval, stop
+
+
+def _damped_step(A: np.ndarray, g: np.ndarray, lam: float, theta: np.ndarray, lo: np.ndarray,
+                 hi: np.ndarray) -> tuple[np.ndarray, int]:
+    """The scaled damped Gauss–Newton step u of (A + λI) u = −g, and LAPACK's ``info`` (non-zero:
+    not positive definite). Coordinates on a bound whose descent direction (−g) leaves the box
+    are held (u = 0 there) and the step is solved for the others (projected, active-set LM; all
+    free inside the box)."""
+    # = linalg.solve(..., assume_a="pos") (same LAPACK call and triangle, less overhead)
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
+        raise ValueError("array must not contain infs or NaNs")
+    held = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
+    if np.any(held):
+        u, free = np.zeros_like(g), ~held
+        _, u_free, info = lapack.dposv(A[np.ix_(free, free)] + lam * np.eye(np.sum(free)),
+                                       -g[free], lower=0)
+        u[free] = u_free
+    else:
+        _, u, info = lapack.dposv(A + lam * np.eye(A.shape[0]), -g, lower=0)
+    return u, info
+
+
+def _extrapolate(prob, theta: np.ndarray, trial: tuple, lo: np.ndarray,
+                 hi: np.ndarray) -> tuple[tuple, int]:
+    """An accepted step from ``theta`` doubled (up to ``_MAX_DOUBLINGS`` times) while the cost
+    keeps falling. ``trial`` and the result: (θ, Σr², residual, projector, B) of the point
+    reached; and the residuals evaluated. A point given up is released."""
+    new, cost_new, r_new, p_new, B_new = trial
+    step = new - theta
+    n = 0
+    for _ in range(_MAX_DOUBLINGS):
+        step = 2.0 * step
+        far = np.clip(theta + step, lo, hi)
+        r_far, p_far, B_far = prob.residual(far)
+        n += 1
+        cost_far = float(np.sum(r_far**2))
+        if not cost_far < cost_new:
+            prob.release(p_far)
+            break
+        prob.release(p_new)
+        new, cost_new, r_new, p_new, B_new = far, cost_far, r_far, p_far, B_far
+    return (new, cost_new, r_new, p_new, B_new), n
 
 
 def fit_modes_varpro(
@@ -513,8 +551,8 @@ def fit_modes_varpro(
     theta0[0::2], theta0[1::2] = f0, d0
     theta0 = np.clip(theta0, lo, hi)
     dof = C * N - C * P - 2 * K
-    theta, resid_w, B, JtJ, n_eval, ok = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
-                                                              chi2_tol, dof)
+    theta, resid_w, B, JtJ, n_eval, stop = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
+                                                                chi2_tol, dof)
     B = B / w[None, :]
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
@@ -530,7 +568,8 @@ def fit_modes_varpro(
         rss=rss,
         noise_std=np.sqrt(rss / max(N - P - 2 * K / C, 1)),
         n_eval=int(n_eval),
-        success=bool(ok),
+        success=stop is LMStop.CONVERGED,
+        stop=stop,
     )
 
 

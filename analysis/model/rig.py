@@ -266,7 +266,45 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     medium = r.text("medium")
     if medium not in MEDIA:
         r.fail("medium", f"{medium!r} is not one of {', '.join(MEDIA)}")
+    daq = _read_daq(r)
+    rudder = _read_rudder(r)
+    stock = Stock(
+        E_Pa=r.positive("stock.E_Pa"),
+        G_Pa=r.positive("stock.G_Pa"),
+        I_m4=r.positive("stock.I_m4"),
+        J_m4=r.positive("stock.J_m4"),
+        shear_area_m2=r.positive("stock.shear_area_m2"),
+        bending_length_m=r.positive("stock.bending_length_m"),
+        torsion_length_m=r.positive("stock.torsion_length_m"),
+    )
+    damping = _read_damping(r, medium)
+    hull_modes = _read_hull_modes(r)
+    impact = ImpactSpec(
+        peak_force_N=r.positive("impact.peak_force_N"),
+        duration_s=r.positive("impact.duration_s"),
+        location_m=r.vector("impact.location_m"),
+        direction=r.axis("impact.direction", default="y"),
+    )
+    gages = _read_gages(r, rudder, stock)
+    ambient = _read_ambient(r, len(hull_modes))
+    return Rig(
+        name=r.text("name"),
+        medium=medium,
+        water_density_kg_m3=r.positive("water.density_kg_m3", default=1025.0),
+        daq=daq,
+        rudder=rudder,
+        stock=stock,
+        damping=damping,
+        hull_modes=hull_modes,
+        impact=impact,
+        gages=gages,
+        ambient=ambient,
+        source=source,
+        text=text,
+    )
 
+
+def _read_daq(r: _Reader) -> Daq:
     daq = Daq(
         sample_rate_hz=r.positive("daq.sample_rate_hz"),
         adc_bits=int(r.positive("daq.adc_bits")),
@@ -280,7 +318,10 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     if daq.anti_alias_hz >= daq.sample_rate_hz / 2:
         r.fail("daq.anti_alias_hz", f"{daq.anti_alias_hz} Hz is not below Nyquist "
                f"({daq.sample_rate_hz / 2} Hz)")
+    return daq
 
+
+def _read_rudder(r: _Reader) -> Rudder:
     rudder = Rudder(
         mass_kg=r.positive("rudder.mass_kg"),
         Iz_kg_m2=r.positive("rudder.Iz_kg_m2"),
@@ -296,15 +337,11 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     if rudder.Ixz_kg_m2**2 >= rudder.Ix_kg_m2 * rudder.Iz_kg_m2:
         r.fail("rudder.Ixz_kg_m2", "makes the inertia matrix not positive definite "
                "(need Ixz^2 < Ix*Iz)")
-    stock = Stock(
-        E_Pa=r.positive("stock.E_Pa"),
-        G_Pa=r.positive("stock.G_Pa"),
-        I_m4=r.positive("stock.I_m4"),
-        J_m4=r.positive("stock.J_m4"),
-        shear_area_m2=r.positive("stock.shear_area_m2"),
-        bending_length_m=r.positive("stock.bending_length_m"),
-        torsion_length_m=r.positive("stock.torsion_length_m"),
-    )
+    return rudder
+
+
+def _read_damping(r: _Reader, medium: str) -> dict[str, Damping]:
+    """The damping constants of each medium the file gives; the rig's own medium's are required."""
     damping: dict[str, Damping] = {}
     for med in MEDIA:
         if r.has(f"damping.{med}"):
@@ -315,7 +352,10 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
             )
     if medium not in damping:
         r.fail(f"damping.{medium}", "missing for the rig's medium")
+    return damping
 
+
+def _read_hull_modes(r: _Reader) -> tuple[HullMode, ...]:
     modes_raw = r.get("hull.modes")
     if not isinstance(modes_raw, list) or not modes_raw:
         r.fail("hull.modes", "needs at least one [[hull.modes]] table (a hull bending mode)")
@@ -334,38 +374,20 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         ))
         if hull_modes[-1].damping_ratio >= 1:
             r.fail(f"{p}.damping_ratio", "must be below 1 (an underdamped mode)")
+    return tuple(hull_modes)
 
-    impact = ImpactSpec(
-        peak_force_N=r.positive("impact.peak_force_N"),
-        duration_s=r.positive("impact.duration_s"),
-        location_m=r.vector("impact.location_m"),
-        direction=r.axis("impact.direction", default="y"),
-    )
-    gages = _read_gages(r, rudder, stock)
+
+def _read_ambient(r: _Reader, n_hull_modes: int) -> tuple[Ambient, ...]:
     ambient = []
     for i, _ in enumerate(r.get("ambient", default=[])):
         p = f"ambient[{i}]"
         amb = Ambient(hull_mode=r.integer(f"{p}.hull_mode"),
                       frequency_hz=r.positive(f"{p}.frequency_hz"),
                       v_b_amplitude_m=r.nonnegative(f"{p}.v_b_amplitude_m"))
-        if not 1 <= amb.hull_mode <= len(hull_modes):
-            r.fail(f"{p}.hull_mode", f"{amb.hull_mode} is not a hull mode (1..{len(hull_modes)})")
+        if not 1 <= amb.hull_mode <= n_hull_modes:
+            r.fail(f"{p}.hull_mode", f"{amb.hull_mode} is not a hull mode (1..{n_hull_modes})")
         ambient.append(amb)
-    return Rig(
-        name=r.text("name"),
-        medium=medium,
-        water_density_kg_m3=r.positive("water.density_kg_m3", default=1025.0),
-        daq=daq,
-        rudder=rudder,
-        stock=stock,
-        damping=damping,
-        hull_modes=tuple(hull_modes),
-        impact=impact,
-        gages=gages,
-        ambient=tuple(ambient),
-        source=source,
-        text=text,
-    )
+    return tuple(ambient)
 
 
 def _read_gages(r: _Reader, rudder: Rudder, stock: Stock) -> tuple[Gage, ...]:

@@ -111,6 +111,10 @@ def _bend_element(rig: Rig, le: float, rho_a: float, rho_i: float) -> tuple[np.n
     return K, Mt + Mr
 
 
+# Long (130 lines) on purpose: one assembly read top to bottom -- the DOF layout, the bending and
+# torsion node maps, the element matrices, the rudder's masses, damping, tiller and absorber, the
+# massless stock's condensation. Every step reads the DOF indices (i_hull, i_tiller, i_abs,
+# internal) and the node maps (Tb, Tt, tz); split, each piece would take most of them as arguments.
 def build_truth_model(rig: Rig, *, stock_mass_factor: float = 1.0, extra_hull: dict | None = None,
                       tiller: dict | None = None, absorber: dict | None = None,
                       inertia_factors: tuple[float, float] = (1.0, 1.0)) -> TruthModel:

@@ -75,22 +75,18 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
                    "delta": _num(m.delta[i]), "delta_se": _num(m.delta_se[i]),
                    "zeta": _num(m.zeta[i]), "zeta_se": _num(m.zeta_se[i]),
                    "shape": {f"g{n:02d}": [_num(float(abs(s))), _num(float(np.angle(s)))]
-                             for n, s in zip(_active_gages(a), m.mode_shape[:, i], strict=False)}}
+                             for n, s in zip(a.active_gages, m.mode_shape[:, i], strict=True)}}
                   for i in range(len(m))],
-        "verdicts": {f"g{n:02d}": {"verdict": v, "reason": r} for n, (v, r) in a.verdicts.items()},
+        "verdicts": {f"g{n:02d}": v.to_json() for n, v in a.verdicts.items()},
         "gages": {f"g{n:02d}": d.to_json() for n, d in sorted(a.gages.items())},
         "motions": {k: d.to_json() for k, d in a.motions.items()},
         "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
         "alpha1_over_gamma1": _num(a.alpha1_over_gamma1),
-        "damping": {k: _num(v) for k, v in a.damping.items()},
+        "damping": a.damping.to_json(),
         "stock_lengths_m": a.stock_lengths,
         "table2b": json.loads(json.dumps(a.table2b(), default=float)),
         "notes": list(a.notes),
     }
-
-
-def _active_gages(a: ImpactAnalysis) -> list[int]:
-    return [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
 
 
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,

@@ -39,8 +39,7 @@ def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_di
 
 def _decay(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, path: Path) -> Path:
     m, p = a.modes, a.predominant
-    active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
-    row_of = {n: j for j, n in enumerate(active)}
+    row_of = {n: j for j, n in enumerate(a.active_gages)}
     t = np.arange(x.shape[1]) / fs_hz
     env = np.exp(-m.delta[p] * m.frequency_hz[p] * t)
     fig, axes = plt.subplots(4, 4, figsize=(16, 11), sharex=True)
@@ -57,7 +56,7 @@ def _decay(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, path: Path) -> Path:
             if g is not None and np.isfinite(g.delta):
                 title += f": delta {g.delta:.4f} +- {g.delta_se:.1g}"
         else:
-            title += f": {a.verdicts[n][0]}"
+            title += f": {a.verdicts[n].code}"
         ax.set_title(title, fontsize=9)
     for ax in axes[-1]:
         ax.set_xlabel("time after decay start (s)")
@@ -91,8 +90,7 @@ def _spectrum(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, path: Pa
 
 def _modeshape(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
     m, p = a.modes, a.predominant
-    active = [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
-    shape = dict(zip(active, m.mode_shape[:, p], strict=False))
+    shape = dict(zip(a.active_gages, m.mode_shape[:, p], strict=True))
     ref = shape.get(4, 1.0)
     fig, ax = plt.subplots(figsize=(8, 8))
     span = max(abs(c) for g in rig.gages for c in (g.position_m[0], g.position_m[2]))

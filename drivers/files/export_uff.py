@@ -120,20 +120,15 @@ def export_uff(path: str | PathLike, analysis_hits: Sequence, rig: Rig, *, sourc
     return UffExport(path, hits, len(rig.gages), modes, records)
 
 
-def _active_gages(a: ImpactAnalysis) -> list[int]:
-    """Gages whose channels the mode fit used, in the mode table's row order."""
-    return [n for n in a.gage_numbers if a.verdicts[n][0] == "ok"]
-
-
 def _mode_sets(index: int, a: ImpactAnalysis, rig: Rig, ids: dict) -> list[dict]:
     m = a.modes
     shapes = m.mode_shape
-    gages = _active_gages(a)
+    gages = a.active_gages
     out = []
     for k in range(len(m)):
         f, delta, zeta = float(m.frequency_hz[k]), float(m.delta[k]), float(m.zeta[k])
         nodes, r = [], np.zeros((3, 0), complex)
-        for n, s in zip(gages, shapes[:, k], strict=False):
+        for n, s in zip(gages, shapes[:, k], strict=True):
             if not np.isfinite(s):
                 continue
             code = AXIS_CODES[rig.gage(n).axis]
