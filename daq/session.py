@@ -32,7 +32,7 @@ from ramdaq.daq.commands.analyze import analysis_to_json
 from ramdaq.daq.readout import LiveReadout
 from ramdaq.daq.record import store_block
 from ramdaq.daq.recorder import Recorder
-from ramdaq.daq.trigger import ImpactEvent, Trigger
+from ramdaq.daq.trigger import ImpactEvent, Trigger, TriggerSettings
 from ramdaq.drivers.base import Device
 from ramdaq.drivers.errors import DeviceError
 from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
@@ -78,13 +78,13 @@ class Session:
         Terminal table; ``None`` makes one, ``False`` shows nothing.
     update_s : float
         Stream seconds between first looks at a ringing decay.
-    trigger_options : dict
-        Passed to :class:`~ramdaq.daq.trigger.Trigger`.
+    trigger_settings : TriggerSettings, optional
+        The trigger's settings (default ``TriggerSettings()``).
     """
 
     def __init__(self, device: Device, *, record_path: str | Path | None = None,
                  overwrite: bool = False, view=None, readout: LiveReadout | bool | None = None,
-                 update_s: float = 0.5, trigger_options: dict | None = None,
+                 update_s: float = 0.5, trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None) -> None:
         self.device = device
         self.info = device.open()
@@ -99,7 +99,7 @@ class Session:
         self.readout = (LiveReadout(self.info, adc_bits=self.info.extra.get("adc_bits"))
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
-        self.trigger = Trigger(self.info, **(trigger_options or {}))
+        self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
         self._jobs: queue.Queue = queue.Queue()
         self._done: queue.Queue = queue.Queue()

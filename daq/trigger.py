@@ -1,7 +1,9 @@
 """Impact trigger: finds ram blows in a block stream, to the sample, and hands over their records.
 
-``Trigger(info).process(block) -> [ImpactEvent]``; events come out once their record is complete
-(``flush()`` at the end of a stream). States and what moves them::
+``Trigger(info, TriggerSettings(...)).process(block) -> [ImpactEvent]``; events come out once
+their record is complete (``flush()`` at the end of a stream). Every setting is in
+:class:`TriggerSettings` (times in seconds); the trigger turns them into samples at the stream's
+rate when it is built. States and what moves them::
 
     not ready --(lta_s of samples since the start or a gap)--> armed
     armed  --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
@@ -38,6 +40,12 @@
   the ring buffer restart, and the trigger is *not ready* for ``lta_s``: a step across a gap can
   never trigger, and a blow within ``lta_s`` after one is missed.
 
+The working state of an event is held in pieces a reader can take one at a time: the detector's
+running averages (:class:`_Levels`), the envelope watch that ends the record
+(:class:`_DecayWatch`), and the second-contact detector with its AR filter
+(:class:`_ContactScan`, :class:`_Whitener`), which a blow that follows while the last one still
+rings takes over.
+
 Events are JSON-serialisable (:meth:`ImpactEvent.to_json`) for ``/ramdaq/impacts``
 (:data:`IMPACT_JSON_SCHEMA`); the samples (``ImpactEvent.record``) travel beside the JSON.
 """
@@ -54,13 +62,166 @@ import numpy as np
 from ramdaq.analysis import onset as ons
 from ramdaq.drivers.block import Block, StreamInfo
 
-__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "Trigger"]
+__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "Trigger", "TriggerSettings"]
 
 _AIC_PRE_S, _AIC_POST_S = 0.1, 0.01          # AIC window around a detection
 _EDGE_PRE_S, _EDGE_POST_S = 0.015, 0.004     # hinge fit window around the AIC pick
 _EDGE_SEARCH_S = (0.0015, 0.0005)            # onset search around the AIC pick
 _RING_SPARE_S = 1.0
 NOT_READY, ARMED, ACTIVE = "not ready", "armed", "active"
+MODES = ("auto", "force", "sta_lta")
+
+
+@dataclass(frozen=True)
+class TriggerSettings:
+    """Every setting of :class:`Trigger`; times in s, forces in N, the rest ratios.
+
+    Attributes
+    ----------
+    mode : {"auto", "force", "sta_lta"}
+        ``auto`` uses a ram force channel (unit ``"N"``) when the stream has one.
+    force_channel : str, optional
+        Name of the ram load cell; default the first channel in ``"N"``.
+    level_N, slope_N_per_s : float
+        Force trigger: ``|F| >= level_N`` (N), or ``|dF/dt| >= slope_N_per_s`` (N/s) if given.
+    hysteresis : float
+        ``|F|`` must fall below ``hysteresis * level_N`` before a new contact counts.
+    sta_s, lta_s : float
+        STA and LTA lengths, s. The trigger is ready ``lta_s`` after the start and any gap.
+    on : float
+        STA/LTA ratio of a voting gage that counts towards a trigger.
+    off : float
+        A second contact has ended when fewer than ``k`` gages' innovation ratio exceeds it.
+    k_of_n : (int, int or None)
+        ``k`` of the ``n`` voting gages must exceed ``on`` (``n`` None: all of ``voters``).
+    voters : tuple of str, optional
+        Channels that vote; default every gage (``info.gages > 0``).
+    pre_trigger_s, post_s, max_post_s : float
+        Record from ``pre_trigger_s`` before the onset to the decay's end, kept within
+        ``post_s .. max_post_s`` after the onset, s.
+    envelope_s, rearm_ratio, rearm_hold_s : float
+        Decay: envelope / pre-event power < ``rearm_ratio`` on every responding gage for
+        ``rearm_hold_s`` (s); the envelope is a recursive mean of x**2 over ``envelope_s`` (s).
+    double_hit_s : float
+        A second contact up to this long after the onset (s) is a double hit; later, a new impact.
+    double_on, innovation_sta_s : float
+        Second contact: innovation power (mean over ``innovation_sta_s``, s) / its level in the
+        fit window above ``double_on`` on ``k`` responding gages.
+    ar_order : int, optional
+        Taps of the AR prediction-error filter; default ``min(32, fit samples // 3)`` (20 at
+        2048 Hz, 32 at 25.6 kHz, where the anti-alias band edge needs more).
+    ar_guard_s, ar_fit_s : float
+        The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset, s.
+    delay_s : float, optional
+        Front-end delay removed from onsets, s; default the rig's anti-alias filter
+        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
+    keep_records : bool
+        Attach the samples (:class:`ImpactRecord`) to each event.
+
+    Settings that need no stream are checked here (``ValueError`` naming the setting); those
+    that depend on the stream's channels and rate when the :class:`Trigger` is built.
+    """
+
+    mode: str = "auto"
+    force_channel: str | None = None
+    level_N: float = 1000.0
+    slope_N_per_s: float | None = None
+    hysteresis: float = 0.5
+    sta_s: float = 0.01
+    lta_s: float = 2.0
+    on: float = 4.0
+    off: float = 2.0
+    k_of_n: tuple[int, int | None] = (3, None)
+    voters: tuple[str, ...] | None = None
+    pre_trigger_s: float = 0.5
+    post_s: float = 2.0
+    max_post_s: float = 30.0
+    envelope_s: float = 0.25
+    rearm_ratio: float = 2.0
+    rearm_hold_s: float = 0.25
+    double_hit_s: float = 1.0
+    double_on: float = 5.0
+    innovation_sta_s: float = 0.003
+    ar_order: int | None = None
+    ar_guard_s: float = 0.015
+    ar_fit_s: float = 0.03
+    delay_s: float | None = None
+    keep_records: bool = True
+
+    def __post_init__(self) -> None:
+        if self.voters is not None:
+            object.__setattr__(self, "voters", tuple(self.voters))
+        object.__setattr__(self, "k_of_n", tuple(self.k_of_n))
+        for name in ("level_N", "sta_s", "lta_s", "on", "off", "post_s", "envelope_s",
+                     "rearm_ratio", "rearm_hold_s", "double_on", "innovation_sta_s",
+                     "ar_guard_s", "ar_fit_s"):
+            v = getattr(self, name)
+            if not v > 0 or not math.isfinite(v):
+                raise ValueError(f"{name} ({v}) must be a positive number")
+        if not 0 < self.hysteresis < 1:
+            raise ValueError(f"hysteresis ({self.hysteresis}) must lie between 0 and 1")
+        if not self.off < self.on:
+            raise ValueError(f"off ({self.off}) must be below on ({self.on})")
+        if not (0 <= self.pre_trigger_s and self.post_s <= self.max_post_s):
+            raise ValueError(f"need 0 <= pre_trigger_s ({self.pre_trigger_s}) and post_s "
+                             f"({self.post_s}) <= max_post_s ({self.max_post_s})")
+        if self.mode not in MODES:
+            raise ValueError(f"mode {self.mode!r} is not 'auto', 'force' or 'sta_lta'")
+
+
+@dataclass(frozen=True)
+class _Lengths:
+    """The settings in samples at one stream's rate (each at least one sample, except the
+    pre-trigger and the onset search after the AIC pick, which may be 0)."""
+
+    sta: int
+    lta: int
+    pre: int                  # pre-trigger
+    post: int                 # shortest record after the onset
+    max_post: int             # longest record after the onset
+    envelope: int
+    hold: int                 # re-arm hold
+    double: int               # double-hit window
+    guard: int                # AR fit starts this far after the onset
+    fit: int                  # AR fit window
+    innovation: int           # innovation STA
+    order: int                # AR taps
+    aic_pre: int
+    aic_post: int
+    search: tuple[int, int]   # hinge search before / after the AIC pick
+    edge_pre: int
+    edge_post: int
+    look: int                 # look-ahead a detection needs before its onset is refined
+    spare: int                # ring spare
+
+    @classmethod
+    def at(cls, s: TriggerSettings, fs_hz: float) -> _Lengths:
+        """Lengths of settings ``s`` at ``fs_hz``; ValueError for lengths that do not fit."""
+        def n(seconds: float, minimum: int = 1) -> int:
+            return max(minimum, round(seconds * fs_hz))
+
+        sta, lta = n(s.sta_s), n(s.lta_s)
+        if sta >= lta:
+            raise ValueError(f"sta_s ({s.sta_s}) must be shorter than lta_s ({s.lta_s})")
+        fit = n(s.ar_fit_s)
+        order = min(32, fit // 3) if s.ar_order is None else int(s.ar_order)
+        if not 1 <= order < fit // 2:
+            raise ValueError(f"ar_order ({order}) must lie in 1..{fit // 2 - 1} "
+                             f"for ar_fit_s ({s.ar_fit_s})")
+        search = (n(_EDGE_SEARCH_S[0]), n(_EDGE_SEARCH_S[1], 0))
+        aic_post, edge_post = n(_AIC_POST_S), max(n(_EDGE_POST_S), search[1] + 3)
+        look = aic_post + edge_post + 2
+        envelope, hold = n(s.envelope_s), n(s.rearm_hold_s)
+        if envelope + hold <= look:
+            raise ValueError(f"envelope_s + rearm_hold_s ({s.envelope_s + s.rearm_hold_s}) must "
+                             f"be longer than the onset look-ahead ({look / fs_hz} s)")
+        return cls(sta=sta, lta=lta, pre=n(s.pre_trigger_s, 0), post=n(s.post_s),
+                   max_post=n(s.max_post_s), envelope=envelope, hold=hold,
+                   double=n(s.double_hit_s), guard=n(s.ar_guard_s), fit=fit,
+                   innovation=n(s.innovation_sta_s), order=order, aic_pre=n(_AIC_PRE_S),
+                   aic_post=aic_post, search=search,
+                   edge_pre=max(n(_EDGE_PRE_S), search[0] + 3), edge_post=edge_post,
+                   look=look, spare=n(_RING_SPARE_S))
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,29 +352,86 @@ class _Ring:
 
 
 @dataclass
-class _Event:
-    """An event being recorded (mutable working state)."""
+class _Levels:
+    """The detector's running averages of the voting channels' power (units^2): STA and LTA at
+    the last sample taken, and how many samples the LTA has taken since it started from zero."""
 
-    detect: int
-    pre: np.ndarray                      # pre-event power of the monitor channels, units^2
-    onset: int = -1                      # refined onset sample, -1 until refined
-    onset_s: float = 0.0
-    voters: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    second: tuple[int, float | None] | None = None   # (sample, s); s None until refined
-    cut: _Event | None = None            # previous event to close at this one's onset
-    env_last: np.ndarray | None = None
-    env_pos: int = 0
+    sta: np.ndarray
+    lta: np.ndarray
+    n: int = 0
+
+    def restart(self) -> None:
+        self.sta, self.lta, self.n = np.zeros(len(self.sta)), np.zeros(len(self.lta)), 0
+
+    def advance_lta(self, x2: np.ndarray, nlta: int) -> np.ndarray:
+        """Take ``x2`` (power, (n_voters, n)) into the LTA; its value at each sample, unbiased."""
+        lta, self.lta = ons.exp_average(x2, nlta, self.lta)
+        m0, self.n = self.n, self.n + x2.shape[1]
+        if m0 < 20 * nlta:  # undo the bias of an average started from zero
+            lta = lta / -np.expm1(np.arange(m0 + 1, self.n + 1) * np.log1p(-1 / nlta))
+        return lta
+
+    def pre_power(self, nlta: int, floor: np.ndarray) -> np.ndarray:
+        """The unbiased LTA now, at least ``floor``: the pre-event level of a blow detected here."""
+        bias = -math.expm1(self.n * math.log1p(-1 / nlta))
+        return np.maximum(self.lta / bias, floor)
+
+
+@dataclass(frozen=True, eq=False)
+class _Whitener:
+    """AR prediction-error filter fitted to a ringing (``a``, shape (order + 1,)) and the
+    innovation's variance per responding gage in the fit window (``var``, units^2)."""
+
+    a: np.ndarray
+    var: np.ndarray
+
+
+@dataclass
+class _ContactScan:
+    """Where the second-contact detector stands: it scans from ``pos`` (innovation power
+    ``level`` at ``pos - 1``), is still ``on`` from the last contact, last went off at
+    ``off_pos``, and lets no new contact count before ``dead_until``. A blow that follows while
+    the last one still rings takes the scan over, filter and all."""
+
+    pos: int = 0
+    on: bool = True
+    level: np.ndarray | None = None
+    off_pos: int = 0
+    dead_until: int = 0
+    whitener: _Whitener | None = None
+
+
+@dataclass
+class _DecayWatch:
+    """The envelope of the monitored channels from the onset: its value ``level`` (units^2) at
+    ``pos - 1``, how many samples in a row it has been near the pre-event level (``hold``), and
+    the sample where that lasted the re-arm hold (``decayed``)."""
+
+    level: np.ndarray
+    pos: int
     hold: int = 0
     decayed: int | None = None
-    end: int = -1                        # last sample of the record, -1 while ringing
+
+
+@dataclass
+class _Event:
+    """An event being recorded: detected at ``detect`` over a pre-event power ``pre`` (units^2,
+    per voting channel); ``voters`` the responding ones (indices into the voters, empty until
+    the onset is refined); ``onset`` -1 until refined; ``second`` (sample, s) of a second contact
+    (s None until refined); ``cut`` the previous event, to close at this one's onset; ``end`` the
+    record's last sample, -1 while ringing."""
+
+    detect: int
+    pre: np.ndarray
+    cut: _Event | None = None
+    voters: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    scan: _ContactScan = field(default_factory=_ContactScan)
+    decay: _DecayWatch | None = None
+    onset: int = -1
+    onset_s: float = 0.0
+    second: tuple[int, float | None] | None = None
+    end: int = -1
     end_reason: str = "decayed"
-    scan_pos: int = 0                    # next sample for the second-contact detector
-    sharp_on: bool = True                # detector still 'on' from the last contact
-    sharp_last: np.ndarray | None = None
-    off_pos: int = 0                     # where the second-contact detector last went off
-    dead_until: int = 0                  # no new contact before this sample
-    ar: np.ndarray | None = None
-    ar_var: np.ndarray | None = None
 
 
 class Trigger:
@@ -223,128 +441,35 @@ class Trigger:
     ----------
     info : StreamInfo
         The stream: channel names, units, gage numbers, ``fs_hz``, ``rig_toml``, ``extra``.
-    mode : {"auto", "force", "sta_lta"}
-        ``auto`` uses a ram force channel (unit ``"N"``) when the stream has one.
-    force_channel : str, optional
-        Name of the ram load cell; default the first channel in ``"N"``.
-    level_N, slope_N_per_s : float
-        Force trigger: ``|F| >= level_N``, or ``|dF/dt| >= slope_N_per_s`` (N/s) if given.
-    hysteresis : float
-        ``|F|`` must fall below ``hysteresis * level_N`` before a new contact counts.
-    sta_s, lta_s : float
-        STA and LTA lengths, s. The trigger is ready ``lta_s`` after the start and any gap.
-    on : float
-        STA/LTA ratio of a voting gage that counts towards a trigger.
-    off : float
-        A second contact has ended when fewer than ``k`` gages' innovation ratio exceeds it.
-    k_of_n : (int, int or None)
-        ``k`` of the ``n`` voting gages must exceed ``on`` (``n`` None: all of ``voters``).
-    voters : sequence of str, optional
-        Channels that vote; default every gage (``info.gages > 0``).
-    pre_trigger_s, post_s, max_post_s : float
-        Record from ``pre_trigger_s`` before the onset to the decay's end, kept within
-        ``post_s .. max_post_s`` after the onset.
-    envelope_s, rearm_ratio, rearm_hold_s : float
-        Decay: envelope / pre-event power < ``rearm_ratio`` on every responding gage for
-        ``rearm_hold_s``; the envelope is a recursive mean of x**2 over ``envelope_s``.
-    double_hit_s : float
-        A second contact up to this long after the onset is a double hit; later, a new impact.
-    double_on, innovation_sta_s : float
-        Second contact: innovation power (mean over ``innovation_sta_s``) / its level in the
-        fit window above ``double_on`` on ``k`` responding gages.
-    ar_order : int, optional
-        Taps of the AR prediction-error filter; default ``min(32, fit samples // 3)`` (20 at
-        2048 Hz, 32 at 25.6 kHz, where the anti-alias band edge needs more).
-    ar_guard_s, ar_fit_s : float
-        The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset.
-    delay_s : float, optional
-        Front-end delay removed from onsets, s; default the rig's anti-alias filter
-        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
-    keep_records : bool
-        Attach the samples (:class:`ImpactRecord`) to each event.
+    settings : TriggerSettings, optional
+        Default ``TriggerSettings()``.
+
+    Raises
+    ------
+    ValueError
+        A setting the stream cannot meet (its channels, its rate).
     """
 
-    def __init__(self, info: StreamInfo, *, mode: str = "auto", force_channel: str | None = None,
-                 level_N: float = 1000.0, slope_N_per_s: float | None = None,
-                 hysteresis: float = 0.5, sta_s: float = 0.01, lta_s: float = 2.0,
-                 on: float = 4.0, off: float = 2.0, k_of_n: tuple[int, int | None] = (3, None),
-                 voters: list[str] | tuple[str, ...] | None = None, pre_trigger_s: float = 0.5,
-                 post_s: float = 2.0, max_post_s: float = 30.0, envelope_s: float = 0.25,
-                 rearm_ratio: float = 2.0, rearm_hold_s: float = 0.25, double_hit_s: float = 1.0,
-                 double_on: float = 5.0, innovation_sta_s: float = 0.003, ar_order: int | None = None,
-                 ar_guard_s: float = 0.015, ar_fit_s: float = 0.03, delay_s: float | None = None,
-                 keep_records: bool = True) -> None:
-        self.info, self.fs_hz = info, float(info.fs_hz)
-        for name, v in (("level_N", level_N), ("sta_s", sta_s), ("lta_s", lta_s), ("on", on),
-                        ("off", off), ("post_s", post_s), ("envelope_s", envelope_s),
-                        ("rearm_ratio", rearm_ratio), ("rearm_hold_s", rearm_hold_s),
-                        ("double_on", double_on), ("innovation_sta_s", innovation_sta_s),
-                        ("ar_guard_s", ar_guard_s), ("ar_fit_s", ar_fit_s)):
-            if not v > 0 or not math.isfinite(v):
-                raise ValueError(f"{name} ({v}) must be a positive number")
-        if not 0 < hysteresis < 1:
-            raise ValueError(f"hysteresis ({hysteresis}) must lie between 0 and 1")
-        if not off < on:
-            raise ValueError(f"off ({off}) must be below on ({on})")
-        if not (0 <= pre_trigger_s and post_s <= max_post_s):
-            raise ValueError(f"need 0 <= pre_trigger_s ({pre_trigger_s}) and post_s ({post_s}) "
-                             f"<= max_post_s ({max_post_s})")
-        n = self._n
-        self._nsta, self._nlta = n(sta_s), n(lta_s)
-        if self._nsta >= self._nlta:
-            raise ValueError(f"sta_s ({sta_s}) must be shorter than lta_s ({lta_s})")
-        names = list(info.channels)
-        if voters is None:
-            voters = [c for c, g in zip(names, info.gages, strict=True) if g > 0]
-        for v in voters:
-            if v not in names:
-                raise ValueError(f"voter {v!r} is not a channel of the stream")
-        self._vidx = np.array([names.index(v) for v in voters], dtype=int)
-        k, n_of = k_of_n
-        if n_of is not None and n_of != len(self._vidx):
-            raise ValueError(f"k_of_n n ({n_of}) is not the number of voting gages "
-                             f"({len(self._vidx)})")
-        if not 1 <= k <= len(self._vidx):
-            raise ValueError(f"k_of_n k ({k}) must lie in 1..{len(self._vidx)}")
-        self._k = k
-        if mode not in ("auto", "force", "sta_lta"):
-            raise ValueError(f"mode {mode!r} is not 'auto', 'force' or 'sta_lta'")
-        if force_channel is not None and (force_channel not in names
-                                          or info.units[names.index(force_channel)] != "N"):
-            raise ValueError(f"force_channel {force_channel!r} is not a channel in N")
-        in_n = [i for i, u in enumerate(info.units) if u == "N"]
-        fidx = names.index(force_channel) if force_channel else (in_n[0] if in_n else None)
-        if mode == "force" and fidx is None:
-            raise ValueError("mode 'force' needs a channel in N; the stream has none")
-        self._fidx = fidx if mode in ("auto", "force") else None
+    def __init__(self, info: StreamInfo, settings: TriggerSettings | None = None) -> None:
+        s = TriggerSettings() if settings is None else settings
+        self.info, self.settings, self.fs_hz = info, s, float(info.fs_hz)
+        self._len = _Lengths.at(s, self.fs_hz)
+        self._vidx, self._k = _voting_rows(info, s)
+        self._fidx = _force_row(info, s)
         self.mode = "sta_lta" if self._fidx is None else "force"
-        self.level_N, self.slope_N_per_s, self.hysteresis = level_N, slope_N_per_s, hysteresis
-        self.on, self.off, self.double_on, self.rearm_ratio = on, off, double_on, rearm_ratio
-        self._pre_n, self._post_n, self._max_n = n(pre_trigger_s, 0), n(post_s), n(max_post_s)
-        self._env_n, self._hold_n, self._double_n = n(envelope_s), n(rearm_hold_s), n(double_hit_s)
-        self._guard_n, self._fit_n = n(ar_guard_s), n(ar_fit_s)
-        self._inno_n = n(innovation_sta_s)
-        self._order = min(32, self._fit_n // 3) if ar_order is None else int(ar_order)
-        if not 1 <= self._order < self._fit_n // 2:
-            raise ValueError(f"ar_order ({self._order}) must lie in 1..{self._fit_n // 2 - 1} "
-                             f"for ar_fit_s ({ar_fit_s})")
-        self._aic_pre_n, self._aic_post_n = n(_AIC_PRE_S), n(_AIC_POST_S)
-        self._search_n = (n(_EDGE_SEARCH_S[0]), n(_EDGE_SEARCH_S[1], 0))
-        self._edge_pre_n = max(n(_EDGE_PRE_S), self._search_n[0] + 3)
-        self._edge_post_n = max(n(_EDGE_POST_S), self._search_n[1] + 3)
-        self._look_n = self._aic_post_n + self._edge_post_n + 2
-        if self._env_n + self._hold_n <= self._look_n:
-            raise ValueError(f"envelope_s + rearm_hold_s ({envelope_s + rearm_hold_s}) must be "
-                             f"longer than the onset look-ahead ({self._look_n / self.fs_hz} s)")
-        self.delay_s = _rig_delay_s(info) if delay_s is None else float(delay_s)
+        self.delay_s = _rig_delay_s(info) if s.delay_s is None else float(s.delay_s)
         self._delay_n = self.delay_s * self.fs_hz
         bits = info.extra.get("adc_bits")
         self._rails = None if bits is None else (-(2 ** (int(bits) - 1)), 2 ** (int(bits) - 1) - 1)
-        self.keep_records = keep_records
-        self._ring = _Ring(info.n_channels, self._pre_n + self._max_n + n(_RING_SPARE_S))
+        n = self._len
+        self._ring = _Ring(info.n_channels, n.pre + n.max_post + n.spare)
         self._scale = np.ones(info.n_channels)
-        self._expected: int | None = None
-        self._reset(0, 0)
+        self._expected: int | None = None           # first sample of the next block, if no gap
+        self._seg = (0, 0)                          # (first sample, t0_ns) since the last gap
+        self._state = NOT_READY
+        self._levels = _Levels(np.zeros(len(self._vidx)), np.zeros(len(self._vidx)))
+        self._f_below = True                        # force fell below hysteresis since the last contact
+        self._ev: _Event | None = None
 
     # -- public ----------------------------------------------------------------------------
     @property
@@ -382,7 +507,7 @@ class Trigger:
         self._scale = block.scale
         x = block.counts[self._vidx] * block.scale[self._vidx, None]
         x2 = x * x
-        sta, self._sta_last = ons.exp_average(x2, self._nsta, self._sta_last)
+        sta, self._levels.sta = ons.exp_average(x2, self._len.sta, self._levels.sta)
         self._run(block.first_sample, x2, sta, out)
         return out
 
@@ -393,28 +518,24 @@ class Trigger:
         return out
 
     # -- state machine -----------------------------------------------------------------------
-    def _n(self, seconds: float, minimum: int = 1) -> int:
-        return max(minimum, round(seconds * self.fs_hz))
-
     def _reset(self, first_sample: int, t0_ns: int) -> None:
-        nv = len(self._vidx)
         self._state, self._ev = NOT_READY, None
-        self._sta_last, self._lta_last, self._lta_m = np.zeros(nv), np.zeros(nv), 0
+        self._levels.restart()
         self._seg = (first_sample, t0_ns)
         self._ring.reset(first_sample)
         self._f_below = True
 
     def _run(self, b0: int, x2: np.ndarray, sta: np.ndarray, out: list[ImpactEvent]) -> None:
-        end, pos = b0 + x2.shape[1], b0
+        end, pos, nlta = b0 + x2.shape[1], b0, self._len.lta
         while True:
             ev = self._ev
             if self._state == NOT_READY:
                 if pos >= end:
                     return
-                stop = min(end, pos + self._nlta - self._lta_m)
-                self._lta_advance(x2[:, pos - b0:stop - b0])
+                stop = min(end, pos + nlta - self._levels.n)
+                self._levels.advance_lta(x2[:, pos - b0:stop - b0], nlta)
                 pos = stop
-                if self._lta_m >= self._nlta:
+                if self._levels.n >= nlta:
                     self._state = ARMED
             elif self._state == ARMED:
                 if ev is not None and ev.end < pos:
@@ -428,7 +549,8 @@ class Trigger:
                 if d is None:
                     pos = limit
                 else:
-                    self._ev = _Event(detect=d, pre=self._pre_power(), cut=ev)
+                    floor = self._scale[self._vidx] ** 2 / 12
+                    self._ev = _Event(detect=d, pre=self._levels.pre_power(nlta, floor), cut=ev)
                     self._state, pos = ACTIVE, d
             else:
                 r = self._advance(end, out)
@@ -436,184 +558,194 @@ class Trigger:
                     return
                 self._state, pos = ARMED, r
 
-    def _lta_advance(self, x2: np.ndarray) -> np.ndarray:
-        lta, self._lta_last = ons.exp_average(x2, self._nlta, self._lta_last)
-        m0, self._lta_m = self._lta_m, self._lta_m + x2.shape[1]
-        if m0 < 20 * self._nlta:  # undo the bias of an average started from zero
-            lta = lta / -np.expm1(np.arange(m0 + 1, self._lta_m + 1) * np.log1p(-1 / self._nlta))
-        return lta
-
-    def _pre_power(self) -> np.ndarray:
-        bias = -math.expm1(self._lta_m * math.log1p(-1 / self._nlta))
-        return np.maximum(self._lta_last / bias, self._scale[self._vidx] ** 2 / 12)
-
     def _values(self, a: int, b: int, rows: Any) -> np.ndarray:
         return self._ring.read(a, b, rows) * self._scale[rows, None]
 
     def _detect(self, pos: int, limit: int, b0: int, x2: np.ndarray, sta: np.ndarray) -> int | None:
         """First trigger in ``pos .. limit-1`` while armed; the LTA advances up to it."""
         seg = slice(pos - b0, limit - b0)
-        lta_last, m0 = self._lta_last, self._lta_m
-        lta = self._lta_advance(x2[:, seg])
+        levels, nlta, s = self._levels, self._len.lta, self.settings
+        lta_last, m0 = levels.lta, levels.n
+        lta = levels.advance_lta(x2[:, seg], nlta)
         if self._fidx is None:
-            hit = (sta[:, seg] > self.on * lta).sum(axis=0) >= self._k
+            hit = (sta[:, seg] > s.on * lta).sum(axis=0) >= self._k
         else:
-            f = self._values(max(pos - 1, self._ring.start), limit, [self._fidx])[0]
-            slope = (np.abs(np.diff(f, prepend=f[0])) * self.fs_hz)[-(limit - pos):]
-            f = np.abs(f[-(limit - pos):])
-            hit = f >= self.level_N
-            if self.slope_N_per_s is not None:
-                hit |= slope >= self.slope_N_per_s
-            if not self._f_below:
-                below = np.flatnonzero(f < self.hysteresis * self.level_N)
-                hit[:below[0] if below.size else hit.size] = False
-                self._f_below = bool(below.size)
+            hit = self._force_hits(pos, limit)
         idx = np.flatnonzero(hit)
         if idx.size == 0:
             return None
         j = int(idx[0])
-        self._lta_last = lta_last if j == 0 else ons.exp_average(
-            x2[:, seg.start:seg.start + j], self._nlta, lta_last)[1]
-        self._lta_m = m0 + j
+        levels.lta = lta_last if j == 0 else ons.exp_average(
+            x2[:, seg.start:seg.start + j], nlta, lta_last)[1]
+        levels.n = m0 + j
         return pos + j
+
+    def _force_hits(self, pos: int, limit: int) -> np.ndarray:
+        """Where the ram force (or its slope) is at the trigger level in ``pos .. limit-1``,
+        counting only after it has fallen below the hysteresis level since the last contact."""
+        s = self.settings
+        f = self._values(max(pos - 1, self._ring.start), limit, [self._fidx])[0]
+        slope = (np.abs(np.diff(f, prepend=f[0])) * self.fs_hz)[-(limit - pos):]
+        f = np.abs(f[-(limit - pos):])
+        hit = f >= s.level_N
+        if s.slope_N_per_s is not None:
+            hit |= slope >= s.slope_N_per_s
+        if not self._f_below:
+            below = np.flatnonzero(f < s.hysteresis * s.level_N)
+            hit[:below[0] if below.size else hit.size] = False
+            self._f_below = bool(below.size)
+        return hit
 
     def _advance(self, end: int, out: list[ImpactEvent]) -> int | None:
         """Work through the active event up to sample ``end``; the re-arm sample, or None."""
+        n = self._len
         while True:
             ev = self._ev
             if ev.onset < 0:
-                if end < ev.detect + self._look_n:
+                if end < ev.detect + n.look:
                     return None
                 self._refine(ev, out)
             self._refine_second(ev, end)
-            max_end = ev.onset + self._max_n
-            if self._fidx is None and ev.ar is None and end >= ev.onset + self._guard_n + self._fit_n:
+            max_end = ev.onset + n.max_post
+            if (self._fidx is None and ev.scan.whitener is None
+                    and end >= ev.onset + n.guard + n.fit):
                 self._fit(ev)
             r = self._scan_decay(ev, min(end, max_end + 1))
             s = self._scan_sharp(ev, end if r is None else r)
-            if s is not None and s - ev.onset <= self._double_n:
+            if s is not None and s - ev.onset <= n.double:
                 ev.second = ev.second or (s, None)
-            elif s is not None:  # a new blow while the last one still rings
-                self._ev = _Event(detect=s, pre=ev.pre, cut=ev, voters=ev.voters, ar=ev.ar,
-                                  ar_var=ev.ar_var, scan_pos=ev.scan_pos,
-                                  sharp_last=ev.sharp_last, off_pos=ev.off_pos,
-                                  dead_until=ev.dead_until)
-            elif r is not None or ev.env_pos > max_end:
-                # the LTA resumes from the pre-event level, or from what still rings if higher
-                self._f_below = not ev.sharp_on
-                self._lta_last = np.maximum(ev.pre, ev.env_last)
-                self._lta_m = max(self._lta_m, 20 * self._nlta)
-                if r is not None:
-                    ev.end = min(max(r, ev.onset + self._post_n), max_end)
-                    return r + 1
-                ev.end, ev.end_reason = max_end, "max_length"
-                return max_end + 1
+            elif s is not None:  # a new blow while the last one still rings: it takes the scan
+                self._ev = _Event(detect=s, pre=ev.pre, cut=ev, voters=ev.voters, scan=ev.scan)
+            elif r is not None or ev.decay.pos > max_end:
+                return self._rearm(ev, r, max_end)
             else:
                 return None
 
+    def _rearm(self, ev: _Event, decayed: int | None, max_end: int) -> int:
+        """End the ringing of ``ev`` (decayed at ``decayed``, else at ``max_end``): set its
+        record's end and resume the detector; the sample it resumes at."""
+        # the LTA resumes from the pre-event level, or from what still rings if higher
+        self._f_below = not ev.scan.on
+        self._levels.lta = np.maximum(ev.pre, ev.decay.level)
+        self._levels.n = max(self._levels.n, 20 * self._len.lta)
+        if decayed is not None:
+            ev.end = min(max(decayed, ev.onset + self._len.post), max_end)
+            return decayed + 1
+        ev.end, ev.end_reason = max_end, "max_length"
+        return max_end + 1
+
     def _edge(self, rows: Any, noise_var: np.ndarray | None, a: int, d: int) -> float:
         """AIC pick in ``a .. d + aic_post``, refined by the hinge fit when the ring allows."""
-        pick = a + ons.aic_pick(self._values(a, d + self._aic_post_n + 1, rows))
-        lo, hi = pick - self._edge_pre_n, pick + self._edge_post_n + 1
+        n = self._len
+        pick = a + ons.aic_pick(self._values(a, d + n.aic_post + 1, rows))
+        lo, hi = pick - n.edge_pre, pick + n.edge_post + 1
         if lo < self._ring.start or hi > self._ring.end:
             return float(pick)
-        return lo + ons.hinge_onset(self._values(lo, hi, rows), self._edge_pre_n,
-                                    pre_n=self._edge_pre_n, post_n=self._edge_post_n,
-                                    search_n=self._search_n, noise_var=noise_var)
+        return lo + ons.hinge_onset(self._values(lo, hi, rows), n.edge_pre, pre_n=n.edge_pre,
+                                    post_n=n.edge_post, search_n=n.search, noise_var=noise_var)
 
     def _residual_pick(self, ev: _Event, d: int) -> float:
-        a = max(d - self._aic_pre_n // 2, ev.off_pos, self._ring.start + self._order)
-        a = min(a, d - self._guard_n)
-        x = self._values(a - self._order, d + self._aic_post_n + 1, self._vidx[ev.voters])
-        return float(a + ons.aic_pick(ons.prediction_error(x, ev.ar)))
+        """AIC pick of a blow at ``d`` on the innovation of the ringing it interrupts."""
+        n = self._len
+        a = max(d - n.aic_pre // 2, ev.scan.off_pos, self._ring.start + n.order)
+        a = min(a, d - n.guard)
+        x = self._values(a - n.order, d + n.aic_post + 1, self._vidx[ev.voters])
+        return float(a + ons.aic_pick(ons.prediction_error(x, ev.scan.whitener.a)))
 
     def _refine(self, ev: _Event, out: list[ImpactEvent]) -> None:
-        d = ev.detect
-        a = max(self._ring.start, d - self._aic_pre_n)
+        """The onset of ``ev`` to a fraction of a sample; closes the event it interrupts."""
+        n, d = self._len, ev.detect
+        a = max(self._ring.start, d - n.aic_pre)
         if ev.voters.size == 0:
-            x = self._values(d, d + self._aic_post_n + 1, self._vidx)
-            resp = np.flatnonzero((x * x).max(axis=1) > self.on * ev.pre)
+            x = self._values(d, d + n.aic_post + 1, self._vidx)
+            resp = np.flatnonzero((x * x).max(axis=1) > self.settings.on * ev.pre)
             ev.voters = resp if resp.size else np.arange(len(self._vidx))
         if self._fidx is not None:
-            f = self._edge([self._fidx], None, max(a, ev.off_pos), d)
-            ev.scan_pos, ev.sharp_on = d + 1, True
-        elif ev.ar is None:
+            f = self._edge([self._fidx], None, max(a, ev.scan.off_pos), d)
+            ev.scan.pos, ev.scan.on = d + 1, True
+        elif ev.scan.whitener is None:
             f = self._edge(self._vidx[ev.voters], ev.pre[ev.voters], a, d)
         else:  # the AR filter whitens the anti-alias filter too: no delay to remove
             f = self._residual_pick(ev, d) + self._delay_n
         f -= self._delay_n
         ev.onset, ev.onset_s = max(round(f), self._ring.start), f / self.fs_hz
-        ev.env_last, ev.env_pos = ev.pre.copy(), ev.onset
+        ev.decay = _DecayWatch(level=ev.pre.copy(), pos=ev.onset)
         if ev.cut is not None:
-            ev.cut.end = min(ev.cut.end if ev.cut.end >= 0 else ev.onset, ev.onset) - 1
-            ev.cut.end = max(ev.cut.end, ev.cut.onset)
-            ev.cut.end_reason = "next_impact"
-            out.append(self._finish(ev.cut))
+            cut = ev.cut
+            cut.end = max(min(cut.end if cut.end >= 0 else ev.onset, ev.onset) - 1, cut.onset)
+            cut.end_reason = "next_impact"
+            out.append(self._finish(cut))
             ev.cut = None
 
     def _refine_second(self, ev: _Event, end: int) -> None:
-        if ev.second is None or ev.second[1] is not None or end < ev.second[0] + self._look_n:
+        if ev.second is None or ev.second[1] is not None or end < ev.second[0] + self._len.look:
             return
         s = ev.second[0]
         if self._fidx is not None:
-            f = self._edge([self._fidx], None, max(s - self._aic_pre_n, ev.off_pos), s)
+            f = self._edge([self._fidx], None, max(s - self._len.aic_pre, ev.scan.off_pos), s)
             f -= self._delay_n
         else:
             f = self._residual_pick(ev, s)
         ev.second = (round(f), f / self.fs_hz)
 
     def _fit(self, ev: _Event) -> None:
-        f0 = ev.onset + self._guard_n
+        """Fit the AR filter to the ringing of ``ev``; the second-contact scan starts after it."""
+        n = self._len
+        f0 = ev.onset + n.guard
         rows = self._vidx[ev.voters]
-        x = self._values(f0, f0 + self._fit_n, rows)
-        ev.ar = ons.ar_prediction_filter(x, self._order, ev.pre[ev.voters])
-        e = ons.prediction_error(x, ev.ar)
-        ev.ar_var = np.maximum(np.mean(e * e, axis=1), self._scale[rows] ** 2 / 12)
-        ev.scan_pos = ev.off_pos = f0 + self._fit_n
-        ev.sharp_on, ev.sharp_last = False, ev.ar_var.copy()
+        x = self._values(f0, f0 + n.fit, rows)
+        a = ons.ar_prediction_filter(x, n.order, ev.pre[ev.voters])
+        e = ons.prediction_error(x, a)
+        var = np.maximum(np.mean(e * e, axis=1), self._scale[rows] ** 2 / 12)
+        scan = ev.scan
+        scan.whitener = _Whitener(a, var)
+        scan.pos = scan.off_pos = f0 + n.fit
+        scan.on, scan.level = False, var.copy()
 
     def _scan_decay(self, ev: _Event, limit: int) -> int | None:
         """Sample where the envelope has been back near the pre-event level for the hold."""
-        if ev.decayed is not None or limit <= ev.env_pos:
-            return ev.decayed
-        a = ev.env_pos
+        w = ev.decay
+        if w.decayed is not None or limit <= w.pos:
+            return w.decayed
+        a, n = w.pos, self._len
         x = self._values(a, limit, self._vidx)
-        env, last = ons.exp_average(x * x, self._env_n, ev.env_last)
-        ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.rearm_ratio
-        ok[:max(0, ev.onset + self._env_n - a)] = False
-        j, ev.hold = ons.first_hold(ok, self._hold_n, ev.hold)
+        env, last = ons.exp_average(x * x, n.envelope, w.level)
+        ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.settings.rearm_ratio
+        ok[:max(0, ev.onset + n.envelope - a)] = False
+        j, w.hold = ons.first_hold(ok, n.hold, w.hold)
         if j is None:
-            ev.env_last, ev.env_pos = last, limit
+            w.level, w.pos = last, limit
             return None
-        ev.env_last, ev.env_pos, ev.decayed = env[:, j].copy(), a + j + 1, a + j
+        w.level, w.pos, w.decayed = env[:, j].copy(), a + j + 1, a + j
         return a + j
 
     def _scan_sharp(self, ev: _Event, limit: int) -> int | None:
-        """Next sharp onset (second contact) in ``scan_pos .. limit-1``, with hysteresis."""
-        a = ev.scan_pos
-        if limit <= a or (self._fidx is None and ev.ar is None):
+        """Next sharp onset (second contact) in ``scan.pos .. limit-1``, with hysteresis."""
+        scan, n, s = ev.scan, self._len, self.settings
+        a = scan.pos
+        if limit <= a or (self._fidx is None and scan.whitener is None):
             return None
         if self._fidx is not None:
             f = np.abs(self._values(a, limit, [self._fidx])[0])
-            on, off, p, last = f >= self.level_N, f < self.hysteresis * self.level_N, None, None
+            on, off, p, last = f >= s.level_N, f < s.hysteresis * s.level_N, None, None
         else:
-            x = self._values(a - self._order, limit, self._vidx[ev.voters])
-            e = ons.prediction_error(x, ev.ar)
-            p, last = ons.exp_average(e * e, self._inno_n, ev.sharp_last)
-            ratio = p / ev.ar_var[:, None]
+            x = self._values(a - n.order, limit, self._vidx[ev.voters])
+            e = ons.prediction_error(x, scan.whitener.a)
+            p, last = ons.exp_average(e * e, n.innovation, scan.level)
+            ratio = p / scan.whitener.var[:, None]
             kk = min(self._k, len(ev.voters))
-            on = (ratio > self.double_on).sum(axis=0) >= kk
-            off = (ratio > self.off).sum(axis=0) < kk
-        dead = max(0, ev.dead_until - a)  # one contact cannot trigger twice
+            on = (ratio > s.double_on).sum(axis=0) >= kk
+            off = (ratio > s.off).sum(axis=0) < kk
+        dead = max(0, scan.dead_until - a)  # one contact cannot trigger twice
         on[:dead] = off[:dead] = False
-        j, ev.sharp_on, off_i = ons.next_trigger(on, off, ev.sharp_on)
+        j, scan.on, off_i = ons.next_trigger(on, off, scan.on)
         if off_i >= 0:
-            ev.off_pos = a + off_i
+            scan.off_pos = a + off_i
         if j is None:
-            ev.scan_pos, ev.sharp_last = limit, last
+            scan.pos, scan.level = limit, last
             return None
-        ev.scan_pos, ev.sharp_last = a + j + 1, None if p is None else p[:, j].copy()
-        ev.dead_until = a + j + self._guard_n
+        scan.pos, scan.level = a + j + 1, None if p is None else p[:, j].copy()
+        scan.dead_until = a + j + n.guard
         return a + j
 
     def _close(self, reason: str) -> list[ImpactEvent]:
@@ -622,7 +754,7 @@ class Trigger:
         ev, end = self._ev, self._ring.end
         if ev is None:
             return out
-        if ev.onset < 0 and end >= ev.detect + self._look_n:
+        if ev.onset < 0 and end >= ev.detect + self._len.look:
             self._refine(ev, out)
         elif ev.onset < 0:
             ev.onset, ev.onset_s = ev.detect, ev.detect / self.fs_hz
@@ -640,8 +772,9 @@ class Trigger:
         return out
 
     def _finish(self, ev: _Event) -> ImpactEvent:
+        """The completed event with its record cut from the ring."""
         fs, names = self.fs_hz, self.info.channels
-        first = max(ev.onset - self._pre_n, self._ring.start)
+        first = max(ev.onset - self._len.pre, self._ring.start)
         last = max(ev.end, ev.onset)
         counts = self._ring.read(first, last + 1)
         peak = np.abs(counts[:, ev.onset - first:]).max(axis=1) * self._scale
@@ -652,9 +785,10 @@ class Trigger:
         rows = self._vidx[ev.voters]
         chans = ([self._fidx] if self._fidx is not None else []) + list(rows)
         snr = np.max(peak[rows] ** 2 / ev.pre[ev.voters])
-        cut = ev.end_reason in ("gap", "flush", "next_impact") and last < ev.onset + self._post_n
+        cut = ev.end_reason in ("gap", "flush", "next_impact") and last < ev.onset + self._len.post
         seg0, t0 = self._seg
         second = ev.second or (None, None)
+        decayed = None if ev.decay is None else ev.decay.decayed
         return ImpactEvent(
             onset_sample=ev.onset, onset_s=ev.onset_s,
             t_ns=t0 + round((ev.onset_s * fs - seg0) * 1e9 / fs), trigger_sample=ev.detect,
@@ -665,10 +799,42 @@ class Trigger:
             snr_db=float(10 * np.log10(snr)) if snr > 0 else 0.0,
             double_hit=ev.second is not None, second_onset_sample=second[0],
             second_onset_s=second[1], clipped=clipped,
-            too_short=cut or first > ev.onset - self._pre_n, end_reason=ev.end_reason,
-            decay_s=None if ev.decayed is None else (ev.decayed - ev.onset) / fs,
+            too_short=cut or first > ev.onset - self._len.pre, end_reason=ev.end_reason,
+            decay_s=None if decayed is None else (decayed - ev.onset) / fs,
             record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
-                                self._scale.copy()) if self.keep_records else None)
+                                self._scale.copy()) if self.settings.keep_records else None)
+
+
+def _voting_rows(info: StreamInfo, s: TriggerSettings) -> tuple[np.ndarray, int]:
+    """Rows of the voting channels and ``k`` of the k-of-n vote; ValueError if the stream
+    cannot meet ``s.voters`` / ``s.k_of_n``."""
+    names = list(info.channels)
+    voters = s.voters
+    if voters is None:
+        voters = [c for c, g in zip(names, info.gages, strict=True) if g > 0]
+    for v in voters:
+        if v not in names:
+            raise ValueError(f"voter {v!r} is not a channel of the stream")
+    rows = np.array([names.index(v) for v in voters], dtype=int)
+    k, n_of = s.k_of_n
+    if n_of is not None and n_of != len(rows):
+        raise ValueError(f"k_of_n n ({n_of}) is not the number of voting gages ({len(rows)})")
+    if not 1 <= k <= len(rows):
+        raise ValueError(f"k_of_n k ({k}) must lie in 1..{len(rows)}")
+    return rows, k
+
+
+def _force_row(info: StreamInfo, s: TriggerSettings) -> int | None:
+    """Row of the ram load cell the trigger uses, or None (STA/LTA mode)."""
+    names = list(info.channels)
+    if s.force_channel is not None and (s.force_channel not in names
+                                        or info.units[names.index(s.force_channel)] != "N"):
+        raise ValueError(f"force_channel {s.force_channel!r} is not a channel in N")
+    in_n = [i for i, u in enumerate(info.units) if u == "N"]
+    fidx = names.index(s.force_channel) if s.force_channel else (in_n[0] if in_n else None)
+    if s.mode == "force" and fidx is None:
+        raise ValueError("mode 'force' needs a channel in N; the stream has none")
+    return fidx if s.mode in ("auto", "force") else None
 
 
 def _rig_delay_s(info: StreamInfo) -> float:

@@ -22,7 +22,7 @@ from ramdaq.analysis import onset as ons
 from ramdaq.analysis.model.rig import Rig
 from ramdaq.daq.commands.info import describe_recording
 from ramdaq.daq.recorder import Recorder
-from ramdaq.daq.trigger import IMPACT_JSON_SCHEMA, Trigger
+from ramdaq.daq.trigger import IMPACT_JSON_SCHEMA, Trigger, TriggerSettings
 from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
 from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
 from ramdaq.drivers.sim import Impact, SimDevice
@@ -38,7 +38,7 @@ def stream(rig: Rig, impacts: list, duration_s: float, seed: int = 0, **kw) -> t
 
 
 def run(info: StreamInfo, blocks, **kw) -> list:
-    trig = Trigger(info, **kw)
+    trig = Trigger(info, TriggerSettings(**kw))
     events = [e for b in blocks for e in trig.process(b)]
     return events + trig.flush()
 
@@ -327,4 +327,4 @@ def test_events_are_json_for_the_impacts_topic(albacore, tmp_path):
 def test_bad_settings_are_refused(albacore, kw, match):
     info = SimDevice(albacore).info
     with pytest.raises(ValueError, match=match):
-        Trigger(info, **kw)
+        Trigger(info, TriggerSettings(**kw))
