@@ -17,7 +17,8 @@ rate when it is built. States and what moves them::
   as soon as it re-arms, and the frozen value is the *pre-event level*.
 * **Onset.** AIC (Maeda) over the responding gages, then a joint hinge fit of the rising edge
   (:func:`ramdaq.analysis.onset.hinge_onset`) to a fraction of a sample, less the front end's delay
-  (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``).
+  (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``; a
+  rig that does not say it usably is refused when the trigger is built, never read as 0 s).
 * **Second contact.** 15-45 ms after the onset an AR prediction-error filter is fitted to the
   ringing (all gages share its poles, so it reaches the noise floor); the innovation of a new
   blow then stands far out of the ringing. A new sharp onset within ``double_hit_s`` flags the
@@ -114,7 +115,7 @@ class TriggerSettings:
         The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset, s.
     delay_s : float, optional
         Front-end delay removed from onsets, s; default the rig's anti-alias filter
-        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
+        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, 0 without a rig.
     keep_records : bool
         Attach the samples (:class:`ImpactRecord`) to each event.
 
@@ -447,7 +448,8 @@ class Trigger:
     Raises
     ------
     ValueError
-        A setting the stream cannot meet (its channels, its rate).
+        A setting the stream cannot meet (its channels, its rate), or a rig in ``info.rig_toml``
+        that does not say its anti-alias filter while ``settings.delay_s`` is not given.
     """
 
     def __init__(self, info: StreamInfo, settings: TriggerSettings | None = None) -> None:
@@ -838,10 +840,28 @@ def _force_row(info: StreamInfo, s: TriggerSettings) -> int | None:
 
 
 def _rig_delay_s(info: StreamInfo) -> float:
-    """Group delay of the anti-alias filter the rig in ``info.rig_toml`` describes, else 0."""
-    try:
-        daq = tomllib.loads(info.rig_toml).get("daq", {})
-        return ons.butterworth_delay_s(int(daq["anti_alias_order"]), float(daq["anti_alias_hz"]),
-                                       info.fs_hz)
-    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError):
+    """Group delay of the anti-alias filter the stream's rig describes (``[daq]``
+    ``anti_alias_order`` and ``anti_alias_hz`` in ``info.rig_toml``), s; 0 for a stream that
+    carries no rig. ValueError naming the problem for a rig that does not say it usably."""
+    if not info.rig_toml.strip():
         return 0.0
+    where = f"{info.device}: the stream's rig"
+    fix = "fix the rig, or give the trigger delay_s"
+    try:
+        daq = tomllib.loads(info.rig_toml).get("daq")
+    except tomllib.TOMLDecodeError as err:
+        raise ValueError(f"{where} is not valid TOML ({err}); {fix}") from err
+    if not isinstance(daq, dict):
+        raise ValueError(f"{where} has no [daq] table to say its anti-alias filter; {fix}")
+    order, corner = daq.get("anti_alias_order"), daq.get("anti_alias_hz")
+    if isinstance(order, float) and order.is_integer():
+        order = int(order)
+    if isinstance(order, bool) or not isinstance(order, int) or order < 1:
+        raise ValueError(f"{where}: daq.anti_alias_order ({order!r}) must be a whole number "
+                         f">= 1; {fix}")
+    if isinstance(corner, bool) or not isinstance(corner, int | float) or not math.isfinite(corner):
+        raise ValueError(f"{where}: daq.anti_alias_hz ({corner!r}) must be a number; {fix}")
+    if not 0 < corner < info.fs_hz / 2:
+        raise ValueError(f"{where}: daq.anti_alias_hz ({corner}) is not between 0 and the "
+                         f"stream's Nyquist frequency ({info.fs_hz / 2:g} Hz); {fix}")
+    return ons.butterworth_delay_s(order, float(corner), info.fs_hz)

@@ -328,3 +328,24 @@ def test_bad_settings_are_refused(albacore, kw, match):
     info = SimDevice(albacore).info
     with pytest.raises(ValueError, match=match):
         Trigger(info, TriggerSettings(**kw))
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda t: t + "\n[[[", r"the stream's rig is not valid TOML"),
+    (lambda t: t.replace("anti_alias_order = 4", ""), r"daq.anti_alias_order \(None\)"),
+    (lambda t: t.replace("anti_alias_order = 4", 'anti_alias_order = "four"'),
+     r"daq.anti_alias_order \('four'\) must be a whole number"),
+    (lambda t: t.replace("anti_alias_hz = 800.0", "anti_alias_hz = 1500.0"),
+     r"daq.anti_alias_hz \(1500.0\) is not between 0 and the stream's Nyquist frequency \(1024 Hz\)"),
+])
+def test_rig_that_does_not_say_its_filter_is_refused(albacore, edit, match):
+    """The onset delay comes from the rig's anti-alias filter: a rig that cannot say it is an
+    error naming the rig's problem when the trigger is built, not a silent 0 s delay."""
+    info = SimDevice(albacore).info
+    bad = dataclasses.replace(info, rig_toml=edit(info.rig_toml))
+    with pytest.raises(ValueError, match=match):
+        Trigger(bad)
+    assert Trigger(bad, TriggerSettings(delay_s=0.001)).delay_s == 0.001  # the way out it names
+    # the rig's 800 Hz 4th-order Butterworth at 2048 Hz, 0.4675 samples (test_butterworth_delay)
+    assert Trigger(info).delay_s * 2048 == pytest.approx(0.4675, abs=1e-4)
+    assert Trigger(dataclasses.replace(info, rig_toml="")).delay_s == 0.0  # no rig, no filter known
