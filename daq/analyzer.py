@@ -1,7 +1,9 @@
 """From a detected impact to its numbers, and from all of a trial's impacts to its summary.
 
 The same functions serve ``ramdaq analyze`` (offline, a recording replayed through the trigger)
-and the live trial: one implementation, so live and replay cannot drift apart.
+and the live trial: one implementation, so live and replay cannot drift apart. A live trial's
+analyzer thread takes typed jobs (:class:`FinalJob`, :class:`LookJob`) and gives back typed
+results (:class:`FinalDone`, :class:`LookDone`) through :func:`run_job`.
 
 Each hit is accepted or rejected with a reason: a double hit, an overload (clipped channels), a
 decay too short to measure, or an analysis that found no usable decay. The trial summary gives,
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ramdaq.analysis.impact import ImpactAnalysis, analyze_decay
+from ramdaq.analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
 from ramdaq.analysis.model.rig import Rig
 from ramdaq.daq.trigger import ImpactEvent
 from ramdaq.drivers.block import StreamInfo
@@ -33,6 +35,51 @@ class HitResult:
     accepted: bool
     reason: str
     analysis: ImpactAnalysis | None
+
+
+@dataclass(frozen=True)
+class FinalJob:
+    """Judge and analyse hit ``index`` from its complete record (``event.record``)."""
+
+    index: int
+    event: ImpactEvent
+
+
+@dataclass(frozen=True, eq=False)
+class LookJob:
+    """A first look at a decay still ringing: ``x`` the gage rows from the decay's start to the
+    latest sample (SI units, shape (n_gages, n_samples)) of the impact whose onset is sample
+    ``onset_sample`` of the stream."""
+
+    onset_sample: int
+    x: np.ndarray
+
+
+@dataclass(frozen=True)
+class FinalDone:
+    """A final job's result: the hit judged, analysed if accepted."""
+
+    hit: HitResult
+
+
+@dataclass(frozen=True)
+class LookDone:
+    """A first look's result (``None`` if the decay so far gave no usable numbers)."""
+
+    onset_sample: int
+    look: FirstLook | None
+
+
+def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
+            gages: tuple[int, ...]) -> FinalDone | LookDone:
+    """Do one analyzer job; ``gages`` are the report gage numbers of ``LookJob.x``'s rows."""
+    if isinstance(job, FinalJob):
+        return FinalDone(analyze_event(job.index, job.event, info, rig))
+    try:
+        look = first_look(job.x, info.fs_hz, rig, gages)
+    except ValueError:
+        look = None
+    return LookDone(job.onset_sample, look)
 
 
 def decay_skip_s(rig: Rig) -> float:
