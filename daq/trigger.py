@@ -3,7 +3,11 @@
 ``Trigger(info, TriggerSettings(...)).process(block) -> [ImpactEvent]``; events come out once
 their record is complete (``flush()`` at the end of a stream). Every setting is in
 :class:`TriggerSettings` (times in seconds); the trigger turns them into samples at the stream's
-rate when it is built. States and what moves them::
+rate when it is built, at any rate from 50 Hz to 51.2 kHz: a length the rate cannot resolve
+(an STA of fewer than 5 samples, an AR fit of fewer than 30) is refused then, naming the
+setting and the value to set, never mid-stream; ``TriggerSettings.for_rate(fs_hz)`` (what
+``Trigger(info)`` uses) lengthens the defaults that need it, and is the plain defaults at the
+design rates (2048 Hz, 25.6 kHz). States and what moves them::
 
     not ready --(lta_s of samples since the start or a gap)--> armed
     armed  --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
@@ -53,6 +57,7 @@ Events are JSON-serialisable (:meth:`ImpactEvent.to_json`) for ``/ramdaq/impacts
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field, fields
@@ -69,6 +74,9 @@ _AIC_PRE_S, _AIC_POST_S = 0.1, 0.01          # AIC window around a detection
 _EDGE_PRE_S, _EDGE_POST_S = 0.015, 0.004     # hinge fit window around the AIC pick
 _EDGE_SEARCH_S = (0.0015, 0.0005)            # onset search around the AIC pick
 _RING_SPARE_S = 1.0
+_AIC_MARGIN = 4                              # samples the AIC keeps clear of a window's ends
+_STAT_N = 5                                  # fewest samples of an average set against a threshold
+_AR_MODES_TAPS = 10                          # fewest AR taps by default: five ringing modes
 NOT_READY, ARMED, ACTIVE = "not ready", "armed", "active"
 MODES = ("auto", "force", "sta_lta")
 
@@ -168,6 +176,46 @@ class TriggerSettings:
                              f"({self.post_s}) <= max_post_s ({self.max_post_s})")
         if self.mode not in MODES:
             raise ValueError(f"mode {self.mode!r} is not 'auto', 'force' or 'sta_lta'")
+        if self.ar_order is not None and (isinstance(self.ar_order, bool)
+                                          or int(self.ar_order) != self.ar_order
+                                          or self.ar_order < 1):
+            raise ValueError(f"ar_order ({self.ar_order}) must be a whole number >= 1")
+
+    @classmethod
+    def for_rate(cls, fs_hz: float, **overrides: Any) -> TriggerSettings:
+        """The settings ``TriggerSettings(**overrides)``, with every length that was not given
+        and that ``fs_hz`` cannot resolve lengthened to the fewest samples it needs
+        (:func:`_samples_needed`; at 50 Hz: ``sta_s`` and ``innovation_sta_s`` 0.1 s,
+        ``ar_guard_s`` 0.02 s, ``ar_fit_s`` 0.6 s). Where the defaults resolve (from 1.6 kHz
+        up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it."""
+        s = cls(**overrides)
+        longer = {name: need / fs_hz for name, (need, _) in _samples_needed(s).items()
+                  if name not in overrides and round(getattr(s, name) * fs_hz) < need}
+        return dataclasses.replace(s, **longer) if longer else s
+
+
+def _samples_needed(s: TriggerSettings) -> dict[str, tuple[int, str]]:
+    """The fewest samples each length setting of ``s`` needs at any rate, and why.
+
+    The averages that are compared with a threshold need a few samples: the STA of white
+    noise's power over one sample exceeds 4 times its mean on 3 of 4 gages about once in 2 700
+    samples (chi-square, one degree of freedom: P = 0.046 per gage), a recursive mean over five
+    samples about once in 10^10 (P = 1.8e-4 per gage, simulated). The AR
+    fit needs three equations per tap and ten taps (five ringing modes) for the innovation to
+    be noise where the ringing has more modes than one (with an AR(2) fitted to two modes,
+    a second contact is found 0.1 s after every blow). These are the counts the design rate,
+    2048 Hz, has (20, 6, 61 samples)."""
+    needs = {"sta_s": (_STAT_N, "an STA compared with on"),
+             "innovation_sta_s": (_STAT_N, "an innovation STA compared with double_on")}
+    needs |= {name: (1, "a length of at least one sample")
+              for name in ("envelope_s", "rearm_hold_s", "post_s", "max_post_s", "double_hit_s",
+                           "ar_guard_s")}
+    if s.ar_order is None:  # default order fit // 3
+        needs["ar_fit_s"] = (3 * _AR_MODES_TAPS, f"the AR fit of the ringing ({_AR_MODES_TAPS} "
+                                                 f"taps, five modes, for second contacts)")
+    else:
+        needs["ar_fit_s"] = (2 * int(s.ar_order) + 2, f"ar_order ({s.ar_order})")
+    return needs
 
 
 @dataclass(frozen=True)
@@ -197,32 +245,48 @@ class _Lengths:
 
     @classmethod
     def at(cls, s: TriggerSettings, fs_hz: float) -> _Lengths:
-        """Lengths of settings ``s`` at ``fs_hz``; ValueError for lengths that do not fit."""
-        def n(seconds: float, minimum: int = 1) -> int:
+        """Lengths of settings ``s`` at ``fs_hz``. ValueError, naming the setting and the value
+        to set, for a length the rate cannot resolve: refused here, never mid-stream."""
+        needs = _samples_needed(s)
+
+        def n(name: str) -> int:
+            seconds = getattr(s, name)
+            k, (need, what) = round(seconds * fs_hz), needs[name]
+            if k < need:
+                raise ValueError(
+                    f"{name} ({seconds} s) is {seconds * fs_hz:.3g} sample"
+                    f"{'' if seconds * fs_hz == 1 else 's'} at {fs_hz:g} Hz; "
+                    f"{what} needs at least {need}: set {name} to at least {need / fs_hz:.3g} s"
+                    + (", or a lower ar_order" if name == "ar_fit_s" and s.ar_order else
+                       f", or leave it to TriggerSettings.for_rate({fs_hz:g})"))
+            return k
+
+        def c(seconds: float, minimum: int = 1) -> int:  # the trigger's own windows
             return max(minimum, round(seconds * fs_hz))
 
-        sta, lta = n(s.sta_s), n(s.lta_s)
+        sta, lta = n("sta_s"), round(s.lta_s * fs_hz)
         if sta >= lta:
             raise ValueError(f"sta_s ({s.sta_s}) must be shorter than lta_s ({s.lta_s})")
-        fit = n(s.ar_fit_s)
+        fit = n("ar_fit_s")
         order = min(32, fit // 3) if s.ar_order is None else int(s.ar_order)
-        if not 1 <= order < fit // 2:
-            raise ValueError(f"ar_order ({order}) must lie in 1..{fit // 2 - 1} "
-                             f"for ar_fit_s ({s.ar_fit_s})")
-        search = (n(_EDGE_SEARCH_S[0]), n(_EDGE_SEARCH_S[1], 0))
-        aic_post, edge_post = n(_AIC_POST_S), max(n(_EDGE_POST_S), search[1] + 3)
+        search = (c(_EDGE_SEARCH_S[0]), c(_EDGE_SEARCH_S[1], 0))
+        # every AIC window spans at least the look after the detection: 2 margins + 1 sample
+        aic_post = max(c(_AIC_POST_S), 2 * _AIC_MARGIN)
+        # and the residual pick, which starts half of aic_pre before it, 2 margins too
+        aic_pre = max(c(_AIC_PRE_S), 4 * _AIC_MARGIN)
+        edge_post = max(c(_EDGE_POST_S), search[1] + 3)
         look = aic_post + edge_post + 2
-        envelope, hold = n(s.envelope_s), n(s.rearm_hold_s)
+        envelope, hold = n("envelope_s"), n("rearm_hold_s")
         if envelope + hold <= look:
             raise ValueError(f"envelope_s + rearm_hold_s ({s.envelope_s + s.rearm_hold_s}) must "
                              f"be longer than the onset look-ahead ({look / fs_hz} s)")
-        return cls(sta=sta, lta=lta, pre=n(s.pre_trigger_s, 0), post=n(s.post_s),
-                   max_post=n(s.max_post_s), envelope=envelope, hold=hold,
-                   double=n(s.double_hit_s), guard=n(s.ar_guard_s), fit=fit,
-                   innovation=n(s.innovation_sta_s), order=order, aic_pre=n(_AIC_PRE_S),
+        return cls(sta=sta, lta=lta, pre=c(s.pre_trigger_s, 0), post=n("post_s"),
+                   max_post=n("max_post_s"), envelope=envelope, hold=hold,
+                   double=n("double_hit_s"), guard=n("ar_guard_s"), fit=fit,
+                   innovation=n("innovation_sta_s"), order=order, aic_pre=aic_pre,
                    aic_post=aic_post, search=search,
-                   edge_pre=max(n(_EDGE_PRE_S), search[0] + 3), edge_post=edge_post,
-                   look=look, spare=n(_RING_SPARE_S))
+                   edge_pre=max(c(_EDGE_PRE_S), search[0] + 3), edge_post=edge_post,
+                   look=look, spare=c(_RING_SPARE_S))
 
 
 @dataclass(frozen=True, eq=False)
@@ -443,7 +507,8 @@ class Trigger:
     info : StreamInfo
         The stream: channel names, units, gage numbers, ``fs_hz``, ``rig_toml``, ``extra``.
     settings : TriggerSettings, optional
-        Default ``TriggerSettings()``.
+        Default ``TriggerSettings.for_rate(info.fs_hz)``: the defaults, lengthened where the
+        stream's rate cannot resolve them.
 
     Raises
     ------
@@ -453,7 +518,7 @@ class Trigger:
     """
 
     def __init__(self, info: StreamInfo, settings: TriggerSettings | None = None) -> None:
-        s = TriggerSettings() if settings is None else settings
+        s = TriggerSettings.for_rate(info.fs_hz) if settings is None else settings
         self.info, self.settings, self.fs_hz = info, s, float(info.fs_hz)
         self._len = _Lengths.at(s, self.fs_hz)
         self._vidx, self._k = _voting_rows(info, s)
@@ -639,7 +704,7 @@ class Trigger:
     def _edge(self, rows: Any, noise_var: np.ndarray | None, a: int, d: int) -> float:
         """AIC pick in ``a .. d + aic_post``, refined by the hinge fit when the ring allows."""
         n = self._len
-        pick = a + ons.aic_pick(self._values(a, d + n.aic_post + 1, rows))
+        pick = a + ons.aic_pick(self._values(a, d + n.aic_post + 1, rows), _AIC_MARGIN)
         lo, hi = pick - n.edge_pre, pick + n.edge_post + 1
         if lo < self._ring.start or hi > self._ring.end:
             return float(pick)
@@ -652,7 +717,7 @@ class Trigger:
         a = max(d - n.aic_pre // 2, ev.scan.off_pos, self._ring.start + n.order)
         a = min(a, d - n.guard)
         x = self._values(a - n.order, d + n.aic_post + 1, self._vidx[ev.voters])
-        return float(a + ons.aic_pick(ons.prediction_error(x, ev.scan.whitener.a)))
+        return float(a + ons.aic_pick(ons.prediction_error(x, ev.scan.whitener.a), _AIC_MARGIN))
 
     def _refine(self, ev: _Event, out: list[ImpactEvent]) -> None:
         """The onset of ``ev`` to a fraction of a sample; closes the event it interrupts."""
