@@ -9,9 +9,11 @@ setting and the value to set, never mid-stream; ``TriggerSettings.for_rate(fs_hz
 ``Trigger(info)`` uses) lengthens the defaults that need it, and is the plain defaults at the
 design rates (2048 Hz, 25.6 kHz). States and what moves them::
 
-    not ready --(lta_s of samples since the start or a gap)--> armed
-    armed  --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
+    not ready --(lta_s / 4 of samples since the start or a long gap)--> arming
+    arming --(lta_s of samples: the LTA is full)--> armed
+    arming, armed --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
     active --(envelope back near the pre-event level for rearm_hold_s, or max_post_s)--> armed
+    any --(short gap)--> the same state;  any --(long gap, or back in time)--> not ready
 
 * **Detection.** With a ram load cell (a channel in ``"N"``; ``mode="force"``, or ``"auto"``
   when one exists) a level / slope trigger on ``|F|`` with hysteresis; otherwise recursive
@@ -40,10 +42,28 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
 * **Clipping.** Counts at the ADC rails ``-2**(bits-1)`` / ``2**(bits-1) - 1`` (``adc_bits``
   from ``info.extra``; no check without it) anywhere in the record name the channel in
   ``clipped``.
+* **Arming.** After the start of the stream (or a long gap) the trigger is blind for
+  ``lta_s / 4`` (*not ready*): the background must be averaged over at least half a period of
+  its slowest steady tone, or the tone's peaks would look like blows (the power of a sine
+  averaged over half a period is its mean; 0.5 s covers tones down to 1 Hz). Until ``lta_s``
+  it is *arming*: it detects against the LTA so far, and a blow it sees is reported as
+  ``not_analysable`` ("trigger still arming"): its pre-event level, which ends its record,
+  rests on less than the LTA window.
 * **Gaps.** A block whose ``first_sample`` is not the previous block's ``next_sample`` is a gap:
-  an open event is closed at the last sample before it (``end_reason="gap"``), the STA/LTA and
-  the ring buffer restart, and the trigger is *not ready* for ``lta_s``: a step across a gap can
-  never trigger, and a blow within ``lta_s`` after one is missed.
+  an open event is closed at the last sample before it (``end_reason="gap"``) and the ring
+  buffer restarts (no window reads across a gap). A *short* gap, at most ``lta_s`` of missing
+  samples, leaves the STA and LTA as they were: the LTA's weights fall to 1/e over ``lta_s``,
+  so after such a gap the background it holds is no older than what it already averages. The
+  trigger then goes on from the state it had: armed (or arming) at the first sample after the
+  gap; or, if a blow was ringing, following that ringing to its decay (its record, closed at
+  the gap, is handed over; the ringing after the gap is the same blow and cannot trigger) while
+  its AR filter looks for a new blow once it has ``ar_order`` samples after the gap (10 ms at
+  2048 Hz; until then the STA against the ringing's envelope stands in, if the blow is older
+  than 2 ``envelope_s``; if it is younger, those samples are blind). A longer gap, or a stream
+  that jumps back, restarts the trigger as at the start. A blow whose onset lies within the
+  hinge fit's pre-event window (15 ms) after a gap may have begun inside it: it is reported,
+  ``not_analysable``. :attr:`Trigger.health` counts the gaps, the missing samples, the time
+  the trigger was blind (gaps, settling, an AR filter not yet able to scan) and arming.
 
 The working state of an event is held in pieces a reader can take one at a time: the detector's
 running averages (:class:`_Levels`), the envelope watch that ends the record
@@ -68,7 +88,8 @@ import numpy as np
 from ramdaq.analysis import onset as ons
 from ramdaq.drivers.block import Block, StreamInfo
 
-__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "Trigger", "TriggerSettings"]
+__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "StreamHealth", "Trigger",
+           "TriggerSettings"]
 
 _AIC_PRE_S, _AIC_POST_S = 0.1, 0.01          # AIC window around a detection
 _EDGE_PRE_S, _EDGE_POST_S = 0.015, 0.004     # hinge fit window around the AIC pick
@@ -77,7 +98,7 @@ _RING_SPARE_S = 1.0
 _AIC_MARGIN = 4                              # samples the AIC keeps clear of a window's ends
 _STAT_N = 5                                  # fewest samples of an average set against a threshold
 _AR_MODES_TAPS = 10                          # fewest AR taps by default: five ringing modes
-NOT_READY, ARMED, ACTIVE = "not ready", "armed", "active"
+NOT_READY, ARMING, ARMED, ACTIVE = "not ready", "arming", "armed", "active"
 MODES = ("auto", "force", "sta_lta")
 
 
@@ -242,6 +263,8 @@ class _Lengths:
     edge_post: int
     look: int                 # look-ahead a detection needs before its onset is refined
     spare: int                # ring spare
+    settle: int               # blind after the start or a long gap (lta / 4)
+    short_gap: int            # longest gap the STA and LTA survive (lta)
 
     @classmethod
     def at(cls, s: TriggerSettings, fs_hz: float) -> _Lengths:
@@ -286,7 +309,7 @@ class _Lengths:
                    innovation=n("innovation_sta_s"), order=order, aic_pre=aic_pre,
                    aic_post=aic_post, search=search,
                    edge_pre=max(c(_EDGE_PRE_S), search[0] + 3), edge_post=edge_post,
-                   look=look, spare=c(_RING_SPARE_S))
+                   look=look, spare=c(_RING_SPARE_S), settle=max(1, lta // 4), short_gap=lta)
 
 
 @dataclass(frozen=True, eq=False)
@@ -320,7 +343,8 @@ class ImpactEvent:
     best responding channel. ``too_short``: the record was cut (gap, next impact, end of stream)
     before ``post_s`` or lacks part of its pre-trigger. ``end_reason``: ``decayed``,
     ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to re-arm, or
-    ``None`` if the envelope never came back.
+    ``None`` if the envelope never came back. ``not_analysable``: why a blow that was seen cannot
+    be analysed (``"trigger still arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
     """
 
     onset_sample: int
@@ -342,6 +366,7 @@ class ImpactEvent:
     too_short: bool = False
     end_reason: str = "decayed"
     decay_s: float | None = None
+    not_analysable: str | None = None
     record: ImpactRecord | None = field(default=None, compare=False, repr=False)
 
     def to_json(self) -> dict[str, Any]:
@@ -371,9 +396,38 @@ IMPACT_JSON_SCHEMA: dict[str, Any] = {
         "too_short": {"type": "boolean"},
         "end_reason": {"enum": ["decayed", "max_length", "next_impact", "gap", "flush"]},
         "decay_s": {"type": ["number", "null"]},
+        "not_analysable": {"type": ["string", "null"],
+                           "description": "why a blow that was seen cannot be analysed"},
     },
 }
 """JSON Schema of :meth:`ImpactEvent.to_json`, for the ``/ramdaq/impacts`` topic."""
+
+
+@dataclass(frozen=True)
+class StreamHealth:
+    """What the trigger could not see so far: ``gaps`` in the stream and the stream time, s,
+    ``missing_s`` in them; ``blind_s`` when no blow could have been seen (the missing samples
+    and the settling after the start or a long gap); ``arming_s`` when a blow would be seen
+    but not analysed (the rest of the LTA window)."""
+
+    gaps: int
+    missing_s: float
+    blind_s: float
+    arming_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"gaps": self.gaps, "missing_s": self.missing_s, "blind_s": self.blind_s,
+                "arming_s": self.arming_s}
+
+
+@dataclass
+class _Tally:
+    """Counts behind :class:`StreamHealth`, in samples."""
+
+    gaps: int = 0
+    missing: int = 0
+    blind: int = 0
+    arming: int = 0
 
 
 class _Ring:
@@ -484,7 +538,10 @@ class _Event:
     per voting channel); ``voters`` the responding ones (indices into the voters, empty until
     the onset is refined); ``onset`` -1 until refined; ``second`` (sample, s) of a second contact
     (s None until refined); ``cut`` the previous event, to close at this one's onset; ``end`` the
-    record's last sample, -1 while ringing."""
+    record's last sample, -1 while ringing; ``not_analysable`` why it cannot be analysed;
+    ``recorded`` False for the ringing of a blow whose record a gap closed, followed after the
+    gap to its decay (so it cannot trigger) and scanned for new blows, with no record of its
+    own to hand over; ``check_until`` where its STA check (:meth:`Trigger._ring_check`) ends."""
 
     detect: int
     pre: np.ndarray
@@ -497,6 +554,9 @@ class _Event:
     second: tuple[int, float | None] | None = None
     end: int = -1
     end_reason: str = "decayed"
+    not_analysable: str | None = None
+    recorded: bool = True
+    check_until: int = 0
 
 
 class Trigger:
@@ -533,6 +593,8 @@ class Trigger:
         self._scale = np.ones(info.n_channels)
         self._expected: int | None = None           # first sample of the next block, if no gap
         self._seg = (0, 0)                          # (first sample, t0_ns) since the last gap
+        self._after_gap = False                     # that segment began at a gap
+        self._tally = _Tally()
         self._state = NOT_READY
         self._levels = _Levels(np.zeros(len(self._vidx)), np.zeros(len(self._vidx)))
         self._f_below = True                        # force fell below hysteresis since the last contact
@@ -541,8 +603,16 @@ class Trigger:
     # -- public ----------------------------------------------------------------------------
     @property
     def state(self) -> str:
-        """``"not ready"``, ``"armed"`` or ``"active"``."""
+        """``"not ready"``, ``"arming"``, ``"armed"`` or ``"active"``."""
+        if self._state == ARMED and self._levels.n < self._len.lta:
+            return ARMING
         return self._state
+
+    @property
+    def health(self) -> StreamHealth:
+        """Gaps, missing samples, blind and arming time so far."""
+        t, fs = self._tally, self.fs_hz
+        return StreamHealth(t.gaps, t.missing / fs, t.blind / fs, t.arming / fs)
 
     @property
     def ringing(self) -> tuple[int, int] | None:
@@ -550,7 +620,7 @@ class Trigger:
         refined onset once known (else the detection sample) and one past the latest sample.
         For an analyzer that wants a first look before the record completes."""
         ev = self._ev
-        if ev is None or self._state != ACTIVE:
+        if ev is None or self._state != ACTIVE or not ev.recorded:
             return None
         return (ev.onset if ev.onset >= 0 else ev.detect), self._ring.end
 
@@ -566,9 +636,7 @@ class Trigger:
                              f"match the stream ({self.info.n_channels} at {self.fs_hz} Hz)")
         out: list[ImpactEvent] = []
         if block.first_sample != self._expected:
-            if self._expected is not None:
-                out += self._close("gap")
-            self._reset(block.first_sample, block.t0_ns)
+            out += self._new_segment(block)
         self._expected = block.next_sample
         self._ring.write(block.first_sample, block.counts)
         self._scale = block.scale
@@ -585,28 +653,105 @@ class Trigger:
         return out
 
     # -- state machine -----------------------------------------------------------------------
-    def _reset(self, first_sample: int, t0_ns: int) -> None:
+    def _new_segment(self, block: Block) -> list[ImpactEvent]:
+        """``block`` does not follow the last one: the start of the stream, or a gap (the
+        module docstring says what each does). The events the gap closed."""
+        if self._expected is None:  # the start, or a new stream after flush()
+            self._restart(block, after_gap=False)
+            return []
+        missing = block.first_sample - self._expected
+        self._tally.gaps += 1
+        self._tally.missing += max(0, missing)
+        self._tally.blind += max(0, missing)
+        ev, active = self._ev, self._state == ACTIVE
+        out = self._close("gap")
+        if not 0 < missing <= self._len.short_gap:
+            self._restart(block, after_gap=True)
+            return out
+        self._seg, self._after_gap = (block.first_sample, block.t0_ns), True
+        self._ring.reset(block.first_sample)
+        if active:
+            self._ev = self._ringing_after_gap(ev, block.first_sample)
+        return out
+
+    def _ringing_after_gap(self, ev: _Event, first: int) -> _Event:
+        """The ringing of ``ev`` (its record closed at a gap) from sample ``first`` on: its
+        envelope goes on from where it was; its contact scan from where the AR filter has the
+        ``ar_order`` samples it needs (or, if the gap came before the filter was fitted, after
+        the fit on the samples after the gap). Until then the STA against the ringing's level
+        stands in (:meth:`_ring_check`), once the envelope has caught up with the ringing (two
+        ``envelope_s`` after the onset: before, it is still below the ringing's power); before
+        that, those samples are blind and counted so."""
+        n = self._len
+        decay = ev.decay or _DecayWatch(level=ev.pre.copy(), pos=first)
+        decay.pos, decay.hold = first, 0
+        scan = ev.scan
+        if self._fidx is not None:
+            start = first
+        elif scan.whitener is None:
+            start = max(ev.onset + n.guard, first) + n.fit
+        else:
+            start = first + n.order
+        scan.pos = scan.off_pos = start
+        scan.level, scan.dead_until = None, max(scan.dead_until, first)
+        settled = first - ev.onset >= 2 * n.envelope
+        self._tally.blind += 0 if settled else start - first
+        return _Event(detect=ev.detect, pre=ev.pre, voters=ev.voters, scan=scan, decay=decay,
+                      onset=ev.onset, onset_s=ev.onset_s, recorded=False,
+                      check_until=start if settled else first)
+
+    def _ring_check(self, ev: _Event, pos: int, b0: int, end: int, sta: np.ndarray) -> None:
+        """While the AR scan of a ringing after a gap cannot start: a blow where ``k`` voters'
+        STA exceed ``on`` times the ringing's level (its envelope, or the pre-event level if
+        higher) opens a new event, as the scan would."""
+        stop = min(end, ev.check_until)
+        if stop <= pos:
+            return
+        ref = self.settings.on * np.maximum(ev.pre, ev.decay.level)
+        hit = np.flatnonzero((sta[:, pos - b0:stop - b0] > ref[:, None]).sum(axis=0) >= self._k)
+        if hit.size == 0:
+            return
+        d = pos + int(hit[0])
+        ev.check_until, ev.scan.on = 0, True
+        ev.scan.dead_until = max(ev.scan.dead_until, d + self._len.guard)
+        self._ev = _Event(detect=d, pre=ev.pre, cut=ev, voters=ev.voters, scan=ev.scan)
+
+    def _hand_over(self, ev: _Event, out: list[ImpactEvent]) -> None:
+        """A completed event to the caller (the ringing after a gap has nothing to give)."""
+        if ev.recorded:
+            out.append(self._finish(ev))
+
+    def _restart(self, block: Block, after_gap: bool) -> None:
+        """Start again as at the beginning of a stream, from ``block``."""
         self._state, self._ev = NOT_READY, None
         self._levels.restart()
-        self._seg = (first_sample, t0_ns)
-        self._ring.reset(first_sample)
+        self._seg, self._after_gap = (block.first_sample, block.t0_ns), after_gap
+        self._ring.reset(block.first_sample)
         self._f_below = True
+
+    def _resume(self, ev: _Event) -> None:
+        """The detector goes on after the ringing of ``ev``: the LTA resumes from the pre-event
+        level, or from what still rings if higher, as a full average."""
+        self._f_below = not ev.scan.on
+        self._levels.lta = ev.pre if ev.decay is None else np.maximum(ev.pre, ev.decay.level)
+        self._levels.n = max(self._levels.n, 20 * self._len.lta)
 
     def _run(self, b0: int, x2: np.ndarray, sta: np.ndarray, out: list[ImpactEvent]) -> None:
         end, pos, nlta = b0 + x2.shape[1], b0, self._len.lta
         while True:
             ev = self._ev
-            if self._state == NOT_READY:
+            if self._state == NOT_READY:  # blind: the LTA settles
                 if pos >= end:
                     return
-                stop = min(end, pos + nlta - self._levels.n)
+                stop = min(end, pos + max(0, self._len.settle - self._levels.n))
                 self._levels.advance_lta(x2[:, pos - b0:stop - b0], nlta)
+                self._tally.blind += stop - pos
                 pos = stop
-                if self._levels.n >= nlta:
+                if self._levels.n >= self._len.settle:
                     self._state = ARMED
             elif self._state == ARMED:
                 if ev is not None and ev.end < pos:
-                    out.append(self._finish(ev))
+                    self._hand_over(ev, out)
                     self._ev = None
                     continue
                 if pos >= end:
@@ -617,13 +762,23 @@ class Trigger:
                     pos = limit
                 else:
                     floor = self._scale[self._vidx] ** 2 / 12
-                    self._ev = _Event(detect=d, pre=self._levels.pre_power(nlta, floor), cut=ev)
+                    self._ev = _Event(detect=d, pre=self._levels.pre_power(nlta, floor), cut=ev,
+                                      not_analysable=self._arming_note())
                     self._state, pos = ACTIVE, d
             else:
+                if ev.check_until > pos:
+                    self._ring_check(ev, pos, b0, end, sta)
                 r = self._advance(end, out)
                 if r is None:
                     return
                 self._state, pos = ARMED, r
+
+    def _arming_note(self) -> str | None:
+        """Why a blow detected now cannot be analysed, if the trigger is still arming."""
+        if self._levels.n >= self._len.lta:
+            return None
+        return (f"trigger still arming ({self._levels.n / self.fs_hz:.2f} s of its "
+                f"{self.settings.lta_s:g} s LTA window averaged)")
 
     def _values(self, a: int, b: int, rows: Any) -> np.ndarray:
         return self._ring.read(a, b, rows) * self._scale[rows, None]
@@ -639,6 +794,8 @@ class Trigger:
         else:
             hit = self._force_hits(pos, limit)
         idx = np.flatnonzero(hit)
+        taken = int(idx[0]) if idx.size else limit - pos
+        self._tally.arming += max(0, min(taken, nlta - m0))
         if idx.size == 0:
             return None
         j = int(idx[0])
@@ -675,11 +832,11 @@ class Trigger:
             self._refine_second(ev, end)
             max_end = ev.onset + n.max_post
             if (self._fidx is None and ev.scan.whitener is None
-                    and end >= ev.onset + n.guard + n.fit):
+                    and end >= self._fit_start(ev) + n.fit):
                 self._fit(ev)
             r = self._scan_decay(ev, min(end, max_end + 1))
             s = self._scan_sharp(ev, end if r is None else r)
-            if s is not None and s - ev.onset <= n.double:
+            if s is not None and s - ev.onset <= n.double and ev.recorded:
                 ev.second = ev.second or (s, None)
             elif s is not None:  # a new blow while the last one still rings: it takes the scan
                 self._ev = _Event(detect=s, pre=ev.pre, cut=ev, voters=ev.voters, scan=ev.scan)
@@ -691,10 +848,7 @@ class Trigger:
     def _rearm(self, ev: _Event, decayed: int | None, max_end: int) -> int:
         """End the ringing of ``ev`` (decayed at ``decayed``, else at ``max_end``): set its
         record's end and resume the detector; the sample it resumes at."""
-        # the LTA resumes from the pre-event level, or from what still rings if higher
-        self._f_below = not ev.scan.on
-        self._levels.lta = np.maximum(ev.pre, ev.decay.level)
-        self._levels.n = max(self._levels.n, 20 * self._len.lta)
+        self._resume(ev)
         if decayed is not None:
             ev.end = min(max(decayed, ev.onset + self._len.post), max_end)
             return decayed + 1
@@ -715,7 +869,7 @@ class Trigger:
         """AIC pick of a blow at ``d`` on the innovation of the ringing it interrupts."""
         n = self._len
         a = max(d - n.aic_pre // 2, ev.scan.off_pos, self._ring.start + n.order)
-        a = min(a, d - n.guard)
+        a = max(min(a, d - n.guard), self._ring.start + n.order)  # the max: after a gap
         x = self._values(a - n.order, d + n.aic_post + 1, self._vidx[ev.voters])
         return float(a + ons.aic_pick(ons.prediction_error(x, ev.scan.whitener.a), _AIC_MARGIN))
 
@@ -730,18 +884,22 @@ class Trigger:
         if self._fidx is not None:
             f = self._edge([self._fidx], None, max(a, ev.scan.off_pos), d)
             ev.scan.pos, ev.scan.on = d + 1, True
-        elif ev.scan.whitener is None:
+        elif ev.scan.whitener is None or d < self._ring.start + n.order:  # no innovation yet
             f = self._edge(self._vidx[ev.voters], ev.pre[ev.voters], a, d)
         else:  # the AR filter whitens the anti-alias filter too: no delay to remove
             f = self._residual_pick(ev, d) + self._delay_n
         f -= self._delay_n
         ev.onset, ev.onset_s = max(round(f), self._ring.start), f / self.fs_hz
         ev.decay = _DecayWatch(level=ev.pre.copy(), pos=ev.onset)
+        if self._after_gap and ev.onset - n.edge_pre < self._ring.start and not ev.not_analysable:
+            ev.not_analysable = (f"onset {1e3 * (f - self._ring.start) / self.fs_hz:.0f} ms after "
+                                 f"a gap, within the {1e3 * n.edge_pre / self.fs_hz:.0f} ms the "
+                                 f"onset fit needs before it: the blow may have begun in the gap")
         if ev.cut is not None:
             cut = ev.cut
             cut.end = max(min(cut.end if cut.end >= 0 else ev.onset, ev.onset) - 1, cut.onset)
             cut.end_reason = "next_impact"
-            out.append(self._finish(cut))
+            self._hand_over(cut, out)
             ev.cut = None
 
     def _refine_second(self, ev: _Event, end: int) -> None:
@@ -755,10 +913,15 @@ class Trigger:
             f = self._residual_pick(ev, s)
         ev.second = (round(f), f / self.fs_hz)
 
+    def _fit_start(self, ev: _Event) -> int:
+        """First sample of the AR fit window: ``ar_guard_s`` after the onset, or the first
+        sample after a gap that came before it."""
+        return max(ev.onset + self._len.guard, self._ring.start)
+
     def _fit(self, ev: _Event) -> None:
         """Fit the AR filter to the ringing of ``ev``; the second-contact scan starts after it."""
         n = self._len
-        f0 = ev.onset + n.guard
+        f0 = self._fit_start(ev)
         rows = self._vidx[ev.voters]
         x = self._values(f0, f0 + n.fit, rows)
         a = ons.ar_prediction_filter(x, n.order, ev.pre[ev.voters])
@@ -829,12 +992,12 @@ class Trigger:
                 ev.voters = np.arange(len(self._vidx))
             if ev.cut is not None:
                 ev.cut.end, ev.cut.end_reason = max(ev.detect - 1, ev.cut.onset), "next_impact"
-                out.append(self._finish(ev.cut))
+                self._hand_over(ev.cut, out)
         self._refine_second(ev, end)
         if ev.second is not None and ev.second[1] is None:
             ev.second = (ev.second[0], ev.second[0] / self.fs_hz)
         ev.end, ev.end_reason = end - 1, reason
-        out.append(self._finish(ev))
+        self._hand_over(ev, out)
         self._ev = None
         return out
 
@@ -868,6 +1031,7 @@ class Trigger:
             second_onset_s=second[1], clipped=clipped,
             too_short=cut or first > ev.onset - self._len.pre, end_reason=ev.end_reason,
             decay_s=None if decayed is None else (decayed - ev.onset) / fs,
+            not_analysable=ev.not_analysable,
             record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
                                 self._scale.copy()) if self.settings.keep_records else None)
 
