@@ -5,10 +5,12 @@ and the live trial: one implementation, so live and replay cannot drift apart. A
 analyzer thread takes typed jobs (:class:`FinalJob`, :class:`LookJob`) and gives back typed
 results (:class:`FinalDone`, :class:`LookDone`) through :func:`run_job`.
 
-Each hit is accepted or rejected with a reason: a double hit, an overload (clipped channels), a
-decay too short to measure, or an analysis that found no usable decay. The trial summary gives,
-per gage and per motion, the mean decrement over accepted hits with its scatter -- Report 1836's
-Table 2b "percent deviation from average", done automatically.
+Each hit is accepted or rejected with a reason: a blow the trigger saw but could not place
+(still arming, or its onset at a gap), a double hit, an overload (clipped channels), a decay too
+short to measure, or an analysis that found no usable decay. The trial summary gives, per gage
+and per motion, the mean decrement over accepted hits with its scatter -- Report 1836's Table 2b
+"percent deviation from average", done automatically -- and, when the stream's health is known,
+its gaps and the time the trigger was blind.
 """
 
 from __future__ import annotations
@@ -19,11 +21,13 @@ import numpy as np
 
 from ramdaq.analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
 from ramdaq.analysis.model.rig import Rig
-from ramdaq.daq.trigger import ImpactEvent
+from ramdaq.daq.trigger import ImpactEvent, StreamHealth
 from ramdaq.drivers.block import StreamInfo
 
 MIN_DECAY_S = 0.25
 """Shortest free decay analysed, s: fewer than a few periods of a 13 Hz mode is no decrement."""
+NOT_ANALYSABLE = "blow seen but not analysable"
+"""How the reason of a hit the trigger saw but could not place begins."""
 
 
 @dataclass(frozen=True)
@@ -90,6 +94,9 @@ def decay_skip_s(rig: Rig) -> float:
 
 def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
     """Judge and analyse one trigger event that carries its record."""
+    if event.not_analysable:
+        return HitResult(index, event, False,
+                         f"{NOT_ANALYSABLE}: {event.not_analysable}", None)
     if event.double_hit:
         return HitResult(index, event, False, f"double hit: second contact at "
                          f"{event.second_onset_s:.3f} s", None)
@@ -135,15 +142,19 @@ def _mean_scatter(values: list[float]) -> dict:
             "deviation_pct": [float(100 * (x / mean - 1)) for x in v]}
 
 
-def trial_summary(hits: list[HitResult]) -> dict:
+def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None) -> dict:
     """Per gage and per motion: mean decrement over accepted hits, its standard deviation and
-    each hit's percent deviation from the mean; the predominant frequency likewise."""
+    each hit's percent deviation from the mean; the predominant frequency likewise. How many
+    blows were seen but not analysable, and, given the trigger's ``stream`` health, its gaps,
+    missing, blind and arming time (s)."""
     ok = [h.analysis for h in hits if h.accepted and h.analysis is not None]
     gages = sorted({n for a in ok for n in a.gages})
     motions = sorted({m for a in ok for m in a.motions})
     return {
         "hits": len(hits), "accepted": len(ok),
         "rejected": {h.index: h.reason for h in hits if not h.accepted},
+        "not_analysable": sum(h.event.not_analysable is not None for h in hits),
+        "stream": None if stream is None else stream.to_json(),
         "f_hz": _mean_scatter([a.f_hz for a in ok]),
         "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages])
                        for n in gages},

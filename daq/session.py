@@ -171,7 +171,7 @@ class Session:
                 rec.close()
             self.device.close()
         self.hits.sort(key=lambda h: h.index)
-        return TrialOutcome(self.hits, trial_summary(self.hits), self.samples,
+        return TrialOutcome(self.hits, trial_summary(self.hits, self.trigger.health), self.samples,
                             self.skipped_updates, self.first_looks, interrupted, self.record_path,
                             notes=self.notes)
 
@@ -233,7 +233,8 @@ class Session:
         self._onsets[k] = ev.onset_s
         if rec:
             rec.write_json(IMPACTS_TOPIC, ev.to_json(), ev.t_ns)
-        flags = [f for f, on in (("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
+        flags = [f for f, on in (("not analysable", ev.not_analysable is not None),
+                                 ("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
                                  ("short", ev.too_short)) if on]
         self._say(f"hit {k} at {ev.onset_s:.3f} s detected ({ev.snr_db:.0f} dB"
                   + (", " + ", ".join(flags) if flags else "") + "): analysing")

@@ -9,11 +9,18 @@ Truth is the simulator's blow times; onsets "to the sample" as in tests/test_tri
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
+from ramdaq.daq.analyzer import NOT_ANALYSABLE
+from ramdaq.daq.commands.analyze import summary_table
+from ramdaq.daq.session import Session
 from ramdaq.daq.trigger import Trigger
+from ramdaq.drivers.serial_device import SerialDevice
 from ramdaq.drivers.sim import SimDevice
 
 pytestmark = pytest.mark.timeout(300)
@@ -115,3 +122,63 @@ def test_a_long_gap_restarts_the_trigger_and_a_blow_while_it_arms_is_reported(al
     # arming: after the start until the LTA is full; after the gap, from settled to the blow
     # (its detection, within the STA's 10 ms)
     assert h.arming_s == pytest.approx(LTA_S - SETTLE_S + 9.0 - resumed - SETTLE_S, abs=0.01)
+
+
+def test_a_blow_in_the_arming_window_is_a_rejected_hit_the_summary_counts(albacore):
+    """Through the live trial session: the blow 1.2 s into the stream (the LTA has 0.7 s of
+    its 2 s) is a hit, rejected as "blow seen but not analysable", counted in the summary with
+    the blind (settling) and arming time; the next blow is analysed."""
+    out = Session(SimDevice(albacore, seed=5, duration_s=7.0, impacts=[1.2, 4.0]),
+                  readout=False).run()
+    assert [round(h.event.onset_s, 2) for h in out.hits] == [1.2, 4.0]
+    assert out.hits[0].reason.startswith(f"{NOT_ANALYSABLE}: trigger still arming (1.20 s")
+    assert not out.hits[0].accepted and out.hits[1].accepted
+    s = out.summary
+    assert (s["hits"], s["accepted"], s["not_analysable"]) == (2, 1, 1)
+    assert s["stream"]["gaps"] == 0 and s["stream"]["blind_s"] == SETTLE_S
+    assert s["stream"]["arming_s"] == pytest.approx(1.2 - SETTLE_S, abs=1 / FS)
+    assert "1 blow(s) seen but not analysable" in "\n".join(summary_table(s))
+
+
+def test_serial_link_losing_one_frame_in_40_loses_no_blow(tmp_path):
+    """Issue 22's reproduction: the serial emulator on a real pty drops every 40th frame (a gap
+    of 32 samples every 0.625 s); before, 0 of 5 blows were found. Now every blow is a hit, at
+    its time; the blow at 15 s starts on the first sample after a lost frame, so it is reported
+    not analysable; the summary counts every gap and the blind time."""
+    blows = [3.0, 7.0, 11.0, 15.0, 19.0]
+    cmd = [sys.executable, "-m", "ramdaq.drivers.emulators.serial_emulator", "--pty", "--link",
+           str(tmp_path / "tty"), "--rig", str(RIG), "--duration", "22", "--impacts",
+           ",".join(map(str, blows)), "--seed", "11", "--pace", "fast", "--linger", "5",
+           "--drop-every", "40"]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        address = proc.stdout.readline().strip()
+        assert address, proc.stderr.read()
+        out = Session(SerialDevice(f"{address}?rig={RIG}"), readout=False).run()
+        sent = json.loads(proc.stdout.read().strip().splitlines()[-1])
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.stdout.close()
+        proc.stderr.close()
+    assert [h.index for h in out.hits] == [0, 1, 2, 3, 4]
+    onsets = [h.event.onset_s for h in out.hits]
+    placed = [h for h in out.hits if h.event.not_analysable is None]
+    assert [round(h.event.onset_s, 2) for h in placed] == [3.0, 7.0, 11.0, 19.0]
+    assert all(abs(h.event.onset_s - round(h.event.onset_s)) * FS <= 1 for h in placed)
+    late = out.hits[3]
+    assert abs(onsets[3] - 15.0) < 0.01 and late.reason.startswith(f"{NOT_ANALYSABLE}: onset")
+    # every other hit is judged on its record (cut by the next lost frame: decay too short,
+    # or accepted): none vanishes, none is silent
+    assert all(h.accepted or h.reason for h in out.hits)
+    n = sent["frame_samples"]
+    last_frame = (22 * round(FS)) // n - 1
+    gaps = [k for k in sent["dropped"] if k < last_frame]  # a lost last frame leaves no gap
+    st = out.summary["stream"]
+    assert st["gaps"] == len(gaps) and st["missing_s"] == len(gaps) * n / FS
+    # blind: the lost samples, the settling, and at most the AR fit (ar_guard_s + ar_fit_s,
+    # 45 ms) after each gap that came within 2 envelope_s (0.5 s) of a blow: one per blow
+    assert st["missing_s"] + SETTLE_S <= st["blind_s"] <= st["missing_s"] + SETTLE_S + 5 * 0.045
+    assert f"stream: {len(gaps)} gap(s)" in "\n".join(summary_table(out.summary))

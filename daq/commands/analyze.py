@@ -159,8 +159,15 @@ def format_summary(report: dict, units: str = "si") -> str:
 def summary_table(s: dict, units: str = "si") -> list[str]:
     """Lines of the trial summary: per motion and gage the mean decrement over accepted hits
     with its standard deviation; C and c in SI or, with ``units="report"``, ton/ft units."""
-    lines = [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
-             f"(+- std, n):", "  quantity          mean        std     n"]
+    lines = []
+    st = s.get("stream")
+    if st:  # what the trigger could not see, before the table so that it is not missed
+        lines.append(f"\nstream: {st['gaps']} gap(s), {st['missing_s']:.3f} s missing; the "
+                     f"trigger was blind {st['blind_s']:.3f} s and arming {st['arming_s']:.3f} s")
+    if s.get("not_analysable"):
+        lines.append(f"{s['not_analysable']} blow(s) seen but not analysable (among the rejected)")
+    lines += [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
+              f"(+- std, n):", "  quantity          mean        std     n"]
 
     def row(name: str, d: dict, fmt: str = "{:.4f}") -> None:
         if d["mean"] is None:
