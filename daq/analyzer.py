@@ -7,10 +7,10 @@ results (:class:`FinalDone`, :class:`LookDone`) through :func:`run_job`.
 
 Each hit is accepted or rejected with a reason: a blow the trigger saw but could not place
 (still arming, or its onset at a gap), a double hit, an overload (clipped channels), a decay too
-short to measure, or an analysis that found no usable decay. The trial summary gives, per gage
-and per motion, the mean decrement over accepted hits with its scatter -- Report 1836's Table 2b
-"percent deviation from average", done automatically -- and, when the stream's health is known,
-its gaps and the time the trigger was blind.
+short to measure, an analysis that found no usable decay, or one that failed. The trial summary
+gives, per gage and per motion, the mean decrement over accepted hits with its scatter --
+Report 1836's Table 2b "percent deviation from average", done automatically -- and, when the
+stream's health is known, its gaps and the time the trigger was blind.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
             gages: tuple[int, ...]) -> FinalDone | LookDone:
     """Do one analyzer job; ``gages`` are the report gage numbers of ``LookJob.x``'s rows."""
     if isinstance(job, FinalJob):
-        return FinalDone(analyze_event(job.index, job.event, info, rig))
+        return FinalDone(judge_event(job.index, job.event, info, rig))
     try:
         look = first_look(job.x, info.fs_hz, rig, gages)
     except ValueError:
@@ -124,6 +124,16 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) ->
     except ValueError as err:
         return HitResult(index, event, False, f"no usable decay: {err}", None)
     return HitResult(index, event, True, "", result)
+
+
+def judge_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
+    """:func:`analyze_event`; if the analysis raises, the hit is rejected as "analysis failed:
+    <exception>": a blow the trigger saw never vanishes from the trial."""
+    try:
+        return analyze_event(index, event, info, rig)
+    except Exception as err:  # any failure is this hit's verdict, not the end of the trial
+        return HitResult(index, event, False,
+                         f"analysis failed: {type(err).__name__}: {err}", None)
 
 
 def _full_scale(info: StreamInfo, scale: np.ndarray) -> float | None:

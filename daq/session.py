@@ -280,10 +280,13 @@ class Session:
                 self._show_look(done.onset_sample, done.look)
             elif isinstance(done, FinalDone):
                 self._show_final(done.hit, rec)
+            elif isinstance(done.job, FinalJob):  # judge_event does not raise; should it, the hit stays
+                job, err = done.job, done.error
+                self._show_final(HitResult(job.index, job.event, False, f"analysis failed: "
+                                           f"{type(err).__name__}: {err}", None), rec)
             else:
-                job = done.job
-                key = job.index if isinstance(job, FinalJob) else job.onset_sample
-                self._say(f"analyzer error on hit {key}: {done.error}")
+                self._say(f"first look at the impact from sample {done.job.onset_sample} "
+                          f"failed: {type(done.error).__name__}: {done.error}")
 
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
         if look is None:

@@ -3,7 +3,7 @@ report -- a JSON document of every number with units and standard errors, PNG pl
 summary table for the terminal.
 
 The recording is replayed as a device (``ramdaq.drivers.mcap_replay``), block by block, through the
-same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.analyze_event` as a live trial.
+same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.judge_event` as a live trial.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from ramdaq.analysis.model.geometry import gage_geometry
 from ramdaq.analysis.model.rig import Rig, parse_rig
 from ramdaq.analysis.model.structure import added_mass
 from ramdaq.analysis.model.units import from_si
-from ramdaq.daq.analyzer import HitResult, analyze_event, trial_summary
+from ramdaq.daq.analyzer import HitResult, judge_event, trial_summary
 from ramdaq.daq.trigger import Trigger
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 
@@ -49,7 +49,7 @@ def run_analysis(path: str | Path, *, impact: int | None = None,
                 if progress:
                     progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
                              f"{(ev.last_sample - ev.onset_sample) / info.fs_hz:.1f} s of decay")
-                hits.append(analyze_event(k, ev, info, rig))
+                hits.append(judge_event(k, ev, info, rig))
 
         for block in dev:
             take(trigger.process(block))
