@@ -1,12 +1,16 @@
 """From a detected impact to its numbers, and from all of a trial's impacts to its summary.
 
 The same functions serve ``ramdaq analyze`` (offline, a recording replayed through the trigger)
-and the live trial: one implementation, so live and replay cannot drift apart.
+and the live trial: one implementation, so live and replay cannot drift apart. A live trial's
+analyzer thread takes typed jobs (:class:`FinalJob`, :class:`LookJob`) and gives back typed
+results (:class:`FinalDone`, :class:`LookDone`) through :func:`run_job`.
 
-Each hit is accepted or rejected with a reason: a double hit, an overload (clipped channels), a
-decay too short to measure, or an analysis that found no usable decay. The trial summary gives,
-per gage and per motion, the mean decrement over accepted hits with its scatter -- Report 1836's
-Table 2b "percent deviation from average", done automatically.
+Each hit is accepted or rejected with a reason: a blow the trigger saw but could not place
+(still arming, or its onset at a gap), a double hit, an overload (clipped channels), a decay too
+short to measure, an analysis that found no usable decay, or one that failed. The trial summary
+gives, per gage and per motion, the mean decrement over accepted hits with its scatter --
+Report 1836's Table 2b "percent deviation from average", done automatically -- and, when the
+stream's health is known, its gaps and the time the trigger was blind.
 """
 
 from __future__ import annotations
@@ -15,13 +19,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ramdaq.analysis.impact import ImpactAnalysis, analyze_decay
+from ramdaq.analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
 from ramdaq.analysis.model.rig import Rig
-from ramdaq.daq.trigger import ImpactEvent
+from ramdaq.daq.trigger import ImpactEvent, StreamHealth
 from ramdaq.drivers.block import StreamInfo
 
 MIN_DECAY_S = 0.25
 """Shortest free decay analysed, s: fewer than a few periods of a 13 Hz mode is no decrement."""
+NOT_ANALYSABLE = "blow seen but not analysable"
+"""How the reason of a hit the trigger saw but could not place begins."""
 
 
 @dataclass(frozen=True)
@@ -35,6 +41,51 @@ class HitResult:
     analysis: ImpactAnalysis | None
 
 
+@dataclass(frozen=True)
+class FinalJob:
+    """Judge and analyse hit ``index`` from its complete record (``event.record``)."""
+
+    index: int
+    event: ImpactEvent
+
+
+@dataclass(frozen=True, eq=False)
+class LookJob:
+    """A first look at a decay still ringing: ``x`` the gage rows from the decay's start to the
+    latest sample (SI units, shape (n_gages, n_samples)) of the impact whose onset is sample
+    ``onset_sample`` of the stream."""
+
+    onset_sample: int
+    x: np.ndarray
+
+
+@dataclass(frozen=True)
+class FinalDone:
+    """A final job's result: the hit judged, analysed if accepted."""
+
+    hit: HitResult
+
+
+@dataclass(frozen=True)
+class LookDone:
+    """A first look's result (``None`` if the decay so far gave no usable numbers)."""
+
+    onset_sample: int
+    look: FirstLook | None
+
+
+def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
+            gages: tuple[int, ...]) -> FinalDone | LookDone:
+    """Do one analyzer job; ``gages`` are the report gage numbers of ``LookJob.x``'s rows."""
+    if isinstance(job, FinalJob):
+        return FinalDone(judge_event(job.index, job.event, info, rig))
+    try:
+        look = first_look(job.x, info.fs_hz, rig, gages)
+    except ValueError:
+        look = None
+    return LookDone(job.onset_sample, look)
+
+
 def decay_skip_s(rig: Rig) -> float:
     """Time after the onset before the free decay is taken, s: the ram's contact (twice its
     nominal duration, for a ram that dwells) plus 10 ms for the anti-alias filter to settle."""
@@ -43,6 +94,9 @@ def decay_skip_s(rig: Rig) -> float:
 
 def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
     """Judge and analyse one trigger event that carries its record."""
+    if event.not_analysable:
+        return HitResult(index, event, False,
+                         f"{NOT_ANALYSABLE}: {event.not_analysable}", None)
     if event.double_hit:
         return HitResult(index, event, False, f"double hit: second contact at "
                          f"{event.second_onset_s:.3f} s", None)
@@ -72,6 +126,16 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) ->
     return HitResult(index, event, True, "", result)
 
 
+def judge_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
+    """:func:`analyze_event`; if the analysis raises, the hit is rejected as "analysis failed:
+    <exception>": a blow the trigger saw never vanishes from the trial."""
+    try:
+        return analyze_event(index, event, info, rig)
+    except Exception as err:  # any failure is this hit's verdict, not the end of the trial
+        return HitResult(index, event, False,
+                         f"analysis failed: {type(err).__name__}: {err}", None)
+
+
 def _full_scale(info: StreamInfo, scale: np.ndarray) -> float | None:
     bits = info.extra.get("adc_bits")
     if not bits:
@@ -88,15 +152,19 @@ def _mean_scatter(values: list[float]) -> dict:
             "deviation_pct": [float(100 * (x / mean - 1)) for x in v]}
 
 
-def trial_summary(hits: list[HitResult]) -> dict:
+def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None) -> dict:
     """Per gage and per motion: mean decrement over accepted hits, its standard deviation and
-    each hit's percent deviation from the mean; the predominant frequency likewise."""
+    each hit's percent deviation from the mean; the predominant frequency likewise. How many
+    blows were seen but not analysable, and, given the trigger's ``stream`` health, its gaps,
+    missing, blind and arming time (s)."""
     ok = [h.analysis for h in hits if h.accepted and h.analysis is not None]
     gages = sorted({n for a in ok for n in a.gages})
     motions = sorted({m for a in ok for m in a.motions})
     return {
         "hits": len(hits), "accepted": len(ok),
         "rejected": {h.index: h.reason for h in hits if not h.accepted},
+        "not_analysable": sum(h.event.not_analysable is not None for h in hits),
+        "stream": None if stream is None else stream.to_json(),
         "f_hz": _mean_scatter([a.f_hz for a in ok]),
         "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages])
                        for n in gages},

@@ -25,20 +25,38 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.impact import FirstLook, first_look
+from ramdaq.analysis.impact import FirstLook
 from ramdaq.analysis.model.rig import Rig, parse_rig
-from ramdaq.daq.analyzer import HitResult, analyze_event, decay_skip_s, trial_summary
+from ramdaq.daq.analyzer import (
+    FinalDone,
+    FinalJob,
+    HitResult,
+    LookDone,
+    LookJob,
+    decay_skip_s,
+    run_job,
+    trial_summary,
+)
 from ramdaq.daq.commands.analyze import analysis_to_json
 from ramdaq.daq.readout import LiveReadout
 from ramdaq.daq.record import store_block
 from ramdaq.daq.recorder import Recorder
-from ramdaq.daq.trigger import ImpactEvent, Trigger
+from ramdaq.daq.trigger import ImpactEvent, Trigger, TriggerSettings
 from ramdaq.drivers.base import Device
+from ramdaq.drivers.block import Block
 from ramdaq.drivers.errors import DeviceError
 from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""
+
+
+@dataclass(frozen=True)
+class JobFailed:
+    """An analyzer job that raised: the job and its exception."""
+
+    job: FinalJob | LookJob
+    error: Exception
 
 
 @dataclass
@@ -78,13 +96,13 @@ class Session:
         Terminal table; ``None`` makes one, ``False`` shows nothing.
     update_s : float
         Stream seconds between first looks at a ringing decay.
-    trigger_options : dict
-        Passed to :class:`~ramdaq.daq.trigger.Trigger`.
+    trigger_settings : TriggerSettings, optional
+        The trigger's settings (default ``TriggerSettings()``).
     """
 
     def __init__(self, device: Device, *, record_path: str | Path | None = None,
                  overwrite: bool = False, view=None, readout: LiveReadout | bool | None = None,
-                 update_s: float = 0.5, trigger_options: dict | None = None,
+                 update_s: float = 0.5, trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None) -> None:
         self.device = device
         self.info = device.open()
@@ -99,15 +117,18 @@ class Session:
         self.readout = (LiveReadout(self.info, adc_bits=self.info.extra.get("adc_bits"))
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
-        self.trigger = Trigger(self.info, **(trigger_options or {}))
+        self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
-        self._jobs: queue.Queue = queue.Queue()
-        self._done: queue.Queue = queue.Queue()
+        self._jobs: queue.Queue[FinalJob | LookJob | None] = queue.Queue()  # None: stop
+        self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
         self._busy = threading.Event()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
+        self.samples = 0
         self.skipped_updates = 0
         self.first_looks = 0
+        self._truth_written = 0  # simulator truth messages already in the recording
+        self._next_sample: int | None = None  # where the next block starts if there is no gap
         self._next_look = None
         self._n_events = 0
         self._ringing_hit: int | None = None  # the hit whose first looks are being shown
@@ -123,76 +144,25 @@ class Session:
                 return
             self._busy.set()
             try:
-                kind, k, payload = job
-                if kind == "final":
-                    self._done.put(("final", k, analyze_event(k, payload, self.info, self.rig)))
-                else:
-                    x, dur = payload
-                    try:
-                        look = first_look(x, self.info.fs_hz, self.rig, self._gages)
-                    except ValueError:
-                        look = None
-                    self._done.put(("look", k, look))
+                self._done.put(run_job(job, self.info, self.rig, self._gages))
             except Exception as err:  # never let the analyzer thread die silently
-                self._done.put(("error", job[1], err))
+                self._done.put(JobFailed(job, err))
             finally:
                 self._busy.clear()
                 self._jobs.task_done()
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
+        """Stream the device to its end (or Ctrl-C), then wait for every final analysis."""
         worker = threading.Thread(target=self._worker, name="ramdaq-analyzer", daemon=True)
         worker.start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
                if self.record_path else None)
-        truth_written = 0
-        samples = 0
-        interrupted = False
-        last = None
         if self.readout:
             self.readout.__enter__()
         try:
-            try:
-                for block in self.device:
-                    if rec:
-                        truth_written, faults = store_block(
-                            rec, self.device, block, truth_written,
-                            wait_for_room=getattr(self.device, "pace", "realtime") == "fast")
-                    else:
-                        faults = self.device.take_faults()
-                    for fault in faults:
-                        self._say(f"device fault: {fault.kind} {fault.detail}")
-                    gap = last is not None and block.first_sample != last
-                    last = block.next_sample
-                    samples += block.n_samples
-                    for ev in self.trigger.process(block):
-                        self._on_event(ev, rec)
-                    self._maybe_look(block.next_sample)
-                    if self.view is not None:
-                        self.view.log_block(block)
-                    if self.readout:
-                        self.readout.update(block, queue=rec.stats.queued if rec else 0,
-                                            overflows=rec.overflows if rec else 0, gap=gap,
-                                            impacts=list(self._onsets.values()))
-                    self._drain(rec)
-            except KeyboardInterrupt:
-                interrupted = True
-                if rec:
-                    rec.event("interrupted", 0, reason="Ctrl-C")
-            except DeviceError as err:  # the device gave up: keep what came, say why
-                self._say(f"device ended the stream: {err}")
-                if rec:
-                    rec.event("device_error", 0, message=str(err))
-                self.notes.append(str(err))
-            for fault in self.device.take_faults():  # faults reported with the last read
-                if rec:
-                    rec.event(fault.kind, fault.t_ns, **fault.detail)
-                self._say(f"device fault: {fault.kind} {fault.detail}")
-            for ev in self.trigger.flush():
-                self._on_event(ev, rec)
-            self._say(f"waiting for the analyzer to finish {self._jobs.unfinished_tasks} job(s)")
-            self._jobs.join()
-            self._drain(rec)
+            interrupted = self._stream(rec)
+            self._end_of_stream(rec)
         finally:
             self._jobs.put(None)
             if self.readout:
@@ -201,8 +171,61 @@ class Session:
                 rec.close()
             self.device.close()
         self.hits.sort(key=lambda h: h.index)
-        return TrialOutcome(self.hits, trial_summary(self.hits), samples, self.skipped_updates,
-                            self.first_looks, interrupted, self.record_path, notes=self.notes)
+        return TrialOutcome(self.hits, trial_summary(self.hits, self.trigger.health), self.samples,
+                            self.skipped_updates, self.first_looks, interrupted, self.record_path,
+                            notes=self.notes)
+
+    def _stream(self, rec: Recorder | None) -> bool:
+        """Take every block of the device; True if Ctrl-C ended the stream."""
+        try:
+            for block in self.device:
+                self._take(block, rec)
+        except KeyboardInterrupt:
+            if rec:
+                rec.event("interrupted", 0, reason="Ctrl-C")
+            return True
+        except DeviceError as err:  # the device gave up: keep what came, say why
+            self._say(f"device ended the stream: {err}")
+            if rec:
+                rec.event("device_error", 0, message=str(err))
+            self.notes.append(str(err))
+        return False
+
+    def _take(self, block: Block, rec: Recorder | None) -> None:
+        """One block through the recorder, the trigger, the first looks and the views."""
+        if rec:
+            self._truth_written, faults = store_block(
+                rec, self.device, block, self._truth_written,
+                wait_for_room=getattr(self.device, "pace", "realtime") == "fast")
+        else:
+            faults = self.device.take_faults()
+        for fault in faults:
+            self._say(f"device fault: {fault.kind} {fault.detail}")
+        gap = self._next_sample is not None and block.first_sample != self._next_sample
+        self._next_sample = block.next_sample
+        self.samples += block.n_samples
+        for ev in self.trigger.process(block):
+            self._on_event(ev, rec)
+        self._maybe_look(block.next_sample)
+        if self.view is not None:
+            self.view.log_block(block)
+        if self.readout:
+            self.readout.update(block, queue=rec.stats.queued if rec else 0,
+                                overflows=rec.overflows if rec else 0, gap=gap,
+                                impacts=list(self._onsets.values()))
+        self._drain(rec)
+
+    def _end_of_stream(self, rec: Recorder | None) -> None:
+        """The last faults, the trigger's open event, and every final analysis still queued."""
+        for fault in self.device.take_faults():  # faults reported with the last read
+            if rec:
+                rec.event(fault.kind, fault.t_ns, **fault.detail)
+            self._say(f"device fault: {fault.kind} {fault.detail}")
+        for ev in self.trigger.flush():
+            self._on_event(ev, rec)
+        self._say(f"waiting for the analyzer to finish {self._jobs.unfinished_tasks} job(s)")
+        self._jobs.join()
+        self._drain(rec)
 
     def _on_event(self, ev: ImpactEvent, rec: Recorder | None) -> None:
         k = self._n_events
@@ -210,13 +233,14 @@ class Session:
         self._onsets[k] = ev.onset_s
         if rec:
             rec.write_json(IMPACTS_TOPIC, ev.to_json(), ev.t_ns)
-        flags = [f for f, on in (("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
+        flags = [f for f, on in (("not analysable", ev.not_analysable is not None),
+                                 ("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
                                  ("short", ev.too_short)) if on]
         self._say(f"hit {k} at {ev.onset_s:.3f} s detected ({ev.snr_db:.0f} dB"
                   + (", " + ", ".join(flags) if flags else "") + "): analysing")
         if self.view is not None:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
-        self._jobs.put(("final", k, ev))
+        self._jobs.put(FinalJob(k, ev))
         self._next_look = None
         self._ringing_hit = None
 
@@ -244,20 +268,25 @@ class Session:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
-        self._jobs.put(("look", onset, (x, (end - start) / self.info.fs_hz)))
+        self._jobs.put(LookJob(onset, x))
 
     def _drain(self, rec: Recorder | None) -> None:
         while True:
             try:
-                kind, k, payload = self._done.get_nowait()
+                done = self._done.get_nowait()
             except queue.Empty:
                 return
-            if kind == "look":
-                self._show_look(k, payload)
-            elif kind == "final":
-                self._show_final(payload, rec)
+            if isinstance(done, LookDone):
+                self._show_look(done.onset_sample, done.look)
+            elif isinstance(done, FinalDone):
+                self._show_final(done.hit, rec)
+            elif isinstance(done.job, FinalJob):  # judge_event does not raise; should it, the hit stays
+                job, err = done.job, done.error
+                self._show_final(HitResult(job.index, job.event, False, f"analysis failed: "
+                                           f"{type(err).__name__}: {err}", None), rec)
             else:
-                self._say(f"analyzer error on hit {k}: {payload}")
+                self._say(f"first look at the impact from sample {done.job.onset_sample} "
+                          f"failed: {type(done.error).__name__}: {done.error}")
 
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
         if look is None:

@@ -1,11 +1,19 @@
 """Impact trigger: finds ram blows in a block stream, to the sample, and hands over their records.
 
-``Trigger(info).process(block) -> [ImpactEvent]``; events come out once their record is complete
-(``flush()`` at the end of a stream). States and what moves them::
+``Trigger(info, TriggerSettings(...)).process(block) -> [ImpactEvent]``; events come out once
+their record is complete (``flush()`` at the end of a stream). Every setting is in
+:class:`TriggerSettings` (times in seconds); the trigger turns them into samples at the stream's
+rate when it is built, at any rate from 50 Hz to 51.2 kHz: a length the rate cannot resolve
+(an STA of fewer than 5 samples, an AR fit of fewer than 30) is refused then, naming the
+setting and the value to set, never mid-stream; ``TriggerSettings.for_rate(fs_hz)`` (what
+``Trigger(info)`` uses) lengthens the defaults that need it, and is the plain defaults at the
+design rates (2048 Hz, 25.6 kHz). States and what moves them::
 
-    not ready --(lta_s of samples since the start or a gap)--> armed
-    armed  --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
+    not ready --(lta_s / 4 of samples since the start or a long gap)--> arming
+    arming --(lta_s of samples: the LTA is full)--> armed
+    arming, armed --(detection: k of n gages STA/LTA > on, or ram force >= level)--> active
     active --(envelope back near the pre-event level for rearm_hold_s, or max_post_s)--> armed
+    any --(short gap)--> the same state;  any --(long gap, or back in time)--> not ready
 
 * **Detection.** With a ram load cell (a channel in ``"N"``; ``mode="force"``, or ``"auto"``
   when one exists) a level / slope trigger on ``|F|`` with hysteresis; otherwise recursive
@@ -15,7 +23,8 @@
   as soon as it re-arms, and the frozen value is the *pre-event level*.
 * **Onset.** AIC (Maeda) over the responding gages, then a joint hinge fit of the rising edge
   (:func:`ramdaq.analysis.onset.hinge_onset`) to a fraction of a sample, less the front end's delay
-  (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``).
+  (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``; a
+  rig that does not say it usably is refused when the trigger is built, never read as 0 s).
 * **Second contact.** 15-45 ms after the onset an AR prediction-error filter is fitted to the
   ringing (all gages share its poles, so it reaches the noise floor); the innovation of a new
   blow then stands far out of the ringing. A new sharp onset within ``double_hit_s`` flags the
@@ -33,10 +42,34 @@
 * **Clipping.** Counts at the ADC rails ``-2**(bits-1)`` / ``2**(bits-1) - 1`` (``adc_bits``
   from ``info.extra``; no check without it) anywhere in the record name the channel in
   ``clipped``.
+* **Arming.** After the start of the stream (or a long gap) the trigger is blind for
+  ``lta_s / 4`` (*not ready*): the background must be averaged over at least half a period of
+  its slowest steady tone, or the tone's peaks would look like blows (the power of a sine
+  averaged over half a period is its mean; 0.5 s covers tones down to 1 Hz). Until ``lta_s``
+  it is *arming*: it detects against the LTA so far, and a blow it sees is reported as
+  ``not_analysable`` ("trigger still arming"): its pre-event level, which ends its record,
+  rests on less than the LTA window.
 * **Gaps.** A block whose ``first_sample`` is not the previous block's ``next_sample`` is a gap:
-  an open event is closed at the last sample before it (``end_reason="gap"``), the STA/LTA and
-  the ring buffer restart, and the trigger is *not ready* for ``lta_s``: a step across a gap can
-  never trigger, and a blow within ``lta_s`` after one is missed.
+  an open event is closed at the last sample before it (``end_reason="gap"``) and the ring
+  buffer restarts (no window reads across a gap). A *short* gap, at most ``lta_s`` of missing
+  samples, leaves the STA and LTA as they were: the LTA's weights fall to 1/e over ``lta_s``,
+  so after such a gap the background it holds is no older than what it already averages. The
+  trigger then goes on from the state it had: armed (or arming) at the first sample after the
+  gap; or, if a blow was ringing, following that ringing to its decay (its record, closed at
+  the gap, is handed over; the ringing after the gap is the same blow and cannot trigger) while
+  its AR filter looks for a new blow once it has ``ar_order`` samples after the gap (10 ms at
+  2048 Hz; until then the STA against the ringing's envelope stands in, if the blow is older
+  than 2 ``envelope_s``; if it is younger, those samples are blind). A longer gap, or a stream
+  that jumps back, restarts the trigger as at the start. A blow whose onset lies within the
+  hinge fit's pre-event window (15 ms) after a gap may have begun inside it: it is reported,
+  ``not_analysable``. :attr:`Trigger.health` counts the gaps, the missing samples, the time
+  the trigger was blind (gaps, settling, an AR filter not yet able to scan) and arming.
+
+The working state of an event is held in pieces a reader can take one at a time: the detector's
+running averages (:class:`_Levels`), the envelope watch that ends the record
+(:class:`_DecayWatch`), and the second-contact detector with its AR filter
+(:class:`_ContactScan`, :class:`_Whitener`), which a blow that follows while the last one still
+rings takes over.
 
 Events are JSON-serialisable (:meth:`ImpactEvent.to_json`) for ``/ramdaq/impacts``
 (:data:`IMPACT_JSON_SCHEMA`); the samples (``ImpactEvent.record``) travel beside the JSON.
@@ -44,6 +77,7 @@ Events are JSON-serialisable (:meth:`ImpactEvent.to_json`) for ``/ramdaq/impacts
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field, fields
@@ -54,13 +88,228 @@ import numpy as np
 from ramdaq.analysis import onset as ons
 from ramdaq.drivers.block import Block, StreamInfo
 
-__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "Trigger"]
+__all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "StreamHealth", "Trigger",
+           "TriggerSettings"]
 
 _AIC_PRE_S, _AIC_POST_S = 0.1, 0.01          # AIC window around a detection
 _EDGE_PRE_S, _EDGE_POST_S = 0.015, 0.004     # hinge fit window around the AIC pick
 _EDGE_SEARCH_S = (0.0015, 0.0005)            # onset search around the AIC pick
 _RING_SPARE_S = 1.0
-NOT_READY, ARMED, ACTIVE = "not ready", "armed", "active"
+_AIC_MARGIN = 4                              # samples the AIC keeps clear of a window's ends
+_STAT_N = 5                                  # fewest samples of an average set against a threshold
+_AR_MODES_TAPS = 10                          # fewest AR taps by default: five ringing modes
+NOT_READY, ARMING, ARMED, ACTIVE = "not ready", "arming", "armed", "active"
+MODES = ("auto", "force", "sta_lta")
+
+
+@dataclass(frozen=True)
+class TriggerSettings:
+    """Every setting of :class:`Trigger`; times in s, forces in N, the rest ratios.
+
+    Attributes
+    ----------
+    mode : {"auto", "force", "sta_lta"}
+        ``auto`` uses a ram force channel (unit ``"N"``) when the stream has one.
+    force_channel : str, optional
+        Name of the ram load cell; default the first channel in ``"N"``.
+    level_N, slope_N_per_s : float
+        Force trigger: ``|F| >= level_N`` (N), or ``|dF/dt| >= slope_N_per_s`` (N/s) if given.
+    hysteresis : float
+        ``|F|`` must fall below ``hysteresis * level_N`` before a new contact counts.
+    sta_s, lta_s : float
+        STA and LTA lengths, s. The trigger is ready ``lta_s`` after the start and any gap.
+    on : float
+        STA/LTA ratio of a voting gage that counts towards a trigger.
+    off : float
+        A second contact has ended when fewer than ``k`` gages' innovation ratio exceeds it.
+    k_of_n : (int, int or None)
+        ``k`` of the ``n`` voting gages must exceed ``on`` (``n`` None: all of ``voters``).
+    voters : tuple of str, optional
+        Channels that vote; default every gage (``info.gages > 0``).
+    pre_trigger_s, post_s, max_post_s : float
+        Record from ``pre_trigger_s`` before the onset to the decay's end, kept within
+        ``post_s .. max_post_s`` after the onset, s.
+    envelope_s, rearm_ratio, rearm_hold_s : float
+        Decay: envelope / pre-event power < ``rearm_ratio`` on every responding gage for
+        ``rearm_hold_s`` (s); the envelope is a recursive mean of x**2 over ``envelope_s`` (s).
+    double_hit_s : float
+        A second contact up to this long after the onset (s) is a double hit; later, a new impact.
+    double_on, innovation_sta_s : float
+        Second contact: innovation power (mean over ``innovation_sta_s``, s) / its level in the
+        fit window above ``double_on`` on ``k`` responding gages.
+    ar_order : int, optional
+        Taps of the AR prediction-error filter; default ``min(32, fit samples // 3)`` (20 at
+        2048 Hz, 32 at 25.6 kHz, where the anti-alias band edge needs more).
+    ar_guard_s, ar_fit_s : float
+        The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset, s.
+    delay_s : float, optional
+        Front-end delay removed from onsets, s; default the rig's anti-alias filter
+        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, 0 without a rig.
+    keep_records : bool
+        Attach the samples (:class:`ImpactRecord`) to each event.
+
+    Settings that need no stream are checked here (``ValueError`` naming the setting); those
+    that depend on the stream's channels and rate when the :class:`Trigger` is built.
+    """
+
+    mode: str = "auto"
+    force_channel: str | None = None
+    level_N: float = 1000.0
+    slope_N_per_s: float | None = None
+    hysteresis: float = 0.5
+    sta_s: float = 0.01
+    lta_s: float = 2.0
+    on: float = 4.0
+    off: float = 2.0
+    k_of_n: tuple[int, int | None] = (3, None)
+    voters: tuple[str, ...] | None = None
+    pre_trigger_s: float = 0.5
+    post_s: float = 2.0
+    max_post_s: float = 30.0
+    envelope_s: float = 0.25
+    rearm_ratio: float = 2.0
+    rearm_hold_s: float = 0.25
+    double_hit_s: float = 1.0
+    double_on: float = 5.0
+    innovation_sta_s: float = 0.003
+    ar_order: int | None = None
+    ar_guard_s: float = 0.015
+    ar_fit_s: float = 0.03
+    delay_s: float | None = None
+    keep_records: bool = True
+
+    def __post_init__(self) -> None:
+        if self.voters is not None:
+            object.__setattr__(self, "voters", tuple(self.voters))
+        object.__setattr__(self, "k_of_n", tuple(self.k_of_n))
+        for name in ("level_N", "sta_s", "lta_s", "on", "off", "post_s", "envelope_s",
+                     "rearm_ratio", "rearm_hold_s", "double_on", "innovation_sta_s",
+                     "ar_guard_s", "ar_fit_s"):
+            v = getattr(self, name)
+            if not v > 0 or not math.isfinite(v):
+                raise ValueError(f"{name} ({v}) must be a positive number")
+        if not 0 < self.hysteresis < 1:
+            raise ValueError(f"hysteresis ({self.hysteresis}) must lie between 0 and 1")
+        if not self.off < self.on:
+            raise ValueError(f"off ({self.off}) must be below on ({self.on})")
+        if not (0 <= self.pre_trigger_s and self.post_s <= self.max_post_s):
+            raise ValueError(f"need 0 <= pre_trigger_s ({self.pre_trigger_s}) and post_s "
+                             f"({self.post_s}) <= max_post_s ({self.max_post_s})")
+        if self.mode not in MODES:
+            raise ValueError(f"mode {self.mode!r} is not 'auto', 'force' or 'sta_lta'")
+        if self.ar_order is not None and (isinstance(self.ar_order, bool)
+                                          or int(self.ar_order) != self.ar_order
+                                          or self.ar_order < 1):
+            raise ValueError(f"ar_order ({self.ar_order}) must be a whole number >= 1")
+
+    @classmethod
+    def for_rate(cls, fs_hz: float, **overrides: Any) -> TriggerSettings:
+        """The settings ``TriggerSettings(**overrides)``, with every length that was not given
+        and that ``fs_hz`` cannot resolve lengthened to the fewest samples it needs
+        (:func:`_samples_needed`; at 50 Hz: ``sta_s`` and ``innovation_sta_s`` 0.1 s,
+        ``ar_guard_s`` 0.02 s, ``ar_fit_s`` 0.6 s). Where the defaults resolve (from 1.6 kHz
+        up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it."""
+        s = cls(**overrides)
+        longer = {name: need / fs_hz for name, (need, _) in _samples_needed(s).items()
+                  if name not in overrides and round(getattr(s, name) * fs_hz) < need}
+        return dataclasses.replace(s, **longer) if longer else s
+
+
+def _samples_needed(s: TriggerSettings) -> dict[str, tuple[int, str]]:
+    """The fewest samples each length setting of ``s`` needs at any rate, and why.
+
+    The averages that are compared with a threshold need a few samples: the STA of white
+    noise's power over one sample exceeds 4 times its mean on 3 of 4 gages about once in 2 700
+    samples (chi-square, one degree of freedom: P = 0.046 per gage), a recursive mean over five
+    samples about once in 10^10 (P = 1.8e-4 per gage, simulated). The AR
+    fit needs three equations per tap and ten taps (five ringing modes) for the innovation to
+    be noise where the ringing has more modes than one (with an AR(2) fitted to two modes,
+    a second contact is found 0.1 s after every blow). These are the counts the design rate,
+    2048 Hz, has (20, 6, 61 samples)."""
+    needs = {"sta_s": (_STAT_N, "an STA compared with on"),
+             "innovation_sta_s": (_STAT_N, "an innovation STA compared with double_on")}
+    needs |= {name: (1, "a length of at least one sample")
+              for name in ("envelope_s", "rearm_hold_s", "post_s", "max_post_s", "double_hit_s",
+                           "ar_guard_s")}
+    if s.ar_order is None:  # default order fit // 3
+        needs["ar_fit_s"] = (3 * _AR_MODES_TAPS, f"the AR fit of the ringing ({_AR_MODES_TAPS} "
+                                                 f"taps, five modes, for second contacts)")
+    else:
+        needs["ar_fit_s"] = (2 * int(s.ar_order) + 2, f"ar_order ({s.ar_order})")
+    return needs
+
+
+@dataclass(frozen=True)
+class _Lengths:
+    """The settings in samples at one stream's rate (each at least one sample, except the
+    pre-trigger and the onset search after the AIC pick, which may be 0)."""
+
+    sta: int
+    lta: int
+    pre: int                  # pre-trigger
+    post: int                 # shortest record after the onset
+    max_post: int             # longest record after the onset
+    envelope: int
+    hold: int                 # re-arm hold
+    double: int               # double-hit window
+    guard: int                # AR fit starts this far after the onset
+    fit: int                  # AR fit window
+    innovation: int           # innovation STA
+    order: int                # AR taps
+    aic_pre: int
+    aic_post: int
+    search: tuple[int, int]   # hinge search before / after the AIC pick
+    edge_pre: int
+    edge_post: int
+    look: int                 # look-ahead a detection needs before its onset is refined
+    spare: int                # ring spare
+    settle: int               # blind after the start or a long gap (lta / 4)
+    short_gap: int            # longest gap the STA and LTA survive (lta)
+
+    @classmethod
+    def at(cls, s: TriggerSettings, fs_hz: float) -> _Lengths:
+        """Lengths of settings ``s`` at ``fs_hz``. ValueError, naming the setting and the value
+        to set, for a length the rate cannot resolve: refused here, never mid-stream."""
+        needs = _samples_needed(s)
+
+        def n(name: str) -> int:
+            seconds = getattr(s, name)
+            k, (need, what) = round(seconds * fs_hz), needs[name]
+            if k < need:
+                raise ValueError(
+                    f"{name} ({seconds} s) is {seconds * fs_hz:.3g} sample"
+                    f"{'' if seconds * fs_hz == 1 else 's'} at {fs_hz:g} Hz; "
+                    f"{what} needs at least {need}: set {name} to at least {need / fs_hz:.3g} s"
+                    + (", or a lower ar_order" if name == "ar_fit_s" and s.ar_order else
+                       f", or leave it to TriggerSettings.for_rate({fs_hz:g})"))
+            return k
+
+        def c(seconds: float, minimum: int = 1) -> int:  # the trigger's own windows
+            return max(minimum, round(seconds * fs_hz))
+
+        sta, lta = n("sta_s"), round(s.lta_s * fs_hz)
+        if sta >= lta:
+            raise ValueError(f"sta_s ({s.sta_s}) must be shorter than lta_s ({s.lta_s})")
+        fit = n("ar_fit_s")
+        order = min(32, fit // 3) if s.ar_order is None else int(s.ar_order)
+        search = (c(_EDGE_SEARCH_S[0]), c(_EDGE_SEARCH_S[1], 0))
+        # every AIC window spans at least the look after the detection: 2 margins + 1 sample
+        aic_post = max(c(_AIC_POST_S), 2 * _AIC_MARGIN)
+        # and the residual pick, which starts half of aic_pre before it, 2 margins too
+        aic_pre = max(c(_AIC_PRE_S), 4 * _AIC_MARGIN)
+        edge_post = max(c(_EDGE_POST_S), search[1] + 3)
+        look = aic_post + edge_post + 2
+        envelope, hold = n("envelope_s"), n("rearm_hold_s")
+        if envelope + hold <= look:
+            raise ValueError(f"envelope_s + rearm_hold_s ({s.envelope_s + s.rearm_hold_s}) must "
+                             f"be longer than the onset look-ahead ({look / fs_hz} s)")
+        return cls(sta=sta, lta=lta, pre=c(s.pre_trigger_s, 0), post=n("post_s"),
+                   max_post=n("max_post_s"), envelope=envelope, hold=hold,
+                   double=n("double_hit_s"), guard=n("ar_guard_s"), fit=fit,
+                   innovation=n("innovation_sta_s"), order=order, aic_pre=aic_pre,
+                   aic_post=aic_post, search=search,
+                   edge_pre=max(c(_EDGE_PRE_S), search[0] + 3), edge_post=edge_post,
+                   look=look, spare=c(_RING_SPARE_S), settle=max(1, lta // 4), short_gap=lta)
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +343,8 @@ class ImpactEvent:
     best responding channel. ``too_short``: the record was cut (gap, next impact, end of stream)
     before ``post_s`` or lacks part of its pre-trigger. ``end_reason``: ``decayed``,
     ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to re-arm, or
-    ``None`` if the envelope never came back.
+    ``None`` if the envelope never came back. ``not_analysable``: why a blow that was seen cannot
+    be analysed (``"trigger still arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
     """
 
     onset_sample: int
@@ -116,6 +366,7 @@ class ImpactEvent:
     too_short: bool = False
     end_reason: str = "decayed"
     decay_s: float | None = None
+    not_analysable: str | None = None
     record: ImpactRecord | None = field(default=None, compare=False, repr=False)
 
     def to_json(self) -> dict[str, Any]:
@@ -145,9 +396,38 @@ IMPACT_JSON_SCHEMA: dict[str, Any] = {
         "too_short": {"type": "boolean"},
         "end_reason": {"enum": ["decayed", "max_length", "next_impact", "gap", "flush"]},
         "decay_s": {"type": ["number", "null"]},
+        "not_analysable": {"type": ["string", "null"],
+                           "description": "why a blow that was seen cannot be analysed"},
     },
 }
 """JSON Schema of :meth:`ImpactEvent.to_json`, for the ``/ramdaq/impacts`` topic."""
+
+
+@dataclass(frozen=True)
+class StreamHealth:
+    """What the trigger could not see so far: ``gaps`` in the stream and the stream time, s,
+    ``missing_s`` in them; ``blind_s`` when no blow could have been seen (the missing samples
+    and the settling after the start or a long gap); ``arming_s`` when a blow would be seen
+    but not analysed (the rest of the LTA window)."""
+
+    gaps: int
+    missing_s: float
+    blind_s: float
+    arming_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"gaps": self.gaps, "missing_s": self.missing_s, "blind_s": self.blind_s,
+                "arming_s": self.arming_s}
+
+
+@dataclass
+class _Tally:
+    """Counts behind :class:`StreamHealth`, in samples."""
+
+    gaps: int = 0
+    missing: int = 0
+    blind: int = 0
+    arming: int = 0
 
 
 class _Ring:
@@ -191,29 +471,92 @@ class _Ring:
 
 
 @dataclass
-class _Event:
-    """An event being recorded (mutable working state)."""
+class _Levels:
+    """The detector's running averages of the voting channels' power (units^2): STA and LTA at
+    the last sample taken, and how many samples the LTA has taken since it started from zero."""
 
-    detect: int
-    pre: np.ndarray                      # pre-event power of the monitor channels, units^2
-    onset: int = -1                      # refined onset sample, -1 until refined
-    onset_s: float = 0.0
-    voters: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    second: tuple[int, float | None] | None = None   # (sample, s); s None until refined
-    cut: _Event | None = None            # previous event to close at this one's onset
-    env_last: np.ndarray | None = None
-    env_pos: int = 0
+    sta: np.ndarray
+    lta: np.ndarray
+    n: int = 0
+
+    def restart(self) -> None:
+        self.sta, self.lta, self.n = np.zeros(len(self.sta)), np.zeros(len(self.lta)), 0
+
+    def advance_lta(self, x2: np.ndarray, nlta: int) -> np.ndarray:
+        """Take ``x2`` (power, (n_voters, n)) into the LTA; its value at each sample, unbiased."""
+        lta, self.lta = ons.exp_average(x2, nlta, self.lta)
+        m0, self.n = self.n, self.n + x2.shape[1]
+        if m0 < 20 * nlta:  # undo the bias of an average started from zero
+            lta = lta / -np.expm1(np.arange(m0 + 1, self.n + 1) * np.log1p(-1 / nlta))
+        return lta
+
+    def pre_power(self, nlta: int, floor: np.ndarray) -> np.ndarray:
+        """The unbiased LTA now, at least ``floor``: the pre-event level of a blow detected here."""
+        bias = -math.expm1(self.n * math.log1p(-1 / nlta))
+        return np.maximum(self.lta / bias, floor)
+
+
+@dataclass(frozen=True, eq=False)
+class _Whitener:
+    """AR prediction-error filter fitted to a ringing (``a``, shape (order + 1,)) and the
+    innovation's variance per responding gage in the fit window (``var``, units^2)."""
+
+    a: np.ndarray
+    var: np.ndarray
+
+
+@dataclass
+class _ContactScan:
+    """Where the second-contact detector stands: it scans from ``pos`` (innovation power
+    ``level`` at ``pos - 1``), is still ``on`` from the last contact, last went off at
+    ``off_pos``, and lets no new contact count before ``dead_until``. A blow that follows while
+    the last one still rings takes the scan over, filter and all."""
+
+    pos: int = 0
+    on: bool = True
+    level: np.ndarray | None = None
+    off_pos: int = 0
+    dead_until: int = 0
+    whitener: _Whitener | None = None
+
+
+@dataclass
+class _DecayWatch:
+    """The envelope of the monitored channels from the onset: its value ``level`` (units^2) at
+    ``pos - 1``, how many samples in a row it has been near the pre-event level (``hold``), and
+    the sample where that lasted the re-arm hold (``decayed``)."""
+
+    level: np.ndarray
+    pos: int
     hold: int = 0
     decayed: int | None = None
-    end: int = -1                        # last sample of the record, -1 while ringing
+
+
+@dataclass
+class _Event:
+    """An event being recorded: detected at ``detect`` over a pre-event power ``pre`` (units^2,
+    per voting channel); ``voters`` the responding ones (indices into the voters, empty until
+    the onset is refined); ``onset`` -1 until refined; ``second`` (sample, s) of a second contact
+    (s None until refined); ``cut`` the previous event, to close at this one's onset; ``end`` the
+    record's last sample, -1 while ringing; ``not_analysable`` why it cannot be analysed;
+    ``recorded`` False for the ringing of a blow whose record a gap closed, followed after the
+    gap to its decay (so it cannot trigger) and scanned for new blows, with no record of its
+    own to hand over; ``check_until`` where its STA check (:meth:`Trigger._ring_check`) ends."""
+
+    detect: int
+    pre: np.ndarray
+    cut: _Event | None = None
+    voters: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    scan: _ContactScan = field(default_factory=_ContactScan)
+    decay: _DecayWatch | None = None
+    onset: int = -1
+    onset_s: float = 0.0
+    second: tuple[int, float | None] | None = None
+    end: int = -1
     end_reason: str = "decayed"
-    scan_pos: int = 0                    # next sample for the second-contact detector
-    sharp_on: bool = True                # detector still 'on' from the last contact
-    sharp_last: np.ndarray | None = None
-    off_pos: int = 0                     # where the second-contact detector last went off
-    dead_until: int = 0                  # no new contact before this sample
-    ar: np.ndarray | None = None
-    ar_var: np.ndarray | None = None
+    not_analysable: str | None = None
+    recorded: bool = True
+    check_until: int = 0
 
 
 class Trigger:
@@ -223,134 +566,53 @@ class Trigger:
     ----------
     info : StreamInfo
         The stream: channel names, units, gage numbers, ``fs_hz``, ``rig_toml``, ``extra``.
-    mode : {"auto", "force", "sta_lta"}
-        ``auto`` uses a ram force channel (unit ``"N"``) when the stream has one.
-    force_channel : str, optional
-        Name of the ram load cell; default the first channel in ``"N"``.
-    level_N, slope_N_per_s : float
-        Force trigger: ``|F| >= level_N``, or ``|dF/dt| >= slope_N_per_s`` (N/s) if given.
-    hysteresis : float
-        ``|F|`` must fall below ``hysteresis * level_N`` before a new contact counts.
-    sta_s, lta_s : float
-        STA and LTA lengths, s. The trigger is ready ``lta_s`` after the start and any gap.
-    on : float
-        STA/LTA ratio of a voting gage that counts towards a trigger.
-    off : float
-        A second contact has ended when fewer than ``k`` gages' innovation ratio exceeds it.
-    k_of_n : (int, int or None)
-        ``k`` of the ``n`` voting gages must exceed ``on`` (``n`` None: all of ``voters``).
-    voters : sequence of str, optional
-        Channels that vote; default every gage (``info.gages > 0``).
-    pre_trigger_s, post_s, max_post_s : float
-        Record from ``pre_trigger_s`` before the onset to the decay's end, kept within
-        ``post_s .. max_post_s`` after the onset.
-    envelope_s, rearm_ratio, rearm_hold_s : float
-        Decay: envelope / pre-event power < ``rearm_ratio`` on every responding gage for
-        ``rearm_hold_s``; the envelope is a recursive mean of x**2 over ``envelope_s``.
-    double_hit_s : float
-        A second contact up to this long after the onset is a double hit; later, a new impact.
-    double_on, innovation_sta_s : float
-        Second contact: innovation power (mean over ``innovation_sta_s``) / its level in the
-        fit window above ``double_on`` on ``k`` responding gages.
-    ar_order : int, optional
-        Taps of the AR prediction-error filter; default ``min(32, fit samples // 3)`` (20 at
-        2048 Hz, 32 at 25.6 kHz, where the anti-alias band edge needs more).
-    ar_guard_s, ar_fit_s : float
-        The filter is fitted from ``ar_guard_s`` to ``ar_guard_s + ar_fit_s`` after the onset.
-    delay_s : float, optional
-        Front-end delay removed from onsets, s; default the rig's anti-alias filter
-        (:func:`ramdaq.analysis.onset.butterworth_delay_s`) from ``info.rig_toml``, else 0.
-    keep_records : bool
-        Attach the samples (:class:`ImpactRecord`) to each event.
+    settings : TriggerSettings, optional
+        Default ``TriggerSettings.for_rate(info.fs_hz)``: the defaults, lengthened where the
+        stream's rate cannot resolve them.
+
+    Raises
+    ------
+    ValueError
+        A setting the stream cannot meet (its channels, its rate), or a rig in ``info.rig_toml``
+        that does not say its anti-alias filter while ``settings.delay_s`` is not given.
     """
 
-    def __init__(self, info: StreamInfo, *, mode: str = "auto", force_channel: str | None = None,
-                 level_N: float = 1000.0, slope_N_per_s: float | None = None,
-                 hysteresis: float = 0.5, sta_s: float = 0.01, lta_s: float = 2.0,
-                 on: float = 4.0, off: float = 2.0, k_of_n: tuple[int, int | None] = (3, None),
-                 voters: list[str] | tuple[str, ...] | None = None, pre_trigger_s: float = 0.5,
-                 post_s: float = 2.0, max_post_s: float = 30.0, envelope_s: float = 0.25,
-                 rearm_ratio: float = 2.0, rearm_hold_s: float = 0.25, double_hit_s: float = 1.0,
-                 double_on: float = 5.0, innovation_sta_s: float = 0.003, ar_order: int | None = None,
-                 ar_guard_s: float = 0.015, ar_fit_s: float = 0.03, delay_s: float | None = None,
-                 keep_records: bool = True) -> None:
-        self.info, self.fs_hz = info, float(info.fs_hz)
-        for name, v in (("level_N", level_N), ("sta_s", sta_s), ("lta_s", lta_s), ("on", on),
-                        ("off", off), ("post_s", post_s), ("envelope_s", envelope_s),
-                        ("rearm_ratio", rearm_ratio), ("rearm_hold_s", rearm_hold_s),
-                        ("double_on", double_on), ("innovation_sta_s", innovation_sta_s),
-                        ("ar_guard_s", ar_guard_s), ("ar_fit_s", ar_fit_s)):
-            if not v > 0 or not math.isfinite(v):
-                raise ValueError(f"{name} ({v}) must be a positive number")
-        if not 0 < hysteresis < 1:
-            raise ValueError(f"hysteresis ({hysteresis}) must lie between 0 and 1")
-        if not off < on:
-            raise ValueError(f"off ({off}) must be below on ({on})")
-        if not (0 <= pre_trigger_s and post_s <= max_post_s):
-            raise ValueError(f"need 0 <= pre_trigger_s ({pre_trigger_s}) and post_s ({post_s}) "
-                             f"<= max_post_s ({max_post_s})")
-        n = self._n
-        self._nsta, self._nlta = n(sta_s), n(lta_s)
-        if self._nsta >= self._nlta:
-            raise ValueError(f"sta_s ({sta_s}) must be shorter than lta_s ({lta_s})")
-        names = list(info.channels)
-        if voters is None:
-            voters = [c for c, g in zip(names, info.gages, strict=True) if g > 0]
-        for v in voters:
-            if v not in names:
-                raise ValueError(f"voter {v!r} is not a channel of the stream")
-        self._vidx = np.array([names.index(v) for v in voters], dtype=int)
-        k, n_of = k_of_n
-        if n_of is not None and n_of != len(self._vidx):
-            raise ValueError(f"k_of_n n ({n_of}) is not the number of voting gages "
-                             f"({len(self._vidx)})")
-        if not 1 <= k <= len(self._vidx):
-            raise ValueError(f"k_of_n k ({k}) must lie in 1..{len(self._vidx)}")
-        self._k = k
-        if mode not in ("auto", "force", "sta_lta"):
-            raise ValueError(f"mode {mode!r} is not 'auto', 'force' or 'sta_lta'")
-        if force_channel is not None and (force_channel not in names
-                                          or info.units[names.index(force_channel)] != "N"):
-            raise ValueError(f"force_channel {force_channel!r} is not a channel in N")
-        in_n = [i for i, u in enumerate(info.units) if u == "N"]
-        fidx = names.index(force_channel) if force_channel else (in_n[0] if in_n else None)
-        if mode == "force" and fidx is None:
-            raise ValueError("mode 'force' needs a channel in N; the stream has none")
-        self._fidx = fidx if mode in ("auto", "force") else None
+    def __init__(self, info: StreamInfo, settings: TriggerSettings | None = None) -> None:
+        s = TriggerSettings.for_rate(info.fs_hz) if settings is None else settings
+        self.info, self.settings, self.fs_hz = info, s, float(info.fs_hz)
+        self._len = _Lengths.at(s, self.fs_hz)
+        self._vidx, self._k = _voting_rows(info, s)
+        self._fidx = _force_row(info, s)
         self.mode = "sta_lta" if self._fidx is None else "force"
-        self.level_N, self.slope_N_per_s, self.hysteresis = level_N, slope_N_per_s, hysteresis
-        self.on, self.off, self.double_on, self.rearm_ratio = on, off, double_on, rearm_ratio
-        self._pre_n, self._post_n, self._max_n = n(pre_trigger_s, 0), n(post_s), n(max_post_s)
-        self._env_n, self._hold_n, self._double_n = n(envelope_s), n(rearm_hold_s), n(double_hit_s)
-        self._guard_n, self._fit_n = n(ar_guard_s), n(ar_fit_s)
-        self._inno_n = n(innovation_sta_s)
-        self._order = min(32, self._fit_n // 3) if ar_order is None else int(ar_order)
-        if not 1 <= self._order < self._fit_n // 2:
-            raise ValueError(f"ar_order ({self._order}) must lie in 1..{self._fit_n // 2 - 1} "
-                             f"for ar_fit_s ({ar_fit_s})")
-        self._aic_pre_n, self._aic_post_n = n(_AIC_PRE_S), n(_AIC_POST_S)
-        self._search_n = (n(_EDGE_SEARCH_S[0]), n(_EDGE_SEARCH_S[1], 0))
-        self._edge_pre_n = max(n(_EDGE_PRE_S), self._search_n[0] + 3)
-        self._edge_post_n = max(n(_EDGE_POST_S), self._search_n[1] + 3)
-        self._look_n = self._aic_post_n + self._edge_post_n + 2
-        if self._env_n + self._hold_n <= self._look_n:
-            raise ValueError(f"envelope_s + rearm_hold_s ({envelope_s + rearm_hold_s}) must be "
-                             f"longer than the onset look-ahead ({self._look_n / self.fs_hz} s)")
-        self.delay_s = _rig_delay_s(info) if delay_s is None else float(delay_s)
+        self.delay_s = _rig_delay_s(info) if s.delay_s is None else float(s.delay_s)
         self._delay_n = self.delay_s * self.fs_hz
         bits = info.extra.get("adc_bits")
         self._rails = None if bits is None else (-(2 ** (int(bits) - 1)), 2 ** (int(bits) - 1) - 1)
-        self.keep_records = keep_records
-        self._ring = _Ring(info.n_channels, self._pre_n + self._max_n + n(_RING_SPARE_S))
+        n = self._len
+        self._ring = _Ring(info.n_channels, n.pre + n.max_post + n.spare)
         self._scale = np.ones(info.n_channels)
-        self._expected: int | None = None
-        self._reset(0, 0)
+        self._expected: int | None = None           # first sample of the next block, if no gap
+        self._seg = (0, 0)                          # (first sample, t0_ns) since the last gap
+        self._after_gap = False                     # that segment began at a gap
+        self._tally = _Tally()
+        self._state = NOT_READY
+        self._levels = _Levels(np.zeros(len(self._vidx)), np.zeros(len(self._vidx)))
+        self._f_below = True                        # force fell below hysteresis since the last contact
+        self._ev: _Event | None = None
 
     # -- public ----------------------------------------------------------------------------
     @property
     def state(self) -> str:
-        """``"not ready"``, ``"armed"`` or ``"active"``."""
+        """``"not ready"``, ``"arming"``, ``"armed"`` or ``"active"``."""
+        if self._state == ARMED and self._levels.n < self._len.lta:
+            return ARMING
         return self._state
+
+    @property
+    def health(self) -> StreamHealth:
+        """Gaps, missing samples, blind and arming time so far."""
+        t, fs = self._tally, self.fs_hz
+        return StreamHealth(t.gaps, t.missing / fs, t.blind / fs, t.arming / fs)
 
     @property
     def ringing(self) -> tuple[int, int] | None:
@@ -358,7 +620,7 @@ class Trigger:
         refined onset once known (else the detection sample) and one past the latest sample.
         For an analyzer that wants a first look before the record completes."""
         ev = self._ev
-        if ev is None or self._state != ACTIVE:
+        if ev is None or self._state != ACTIVE or not ev.recorded:
             return None
         return (ev.onset if ev.onset >= 0 else ev.detect), self._ring.end
 
@@ -374,15 +636,13 @@ class Trigger:
                              f"match the stream ({self.info.n_channels} at {self.fs_hz} Hz)")
         out: list[ImpactEvent] = []
         if block.first_sample != self._expected:
-            if self._expected is not None:
-                out += self._close("gap")
-            self._reset(block.first_sample, block.t0_ns)
+            out += self._new_segment(block)
         self._expected = block.next_sample
         self._ring.write(block.first_sample, block.counts)
         self._scale = block.scale
         x = block.counts[self._vidx] * block.scale[self._vidx, None]
         x2 = x * x
-        sta, self._sta_last = ons.exp_average(x2, self._nsta, self._sta_last)
+        sta, self._levels.sta = ons.exp_average(x2, self._len.sta, self._levels.sta)
         self._run(block.first_sample, x2, sta, out)
         return out
 
@@ -393,32 +653,105 @@ class Trigger:
         return out
 
     # -- state machine -----------------------------------------------------------------------
-    def _n(self, seconds: float, minimum: int = 1) -> int:
-        return max(minimum, round(seconds * self.fs_hz))
+    def _new_segment(self, block: Block) -> list[ImpactEvent]:
+        """``block`` does not follow the last one: the start of the stream, or a gap (the
+        module docstring says what each does). The events the gap closed."""
+        if self._expected is None:  # the start, or a new stream after flush()
+            self._restart(block, after_gap=False)
+            return []
+        missing = block.first_sample - self._expected
+        self._tally.gaps += 1
+        self._tally.missing += max(0, missing)
+        self._tally.blind += max(0, missing)
+        ev, active = self._ev, self._state == ACTIVE
+        out = self._close("gap")
+        if not 0 < missing <= self._len.short_gap:
+            self._restart(block, after_gap=True)
+            return out
+        self._seg, self._after_gap = (block.first_sample, block.t0_ns), True
+        self._ring.reset(block.first_sample)
+        if active:
+            self._ev = self._ringing_after_gap(ev, block.first_sample)
+        return out
 
-    def _reset(self, first_sample: int, t0_ns: int) -> None:
-        nv = len(self._vidx)
+    def _ringing_after_gap(self, ev: _Event, first: int) -> _Event:
+        """The ringing of ``ev`` (its record closed at a gap) from sample ``first`` on: its
+        envelope goes on from where it was; its contact scan from where the AR filter has the
+        ``ar_order`` samples it needs (or, if the gap came before the filter was fitted, after
+        the fit on the samples after the gap). Until then the STA against the ringing's level
+        stands in (:meth:`_ring_check`), once the envelope has caught up with the ringing (two
+        ``envelope_s`` after the onset: before, it is still below the ringing's power); before
+        that, those samples are blind and counted so."""
+        n = self._len
+        decay = ev.decay or _DecayWatch(level=ev.pre.copy(), pos=first)
+        decay.pos, decay.hold = first, 0
+        scan = ev.scan
+        if self._fidx is not None:
+            start = first
+        elif scan.whitener is None:
+            start = max(ev.onset + n.guard, first) + n.fit
+        else:
+            start = first + n.order
+        scan.pos = scan.off_pos = start
+        scan.level, scan.dead_until = None, max(scan.dead_until, first)
+        settled = first - ev.onset >= 2 * n.envelope
+        self._tally.blind += 0 if settled else start - first
+        return _Event(detect=ev.detect, pre=ev.pre, voters=ev.voters, scan=scan, decay=decay,
+                      onset=ev.onset, onset_s=ev.onset_s, recorded=False,
+                      check_until=start if settled else first)
+
+    def _ring_check(self, ev: _Event, pos: int, b0: int, end: int, sta: np.ndarray) -> None:
+        """While the AR scan of a ringing after a gap cannot start: a blow where ``k`` voters'
+        STA exceed ``on`` times the ringing's level (its envelope, or the pre-event level if
+        higher) opens a new event, as the scan would."""
+        stop = min(end, ev.check_until)
+        if stop <= pos:
+            return
+        ref = self.settings.on * np.maximum(ev.pre, ev.decay.level)
+        hit = np.flatnonzero((sta[:, pos - b0:stop - b0] > ref[:, None]).sum(axis=0) >= self._k)
+        if hit.size == 0:
+            return
+        d = pos + int(hit[0])
+        ev.check_until, ev.scan.on = 0, True
+        ev.scan.dead_until = max(ev.scan.dead_until, d + self._len.guard)
+        self._ev = _Event(detect=d, pre=ev.pre, cut=ev, voters=ev.voters, scan=ev.scan)
+
+    def _hand_over(self, ev: _Event, out: list[ImpactEvent]) -> None:
+        """A completed event to the caller (the ringing after a gap has nothing to give)."""
+        if ev.recorded:
+            out.append(self._finish(ev))
+
+    def _restart(self, block: Block, after_gap: bool) -> None:
+        """Start again as at the beginning of a stream, from ``block``."""
         self._state, self._ev = NOT_READY, None
-        self._sta_last, self._lta_last, self._lta_m = np.zeros(nv), np.zeros(nv), 0
-        self._seg = (first_sample, t0_ns)
-        self._ring.reset(first_sample)
+        self._levels.restart()
+        self._seg, self._after_gap = (block.first_sample, block.t0_ns), after_gap
+        self._ring.reset(block.first_sample)
         self._f_below = True
 
+    def _resume(self, ev: _Event) -> None:
+        """The detector goes on after the ringing of ``ev``: the LTA resumes from the pre-event
+        level, or from what still rings if higher, as a full average."""
+        self._f_below = not ev.scan.on
+        self._levels.lta = ev.pre if ev.decay is None else np.maximum(ev.pre, ev.decay.level)
+        self._levels.n = max(self._levels.n, 20 * self._len.lta)
+
     def _run(self, b0: int, x2: np.ndarray, sta: np.ndarray, out: list[ImpactEvent]) -> None:
-        end, pos = b0 + x2.shape[1], b0
+        end, pos, nlta = b0 + x2.shape[1], b0, self._len.lta
         while True:
             ev = self._ev
-            if self._state == NOT_READY:
+            if self._state == NOT_READY:  # blind: the LTA settles
                 if pos >= end:
                     return
-                stop = min(end, pos + self._nlta - self._lta_m)
-                self._lta_advance(x2[:, pos - b0:stop - b0])
+                stop = min(end, pos + max(0, self._len.settle - self._levels.n))
+                self._levels.advance_lta(x2[:, pos - b0:stop - b0], nlta)
+                self._tally.blind += stop - pos
                 pos = stop
-                if self._lta_m >= self._nlta:
+                if self._levels.n >= self._len.settle:
                     self._state = ARMED
             elif self._state == ARMED:
                 if ev is not None and ev.end < pos:
-                    out.append(self._finish(ev))
+                    self._hand_over(ev, out)
                     self._ev = None
                     continue
                 if pos >= end:
@@ -428,24 +761,24 @@ class Trigger:
                 if d is None:
                     pos = limit
                 else:
-                    self._ev = _Event(detect=d, pre=self._pre_power(), cut=ev)
+                    floor = self._scale[self._vidx] ** 2 / 12
+                    self._ev = _Event(detect=d, pre=self._levels.pre_power(nlta, floor), cut=ev,
+                                      not_analysable=self._arming_note())
                     self._state, pos = ACTIVE, d
             else:
+                if ev.check_until > pos:
+                    self._ring_check(ev, pos, b0, end, sta)
                 r = self._advance(end, out)
                 if r is None:
                     return
                 self._state, pos = ARMED, r
 
-    def _lta_advance(self, x2: np.ndarray) -> np.ndarray:
-        lta, self._lta_last = ons.exp_average(x2, self._nlta, self._lta_last)
-        m0, self._lta_m = self._lta_m, self._lta_m + x2.shape[1]
-        if m0 < 20 * self._nlta:  # undo the bias of an average started from zero
-            lta = lta / -np.expm1(np.arange(m0 + 1, self._lta_m + 1) * np.log1p(-1 / self._nlta))
-        return lta
-
-    def _pre_power(self) -> np.ndarray:
-        bias = -math.expm1(self._lta_m * math.log1p(-1 / self._nlta))
-        return np.maximum(self._lta_last / bias, self._scale[self._vidx] ** 2 / 12)
+    def _arming_note(self) -> str | None:
+        """Why a blow detected now cannot be analysed, if the trigger is still arming."""
+        if self._levels.n >= self._len.lta:
+            return None
+        return (f"trigger still arming ({self._levels.n / self.fs_hz:.2f} s of its "
+                f"{self.settings.lta_s:g} s LTA window averaged)")
 
     def _values(self, a: int, b: int, rows: Any) -> np.ndarray:
         return self._ring.read(a, b, rows) * self._scale[rows, None]
@@ -453,167 +786,196 @@ class Trigger:
     def _detect(self, pos: int, limit: int, b0: int, x2: np.ndarray, sta: np.ndarray) -> int | None:
         """First trigger in ``pos .. limit-1`` while armed; the LTA advances up to it."""
         seg = slice(pos - b0, limit - b0)
-        lta_last, m0 = self._lta_last, self._lta_m
-        lta = self._lta_advance(x2[:, seg])
+        levels, nlta, s = self._levels, self._len.lta, self.settings
+        lta_last, m0 = levels.lta, levels.n
+        lta = levels.advance_lta(x2[:, seg], nlta)
         if self._fidx is None:
-            hit = (sta[:, seg] > self.on * lta).sum(axis=0) >= self._k
+            hit = (sta[:, seg] > s.on * lta).sum(axis=0) >= self._k
         else:
-            f = self._values(max(pos - 1, self._ring.start), limit, [self._fidx])[0]
-            slope = (np.abs(np.diff(f, prepend=f[0])) * self.fs_hz)[-(limit - pos):]
-            f = np.abs(f[-(limit - pos):])
-            hit = f >= self.level_N
-            if self.slope_N_per_s is not None:
-                hit |= slope >= self.slope_N_per_s
-            if not self._f_below:
-                below = np.flatnonzero(f < self.hysteresis * self.level_N)
-                hit[:below[0] if below.size else hit.size] = False
-                self._f_below = bool(below.size)
+            hit = self._force_hits(pos, limit)
         idx = np.flatnonzero(hit)
+        taken = int(idx[0]) if idx.size else limit - pos
+        self._tally.arming += max(0, min(taken, nlta - m0))
         if idx.size == 0:
             return None
         j = int(idx[0])
-        self._lta_last = lta_last if j == 0 else ons.exp_average(
-            x2[:, seg.start:seg.start + j], self._nlta, lta_last)[1]
-        self._lta_m = m0 + j
+        levels.lta = lta_last if j == 0 else ons.exp_average(
+            x2[:, seg.start:seg.start + j], nlta, lta_last)[1]
+        levels.n = m0 + j
         return pos + j
+
+    def _force_hits(self, pos: int, limit: int) -> np.ndarray:
+        """Where the ram force (or its slope) is at the trigger level in ``pos .. limit-1``,
+        counting only after it has fallen below the hysteresis level since the last contact."""
+        s = self.settings
+        f = self._values(max(pos - 1, self._ring.start), limit, [self._fidx])[0]
+        slope = (np.abs(np.diff(f, prepend=f[0])) * self.fs_hz)[-(limit - pos):]
+        f = np.abs(f[-(limit - pos):])
+        hit = f >= s.level_N
+        if s.slope_N_per_s is not None:
+            hit |= slope >= s.slope_N_per_s
+        if not self._f_below:
+            below = np.flatnonzero(f < s.hysteresis * s.level_N)
+            hit[:below[0] if below.size else hit.size] = False
+            self._f_below = bool(below.size)
+        return hit
 
     def _advance(self, end: int, out: list[ImpactEvent]) -> int | None:
         """Work through the active event up to sample ``end``; the re-arm sample, or None."""
+        n = self._len
         while True:
             ev = self._ev
             if ev.onset < 0:
-                if end < ev.detect + self._look_n:
+                if end < ev.detect + n.look:
                     return None
                 self._refine(ev, out)
             self._refine_second(ev, end)
-            max_end = ev.onset + self._max_n
-            if self._fidx is None and ev.ar is None and end >= ev.onset + self._guard_n + self._fit_n:
+            max_end = ev.onset + n.max_post
+            if (self._fidx is None and ev.scan.whitener is None
+                    and end >= self._fit_start(ev) + n.fit):
                 self._fit(ev)
             r = self._scan_decay(ev, min(end, max_end + 1))
             s = self._scan_sharp(ev, end if r is None else r)
-            if s is not None and s - ev.onset <= self._double_n:
+            if s is not None and s - ev.onset <= n.double and ev.recorded:
                 ev.second = ev.second or (s, None)
-            elif s is not None:  # a new blow while the last one still rings
-                self._ev = _Event(detect=s, pre=ev.pre, cut=ev, voters=ev.voters, ar=ev.ar,
-                                  ar_var=ev.ar_var, scan_pos=ev.scan_pos,
-                                  sharp_last=ev.sharp_last, off_pos=ev.off_pos,
-                                  dead_until=ev.dead_until)
-            elif r is not None or ev.env_pos > max_end:
-                # the LTA resumes from the pre-event level, or from what still rings if higher
-                self._f_below = not ev.sharp_on
-                self._lta_last = np.maximum(ev.pre, ev.env_last)
-                self._lta_m = max(self._lta_m, 20 * self._nlta)
-                if r is not None:
-                    ev.end = min(max(r, ev.onset + self._post_n), max_end)
-                    return r + 1
-                ev.end, ev.end_reason = max_end, "max_length"
-                return max_end + 1
+            elif s is not None:  # a new blow while the last one still rings: it takes the scan
+                self._ev = _Event(detect=s, pre=ev.pre, cut=ev, voters=ev.voters, scan=ev.scan)
+            elif r is not None or ev.decay.pos > max_end:
+                return self._rearm(ev, r, max_end)
             else:
                 return None
 
+    def _rearm(self, ev: _Event, decayed: int | None, max_end: int) -> int:
+        """End the ringing of ``ev`` (decayed at ``decayed``, else at ``max_end``): set its
+        record's end and resume the detector; the sample it resumes at."""
+        self._resume(ev)
+        if decayed is not None:
+            ev.end = min(max(decayed, ev.onset + self._len.post), max_end)
+            return decayed + 1
+        ev.end, ev.end_reason = max_end, "max_length"
+        return max_end + 1
+
     def _edge(self, rows: Any, noise_var: np.ndarray | None, a: int, d: int) -> float:
         """AIC pick in ``a .. d + aic_post``, refined by the hinge fit when the ring allows."""
-        pick = a + ons.aic_pick(self._values(a, d + self._aic_post_n + 1, rows))
-        lo, hi = pick - self._edge_pre_n, pick + self._edge_post_n + 1
+        n = self._len
+        pick = a + ons.aic_pick(self._values(a, d + n.aic_post + 1, rows), _AIC_MARGIN)
+        lo, hi = pick - n.edge_pre, pick + n.edge_post + 1
         if lo < self._ring.start or hi > self._ring.end:
             return float(pick)
-        return lo + ons.hinge_onset(self._values(lo, hi, rows), self._edge_pre_n,
-                                    pre_n=self._edge_pre_n, post_n=self._edge_post_n,
-                                    search_n=self._search_n, noise_var=noise_var)
+        return lo + ons.hinge_onset(self._values(lo, hi, rows), n.edge_pre, pre_n=n.edge_pre,
+                                    post_n=n.edge_post, search_n=n.search, noise_var=noise_var)
 
     def _residual_pick(self, ev: _Event, d: int) -> float:
-        a = max(d - self._aic_pre_n // 2, ev.off_pos, self._ring.start + self._order)
-        a = min(a, d - self._guard_n)
-        x = self._values(a - self._order, d + self._aic_post_n + 1, self._vidx[ev.voters])
-        return float(a + ons.aic_pick(ons.prediction_error(x, ev.ar)))
+        """AIC pick of a blow at ``d`` on the innovation of the ringing it interrupts."""
+        n = self._len
+        a = max(d - n.aic_pre // 2, ev.scan.off_pos, self._ring.start + n.order)
+        a = max(min(a, d - n.guard), self._ring.start + n.order)  # the max: after a gap
+        x = self._values(a - n.order, d + n.aic_post + 1, self._vidx[ev.voters])
+        return float(a + ons.aic_pick(ons.prediction_error(x, ev.scan.whitener.a), _AIC_MARGIN))
 
     def _refine(self, ev: _Event, out: list[ImpactEvent]) -> None:
-        d = ev.detect
-        a = max(self._ring.start, d - self._aic_pre_n)
+        """The onset of ``ev`` to a fraction of a sample; closes the event it interrupts."""
+        n, d = self._len, ev.detect
+        a = max(self._ring.start, d - n.aic_pre)
         if ev.voters.size == 0:
-            x = self._values(d, d + self._aic_post_n + 1, self._vidx)
-            resp = np.flatnonzero((x * x).max(axis=1) > self.on * ev.pre)
+            x = self._values(d, d + n.aic_post + 1, self._vidx)
+            resp = np.flatnonzero((x * x).max(axis=1) > self.settings.on * ev.pre)
             ev.voters = resp if resp.size else np.arange(len(self._vidx))
         if self._fidx is not None:
-            f = self._edge([self._fidx], None, max(a, ev.off_pos), d)
-            ev.scan_pos, ev.sharp_on = d + 1, True
-        elif ev.ar is None:
+            f = self._edge([self._fidx], None, max(a, ev.scan.off_pos), d)
+            ev.scan.pos, ev.scan.on = d + 1, True
+        elif ev.scan.whitener is None or d < self._ring.start + n.order:  # no innovation yet
             f = self._edge(self._vidx[ev.voters], ev.pre[ev.voters], a, d)
         else:  # the AR filter whitens the anti-alias filter too: no delay to remove
             f = self._residual_pick(ev, d) + self._delay_n
         f -= self._delay_n
         ev.onset, ev.onset_s = max(round(f), self._ring.start), f / self.fs_hz
-        ev.env_last, ev.env_pos = ev.pre.copy(), ev.onset
+        ev.decay = _DecayWatch(level=ev.pre.copy(), pos=ev.onset)
+        if self._after_gap and ev.onset - n.edge_pre < self._ring.start and not ev.not_analysable:
+            ev.not_analysable = (f"onset {1e3 * (f - self._ring.start) / self.fs_hz:.0f} ms after "
+                                 f"a gap, within the {1e3 * n.edge_pre / self.fs_hz:.0f} ms the "
+                                 f"onset fit needs before it: the blow may have begun in the gap")
         if ev.cut is not None:
-            ev.cut.end = min(ev.cut.end if ev.cut.end >= 0 else ev.onset, ev.onset) - 1
-            ev.cut.end = max(ev.cut.end, ev.cut.onset)
-            ev.cut.end_reason = "next_impact"
-            out.append(self._finish(ev.cut))
+            cut = ev.cut
+            cut.end = max(min(cut.end if cut.end >= 0 else ev.onset, ev.onset) - 1, cut.onset)
+            cut.end_reason = "next_impact"
+            self._hand_over(cut, out)
             ev.cut = None
 
     def _refine_second(self, ev: _Event, end: int) -> None:
-        if ev.second is None or ev.second[1] is not None or end < ev.second[0] + self._look_n:
+        if ev.second is None or ev.second[1] is not None or end < ev.second[0] + self._len.look:
             return
         s = ev.second[0]
         if self._fidx is not None:
-            f = self._edge([self._fidx], None, max(s - self._aic_pre_n, ev.off_pos), s)
+            f = self._edge([self._fidx], None, max(s - self._len.aic_pre, ev.scan.off_pos), s)
             f -= self._delay_n
         else:
             f = self._residual_pick(ev, s)
         ev.second = (round(f), f / self.fs_hz)
 
+    def _fit_start(self, ev: _Event) -> int:
+        """First sample of the AR fit window: ``ar_guard_s`` after the onset, or the first
+        sample after a gap that came before it."""
+        return max(ev.onset + self._len.guard, self._ring.start)
+
     def _fit(self, ev: _Event) -> None:
-        f0 = ev.onset + self._guard_n
+        """Fit the AR filter to the ringing of ``ev``; the second-contact scan starts after it."""
+        n = self._len
+        f0 = self._fit_start(ev)
         rows = self._vidx[ev.voters]
-        x = self._values(f0, f0 + self._fit_n, rows)
-        ev.ar = ons.ar_prediction_filter(x, self._order, ev.pre[ev.voters])
-        e = ons.prediction_error(x, ev.ar)
-        ev.ar_var = np.maximum(np.mean(e * e, axis=1), self._scale[rows] ** 2 / 12)
-        ev.scan_pos = ev.off_pos = f0 + self._fit_n
-        ev.sharp_on, ev.sharp_last = False, ev.ar_var.copy()
+        x = self._values(f0, f0 + n.fit, rows)
+        a = ons.ar_prediction_filter(x, n.order, ev.pre[ev.voters])
+        e = ons.prediction_error(x, a)
+        var = np.maximum(np.mean(e * e, axis=1), self._scale[rows] ** 2 / 12)
+        scan = ev.scan
+        scan.whitener = _Whitener(a, var)
+        scan.pos = scan.off_pos = f0 + n.fit
+        scan.on, scan.level = False, var.copy()
 
     def _scan_decay(self, ev: _Event, limit: int) -> int | None:
         """Sample where the envelope has been back near the pre-event level for the hold."""
-        if ev.decayed is not None or limit <= ev.env_pos:
-            return ev.decayed
-        a = ev.env_pos
+        w = ev.decay
+        if w.decayed is not None or limit <= w.pos:
+            return w.decayed
+        a, n = w.pos, self._len
         x = self._values(a, limit, self._vidx)
-        env, last = ons.exp_average(x * x, self._env_n, ev.env_last)
-        ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.rearm_ratio
-        ok[:max(0, ev.onset + self._env_n - a)] = False
-        j, ev.hold = ons.first_hold(ok, self._hold_n, ev.hold)
+        env, last = ons.exp_average(x * x, n.envelope, w.level)
+        ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.settings.rearm_ratio
+        ok[:max(0, ev.onset + n.envelope - a)] = False
+        j, w.hold = ons.first_hold(ok, n.hold, w.hold)
         if j is None:
-            ev.env_last, ev.env_pos = last, limit
+            w.level, w.pos = last, limit
             return None
-        ev.env_last, ev.env_pos, ev.decayed = env[:, j].copy(), a + j + 1, a + j
+        w.level, w.pos, w.decayed = env[:, j].copy(), a + j + 1, a + j
         return a + j
 
     def _scan_sharp(self, ev: _Event, limit: int) -> int | None:
-        """Next sharp onset (second contact) in ``scan_pos .. limit-1``, with hysteresis."""
-        a = ev.scan_pos
-        if limit <= a or (self._fidx is None and ev.ar is None):
+        """Next sharp onset (second contact) in ``scan.pos .. limit-1``, with hysteresis."""
+        scan, n, s = ev.scan, self._len, self.settings
+        a = scan.pos
+        if limit <= a or (self._fidx is None and scan.whitener is None):
             return None
         if self._fidx is not None:
             f = np.abs(self._values(a, limit, [self._fidx])[0])
-            on, off, p, last = f >= self.level_N, f < self.hysteresis * self.level_N, None, None
+            on, off, p, last = f >= s.level_N, f < s.hysteresis * s.level_N, None, None
         else:
-            x = self._values(a - self._order, limit, self._vidx[ev.voters])
-            e = ons.prediction_error(x, ev.ar)
-            p, last = ons.exp_average(e * e, self._inno_n, ev.sharp_last)
-            ratio = p / ev.ar_var[:, None]
+            x = self._values(a - n.order, limit, self._vidx[ev.voters])
+            e = ons.prediction_error(x, scan.whitener.a)
+            p, last = ons.exp_average(e * e, n.innovation, scan.level)
+            ratio = p / scan.whitener.var[:, None]
             kk = min(self._k, len(ev.voters))
-            on = (ratio > self.double_on).sum(axis=0) >= kk
-            off = (ratio > self.off).sum(axis=0) < kk
-        dead = max(0, ev.dead_until - a)  # one contact cannot trigger twice
+            on = (ratio > s.double_on).sum(axis=0) >= kk
+            off = (ratio > s.off).sum(axis=0) < kk
+        dead = max(0, scan.dead_until - a)  # one contact cannot trigger twice
         on[:dead] = off[:dead] = False
-        j, ev.sharp_on, off_i = ons.next_trigger(on, off, ev.sharp_on)
+        j, scan.on, off_i = ons.next_trigger(on, off, scan.on)
         if off_i >= 0:
-            ev.off_pos = a + off_i
+            scan.off_pos = a + off_i
         if j is None:
-            ev.scan_pos, ev.sharp_last = limit, last
+            scan.pos, scan.level = limit, last
             return None
-        ev.scan_pos, ev.sharp_last = a + j + 1, None if p is None else p[:, j].copy()
-        ev.dead_until = a + j + self._guard_n
+        scan.pos, scan.level = a + j + 1, None if p is None else p[:, j].copy()
+        scan.dead_until = a + j + n.guard
         return a + j
 
     def _close(self, reason: str) -> list[ImpactEvent]:
@@ -622,7 +984,7 @@ class Trigger:
         ev, end = self._ev, self._ring.end
         if ev is None:
             return out
-        if ev.onset < 0 and end >= ev.detect + self._look_n:
+        if ev.onset < 0 and end >= ev.detect + self._len.look:
             self._refine(ev, out)
         elif ev.onset < 0:
             ev.onset, ev.onset_s = ev.detect, ev.detect / self.fs_hz
@@ -630,18 +992,19 @@ class Trigger:
                 ev.voters = np.arange(len(self._vidx))
             if ev.cut is not None:
                 ev.cut.end, ev.cut.end_reason = max(ev.detect - 1, ev.cut.onset), "next_impact"
-                out.append(self._finish(ev.cut))
+                self._hand_over(ev.cut, out)
         self._refine_second(ev, end)
         if ev.second is not None and ev.second[1] is None:
             ev.second = (ev.second[0], ev.second[0] / self.fs_hz)
         ev.end, ev.end_reason = end - 1, reason
-        out.append(self._finish(ev))
+        self._hand_over(ev, out)
         self._ev = None
         return out
 
     def _finish(self, ev: _Event) -> ImpactEvent:
+        """The completed event with its record cut from the ring."""
         fs, names = self.fs_hz, self.info.channels
-        first = max(ev.onset - self._pre_n, self._ring.start)
+        first = max(ev.onset - self._len.pre, self._ring.start)
         last = max(ev.end, ev.onset)
         counts = self._ring.read(first, last + 1)
         peak = np.abs(counts[:, ev.onset - first:]).max(axis=1) * self._scale
@@ -652,9 +1015,10 @@ class Trigger:
         rows = self._vidx[ev.voters]
         chans = ([self._fidx] if self._fidx is not None else []) + list(rows)
         snr = np.max(peak[rows] ** 2 / ev.pre[ev.voters])
-        cut = ev.end_reason in ("gap", "flush", "next_impact") and last < ev.onset + self._post_n
+        cut = ev.end_reason in ("gap", "flush", "next_impact") and last < ev.onset + self._len.post
         seg0, t0 = self._seg
         second = ev.second or (None, None)
+        decayed = None if ev.decay is None else ev.decay.decayed
         return ImpactEvent(
             onset_sample=ev.onset, onset_s=ev.onset_s,
             t_ns=t0 + round((ev.onset_s * fs - seg0) * 1e9 / fs), trigger_sample=ev.detect,
@@ -665,17 +1029,68 @@ class Trigger:
             snr_db=float(10 * np.log10(snr)) if snr > 0 else 0.0,
             double_hit=ev.second is not None, second_onset_sample=second[0],
             second_onset_s=second[1], clipped=clipped,
-            too_short=cut or first > ev.onset - self._pre_n, end_reason=ev.end_reason,
-            decay_s=None if ev.decayed is None else (ev.decayed - ev.onset) / fs,
+            too_short=cut or first > ev.onset - self._len.pre, end_reason=ev.end_reason,
+            decay_s=None if decayed is None else (decayed - ev.onset) / fs,
+            not_analysable=ev.not_analysable,
             record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
-                                self._scale.copy()) if self.keep_records else None)
+                                self._scale.copy()) if self.settings.keep_records else None)
+
+
+def _voting_rows(info: StreamInfo, s: TriggerSettings) -> tuple[np.ndarray, int]:
+    """Rows of the voting channels and ``k`` of the k-of-n vote; ValueError if the stream
+    cannot meet ``s.voters`` / ``s.k_of_n``."""
+    names = list(info.channels)
+    voters = s.voters
+    if voters is None:
+        voters = [c for c, g in zip(names, info.gages, strict=True) if g > 0]
+    for v in voters:
+        if v not in names:
+            raise ValueError(f"voter {v!r} is not a channel of the stream")
+    rows = np.array([names.index(v) for v in voters], dtype=int)
+    k, n_of = s.k_of_n
+    if n_of is not None and n_of != len(rows):
+        raise ValueError(f"k_of_n n ({n_of}) is not the number of voting gages ({len(rows)})")
+    if not 1 <= k <= len(rows):
+        raise ValueError(f"k_of_n k ({k}) must lie in 1..{len(rows)}")
+    return rows, k
+
+
+def _force_row(info: StreamInfo, s: TriggerSettings) -> int | None:
+    """Row of the ram load cell the trigger uses, or None (STA/LTA mode)."""
+    names = list(info.channels)
+    if s.force_channel is not None and (s.force_channel not in names
+                                        or info.units[names.index(s.force_channel)] != "N"):
+        raise ValueError(f"force_channel {s.force_channel!r} is not a channel in N")
+    in_n = [i for i, u in enumerate(info.units) if u == "N"]
+    fidx = names.index(s.force_channel) if s.force_channel else (in_n[0] if in_n else None)
+    if s.mode == "force" and fidx is None:
+        raise ValueError("mode 'force' needs a channel in N; the stream has none")
+    return fidx if s.mode in ("auto", "force") else None
 
 
 def _rig_delay_s(info: StreamInfo) -> float:
-    """Group delay of the anti-alias filter the rig in ``info.rig_toml`` describes, else 0."""
-    try:
-        daq = tomllib.loads(info.rig_toml).get("daq", {})
-        return ons.butterworth_delay_s(int(daq["anti_alias_order"]), float(daq["anti_alias_hz"]),
-                                       info.fs_hz)
-    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError):
+    """Group delay of the anti-alias filter the stream's rig describes (``[daq]``
+    ``anti_alias_order`` and ``anti_alias_hz`` in ``info.rig_toml``), s; 0 for a stream that
+    carries no rig. ValueError naming the problem for a rig that does not say it usably."""
+    if not info.rig_toml.strip():
         return 0.0
+    where = f"{info.device}: the stream's rig"
+    fix = "fix the rig, or give the trigger delay_s"
+    try:
+        daq = tomllib.loads(info.rig_toml).get("daq")
+    except tomllib.TOMLDecodeError as err:
+        raise ValueError(f"{where} is not valid TOML ({err}); {fix}") from err
+    if not isinstance(daq, dict):
+        raise ValueError(f"{where} has no [daq] table to say its anti-alias filter; {fix}")
+    order, corner = daq.get("anti_alias_order"), daq.get("anti_alias_hz")
+    if isinstance(order, float) and order.is_integer():
+        order = int(order)
+    if isinstance(order, bool) or not isinstance(order, int) or order < 1:
+        raise ValueError(f"{where}: daq.anti_alias_order ({order!r}) must be a whole number "
+                         f">= 1; {fix}")
+    if isinstance(corner, bool) or not isinstance(corner, int | float) or not math.isfinite(corner):
+        raise ValueError(f"{where}: daq.anti_alias_hz ({corner!r}) must be a number; {fix}")
+    if not 0 < corner < info.fs_hz / 2:
+        raise ValueError(f"{where}: daq.anti_alias_hz ({corner}) is not between 0 and the "
+                         f"stream's Nyquist frequency ({info.fs_hz / 2:g} Hz); {fix}")
+    return ons.butterworth_delay_s(order, float(corner), info.fs_hz)

@@ -22,7 +22,8 @@ from ramdaq.analysis import onset as ons
 from ramdaq.analysis.model.rig import Rig
 from ramdaq.daq.commands.info import describe_recording
 from ramdaq.daq.recorder import Recorder
-from ramdaq.daq.trigger import IMPACT_JSON_SCHEMA, Trigger
+from ramdaq.daq.trigger import IMPACT_JSON_SCHEMA, Trigger, TriggerSettings
+from ramdaq.drivers.array_device import ArrayDevice
 from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
 from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
 from ramdaq.drivers.sim import Impact, SimDevice
@@ -38,7 +39,7 @@ def stream(rig: Rig, impacts: list, duration_s: float, seed: int = 0, **kw) -> t
 
 
 def run(info: StreamInfo, blocks, **kw) -> list:
-    trig = Trigger(info, **kw)
+    trig = Trigger(info, TriggerSettings(**kw))
     events = [e for b in blocks for e in trig.process(b)]
     return events + trig.flush()
 
@@ -327,4 +328,99 @@ def test_events_are_json_for_the_impacts_topic(albacore, tmp_path):
 def test_bad_settings_are_refused(albacore, kw, match):
     info = SimDevice(albacore).info
     with pytest.raises(ValueError, match=match):
-        Trigger(info, **kw)
+        Trigger(info, TriggerSettings(**kw))
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda t: t + "\n[[[", r"the stream's rig is not valid TOML"),
+    (lambda t: t.replace("anti_alias_order = 4", ""), r"daq.anti_alias_order \(None\)"),
+    (lambda t: t.replace("anti_alias_order = 4", 'anti_alias_order = "four"'),
+     r"daq.anti_alias_order \('four'\) must be a whole number"),
+    (lambda t: t.replace("anti_alias_hz = 800.0", "anti_alias_hz = 1500.0"),
+     r"daq.anti_alias_hz \(1500.0\) is not between 0 and the stream's Nyquist frequency \(1024 Hz\)"),
+])
+def test_rig_that_does_not_say_its_filter_is_refused(albacore, edit, match):
+    """The onset delay comes from the rig's anti-alias filter: a rig that cannot say it is an
+    error naming the rig's problem when the trigger is built, not a silent 0 s delay."""
+    info = SimDevice(albacore).info
+    bad = dataclasses.replace(info, rig_toml=edit(info.rig_toml))
+    with pytest.raises(ValueError, match=match):
+        Trigger(bad)
+    assert Trigger(bad, TriggerSettings(delay_s=0.001)).delay_s == 0.001  # the way out it names
+    # the rig's 800 Hz 4th-order Butterworth at 2048 Hz, 0.4675 samples (test_butterworth_delay)
+    assert Trigger(info).delay_s * 2048 == pytest.approx(0.4675, abs=1e-4)
+    assert Trigger(dataclasses.replace(info, rig_toml="")).delay_s == 0.0  # no rig, no filter known
+
+
+# -- any rate from 50 Hz to 51.2 kHz ------------------------------------------------------------
+def damped_sines(fs: float, blows: list[tuple[float, float]], duration_s: float, modes,
+                 seed: int = 0, noise: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """A generator that shares nothing with the simulator: 4 channels, each blow at ``t`` s of
+    size ``a`` a sum of damped sines (``modes``: (Hz, damping ratio)) starting at phase 0, so
+    the response starts as a ramp, with each channel's own random amplitudes and signs; white
+    noise of ``noise`` m/s^2 rms. Counts (int32) and scale (m/s^2 per count)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(round(duration_s * fs)) / fs
+    amp = rng.uniform(0.3, 1.0, (4, len(modes))) * rng.choice([-1, 1], (4, len(modes)))
+    x = noise * rng.standard_normal((4, t.size))
+    for t0, a in blows:
+        s = t[t >= t0] - t0
+        for m, (f, zeta) in enumerate(modes):
+            w = 2 * np.pi * f
+            x[:, t >= t0] += (a * amp[:, m:m + 1] * np.exp(-zeta * w * s)
+                              * np.sin(w * np.sqrt(1 - zeta**2) * s))
+    scale = np.full(4, 1e-5)
+    return np.rint(x / scale[:, None]).astype(np.int32), scale
+
+
+LOW_MODES = ((3.1, 0.03), (7.7, 0.04))      # both well below 25 Hz, the Nyquist rate at 50 Hz
+RUDDER_MODES = ((24.5, 0.01), (88.0, 0.01))
+
+
+@pytest.mark.parametrize(("fs", "modes"), [(50.0, LOW_MODES), (100.0, LOW_MODES),
+                                           (200.0, LOW_MODES), (51200.0, RUDDER_MODES)])
+def test_four_channels_at_any_rate_trigger_without_error(fs, modes):
+    """A blow, a second contact 0.74 s later (a double hit), and a new blow while the first
+    still rings (damping 3-4 %: it rings ~12 s down to the noise), with the default settings
+    for the rate. At 50 Hz the AR fit spans 0.6 s (30 samples), so a second contact must come
+    later than that to be seen."""
+    blows = [(3.0131, 1.0), (3.75, 0.6), (6.0, 1.0)]
+    counts, scale = damped_sines(fs, blows, 10.0, modes)
+    dev = ArrayDevice(counts, scale, fs, gages=(1, 2, 3, 4), block_s=0.05)
+    with dev:
+        trig = Trigger(dev.info)  # no settings: TriggerSettings.for_rate(fs)
+        events = [e for b in dev for e in trig.process(b)] + trig.flush()
+    assert [(e.double_hit, e.end_reason) for e in events] == [(True, "next_impact"), (False, "flush")]
+    # the first onset by the hinge fit; the blow in the ringing by the AIC on the AR innovation,
+    # whole samples, a blow exactly on a sample may come out on the next; 51.2 kHz: 5 samples
+    # is 0.1 ms, the first samples of the ramp (slope 2 pi 24.5 Hz x 1 m/s^2) being below the
+    # 1e-3 m/s^2 noise for ~0.07 ms
+    tol = (5 if fs > 10_000 else 1) + 1e-6  # and the rounding of a time in s
+    assert abs(events[0].onset_s - blows[0][0]) * fs <= tol
+    assert abs(events[0].second_onset_s - blows[1][0]) * fs <= tol
+    assert abs(events[1].onset_s - blows[2][0]) * fs <= 1 + 1e-6
+
+
+@pytest.mark.parametrize("fs", [50.0, 100.0, 200.0, 1000.0, 2048.0, 25600.0, 51200.0])
+def test_default_settings_fit_every_rate(fs):
+    info = StreamInfo("x", fs, ("g01", "g02", "g03", "g04"), ("m/s^2",) * 4, (1, 2, 3, 4))
+    trig = Trigger(info)
+    assert trig.settings == TriggerSettings.for_rate(fs)
+    if fs >= 2048:  # the design rates: exactly the defaults, so nothing changes there
+        assert trig.settings == TriggerSettings()
+
+
+@pytest.mark.parametrize(("kw", "match"), [
+    ({}, r"sta_s \(0.01 s\) is 0.5 samples at 50 Hz; an STA compared with on needs at least 5: "
+         r"set sta_s to at least 0.1 s, or leave it to TriggerSettings.for_rate\(50\)"),
+    (dict(sta_s=0.1, innovation_sta_s=0.1), r"ar_fit_s \(0.03 s\) is 1.5 samples at 50 Hz"),
+    (dict(sta_s=0.1, innovation_sta_s=0.1, ar_fit_s=0.6, ar_order=20),
+     r"ar_fit_s \(0.6 s\) is 30 samples at 50 Hz; ar_order \(20\) needs at least 42"),
+])
+def test_what_a_rate_cannot_resolve_is_refused_when_built(kw, match):
+    """Never mid-stream: the plain defaults at 50 Hz are refused with what to set."""
+    info = StreamInfo("x", 50.0, ("g01", "g02", "g03", "g04"), ("m/s^2",) * 4, (1, 2, 3, 4))
+    with pytest.raises(ValueError, match=match):
+        Trigger(info, TriggerSettings(**kw))
+    Trigger(info, TriggerSettings.for_rate(50.0, **{k: v for k, v in kw.items()
+                                                   if k != "ar_fit_s"}))

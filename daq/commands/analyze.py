@@ -3,7 +3,7 @@ report -- a JSON document of every number with units and standard errors, PNG pl
 summary table for the terminal.
 
 The recording is replayed as a device (``ramdaq.drivers.mcap_replay``), block by block, through the
-same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.analyze_event` as a live trial.
+same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.judge_event` as a live trial.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from ramdaq.analysis.model.geometry import gage_geometry
 from ramdaq.analysis.model.rig import Rig, parse_rig
 from ramdaq.analysis.model.structure import added_mass
 from ramdaq.analysis.model.units import from_si
-from ramdaq.daq.analyzer import HitResult, analyze_event, trial_summary
+from ramdaq.daq.analyzer import HitResult, judge_event, trial_summary
 from ramdaq.daq.trigger import Trigger
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 
@@ -49,7 +49,7 @@ def run_analysis(path: str | Path, *, impact: int | None = None,
                 if progress:
                     progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
                              f"{(ev.last_sample - ev.onset_sample) / info.fs_hz:.1f} s of decay")
-                hits.append(analyze_event(k, ev, info, rig))
+                hits.append(judge_event(k, ev, info, rig))
 
         for block in dev:
             take(trigger.process(block))
@@ -155,8 +155,15 @@ def format_summary(report: dict, units: str = "si") -> str:
 def summary_table(s: dict, units: str = "si") -> list[str]:
     """Lines of the trial summary: per motion and gage the mean decrement over accepted hits
     with its standard deviation; C and c in SI or, with ``units="report"``, ton/ft units."""
-    lines = [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
-             f"(+- std, n):", "  quantity          mean        std     n"]
+    lines = []
+    st = s.get("stream")
+    if st:  # what the trigger could not see, before the table so that it is not missed
+        lines.append(f"\nstream: {st['gaps']} gap(s), {st['missing_s']:.3f} s missing; the "
+                     f"trigger was blind {st['blind_s']:.3f} s and arming {st['arming_s']:.3f} s")
+    if s.get("not_analysable"):
+        lines.append(f"{s['not_analysable']} blow(s) seen but not analysable (among the rejected)")
+    lines += [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
+              f"(+- std, n):", "  quantity          mean        std     n"]
 
     def row(name: str, d: dict, fmt: str = "{:.4f}") -> None:
         if d["mean"] is None:
