@@ -177,13 +177,26 @@ class ImpactAnalysis:
 
     def table2b(self) -> dict:
         """Table 2b done automatically: delta_gamma, delta_alpha, delta_v, delta_modal, their
-        average and each one's percent deviation from it."""
-        names = ("gamma", "alpha", "v_2_6")
-        vals = [self.motions[n].delta for n in names] + [self.damping.delta_modal]
-        mean, dev, mean_abs = percent_deviation_from_average(vals)
-        rows = dict(zip((*names, "modal"), zip(vals, dev, strict=True), strict=True))
-        return {"rows": {k: {"delta": v, "deviation_pct": d} for k, (v, d) in rows.items()},
-                "average": mean, "mean_abs_deviation_pct": mean_abs}
+        average and each one's percent deviation from it. A decrement that is not a finite
+        number (a motion the chain could not measure) is left out of the average: its row holds
+        ``None`` and ``left_out`` names it with the reason; with none left, the average is
+        ``None`` too."""
+        names = ("gamma", "alpha", "v_2_6", "modal")
+        vals = [self.motions[n].delta if n in self.motions else float("nan") for n in names[:3]]
+        vals.append(self.damping.delta_modal)
+        good = [k for k, v in enumerate(vals) if np.isfinite(v)]
+        rows = {n: {"delta": None, "deviation_pct": None} for n in names}
+        out = {"rows": rows, "average": None, "mean_abs_deviation_pct": None}
+        if len(good) < len(names):
+            out["left_out"] = {names[k]: ("not measured" if names[k] not in self.motions and k < 3
+                                          else f"not a finite number ({vals[k]})")
+                               for k in range(len(names)) if k not in good}
+        if good:
+            mean, dev, mean_abs = percent_deviation_from_average([vals[k] for k in good])
+            for k, d in zip(good, dev, strict=True):
+                rows[names[k]] = {"delta": vals[k], "deviation_pct": d}
+            out |= {"average": mean, "mean_abs_deviation_pct": mean_abs}
+        return out
 
 
 def _num(v: float) -> float | None:

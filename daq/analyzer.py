@@ -61,9 +61,12 @@ class LookJob:
 
 @dataclass(frozen=True)
 class FinalDone:
-    """A final job's result: the hit judged, analysed if accepted."""
+    """A final job's result: the hit judged, analysed if accepted, and its JSON record
+    (:func:`hit_to_json`), made on the analyzer thread so that nothing about one hit's numbers
+    can stop the acquisition."""
 
     hit: HitResult
+    doc: dict
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,13 @@ def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
             gages: tuple[int, ...]) -> FinalDone | LookDone:
     """Do one analyzer job; ``gages`` are the report gage numbers of ``LookJob.x``'s rows."""
     if isinstance(job, FinalJob):
-        return FinalDone(judge_event(job.index, job.event, info, rig))
+        hit = judge_event(job.index, job.event, info, rig)
+        try:
+            return FinalDone(hit, hit_to_json(hit))
+        except Exception as err:  # noqa: BLE001 -- a hit whose numbers cannot be written is rejected, not lost
+            hit = HitResult(hit.index, hit.event, False,
+                            f"analysis failed: {type(err).__name__}: {err}", None)
+            return FinalDone(hit, hit_to_json(hit))
     try:
         look = first_look(job.x, info.fs_hz, rig, gages)
     except ValueError:
@@ -174,3 +183,51 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None) -> 
         "C_N_s_per_m": _mean_scatter([a.damping["C_N_s_per_m"] for a in ok]),
         "c_N_m_s_per_rad": _mean_scatter([a.damping["c_N_m_s_per_rad"] for a in ok]),
     }
+
+
+def finite_json(obj: object) -> object:
+    """``obj`` (dicts, lists, tuples, numbers, strings) with every number a plain Python one and
+    every NaN or infinity ``None``, so that the JSON written is valid (``allow_nan=False``)."""
+    if isinstance(obj, dict):
+        return {k: finite_json(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite_json(v) for v in obj]
+    if isinstance(obj, bool | np.bool_):
+        return bool(obj)
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        return float(obj) if np.isfinite(obj) else None
+    return obj
+
+
+def analysis_to_json(a: ImpactAnalysis) -> dict:
+    """Every number of one impact, SI, with standard errors (a number the analysis could not
+    give is ``None``)."""
+    m = a.modes
+    return {
+        "onset_s": a.onset_s, "decay_start_s": a.decay_start_s, "decay_duration_s": a.duration_s,
+        "predominant_mode": a.predominant, "f_hz": a.f_hz,
+        "modes": [{"f_hz": finite_json(m.frequency_hz[i]), "f_se_hz": finite_json(m.frequency_se_hz[i]),
+                   "delta": finite_json(m.delta[i]), "delta_se": finite_json(m.delta_se[i]),
+                   "zeta": finite_json(m.zeta[i]), "zeta_se": finite_json(m.zeta_se[i]),
+                   "shape": {f"g{n:02d}": [finite_json(float(abs(s))), finite_json(float(np.angle(s)))]
+                             for n, s in zip(a.active_gages, m.mode_shape[:, i], strict=True)}}
+                  for i in range(len(m))],
+        "verdicts": {f"g{n:02d}": v.to_json() for n, v in a.verdicts.items()},
+        "gages": {f"g{n:02d}": d.to_json() for n, d in sorted(a.gages.items())},
+        "motions": {k: d.to_json() for k, d in a.motions.items()},
+        "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
+        "alpha1_over_gamma1": finite_json(a.alpha1_over_gamma1),
+        "damping": a.damping.to_json(),
+        "stock_lengths_m": a.stock_lengths,
+        "table2b": finite_json(a.table2b()),
+        "notes": list(a.notes),
+    }
+
+
+def hit_to_json(hit: HitResult) -> dict:
+    """One hit as the results topic, ``replay --json`` and the live trial write it."""
+    return finite_json({"index": hit.index, "onset_sample": hit.event.onset_sample,
+                        "onset_s": hit.event.onset_s, "accepted": hit.accepted, "reason": hit.reason,
+                        "analysis": analysis_to_json(hit.analysis) if hit.analysis else None})

@@ -34,10 +34,10 @@ from ramdaq.daq.analyzer import (
     LookDone,
     LookJob,
     decay_skip_s,
+    hit_to_json,
     run_job,
     trial_summary,
 )
-from ramdaq.daq.commands.analyze import analysis_to_json
 from ramdaq.daq.readout import LiveReadout
 from ramdaq.daq.record import store_block
 from ramdaq.daq.recorder import Recorder
@@ -75,10 +75,7 @@ class TrialOutcome:
 
     def results_json(self) -> list[dict]:
         """Final per-hit results, the numbers replay must reproduce exactly."""
-        return [{"index": h.index, "onset_sample": h.event.onset_sample,
-                 "onset_s": h.event.onset_s, "accepted": h.accepted, "reason": h.reason,
-                 "analysis": analysis_to_json(h.analysis) if h.analysis else None}
-                for h in self.hits]
+        return [hit_to_json(h) for h in self.hits]
 
 
 class Session:
@@ -279,11 +276,12 @@ class Session:
             if isinstance(done, LookDone):
                 self._show_look(done.onset_sample, done.look)
             elif isinstance(done, FinalDone):
-                self._show_final(done.hit, rec)
+                self._show_final(done.hit, done.doc, rec)
             elif isinstance(done.job, FinalJob):  # judge_event does not raise; should it, the hit stays
                 job, err = done.job, done.error
-                self._show_final(HitResult(job.index, job.event, False, f"analysis failed: "
-                                           f"{type(err).__name__}: {err}", None), rec)
+                hit = HitResult(job.index, job.event, False,
+                                f"analysis failed: {type(err).__name__}: {err}", None)
+                self._show_final(hit, hit_to_json(hit), rec)
             else:
                 self._say(f"first look at the impact from sample {done.job.onset_sample} "
                           f"failed: {type(done.error).__name__}: {done.error}")
@@ -301,13 +299,13 @@ class Session:
                 self.view.log_gage_result(len(self.hits), f"g{n:02d}", t, f, d, float("nan"),
                                           final=False)
 
-    def _show_final(self, hit: HitResult, rec: Recorder | None) -> None:
+    def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
+        """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
+        thread (:func:`~ramdaq.daq.analyzer.hit_to_json`)."""
         self.hits.append(hit)
         a = hit.analysis
         if rec:
-            rec.write_json(RESULTS_TOPIC, {"index": hit.index, "accepted": hit.accepted,
-                                           "reason": hit.reason,
-                                           "analysis": analysis_to_json(a) if a else None},
+            rec.write_json(RESULTS_TOPIC, {k: doc[k] for k in ("index", "accepted", "reason", "analysis")},
                            hit.event.t_ns)
         if a is None:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s REJECTED: {hit.reason}")

@@ -8,18 +8,14 @@ same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.judge_
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
-from ramdaq.analysis.impact import ImpactAnalysis
 from ramdaq.analysis.model.geometry import gage_geometry
 from ramdaq.analysis.model.rig import Rig, parse_rig
 from ramdaq.analysis.model.structure import added_mass
 from ramdaq.analysis.model.units import from_si
-from ramdaq.daq.analyzer import HitResult, judge_event, trial_summary
+from ramdaq.daq.analyzer import HitResult, analysis_to_json, finite_json, judge_event, trial_summary
 from ramdaq.daq.trigger import Trigger
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 
@@ -59,36 +55,6 @@ def run_analysis(path: str | Path, *, impact: int | None = None,
     return rig, hits
 
 
-def _num(v: object) -> object:
-    if isinstance(v, float | np.floating):
-        return float(v) if np.isfinite(v) else None
-    return v
-
-
-def analysis_to_json(a: ImpactAnalysis) -> dict:
-    """Every number of one impact, SI, with standard errors."""
-    m = a.modes
-    return {
-        "onset_s": a.onset_s, "decay_start_s": a.decay_start_s, "decay_duration_s": a.duration_s,
-        "predominant_mode": a.predominant, "f_hz": a.f_hz,
-        "modes": [{"f_hz": _num(m.frequency_hz[i]), "f_se_hz": _num(m.frequency_se_hz[i]),
-                   "delta": _num(m.delta[i]), "delta_se": _num(m.delta_se[i]),
-                   "zeta": _num(m.zeta[i]), "zeta_se": _num(m.zeta_se[i]),
-                   "shape": {f"g{n:02d}": [_num(float(abs(s))), _num(float(np.angle(s)))]
-                             for n, s in zip(a.active_gages, m.mode_shape[:, i], strict=True)}}
-                  for i in range(len(m))],
-        "verdicts": {f"g{n:02d}": v.to_json() for n, v in a.verdicts.items()},
-        "gages": {f"g{n:02d}": d.to_json() for n, d in sorted(a.gages.items())},
-        "motions": {k: d.to_json() for k, d in a.motions.items()},
-        "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
-        "alpha1_over_gamma1": _num(a.alpha1_over_gamma1),
-        "damping": a.damping.to_json(),
-        "stock_lengths_m": a.stock_lengths,
-        "table2b": json.loads(json.dumps(a.table2b(), default=float)),
-        "notes": list(a.notes),
-    }
-
-
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
                      f_water_hz: float | None = None) -> dict:
     """Eq 19-21 from the rig's geometry; Eq 18 when both trials' frequencies are given."""
@@ -104,13 +70,13 @@ def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
 
 def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                  air: tuple[Rig, list[HitResult]] | None = None) -> dict:
-    """The trial report as a JSON-serialisable dict."""
+    """The trial report as a JSON-serialisable dict (every NaN or infinity written as ``None``)."""
     summary = trial_summary(hits)
     f_other = trial_summary(air[1])["f_hz"]["mean"] if air else None
     f_here = summary["f_hz"]["mean"]
     vi = virtual_inertias(rig, f_other, f_here) if air and rig.medium == "water" else \
         virtual_inertias(rig)
-    return {
+    return finite_json({
         "recording": str(path), "rig": rig.name, "medium": rig.medium,
         "geometry_m": gage_geometry(rig).__dict__,
         "units": UNITS,
@@ -118,12 +84,12 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                      "reason": h.reason, "flags": {"double_hit": h.event.double_hit,
                                                    "clipped": list(h.event.clipped),
                                                    "too_short": h.event.too_short},
-                     "snr_db": _num(h.event.snr_db),
+                     "snr_db": finite_json(h.event.snr_db),
                      "analysis": analysis_to_json(h.analysis) if h.analysis else None}
                     for h in hits],
         "summary": summary,
         "virtual_inertias": vi,
-    }
+    })
 
 
 def format_summary(report: dict, units: str = "si") -> str:
