@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import can
 import numpy as np
 
-from ramdaq.analysis.model.rig import parse_rig
+from ramdaq.analysis.model.rig import RigError, load_rig
 from ramdaq.drivers.block import Block
 from ramdaq.drivers.can_frames import FrameCodec
 
@@ -318,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--interface", default="slcan", help="slcan (a pty), or any python-can interface")
     ap.add_argument("--channel", action="append", default=[], help="bus channel (repeat: one per group)")
-    ap.add_argument("--rig", required=True, help="rig TOML file")
+    ap.add_argument("--rig", required=True, help="rig file, or a shipped rig's name (albacore)")
     ap.add_argument("--dbc", default=None, help="classic, fd24, fd16 or a DBC path")
     ap.add_argument("--fd", action="store_true", help="CAN FD (default layout fd24)")
     ap.add_argument("--duration", type=float, default=10.0, help="stream length, s")
@@ -335,8 +335,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--linger", type=float, default=30.0, help="slcan: stay up after the last frame, s")
     a = ap.parse_args(argv)
     codec = FrameCodec(a.dbc, fd=a.fd)
-    with open(a.rig, encoding="utf-8") as f:
-        rig = parse_rig(f.read(), source=a.rig)
+    try:
+        rig = load_rig(a.rig)
+    except RigError as err:
+        raise SystemExit(f"can_emulator: {err}") from None
     bits = min(lay.sample_bits for lay in codec.groups.values())
     if rig.daq.adc_bits > bits:
         raise SystemExit(f"can_emulator: {a.rig} has a {rig.daq.adc_bits}-bit ADC, {codec.name} carries "
