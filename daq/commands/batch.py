@@ -21,6 +21,7 @@ there -- and carries its rows over, unless ``force``.
 
 from __future__ import annotations
 
+import asyncio
 import glob
 import logging
 import os
@@ -240,15 +241,29 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
         cluster.close()
 
 
+class ClusterError(Exception):
+    """The cluster cannot run the batch (no workers, or workers without ramdaq)."""
+
+
 def describe_cluster(client) -> tuple[str, int, list[str]]:
-    """The scheduler's address, its number of workers, and warnings about them (workers whose
-    BLAS may run threaded)."""
+    """The scheduler's address, its number of workers (waiting ``CONNECT_TIMEOUT_S`` for a
+    first one), and warnings about them (workers whose BLAS may run threaded)."""
+    addr = client.scheduler.address
+    try:
+        client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+    except TimeoutError:
+        raise ClusterError(f"the dask cluster at {addr} has no workers (waited "
+                           f"{CONNECT_TIMEOUT_S:g} s)") from None
     n = len(client.nthreads())
-    threads = client.run(blas_threads)
+    try:
+        threads = client.run(blas_threads)
+    except Exception as err:  # a worker that cannot unpickle a ramdaq function lacks ramdaq
+        raise ClusterError(f"the workers of the dask cluster at {addr} cannot run ramdaq's tasks "
+                           f"(is ramdaq installed there?): {one_line(err)}") from None
     odd = sorted(w for w, v in threads.items() if v != "1")
     warn = [f"{len(odd)} of {n} workers run with OPENBLAS_NUM_THREADS={threads[odd[0]]!s}, not 1: "
             "their digits may differ from a serial run"] if odd else []
-    return client.scheduler.address, n, warn
+    return addr, n, warn
 
 
 @contextmanager
@@ -383,12 +398,19 @@ def task_key(kind: str, batch: str, i: int, spec: TaskSpec) -> str:
 
 
 def _result_of(fut, spec: TaskSpec) -> TaskResult:
-    """A finished future's result; a task the cluster gave up on (its workers died too often)
-    or that failed outside the task's own guard is a ``lost`` result naming why."""
+    """A finished future's result; a task the cluster gave up on (its workers died
+    ``distributed.scheduler.allowed-failures`` times running it), cancelled (the scheduler
+    lost), or failed outside the task's own guard is a ``lost`` result naming why."""
+    from distributed.scheduler import KilledWorker
+
     try:
         return fut.result()
-    except Exception as exc:
-        return TaskResult.not_run(spec, "lost", one_line(exc))
+    except KilledWorker as exc:
+        return TaskResult.not_run(spec, "lost", f"KilledWorker: the workers running it died {exc.args[2]} "
+                                  "times; dask gave up on it")
+    except (Exception, asyncio.CancelledError) as exc:
+        return TaskResult.not_run(spec, "lost", one_line(exc) if str(exc) else
+                                  f"{type(exc).__name__}: the cluster dropped the task")
 
 
 def finish(outcome: BatchOutcome) -> None:

@@ -303,13 +303,13 @@ def cmd_rig(args: argparse.Namespace) -> int:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """Many recordings at once on a dask cluster: one Parquet table, a report folder each."""
-    from ramdaq.daq.commands.batch import exit_code, run_batch, summary_lines
+    from ramdaq.daq.commands.batch import ClusterError, exit_code, run_batch, summary_lines
 
     out = Path(args.out or f"batch_{args.kind}")
     try:
         outcome = run_batch(args.kind, args.paths, out, workers=args.workers, scheduler=args.scheduler,
                             plots=not args.no_plots, force=args.force, progress=not args.quiet)
-    except ConnectionError as err:
+    except (ConnectionError, ClusterError) as err:
         print(f"ramdaq batch: {err}", file=sys.stderr)
         return 1
     print("\n".join(summary_lines(outcome)))
