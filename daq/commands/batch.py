@@ -232,8 +232,10 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     if n < 1:
         raise ValueError(f"--workers {n}: at least 1")
     with _sigint_ignored_in_children():
+        # the scheduler's HTTP server (health, metrics; the dashboard where bokeh is installed)
+        # on a free loopback port: the default 8787 is often taken by another cluster
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     try:
         with Client(cluster) as client:
             yield client
