@@ -19,8 +19,14 @@ import time
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ramdaq.analysis.gap.diagnose import Diagnosis
+    from ramdaq.analysis.model.rig import Rig
+    from ramdaq.daq.analyzer import HitResult
 
 STATUSES = ("ok", "failed", "lost", "interrupted")
 """A recording's status in the table: analysed (``ok``); its task ran and the recording could
@@ -181,7 +187,7 @@ def _num(v: object) -> float | None:
     return None if v is None else float(v)
 
 
-def hit_rows(h) -> list[ModeRow]:
+def hit_rows(h: HitResult) -> list[ModeRow]:
     """The rows of one :class:`~ramdaq.daq.analyzer.HitResult`: gages x modes of its analysis,
     read from the same JSON ``ramdaq analyze`` writes (so the table and report.json agree to
     the digit); one row for a rejected hit."""
@@ -214,7 +220,7 @@ def _json_default(o: object) -> object:
     return str(o)
 
 
-def write_analysis(path: str, rig, hits: list, out: Path, plots: bool) -> list[Path]:
+def write_analysis(path: str, rig: Rig, hits: list[HitResult], out: Path, plots: bool) -> list[Path]:
     """The folder ``ramdaq analyze PATH --out OUT`` writes: report.json (replaced whole, so a
     task killed while writing leaves the last complete one) and, with ``plots``, each accepted
     hit's PNGs."""
@@ -258,7 +264,7 @@ def _finite(v: float | None) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
 
 
-def gap_row(d, n_findings: int = 5) -> GapRow:
+def gap_row(d: Diagnosis, n_findings: int = 5) -> GapRow:
     """A :class:`~ramdaq.analysis.gap.diagnose.Diagnosis` as one row."""
     b = d.best
     lo, hi = b.closed_held_ci if b else (None, None)

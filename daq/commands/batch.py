@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import get_args, get_type_hints
+from typing import TYPE_CHECKING, get_args, get_type_hints
 
 from ramdaq.daq.batch_tasks import (
     ROWS,
@@ -45,6 +45,10 @@ from ramdaq.daq.batch_tasks import (
     method_digest,
     one_line,
 )
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+    from distributed import Client, Future
 
 REPORT = {"analyze": ("_analysis", "report.json"), "gap": ("_gap", "gap.json")}
 """Per kind: the report folder's suffix (as ``ramdaq analyze`` / ``ramdaq gap`` name it beside
@@ -92,7 +96,7 @@ def report_folders(paths: Sequence[Path], out: Path, kind: str) -> list[Path]:
 _HEAD = [f.name for f in fields(TaskResult) if f.name != "rows"]
 
 
-def arrow_schema(kind: str):
+def arrow_schema(kind: str) -> pa.Schema:
     """The table's columns: each result's identity and status (:class:`TaskResult`), then its
     row (:class:`ModeRow` or :class:`GapRow`), typed from the dataclasses' hints."""
     import pyarrow as pa
@@ -121,7 +125,7 @@ def _key(kind: str) -> list[str]:
     return ["recording", "hit", "gage", "mode"] if kind == "analyze" else ["recording"]
 
 
-def results_table(results: Sequence[TaskResult], kind: str, carried=None):
+def results_table(results: Sequence[TaskResult], kind: str, carried: pa.Table | None = None) -> pa.Table:
     """One Arrow table of ``results`` (and the rows ``carried`` over from an earlier run),
     sorted by its key; a key seen twice is a bug and raises."""
     import pyarrow as pa
@@ -138,7 +142,7 @@ def results_table(results: Sequence[TaskResult], kind: str, carried=None):
     return t.sort_by([(k, "ascending") for k in key])
 
 
-def write_table(table, path: Path, *, partial: bool, pending: int) -> None:
+def write_table(table: pa.Table, path: Path, *, partial: bool, pending: int) -> None:
     """Write the table at once (a temporary file replaced into place), with ``ramdaq.partial``
     and ``ramdaq.pending`` (recordings not done) in its schema metadata."""
     import pyarrow.parquet as pq
@@ -152,7 +156,7 @@ def write_table(table, path: Path, *, partial: bool, pending: int) -> None:
     os.replace(tmp, path)
 
 
-def read_table(path: Path, kind: str) -> tuple[object, str]:
+def read_table(path: Path, kind: str) -> tuple[pa.Table | None, str]:
     """The table an earlier run left at ``path`` (None when there is none, it cannot be read,
     or its columns are not this version's: then every recording runs again), and a note saying
     why it is not used ("" when it is, or there is none)."""
@@ -170,7 +174,7 @@ def read_table(path: Path, kind: str) -> tuple[object, str]:
     return t, ""
 
 
-def current(old, specs: Sequence[TaskSpec], kind: str) -> set[str]:
+def current(old: pa.Table | None, specs: Sequence[TaskSpec], kind: str) -> set[str]:
     """The recordings of ``specs`` whose rows in ``old`` are current: same content, same
     code, same plots option, analysed (or failed) by that code, and the folder still there."""
     if old is None:
@@ -211,7 +215,7 @@ def _sigint_ignored_in_children() -> Iterator[None]:
 
 
 @contextmanager
-def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
+def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[Client]:
     """A ``distributed.Client``: on the running cluster at ``scheduler`` (``tcp://HOST:PORT``),
     or on a local cluster of ``workers`` single-threaded worker processes (default: the core
     count) on 127.0.0.1, started here and stopped on leaving."""
@@ -247,7 +251,7 @@ class ClusterError(Exception):
     """The cluster cannot run the batch (no workers, or workers without ramdaq)."""
 
 
-def describe_cluster(client) -> tuple[str, int, list[str]]:
+def describe_cluster(client: Client) -> tuple[str, int, list[str]]:
     """The scheduler's address, its number of workers (waiting ``CONNECT_TIMEOUT_S`` for a
     first one), and warnings about them (workers whose BLAS may run threaded)."""
     addr = client.scheduler.address
@@ -309,7 +313,7 @@ class BatchPlan:
     table: Path
     specs: tuple[TaskSpec, ...]
     todo: tuple[TaskSpec, ...]
-    carried: object
+    carried: pa.Table | None
     note: str = ""
 
 
@@ -333,7 +337,7 @@ def plan_batch(kind: str, patterns: Sequence[str], out: Path, *, plots: bool = T
     return BatchPlan(kind, table, specs, tuple(s for s in specs if s.path not in done), carried, note)
 
 
-def _array(values: list[str]):
+def _array(values: list[str]) -> pa.Array:
     import pyarrow as pa
 
     return pa.array(values, pa.string())
@@ -353,15 +357,15 @@ class BatchOutcome:
     cluster: str = ""
     workers: int = 0
     warnings: list[str] | None = None
-    table: object = None
+    table: pa.Table | None = None
 
     @property
     def skipped(self) -> int:
         return len(self.plan.specs) - len(self.plan.todo)
 
 
-def run_tasks(client, plan: BatchPlan, *, on_result: Callable[[TaskResult], None] | None = None,
-              ) -> BatchOutcome:
+def run_tasks(client: Client, plan: BatchPlan, *,
+              on_result: Callable[[TaskResult], None] | None = None) -> BatchOutcome:
     """Submit one task per recording to do, the largest files first (the longest tasks, so no
     worker idles behind one at the end), and gather each result as it completes. Ctrl-C
     cancels what is left; each recording without a result gets a ``lost`` or ``interrupted``
@@ -399,7 +403,7 @@ def task_key(kind: str, batch: str, i: int, spec: TaskSpec) -> str:
     return f"ramdaq-{kind}-{batch}-{i}-{Path(spec.path).stem}"
 
 
-def _result_of(fut, spec: TaskSpec) -> TaskResult:
+def _result_of(fut: Future, spec: TaskSpec) -> TaskResult:
     """A finished future's result; a task the cluster gave up on (its workers died
     ``distributed.scheduler.allowed-failures`` times running it), cancelled (the scheduler
     lost), or failed outside the task's own guard is a ``lost`` result naming why."""
@@ -423,7 +427,7 @@ def finish(outcome: BatchOutcome) -> None:
     write_table(outcome.table, plan.table, partial=outcome.interrupted, pending=pending)
 
 
-def recordings_of(table) -> list[dict]:
+def recordings_of(table: pa.Table) -> list[dict]:
     """One dict per recording of a batch table: its result columns (the first row's)."""
     seen: dict[str, dict] = {}
     for r in table.select(_HEAD).to_pylist():
@@ -474,9 +478,9 @@ def summary_lines(outcome: BatchOutcome) -> list[str]:
     return out
 
 
-def run_batch(kind: str, patterns: Sequence[str], out: Path, *, client=None, workers: int | None = None,
-              scheduler: str | None = None, plots: bool = True, force: bool = False,
-              progress: bool = False) -> BatchOutcome:
+def run_batch(kind: str, patterns: Sequence[str], out: Path, *, client: Client | None = None,
+              workers: int | None = None, scheduler: str | None = None, plots: bool = True,
+              force: bool = False, progress: bool = False) -> BatchOutcome:
     """Plan, run on ``client`` (or on a cluster opened for the purpose, only when there is
     something to run), with a progress bar if asked, and write the table; the outcome.
     Python's entry to ``ramdaq batch``."""

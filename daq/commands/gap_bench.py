@@ -28,8 +28,12 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 RIGS = (("albacore", "air"), ("albacore", "water"), ("sampson", "water"))
 SEED_SETS = {
@@ -305,7 +309,7 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
 
 
 def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str], None],
-         client=None) -> list[dict]:
+         client: Client | None = None) -> list[dict]:
     """Run the scenarios on ``jobs`` worker processes or, when a ``distributed.Client`` is
     given, on its cluster (through its ``concurrent.futures`` executor: the same submissions
     and the same :func:`run_one`, so the same results). Results keep the scenarios' order."""
@@ -333,7 +337,7 @@ def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str],
 def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", jobs: int = 2,
                   effects: tuple[str, ...] | None = None, rescore: bool = False,
                   thresholds: Path | None = None, progress: Callable[[str], None] | None = None,
-                  client=None) -> int:
+                  client: Client | None = None) -> int:
     """Run the benchmark on the seed set ``seeds`` (:data:`SEED_SETS`) and print its figures; 0
     when done. The scenarios run on ``jobs`` processes, or on the dask cluster of ``client`` (a
     ``distributed.Client``) when given. ``dev`` writes the thresholds to
