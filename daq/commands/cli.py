@@ -408,6 +408,90 @@ def cmd_rig(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# -- batch and gap-benchmark on a dask cluster (ramdaq.daq.commands.batch) ---------------------
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    """Many recordings at once on a dask cluster: one Parquet table, a report folder each."""
+    from ramdaq.daq.commands.batch import ClusterError, exit_code, run_batch, summary_lines
+
+    out = Path(args.out or f"batch_{args.kind}")
+    try:
+        outcome = run_batch(args.kind, args.paths, out, workers=args.workers, scheduler=args.scheduler,
+                            plots=not args.no_plots, force=args.force, progress=not args.quiet)
+    except (ConnectionError, ClusterError) as err:
+        print(f"ramdaq batch: {err}", file=sys.stderr)
+        return 1
+    print("\n".join(summary_lines(outcome)))
+    return exit_code(outcome)
+
+
+def cmd_gap_benchmark(args: argparse.Namespace) -> int:
+    """The gap benchmark on worker processes, or with --scheduler on a dask cluster."""
+    from ramdaq.analysis.gap.effects import get_effect
+    from ramdaq.daq.commands.gap_bench import run_benchmark
+
+    effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
+    for e in effects or ():
+        get_effect(e)
+    if sum((args.dev, args.check, args.seeds is not None)) > 1:
+        raise SystemExit("ramdaq gap-benchmark: give one of --dev, --check, --seeds")
+    seeds = "dev" if args.dev else "check" if args.check else args.seeds or "benchmark"
+    kw = dict(per_class=args.per_class, seeds=seeds, jobs=args.jobs, effects=effects, rescore=args.rescore,
+              thresholds=args.thresholds, progress=lambda m: print(m, flush=True))
+    out = Path(args.out or "gap_benchmark")
+    if not args.scheduler or args.rescore:
+        return run_benchmark(out, **kw)
+    from ramdaq.daq.commands.batch import open_client
+
+    local = args.scheduler == "local"
+    try:
+        with open_client(args.jobs if local else None, None if local else args.scheduler) as client:
+            return run_benchmark(out, client=client, **kw)
+    except ConnectionError as err:
+        print(f"ramdaq gap-benchmark: {err}", file=sys.stderr)
+        return 1
+
+
+def _batch_parsers(sub: argparse._SubParsersAction) -> None:
+    """``batch analyze|gap`` and ``gap-benchmark``."""
+    b = sub.add_parser("batch", help="many recordings on a dask cluster: one Parquet table and a "
+                       "report folder per recording")
+    kinds = b.add_subparsers(dest="kind", required=True)
+    for kind, what in (("analyze", "ramdaq analyze of each recording"),
+                       ("gap", "ramdaq gap of each recording (default settings)")):
+        k = kinds.add_parser(kind, help=what)
+        k.add_argument("paths", nargs="+", help="recordings: files, folders (every .mcap below), globs")
+        k.add_argument("--out", help=f"output folder: {kind}.parquet and a report folder per recording "
+                       f"(default batch_{kind}/)")
+        k.add_argument("--workers", type=int, help="worker processes of the local cluster (default: the "
+                       "core count)")
+        k.add_argument("--scheduler", help="tcp://HOST:8786: run on this running dask cluster instead; its "
+                       "workers must see the recordings and --out at the same paths")
+        k.add_argument("--force", action="store_true", help="run every recording, also those whose results "
+                       "are current (same content, same code)")
+        k.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+        k.add_argument("--quiet", action="store_true", help="no progress bar")
+        k.set_defaults(func=cmd_batch)
+
+    g = sub.add_parser("gap-benchmark", help="the gap diagnosis proven on simulated trials with a hidden "
+                       "effect (as 'gap benchmark'), optionally on a dask cluster")
+    g.add_argument("--out", help="output folder (default gap_benchmark/)")
+    g.add_argument("--per-class", type=int, default=20, help="scenarios per effect class (default 20)")
+    g.add_argument("--seeds", choices=list(SEED_SETS), help="the seed set: " + "; ".join(
+        f"{k}, {v[1]}" for k, v in SEED_SETS.items()) + " (default benchmark)")
+    g.add_argument("--dev", action="store_true", help="--seeds dev (tunes the thresholds)")
+    g.add_argument("--check", action="store_true", help="--seeds check")
+    g.add_argument("--effects", help="comma-separated effect classes (default: all)")
+    g.add_argument("--jobs", type=int, default=2, help="worker processes (default 2); with --scheduler "
+                   "local, the local cluster's workers")
+    g.add_argument("--scheduler", help="tcp://HOST:8786: run the scenarios on this dask cluster; 'local': "
+                   "on a local dask cluster of --jobs workers")
+    g.add_argument("--rescore", action="store_true", help="score the results stored in --out again")
+    g.add_argument("--thresholds", type=Path, help="thresholds file to score with (default: the shipped "
+                   "ones)")
+    g.set_defaults(func=cmd_gap_benchmark)
+
+
 def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
     r.add_argument("--rig", help="rig file (TOML), required for the simulator")
@@ -522,6 +606,7 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--binary", action="store_true", help="binary 58b decay records")
     x.set_defaults(func=cmd_export_uff)
 
+    _batch_parsers(sub)
     p.add_argument("--debug", action="store_true", help="the traceback of an internal error")
     for command in sub.choices.values():  # --debug after the command too
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,

@@ -1,0 +1,284 @@
+"""The per-recording tasks of ``ramdaq batch``: a recording's path in, typed result rows out,
+and the recording's report folder written as ``ramdaq analyze`` / ``ramdaq gap`` write it.
+
+Each task is a plain function of its :class:`TaskSpec` that never raises for a bad recording (its
+:class:`TaskResult` says why, in one line) and knows nothing of dask: the same function runs on a
+dask worker, in a process pool or in this process, and gives the same rows. Running it twice
+(a worker killed mid-task, its task run again elsewhere) writes the same folder again.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import os
+import socket
+import time
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ramdaq.analysis.gap.diagnose import Diagnosis
+    from ramdaq.analysis.model.rig import Rig
+    from ramdaq.daq.analyzer import HitResult
+
+STATUSES = ("ok", "failed", "lost", "interrupted")
+"""A recording's status in the table: analysed (``ok``); its task ran and the recording could
+not be analysed (``failed``: corrupt, truncated, no rig ...); the workers running it died
+``distributed.scheduler.allowed-failures`` times (``lost``); the batch was stopped before it
+ran (``interrupted``). Only ``ok`` and ``failed`` are results of the recording itself."""
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One recording to process: its absolute ``path`` (as the workers see it), its content
+    ``sha256`` (hex), the report ``folder`` to write and whether to draw the PNG ``plots``."""
+
+    path: str
+    sha256: str
+    folder: str
+    plots: bool
+
+
+@dataclass(frozen=True)
+class ModeRow:
+    """One hit x gage x mode of an analysed recording, SI. A rejected hit is one row whose
+    gage and mode are None; a gage whose own decay was not usable (``gage_verdict`` other than
+    "ok") has no mode-shape component (NaN). ``f_hz``, ``delta`` (logarithmic decrement, 1),
+    ``zeta`` (damping ratio, 1) and their standard errors are the mode's, fitted over all
+    active gages; ``shape_amp`` (1, largest component 1) and ``shape_phase_rad`` the gage's
+    component of that mode."""
+
+    hit: int
+    onset_s: float
+    accepted: bool
+    hit_reason: str
+    gage: int | None = None
+    gage_verdict: str | None = None
+    gage_reason: str | None = None
+    mode: int | None = None
+    predominant: bool | None = None
+    f_hz: float | None = None
+    f_se_hz: float | None = None
+    delta: float | None = None
+    delta_se: float | None = None
+    zeta: float | None = None
+    zeta_se: float | None = None
+    shape_amp: float | None = None
+    shape_phase_rad: float | None = None
+
+
+@dataclass(frozen=True)
+class GapRow:
+    """A recording's gap diagnosis: the ``verdict``, the named ``effect`` (None unless
+    explained), its detection score ``detection_z``, the gap on the fitted and held-out impacts
+    (residual energy beyond the noise, in noise variances), the share of it the named effect
+    closes (1 = all; None without one) with its 95 % interval on the held-out impacts, the
+    effect's ``dbic``, and the strongest ``findings`` in physical terms (one line each, as the
+    ``ramdaq gap`` summary prints them)."""
+
+    verdict: str
+    effect: str | None
+    detection_z: float | None
+    gap_fitted: float
+    gap_held_out: float
+    closed_fitted: float | None
+    closed_held_out: float | None
+    closed_held_out_lo: float | None
+    closed_held_out_hi: float | None
+    dbic: float | None
+    impacts: int
+    findings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class TaskResult:
+    """What one task gives back: the recording's identity (``recording`` path, content
+    ``sha256``, ``method`` digest of the code that ran, ``plots``), its ``status``
+    (:data:`STATUSES`) with a one-line ``reason`` when not ok, the report ``folder``, which
+    ``worker`` ran it (host:pid) in ``seconds`` (wall, s), its ``hits_found`` and
+    ``hits_accepted`` (for gap: impacts found and compared), and its ``rows``
+    (:class:`ModeRow` for analyze, :class:`GapRow` for gap)."""
+
+    recording: str
+    sha256: str
+    status: str
+    reason: str = ""
+    folder: str = ""
+    plots: bool = False
+    method: str = ""
+    worker: str = ""
+    seconds: float = 0.0
+    hits_found: int = 0
+    hits_accepted: int = 0
+    rows: tuple = field(default=())
+
+    @classmethod
+    def not_run(cls, spec: TaskSpec, status: str, reason: str) -> TaskResult:
+        """A recording whose task gave no result (``lost``, ``interrupted``)."""
+        return cls(spec.path, spec.sha256, status, reason, spec.folder, spec.plots)
+
+
+@functools.cache
+def method_digest() -> str:
+    """sha256 (first 16 hex) of this installed ramdaq's source, rig and threshold files: two
+    runs with the same digest ran the same code on the same rigs."""
+    h = hashlib.sha256()
+    for pkg in ("ramdaq", "ramdaq.analysis", "ramdaq.daq", "ramdaq.drivers", "ramdaq.rigs"):
+        root = Path(str(resources.files(pkg)))
+        own = ("*.py",) if pkg == "ramdaq" else ("**/*.py", "**/*.toml", "**/*.json", "**/*.dbc")
+        for f in sorted({p for pat in own for p in root.glob(pat)}):
+            h.update(f"{pkg}/{f.relative_to(root).as_posix()}\0".encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
+    """sha256 of a file's bytes, hex."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while b := f.read(chunk):
+            h.update(b)
+    return h.hexdigest()
+
+
+def one_line(exc: BaseException, limit: int = 300) -> str:
+    """An exception as one line: its type and the first line of its message."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"[:limit]
+
+
+def _worker() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _finish(spec: TaskSpec, t0: float, **kw) -> TaskResult:
+    return TaskResult(spec.path, spec.sha256, folder=spec.folder, plots=spec.plots,
+                      method=method_digest(), worker=_worker(),
+                      seconds=time.perf_counter() - t0, **kw)
+
+
+def analyze_task(spec: TaskSpec) -> TaskResult:
+    """``ramdaq analyze`` of one recording: its report folder written, its rows returned (one
+    per hit x gage x mode, :class:`ModeRow`). A recording that cannot be analysed is a
+    ``failed`` result naming why."""
+    from ramdaq.daq.commands.analyze import run_analysis
+
+    t0 = time.perf_counter()
+    try:
+        rig, hits = run_analysis(spec.path)
+        write_analysis(spec.path, rig, hits, Path(spec.folder), spec.plots)
+    except Exception as exc:  # a recording that breaks the analysis is a row, not a crash
+        return _finish(spec, t0, status="failed", reason=one_line(exc))
+    rows = tuple(r for h in hits for r in hit_rows(h))
+    return _finish(spec, t0, status="ok", hits_found=len(hits),
+                   hits_accepted=sum(h.accepted for h in hits), rows=rows)
+
+
+def _num(v: object) -> float | None:
+    """A JSON number of :func:`~ramdaq.daq.commands.analyze.analysis_to_json` as a float
+    (None stays None: not finite)."""
+    return None if v is None else float(v)
+
+
+def hit_rows(h: HitResult) -> list[ModeRow]:
+    """The rows of one :class:`~ramdaq.daq.analyzer.HitResult`: gages x modes of its analysis,
+    read from the same JSON ``ramdaq analyze`` writes (so the table and report.json agree to
+    the digit); one row for a rejected hit."""
+    from ramdaq.daq.commands.analyze import analysis_to_json
+
+    head = dict(hit=h.index, onset_s=float(h.event.onset_s), accepted=bool(h.accepted),
+                hit_reason=h.reason)
+    if h.analysis is None:
+        return [ModeRow(**head)]
+    j = analysis_to_json(h.analysis)
+    rows = []
+    for gage, v in j["verdicts"].items():
+        for k, m in enumerate(j["modes"]):
+            amp, phase = m["shape"].get(gage, (math.nan, math.nan))
+            rows.append(ModeRow(**head, gage=int(gage[1:]), gage_verdict=v["verdict"],
+                                gage_reason=v["reason"], mode=k, predominant=k == j["predominant_mode"],
+                                f_hz=_num(m["f_hz"]), f_se_hz=_num(m["f_se_hz"]), delta=_num(m["delta"]),
+                                delta_se=_num(m["delta_se"]), zeta=_num(m["zeta"]),
+                                zeta_se=_num(m["zeta_se"]), shape_amp=_num(amp),
+                                shape_phase_rad=_num(phase)))
+    return rows
+
+
+def _json_default(o: object) -> object:
+    """numpy scalars and arrays as JSON, anything else as its text (as ``ramdaq analyze``)."""
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def write_analysis(path: str, rig: Rig, hits: list[HitResult], out: Path, plots: bool) -> list[Path]:
+    """The folder ``ramdaq analyze PATH --out OUT`` writes: report.json (replaced whole, so a
+    task killed while writing leaves the last complete one) and, with ``plots``, each accepted
+    hit's PNGs."""
+    from ramdaq.daq.commands.analyze import build_report
+
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".report.json.{os.getpid()}"
+    tmp.write_text(json.dumps(build_report(Path(path), rig, hits), indent=1, default=_json_default))
+    os.replace(tmp, out / "report.json")
+    files = [out / "report.json"]
+    if plots:
+        from ramdaq.daq.reports.impact_plots import plot_impact
+
+        for h in hits:
+            if h.accepted and h.analysis is not None and h.event.record is not None:
+                rec = h.event.record
+                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
+                x = rec.values()[:len(rig.gages_by_channel()), i0:]
+                files += plot_impact(h.analysis, x, rec.fs_hz, rig, out, h.index)
+    return files
+
+
+def gap_task(spec: TaskSpec) -> TaskResult:
+    """``ramdaq gap`` of one recording with the default settings: its report folder (gap.json,
+    plots) written, its :class:`GapRow` returned. A recording that cannot be diagnosed is a
+    ``failed`` result naming why."""
+    from ramdaq.daq.commands.gap import run_gap, write_report
+
+    t0 = time.perf_counter()
+    try:
+        lt, td, d = run_gap(spec.path)
+        write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
+        row = gap_row(d)
+    except Exception as exc:  # a recording that breaks the diagnosis is a row, not a crash
+        return _finish(spec, t0, status="failed", reason=one_line(exc))
+    return _finish(spec, t0, status="ok", hits_found=len(lt.onsets_s), hits_accepted=int(td.n_seg),
+                   rows=(row,))
+
+
+def _finite(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+def gap_row(d: Diagnosis, n_findings: int = 5) -> GapRow:
+    """A :class:`~ramdaq.analysis.gap.diagnose.Diagnosis` as one row."""
+    b = d.best
+    lo, hi = b.closed_held_ci if b else (None, None)
+    fm = d.features
+    return GapRow(verdict=d.verdict, effect=b.name if b else None, detection_z=_finite(d.z_detect),
+                  gap_fitted=float(d.gap_fit), gap_held_out=float(d.gap_held),
+                  closed_fitted=_finite(b.closed_fit) if b else None,
+                  closed_held_out=_finite(b.closed_held) if b else None,
+                  closed_held_out_lo=_finite(lo), closed_held_out_hi=_finite(hi),
+                  dbic=_finite(b.dbic) if b else None, impacts=int(d.forward.td.n_seg),
+                  findings=tuple(r["text"] for r in fm.strongest(n_findings)) if fm else ())
+
+
+TASKS = {"analyze": analyze_task, "gap": gap_task}
+"""The task of each ``ramdaq batch`` kind."""
+ROWS = {"analyze": ModeRow, "gap": GapRow}
+"""The row type of each kind."""
