@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import json
 import math
 import os
 import socket
@@ -21,11 +20,8 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 if TYPE_CHECKING:
     from ramdaq.analysis.gap.diagnose import Diagnosis
-    from ramdaq.analysis.model.rig import Rig
     from ramdaq.daq.analyzer import HitResult
 
 STATUSES = ("ok", "failed", "lost", "interrupted")
@@ -168,12 +164,12 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq analyze`` of one recording: its report folder written, its rows returned (one
     per hit x gage x mode, :class:`ModeRow`). A recording that cannot be analysed is a
     ``failed`` result naming why."""
-    from ramdaq.daq.commands.analyze import run_analysis
+    from ramdaq.daq.commands.analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
     try:
         rig, hits = run_analysis(spec.path)
-        write_analysis(spec.path, rig, hits, Path(spec.folder), spec.plots)
+        write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
     except Exception as exc:  # a recording that breaks the analysis is a row, not a crash
         return _finish(spec, t0, status="failed", reason=one_line(exc))
     rows = tuple(r for h in hits for r in hit_rows(h))
@@ -209,38 +205,6 @@ def hit_rows(h: HitResult) -> list[ModeRow]:
                                 zeta_se=_num(m["zeta_se"]), shape_amp=_num(amp),
                                 shape_phase_rad=_num(phase)))
     return rows
-
-
-def _json_default(o: object) -> object:
-    """numpy scalars and arrays as JSON, anything else as its text (as ``ramdaq analyze``)."""
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
-
-
-def write_analysis(path: str, rig: Rig, hits: list[HitResult], out: Path, plots: bool) -> list[Path]:
-    """The folder ``ramdaq analyze PATH --out OUT`` writes: report.json (replaced whole, so a
-    task killed while writing leaves the last complete one) and, with ``plots``, each accepted
-    hit's PNGs."""
-    from ramdaq.daq.commands.analyze import build_report
-
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = out / f".report.json.{os.getpid()}"
-    tmp.write_text(json.dumps(build_report(Path(path), rig, hits), indent=1, default=_json_default))
-    os.replace(tmp, out / "report.json")
-    files = [out / "report.json"]
-    if plots:
-        from ramdaq.daq.reports.impact_plots import plot_impact
-
-        for h in hits:
-            if h.accepted and h.analysis is not None and h.event.record is not None:
-                rec = h.event.record
-                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
-                x = rec.values()[:len(rig.gages_by_channel()), i0:]
-                files += plot_impact(h.analysis, x, rec.fs_hz, rig, out, h.index)
-    return files
 
 
 def gap_task(spec: TaskSpec) -> TaskResult:

@@ -8,8 +8,12 @@ same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.judge_
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 from ramdaq.analysis.model.geometry import gage_geometry
 from ramdaq.analysis.model.rig import Rig, parse_rig
@@ -155,3 +159,36 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
             name += " (N s/m)" if key.startswith("C") else " (N m s)"
         row(name, d, "{:.4g}")
     return lines
+
+
+def json_default(o: object) -> object:
+    """numpy scalars and arrays as JSON, anything else as its text (``json.dumps(default=)``)."""
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path, *, plots: bool = True,
+                   air: tuple[Rig, list[HitResult]] | None = None) -> tuple[dict, list[Path]]:
+    """The folder ``ramdaq analyze`` writes: ``report.json`` (:func:`build_report`; replaced
+    whole, so a run killed while writing leaves the last complete one) and, with ``plots``, each
+    accepted hit's PNGs. Returns the report and the files written."""
+    report = build_report(path, rig, hits, air)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".report.json.{os.getpid()}"
+    tmp.write_text(json.dumps(report, indent=1, default=json_default))
+    os.replace(tmp, out / "report.json")
+    files = [out / "report.json"]
+    if plots:
+        from ramdaq.daq.reports.impact_plots import plot_impact
+
+        n_gages = len(rig.gages_by_channel())
+        for h in hits:
+            if h.accepted and h.analysis is not None and h.event.record is not None:
+                rec = h.event.record
+                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
+                files += plot_impact(h.analysis, rec.values()[:n_gages, i0:], rec.fs_hz, rig, out,
+                                     h.index)
+    return report, files

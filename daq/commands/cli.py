@@ -213,7 +213,7 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
 
 def _print_outcome(outcome, args: argparse.Namespace) -> None:
     """The trial summary on the terminal and, with ``--json``, the per-hit results in a file."""
-    from ramdaq.daq.commands.analyze import summary_table
+    from ramdaq.daq.commands.analyze import json_default, summary_table
 
     for k, why in outcome.summary["rejected"].items():
         print(f"hit {k} rejected: {why}")
@@ -222,7 +222,7 @@ def _print_outcome(outcome, args: argparse.Namespace) -> None:
           f"skipped because the analyzer was busy (no samples skipped)")
     if args.json:
         Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
-                                              default=_json_default))
+                                              default=json_default))
 
 
 def _stream_result(outcome, args: argparse.Namespace) -> int:
@@ -270,7 +270,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from ramdaq.daq.commands.analyze import build_report, format_summary, run_analysis
+    from ramdaq.daq.commands.analyze import format_summary, run_analysis, write_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
@@ -280,20 +280,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
     rig, hits = run_analysis(src, impact=args.impact, progress=progress)
     air = run_analysis(Path(args.air), progress=progress) if args.air else None
-    report = build_report(src, rig, hits, air)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "report.json").write_text(json.dumps(report, indent=1, default=_json_default))
-    files = [out / "report.json"]
-    if not args.no_plots:
-        from ramdaq.daq.reports.impact_plots import plot_impact
-
-        for h in hits:
-            if h.accepted and h.analysis is not None and h.event.record is not None:
-                rec = h.event.record
-                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
-                rows = [i for i, g in enumerate(rig.gages_by_channel())]
-                x = rec.values()[rows, i0:]
-                files += plot_impact(h.analysis, x, rec.fs_hz, rig, out, h.index)
+    report, files = write_analysis(src, rig, hits, out, plots=not args.no_plots, air=air)
     print(format_summary(report, args.units))
     print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
     return EXIT_OK
@@ -369,16 +356,6 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
     print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
           f"records from {r.hits} accepted of {len(hits)} hits")
     return EXIT_OK
-
-
-def _json_default(o: object) -> object:
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 def cmd_rig(args: argparse.Namespace) -> int:
