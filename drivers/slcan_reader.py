@@ -15,8 +15,10 @@ What a line becomes (:func:`parse_lines`):
   ``b``/``B`` with bit-rate switch): a frame; identifier 3 or 8 hex digits (at most 0x7FF or
   0x1FFFFFFF), DLC a digit 0-8 (classic) or a hex digit 0-F (FD, python-can's ``CAN_FD_DLC``),
   exactly 2 hex digits per data byte, then at most 8 more hex digits (an adapter's timestamp,
-  ignored; the frame's :attr:`~SlcanFrame.timestamp` is the wall-clock time of the read, s, as
-  python-can's);
+  ignored; the frame's :attr:`~SlcanFrame.timestamp` is the host time of the read, s: wall-clock
+  time as python-can's, but counted on the monotonic clock from the moment the port was opened,
+  so a step of the wall clock (NTP) never looks like a silence on the bus to the CAN adapter,
+  which holds these times against the sample clock);
 * ``F`` with two hex digits (the status flags): nothing when 0, else an error frame with the
   SocketCAN classes the flags mean (controller problems 0x04, lost arbitration 0x02, bus error
   0x80);
@@ -62,7 +64,7 @@ class SlcanFrame:
     """A frame off the serial line, with the ``can.Message`` attributes the CAN adapter reads.
 
     ``data`` is ``bytes``, ``dlc`` its length in bytes (a remote frame: the length asked for),
-    ``timestamp`` the wall-clock time the line was read, s (``time.time()``).
+    ``timestamp`` the host time the line was read, s (module notes).
     """
 
     __slots__ = ("arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd",
@@ -198,6 +200,7 @@ class SlcanReader:
         self.read_every_s = read_every_s
         self._rest = ""            # the start of a line whose "\r" has not come yet
         self._read_at = 0.0        # monotonic time of the last read, s
+        self._epoch = time.time() - time.monotonic()  # frame timestamps: wall clock at open, then monotonic
         self._open_cmd = "L" if listen_only else "O"
         with error_check(exception_type=CanInitializationError):
             self.port = serial.serial_for_url(channel, baudrate=tty_baudrate, rtscts=rtscts, timeout=timeout)
@@ -267,7 +270,7 @@ class SlcanReader:
             if not self._wait(None if deadline is None else max(0.0, deadline - time.monotonic())):
                 return []
             self._read_at = now = time.monotonic()
-            items = self.feed(self._read_waiting(), time.time())
+            items = self.feed(self._read_waiting(), self._epoch + now)
             if items:
                 return items
 
