@@ -538,12 +538,12 @@ class CycleAssembler:
     """One channel group's frames put back together, cycle by cycle, by their SEQ.
 
     Cycle numbers are absolute: SEQ (plus ``seq_shift``, which only a re-anchoring by time sets)
-    unwrapped around the newest cycle ``hi``. A cycle is *final*
-    once complete, or once frames of ``window`` later cycles arrived (then it is lost: frames may
-    come a little out of order, never much). A frame within ``window`` cycles of ``hi`` (and, with
-    a clock, on time: below) is placed at once. A second frame for a filled slot is a
-    ``duplicate_frame`` if it carries the same bytes, else a ``conflicting_frame``: that cycle is
-    lost, never delivered with either sender's samples.
+    unwrapped around the newest cycle ``hi``. A cycle is *final* once complete, or once frames of
+    ``window`` later cycles arrived (then it is lost: frames may come a little out of order, never
+    much). A frame within ``window`` cycles of ``hi`` (and, with a clock, on time: below) is placed
+    at once. A second frame for a filled slot is a ``duplicate_frame`` if it carries the same
+    bytes, else a ``conflicting_frame``: that cycle is lost, never delivered with either sender's
+    samples.
 
     Any other frame is *held* on a side track with the frames that follow it there (SEQ unwrapped
     around the side's own newest cycle), until it is known what they are:
@@ -566,8 +566,8 @@ class CycleAssembler:
     for the group's latest placed frame -- a step from it, so a silence shows while a host or
     sender falling steadily behind (or running ahead, unpaced) does not. A frame more than
     ``tolerance_s`` late or early is held -- a silence longer than the SEQ period, a restart, a
-    stall of the reader or of the sender -- and its side is judged once it has arrived
-    for ``tolerance_s`` at the sample clock's pace, by its least late frame:
+    stall of the reader or of the sender -- and its side is judged once it has arrived for
+    ``tolerance_s`` at the sample clock's pace, by its least late frame:
 
     * on time within the tolerance: SEQ was right;
     * late by k SEQ periods within the tolerance (and the tolerance under half a period): k wraps
@@ -805,8 +805,8 @@ class CycleAssembler:
             return False
         if f.run_lo is None:
             f.run_lo = cycle
-        elif cycle - f.run_lo > self.window + 1 and self.side is None:  # the group fell silent,
-            # not held late beside it, while the other went on
+        elif cycle - f.run_lo > self.window + 1 and self.side is None:
+            # the group fell silent (not held late beside it) while the other went on
             self._foreign_gone("the group went silent while it sent on")
             return False
         f.offset, f.last, f.frames = (seq + self.seq_shift - self.hi) % self.M, self.hi, f.frames + 1
