@@ -590,6 +590,7 @@ class CycleAssembler:
         self.lay, self.T, self.M = layout, layout.samples_per_cycle, layout.seq_modulus
         self.L, self.F = layout.frame_bytes, len(layout.frames)
         self.full, self.window = (1 << self.F) - 1, window
+        self.wrap_at = self.M - window   # SEQ distances from here on are frames behind, not ahead
         self.bad = 1 << self.F            # mask bit of a cycle that got conflicting frames
         self.rate, self.tol_s = cycles_per_s, tolerance_s
         self.tol = math.inf if cycles_per_s is None else tolerance_s * cycles_per_s  # cycles
@@ -634,14 +635,20 @@ class CycleAssembler:
         frame's problem (``late_frame``, ``duplicate_frame``, ``conflicting_frame``,
         ``foreign_frame``) or ``None``; a held frame's problem, once decided, goes to
         :attr:`problems`."""
-        d = (seq + self.seq_shift - self.hi) % self.M
-        cycle = self.hi + (d - self.M if d >= self.M - self.window else d)
+        hi = self.hi
+        d = (seq + self.seq_shift - hi) % self.M
+        cycle = hi + d if d < self.wrap_at else hi + d - self.M
         x = None if t is None or self.rate is None else t * self.rate - cycle
-        if cycle <= self.hi + self.window and (x is None or -self.tol <= x - self.t0 <= self.tol):
-            return self._main(cycle, slot, data, x)
+        if cycle <= hi + self.window and (x is None or -self.tol <= x - self.t0 <= self.tol):
+            if x is not None:  # the group's own frame, on time (inlined: the path of every frame)
+                self.t0 = x
+            problem = self._place(cycle, slot, data)
+            if cycle > hi and (self.side is not None or self.foreign is not None):
+                self._moved()
+            return problem
         if self.foreign is not None and self._foreign_frame(seq, cycle):
             return "foreign_frame"
-        return self._hold(cycle, slot, data, t, x)
+        return self._hold(seq, cycle, slot, data, t, x)
 
     def finish(self) -> None:
         """End of the stream: decide what is held, then make every cycle final."""
@@ -651,15 +658,6 @@ class CycleAssembler:
             self.finalize_to(self.hi + 1)
 
     # -- the group's own frames ------------------------------------------------------------------
-    def _main(self, cycle: int, slot: int, data: bytes, x: float | None) -> str | None:
-        moved = cycle > self.hi
-        if x is not None:
-            self.t0 = x
-        problem = self._place(cycle, slot, data)
-        if moved and (self.side is not None or self.foreign is not None):
-            self._moved()
-        return problem
-
     def _moved(self) -> None:
         """The group advanced: judge what waits beside it."""
         side = self.side
@@ -697,11 +695,12 @@ class CycleAssembler:
         return None
 
     # -- frames beside it ------------------------------------------------------------------------
-    def _hold(self, cycle: int, slot: int, data: bytes, t: float | None, x: float | None) -> str | None:
+    def _hold(self, seq: int, cycle: int, slot: int, data: bytes, t: float | None,
+              x: float | None) -> str | None:
         if x is not None and self.t0 == math.inf:  # the group's first frame with an arrival time
             self.t0 = x
             if cycle <= self.hi + self.window:
-                return self._main(cycle, slot, data, x)
+                return self.put(seq, slot, data, t)
         side = self.side
         if side is not None:  # its SEQ unwrapped around the side's newest cycle
             near = side.hi + (cycle - side.hi + self.M // 2) % self.M - self.M // 2
