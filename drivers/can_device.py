@@ -27,15 +27,19 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   resuming give ``error_frame``, ``bus_off`` and ``bus_recovered``;
 * SEQ and the host clock. SEQ wraps (classic: 256 cycles = 0.375 s at 2.048 kHz; fd24: 65 536
   cycles = 640 s), so a silence longer than that cannot be counted by SEQ alone, bus-off report or
-  not. Every frame's arrival time on the host (``msg.timestamp``; slcan: when its line was read)
-  is held against the group's sample clock (:class:`~ramdaq.drivers.can_frames.CycleAssembler`
-  gives the rule): a frame later or earlier than SEQ says by more than ``clock_tolerance_s``
-  (default 0.1 s) is held until the frames after it show at what pace they come. Whole wraps that
+  not. Every frame's arrival time on the host (``msg.timestamp``; slcan: the last time the port
+  was seen empty before its line, :attr:`~ramdaq.drivers.slcan_reader.SlcanReader.arrived_after`,
+  so a backlog the reader took late is not a silence) is held against the group's sample clock
+  (:class:`~ramdaq.drivers.can_frames.CycleAssembler` gives the rule): a frame later or earlier
+  than SEQ says by more than ``clock_tolerance_s`` (default 0.1 s) is held until the frames after
+  it show at what pace they come. Whole wraps that
   explain the lateness within the tolerance are counted (``seq_wrap``: the gap is exact); when
   nothing does (a front-end restarted, the tolerance is not under half the SEQ period) the samples
   are re-anchored from the host clock and a ``gap_unknown`` event gives the estimated gap, what
-  SEQ said and the uncertainty -- the length is never guessed silently. Frames arriving faster
-  than real time (a reader catching up after a stall, a replay) are judged by SEQ. A SEQ jump of
+  SEQ said and the uncertainty -- the length is never guessed silently. Frames whose SEQ goes on
+  from the group's but which came late by more than the tolerance and no whole wraps (a stalled
+  sender or host) are placed where SEQ says, with a ``delayed_frames`` event; frames arriving
+  faster than real time (a reader catching up after a stall, a replay) are judged by SEQ. A SEQ jump of
   more than 3 cycles is believed when the group's frames go on from it for more than 3 cycles
   (a lone one is a ``seq_outlier``);
 * a second sender with the group's identifiers and valid CRCs (a twin front-end) shows as a
@@ -300,19 +304,20 @@ class CanDevice(Device):
             got = self._recv(wait)
             now = time.monotonic()
             if got is not None:
-                frames, i = got
+                frames, i, after = got
                 for msg in frames:
                     if type(msg) is str:  # an unparseable slcan line
                         self._count("bad_frame", now, reason=msg[:80])
                     else:
-                        self._on_message(msg, i, now)
+                        self._on_message(msg, i, now, msg.timestamp if after is None else after)
             if now >= self._next_poll or got is None:
                 self._poll(now)
 
     # -- receiving ---------------------------------------------------------------------------
-    def _recv(self, timeout: float) -> tuple[list[can.Message | SlcanFrame | str], int] | None:
-        """Frames of the next bus that has some (round robin), and its index; slcan: all waiting,
-        with a reason string in place of each unparseable line."""
+    def _recv(self, timeout: float) -> tuple[list[can.Message | SlcanFrame | str], int, float | None] | None:
+        """Frames of the next bus that has some (round robin), its index, and for slcan the host
+        time all of them arrived after (else ``None``: each frame's own timestamp says); slcan:
+        all lines waiting, with a reason string in place of each unparseable one."""
         n = len(self._buses)
         for k in range(n):
             i = (self._rr + k) % n
@@ -331,7 +336,7 @@ class CanDevice(Device):
                 return None
             if got:
                 self._rr = (i + 1) % n
-                return got, i
+                return got, i, bus.arrived_after if type(bus) is SlcanReader else None
         if n > 1:
             time.sleep(min(timeout, 0.001))
         return None
@@ -347,7 +352,8 @@ class CanDevice(Device):
         if not self._buses:
             self._finish()
 
-    def _on_message(self, msg: can.Message | SlcanFrame, bus_i: int, now: float) -> None:
+    def _on_message(self, msg: can.Message | SlcanFrame, bus_i: int, now: float, t: float) -> None:
+        """One frame off bus ``bus_i``; ``t`` is its arrival time on the host, s."""
         self._frames += 1
         if msg.is_error_frame:
             self._on_error_frame(msg, bus_i, now)
@@ -363,7 +369,7 @@ class CanDevice(Device):
         grp = self.groups[lay.group]
         if grp.base is None:
             started = [(g.hi + 1) * g.T for g in self.groups.values() if g.base is not None]
-            grp.start(seq, max(started) // grp.T if started else None, msg.timestamp)
+            grp.start(seq, max(started) // grp.T if started else None, t)
             if self._origin is None:
                 self._origin = self._pos = grp.done()
                 self._first_wall = now
@@ -371,7 +377,7 @@ class CanDevice(Device):
         if self._silent:
             self._silent.discard(lay.group)
         base = grp.base
-        problem = grp.put(seq, lay.slot, msg.data, msg.timestamp)
+        problem = grp.put(seq, lay.slot, msg.data, t)
         if problem:
             self._count(problem, now, group=lay.group, id=hex(msg.arbitration_id))
         else:

@@ -495,9 +495,10 @@ _HOLD_S = 0.8            # longest a late side waits for a reader to catch up be
 @dataclass(frozen=True)
 class SeqNote:
     """A decision about a group's sequence for the device to report: ``kind``
-    (``foreign_sender``, ``foreign_sender_gone``, ``seq_wrap``, ``gap_unknown``), the absolute
-    ``cycle`` it applies from, a JSON-serialisable ``detail`` (lengths in samples), and for a
-    re-anchoring the ``shift`` (cycles) added to the cycles SEQ gave."""
+    (``foreign_sender``, ``foreign_sender_gone``, ``seq_wrap``, ``gap_unknown``,
+    ``delayed_frames``), the absolute ``cycle`` it applies from, a JSON-serialisable ``detail``
+    (lengths in samples), and for a re-anchoring the ``shift`` (cycles) added to the cycles SEQ
+    gave."""
 
     kind: str
     cycle: int
@@ -564,7 +565,9 @@ class CycleAssembler:
     The clock (``cycles_per_s`` given and each frame's host arrival time ``t``, s, passed to
     :meth:`put`): a frame's lateness is ``t x cycles_per_s - cycle - t0``, ``t0`` being the same
     for the group's latest placed frame -- a step from it, so a silence shows while a host or
-    sender falling steadily behind (or running ahead, unpaced) does not. A frame more than
+    sender falling steadily behind (or running ahead, unpaced) does not (a silence right after
+    frames that came late is measured short by their delay: the estimate is as good as the host's
+    arrival times). A frame more than
     ``tolerance_s`` late or early is held -- a silence longer than the SEQ period, a restart, a
     stall of the reader or of the sender -- and its side is judged once it has arrived for
     ``tolerance_s`` at the sample clock's pace, by its least late frame:
@@ -639,6 +642,8 @@ class CycleAssembler:
         d = (seq + self.seq_shift - hi) % self.M
         cycle = hi + d if d < self.wrap_at else hi + d - self.M
         x = None if t is None or self.rate is None else t * self.rate - cycle
+        if self.side is not None and self._goes_on(self.side, cycle):
+            return self._hold(seq, cycle, slot, data, t, x)
         if cycle <= hi + self.window and (x is None or -self.tol <= x - self.t0 <= self.tol):
             if x is not None:  # the group's own frame, on time (inlined: the path of every frame)
                 self.t0 = x
@@ -695,6 +700,14 @@ class CycleAssembler:
         return None
 
     # -- frames beside it ------------------------------------------------------------------------
+    def _goes_on(self, side: _Side, cycle: int) -> bool:
+        """Whether a frame carries on a side that is a stream of its own (it advanced in its
+        current run): then it is the side's, even where its SEQ also fits the group's."""
+        if side.hi == side.run_lo:
+            return False
+        near = side.hi + (cycle - side.hi + self.M // 2) % self.M - self.M // 2
+        return side.hi - 1 <= near <= side.hi + self.window + 1
+
     def _hold(self, seq: int, cycle: int, slot: int, data: bytes, t: float | None,
               x: float | None) -> str | None:
         if x is not None and self.t0 == math.inf:  # the group's first frame with an arrival time
@@ -708,9 +721,9 @@ class CycleAssembler:
                 if x is not None:
                     x -= near - cycle
                 cycle = near
-            elif side.lo <= self.hi + self.window + 1:  # the group's own frames, held late: kept
-                self.problems["seq_outlier"] += 1
-                return None
+            elif side.lo <= self.hi + self.window + 1:  # the group's own frames, held late:
+                self._settle(final=True)  # placed now (delayed, or whole wraps), then this one
+                return self.put(seq, slot, data, t)
             else:
                 self._drop_side("seq_outlier")
                 side = None
@@ -756,13 +769,19 @@ class CycleAssembler:
 
     def _adopt_by_time(self, late: float) -> None:
         """Place the side where its arrival times say: whole SEQ wraps if they explain its
-        lateness within the tolerance, else re-anchored (a gap of unknown length)."""
+        lateness within the tolerance; else, if its SEQ goes on from the group's, where SEQ says
+        (the frames came late, none was lost: ``delayed_frames``); else re-anchored (a gap of
+        unknown length)."""
         k = round(late / self.M)
         if late > self.tol and k >= 1 and abs(late - k * self.M) <= self.tol < self.M / 2:
             self.notes.append(SeqNote("seq_wrap", self.side.lo + k * self.M, {
                 "wraps": k, "wrap_samples": self.M * self.T,
                 "timing_error_samples": round((late - k * self.M) * self.T)}))
             self._adopt(k * self.M)
+        elif self.side.lo <= self.hi + self.window + 1:
+            self.notes.append(SeqNote("delayed_frames", self.side.lo, {
+                "late_s": round(late / self.rate, 3), "frames": len(self.side.frames)}))
+            self._adopt(0)
         else:
             hint, self.hint = self.hint, None
             self._adopt(hint if hint is not None and abs(hint - late) <= self.tol else round(late), True)

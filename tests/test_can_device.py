@@ -369,28 +369,6 @@ def test_a_twin_sender_is_a_bus_fault_and_never_placed(tmp_path, rigs, dbc, seq_
     assert sum(e["detail"]["frames_dropped"] for e in went) == dev.counters["foreign_frame"]
 
 
-@pytest.mark.parametrize("dbc", ["classic", "fd24"])
-def test_a_restarted_front_end_is_re_anchored_from_the_host_clock(tmp_path, rigs, dbc):
-    """The front-end restarts at 0.4 s: silent 0.1 s, then its SEQ counts from 0 again. SEQ
-    cannot say how long the gap was; the samples after it are placed where the frames' arrival
-    times put them (all groups alike), and a gap_unknown event gives that estimate, what SEQ said
-    and the uncertainty. Before the restart, bit for bit."""
-    emu, dev, blocks, events, _ = _virtual_trial(tmp_path, dbc, rigs[dbc], pace="realtime",
-                                                 emu_kw=dict(restart_at_s=0.4, restart_s=0.1))
-    truth = _truth(rigs[dbc])
-    assert emu.injected["restart"] == 1
-    before, after = _split_at_gap(blocks)
-    assert _offset_from_truth(before, truth, 0) == 0
-    assert before[-1].next_sample <= 0.4 * 2048 + emu.codec.groups[1].samples_per_cycle
-    unknown = [e["detail"] for e in events if e["kind"] == "gap_unknown"]
-    assert len(unknown) == len(emu.codec.groups) and len({u["estimated_samples"] for u in unknown}) == 1
-    assert unknown[0]["uncertainty_samples"] == round(0.1 * 2048)  # the default clock tolerance
-    shift = _offset_from_truth(after, truth, unknown[0]["uncertainty_samples"])  # all channels alike
-    true_gap = int(np.flatnonzero(~emu.missing(truth.shape[1])[before[-1].next_sample :])[0])
-    recorded_gap = after[0].first_sample - before[-1].next_sample
-    assert unknown[0]["estimated_samples"] == recorded_gap == true_gap - shift
-
-
 # -- slcan over a pseudo-terminal, the emulator a real process ---------------------------------
 def _emulator(rig: Path, dbc: str, report: Path, *args: str) -> tuple[subprocess.Popen, str]:
     proc = subprocess.Popen(
@@ -487,6 +465,48 @@ def test_slcan_line_faults_from_a_pty(tmp_path, rigs):
                if e["kind"] == "bad_frame")
     # every sample frame but the 4 lines lost (600 and 601 are one), plus status, remote, unrelated
     assert dev.counters["frames"] == k + 1 - 4 + 3
+
+
+# classic: silent 0.1 s, so SEQ from 0 claims 170 cycles (0.25 s) more than time says (with 0.3 s
+# it would agree with time within the 0.1 s tolerance: a restart SEQ cannot be told from a jump
+# then). fd24 with a 0.3 s tolerance: the emulator, a process on a shared 2-core box, was seen to
+# send up to 0.2 s behind its sample clock just before the silence, which shortens it on arrival
+# by as much -- the estimate is only as good as the arrival times.
+@pytest.mark.parametrize("dbc, silent_s, tolerance_s", [("classic", 0.1, 0.1), ("fd24", 0.5, 0.3)])
+def test_a_restarted_front_end_is_re_anchored_from_the_host_clock(tmp_path, rigs, dbc, silent_s,
+                                                                  tolerance_s):
+    """The front-end restarts at 0.4 s: silent a while, then its SEQ counts from 0 again (slcan,
+    the emulator its own process). SEQ cannot say how long the gap was; the samples after it are
+    placed where the frames' arrival times put them (all groups alike, never onto samples already
+    placed), and a gap_unknown event gives that estimate, what SEQ said and the uncertainty.
+    Before the restart, bit for bit."""
+    proc, port = _emulator(rigs[dbc], dbc, tmp_path / "truth.json", "--pace", "realtime",
+                           "--restart-at", "0.4", "--restart-s", str(silent_s))
+    try:
+        dev = open_device(f"can://slcan/{port}?sleep_after_open=0&idle_s=1&clock_tolerance_s={tolerance_s}",
+                          dbc=dbc, rig=str(rigs[dbc]))
+        _record(dev, tmp_path / "trial.mcap")
+        assert proc.wait(10) == 0
+    finally:
+        proc.kill()
+    report = json.loads((tmp_path / "truth.json").read_text())
+    blocks, events, _ = _replay(tmp_path / "trial.mcap")
+    truth = _truth(rigs[dbc])
+    assert report["injected"]["restart"] == 1
+    at = [e["t_ns"] for e in events if e["kind"] == "gap_unknown"][:1]
+    before = [b for b in blocks if at and b.t0_ns < at[0]]
+    after = blocks[len(before):]
+    assert _offset_from_truth(before, truth, 0) == 0
+    T = report["samples_per_cycle"]["1"]
+    assert before[-1].next_sample <= 0.4 * 2048 + T
+    unknown = [{**e["detail"], "group": 0} for e in events if e["kind"] == "gap_unknown"]
+    assert len(unknown) == len(report["lost"]) and unknown.count(unknown[0]) == len(unknown)
+    assert unknown[0]["uncertainty_samples"] == round(tolerance_s * 2048)
+    shift = _offset_from_truth(after, truth, unknown[0]["uncertainty_samples"])  # all channels alike
+    missing = _missing_from_report(report, truth.shape[1])
+    true_gap = int(np.flatnonzero(~missing[before[-1].next_sample :])[0])
+    recorded_gap = after[0].first_sample - before[-1].next_sample
+    assert unknown[0]["estimated_samples"] == recorded_gap == true_gap - shift
 
 
 @pytest.mark.parametrize("tolerance_s", [0.1, 0.2])
