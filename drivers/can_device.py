@@ -8,12 +8,12 @@
 The address is ``INTERFACE/CHANNEL`` of any python-can interface (``socketcan/can0``,
 ``pcan/PCAN_USBBUS1``, ``kvaser/0``, ``vector/0``, ``slcan//dev/ttyACM0``, ``virtual/0``) and a
 query: ``rig``, ``dbc``, ``channels``, ``fs_hz``, ``block_s``, ``bitrate``, ``data_bitrate``, ``fd``,
-``duration_s``, ``idle_s``, ``group_timeout_s``, ``bus`` (one more ``INTERFACE/CHANNEL``,
-repeatable); any other key goes to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan). slcan
-is opened as python-can opens it but read by :class:`ramdaq.drivers.slcan_reader.SlcanReader`: every
-byte waiting at most every ``read_every_s`` (default 4 ms), the lines parsed in bulk without a
-``can.Message`` each (python-can's one byte per call cannot keep up with 16 ch x 2.048 kHz);
-with ``can_filters`` it is python-can's own bus.
+``duration_s``, ``idle_s``, ``group_timeout_s``, ``clock_tolerance_s``, ``bus`` (one more
+``INTERFACE/CHANNEL``, repeatable); any other key goes to ``can.Bus`` (e.g. ``sleep_after_open=0``
+for slcan). slcan is opened as python-can opens it but read by
+:class:`ramdaq.drivers.slcan_reader.SlcanReader`: every byte waiting at most every ``read_every_s``
+(default 4 ms), the lines parsed in bulk without a ``can.Message`` each (python-can's one byte
+per call cannot keep up with 16 ch x 2.048 kHz); with ``can_filters`` it is python-can's own bus.
 
 The frames are described by a DBC (:mod:`ramdaq.drivers.can_frames`). Each channel group's frames are
 put together cycle by cycle by their SEQ counter; a block holds every channel, so a sample is
@@ -24,11 +24,29 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   jump loses the cycles skipped, a silent group (``group_timeout``) everything until it speaks
   again: the next block's ``first_sample`` jumps by exactly the samples lost (``seq_gap``);
 * error frames (SocketCAN error classes: bus-off 0x40, restarted 0x100), ``bus.state`` and frames
-  resuming give ``error_frame``, ``bus_off`` and ``bus_recovered``; after a bus-off the cycles
-  lost are counted from the frames' timestamps, so SEQ wrapping (classic: 256 cycles = 0.375 s at
-  2.048 kHz; fd24: 65 536 cycles = 640 s) is not mistaken. A silence without a bus-off report is
-  counted modulo the wrap. A SEQ jump of more than 3 cycles is believed only when the group's next
-  frame agrees (a lone one is a ``seq_outlier``);
+  resuming give ``error_frame``, ``bus_off`` and ``bus_recovered``;
+* SEQ and the host clock. SEQ wraps (classic: 256 cycles = 0.375 s at 2.048 kHz; fd24: 65 536
+  cycles = 640 s), so a silence longer than that cannot be counted by SEQ alone, bus-off report or
+  not. Every frame's arrival time on the host (``msg.timestamp``; slcan: the last time the port
+  was seen empty before its line, :attr:`~ramdaq.drivers.slcan_reader.SlcanReader.arrived_after`,
+  so a backlog the reader took late is not a silence) is held against the group's sample clock
+  (:class:`~ramdaq.drivers.can_frames.CycleAssembler` gives the rule): a frame later or earlier
+  than SEQ says by more than ``clock_tolerance_s`` (default 0.1 s) is held until the frames after
+  it show at what pace they come. Whole wraps that
+  explain the lateness within the tolerance are counted (``seq_wrap``: the gap is exact); when
+  nothing does (a front-end restarted, the tolerance is not under half the SEQ period) the samples
+  are re-anchored from the host clock and a ``gap_unknown`` event gives the estimated gap, what
+  SEQ said and the uncertainty -- the length is never guessed silently. Frames whose SEQ goes on
+  from the group's but which came late by more than the tolerance and no whole wraps (a stalled
+  sender or host) are placed where SEQ says, with a ``delayed_frames`` event; frames arriving
+  faster than real time (a reader catching up after a stall, a replay) are judged by SEQ. A SEQ jump of
+  more than 3 cycles is believed when the group's frames go on from it for more than 3 cycles
+  (a lone one is a ``seq_outlier``);
+* a second sender with the group's identifiers and valid CRCs (a twin front-end) shows as a
+  second SEQ history interleaved with the group's: it is a bus fault (``foreign_sender``, then
+  ``foreign_sender_gone`` when it has been quiet for 0.25 s), its frames are dropped and counted
+  (``foreign_frame``), and a cycle in which the two senders' frames disagree is lost
+  (``conflicting_frame``); no sample of it is ever placed;
 * frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
   (``bad_frame``, with the line), late and duplicate frames are counted; these faults are
   reported at most once per ``report_s`` with their counts. ``bus_lost`` (the interface failed)
@@ -59,7 +77,7 @@ __all__ = ["CanDevice", "parse_address"]
 
 _BUS_OFF, _RESTARTED, _CRTL, _CRTL_ACTIVE = 0x40, 0x100, 0x04, 0x40  # linux/can/error.h
 _OPTIONS = {"rig", "dbc", "channels", "fs_hz", "block_s", "bitrate", "data_bitrate", "fd", "bus",
-            "duration_s", "idle_s", "group_timeout_s", "scale"}
+            "duration_s", "idle_s", "group_timeout_s", "clock_tolerance_s", "scale"}
 
 
 def _coerce(text: str) -> object:
@@ -127,6 +145,9 @@ class CanDevice(Device):
         End the stream when no frame came for this long after the first (default: never).
     group_timeout_s : float
         A group silent this long while another delivers is declared missing (default 0.5 s).
+    clock_tolerance_s : float
+        How far a frame's host arrival time may stray from its place on the sample clock before
+        the clock is consulted about SEQ, s (default 0.1; module notes).
     report_s : float
         Counted faults are reported at most this often, s.
     bus_options : dict, optional
@@ -142,7 +163,8 @@ class CanDevice(Device):
                  data_bitrate: int | None = None, fd: bool | None = None,
                  extra_buses: list[str] | tuple[str, ...] = (), duration_s: float | None = None,
                  idle_s: float | None = None, group_timeout_s: float | None = None,
-                 report_s: float = 1.0, bus_options: dict | None = None) -> None:
+                 clock_tolerance_s: float | None = None, report_s: float = 1.0,
+                 bus_options: dict | None = None) -> None:
         super().__init__()
         interface, channel, q, more = parse_address(address)
         unknown = {k: q.pop(k) for k in list(q) if k not in _OPTIONS}
@@ -162,7 +184,13 @@ class CanDevice(Device):
         self.rig = rig if rig is None or isinstance(rig, Rig) else load_rig(rig)
         n_rig = len(self.rig.gages_by_channel()) if self.rig else None
         n = int(channels if channels is not None else q.get("channels", n_rig or len(self.codec.channels)))
-        self.groups = {g: CycleAssembler(lay)
+        self.fs_hz = float(fs_hz or q.get("fs_hz") or (self.rig.daq.sample_rate_hz if self.rig else 2048.0))
+        tol = clock_tolerance_s if clock_tolerance_s is not None else q.get("clock_tolerance_s", 0.1)
+        self.clock_tolerance_s = float(tol)
+        if not self.clock_tolerance_s > 0:
+            raise ValueError(f"can://{address}: clock_tolerance_s ({tol}) must be positive")
+        self.groups = {g: CycleAssembler(lay, cycles_per_s=self.fs_hz / lay.samples_per_cycle,
+                                         tolerance_s=self.clock_tolerance_s)
                        for g, lay in self.codec.groups.items() if max(lay.channels) <= n}
         if sorted(c for gr in self.groups.values() for c in gr.lay.channels) != list(range(1, n + 1)):
             groups = {g: f"{lay.channels[0]}-{lay.channels[-1]}" for g, lay in self.codec.groups.items()}
@@ -174,7 +202,6 @@ class CanDevice(Device):
         if self.rig and self.rig.daq.adc_bits > bits:
             raise ValueError(f"can://{address}: rig ADC has {self.rig.daq.adc_bits} bits, "
                              f"{self.codec.name} carries {bits}-bit samples")
-        self.fs_hz = float(fs_hz or q.get("fs_hz") or (self.rig.daq.sample_rate_hz if self.rig else 2048.0))
         self.block_n = max(1, round(float(block_s or q.get("block_s", 0.05)) * self.fs_hz))
         dur = duration_s if duration_s is not None else q.get("duration_s")
         self.total_n = None if dur is None else round(float(dur) * self.fs_hz)
@@ -207,8 +234,6 @@ class CanDevice(Device):
         self._states: dict[str, str] = {}  # bus name -> "active", "passive" or "bus_off"
         self._names: list[str] = []
         self._off_since: dict[str, float] = {}
-        self._resync: dict[int, bool] = {}        # group -> count the cycles a bus-off lost
-        self._last_ts: dict[int, float] = {}      # group -> timestamp of its last good frame, s
         self._last_seen: dict[int, float] = {}    # group -> monotonic time of that frame, s
         self._silent: set[int] = set()
         self._stateful: list[bool] = []
@@ -279,19 +304,20 @@ class CanDevice(Device):
             got = self._recv(wait)
             now = time.monotonic()
             if got is not None:
-                frames, i = got
+                frames, i, after = got
                 for msg in frames:
                     if type(msg) is str:  # an unparseable slcan line
                         self._count("bad_frame", now, reason=msg[:80])
                     else:
-                        self._on_message(msg, i, now)
+                        self._on_message(msg, i, now, msg.timestamp if after is None else after)
             if now >= self._next_poll or got is None:
                 self._poll(now)
 
     # -- receiving ---------------------------------------------------------------------------
-    def _recv(self, timeout: float) -> tuple[list[can.Message | SlcanFrame | str], int] | None:
-        """Frames of the next bus that has some (round robin), and its index; slcan: all waiting,
-        with a reason string in place of each unparseable line."""
+    def _recv(self, timeout: float) -> tuple[list[can.Message | SlcanFrame | str], int, float | None] | None:
+        """Frames of the next bus that has some (round robin), its index, and for slcan the host
+        time all of them arrived after (else ``None``: each frame's own timestamp says); slcan:
+        all lines waiting, with a reason string in place of each unparseable one."""
         n = len(self._buses)
         for k in range(n):
             i = (self._rr + k) % n
@@ -310,7 +336,7 @@ class CanDevice(Device):
                 return None
             if got:
                 self._rr = (i + 1) % n
-                return got, i
+                return got, i, bus.arrived_after if type(bus) is SlcanReader else None
         if n > 1:
             time.sleep(min(timeout, 0.001))
         return None
@@ -326,7 +352,8 @@ class CanDevice(Device):
         if not self._buses:
             self._finish()
 
-    def _on_message(self, msg: can.Message | SlcanFrame, bus_i: int, now: float) -> None:
+    def _on_message(self, msg: can.Message | SlcanFrame, bus_i: int, now: float, t: float) -> None:
+        """One frame off bus ``bus_i``; ``t`` is its arrival time on the host, s."""
         self._frames += 1
         if msg.is_error_frame:
             self._on_error_frame(msg, bus_i, now)
@@ -340,24 +367,23 @@ class CanDevice(Device):
             self._bus_state(bus_i, "active", now, why="frames resumed")
         lay, seq = hit
         grp = self.groups[lay.group]
-        elapsed = None
         if grp.base is None:
             started = [(g.hi + 1) * g.T for g in self.groups.values() if g.base is not None]
-            grp.start(seq, max(started) // grp.T if started else None)
+            grp.start(seq, max(started) // grp.T if started else None, t)
             if self._origin is None:
                 self._origin = self._pos = grp.done()
                 self._first_wall = now
-        elif self._resync.pop(lay.group, False):
-            elapsed = (msg.timestamp - self._last_ts[lay.group]) * self.fs_hz / grp.T
-        self._last_ts[lay.group], self._last_seen[lay.group], self._last_wall = msg.timestamp, now, now
+        self._last_seen[lay.group], self._last_wall = now, now
         if self._silent:
             self._silent.discard(lay.group)
         base = grp.base
-        problem = grp.put(seq, lay.slot, msg.data, elapsed)
+        problem = grp.put(seq, lay.slot, msg.data, t)
         if problem:
             self._count(problem, now, group=lay.group, id=hex(msg.arbitration_id))
         else:
             self._good += 1
+        if grp.problems or grp.notes:
+            self._report_decisions(grp, now)
         self._dirty = self._dirty or grp.base != base
         if grp.lost:
             self._report_lost(grp, now)
@@ -378,7 +404,6 @@ class CanDevice(Device):
         if state == "bus_off" and before != "bus_off":
             self._fault("bus_off", self._t_ns(), bus=bus, reason=why)
             self._off_since[bus] = now
-            self._resync.update(dict.fromkeys(self.groups, True))
         elif state == "active" and before == "bus_off":
             self._fault("bus_recovered", self._t_ns(), bus=bus, reason=why,
                         off_s=round(now - self._off_since.pop(bus, now), 3))
@@ -419,7 +444,8 @@ class CanDevice(Device):
     def _finish(self) -> None:
         for grp in self.groups.values():
             if grp.base is not None:
-                grp.finalize_to(grp.hi + 1)
+                grp.finish()
+                self._report_decisions(grp, math.inf)
                 self._report_lost(grp, math.inf)
         self._final = True
 
@@ -434,10 +460,10 @@ class CanDevice(Device):
         """Frames received, good sample frames, and each fault counted so far."""
         return Counter(frames=self._frames, good_frames=self._good, **self._counts)
 
-    def _count(self, kind: str, now: float, t_ns: int | None = None, **detail: object) -> None:
-        self._counts[kind] += 1
+    def _count(self, kind: str, now: float, t_ns: int | None = None, n: int = 1, **detail: object) -> None:
+        self._counts[kind] += n
         p = self._pending.setdefault(kind, {"count": 0, "t_ns": self._t_ns() if t_ns is None else t_ns})
-        p["count"] += 1
+        p["count"] += n
         for key in ("missing_samples", "missing_cycles", "incomplete_cycles"):
             if key in detail:
                 p[key] = p.get(key, 0) + detail.pop(key)
@@ -453,6 +479,20 @@ class CanDevice(Device):
             t_ns = p.pop("t_ns")
             self._fault(kind, t_ns, total=self._counts[kind], **p)
             self._reported[kind] = now
+
+    def _report_decisions(self, grp: CycleAssembler, now: float) -> None:
+        """What the group's assembler decided about frames it held: their problems counted, its
+        notes (foreign sender, SEQ wraps counted by time, gaps of unknown length) as events."""
+        for kind, n in grp.problems.items():
+            self._count(kind, now, n=n, group=grp.lay.group)
+        grp.problems.clear()
+        for note in grp.notes:
+            self._fault(note.kind, self._t_ns(note.cycle * grp.T), group=grp.lay.group, **note.detail)
+            if note.kind == "gap_unknown":  # one front-end: its other groups re-anchor alike
+                for other in self.groups.values():
+                    if other is not grp and other.T == grp.T:
+                        other.hint = note.shift
+        grp.notes.clear()
 
     def _report_lost(self, grp: CycleAssembler, now: float) -> None:
         for first, n, incomplete in grp.lost:

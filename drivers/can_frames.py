@@ -54,7 +54,9 @@ no margin, and no way to see a lost frame.
 from __future__ import annotations
 
 import binascii
+import math
 import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,8 +64,8 @@ import can
 import cantools
 import numpy as np
 
-__all__ = ["FrameCodec", "FrameLayout", "GroupLayout", "Decoded", "resolve_dbc", "crc",
-           "frame_bits", "frame_time_s", "capacity_table", "capacity_rst", "REJECTIONS", "SHIPPED_DBC"]
+__all__ = ["FrameCodec", "FrameLayout", "GroupLayout", "Decoded", "CycleAssembler", "SeqNote", "resolve_dbc",
+           "crc", "frame_bits", "frame_time_s", "capacity_table", "capacity_rst", "REJECTIONS", "SHIPPED_DBC"]
 
 DBC_DIR = Path(__file__).resolve().parent / "dbc"
 SHIPPED_DBC = {"classic": "ramdaq_classic.dbc", "fd24": "ramdaq_fd24.dbc", "fd16": "ramdaq_fd16.dbc"}
@@ -485,38 +487,143 @@ def capacity_rst(fs_hz: float = 2048.0, load: float = 0.8) -> str:
 
 
 # -- cycles -> samples ---------------------------------------------------------------------------
+_FOREIGN_QUIET_S = 0.25  # a foreign sender not heard for this long has left
+_FOREIGN_RUNS = 3        # runs of held frames between the group's own frames that make a foreign sender
+_HOLD_S = 0.8            # longest a late side waits for a reader to catch up before time judges it
+
+
+@dataclass(frozen=True)
+class SeqNote:
+    """A decision about a group's sequence for the device to report: ``kind``
+    (``foreign_sender``, ``foreign_sender_gone``, ``seq_wrap``, ``gap_unknown``,
+    ``delayed_frames``), the absolute ``cycle`` it applies from, a JSON-serialisable ``detail``
+    (lengths in samples), and for a re-anchoring the ``shift`` (cycles) added to the cycles SEQ
+    gave."""
+
+    kind: str
+    cycle: int
+    detail: dict
+    shift: int = 0
+
+
+@dataclass(eq=False)
+class _Side:
+    """Frames held beside a group's sequence until it is known what they are. Cycles are in the
+    group's numbering; times are host arrival times, s (``None`` without a clock)."""
+
+    frames: list             # (cycle, slot, data), in arrival order
+    lo: int
+    hi: int
+    run_lo: int              # first cycle of the current run (frames since the group last advanced)
+    main_at: int             # the group's newest cycle when the side last got a frame
+    t_run: float | None      # arrival of the current run's first frame
+    t_last: float | None
+    x_min: float = math.inf  # lowest (arrival x cycle rate - cycle) of its frames
+    x_last: float = math.inf  # ... of its latest frame
+    runs: int = 1            # runs it had: a new one begins when it speaks after the group advanced
+    main_moved: bool = False
+
+
+@dataclass(eq=False)
+class _Foreign:
+    """Another sender with the group's identifiers, recognised by its SEQ offset from the group's."""
+
+    offset: int              # its SEQ minus the group's newest cycle, modulo the SEQ period
+    since: int               # the group's newest cycle when it was found
+    last: int                # ... when it was last heard
+    run_lo: int | None       # its first cycle heard since the group last advanced
+    frames: int              # its frames dropped
+
+
 class CycleAssembler:
     """One channel group's frames put back together, cycle by cycle, by their SEQ.
 
-    Cycle numbers are absolute (SEQ unwrapped). A cycle is *final* once complete, or once frames
-    of ``window`` later cycles arrived (then it is lost: frames may come a little out of order,
-    never much). A SEQ more than ``window`` cycles behind the newest is taken as a jump forward
-    (time only runs forward), and a jump forward by more than ``window`` cycles is believed only
-    when the group's next good frame agrees; until then that frame is held (``seq_outlier``
-    if it was alone). Final cycles wait in :attr:`raw` until :meth:`decode` turns them into
-    sample runs that :meth:`present_from` and :meth:`take` hand out.
+    Cycle numbers are absolute: SEQ (plus ``seq_shift``, which only a re-anchoring by time sets)
+    unwrapped around the newest cycle ``hi``. A cycle is *final* once complete, or once frames of
+    ``window`` later cycles arrived (then it is lost: frames may come a little out of order, never
+    much). A frame within ``window`` cycles of ``hi`` (and, with a clock, on time: below) is placed
+    at once. A second frame for a filled slot is a ``duplicate_frame`` if it carries the same
+    bytes, else a ``conflicting_frame``: that cycle is lost, never delivered with either sender's
+    samples.
+
+    Any other frame is *held* on a side track with the frames that follow it there (SEQ unwrapped
+    around the side's own newest cycle), until it is known what they are:
+
+    * **continuation** -- the group catches up with them (they came early, or late behind a stall
+      of the reader): placed as they are;
+    * **jump** -- the side goes on for more than ``window`` cycles while the group is silent
+      (frames were lost, or the sender restarted): placed, the cycles between lost; with a clock
+      the jump is checked against the time it took (below);
+    * **foreign sender** -- the side speaks again after the group advanced, in
+      ``_FOREIGN_RUNS`` runs: a second sender with the same identifiers and valid CRCs (a twin
+      front-end). Its frames are dropped (``foreign_frame``) and recognised by their SEQ offset
+      until it has been quiet for ``_FOREIGN_QUIET_S`` (``foreign_sender`` and
+      ``foreign_sender_gone`` notes). If the group goes silent while it speaks on for more than
+      ``window`` cycles, it is no longer told apart: its frames are held and judged as above;
+    * **outlier** -- the group moved more than ``window`` cycles past it: dropped (``seq_outlier``).
+
+    The clock (``cycles_per_s`` given and each frame's host arrival time ``t``, s, passed to
+    :meth:`put`): a frame's lateness is ``t x cycles_per_s - cycle - t0``, ``t0`` being the same
+    for the group's latest placed frame -- a step from it, so a silence shows while a host or
+    sender falling steadily behind (or running ahead, unpaced) does not (a silence right after
+    frames that came late is measured short by their delay: the estimate is as good as the host's
+    arrival times). A frame more than
+    ``tolerance_s`` late or early is held -- a silence longer than the SEQ period, a restart, a
+    stall of the reader or of the sender -- and its side is judged once it has arrived for
+    ``tolerance_s`` at the sample clock's pace, by its least late frame:
+
+    * on time within the tolerance: SEQ was right;
+    * late by k SEQ periods within the tolerance (and the tolerance under half a period): k wraps
+      counted by time (``seq_wrap`` note), the gap's length known;
+    * otherwise the gap's length cannot be known: the side is re-anchored from time (its lateness
+      rounded to whole cycles, never onto cycles already placed; or the ``hint`` another group of
+      the same front-end took, if it agrees within the tolerance, so the groups stay aligned), and
+      a ``gap_unknown`` note gives the estimate and its uncertainty;
+    * frames arriving faster than real time (a reader catching up after a stall, a sender not
+      paced by a sample clock) are not judged by time: a late side waits to catch up (at most
+      ``_HOLD_S``), an early one is taken by SEQ.
+
+    Final cycles wait in :attr:`raw` until :meth:`decode` turns them into sample runs that
+    :meth:`present_from` and :meth:`take` hand out. Problems of held frames decided later are
+    counted in :attr:`problems`, and decisions the device reports are listed in :attr:`notes`.
     """
 
-    def __init__(self, layout: GroupLayout, window: int = 3) -> None:
+    def __init__(self, layout: GroupLayout, window: int = 3, cycles_per_s: float | None = None,
+                 tolerance_s: float = 0.1) -> None:
         self.lay, self.T, self.M = layout, layout.samples_per_cycle, layout.seq_modulus
         self.L, self.F = layout.frame_bytes, len(layout.frames)
         self.full, self.window = (1 << self.F) - 1, window
+        self.wrap_at = self.M - window   # SEQ distances from here on are frames behind, not ahead
+        self.bad = 1 << self.F            # mask bit of a cycle that got conflicting frames
+        self.rate, self.tol_s = cycles_per_s, tolerance_s
+        self.tol = math.inf if cycles_per_s is None else tolerance_s * cycles_per_s  # cycles
+        self.hold = None if cycles_per_s is None else round(_HOLD_S * cycles_per_s)
+        self.quiet = 64 if cycles_per_s is None else max(4 * window, round(_FOREIGN_QUIET_S * cycles_per_s))
+        self.t0 = math.inf                # arrival x cycles_per_s - cycle of the latest frame placed
+        self.hint: int | None = None      # shift another group re-anchored by (a SeqNote's)
+        self.seq_shift = 0                # cycle = SEQ + seq_shift, modulo the SEQ period
         self.base: int | None = None      # first cycle not final (None: no frame yet)
         self.hi = -1                      # highest cycle accepted
         self.open: dict[int, list] = {}   # cycle -> [bytearray row, mask of slots received]
-        self.held: tuple | None = None    # (cycle, slot, data) of an unconfirmed jump
+        self.side: _Side | None = None
+        self.foreign: _Foreign | None = None
         self.raw: list[list] = []         # final complete cycles: [first, n, bytearray]
         self.runs: list[list] = []        # decoded samples: [start, end, counts (channels, n)]
         self.lost: list[list[int]] = []   # final lost cycles: [first, n, of which incomplete]
+        self.problems: Counter = Counter()
+        self.notes: list[SeqNote] = []
 
     def done(self) -> int:
         """Samples before this (absolute) index are final."""
         return self.base * self.T
 
-    def start(self, seq: int, near: int | None = None) -> None:
-        """First frame: its cycle is ``seq`` unwrapped nearest to cycle ``near`` (if given)."""
+    def start(self, seq: int, near: int | None = None, t: float | None = None) -> None:
+        """First frame: its cycle is ``seq`` unwrapped nearest to cycle ``near`` (if given);
+        ``t`` its arrival time, s."""
         cycle = seq if near is None else near + (seq - near + self.M // 2) % self.M - self.M // 2
         self.base, self.hi = cycle, cycle - 1
+        if t is not None and self.rate is not None:
+            self.t0 = t * self.rate - cycle
 
     def skip_to(self, cycle: int) -> None:
         """Declare everything before ``cycle`` final (a silent group); later SEQs count from here."""
@@ -526,29 +633,50 @@ class CycleAssembler:
         self.finalize_to(cycle)
         self.hi = max(self.hi, self.base - 1)
 
-    def put(self, seq: int, slot: int, data: bytes, elapsed: float | None = None) -> str | None:
-        """Place a good frame; returns a problem (``late_frame``, ``duplicate_frame``,
-        ``seq_outlier``) or ``None``. ``elapsed``: cycles the clock says passed since the group's
-        last frame, given after a bus-off to count whole SEQ wraps (never backwards)."""
-        if elapsed is not None:
-            d0 = (seq - self.hi - 1) % self.M
-            self.held = None
-            return self._place(self.hi + 1 + d0 + self.M * max(0, round((elapsed - 1 - d0) / self.M)),
-                               slot, data)
-        d = (seq - self.hi) % self.M
-        cycle = self.hi + (d - self.M if d >= self.M - self.window else d)
-        if cycle > self.hi + self.window:  # a jump: believed when the next frame agrees
-            held, self.held = self.held, (cycle, slot, data)
-            if held is None or abs(cycle - held[0]) > self.window:
-                return None if held is None else "seq_outlier"
-            self.held = None
-            if held[0] > cycle:  # the two agree: place them in cycle order
-                held, (cycle, slot, data) = (cycle, slot, data), held
-            self._place(*held)
-        elif self.held is not None:
-            self.held = None
-            return self._place(cycle, slot, data) or "seq_outlier"
-        return self._place(cycle, slot, data)
+    def put(self, seq: int, slot: int, data: bytes, t: float | None = None) -> str | None:
+        """Place a good frame that arrived at host time ``t`` (s; ``None``: no clock). Returns this
+        frame's problem (``late_frame``, ``duplicate_frame``, ``conflicting_frame``,
+        ``foreign_frame``) or ``None``; a held frame's problem, once decided, goes to
+        :attr:`problems`."""
+        hi = self.hi
+        d = (seq + self.seq_shift - hi) % self.M
+        cycle = hi + d if d < self.wrap_at else hi + d - self.M
+        x = None if t is None or self.rate is None else t * self.rate - cycle
+        if self.side is not None and self._goes_on(self.side, cycle):
+            return self._hold(seq, cycle, slot, data, t, x)
+        if cycle <= hi + self.window and (x is None or -self.tol <= x - self.t0 <= self.tol):
+            if x is not None:  # the group's own frame, on time (inlined: the path of every frame)
+                self.t0 = x
+            problem = self._place(cycle, slot, data)
+            if cycle > hi and (self.side is not None or self.foreign is not None):
+                self._moved()
+            return problem
+        if self.foreign is not None and self._foreign_frame(seq, cycle):
+            return "foreign_frame"
+        return self._hold(seq, cycle, slot, data, t, x)
+
+    def finish(self) -> None:
+        """End of the stream: decide what is held, then make every cycle final."""
+        if self.side is not None:
+            self._settle(final=True)
+        if self.base is not None:
+            self.finalize_to(self.hi + 1)
+
+    # -- the group's own frames ------------------------------------------------------------------
+    def _moved(self) -> None:
+        """The group advanced: judge what waits beside it."""
+        side = self.side
+        if side is not None:
+            side.main_moved = True
+            if side.lo <= self.hi + self.window:
+                self._adopt(0)  # early frames: the group caught up with them
+            elif self.hi - side.main_at > self.window + 1:
+                self._drop_side("seq_outlier")
+        f = self.foreign
+        if f is not None:
+            f.run_lo = None
+            if self.hi - f.last > self.quiet:
+                self._foreign_gone("quiet")
 
     def _place(self, cycle: int, slot: int, data: bytes) -> str | None:
         if cycle < self.base:
@@ -559,6 +687,10 @@ class CycleAssembler:
         if entry is None:
             entry = self.open[cycle] = [bytearray(self.F * self.L), 0]
         if entry[1] & (1 << slot):
+            at = slot * self.L
+            if entry[0][at : at + len(data)] != data:
+                entry[1] |= self.bad
+                return "conflicting_frame"
             return "duplicate_frame"
         entry[0][slot * self.L : slot * self.L + len(data)] = data
         entry[1] |= 1 << slot
@@ -567,6 +699,143 @@ class CycleAssembler:
             self.finalize_to(cycle + 1)
         return None
 
+    # -- frames beside it ------------------------------------------------------------------------
+    def _goes_on(self, side: _Side, cycle: int) -> bool:
+        """Whether a frame carries on a side that is a stream of its own (it advanced in its
+        current run): then it is the side's, even where its SEQ also fits the group's."""
+        if side.hi == side.run_lo:
+            return False
+        near = side.hi + (cycle - side.hi + self.M // 2) % self.M - self.M // 2
+        return side.hi - 1 <= near <= side.hi + self.window + 1
+
+    def _hold(self, seq: int, cycle: int, slot: int, data: bytes, t: float | None,
+              x: float | None) -> str | None:
+        if x is not None and self.t0 == math.inf:  # the group's first frame with an arrival time
+            self.t0 = x
+            if cycle <= self.hi + self.window:
+                return self.put(seq, slot, data, t)
+        side = self.side
+        if side is not None:  # its SEQ unwrapped around the side's newest cycle
+            near = side.hi + (cycle - side.hi + self.M // 2) % self.M - self.M // 2
+            if side.lo - self.window <= near <= side.hi + self.window + 1:
+                if x is not None:
+                    x -= near - cycle
+                cycle = near
+            elif side.lo <= self.hi + self.window + 1:  # the group's own frames, held late:
+                self._settle(final=True)  # placed now (delayed, or whole wraps), then this one
+                return self.put(seq, slot, data, t)
+            else:
+                self._drop_side("seq_outlier")
+                side = None
+        if side is None:
+            side = self.side = _Side([], cycle, cycle, cycle, self.hi, t, t)
+        elif side.main_moved:  # it speaks again after the group advanced: a new run
+            side.runs += 1
+            side.main_moved, side.run_lo, side.t_run = False, cycle, t
+            if side.runs >= _FOREIGN_RUNS:
+                self._foreign_found(cycle)
+                return "foreign_frame"
+        side.frames.append((cycle, slot, data))
+        side.lo, side.hi, side.main_at = min(side.lo, cycle), max(side.hi, cycle), self.hi
+        if x is not None:
+            side.t_last, side.x_last = t, x
+            side.x_min = min(side.x_min, x)
+        self._settle(final=False)
+        return None
+
+    def _settle(self, final: bool) -> None:
+        """Decide what the side is if that can be told yet (always when ``final``)."""
+        side = self.side
+        run = side.hi - side.run_lo + 1
+        late = side.x_min - self.t0 if side.x_min < math.inf and self.t0 < math.inf else 0.0
+        if abs(late) <= self.tol:  # on time, or no clock: SEQ says where it goes
+            if final or run > self.window or side.lo <= self.hi + self.window:
+                self._adopt(0)
+            return
+        if not final and run <= self.window:
+            return
+        arrived = side.t_last - side.t_run
+        ahead = run / self.rate - arrived  # s of samples beyond the time they took to arrive
+        waiting = not final and run < self.hold
+        if ahead > self.tol_s / 2:  # faster than real time: the clock cannot judge the jump
+            if late < 0:
+                self._adopt(0)
+                return
+            if waiting:  # late, catching up: wait until it is on time
+                return
+        elif arrived < self.tol_s and waiting:
+            return
+        self._adopt_by_time(late)
+
+    def _adopt_by_time(self, late: float) -> None:
+        """Place the side where its arrival times say: whole SEQ wraps if they explain its
+        lateness within the tolerance; else, if its SEQ goes on from the group's, where SEQ says
+        (the frames came late, none was lost: ``delayed_frames``); else re-anchored (a gap of
+        unknown length)."""
+        k = round(late / self.M)
+        if late > self.tol and k >= 1 and abs(late - k * self.M) <= self.tol < self.M / 2:
+            self.notes.append(SeqNote("seq_wrap", self.side.lo + k * self.M, {
+                "wraps": k, "wrap_samples": self.M * self.T,
+                "timing_error_samples": round((late - k * self.M) * self.T)}))
+            self._adopt(k * self.M)
+        elif self.side.lo <= self.hi + self.window + 1:
+            self.notes.append(SeqNote("delayed_frames", self.side.lo, {
+                "late_s": round(late / self.rate, 3), "frames": len(self.side.frames)}))
+            self._adopt(0)
+        else:
+            hint, self.hint = self.hint, None
+            self._adopt(hint if hint is not None and abs(hint - late) <= self.tol else round(late), True)
+
+    def _adopt(self, shift: int, unknown: bool = False) -> None:
+        """Place the side's frames ``shift`` cycles on from where their SEQ put them."""
+        side, self.side = self.side, None
+        if unknown:
+            seq_gap = (side.lo - self.hi - 1) % self.M
+            shift = max(shift, self.hi + 1 - side.lo)  # never onto cycles already placed
+            self.seq_shift = (self.seq_shift + shift) % self.M
+            self.notes.append(SeqNote("gap_unknown", side.lo + shift, {
+                "estimated_samples": (side.lo + shift - self.hi - 1) * self.T,
+                "uncertainty_samples": round(self.tol * self.T),
+                "seq_says_samples": seq_gap * self.T}, shift))
+        for cycle, slot, data in side.frames:
+            problem = self._place(cycle + shift, slot, data)
+            if problem:
+                self.problems[problem] += 1
+        if side.x_last < math.inf:
+            self.t0 = side.x_last - shift
+
+    def _drop_side(self, kind: str) -> None:
+        side, self.side = self.side, None
+        self.problems[kind] += len(side.frames)
+
+    # -- a foreign sender --------------------------------------------------------------------------
+    def _foreign_found(self, cycle: int) -> None:
+        side, self.side = self.side, None
+        self.problems["foreign_frame"] += len(side.frames)
+        self.foreign = _Foreign((cycle - self.hi) % self.M, self.hi, self.hi, cycle, len(side.frames) + 1)
+        self.notes.append(SeqNote("foreign_sender", self.hi + 1, {
+            "seq_offset_cycles": self.foreign.offset, "frames_dropped": self.foreign.frames}))
+
+    def _foreign_frame(self, seq: int, cycle: int) -> bool:
+        """Whether a frame off the group's sequence is the foreign sender's (then it is dropped)."""
+        f, half = self.foreign, self.M // 2
+        if abs((seq + self.seq_shift - self.hi - f.offset + half) % self.M - half) > 2 * self.window + 1:
+            return False
+        if f.run_lo is None:
+            f.run_lo = cycle
+        elif cycle - f.run_lo > self.window + 1 and self.side is None:
+            # the group fell silent (not held late beside it) while the other went on
+            self._foreign_gone("the group went silent while it sent on")
+            return False
+        f.offset, f.last, f.frames = (seq + self.seq_shift - self.hi) % self.M, self.hi, f.frames + 1
+        return True
+
+    def _foreign_gone(self, why: str) -> None:
+        f, self.foreign = self.foreign, None
+        self.notes.append(SeqNote("foreign_sender_gone", f.last + 1, {
+            "frames_dropped": f.frames, "heard_samples": (f.last - f.since + 1) * self.T, "why": why}))
+
+    # -- final cycles -> samples -------------------------------------------------------------------
     def finalize_to(self, target: int) -> None:
         """Make every cycle before ``target`` final (complete or lost), then complete ones after."""
         while self.base < target or (self.base in self.open and self.open[self.base][1] == self.full):

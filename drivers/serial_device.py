@@ -14,12 +14,32 @@ handed to pyserial; any other key (``logging=debug``) is left for pyserial.
 
 Frames are gathered into blocks of at most ``block_s`` (and at least one frame); a block's
 ``first_sample`` is its first frame's own sample index, so frames that never arrived leave a
-gap that is never filled. Faults are reported through
-:meth:`~ramdaq.drivers.base.Device.take_faults`, never raised:
+gap that is never filled. A sample once placed is never moved. Each CRC-valid frame is
+classified against the stream so far (its sequence number, sample index and payload CRC):
+
+* it starts where the last one ended: placed;
+* it is a frame already placed, the same bytes again (a TCP link or a buffer that repeated a
+  span; the last 4096 frames are remembered): dropped, a run of them one ``repeated_frame`` event;
+* it starts later, and its sequence number skipped exactly the frames that would fill the gap:
+  placed after a ``seq_gap``;
+* anything else -- behind the stream but not a repeat, or ahead by what its sequence does not
+  explain -- is held until the next frame says what it was. Continued by it (sequence +1, sample
+  index on from it): ahead, a gap (placed); behind, the device restarted its count
+  (``stream_restart``: placed after the last sample, with a gap estimated from the host clock
+  between the two frames' arrivals, ``gap_unknown`` true). Not continued: a stale or foreign
+  frame, dropped (``stale_frame``).
+
+Faults are reported through :meth:`~ramdaq.drivers.base.Device.take_faults`, never raised:
 
 * ``crc_error`` -- frames whose header or payload CRC failed (``count``, ``total``);
 * ``resync`` -- sync regained after garbage or a torn frame (``bytes_discarded``, ``seq``);
 * ``seq_gap`` -- frames missing from the sequence (``missing_frames``, ``missing_samples``);
+* ``repeated_frame`` -- frames received again, dropped (``frames``, ``first_seq``, ``last_seq``,
+  ``samples``, ``placed_at``: the stream sample where the first of them had been placed);
+* ``stale_frame`` -- a frame that fits neither the stream nor the frame after it, dropped
+  (``seq``, ``device_first_sample``, ``samples``, ``where``: ``behind`` or ``ahead``);
+* ``stream_restart`` -- the device restarted its count (``seq``, ``device_first_sample``,
+  ``continues_at``, ``gap_samples``, ``gap_unknown``);
 * ``port_lost`` -- the port vanished (USB unplug, bridge down, EOF on a pty or socket);
 * ``port_back`` -- the port reopened and data flows again, with the gap it left
   (``gap_samples``, ``gap_frames``, ``down_s``);
@@ -55,6 +75,7 @@ __all__ = ["SerialDevice", "split_url"]
 _QUERY_KEYS = {"rig": str, "fs_hz": float, "channels": int, "block_s": float, "baudrate": int,
                "reconnect_s": float, "give_up_s": float}
 _READ_CHUNK = 1 << 16
+_HISTORY = 4096  # frames remembered (by sequence number) to tell a repeat from a restart
 _PORT_ERRORS = (serial.SerialException, OSError)
 
 
@@ -159,6 +180,13 @@ class SerialDevice(Device):
         self._next: int | None = None  # sample index the next frame should start at
         self._last_seq: int | None = None
         self._offset = 0  # added to device sample indices after a device restart
+        self._placed: list[tuple | None] = [None] * _HISTORY  # seq % _HISTORY -> (seq, device
+        # first sample, payload CRC, stream first sample) of the frames placed
+        self._suspect: Frame | None = None  # a frame held until the next one says what it is
+        self._suspect_t = 0.0
+        self._repeats: dict | None = None  # the run of repeated frames being dropped
+        self._t_read = 0.0  # monotonic time of the read whose frames are being placed, s
+        self._t_last: float | None = None  # ... of the last frame placed
         self._seq = 0
         self._ended = False
         self._lost_at: float | None = None
@@ -205,6 +233,7 @@ class SerialDevice(Device):
             except _PORT_ERRORS as err:
                 self._lose(err)
                 continue
+            self._t_read = time.monotonic()
             if data:
                 self._ingest(self.parser.feed(data))
             if not self._ready and deadline is not None and time.monotonic() >= deadline:
@@ -251,6 +280,7 @@ class SerialDevice(Device):
         """The port failed: keep what was received, hand out the partial block, start retrying."""
         self._drop_port()
         self._ingest(self.parser.flush())
+        self._end_repeats()
         self._emit_partial()
         if self._ended:  # the device said goodbye before it went: not a fault
             return
@@ -294,6 +324,9 @@ class SerialDevice(Device):
                 self._fault("resync", self._t_next(), bytes_discarded=frame.skipped_bytes,
                             seq=frame.seq, total=self.parser.resyncs)
             if frame.end:
+                if self._suspect is not None:
+                    self._judge_suspect(frame)
+                self._end_repeats()
                 self._ended = True
                 self._drop_port()
                 break
@@ -306,12 +339,74 @@ class SerialDevice(Device):
             self._emit_partial()
 
     def _place(self, frame: Frame) -> None:
+        """Where a CRC-valid frame goes (module notes): on from the last, dropped as a repeat,
+        after a gap its sequence explains, or held until the next frame says what it is."""
+        if self._next is None:
+            self._accept(frame)
+            return
+        if self._suspect is not None:
+            self._judge_suspect(frame)
+        expected = self._next - self._offset
+        if frame.first_sample != expected and self._is_repeat(frame):
+            self._count_repeat(frame)
+            return
+        self._end_repeats()
+        if frame.first_sample == expected or (frame.first_sample > expected and self._explained(frame)):
+            self._accept(frame)
+        else:
+            self._suspect, self._suspect_t = frame, self._t_read
+
+    def _explained(self, frame: Frame) -> bool:
+        """Whether a frame that starts later skipped exactly the frames its sequence skipped
+        (taken to be of its own length)."""
+        lost = (frame.seq - self._last_seq - 1) % 2**32
+        return frame.first_sample - (self._next - self._offset) == lost * frame.n_samples
+
+    def _is_repeat(self, frame: Frame) -> bool:
+        e = self._placed[frame.seq % _HISTORY]
+        return e is not None and e[:3] == (frame.seq, frame.first_sample, frame.payload_crc)
+
+    def _count_repeat(self, frame: Frame) -> None:
+        r = self._repeats
+        if r is not None and frame.seq == (r["last_seq"] + 1) % 2**32:
+            r["frames"] += 1
+            r["last_seq"] = frame.seq
+            r["samples"] += frame.n_samples
+            return
+        self._end_repeats()
+        self._repeats = {"frames": 1, "first_seq": frame.seq, "last_seq": frame.seq,
+                         "samples": frame.n_samples, "placed_at": self._placed[frame.seq % _HISTORY][3]}
+
+    def _end_repeats(self) -> None:
+        if self._repeats is not None:
+            self._fault("repeated_frame", self._t_next(), **self._repeats)
+            self._repeats = None
+
+    def _judge_suspect(self, after: Frame) -> None:
+        """The frame after a held one says what that was: continued by it, a gap (ahead of the
+        stream) or a restart (behind it); otherwise a stale or foreign frame, dropped."""
+        s, self._suspect = self._suspect, None
+        behind = s.first_sample < self._next - self._offset
+        if after.seq == (s.seq + 1) % 2**32 and after.first_sample == s.first_sample + s.n_samples:
+            if behind:
+                self._restart(s)
+            self._accept(s, gap_event=not behind)
+        else:
+            self._fault("stale_frame", self._t_next(), seq=s.seq, device_first_sample=s.first_sample,
+                        samples=s.n_samples, where="behind" if behind else "ahead")
+
+    def _restart(self, frame: Frame) -> None:
+        """The device restarted its count: go on after the last sample placed, leaving the gap
+        the host clock saw between the two frames' arrivals (an estimate: said so)."""
+        seen = 0.0 if self._t_last is None else self._suspect_t - self._t_last
+        gap = max(0, round(seen * self.fs_hz) - frame.n_samples)
+        self._fault("stream_restart", self._t_next(), seq=frame.seq,
+                    device_first_sample=frame.first_sample, continues_at=self._next + gap,
+                    gap_samples=gap, gap_unknown=True)
+        self._offset = self._next + gap - frame.first_sample
+
+    def _accept(self, frame: Frame, gap_event: bool = True) -> None:
         first = frame.first_sample + self._offset
-        if self._next is not None and first < self._next:  # the device restarted its count
-            self._fault("stream_restart", self._t_next(), seq=frame.seq,
-                        device_first_sample=frame.first_sample, continues_at=self._next)
-            self._offset += self._next - first
-            first = self._next
         if (self._next is not None and first > self._next) or self._back is not None:
             missing = first - (self._next if self._next is not None else first)
             frames = 0 if self._last_seq is None else (frame.seq - self._last_seq - 1) % 2**32
@@ -320,7 +415,7 @@ class SerialDevice(Device):
                 self._fault("port_back", self._t_next(), url=self.url,
                             down_s=round(self._back, 3), **detail)
                 self._back = None
-            else:
+            elif gap_event:
                 self._fault("seq_gap", self._t_next(), after_seq=self._last_seq, seq=frame.seq,
                             missing_frames=frames, missing_samples=missing)
             if missing:
@@ -331,6 +426,8 @@ class SerialDevice(Device):
         self._part_n += frame.n_samples
         self._next = first + frame.n_samples
         self._last_seq = frame.seq
+        self._placed[frame.seq % _HISTORY] = (frame.seq, frame.first_sample, frame.payload_crc, first)
+        self._t_last = self._t_read
         if self._part_n + frame.n_samples > self.block_n:  # another such frame would not fit
             self._emit_partial()
 

@@ -120,6 +120,9 @@ class Frame:
         Bytes the parser discarded between the previous frame and this one (0 when in sync).
     failed_crc : int
         CRC failures the parser met between the previous frame and this one.
+    payload_crc : int
+        The payload's CRC-16 as sent: with ``seq`` and ``first_sample``, what tells a repeated
+        frame (the same bytes again) from another frame with the same header.
     """
 
     seq: int
@@ -129,6 +132,7 @@ class Frame:
     flags: int = 0
     skipped_bytes: int = 0
     failed_crc: int = 0
+    payload_crc: int = 0
 
     @property
     def end(self) -> bool:
@@ -288,12 +292,13 @@ class FrameParser:
                 pos += 1
                 continue
             payload = bytes(buf[pos + HEADER_BYTES:pos + HEADER_BYTES + size])
-            if crc16(payload) != int.from_bytes(buf[pos + total - 2:pos + total], "little"):
+            payload_crc = crc16(payload)
+            if payload_crc != int.from_bytes(buf[pos + total - 2:pos + total], "little"):
                 self._crc_failed()
                 pos += 1
                 continue
             out.append(Frame(seq, first, _decode_payload(payload, width, n_ch, n), width, flags,
-                             self._skipped, self._failed))
+                             self._skipped, self._failed, payload_crc))
             self.frames += 1
             self.bytes_framed += total
             self.resyncs += self._skipped > 0

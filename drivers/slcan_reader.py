@@ -9,14 +9,24 @@ byte waiting at most every :data:`READ_EVERY_S` seconds, splits it on ``\\r`` an
 straight into :class:`SlcanFrame` (the few ``can.Message`` attributes the adapter reads).
 python-can's own bus stays in use for every other interface.
 
+When the lines came: a read's time says when they were taken, not when they arrived -- a reader
+that was not scheduled for a while reads a backlog that looks late. :attr:`SlcanReader.arrived_after`
+is the last host time the port was seen empty (a read that drained it, a wait that found nothing,
+or one read period before a wait on an empty port was woken by bytes): every line of the last
+batch arrived after it and by its ``timestamp``. A backlog read late has an early bound (it looks
+on time); lines after a silence the reader waited through have a bound within a read period of
+their arrival.
+
 What a line becomes (:func:`parse_lines`):
 
 * ``t``/``T``/``x`` (``x``: CANdapter's extended), ``r``/``R`` (remote), ``d``/``D``/``b``/``B`` (CAN FD,
   ``b``/``B`` with bit-rate switch): a frame; identifier 3 or 8 hex digits (at most 0x7FF or
   0x1FFFFFFF), DLC a digit 0-8 (classic) or a hex digit 0-F (FD, python-can's ``CAN_FD_DLC``),
   exactly 2 hex digits per data byte, then at most 8 more hex digits (an adapter's timestamp,
-  ignored; the frame's :attr:`~SlcanFrame.timestamp` is the wall-clock time of the read, s, as
-  python-can's);
+  ignored; the frame's :attr:`~SlcanFrame.timestamp` is the host time of the read, s: wall-clock
+  time as python-can's, but counted on the monotonic clock from the moment the port was opened,
+  so a step of the wall clock (NTP) never looks like a silence on the bus to the CAN adapter,
+  which holds these times against the sample clock);
 * ``F`` with two hex digits (the status flags): nothing when 0, else an error frame with the
   SocketCAN classes the flags mean (controller problems 0x04, lost arbitration 0x02, bus error
   0x80);
@@ -44,6 +54,7 @@ __all__ = ["READ_EVERY_S", "SlcanFrame", "SlcanReader", "parse_lines"]
 
 READ_EVERY_S = 0.004  # read the port at most this often, s (adds at most this latency)
 _MAX_LINE = 256       # longest line kept waiting for its "\r" (a frame line has at most 146)
+_CHUNK = 1 << 16      # most bytes taken in one read
 _HEX = "0123456789abcdefABCDEF"
 _CLASSIC = {str(n): n for n in range(9)}
 _FD = {**{f"{d:X}": n for d, n in enumerate(CAN_FD_DLC)}, **{f"{d:x}": n for d, n in enumerate(CAN_FD_DLC)}}
@@ -62,7 +73,7 @@ class SlcanFrame:
     """A frame off the serial line, with the ``can.Message`` attributes the CAN adapter reads.
 
     ``data`` is ``bytes``, ``dlc`` its length in bytes (a remote frame: the length asked for),
-    ``timestamp`` the wall-clock time the line was read, s (``time.time()``).
+    ``timestamp`` the host time the line was read, s (module notes).
     """
 
     __slots__ = ("arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd",
@@ -198,6 +209,9 @@ class SlcanReader:
         self.read_every_s = read_every_s
         self._rest = ""            # the start of a line whose "\r" has not come yet
         self._read_at = 0.0        # monotonic time of the last read, s
+        self._epoch = time.time() - time.monotonic()  # frame timestamps: wall clock at open, then monotonic
+        self._empty_at = time.monotonic()  # the port was last seen empty then
+        self.arrived_after = self._epoch + self._empty_at  # ... as a timestamp (module notes)
         self._open_cmd = "L" if listen_only else "O"
         with error_check(exception_type=CanInitializationError):
             self.port = serial.serial_for_url(channel, baudrate=tty_baudrate, rtscts=rtscts, timeout=timeout)
@@ -265,9 +279,14 @@ class SlcanReader:
                     return []
                 time.sleep(ready_at - now)
             if not self._wait(None if deadline is None else max(0.0, deadline - time.monotonic())):
+                self._empty_at = time.monotonic()  # nothing came: empty until now
                 return []
+            self.arrived_after = self._epoch + self._empty_at
             self._read_at = now = time.monotonic()
-            items = self.feed(self._read_waiting(), time.time())
+            chunk = self._read_waiting()
+            if len(chunk) < _CHUNK:  # drained: what comes next arrives after this read
+                self._empty_at = now
+            items = self.feed(chunk, self._epoch + now)
             if items:
                 return items
 
@@ -281,11 +300,20 @@ class SlcanReader:
         return parse_lines(lines, timestamp) if lines else []
 
     def _wait(self, timeout: float | None) -> bool:
-        """Whether bytes are waiting, after up to ``timeout`` s (``None``: forever)."""
+        """Whether bytes are waiting, after up to ``timeout`` s (``None``: forever). A wait that
+        begins on an empty port and is woken by bytes saw them come: :attr:`arrived_after` moves
+        up to one read period before the wake (at least to the wait's start)."""
         if self._fd is not None:
-            return bool(select.select([self._fd], [], [], timeout)[0])
+            if select.select([self._fd], [], [], 0)[0]:
+                return True
+            self._empty_at = time.monotonic()
+            if timeout == 0 or not select.select([self._fd], [], [], timeout)[0]:
+                return False
+            self._empty_at = max(self._empty_at, time.monotonic() - self.read_every_s)
+            return True
         end = None if timeout is None else time.monotonic() + timeout
         while not self.port.in_waiting:  # a port without a file descriptor: poll every 1 ms
+            self._empty_at = time.monotonic()
             if end is not None and time.monotonic() >= end:
                 return False
             time.sleep(0.001)
@@ -295,7 +323,7 @@ class SlcanReader:
         if self._fd is None:
             return self.port.read(self.port.in_waiting)
         try:
-            chunk = os.read(self._fd, 1 << 16)
+            chunk = os.read(self._fd, _CHUNK)
         except BlockingIOError:
             return b""
         if not chunk:

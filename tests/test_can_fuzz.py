@@ -169,7 +169,9 @@ def _assemble(codec: FrameCodec, g: int, counts: np.ndarray, wire: list) -> None
         TALLY[asm.put(seq, layout.slot, msg.data) or "placed"] += 1
     if asm.base is None:
         return
-    asm.finalize_to(asm.hi + 1)
+    asm.finish()
+    TALLY.update(asm.problems)
+    assert not asm.notes  # one sender, no clock: no foreign sender, no wrap or gap judged by time
     asm.decode(codec)
     T, ids, seen = lay.samples_per_cycle, {f.frame_id for f in lay.frames}, {}
     for k, m in wire:
@@ -186,8 +188,32 @@ def _assemble(codec: FrameCodec, g: int, counts: np.ndarray, wire: list) -> None
 @SHORT
 @given(st.integers(0, 2**63 - 1))
 @example(97654)  # found by the long run: a jump's first frame, then a late frame of the jump
+@example(103522)  # found by the long run: test_cycle_after_a_jump_past_a_straggler_is_delivered
 def test_assembler_never_delivers_a_wrong_sample(seed):
     _assemble(*seeded_stream(seed))
+
+
+def test_cycle_after_a_jump_past_a_straggler_is_delivered():
+    """Regression (long run, seed 103522): fd24, cycles 3-5 lost (a SEQ jump of 4), and the
+    jump's first frame came before a straggler of cycle 2. The straggler used to make that first
+    frame a lone outlier, so the complete cycle 6 was never delivered (20 samples lost)."""
+    codec = CODECS["fd24"]
+    lay = codec.groups[1]
+    counts = np.random.default_rng(7).integers(-(1 << 23), 1 << 23, (16, 8 * lay.samples_per_cycle))
+    msgs = codec.messages(1, 7385, counts.astype(np.int32))
+    by_cycle = [msgs[k * 16 : (k + 1) * 16] for k in range(8)]
+    order = ([(0, s) for s in range(16)] + [(1, s) for s in range(16)] + [(2, s) for s in range(4)]
+             + [(6, 0), (2, 5)] + [(6, s) for s in range(1, 16)] + [(7, s) for s in range(16)])
+    wire = [(k, by_cycle[k][s]) for k, s in order]
+    _assemble(codec, 1, counts, wire)  # every complete cycle after the first delivered, bit for bit
+    asm = CycleAssembler(lay)
+    asm.start(7385)
+    problems = [asm.put(m.data[0] | m.data[1] << 8, codec.check(m)[0].slot, m.data) for _, m in wire]
+    asm.finish()
+    asm.decode(codec)
+    assert problems == [None] * len(wire) and not asm.problems
+    assert [(r[0], r[1]) for r in asm.runs] == [(7385 * 20, 7387 * 20), (7391 * 20, 7393 * 20)]
+    assert asm.lost == [[7387, 4, 1]]  # cycle 2 incomplete, 3-5 never seen
 
 
 @pytest.fixture

@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import json
 import re
+import select
+import socket
 import subprocess
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,10 +27,12 @@ import pytest
 from ramdaq.daq.record import record
 from ramdaq.daq.session import Session
 from ramdaq.drivers.block import sample_time_ns
+from ramdaq.drivers.emulators.serial_emulator import PtyPort
 from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.registry import open_device
 from ramdaq.drivers.serial_device import SerialDevice, split_url
+from ramdaq.drivers.serial_frames import FLAG_END, encode_frame
 from ramdaq.drivers.sim import SimDevice
 
 pytestmark = pytest.mark.timeout(60)
@@ -270,6 +275,136 @@ def _plain(o: object) -> object:
 def _canonical(text: str) -> str:
     """JSON text in one spelling (NaN compares equal to NaN here)."""
     return json.dumps(json.loads(text), sort_keys=True)
+
+
+# -- repeated, stale and foreign frames (issue 22, item 2) ----------------------------------
+_N = 32  # samples per frame
+_OURS = np.random.default_rng(1).integers(-2**23, 2**23, (8, 2, _N)).astype(np.int32)
+_OTHER = np.random.default_rng(2).integers(-2**23, 2**23, (8, 2, _N)).astype(np.int32)
+# name -> frames in wire order as (seq, device first sample, counts), and the expected
+# (stream first sample, counts) of what is placed, with the faults expected (kind -> count)
+_A = [(k, k * _N, _OURS[k]) for k in range(8)]
+_SCRIPTS = {
+    "repeat": ([_A[0], _A[1], _A[2], _A[1], _A[3], _A[4], _A[5]],
+               [(k * _N, _OURS[k]) for k in range(6)], {"repeated_frame": 1}),
+    "repeated span": ([*_A[:4], *_A[1:4], *_A[4:6]],
+                      [(k * _N, _OURS[k]) for k in range(6)], {"repeated_frame": 1}),
+    "stale frame behind": ([*_A[:3], (1, _N, _OTHER[1]), *_A[3:6]],
+                           [(k * _N, _OURS[k]) for k in range(6)], {"stale_frame": 1}),
+    "foreign frame ahead": ([*_A[:3], (7777, 10**9, _OTHER[0]), *_A[3:6]],
+                            [(k * _N, _OURS[k]) for k in range(6)], {"stale_frame": 1}),
+    "restart": ([*_A[:4], *[(k, k * _N, _OTHER[k]) for k in range(3)]],
+                [*[(k * _N, _OURS[k]) for k in range(4)], *[((4 + k) * _N, _OTHER[k]) for k in range(3)]],
+                {"stream_restart": 1}),
+    "lost frame": ([_A[0], _A[1], _A[3], _A[4]],
+                   [(k * _N, _OURS[k]) for k in (0, 1, 3, 4)], {"seq_gap": 1}),
+}
+
+
+def _serve_frames(tmp_path: Path, wire: bytes) -> tuple[list, list]:
+    """``wire`` written to a real pty once a SerialDevice opened it; the blocks and faults."""
+    port = PtyPort(tmp_path / "tty")
+
+    def write() -> None:
+        if port.wait_reader(10.0):
+            port.send(wire)
+            port.finish(5.0)
+
+    th = threading.Thread(target=write, name="pty-writer", daemon=True)
+    th.start()
+    try:
+        with SerialDevice(port.address, channels=2, fs_hz=2048.0) as dev:
+            blocks = list(dev)  # to the end-of-stream frame
+            faults = dev.take_faults()
+    finally:
+        th.join(10)
+        port.unplug()
+    return blocks, faults
+
+
+@pytest.mark.parametrize("name", list(_SCRIPTS))
+def test_a_frame_out_of_place_never_moves_the_samples(tmp_path, name):
+    """Issue 22, item 2: frames 0,1,2,1,3,... were taken for a device restart -- frame 1's data
+    landed at samples 96-127 and everything after moved 64 samples. A repeat (the same bytes again)
+    is dropped and logged; a stale or foreign frame that fits neither the stream nor the frame
+    after it is dropped and logged; a genuine restart (its next frame continues it) is still
+    followed, after the last sample; a lost frame is still a gap. Nothing placed is ever moved."""
+    frames, placed, kinds_expected = _SCRIPTS[name]
+    last_seq, last_first, _ = frames[-1]
+    wire = b"".join(encode_frame(seq, first, counts) for seq, first, counts in frames)
+    wire += encode_frame(last_seq + 1, last_first + _N, np.zeros((2, 0), np.int32), flags=FLAG_END)
+    blocks, faults = _serve_frames(tmp_path, wire)
+    got = {b.first_sample + i: b.counts[:, i] for b in blocks for i in range(b.n_samples)}
+    want = {first + i: counts[:, i] for first, counts in placed for i in range(_N)}
+    assert sorted(got) == sorted(want)
+    assert all(np.array_equal(got[i], want[i]) for i in want)
+    assert kinds([{"kind": f.kind} for f in faults]) == kinds_expected
+    detail = faults[0].detail
+    if name == "repeat":
+        assert detail == {"frames": 1, "first_seq": 1, "last_seq": 1, "samples": _N, "placed_at": _N}
+    elif name == "repeated span":
+        assert detail == {"frames": 3, "first_seq": 1, "last_seq": 3, "samples": 3 * _N, "placed_at": _N}
+        assert faults[0].t_ns == sample_time_ns(4 * _N, 2048.0)
+    elif name == "restart":
+        assert detail["continues_at"] == 4 * _N and detail["gap_unknown"] and detail["gap_samples"] == 0
+
+
+class RepeatingProxy:
+    """A TCP proxy on 127.0.0.1 between a reader and ``upstream``, as a flaky Ethernet link:
+    once ``after`` bytes went through, it sends the last ``span`` bytes again."""
+
+    def __init__(self, upstream: str, after: int, span: int) -> None:
+        host, _, port = upstream.removeprefix("socket://").rpartition(":")
+        self.upstream = (host, int(port))
+        self.after, self.span, self.repeated = after, span, 0
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.address = f"socket://127.0.0.1:{self.listener.getsockname()[1]}"
+        self.thread = threading.Thread(target=self._run, name="repeating-proxy", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        client, _ = self.listener.accept()
+        up = socket.create_connection(self.upstream)
+        sent, tail = 0, b""
+        with client, up:
+            while True:
+                ready, _, _ = select.select([up, client], [], [], 10.0)
+                if not ready or client in ready and not client.recv(4096):
+                    return  # the reader closed: so does the link
+                if up in ready:
+                    data = up.recv(65536)
+                    if not data:
+                        client.shutdown(socket.SHUT_WR)
+                        continue
+                    client.sendall(data)
+                    tail = (tail + data)[-self.span:]
+                    sent += len(data)
+                    if sent >= self.after and not self.repeated:
+                        client.sendall(tail)
+                        self.repeated = len(tail)
+
+
+def test_a_link_that_repeats_a_span_moves_nothing(tmp_path):
+    """Issue 22, item 2: a TCP link that sent a 5 000-byte span twice made 36 192 samples per
+    channel land 46.9 ms late (taken for a device restart). Now the repeated frames are dropped
+    and logged, the torn edges of the span are resyncs, and the recording equals the simulator's
+    bit for bit with no gap."""
+    path = tmp_path / "repeat.mcap"
+    with emulator(tmp_path, "tcp") as (proc, address):
+        proxy = RepeatingProxy(address, after=100_000, span=5000)
+        rec = record(SerialDevice(proxy.address, rig=RIG), path, readout=False)
+        s = summary(proc)
+    proxy.thread.join(10)
+    assert proxy.repeated == 5000 and rec.gaps == 0
+    missing, events = check_recording(path)
+    assert not missing.any() and s["samples_sent"] == rec.samples
+    n = kinds(events)
+    assert n.get("repeated_frame") == 1 and n.get("resync", 0) >= 1
+    assert not {"gap", "seq_gap", "stream_restart", "stale_frame"} & set(n)
+    rep = next(e for e in events if e["kind"] == "repeated_frame")["detail"]
+    frame_bytes = 22 + 16 * 32 * 3 + 2
+    assert 5000 // frame_bytes - 1 <= rep["frames"] <= 5000 // frame_bytes  # whole frames in the span
+    assert rep["samples"] == 32 * rep["frames"]
 
 
 # -- arguments -------------------------------------------------------------------------------

@@ -22,7 +22,10 @@ Faults are injected by counting sample frames: every K-th is dropped, corrupted 
 the CRC catches it), shortened (wrong DLC) or, on slcan, garbled (an unparseable line); every K-th
 is followed by an error frame or by a frame of another node; a bus-off (error frames with the
 SocketCAN bus-off and restarted classes, the frames between lost) at a chosen time. Error frames
-cannot be said in the Lawicel protocol: on slcan they are left out. :attr:`CanEmulator.lost` and
+cannot be said in the Lawicel protocol: on slcan they are left out, so a bus-off there is a plain
+silence. A front-end restart (``--restart-at``): silent for ``--restart-s``, then its SEQ counts
+from 0 again. ``--seq-offset`` starts the SEQ counter elsewhere (a twin front-end powered up at
+another time: tests merge two emulators' frames). :attr:`CanEmulator.lost` and
 ``--report`` give the cycles lost, the ground truth a test compares the recording with.
 """
 
@@ -90,17 +93,25 @@ class CanEmulator:
         After every K-th sample frame, a frame of another node / a bus error frame.
     bus_off_at_s, bus_off_s : float
         Go bus-off at this stream time for this long (frames in between are lost).
+    restart_at_s, restart_s : float
+        The front-end restarts at this stream time: silent this long, then SEQ from 0 again.
+    seq_offset : int
+        SEQ of cycle 0 (the counter's phase), cycles.
     """
 
     def __init__(self, codec: FrameCodec, blocks: Iterable[Block], *, drop_every: int = 0,
                  corrupt_every: int = 0, wrong_dlc_every: int = 0, garble_every: int = 0,
                  unrelated_every: int = 0, error_frame_every: int = 0,
-                 bus_off_at_s: float | None = None, bus_off_s: float = 0.1) -> None:
+                 bus_off_at_s: float | None = None, bus_off_s: float = 0.1,
+                 restart_at_s: float | None = None, restart_s: float = 0.2, seq_offset: int = 0) -> None:
         self.codec, self.blocks = codec, blocks
         self.every = {"drop": drop_every, "corrupt": corrupt_every, "wrong_dlc": wrong_dlc_every,
                       "garble": garble_every}
         self.unrelated_every, self.error_frame_every = unrelated_every, error_frame_every
         self.bus_off = None if bus_off_at_s is None else (bus_off_at_s, bus_off_at_s + bus_off_s)
+        self.restart = None if restart_at_s is None else (restart_at_s, restart_at_s + restart_s)
+        self.restarted_at: int | None = None  # first cycle after the restart (SEQ 0)
+        self.seq_offset = seq_offset
         self.lost: dict[int, set[int]] = {g: set() for g in codec.groups}
         self.injected: Counter = Counter()
         self.cycles_sent: dict[int, int] = dict.fromkeys(codec.groups, 0)
@@ -122,6 +133,14 @@ class CanEmulator:
                         continue
                     state = "done"
                     yield Wire(0, t_s, can.Message(is_error_frame=True, arbitration_id=0x100, dlc=8))
+                if self.restart and start_s >= self.restart[0]:
+                    if start_s < self.restart[1]:
+                        self.lost[group].add(cycle)
+                        continue
+                    if self.restarted_at is None:
+                        self.restarted_at = cycle
+                        self.injected["restart"] += 1
+                    msg = self._with_seq(msg, cycle - self.restarted_at)
                 k += 1
                 fault = next((f for f, n in self.every.items() if n and k % n == 0), None)
                 if fault:
@@ -143,6 +162,17 @@ class CanEmulator:
                     self.injected["unrelated"] += 1
                     yield Wire(group, t_s, _UNRELATED[(k // self.unrelated_every) % 2])
 
+    def _with_seq(self, msg: can.Message, seq: int) -> can.Message:
+        """``msg`` with its SEQ set to ``seq`` (modulo the period) and its CRC made good again."""
+        lay = self.codec.check(msg)[0]
+        data = bytearray(msg.data)
+        width = lay.seq_end - lay.seq_at
+        data[lay.seq_at : lay.seq_end] = (seq % (1 << 8 * width)).to_bytes(width, "little")
+        if lay.crc_name:
+            crc = lay.crc_update(bytes(data[: lay.crc_at]), lay.crc_seed) ^ lay.crc_xorout
+            data[lay.crc_at : lay.crc_end] = crc.to_bytes(lay.crc_end - lay.crc_at, "little")
+        return _copy(msg, bytes(data))
+
     def _cycles(self) -> Iterator[list[tuple[int, int, float, float, can.Message]]]:
         groups = self.codec.groups
         rows = {g: [self.codec.channels.index(c) for c in lay.channels] for g, lay in groups.items()}
@@ -158,7 +188,7 @@ class CanEmulator:
                     pending[g] = [have]
                     continue
                 T, c0, F = lay.samples_per_cycle, self.cycles_sent[g], len(lay.frames)
-                msgs = self.codec.messages(g, c0, have[:, : n * T])
+                msgs = self.codec.messages(g, c0 + self.seq_offset, have[:, : n * T])
                 pending[g] = [have[:, n * T :]]
                 self.cycles_sent[g] += n
                 fs = block.fs_hz
@@ -331,6 +361,10 @@ def main(argv: list[str] | None = None) -> int:
         ap.add_argument(f"--{name}-every", type=int, default=0, metavar="K")
     ap.add_argument("--bus-off-at", type=float, default=None, metavar="S")
     ap.add_argument("--bus-off-s", type=float, default=0.1, metavar="S")
+    ap.add_argument("--restart-at", type=float, default=None, metavar="S",
+                    help="the front-end restarts (silent, then SEQ from 0) at this stream time")
+    ap.add_argument("--restart-s", type=float, default=0.2, metavar="S")
+    ap.add_argument("--seq-offset", type=int, default=0, metavar="CYCLES", help="SEQ of cycle 0")
     ap.add_argument("--report", default=None, help="write the ground truth (JSON) here at the end")
     ap.add_argument("--linger", type=float, default=30.0, help="slcan: stay up after the last frame, s")
     a = ap.parse_args(argv)
@@ -349,7 +383,8 @@ def main(argv: list[str] | None = None) -> int:
     emu = CanEmulator(codec, sim, drop_every=a.drop_every, corrupt_every=a.corrupt_every,
                       wrong_dlc_every=a.wrong_dlc_every, garble_every=a.garble_every,
                       unrelated_every=a.unrelated_every, error_frame_every=a.error_frame_every,
-                      bus_off_at_s=a.bus_off_at, bus_off_s=a.bus_off_s)
+                      bus_off_at_s=a.bus_off_at, bus_off_s=a.bus_off_s, restart_at_s=a.restart_at,
+                      restart_s=a.restart_s, seq_offset=a.seq_offset)
     with sim:
         if a.interface == "slcan":
             n = serve_slcan(emu.frames(), pace=a.pace, linger_s=a.linger,
