@@ -209,11 +209,19 @@ def test_gap_benchmark_through_dask_is_the_serial_run(client, tmp_path):
 
 # -- real processes ------------------------------------------------------------------------------
 
+def _sigint_as_at_a_terminal() -> None:
+    """A terminal's foreground command has SIGINT at its default; a shell's background job (how
+    a CI script may run pytest) inherits it ignored, and Python then never raises
+    KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(cmd: list[str], log: Path) -> subprocess.Popen:
-    """A process in its own process group (killed as a group), output to ``log``."""
+    """A process in its own process group (killed as a group), output to ``log``, with SIGINT
+    as at a terminal."""
     with open(log, "wb") as f:
         return subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, start_new_session=True, env=ENV,
-                                cwd=log.parent)
+                                cwd=log.parent, preexec_fn=_sigint_as_at_a_terminal)
 
 
 def _stop(p: subprocess.Popen) -> None:
