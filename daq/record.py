@@ -85,9 +85,9 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
                 if view:
                     view.update(block, queue=rec.stats.queued, overflows=rec.overflows, gap=gap,
                                 impacts=[b.t_s for b in truth] if truth is not None else None)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             interrupted = True
-            rec.event("interrupted", 0 if last is None else block.t0_ns, reason="Ctrl-C")
+            rec.event("interrupted", 0 if last is None else block.t0_ns, reason=str(err) or "Ctrl-C")
         finally:
             if view:
                 view.__exit__(None, None, None)

@@ -177,9 +177,9 @@ class Session:
         try:
             for block in self.device:
                 self._take(block, rec)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             if rec:
-                rec.event("interrupted", 0, reason="Ctrl-C")
+                rec.event("interrupted", 0, reason=str(err) or "Ctrl-C")
             return True
         except DeviceError as err:  # the device gave up: keep what came, say why
             self._say(f"device ended the stream: {err}")

@@ -306,8 +306,9 @@ def test_sigterm_finishes_a_recording_like_ctrl_c(tmp_path):
     assert "interrupted: wrote" in stdout and "Traceback" not in stderr
     with McapReplayDevice(out) as dev:
         blocks = list(dev)
-        kinds = [e["kind"] for e in dev.events()]
-    assert blocks and kinds[-1] == "interrupted"
+        events = list(dev.events())
+    assert blocks and events[-1]["kind"] == "interrupted"
+    assert events[-1]["detail"]["reason"] == "SIGTERM"   # not "Ctrl-C": the event says what ended it
 
 
 def test_sigterm_finishes_a_trials_rrd(tmp_path):
