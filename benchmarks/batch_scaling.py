@@ -140,6 +140,7 @@ def main() -> None:
     print(f"{len(paths)} simulated recordings in {folder}: {sizes.min() / 1e6:.2f}-"
           f"{sizes.max() / 1e6:.2f} MB, 16 channels at 2048 Hz, one blow each")
     walls, task_lists, overhead = {}, {}, 0.0
+    busy = os.getloadavg()[0] > 0.5 * (os.cpu_count() or 1)   # other jobs, before ours start
     for w in (1, 2):
         print(f"\n{w} worker{'s' * (w > 1)}: {load()}", flush=True)
         t_start, wall, results, over = measure(folder, tmp / f"out{w}", w)
@@ -148,11 +149,11 @@ def main() -> None:
         ts = np.array([r.seconds for r in results])
         print(f"  cluster start {t_start:.1f} s; tasks {wall:.1f} s wall, {ts.sum():.1f} s summed in the "
               f"tasks (median {np.median(ts):.2f} s, max {ts.max():.2f} s); after it: {load()}")
-    print(f"\nspeed-up on 2 workers: {walls[1] / walls[2]:.2f}x, measured on a shared machine (the load "
-          "averages above, against its cores): the tasks run slower than on an idle one, and how the "
-          "CPU is split between these workers and the other jobs changes with the number of worker "
-          "processes, so this is not the idle machine's figure (the issue's >= 1.8x is for an idle "
-          "machine: re-measure there)")
+    print(f"\nspeed-up on 2 workers: {walls[1] / walls[2]:.2f}x"
+          + (", measured on a busy machine (the load averages above, against its cores): how the CPU "
+             "is split between these workers and the other jobs changes with the number of worker "
+             "processes, so this is not an idle machine's figure" if busy else
+             ", on a machine otherwise idle (the load averages above)"))
 
     res = task_lists[1]
     task_s = np.array([r.seconds for r in res])
