@@ -374,7 +374,10 @@ class RepeatingProxy:
                 if up in ready:
                     data = up.recv(65536)
                     if not data:
-                        client.shutdown(socket.SHUT_WR)
+                        try:
+                            client.shutdown(socket.SHUT_WR)
+                        except OSError:  # the reader already went: the link is closed either way
+                            return
                         continue
                     client.sendall(data)
                     tail = (tail + data)[-self.span:]
