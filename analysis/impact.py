@@ -25,21 +25,21 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ramdaq.analysis.modal.identify import identify_modes
-from ramdaq.analysis.modal.peaks import decrement_from_peaks
-from ramdaq.analysis.modal.table import ModeTable
-from ramdaq.analysis.modal.verdicts import DecayAssessment, Verdict, assess_decay
-from ramdaq.analysis.model.geometry import gage_geometry, stock_pair
-from ramdaq.analysis.model.rig import ALIGN_TOL_M, Rig
-from ramdaq.analysis.model.structure import added_mass
-from ramdaq.analysis.report1836.damping import (
+from .modal.identify import identify_modes
+from .modal.peaks import decrement_from_peaks
+from .modal.table import ModeTable
+from .modal.verdicts import DecayAssessment, Verdict, assess_decay
+from .model.geometry import gage_geometry, stock_pair
+from .model.rig import ALIGN_TOL_M, Rig
+from .model.structure import added_mass
+from .report1836.damping import (
     C_translational,
     C_translational_full,
     c_rotational,
     c_rotational_full,
     stock_stiffness_k_s,
 )
-from ramdaq.analysis.report1836.motions import (
+from .report1836.motions import (
     alpha,
     alpha_b_from_13_14,
     d_rudder_hull,
@@ -380,7 +380,7 @@ def _stock_lengths(amp: dict[int, complex], rig: Rig,
     ``amp`` (by gage, the usable ones), and the curves they were read from: heights z' (m above
     the rudder top), (d_v,alpha) and gamma of the stock points, and the hull points 13, 14 -- in
     the mode's amplitude units, signed by the phase of gage 4."""
-    from ramdaq.analysis.report1836.stock_length import effective_length_bending, effective_length_torsion
+    from .report1836.stock_length import effective_length_bending, effective_length_torsion
 
     needed = (1, 3, 7, 11, 10, 12, 13, 14)
     if any(n not in amp for n in needed):

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ramdaq.analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.daq.trigger import ImpactEvent, StreamHealth
-from ramdaq.drivers.block import StreamInfo
+from ..analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
+from ..analysis.model.rig import Rig
+from ..drivers.block import StreamInfo
+from .trigger import ImpactEvent, StreamHealth
 
 MIN_DECAY_S = 0.25
 """Shortest free decay analysed, s: fewer than a few periods of a 13 Hz mode is no decrement."""

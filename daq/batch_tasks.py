@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ramdaq.analysis.gap.diagnose import Diagnosis
-    from ramdaq.daq.analyzer import HitResult
+    from ..analysis.gap.diagnose import Diagnosis
+    from .analyzer import HitResult
 
 STATUSES = ("ok", "failed", "lost", "interrupted")
 """A recording's status in the table: analysed (``ok``); its task ran and the recording could
@@ -164,7 +164,7 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq analyze`` of one recording: its report folder written, its rows returned (one
     per hit x gage x mode, :class:`ModeRow`). A recording that cannot be analysed is a
     ``failed`` result naming why."""
-    from ramdaq.daq.commands.analyze import run_analysis, write_analysis
+    from .commands.analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
     try:
@@ -187,7 +187,7 @@ def hit_rows(h: HitResult) -> list[ModeRow]:
     """The rows of one :class:`~ramdaq.daq.analyzer.HitResult`: gages x modes of its analysis,
     read from the same JSON ``ramdaq analyze`` writes (so the table and report.json agree to
     the digit); one row for a rejected hit."""
-    from ramdaq.daq.commands.analyze import analysis_to_json
+    from .commands.analyze import analysis_to_json
 
     head = dict(hit=h.index, onset_s=float(h.event.onset_s), accepted=bool(h.accepted),
                 hit_reason=h.reason)
@@ -211,7 +211,7 @@ def gap_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq gap`` of one recording with the default settings: its report folder (gap.json,
     plots) written, its :class:`GapRow` returned. A recording that cannot be diagnosed is a
     ``failed`` result naming why."""
-    from ramdaq.daq.commands.gap import run_gap, write_report
+    from .commands.gap import run_gap, write_report
 
     t0 = time.perf_counter()
     try:

@@ -23,7 +23,7 @@ the file (or port) and what is wrong with it.
 
 from __future__ import annotations
 
-from ramdaq.drivers.mcap_format import (
+from ..drivers.mcap_format import (
     CorruptRecording,
     NotARamdaqRecording,
     RecordingError,

@@ -15,7 +15,7 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from ramdaq.drivers.block import Block, StreamInfo
+from ..drivers.block import Block, StreamInfo
 
 
 class LiveReadout:

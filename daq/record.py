@@ -12,11 +12,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ramdaq.daq.readout import LiveReadout
-from ramdaq.daq.recorder import Recorder
-from ramdaq.drivers.base import Device, DeviceFault
-from ramdaq.drivers.block import Block
-from ramdaq.drivers.mcap_format import SIM_IMPACTS_TOPIC
+from ..drivers.base import Device, DeviceFault
+from ..drivers.block import Block
+from ..drivers.mcap_format import SIM_IMPACTS_TOPIC
+from .readout import LiveReadout
+from .recorder import Recorder
 
 
 def store_block(rec: Recorder, device: Device, block: Block, truth_written: int, *,

@@ -40,9 +40,9 @@ from typing import Any, NamedTuple
 
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
-from ramdaq.daq.errors import RecordingError
-from ramdaq.drivers import mcap_format as fmt
-from ramdaq.drivers.block import Block, StreamInfo
+from ..drivers import mcap_format as fmt
+from ..drivers.block import Block, StreamInfo
+from .errors import RecordingError
 
 __all__ = ["Recorder", "RecorderStats"]
 

@@ -28,10 +28,10 @@ from pathlib import Path
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import Writer
 
-from ramdaq.daq.errors import NotARamdaqRecording
-from ramdaq.drivers import mcap_format as fmt
-from ramdaq.drivers.errors import FrameError
-from ramdaq.drivers.mcap_replay import Damage, RecordScanner
+from ..drivers import mcap_format as fmt
+from ..drivers.errors import FrameError
+from ..drivers.mcap_replay import Damage, RecordScanner
+from .errors import NotARamdaqRecording
 
 __all__ = ["RecoverReport", "recover"]
 

@@ -44,9 +44,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ramdaq.analysis.model.rig import Rig, parse_rig
-from ramdaq.daq.errors import ViewError
-from ramdaq.drivers.block import Block, StreamInfo
+from ..analysis.model.rig import Rig, parse_rig
+from ..drivers.block import Block, StreamInfo
+from .errors import ViewError
 
 TIMELINE = "time"
 BODY_COLORS = {"rudder": (60, 130, 230), "stock": (240, 150, 40), "hull": (150, 150, 150)}

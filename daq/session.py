@@ -25,9 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.impact import FirstLook
-from ramdaq.analysis.model.rig import Rig, parse_rig
-from ramdaq.daq.analyzer import (
+from ..analysis.impact import FirstLook
+from ..analysis.model.rig import Rig, parse_rig
+from ..drivers.base import Device
+from ..drivers.block import Block
+from ..drivers.errors import DeviceError
+from ..drivers.mcap_format import IMPACTS_TOPIC
+from .analyzer import (
     FinalDone,
     FinalJob,
     HitResult,
@@ -38,14 +42,10 @@ from ramdaq.daq.analyzer import (
     run_job,
     trial_summary,
 )
-from ramdaq.daq.readout import LiveReadout
-from ramdaq.daq.record import store_block
-from ramdaq.daq.recorder import Recorder
-from ramdaq.daq.trigger import ImpactEvent, Trigger, TriggerSettings
-from ramdaq.drivers.base import Device
-from ramdaq.drivers.block import Block
-from ramdaq.drivers.errors import DeviceError
-from ramdaq.drivers.mcap_format import IMPACTS_TOPIC
+from .readout import LiveReadout
+from .record import store_block
+from .recorder import Recorder
+from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""

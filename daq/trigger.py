@@ -85,8 +85,8 @@ from typing import Any
 
 import numpy as np
 
-from ramdaq.analysis import onset as ons
-from ramdaq.drivers.block import Block, StreamInfo
+from ..analysis import onset as ons
+from ..drivers.block import Block, StreamInfo
 
 __all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "StreamHealth", "Trigger",
            "TriggerSettings"]

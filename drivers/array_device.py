@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ramdaq.drivers.base import Device
-from ramdaq.drivers.block import Block, StreamInfo
+from .base import Device
+from .block import Block, StreamInfo
 
 
 class ArrayDevice(Device):

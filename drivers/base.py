@@ -20,8 +20,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
-from ramdaq.drivers.block import Block, StreamInfo
-from ramdaq.drivers.errors import DeviceClosed, DeviceTimeout
+from .block import Block, StreamInfo
+from .errors import DeviceClosed, DeviceTimeout
 
 
 @dataclass(frozen=True)

@@ -65,13 +65,13 @@ from urllib.parse import parse_qsl
 import can
 import numpy as np
 
-from ramdaq.analysis.model.rig import Rig, load_rig, parse_rig
-from ramdaq.analysis.model.sensor import channel_scales
-from ramdaq.drivers.base import TIMED_OUT, Device
-from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
-from ramdaq.drivers.can_frames import UNRELATED, CycleAssembler, FrameCodec
-from ramdaq.drivers.errors import DeviceNotFound
-from ramdaq.drivers.slcan_reader import SlcanFrame, SlcanReader
+from ..analysis.model.rig import Rig, load_rig, parse_rig
+from ..analysis.model.sensor import channel_scales
+from .base import TIMED_OUT, Device
+from .block import Block, StreamInfo, sample_time_ns
+from .can_frames import UNRELATED, CycleAssembler, FrameCodec
+from .errors import DeviceNotFound
+from .slcan_reader import SlcanFrame, SlcanReader
 
 __all__ = ["CanDevice", "parse_address"]
 

@@ -93,8 +93,8 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError
 
-from ramdaq.drivers.block import Block, StreamInfo
-from ramdaq.drivers.errors import FrameError
+from .block import Block, StreamInfo
+from .errors import FrameError
 
 __all__ = [
     "BLOCK_SCHEMA_NAME", "BLOCK_TOPIC", "EVENTS_TOPIC", "IMPACTS_TOPIC", "SIM_IMPACTS_TOPIC",

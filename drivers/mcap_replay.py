@@ -58,10 +58,10 @@ from mcap.records import (
 )
 from mcap.stream_reader import breakup_chunk
 
-from ramdaq.drivers import mcap_format as fmt
-from ramdaq.drivers.base import TIMED_OUT, Device
-from ramdaq.drivers.block import Block, StreamInfo
-from ramdaq.drivers.errors import DeviceNotFound, FrameError
+from . import mcap_format as fmt
+from .base import TIMED_OUT, Device
+from .block import Block, StreamInfo
+from .errors import DeviceNotFound, FrameError
 
 __all__ = ["McapReplayDevice", "JsonMessage", "RecordScanner", "Damage", "FileEnd", "read_file_end",
            "check_mcap_magic"]

@@ -10,8 +10,8 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from ramdaq.drivers.base import Device
-from ramdaq.drivers.errors import DeviceNotFound
+from .base import Device
+from .errors import DeviceNotFound
 
 BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("ramdaq.drivers.sim", "SimDevice"),

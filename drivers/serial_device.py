@@ -63,12 +63,12 @@ from urllib.parse import unquote
 import numpy as np
 import serial
 
-from ramdaq.analysis.model.rig import Rig, load_rig, parse_rig
-from ramdaq.analysis.model.sensor import channel_scales
-from ramdaq.drivers.base import TIMED_OUT, Device
-from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
-from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
-from ramdaq.drivers.serial_frames import Frame, FrameParser
+from ..analysis.model.rig import Rig, load_rig, parse_rig
+from ..analysis.model.sensor import channel_scales
+from .base import TIMED_OUT, Device
+from .block import Block, StreamInfo, sample_time_ns
+from .errors import DeviceClosed, DeviceNotFound
+from .serial_frames import Frame, FrameParser
 
 __all__ = ["SerialDevice", "split_url"]
 

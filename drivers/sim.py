@@ -18,12 +18,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ramdaq.analysis.model.response import ModalSimulator, modal_form
-from ramdaq.analysis.model.rig import AXES, Rig, load_rig
-from ramdaq.analysis.model.sensor import SensorChain
-from ramdaq.analysis.model.structure import build_model
-from ramdaq.drivers.base import TIMED_OUT, Device
-from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
+from ..analysis.model.response import ModalSimulator, modal_form
+from ..analysis.model.rig import AXES, Rig, load_rig
+from ..analysis.model.sensor import SensorChain
+from ..analysis.model.structure import build_model
+from .base import TIMED_OUT, Device
+from .block import Block, StreamInfo, sample_time_ns
 
 
 @dataclass(frozen=True)

@@ -33,13 +33,26 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
+PACKAGE_OF = {path: (mod if path.stem == "__init__" else mod.rpartition(".")[0])
+              for mod, path in MODULES.items()}
+
+
+def _absolute(node: ast.ImportFrom, path: Path) -> str | None:
+    """The absolute module a ``from`` import names (relative ones resolved against ``path``'s package)."""
+    if node.level == 0:
+        return node.module
+    base = PACKAGE_OF[path].split(".")[: len(PACKAGE_OF[path].split(".")) - node.level + 1]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def _imports(path: Path) -> list[tuple[str, list[str], int]]:
-    """(module, names, line) of every ramdaq import in ``path``, at any depth (under
-    TYPE_CHECKING too: a circle of type hints is still a circle for the reader)."""
+    """(module, names, line) of every ramdaq import in ``path``, relative or absolute, at any depth
+    (under TYPE_CHECKING too: a circle of type hints is still a circle for the reader)."""
     out = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("ramdaq"):
-            out.append((node.module, [a.name for a in node.names], node.lineno))
+        target = _absolute(node, path) if isinstance(node, ast.ImportFrom) else None
+        if target and target.startswith("ramdaq"):
+            out.append((target, [a.name for a in node.names], node.lineno))
         elif isinstance(node, ast.Import):
             out += [(a.name, [], node.lineno) for a in node.names if a.name.startswith("ramdaq")]
     return out
@@ -53,6 +66,14 @@ def _edges() -> dict[str, set[str]]:
             subs = [f"{target}.{n}" for n in names if f"{target}.{n}" in MODULES]
             edges[mod].update(subs or ([target] if target in MODULES else []))
     return edges
+
+
+def test_the_import_graph_is_read() -> None:
+    """The checks below mean something only if the imports are found: relative ones included."""
+    edges = _edges()
+    assert "ramdaq.analysis.model.rig" in edges["ramdaq.analysis.impact"]
+    assert "ramdaq.drivers.block" in edges["ramdaq.daq.recorder"]
+    assert sum(map(len, edges.values())) > 200
 
 
 def test_every_folder_with_an_init_is_installed() -> None:
@@ -101,9 +122,10 @@ def test_no_private_name_crosses_a_module() -> None:
             crossing += [f"{path.relative_to(ROOT)}:{line}: {target}.{n}" for n in names
                          if n.startswith("_") and not n.startswith("__")]
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("ramdaq"):
+            target = _absolute(node, path) if isinstance(node, ast.ImportFrom) else None
+            if target and target.startswith("ramdaq"):
                 aliases.update({a.asname or a.name: a.name for a in node.names
-                                if f"{node.module}.{a.name}" in MODULES})
+                                if f"{target}.{a.name}" in MODULES})
         for node in ast.walk(tree):
             if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
                     and node.value.id in aliases and node.attr.startswith("_")

@@ -19,9 +19,9 @@ from enum import StrEnum
 
 import numpy as np
 
-from ramdaq.analysis.gap.forward import Fit, Forward
-from ramdaq.analysis.gap.terms import Term
-from ramdaq.analysis.gap.trialdata import summed_spectrum
+from .forward import Fit, Forward
+from .terms import Term
+from .trialdata import summed_spectrum
 
 
 class Stop(StrEnum):

@@ -40,9 +40,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ramdaq.analysis.gap.calibrate import Calibration, Stop, calibrate, prefit_frequencies
-from ramdaq.analysis.gap.effects import EFFECTS
-from ramdaq.analysis.gap.evidence import (
+from .calibrate import Calibration, Stop, calibrate, prefit_frequencies
+from .effects import EFFECTS
+from .evidence import (
     Bands,
     GapMap,
     ScoreBasis,
@@ -58,11 +58,11 @@ from ramdaq.analysis.gap.evidence import (
     signature_scores,
     window_inflation,
 )
-from ramdaq.analysis.gap.features import FeatureMap, feature_map
-from ramdaq.analysis.gap.forward import Forward
-from ramdaq.analysis.gap.terms import Placement, Term
-from ramdaq.analysis.gap.trialdata import TrialData
-from ramdaq.analysis.gap.verdict import choose, closed_share, closure, detection_score, location
+from .features import FeatureMap, feature_map
+from .forward import Forward
+from .terms import Placement, Term
+from .trialdata import TrialData
+from .verdict import choose, closed_share, closure, detection_score, location
 
 
 @dataclass(frozen=True)

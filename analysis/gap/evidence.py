@@ -25,9 +25,9 @@ import scipy.signal
 import scipy.special
 import scipy.stats
 
-from ramdaq.analysis.gap.calibrate import Calibration
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, whiten_fitted
-from ramdaq.analysis.gap.forward import Forward
+from .calibrate import Calibration
+from .effects.base import Effect, Placement, Term, whiten_fitted
+from .forward import Forward
 
 WINDOWS = ("pre", "early", "late")
 DECAY_TOL_PER_FORM_TOL = 5.0

@@ -30,11 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ramdaq.analysis.gap.calibrate import Calibration
-from ramdaq.analysis.gap.effects.base import compared_modes
-from ramdaq.analysis.gap.evidence import Bands
-from ramdaq.analysis.gap.forward import Forward
-from ramdaq.analysis.gap.trialdata import TrialData
+from .calibrate import Calibration
+from .effects.base import compared_modes
+from .evidence import Bands
+from .forward import Forward
+from .trialdata import TrialData
 
 DECAY_WINDOWS = ("early", "late")
 FEATURES = {

@@ -30,13 +30,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.signal
 
-from ramdaq.analysis.gap.trialdata import TrialData
-from ramdaq.analysis.model.response import half_sine_response, modal_form
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.analysis.model.structure import StructuralModel, build_model
+from ..model.response import half_sine_response, modal_form
+from ..model.rig import Rig
+from ..model.structure import StructuralModel, build_model
+from .trialdata import TrialData
 
 if TYPE_CHECKING:
-    from ramdaq.analysis.gap.terms import Term
+    from .terms import Term
 
 
 @dataclass(frozen=True)

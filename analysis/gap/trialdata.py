@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
-from ramdaq.analysis.model.response import impact_amplitudes, modal_form, predominant_mode
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.analysis.model.structure import build_model
+from ..model.response import impact_amplitudes, modal_form, predominant_mode
+from ..model.rig import Rig
+from ..model.structure import build_model
 
 DEC_ORDER = 8
 """Order of the decimation low-pass (applied forward and back: 16 in magnitude)."""

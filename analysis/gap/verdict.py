@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ramdaq.analysis.gap.evidence import GAP_CELL_Z, WINDOWS, GapMap
-from ramdaq.analysis.gap.terms import Term
+from .evidence import GAP_CELL_Z, WINDOWS, GapMap
+from .terms import Term
 
 
 def detection_score(fitted: GapMap, held: GapMap | None) -> float:

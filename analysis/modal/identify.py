@@ -61,9 +61,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg, stats
 
-from ramdaq.analysis.modal.crb import damping_ratio_from_decrement
-from ramdaq.analysis.modal.order import ModeSelector, floor_noise
-from ramdaq.analysis.modal.signal import (
+from .crb import damping_ratio_from_decrement
+from .order import ModeSelector, floor_noise
+from .signal import (
     decimate_valid,
     estimate_noise_std,
     fir_gain,
@@ -72,15 +72,15 @@ from ramdaq.analysis.modal.signal import (
     noise_std_from_periodogram,
     significant_band,
 )
-from ramdaq.analysis.modal.subspace import (
+from .subspace import (
     default_pencil_length,
     era_poles,
     esprit_poles,
     matrix_pencil_poles,
     poles_to_modes,
 )
-from ramdaq.analysis.modal.table import ModeTable
-from ramdaq.analysis.modal.varpro import Projector, damped_basis, fit_modes_varpro, uniform_grid
+from .table import ModeTable
+from .varpro import Projector, damped_basis, fit_modes_varpro, uniform_grid
 
 __all__ = ["ModeTable", "identify_modes"]
 

@@ -29,8 +29,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import linalg
 
-from ramdaq.analysis.modal.crb import damping_ratio_from_decrement
-from ramdaq.analysis.modal.varpro import (
+from .crb import damping_ratio_from_decrement
+from .varpro import (
     HeldPoleFitter,
     VarProFit,
     drop_one_rss_increase,

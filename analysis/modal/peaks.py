@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import signal
 
-from ramdaq.analysis.modal.signal import estimate_noise_std
+from .signal import estimate_noise_std
 
 __all__ = ["PeakDecrement", "bandpass_mode", "decrement_from_peaks"]
 

@@ -27,7 +27,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ramdaq.analysis.modal.identify import identify_modes
+from .identify import identify_modes
 
 __all__ = ["DecayAssessment", "Verdict", "assess_decay"]
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ramdaq.analysis.model.rig import ALIGN_TOL_M, Rig, RigError
-from ramdaq.analysis.report1836.motions import GageGeometry
+from ..report1836.motions import GageGeometry
+from .rig import ALIGN_TOL_M, Rig, RigError
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from ramdaq.analysis.model.structure import StructuralModel
+from .structure import StructuralModel
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ramdaq.analysis.model.response import ModelModes, modal_form, model_modes, predominant_mode
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.analysis.model.structure import build_model
+from .response import ModelModes, modal_form, model_modes, predominant_mode
+from .rig import Rig
+from .structure import build_model
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from ramdaq.analysis.model.rig import Rig
+from .rig import Rig
 
 
 def channel_scales(rig: Rig) -> np.ndarray:

@@ -42,8 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ramdaq.analysis.model.rig import AXES, Rig
-from ramdaq.analysis.report1836.virtual_mass import Ix_vir, Iz_vir_elliptic, m_vir_flat_plate
+from ..report1836.virtual_mass import Ix_vir, Iz_vir_elliptic, m_vir_flat_plate
+from .rig import AXES, Rig
 
 RUDDER_DOFS = ("v", "gamma", "alpha")
 

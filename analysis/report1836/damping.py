@@ -58,8 +58,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 # The exact delta <-> zeta relations live in ramdaq.analysis.modal.crb; re-exported here for the chain.
-from ramdaq.analysis.modal.crb import damping_ratio_from_decrement, decrement_from_damping_ratio
-from ramdaq.analysis.report1836.arrays import Number, as_number, checked, finite, positive
+from ..modal.crb import damping_ratio_from_decrement, decrement_from_damping_ratio
+from .arrays import Number, as_number, checked, finite, positive
 
 __all__ = [
     "damping_ratio_from_decrement",

@@ -28,7 +28,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ramdaq.analysis.report1836.arrays import Number, as_number, finite, positive
+from .arrays import Number, as_number, finite, positive
 
 __all__ = [
     "GageGeometry",

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ramdaq.analysis.model.units import RHO_REPORT_KG_M3, from_si, report_unit, to_si
-from ramdaq.analysis.report1836.damping import C_translational, c_rotational
-from ramdaq.analysis.report1836.motions import percent_deviation_from_average
-from ramdaq.analysis.report1836.virtual_mass import (
+from ..model.units import RHO_REPORT_KG_M3, from_si, report_unit, to_si
+from .damping import C_translational, c_rotational
+from .motions import percent_deviation_from_average
+from .virtual_mass import (
     Ix_vir,
     Iz_vir_elliptic,
     m_vir_flat_plate,

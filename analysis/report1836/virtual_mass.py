@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ramdaq.analysis.report1836.arrays import Number, as_number, checked, positive
+from .arrays import Number, as_number, checked, positive
 
 __all__ = [
     "m_vir_from_frequencies",

@@ -40,15 +40,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.analysis.truth.integrate import (
+from ..model.rig import Rig
+from .integrate import (
     ModalRecursion,
     blow_amplitudes,
     decay_weighted,
     gage_mode_amplitudes,
     modal_recursion,
 )
-from ramdaq.analysis.truth.structure import TruthModel, build_truth_model
+from .structure import TruthModel, build_truth_model
 
 REFERENCE: dict[str, str] = {
     "none": "no effect; size is ignored",

@@ -30,8 +30,8 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from ramdaq.analysis.model.response import half_sine_response
-from ramdaq.analysis.truth.structure import TruthModel
+from ..model.response import half_sine_response
+from .structure import TruthModel
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(6)
 FAST_DECAY = 40.0

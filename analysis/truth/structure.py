@@ -43,8 +43,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from ramdaq.analysis.model.rig import AXES, Rig
-from ramdaq.analysis.model.structure import added_mass, rudder_point_dofs
+from ..model.rig import AXES, Rig
+from ..model.structure import added_mass, rudder_point_dofs
 
 STEEL_DENSITY_KG_M3 = 7850.0
 N_BEND_ELEMENTS = 4

@@ -38,11 +38,11 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from ramdaq.analysis.model.response import modal_form, model_modes, predominant_mode
-from ramdaq.analysis.model.rig import ImpactSpec, Rig
-from ramdaq.analysis.model.structure import build_model
-from ramdaq.analysis.truth.effects import PLANNERS, REFERENCE, Context, Plan
-from ramdaq.analysis.truth.integrate import (
+from ..model.response import modal_form, model_modes, predominant_mode
+from ..model.rig import ImpactSpec, Rig
+from ..model.structure import build_model
+from .effects import PLANNERS, REFERENCE, Context, Plan
+from .integrate import (
     ModalRecursion,
     friction_input,
     half_sine_moments,
@@ -50,7 +50,7 @@ from ramdaq.analysis.truth.integrate import (
     modal_recursion,
     smooth_moments,
 )
-from ramdaq.analysis.truth.structure import build_truth_model
+from .structure import build_truth_model
 
 EFFECTS: tuple[str, ...] = ("none", "hull_coupling", "ambient_tone", "friction", "tiller", "added_mass",
                             "split_mode", "gage_sensitivity", "gage_alignment", "clipping", "time_skew",

@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.model.geometry import gage_geometry
-from ramdaq.analysis.model.rig import Rig, parse_rig
-from ramdaq.analysis.model.structure import added_mass
-from ramdaq.analysis.model.units import from_si
-from ramdaq.daq.analyzer import HitResult, analysis_to_json, finite_json, judge_event, trial_summary
-from ramdaq.daq.trigger import Trigger
-from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ...analysis.model.geometry import gage_geometry
+from ...analysis.model.rig import Rig, parse_rig
+from ...analysis.model.structure import added_mass
+from ...analysis.model.units import from_si
+from ...drivers.mcap_replay import McapReplayDevice
+from ..analyzer import HitResult, analysis_to_json, finite_json, judge_event, trial_summary
+from ..trigger import Trigger
 
 UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "m",
          "mass": "kg", "inertia": "kg m^2", "time": "s"}
@@ -182,7 +182,7 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
     os.replace(tmp, out / "report.json")
     files = [out / "report.json"]
     if plots:
-        from ramdaq.daq.reports.impact_plots import plot_impact
+        from ..reports.impact_plots import plot_impact
 
         n_gages = len(rig.gages_by_channel())
         for h in hits:

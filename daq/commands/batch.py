@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, get_args, get_type_hints
 
-from ramdaq.daq.batch_tasks import (
+from ..batch_tasks import (
     ROWS,
     TASKS,
     TaskResult,

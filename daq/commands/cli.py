@@ -47,10 +47,10 @@ import traceback  # noqa: E402
 from collections.abc import Iterator  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from ramdaq.analysis.model.rig import RigError, load_rig
-from ramdaq.daq.commands.gap_bench import SEED_SETS
-from ramdaq.daq.errors import RecordingError, ViewError
-from ramdaq.drivers.errors import DeviceError
+from ...analysis.model.rig import RigError, load_rig
+from ...drivers.errors import DeviceError
+from ..errors import RecordingError, ViewError
+from .gap_bench import SEED_SETS
 
 RECORDINGS = Path("recordings")
 
@@ -73,8 +73,8 @@ def _parse_impacts(text: str) -> list[float]:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    from ramdaq.daq.record import record
-    from ramdaq.drivers.registry import open_device
+    from ...drivers.registry import open_device
+    from ..record import record
 
     options, default_name = _device_options(args)
     out = _recording_path(args, default_name)
@@ -94,7 +94,7 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from ramdaq.daq.commands.info import describe_recording, format_info
+    from .info import describe_recording, format_info
 
     d = describe_recording(args.file)
     print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
@@ -102,7 +102,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_recover(args: argparse.Namespace) -> int:
-    from ramdaq.daq.recover import recover
+    from ..recover import recover
 
     src = Path(args.file)
     dst = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
@@ -182,7 +182,7 @@ def _make_folders(paths: list[Path | None]) -> None:
 
 def _check_ports(args: argparse.Namespace) -> None:
     if getattr(args, "web", False):
-        from ramdaq.daq.rerun_view import check_ports
+        from ..rerun_view import check_ports
 
         try:
             check_ports(args.web_port, args.grpc_port)
@@ -191,11 +191,11 @@ def _check_ports(args: argparse.Namespace) -> None:
 
 
 def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd: Path | None):
-    from ramdaq.daq.session import Session
+    from ..session import Session
 
     view = None
     if rrd is not None or args.web:
-        from ramdaq.daq.rerun_view import RerunView
+        from ..rerun_view import RerunView
 
         view = RerunView(device.info, rrd_path=rrd, serve_web=args.web, web_port=args.web_port,
                          grpc_port=args.grpc_port)
@@ -213,7 +213,7 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
 
 def _print_outcome(outcome, args: argparse.Namespace) -> None:
     """The trial summary on the terminal and, with ``--json``, the per-hit results in a file."""
-    from ramdaq.daq.commands.analyze import json_default, summary_table
+    from .analyze import json_default, summary_table
 
     for k, why in outcome.summary["rejected"].items():
         print(f"hit {k} rejected: {why}")
@@ -233,7 +233,7 @@ def _stream_result(outcome, args: argparse.Namespace) -> int:
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
-    from ramdaq.drivers.registry import open_device
+    from ...drivers.registry import open_device
 
     options, default_name = _device_options(args)
     out = _recording_path(args, default_name)
@@ -254,7 +254,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from ramdaq.drivers.mcap_replay import McapReplayDevice
+    from ...drivers.mcap_replay import McapReplayDevice
 
     rrd = Path(args.rrd) if args.rrd else None
     outputs = [rrd, Path(args.json) if args.json else None]
@@ -270,7 +270,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from ramdaq.daq.commands.analyze import format_summary, run_analysis, write_analysis
+    from .analyze import format_summary, run_analysis, write_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
@@ -288,14 +288,14 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_gap(args: argparse.Namespace) -> int:
     """Sim-to-real gap diagnosis of a recording, or the benchmark that proves it."""
-    from ramdaq.analysis.gap.diagnose import Settings
-    from ramdaq.analysis.gap.effects import get_effect
+    from ...analysis.gap.diagnose import Settings
+    from ...analysis.gap.effects import get_effect
 
     effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
     for e in effects or ():
         get_effect(e)
     if args.file == "benchmark":
-        from ramdaq.daq.commands.gap_bench import run_benchmark
+        from .gap_bench import run_benchmark
 
         if sum((args.dev, args.check, args.seeds is not None)) > 1:
             raise SystemExit("ramdaq gap benchmark: give one of --dev, --check, --seeds")
@@ -304,7 +304,7 @@ def cmd_gap(args: argparse.Namespace) -> int:
         return run_benchmark(out, per_class=args.per_class, seeds=seeds, jobs=args.jobs,
                              rescore=args.rescore, thresholds=args.thresholds,
                              progress=lambda m: print(m, flush=True))
-    from ramdaq.daq.commands.gap import run_gap, summary_lines, write_report
+    from .gap import run_gap, summary_lines, write_report
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
@@ -319,9 +319,9 @@ def cmd_gap(args: argparse.Namespace) -> int:
 
 def cmd_import(args: argparse.Namespace) -> int:
     """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording."""
-    from ramdaq.daq.record import record
-    from ramdaq.drivers.files.import_common import parse_channel_map
-    from ramdaq.drivers.registry import open_device
+    from ...drivers.files.import_common import parse_channel_map
+    from ...drivers.registry import open_device
+    from ..record import record
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".mcap")
@@ -346,8 +346,8 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 def cmd_export_uff(args: argparse.Namespace) -> int:
     """A recording's identified modes and decay records as UFF 15/55/58 for modal software."""
-    from ramdaq.daq.commands.analyze import run_analysis
-    from ramdaq.drivers.files.export_uff import export_uff
+    from ...drivers.files.export_uff import export_uff
+    from .analyze import run_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".uff")
@@ -359,7 +359,7 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
 
 
 def cmd_rig(args: argparse.Namespace) -> int:
-    from ramdaq.analysis.model.rig_modes import eq18_check, modes_in
+    from ...analysis.model.rig_modes import eq18_check, modes_in
 
     rig = load_rig(args.rig)
     print(f"rig {rig.name} ({args.rig}): {len(rig.gages)} gages, "
@@ -389,7 +389,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """Many recordings at once on a dask cluster: one Parquet table, a report folder each."""
-    from ramdaq.daq.commands.batch import ClusterError, exit_code, run_batch, summary_lines
+    from .batch import ClusterError, exit_code, run_batch, summary_lines
 
     out = Path(args.out or f"batch_{args.kind}")
     try:
@@ -404,8 +404,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 def cmd_gap_benchmark(args: argparse.Namespace) -> int:
     """The gap benchmark on worker processes, or with --scheduler on a dask cluster."""
-    from ramdaq.analysis.gap.effects import get_effect
-    from ramdaq.daq.commands.gap_bench import run_benchmark
+    from ...analysis.gap.effects import get_effect
+    from .gap_bench import run_benchmark
 
     effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
     for e in effects or ():
@@ -418,7 +418,7 @@ def cmd_gap_benchmark(args: argparse.Namespace) -> int:
     out = Path(args.out or "gap_benchmark")
     if not args.scheduler or args.rescore:
         return run_benchmark(out, **kw)
-    from ramdaq.daq.commands.batch import open_client
+    from .batch import open_client
 
     local = args.scheduler == "local"
     try:

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.gap.diagnose import Diagnosis, Settings, diagnose
-from ramdaq.analysis.gap.trialdata import TrialData, prepare
-from ramdaq.analysis.model.rig import Rig, RigError, load_rig, parse_rig
-from ramdaq.daq.trigger import Trigger
-from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ...analysis.gap.diagnose import Diagnosis, Settings, diagnose
+from ...analysis.gap.trialdata import TrialData, prepare
+from ...analysis.model.rig import Rig, RigError, load_rig, parse_rig
+from ...drivers.mcap_replay import McapReplayDevice
+from ..trigger import Trigger
 
 
 @dataclass
@@ -199,6 +199,6 @@ def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "
     files = [out / "gap.json"]
     files[0].write_text(json.dumps(doc, indent=1))
     if plots:
-        from ramdaq.daq.reports.gap_plots import plot_diagnosis
+        from ..reports.gap_plots import plot_diagnosis
         files += plot_diagnosis(d, out)
     return files

@@ -68,7 +68,7 @@ def scenarios(per_class: int, seeds: str = "benchmark",
               effects: tuple[str, ...] | None = None) -> list[dict]:
     """The fixed scenario list: every effect class x ``per_class`` sizes, rigs in turn, from the
     seed set named ``seeds`` (a key of :data:`SEED_SETS`)."""
-    from ramdaq.analysis.truth.trial import EFFECTS
+    from ...analysis.truth.trial import EFFECTS
 
     if seeds not in SEED_SETS:
         raise ValueError(f"seed set {seeds!r}: not one of {', '.join(SEED_SETS)}")
@@ -92,12 +92,12 @@ def scenarios(per_class: int, seeds: str = "benchmark",
 
 def run_one(sc: dict, workdir: str) -> dict:
     """Generate, record, diagnose one scenario; the result as plain JSON."""
-    from ramdaq.analysis.gap.diagnose import Settings
-    from ramdaq.analysis.model.rig import load_rig
-    from ramdaq.analysis.truth.trial import generate_trial
-    from ramdaq.daq.commands.gap import run_gap
-    from ramdaq.daq.record import record
-    from ramdaq.drivers.array_device import ArrayDevice
+    from ...analysis.gap.diagnose import Settings
+    from ...analysis.model.rig import load_rig
+    from ...analysis.truth.trial import generate_trial
+    from ...drivers.array_device import ArrayDevice
+    from ..record import record
+    from .gap import run_gap
 
     t0 = time.perf_counter()
     rig = load_rig(sc["rig"]).with_medium(sc["medium"])
@@ -135,7 +135,7 @@ def run_one(sc: dict, workdir: str) -> dict:
 def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
     """The verdict's choice re-evaluated for other thresholds (for tuning): the diagnosis' own
     :func:`~ramdaq.analysis.gap.diagnose.choose` on the stored candidates."""
-    from ramdaq.analysis.gap.verdict import choose
+    from ...analysis.gap.verdict import choose
 
     if "error" in r:
         return "none"
@@ -345,7 +345,7 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
     shipped :data:`THRESHOLDS`).
     ``rescore``: score the results an earlier run stored in ``out`` again (after re-tuning on
     the development seeds) instead of running the scenarios."""
-    from ramdaq.analysis.gap.diagnose import Settings
+    from ...analysis.gap.diagnose import Settings
 
     say = progress or (lambda s: None)
     out.mkdir(parents=True, exist_ok=True)

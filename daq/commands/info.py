@@ -16,9 +16,9 @@ from typing import Any
 
 from mcap.records import Attachment, Channel, Message, Metadata
 
-from ramdaq.daq.errors import NotARamdaqRecording
-from ramdaq.drivers import mcap_format as fmt
-from ramdaq.drivers.mcap_replay import Damage, RecordScanner
+from ...drivers import mcap_format as fmt
+from ...drivers.mcap_replay import Damage, RecordScanner
+from ..errors import NotARamdaqRecording
 
 __all__ = ["describe_recording", "format_info"]
 

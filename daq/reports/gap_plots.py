@@ -13,9 +13,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ramdaq.analysis.gap.diagnose import Diagnosis  # noqa: E402
-from ramdaq.analysis.gap.evidence import WINDOWS, GapMap  # noqa: E402
-from ramdaq.analysis.gap.features import DECAY_WINDOWS, FEATURES, FeatureMap  # noqa: E402
+from ...analysis.gap.diagnose import Diagnosis  # noqa: E402
+from ...analysis.gap.evidence import WINDOWS, GapMap  # noqa: E402
+from ...analysis.gap.features import DECAY_WINDOWS, FEATURES, FeatureMap  # noqa: E402
 
 
 def _heat(ax_row, m: GapMap, title: str, vmax: float) -> None:

@@ -17,9 +17,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.signal  # noqa: E402
 
-from ramdaq.analysis.impact import ImpactAnalysis  # noqa: E402
-from ramdaq.analysis.modal.peaks import bandpass_mode  # noqa: E402
-from ramdaq.analysis.model.rig import Rig  # noqa: E402
+from ...analysis.impact import ImpactAnalysis  # noqa: E402
+from ...analysis.modal.peaks import bandpass_mode  # noqa: E402
+from ...analysis.model.rig import Rig  # noqa: E402
 
 BODY_COLOURS = {"rudder": "tab:blue", "stock": "tab:orange", "hull": "tab:grey"}
 

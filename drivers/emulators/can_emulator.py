@@ -47,9 +47,9 @@ from dataclasses import dataclass
 import can
 import numpy as np
 
-from ramdaq.analysis.model.rig import RigError, load_rig
-from ramdaq.drivers.block import Block
-from ramdaq.drivers.can_frames import FrameCodec
+from ...analysis.model.rig import RigError, load_rig
+from ..block import Block
+from ..can_frames import FrameCodec
 
 __all__ = ["CanEmulator", "Wire", "send_frames", "serve_slcan", "slcan_line", "rig_with_adc_bits", "main"]
 
@@ -342,7 +342,7 @@ def _drain(fd: int, out: bytes, serve: Callable[[float], None], state: dict, sta
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ramdaq.drivers.sim import SimDevice
+    from ..sim import SimDevice
 
     ap = argparse.ArgumentParser(prog="python -m ramdaq.drivers.emulators.can_emulator",
                                  description=__doc__.split("\n")[0])

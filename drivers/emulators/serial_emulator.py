@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.drivers.serial_frames import FLAG_END, HEADER_BYTES, encode_frame, width_for_bits
+from ..serial_frames import FLAG_END, HEADER_BYTES, encode_frame, width_for_bits
 
 _SETTLE_S = 0.2  # after a reader connects: pyserial flushes a port's input as it opens it
 
@@ -212,7 +212,7 @@ def frames_of(sim: Iterable, samples: int) -> Iterator[tuple[int, np.ndarray]]:
 
 def run(args: argparse.Namespace, port: PtyPort | TcpBridge) -> dict:
     """Stream the simulated trial through ``port``; return the summary."""
-    from ramdaq.drivers.sim import SimDevice  # after the address is out: scipy takes a while to import
+    from ..sim import SimDevice  # after the address is out: scipy takes a while to import
 
     sim = SimDevice(args.rig, seed=args.seed, duration_s=args.duration, impacts=args.impacts,
                     fs_hz=args.fs, pace="fast")

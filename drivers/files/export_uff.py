@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.impact import ImpactAnalysis
-from ramdaq.analysis.model.rig import Rig
+from ...analysis.impact import ImpactAnalysis
+from ...analysis.model.rig import Rig
 
 __all__ = ["export_uff", "UffExport", "AXIS_CODES"]
 

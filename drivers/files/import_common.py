@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.model.rig import Rig, load_rig
-from ramdaq.drivers.base import Device
-from ramdaq.drivers.block import Block, StreamInfo, sample_time_ns
-from ramdaq.drivers.errors import DeviceError, DeviceNotFound
+from ...analysis.model.rig import Rig, load_rig
+from ..base import Device
+from ..block import Block, StreamInfo, sample_time_ns
+from ..errors import DeviceError, DeviceNotFound
 
 __all__ = ["G0", "FULL_SCALE_COUNTS", "STEP_TOLERANCE", "ImportFormatError", "SourceTable",
            "Quantisation", "FileImportDevice", "gage_of_name", "parse_channel_map",

@@ -41,8 +41,8 @@ from os import PathLike
 
 import numpy as np
 
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.drivers.files.import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from ...analysis.model.rig import Rig
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
 
 __all__ = ["CsvImportDevice", "read_csv_table", "sample_grid"]
 

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.drivers.files.import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
-from ramdaq.drivers.files.import_csv import sample_grid
+from ...analysis.model.rig import Rig
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from .import_csv import sample_grid
 
 __all__ = ["TdmsImportDevice", "check_tdms_segments"]
 

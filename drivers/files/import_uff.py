@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ramdaq.drivers.files.import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
 
 __all__ = ["UffImportDevice", "read_uff_table"]
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term
+from .base import Effect, Placement, Term
 
 __all__ = ["Effect", "Placement", "Term", "EFFECTS", "get_effect"]
 

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, placement
+from .base import Effect, Placement, Term, placement
 
 
 class AddedMass(Effect):

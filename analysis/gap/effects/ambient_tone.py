@@ -18,9 +18,9 @@ import math
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, placement, summed_spectrum
-from ramdaq.analysis.model.response import ambient_gage_amplitudes
-from ramdaq.analysis.model.structure import build_model
+from ...model.response import ambient_gage_amplitudes
+from ...model.structure import build_model
+from .base import Effect, Placement, Term, placement, summed_spectrum
 
 
 class AmbientTone(Effect):

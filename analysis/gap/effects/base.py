@@ -22,17 +22,17 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from ramdaq.analysis.gap.terms import Placement, Term, placement
-from ramdaq.analysis.gap.trialdata import summed_spectrum
-from ramdaq.analysis.model.rig import Rig
-from ramdaq.analysis.model.structure import StructuralModel
+from ...model.rig import Rig
+from ...model.structure import StructuralModel
+from ..terms import Placement, Term, placement
+from ..trialdata import summed_spectrum
 
 __all__ = ["Effect", "Placement", "Term", "compared_modes", "gage_row", "placement", "residual_peaks",
            "rudder_gages", "summed_spectrum", "whiten_fitted"]
 
 if TYPE_CHECKING:
-    from ramdaq.analysis.gap.calibrate import Calibration
-    from ramdaq.analysis.gap.forward import Fit, Forward, ModeSet
+    from ..calibrate import Calibration
+    from ..forward import Fit, Forward, ModeSet
 
 
 class Effect:

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, placement
+from .base import Effect, Placement, Term, placement
 
 
 class Clipping(Effect):

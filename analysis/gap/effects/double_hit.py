@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, placement
+from .base import Effect, Placement, Term, placement
 
 DELAY_RANGE_S = (0.004, 0.055)
 """Second contacts looked for: from just after a contact to where the trigger would see a new

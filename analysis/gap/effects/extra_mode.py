@@ -13,7 +13,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import (
+from ...model.rig import HullMode
+from .base import (
     Effect,
     Placement,
     Term,
@@ -21,7 +22,6 @@ from ramdaq.analysis.gap.effects.base import (
     placement,
     residual_peaks,
 )
-from ramdaq.analysis.model.rig import HullMode
 
 
 class _ExtraMode(Effect):

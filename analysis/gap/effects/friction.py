@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
+from .base import Effect, Placement, Term, compared_modes, placement
 
 
 class Friction(Effect):

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, placement
+from .base import Effect, Placement, Term, placement
 
 
 class GageAlignment(Effect):

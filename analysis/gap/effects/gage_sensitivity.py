@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, placement, whiten_fitted
+from .base import Effect, Placement, Term, placement, whiten_fitted
 
 
 class GageSensitivity(Effect):

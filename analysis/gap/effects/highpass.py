@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
-from ramdaq.analysis.model.response import half_sine_response
+from ...model.response import half_sine_response
+from .base import Effect, Placement, Term, compared_modes, placement
 
 
 class HighPass(Effect):

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ramdaq.analysis.gap.effects.base import Effect, Placement, Term, compared_modes, placement
+from .base import Effect, Placement, Term, compared_modes, placement
 
 MAX_SPLIT = 0.1
 """The widest split fitted, relative: beyond it the two are modes of their own (an extra mode)."""
