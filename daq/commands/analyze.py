@@ -18,10 +18,15 @@ import numpy as np
 from ...analysis.model.geometry import gage_geometry
 from ...analysis.model.rig import Rig, parse_rig
 from ...analysis.model.structure import added_mass
+from ...analysis.model.surface import Surface
 from ...analysis.model.units import from_si
 from ...drivers.mcap_replay import McapReplayDevice
 from ..analyzer import HitResult, analysis_to_json, finite_json, judge_event, trial_summary
 from ..trigger import Trigger
+
+MODEL_MOTIONS = ("v", "gamma", "alpha")
+"""The model's motion names; ``report.json``'s ``surface.motions`` gives what the rig calls each
+(a stern plane's w, beta, alpha), and every key of its analyses uses those names."""
 
 UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "m",
          "mass": "kg", "inertia": "kg m^2", "time": "s"}
@@ -80,8 +85,10 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
     f_here = summary["f_hz"]["mean"]
     vi = virtual_inertias(rig, f_other, f_here) if air and rig.medium == "water" else \
         virtual_inertias(rig)
+    surface = rig.surface
     return finite_json({
         "recording": str(path), "rig": rig.name, "medium": rig.medium,
+        "surface": {"kind": surface.kind, "motions": {m: surface.label(m) for m in MODEL_MOTIONS}},
         "geometry_m": gage_geometry(rig).__dict__,
         "units": UNITS,
         "impacts": [{"index": h.index, "onset_s": h.event.onset_s, "accepted": h.accepted,
@@ -89,16 +96,18 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                                                    "clipped": list(h.event.clipped),
                                                    "too_short": h.event.too_short},
                      "snr_db": finite_json(h.event.snr_db),
-                     "analysis": analysis_to_json(h.analysis) if h.analysis else None}
+                     "analysis": surface.relabel(analysis_to_json(h.analysis)) if h.analysis
+                     else None}
                     for h in hits],
-        "summary": summary,
+        "summary": surface.relabel(summary),
         "virtual_inertias": vi,
     })
 
 
 def format_summary(report: dict, units: str = "si") -> str:
     """A readable table: each hit, then per gage and motion the mean decrement and scatter."""
-    lines = [f"{report['recording']}: rig {report['rig']} in {report['medium']}"]
+    kind = report.get("surface", {}).get("kind", "rudder").replace("_", " ")
+    lines = [f"{report['recording']}: rig {report['rig']} ({kind}) in {report['medium']}"]
     for imp in report["impacts"]:
         a = imp["analysis"]
         if a:
@@ -109,12 +118,13 @@ def format_summary(report: dict, units: str = "si") -> str:
                          f"{imp['reason']}")
     lines += summary_table(report["summary"], units)
     vi = report["virtual_inertias"]
+    surface = Surface(kind=report.get("surface", {}).get("kind", "rudder"))
     conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
     mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
-    lines.append(f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
-                 f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
-                 f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g}"
-                 f" {iu}")
+    lines.append(surface.label(
+        f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
+        f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
+        f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g} {iu}"))
     if "m_vir_eq18_kg" in vi:
         lines.append(f"virtual mass, Eq 18 (air {vi['f_air_hz']:.3f} Hz, water "
                      f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
