@@ -66,7 +66,12 @@ def run_analysis(path: str | Path, *, impact: int | None = None,
 
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
                      f_water_hz: float | None = None) -> dict:
-    """Eq 19-21 from the rig's geometry; Eq 18 when both trials' frequencies are given."""
+    """Eq 19-21 from the rig's geometry; Eq 18 when both trials' frequencies are given. A rig
+    without water damping (a surface tested in air only, as the report's stern planes) has none:
+    the dict holds only ``not_computed``, the reason."""
+    if "water" not in rig.damping:
+        return {"not_computed": f"rig {rig.name} has no [damping.water]: tested in air only, "
+                                "so no virtual inertias (as Report 1836 for its stern planes)"}
     add = added_mass(rig.with_medium("water"))
     out = {"m_vir_eq19_kg": add["m_vir"], "Iz_vir_eq20_kg_m2": add["Iz_vir"],
            "Ix_vir_eq21_kg_m2": add["Ix_vir"]}
@@ -121,6 +126,9 @@ def format_summary(report: dict, units: str = "si") -> str:
     surface = Surface(kind=report.get("surface", {}).get("kind", "rudder"))
     conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
     mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
+    if "not_computed" in vi:
+        lines.append(f"\nvirtual inertias: {vi['not_computed']}")
+        return "\n".join(lines)
     lines.append(surface.label(
         f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
         f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
