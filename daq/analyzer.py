@@ -218,10 +218,12 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
         "gages": {f"g{n:02d}": d.to_json() for n, d in sorted(a.gages.items())},
         "motions": {k: d.to_json() for k, d in a.motions.items()},
         "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
+        "hull_motions": {k: d.to_json() for k, d in a.hull_motions.items()},
         "alpha1_over_gamma1": finite_json(a.alpha1_over_gamma1),
         "damping": a.damping.to_json(),
         "stock_lengths_m": a.stock_lengths,
         "table2b": finite_json(a.table2b()),
+        "hull_table": finite_json(a.hull_table()),
         "notes": list(a.notes),
     }
 

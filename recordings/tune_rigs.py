@@ -81,7 +81,7 @@ def tune_stern_plane() -> None:
         f = modes_in(build(p), "air").table.frequency_hz
         return [f[0] / 20 - 1, f[1] / 77 - 1, f[2] / 120 - 1]
 
-    fit = least_squares(residual, [0.17, 150.0, 110.0], x_scale=[0.01, 20.0, 5.0], diff_step=1e-4,
+    fit = least_squares(residual, [0.22, 145.0, 138.0], x_scale=[0.01, 20.0, 5.0], diff_step=1e-4,
                         bounds=([0.05, 20, 50], [0.5, 2000, 300]))
     tuned = build(fit.x)
     delta = 0.0933

@@ -66,6 +66,15 @@ def test_analyze(trial, truth, capsys):
         for name, m in a["motions"].items():
             assert _within_statistics(m["delta"], m["delta_se"], d_true), (name, m, d_true)
         assert set(a["table2b"]["rows"]) == {"beta", "alpha", "w_2_6", "modal"}
+        # Table 2f's fixed-portion decrements: the fixed plane's own alpha, beta, w, which the
+        # 20 Hz mode moves too; its rows hold what the chain could measure
+        fixed = a["fixed_portion_motions"]
+        assert set(fixed) == {"alpha_b", "beta_b", "w_b"}
+        for name, m in fixed.items():
+            assert _within_statistics(m["delta"], m["delta_se"], d_true), (name, m, d_true)
+        assert set(a["fixed_portion_table"]["rows"]) == {"alpha_b", "beta_b", "w_b"}
+        assert a["fixed_portion_table"]["average"] == pytest.approx(
+            sum(m["delta"] for m in fixed.values()) / 3, rel=1e-12)
         assert "alpha1_over_beta1" in a and "I_y_kg_m2" in a["damping"]
 
 

@@ -93,9 +93,10 @@ def test_labels_follow_the_surface():
     s = Surface("stern_plane")
     assert [s.label(n) for n in ("v_2_6", "gamma", "alpha", "v_R_4_8", "gamma_R", "delta_v",
                                  "alpha1_over_gamma1", "I_z_kg_m2", "I_xz_kg_m2", "m_vir",
-                                 "delta_modal", "c_N_m_s_per_rad")] == [
+                                 "delta_modal", "c_N_m_s_per_rad", "hull_motions")] == [
         "w_2_6", "beta", "alpha", "w_R_4_8", "beta_R", "delta_w", "alpha1_over_beta1",
-        "I_y_kg_m2", "I_xy_kg_m2", "m_vir", "delta_modal", "c_N_m_s_per_rad"]
+        "I_y_kg_m2", "I_xy_kg_m2", "m_vir", "delta_modal", "c_N_m_s_per_rad",
+        "fixed_portion_motions"]
     assert Surface().label("v_2_6") == "v_2_6"
     # alpha1/beta1 = -alpha1/gamma1 on the starboard side, where beta = -gamma
     assert s.relabel({"alpha1_over_gamma1": -1.5, "motions": {"gamma": 1}}) == {
@@ -110,7 +111,7 @@ def test_labels_follow_the_surface():
     ('body = "movable"', 'body = "rudder"', r"gages\[0\]\.body: 'rudder' is not one of movable, "
                                             r"stock, fixed \(a stern plane's bodies\)"),
     ("mass_kg = 1200.0", "mass_kg = -1200.0", r"plane\.mass_kg: must be positive"),
-    ("Iy_kg_m2 = 127.05", "Iy_kg_m2_ = 127.05", r"plane\.Iy_kg_m2: missing"),
+    ("Iy_kg_m2 = 144.83", "Iy_kg_m2_ = 144.83", r"plane\.Iy_kg_m2: missing"),
     ("w_b = 1.0", "v_b = 1.0", r"hull\.modes\[0\]\.v_b: a stern plane's hull modes give w_b"),
     ("beta_b = 0.10", "beta_b = true", r"hull\.modes\[0\]\.beta_b: expected a finite number"),
 ])

@@ -111,7 +111,8 @@ class Surface:
     def label(self, name: str) -> str:
         """A model quantity's name as this surface calls it: for a stern plane ``v_2_6`` is
         ``w_2_6``, ``gamma_b`` is ``beta_b``, ``alpha1_over_gamma1`` is ``alpha1_over_beta1``,
-        ``I_z_kg_m2`` (about the stock) ``I_y_kg_m2``; a rudder's names are the model's."""
+        ``I_z_kg_m2`` (about the stock) ``I_y_kg_m2``, ``hull_motions`` ``fixed_portion_motions``;
+        a rudder's names are the model's."""
         if self.is_rudder:
             return name
         for pattern, new in _STERN_LABELS:
@@ -149,6 +150,7 @@ _STERN_LABELS = (
     (re.compile(r"I(_?)xz"), r"I\1xy"),
     (re.compile(r"(?<![A-Za-z0-9])I(_?)z(?![A-Za-z0-9])"), r"I\1y"),
     (re.compile(r"rudder"), "movable"),
+    (re.compile(r"hull"), "fixed_portion"),
 )
 
 
