@@ -104,3 +104,21 @@ def test_gap(trial, truth, capsys):
     assert abs(first["f_hz"] / 20.0 - 1) < 0.02
     # the calibrated model's decrement, printed to 4 figures: the model's within the bias bound
     assert abs(first["delta"] / d_true - 1) < DELTA_BIAS
+
+
+def test_export_uff_in_ship_axes(trial):
+    import pyuff
+
+    tmp, mcap = trial
+    out = tmp / "sp.uff"
+    assert main(["export-uff", str(mcap), "--out", str(out)]) == 0
+    sets = pyuff.UFF(str(out)).read_sets()
+    nodes = next(s for s in sets if s["type"] == 15)
+    xyz = {n: (nodes["x"][i], nodes["y"][i], nodes["z"][i])
+           for i, n in enumerate(nodes["node_nums"])}
+    # as stern_plane.toml writes them: gage 2 on the stock's line 0.70 m inboard (-y), gage 15
+    # 0.40 m below the planes; every gage but 15 and 16 senses vertically (UFF direction 3)
+    assert xyz[2] == pytest.approx((0.0, -0.70, 0.0), abs=1e-6)
+    assert xyz[15] == pytest.approx((-0.25, -1.80, -0.40), abs=1e-6)
+    dirs = {int(s["rsp_node"]): int(s["rsp_dir"]) for s in sets if s["type"] == 58}
+    assert dirs == {n: (-2 if n in (15, 16) else 3) for n in range(1, 17)}
