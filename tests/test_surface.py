@@ -148,3 +148,16 @@ def test_stern_plane_model_gives_table_2e():
     assert m.table.decrement[m.predominant] == pytest.approx(0.0933, rel=0.01)
     with pytest.raises(RigError, match=r"damping\.water: missing"):
         rig.with_medium("water")  # tested in air only
+
+
+def test_stern_plane_geometry_errors_in_its_own_terms():
+    from ramdaq.analysis.model.geometry import gage_geometry
+
+    text = (RIGS / "stern_plane.toml").read_text()
+    for old in ("position_m = [0.0, -0.70, 0.0]", "position_m = [0.0, 0.70, 0.0]"):  # 2 and 6
+        assert old in text
+        text = text.replace(old, old.replace("[0.0,", "[0.05,"))
+    rig = parse_rig(text, "bad.toml")
+    with pytest.raises(RigError, match=r"^bad\.toml: gage 2 is off the line along the stock "
+                                       r"through the centre of mass \(\(0\.05, -0\.7, 0\.0\)\)"):
+        gage_geometry(rig)
