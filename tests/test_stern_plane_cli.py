@@ -51,6 +51,7 @@ def test_analyze(trial, truth, capsys):
     text = capsys.readouterr().out
     assert "(stern plane) in air" in text and "delta_w_2_6" in text and "delta_beta" in text
     assert "no virtual inertias" in text  # tested in air only, as the report's stern planes
+    assert all(f"delta_{m}_b " in text for m in ("alpha", "beta", "w"))  # Table 2f, fixed portion
     rep = json.loads((tmp / "an" / "report.json").read_text())
     assert rep["surface"] == {"kind": "stern_plane",
                               "motions": {"v": "w", "gamma": "beta", "alpha": "alpha"}}

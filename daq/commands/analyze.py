@@ -163,6 +163,9 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
     for m, d in s["delta_motion"].items():
         row(f"delta_{m}", d)
     row("delta_modal", s["delta_modal"])
+    # the hull section's motions (a stern plane's fixed portion's: its summary is relabelled)
+    for m, d in (s.get("delta_hull_motion") or s.get("delta_fixed_portion_motion") or {}).items():
+        row(f"delta_{m}", d)
     for g, d in s["delta_gage"].items():
         row(f"delta {g}", d)
     for key, q in (("C_N_s_per_m", "damping_translational"), ("c_N_m_s_per_rad",
