@@ -114,6 +114,8 @@ def test_labels_follow_the_surface():
     ("Iy_kg_m2 = 144.83", "Iy_kg_m2_ = 144.83", r"plane\.Iy_kg_m2: missing"),
     ("w_b = 1.0", "v_b = 1.0", r"hull\.modes\[0\]\.v_b: a stern plane's hull modes give w_b"),
     ("beta_b = 0.10", "beta_b = true", r"hull\.modes\[0\]\.beta_b: expected a finite number"),
+    ("Ixy_kg_m2 = -40.0", "Ixy_kg_m2 = -40.0\nIz_kg_m2 = 100.0",
+     r"plane\.Iz_kg_m2: a rudder's key; a stern plane's is Iy_kg_m2 \(about the stock\)"),
 ])
 def test_stern_plane_errors_name_its_own_fields(old, new, message):
     text = (RIGS / "stern_plane.toml").read_text()

@@ -52,6 +52,10 @@ _PLANE_KEYS = {"mass_kg": "mass_kg", "Iy_kg_m2": "Iz_kg_m2", "Ix_kg_m2": "Ix_kg_
                "added_mass_factor": "added_mass_factor"}
 """``[plane]`` key -> the model's ``[rudder]`` key (Iy about the stock is the rudder's Iz)."""
 
+_RUDDER_ONLY = {"Iz_kg_m2": "Iy_kg_m2 (about the stock)", "Ixz_kg_m2": "Ixy_kg_m2",
+                "attach_z_m": "attach_m (along the stock)"}
+"""A rudder's ``[rudder]`` keys that a ``[plane]`` names otherwise (read, they would collide)."""
+
 
 class SurfaceError(ValueError):
     """A ``[surface]`` table or stern-plane key that cannot be read: ``field`` and ``why``."""
@@ -187,6 +191,10 @@ def to_surface_frame(doc: dict[str, Any]) -> tuple[dict[str, Any], Surface, dict
                            "not [rudder]")
     plane = out.pop("plane", None)
     if isinstance(plane, dict):
+        for rudder_key, plane_key in _RUDDER_ONLY.items():
+            if rudder_key in plane:
+                raise SurfaceError(f"plane.{rudder_key}", f"a rudder's key; a stern plane's is "
+                                   f"{plane_key}")
         out["rudder"] = {_PLANE_KEYS.get(k, k): v for k, v in plane.items()}
     if "impact" in out and isinstance(out["impact"], dict):
         out["impact"] = _turn_impact(out["impact"], surface)
