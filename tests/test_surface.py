@@ -102,6 +102,11 @@ def test_labels_follow_the_surface():
     assert s.relabel({"alpha1_over_gamma1": -1.5, "motions": {"gamma": 1}}) == {
         "alpha1_over_beta1": 1.5, "motions": {"beta": 1}}
     assert s.body("rudder") == "movable" and s.body("hull") == "fixed"
+    assert s.words("gamma_b left out: hull gages 5 and 13 are not level") == \
+        "beta_b left out: fixed portion gages 5 and 13 are not level"
+    assert s.words("stock lengths: not computed, a stock, rudder-top or hull gage is unusable") \
+        == "stock lengths: not computed, a stock, plane-root or fixed portion gage is unusable"
+    assert Surface().words("a rudder or hull gage") == "a rudder or hull gage"
 
 
 @pytest.mark.parametrize(("old", "new", "message"), [

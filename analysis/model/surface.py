@@ -123,6 +123,16 @@ class Surface:
             name = pattern.sub(new, name)
         return name
 
+    def words(self, text: str) -> str:
+        """A sentence of the analysis (a note) in this surface's words: for a stern plane the
+        motions renamed as :meth:`label` does, "rudder" the movable plane, "hull" the fixed
+        portion."""
+        if self.is_rudder:
+            return text
+        for pattern, new in _STERN_LABELS[:-2] + _STERN_WORDS:
+            text = pattern.sub(new, text)
+        return text
+
     def relabel(self, obj: Any) -> Any:
         """``obj`` (dicts, lists, values) with every dict key renamed by :meth:`label`; the
         values are untouched but for ``alpha1_over_gamma1``, whose sign follows the renamed
@@ -155,6 +165,13 @@ _STERN_LABELS = (
     (re.compile(r"(?<![A-Za-z0-9])I(_?)z(?![A-Za-z0-9])"), r"I\1y"),
     (re.compile(r"rudder"), "movable"),
     (re.compile(r"hull"), "fixed_portion"),
+)
+
+
+_STERN_WORDS = (
+    (re.compile(r"rudder-top"), "plane-root"),
+    (re.compile(r"rudder"), "movable plane"),
+    (re.compile(r"hull"), "fixed portion"),
 )
 
 

@@ -101,12 +101,20 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                                                    "clipped": list(h.event.clipped),
                                                    "too_short": h.event.too_short},
                      "snr_db": finite_json(h.event.snr_db),
-                     "analysis": surface.relabel(analysis_to_json(h.analysis)) if h.analysis
+                     "analysis": _in_words(surface, analysis_to_json(h.analysis)) if h.analysis
                      else None}
                     for h in hits],
         "summary": surface.relabel(summary),
         "virtual_inertias": vi,
     })
+
+
+def _in_words(surface: Surface, analysis: dict) -> dict:
+    """One hit's analysis (:func:`analysis_to_json`) with its keys and notes named as the rig's
+    surface names them."""
+    out = surface.relabel(analysis)
+    out["notes"] = [surface.words(n) for n in analysis["notes"]]
+    return out
 
 
 def format_summary(report: dict, units: str = "si") -> str:
