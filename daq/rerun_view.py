@@ -17,7 +17,8 @@ Entity layout (``<k>`` the impact number, ``gXX`` the channel name)::
     impacts/<k>/decay/gXX        the decay a result was fitted to, if given; .../envelope (+e, -e)
     impacts/<k>/mode             Arrows3D of the last mode shape of impact k (+ f_hz)
     results/gXX/{f_hz,delta,amplitude}, results/log   per-gage estimates; final ones also logged
-    layout/{gages,axes,rudder,stock}   static gage positions coloured by body, axes, outline
+    layout/{gages,axes,rudder,stock}   static gage positions coloured by body, axes, outline, in
+                                 ship axes (``rudder``: the control surface, a stern plane too)
     layout/mode                  the mode shape at the time cursor: arrows along the sensing axes
 
 Min/max rather than a plain decimated series: a 25.6 kHz trace in a plot a few thousand pixels wide
@@ -254,20 +255,23 @@ class RerunView:
             return
         self.rec.log("layout", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         gages = self.rig.gages_by_channel()
-        pos = np.array([g.position_m for g in gages])
+        sf = self.rig.surface  # the layout is drawn in ship axes, a stern plane's stock athwartship
+        pos = np.array([sf.to_ship(g.position_m) for g in gages])
         size = self._extent()
         self.rec.log("layout/gages", rr.Points3D(
             pos, radii=0.012 * size, colors=[BODY_COLORS[g.body] for g in gages],
-            labels=[f"g{g.number:02d} ({g.body}, {g.axis})" for g in gages]), static=True)
+            labels=[f"g{g.number:02d} ({sf.body(g.body)}, {sf.ship_axis(g.axis)})" for g in gages]),
+            static=True)
         self.rec.log("layout/axes", rr.Arrows3D(
-            origins=pos, vectors=[0.05 * size * g.direction for g in gages],
+            origins=pos, vectors=[0.05 * size * np.array(sf.to_ship(g.direction)) for g in gages],
             colors=[BODY_COLORS[g.body] for g in gages], radii=0.002 * size), static=True)
         r = self.rig.rudder
         self.rec.log("layout/rudder", rr.Boxes3D(
-            half_sizes=[r.chord_m / 2, r.thickness_m / 2, r.span_m / 2],
-            colors=BODY_COLORS["rudder"], labels="rudder (approx.)"), static=True)
+            half_sizes=np.abs(sf.to_ship((r.chord_m / 2, r.thickness_m / 2, r.span_m / 2))),
+            colors=BODY_COLORS["rudder"], labels=f"{sf.title} (approx.)"), static=True)
         self.rec.log("layout/stock", rr.LineStrips3D(
-            [[(r.stock_x_m, 0.0, r.attach_z_m), (r.stock_x_m, 0.0, self.rig.hull_attach_z_m)]],
+            [[sf.to_ship((r.stock_x_m, 0.0, r.attach_z_m)),
+              sf.to_ship((r.stock_x_m, 0.0, self.rig.hull_attach_z_m))]],
             colors=BODY_COLORS["stock"], radii=0.004 * size), static=True)
 
     def _hue(self, i: int) -> tuple[int, int, int]:
@@ -453,8 +457,9 @@ class RerunView:
         rel = real / (float(np.abs(real).max()) or 1.0)
         length = 0.3 * self._extent()
         arrows = rr.Arrows3D(
-            origins=[g.position_m for g, _ in items],
-            vectors=[length * r * g.direction for (g, _), r in zip(items, rel, strict=True)],
+            origins=[self.rig.surface.to_ship(g.position_m) for g, _ in items],
+            vectors=[length * r * np.array(self.rig.surface.to_ship(g.direction))
+                     for (g, _), r in zip(items, rel, strict=True)],
             colors=[SIGN_COLORS[int(r >= 0)] for r in rel],
             labels=[f"g{g.number:02d} {r:+.2f}" for (g, _), r in zip(items, rel, strict=True)],
             radii=0.006 * self._extent())

@@ -319,7 +319,8 @@ class Session:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s REJECTED: {hit.reason}")
         else:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s accepted: f = {a.f_hz:.3f} Hz,"
-                      f" delta_modal = {a.damping['delta_modal']:.4f}, delta_v = "
+                      f" delta_modal = {a.damping['delta_modal']:.4f}, "
+                      f"delta_{self.rig.surface.label('v')} = "
                       f"{a.motions['v_2_6'].delta if 'v_2_6' in a.motions else float('nan'):.4f}")
             if self.readout and self._ringing_hit in (None, hit.index):
                 for n, g in a.gages.items():
