@@ -395,6 +395,8 @@ class McapReplayDevice(Device):
         self._blocks: Iterator[Block] | None = None
         self._pending: Block | None = None
         self._start: tuple[float, int] | None = None  # (monotonic time, first sample) of block 0
+        self._scanner: RecordScanner | None = None
+        self._meta: dict[str, str] = {}
 
     # -- Device hooks ------------------------------------------------------------------------
     def _open(self) -> StreamInfo:
@@ -403,7 +405,8 @@ class McapReplayDevice(Device):
         f = open(self.path, "rb")  # noqa: SIM115 - closed by _close, or below on failure
         try:
             info = self._read_info(f)
-            self._blocks = self._iter_blocks(RecordScanner(f, self.path, strict=True), info.fs_hz)
+            self._scanner = RecordScanner(f, self.path, strict=True)
+            self._blocks = self._iter_blocks(self._scanner, info.fs_hz)
         except BaseException:
             f.close()
             raise
@@ -438,6 +441,7 @@ class McapReplayDevice(Device):
                 f"{self.path}: not a ramdaq recording (no {fmt.STREAM_METADATA} metadata "
                 f"or no {fmt.BLOCK_TOPIC} topic)"
             )
+        self._meta = dict(meta[fmt.STREAM_METADATA])
         try:
             return fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())
         except (fmt.NotARamdaqRecording, UnicodeDecodeError) as err:
@@ -505,6 +509,18 @@ class McapReplayDevice(Device):
         self._blocks = None
 
     # -- other topics ------------------------------------------------------------------------
+    @property
+    def metadata(self) -> dict[str, str]:
+        """The ``ramdaq.stream`` metadata record as written (``created_utc``, ``ramdaq_version``,
+        ...; see :mod:`ramdaq.drivers.mcap_format`)."""
+        self.open()
+        return dict(self._meta)
+
+    @property
+    def bytes_read(self) -> int:
+        """Bytes of the file read so far by the block iterator (for a progress bar)."""
+        return self._scanner.good_bytes if self._scanner is not None else 0
+
     @property
     def rig_toml(self) -> str:
         """The rig file recorded with the stream (``""`` if none)."""
