@@ -80,7 +80,8 @@ _DAMAGE = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, R
 
 
 class JsonMessage(NamedTuple):
-    """A message of a JSON topic: its ``log_time`` (device time, ns) and decoded object."""
+    """A message of a JSON topic: its device time (ns; the record's ``publish_time``, which
+    recordings made before ``log_time`` became UTC hold in ``log_time`` too) and decoded object."""
 
     t_ns: int
     obj: Any
@@ -528,13 +529,13 @@ class McapReplayDevice(Device):
 
     def json_messages(self, topic: str) -> list[JsonMessage]:
         """All messages of a JSON topic, in log-time order (``[]`` if the topic is absent);
-        chunk CRCs checked."""
+        chunk CRCs checked. Times are device times (``publish_time``)."""
         self.open()
         with open(self.path, "rb") as f:
             reader = SeekingReader(f, validate_crcs=True)
             try:
                 return [
-                    JsonMessage(m.log_time, fmt.decode_json(m.data))
+                    JsonMessage(m.publish_time, fmt.decode_json(m.data))
                     for _, _, m in reader.iter_messages(topics=[topic])
                 ]
             except (*_DAMAGE, OSError) as err:
