@@ -23,16 +23,25 @@ from ...analysis.model.units import from_si
 from ..analyzer import HitResult, analysis_to_json, finite_json, trial_summary
 from ..api import analyze_hits, decay_samples
 from ..recording import read_recording, rig_or_fail
+from .progress import bytes_bar, progress_bar
 
 UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "m",
          "mass": "kg", "inertia": "kg m^2", "time": "s"}
 
 
 def run_analysis(path: str | Path, *, impact: int | None = None,
-                 progress: Callable[[str], None] | None = None) -> tuple[Rig, list[HitResult]]:
-    """Read ``path`` through the trigger and analyse each hit (or only hit ``impact``)."""
-    rec = read_recording(path)
-    return rig_or_fail(rec), analyze_hits(rec, impact=impact, progress=progress)
+                 progress: Callable[[str], None] | None = None,
+                 bars: bool | None = False) -> tuple[Rig, list[HitResult]]:
+    """Read ``path`` through the trigger and analyse each hit (or only hit ``impact``); with
+    ``bars`` (``None``: when standard error is a terminal) a progress bar over the reading and
+    one over the hits."""
+    name = Path(path).name
+    with bytes_bar(f"reading {name}", Path(path).stat().st_size, show=bars) as update:
+        rec = read_recording(path, progress=update)
+    rig = rig_or_fail(rec)
+    n = len(rec.impacts) if impact is None else 1
+    with progress_bar(f"analysing {name}", n, unit="hits", show=bars if n > 1 else False) as advance:
+        return rig, analyze_hits(rec, impact=impact, progress=progress, done=lambda h: advance())
 
 
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,

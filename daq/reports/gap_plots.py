@@ -37,9 +37,7 @@ def effect_text(name: str) -> str:
 
 
 def _cmap(name: str) -> mpl.colors.Colormap:
-    cmap = mpl.colormaps[name].copy()
-    cmap.set_bad(_NOT_COMPUTED)
-    return cmap
+    return mpl.colormaps[name].with_extremes(bad=_NOT_COMPUTED)
 
 
 def _hatch_missing(ax, z: np.ndarray) -> None:
