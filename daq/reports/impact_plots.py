@@ -179,7 +179,7 @@ def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
         ax.plot(x, z, marks[g.body], color=BODY_COLOURS[g.body], ms=7)
         k = placed.get(z, 0)
         placed[z] = k + 1
-        ax.annotate(str(n), (x, z), xytext=(5 + 20 * k, 5), textcoords="offset points", fontsize=8)
+        ax.annotate(str(n), (x, z), xytext=(5, 5 - 13 * k), textcoords="offset points", fontsize=8)
     ax.axvline(0, color="k", lw=0.5)
     ax.set_xlabel(f"athwartship amplitude in phase with gage {4 if 4 in amp else '(largest)'} (m/s²)")
     ax.set_ylabel("z, up (m)")
