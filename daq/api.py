@@ -50,13 +50,17 @@ def as_recording(src: Source, rig: Rig | str | Path | None = None) -> Recording:
 
 @dataclass(frozen=True)
 class ModeEstimate:
-    """One mode on one gage of one hit: each gage's own fit (the report's per-gage decrement).
+    """One mode on one gage of one hit.
 
     ``f_hz``, ``f_se_hz`` damped frequency and its standard error (Hz); ``delta``,
-    ``delta_se`` the logarithmic decrement (1); ``zeta``, ``zeta_se`` the damping ratio (1);
-    ``amplitude`` the mode's amplitude on the gage at the decay's start (m/s^2). ``verdict`` is
-    the gage's (``ok`` or what is wrong with its decay) and ``reason`` the hit's when it was
-    rejected, else the gage's. A rejected hit has one row, gage 0 and mode -1, numbers NaN.
+    ``delta_se`` the logarithmic decrement (1); ``zeta``, ``zeta_se`` the damping ratio (1):
+    the gage's own fit (the report's per-gage decrement, Eq 7). ``mode_f_hz`` ...
+    ``mode_zeta_se``: the same of the fit shared by all gages (one value per mode, repeated on
+    each gage's row; what ``ramdaq batch analyze``'s table holds). ``amplitude`` the mode's
+    amplitude on the gage at the decay's start (m/s^2), ``phase_rad`` its phase against the
+    gage where the mode is largest (the mode shape's). ``verdict`` is the gage's
+    (``ok`` or what is wrong with its decay) and ``reason`` the hit's when it was rejected, else
+    the gage's. A rejected hit has one row, gage 0 and mode -1, numbers NaN.
     """
 
     hit: int
@@ -71,7 +75,14 @@ class ModeEstimate:
     delta_se: float
     zeta: float
     zeta_se: float
+    mode_f_hz: float
+    mode_f_se_hz: float
+    mode_delta: float
+    mode_delta_se: float
+    mode_zeta: float
+    mode_zeta_se: float
     amplitude: float
+    phase_rad: float
     verdict: str
     reason: str
 
@@ -87,25 +98,27 @@ def _rows_of(h: HitResult) -> Iterator[ModeEstimate]:
     nan = float("nan")
     a = h.analysis
     if not h.accepted or a is None:
-        yield ModeEstimate(h.index, h.event.onset_s, False, 0, -1, False, nan, nan, nan, nan, nan,
-                           nan, nan, "", h.reason)
+        yield ModeEstimate(h.index, h.event.onset_s, False, 0, -1, False, *[nan] * 14, "", h.reason)
         return
     m = a.modes
     row = {n: j for j, n in enumerate(a.active_gages)}
     for n in a.gage_numbers:
         v = a.verdicts[n]
         if n not in row:
-            yield ModeEstimate(h.index, a.onset_s, True, n, -1, False, nan, nan, nan, nan, nan, nan,
-                               nan, str(v.code), v.reason)
+            yield ModeEstimate(h.index, a.onset_s, True, n, -1, False, *[nan] * 14, str(v.code),
+                               v.reason)
             continue
         j = row[n]
         for k in range(len(m.frequency_hz)):
             d, dse = float(m.channel_delta[j, k]), float(m.channel_delta_se[j, k])
             z, zse = _zeta(d, dse)
+            shared = (m.frequency_hz[k], m.frequency_se_hz[k], m.delta[k], m.delta_se[k], m.zeta[k],
+                      m.zeta_se[k])
             yield ModeEstimate(h.index, a.onset_s, True, n, k, k == a.predominant,
                                float(m.channel_frequency_hz[j, k]),
                                float(m.channel_frequency_se_hz[j, k]), d, dse, z, zse,
-                               float(abs(m.complex_amplitude[j, k])), str(v.code), v.reason)
+                               *(float(x) for x in shared), float(abs(m.complex_amplitude[j, k])),
+                               float(np.angle(m.mode_shape[j, k])), str(v.code), v.reason)
 
 
 @dataclass(frozen=True, eq=False)

@@ -121,3 +121,13 @@ def test_analyze_one_hit_marks_the_others(water: ramdaq.Recording) -> None:
                                                                      (2, 0, -1, "not requested")]
     with pytest.raises(ValueError, match="impact 5 asked for, but 3 impacts found"):
         ramdaq.analyze(water, impact=5)
+
+
+def test_shared_mode_columns_repeat_the_mode_table(analysed: ramdaq.TrialAnalysis) -> None:
+    """mode_* columns are the fit shared by all gages: one value per hit and mode."""
+    h = analysed.hits[0]
+    m = h.analysis.modes
+    for r in (r for r in analysed.rows() if r.hit == 0 and r.mode >= 0):
+        assert (r.mode_f_hz, r.mode_delta, r.mode_zeta_se) == (
+            m.frequency_hz[r.mode], m.delta[r.mode], m.zeta_se[r.mode])
+        assert -np.pi <= r.phase_rad <= np.pi and r.amplitude > 0
