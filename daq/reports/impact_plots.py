@@ -105,6 +105,8 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
         title = f"gage {n}"
         if g is not None and np.isfinite(g.delta):
             title += f": δ = {g.delta:.4f} ± {g.delta_se:.1g} at {g.f_hz:.2f} Hz"
+        else:  # not a number: said, never drawn as zero
+            title += ": δ of the predominant mode not measured"
         ax.set_title(title, fontsize=9)
         ax.set_ylim(floor, None)
     for ax in axes[len(a.gage_numbers):]:
