@@ -9,6 +9,7 @@ for it the loop waits for room in the queue instead of dropping.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,9 +59,10 @@ class RecordSummary:
 
 
 def record(device: Device, path: str | Path, *, readout: bool = True, overwrite: bool = False,
-           queue_blocks: int = 256, chunk_seconds: float = 0.25) -> RecordSummary:
+           queue_blocks: int = 256, chunk_seconds: float = 0.25,
+           progress: Callable[[Block], None] | None = None) -> RecordSummary:
     """Record ``device`` into ``path`` until its stream ends or Ctrl-C; the file is always
-    finished (footer written), also on interruption."""
+    finished (footer written), also on interruption. ``progress`` gets each block written."""
     info = device.open()
     paced = getattr(device, "pace", "realtime") != "fast"
     truth = getattr(device, "delivered_impacts", None)
@@ -79,6 +81,8 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
             for block in device:
                 written_truth, _ = store_block(rec, device, block, written_truth,
                                                wait_for_room=not paced, queue_limit=queue_blocks)
+                if progress:
+                    progress(block)
                 gap = last is not None and block.first_sample != last
                 gaps += gap
                 last = block.next_sample

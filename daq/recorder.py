@@ -42,6 +42,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from ..drivers import mcap_format as fmt
 from ..drivers.block import Block, StreamInfo
+from . import topics
 from .errors import RecordingError
 
 __all__ = ["Recorder", "RecorderStats"]
@@ -49,6 +50,7 @@ __all__ = ["Recorder", "RecorderStats"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _MAX_VARINT_BYTES = 5  # a sint32 zigzag varint takes at most 5 bytes
 _STOP = object()
+CLOCK_METADATA = "ramdaq.clock"
 
 
 @dataclass(frozen=True)
@@ -95,7 +97,14 @@ class _Dropped(NamedTuple):
 class _Json:
     topic: str
     data: bytes
-    t_ns: int
+    t_ns: int  # device time: the record's publish_time
+    log_ns: int  # UTC: the record's log_time
+
+
+@dataclass(frozen=True)
+class _Meta:
+    name: str
+    data: dict[str, str]
 
 
 class _OsFile:
@@ -139,6 +148,16 @@ class Recorder:
         Chunk compression.
     overwrite : bool
         Replace an existing file.
+    derived : bool
+        Also write ``/ramdaq/gages`` and ``/ramdaq/gages/trace`` (:mod:`ramdaq.daq.topics`):
+        each channel in SI per block and decimated, for Foxglove's Plot panel.
+
+    Times: each record's ``publish_time`` is the device time of what it holds (a block's first
+    sample, an event's ``t_ns``; clamped at 0); its ``log_time`` is UTC, ns since 1970: the wall
+    clock when the first block arrived, less that block's length, is taken as the UTC of its
+    first sample, and device time runs on from there. The ``ramdaq.clock`` metadata record
+    holds that anchor (``utc_ns``, ``device_ns``). A JSON message given before the first block
+    is logged at the wall clock's time.
     """
 
     def __init__(
@@ -150,6 +169,7 @@ class Recorder:
         chunk_seconds: float = 0.25,
         compression: str = "zstd",
         overwrite: bool = False,
+        derived: bool = True,
     ) -> None:
         if queue_blocks < 1:
             raise ValueError(f"queue_blocks ({queue_blocks}) must be at least 1")
@@ -163,6 +183,9 @@ class Recorder:
         self._chunk_seconds = float(chunk_seconds)
         self._chunk_samples_max = max(1, math.ceil(chunk_seconds * info.fs_hz))
         chunk_bytes = self._chunk_samples_max * max(1, info.n_channels) * _MAX_VARINT_BYTES + 4096
+        if derived:  # room for the derived topics' JSON too, so that samples still close a chunk
+            chunk_bytes += (self._chunk_samples_max // max(1, math.ceil(info.fs_hz / topics.TRACE_RATE_HZ))
+                            + self._chunk_samples_max // 8 + 2) * (100 + 90 * info.n_channels)
 
         self._file = _OsFile(self.path, overwrite)
         try:
@@ -183,6 +206,10 @@ class Recorder:
             self._block_channel = self._writer.register_channel(fmt.BLOCK_TOPIC, "protobuf", schema_id)
             self._json_channels: dict[str, int] = {}
             self._json_channel(fmt.EVENTS_TOPIC)
+            self._summary = topics.GageSummary(info) if derived and info.n_channels else None
+            if self._summary is not None:
+                self._json_channel(topics.GAGES_TOPIC)
+                self._json_channel(topics.TRACE_TOPIC)
         except BaseException:
             self._file.close()
             raise
@@ -195,6 +222,7 @@ class Recorder:
         self._dropped: list[_Dropped] = []  # dropped blocks whose overflow event is not written
         self._last: tuple[int, int] | None = None  # (seq, next_sample) of the last block given
         self._last_t_ns = 0
+        self._anchor: tuple[int, int] | None = None  # (UTC ns, device ns) of the first sample
         self._counts = dict.fromkeys(
             ("blocks", "samples", "message_bytes", "overflows", "dropped_samples", "gaps", "events"),
             0,
@@ -234,6 +262,8 @@ class Recorder:
             )
         with self._lock:
             self._check_usable()
+            if self._anchor is None:
+                self._set_anchor(block)
             self._check_continuity(block)
             self._last_t_ns = block.t0_ns + round(block.n_samples / block.fs_hz * 1e9)
             if self._pending >= self._queue_blocks:
@@ -265,10 +295,10 @@ class Recorder:
         The object is serialized here, so one that is not strict JSON raises ``ValueError`` or
         ``TypeError`` in the caller rather than in the writer thread.
         """
-        item = _Json(topic, fmt.encode_json(obj), int(t_ns))
+        data = fmt.encode_json(obj)
         with self._lock:
             self._check_usable()
-            self._q.put(item)
+            self._q.put(_Json(topic, data, int(t_ns), self._log_ns(int(t_ns))))
 
     def close(self) -> None:
         """Write everything queued, then the summary and footer, and close the file.
@@ -333,6 +363,21 @@ class Recorder:
                 f"{self.path}: writer thread failed ({type(self._error).__name__}: {self._error})"
             ) from self._error
 
+    def _set_anchor(self, block: Block) -> None:
+        """Take the wall clock, less the block's length, as the UTC of its first sample."""
+        utc = time.time_ns() - round(block.n_samples / block.fs_hz * 1e9)
+        self._anchor = (utc, block.t0_ns)
+        self._q.put(_Meta(CLOCK_METADATA, {
+            "utc_ns": str(utc), "device_ns": str(block.t0_ns),
+            "meaning": "log_time = utc_ns + (device time - device_ns); publish_time = device time"}))
+
+    def _log_ns(self, t_ns: int) -> int:
+        """The UTC ``log_time`` of device time ``t_ns`` (the class docstring, *Times*)."""
+        if self._anchor is None:
+            return time.time_ns()
+        utc, dev = self._anchor
+        return max(utc + t_ns - dev, 0)
+
     def _check_continuity(self, block: Block) -> None:
         if self._last is not None:
             prev_seq, expected = self._last
@@ -345,7 +390,8 @@ class Recorder:
                     "missing_samples": block.first_sample - expected,
                 }
                 event = fmt.make_event("gap", block.t0_ns, detail)
-                self._q.put(_Json(fmt.EVENTS_TOPIC, fmt.encode_json(event), block.t0_ns))
+                self._q.put(_Json(fmt.EVENTS_TOPIC, fmt.encode_json(event), block.t0_ns,
+                                  self._log_ns(block.t0_ns)))
         self._last = (block.seq, block.next_sample)
 
     # -- writer thread -----------------------------------------------------------------------
@@ -364,6 +410,8 @@ class Recorder:
                     break
                 if isinstance(item, Block):
                     self._write_block(item)
+                elif isinstance(item, _Meta):
+                    self._writer.add_metadata(item.name, item.data)
                 else:
                     self._write_json(item)
                 if self._dropped:
@@ -375,16 +423,16 @@ class Recorder:
     def _json_channel(self, topic: str) -> int:
         channel = self._json_channels.get(topic)
         if channel is None:
-            name, schema = fmt.json_schema_for(topic)
+            name, schema = topics.schema_for(topic, self.info)
             schema_id = self._writer.register_schema(name, "jsonschema", schema)
             channel = self._writer.register_channel(topic, "json", schema_id)
             self._json_channels[topic] = channel
         return channel
 
-    def _add(self, channel: int, t_ns: int, data: bytes, sequence: int = 0) -> None:
+    def _add(self, channel: int, t_ns: int, log_ns: int, data: bytes, sequence: int = 0) -> None:
         before = self._file.tell()
-        t = max(int(t_ns), 0)
-        self._writer.add_message(channel, log_time=t, data=data, publish_time=t, sequence=sequence)
+        self._writer.add_message(channel, log_time=log_ns, data=data, publish_time=max(int(t_ns), 0),
+                                 sequence=sequence)
         if self._file.tell() != before:  # the writer's byte limit finished a chunk
             self._chunk_opened, self._chunk_samples = None, 0
         elif self._chunk_opened is None:
@@ -392,7 +440,10 @@ class Recorder:
 
     def _write_block(self, block: Block) -> None:
         data = fmt.encode_block(block)
-        self._add(self._block_channel, block.t0_ns, data, block.seq & 0xFFFF_FFFF)
+        self._add(self._block_channel, block.t0_ns, self._log_ns(block.t0_ns), data,
+                  block.seq & 0xFFFF_FFFF)
+        if self._summary is not None:
+            self._write_derived(block)
         self._chunk_samples += block.n_samples
         with self._lock:
             self._pending -= 1
@@ -402,8 +453,16 @@ class Recorder:
         if self._chunk_samples >= self._chunk_samples_max:
             self._flush_chunk()
 
+    def _write_derived(self, block: Block) -> None:
+        gages = self._json_channel(topics.GAGES_TOPIC)
+        self._add(gages, block.t0_ns, self._log_ns(block.t0_ns),
+                  fmt.encode_json(self._summary.block(block)))
+        trace = self._json_channel(topics.TRACE_TOPIC)
+        for t_ns, msg in self._summary.trace(block):
+            self._add(trace, t_ns, self._log_ns(t_ns), fmt.encode_json(msg))
+
     def _write_json(self, item: _Json) -> None:
-        self._add(self._json_channel(item.topic), item.t_ns, item.data)
+        self._add(self._json_channel(item.topic), item.t_ns, item.log_ns, item.data)
         if item.topic == fmt.EVENTS_TOPIC:
             with self._lock:
                 self._counts["events"] += 1
@@ -424,7 +483,8 @@ class Recorder:
                 "queue_blocks": self._queue_blocks,
             }
             event = fmt.make_event("overflow", run[0].t0_ns, detail)
-            self._write_json(_Json(fmt.EVENTS_TOPIC, fmt.encode_json(event), run[0].t0_ns))
+            self._write_json(_Json(fmt.EVENTS_TOPIC, fmt.encode_json(event), run[0].t0_ns,
+                                   self._log_ns(run[0].t0_ns)))
 
     def _flush_chunk(self) -> None:
         self._writer.flush()  # finishes the chunk; _OsFile already handed every byte to the OS

@@ -37,9 +37,10 @@ Topics
     The value of sample ``i`` of channel ``c`` in SI units is ``counts[c*n_samples+i] *
     scale[c]``. Both repeated fields are packed; ``counts`` is ``sint32`` (zigzag varint): 3 bytes
     per sample for ``|count| < 2**20``, 4 bytes up to ``2**27``.
-    Record ``log_time`` = ``publish_time`` = ``device_time_ns`` (clamped at 0, since MCAP times
-    are unsigned); record ``sequence`` = ``seq mod 2**32``. Messages are in the order the device
-    produced them; nobody fills a gap.
+    Record ``publish_time`` = ``device_time_ns`` (clamped at 0, since MCAP times are unsigned);
+    ``log_time`` = UTC (see *Times*); record ``sequence`` = ``seq mod 2**32``. The schema's
+    ``.proto`` is shipped as ``ramdaq/drivers/block.proto`` (``drivers/block.proto``).
+    Messages are in the order the device produced them; nobody fills a gap.
 
     Why one flat ``counts`` field and not a nested ``repeated Channel {double scale; repeated
     sint32 counts}``: measured on 1 s of 16 ch x 25.6 kHz, both encode in ~8 ms with the numpy
@@ -49,7 +50,7 @@ Topics
 
 ``/ramdaq/events``
     JSON (schema encoding ``jsonschema``, schema ``ramdaq.Event``), one message per event:
-    ``{"kind": str, "t_ns": int, "detail": {...}}``; ``log_time`` = ``t_ns`` = device time in ns.
+    ``{"kind": str, "t_ns": int, "detail": {...}}``; ``publish_time`` = ``t_ns`` = device time in ns.
     Kinds: ``gap`` (the device skipped blocks or samples: ``after_seq``, ``seq``,
     ``missing_blocks``, ``expected_sample``, ``first_sample``, ``missing_samples``),
     ``overflow`` (the recorder's queue was full and it dropped blocks: ``first_seq``,
@@ -59,19 +60,33 @@ Topics
 ``/ramdaq/sim/impacts``
     JSON truth of each simulated impact, written by whoever drives a simulator:
     ``{"sample": int, "t_s": float, "peak_force_N": float, "duration_s": float,
-    "location_m": [x, y, z]}``; ``log_time`` = device time of the impact.
+    "location_m": [x, y, z]}``; ``publish_time`` = device time of the impact.
 
 ``/ramdaq/impacts``
     The trigger's detections, written by a live trial (``ramdaq trial``): one JSON message per
     detected blow, ``ImpactEvent.to_json()`` of :mod:`ramdaq.daq.trigger` (onset, flags, end
-    reason; the samples are not included); ``log_time`` = device time of the onset. The schema
-    registered for it is a placeholder, ``{"title": "ramdaq.Impact", "type": "object"}``, not
-    the trigger's ``IMPACT_JSON_SCHEMA``.
+    reason; the samples are not included); ``publish_time`` = device time of the onset. Schema:
+    the trigger's ``IMPACT_JSON_SCHEMA`` (registered by the recorder; recordings made before
+    registered a placeholder, ``{"title": "ramdaq.Impact", "type": "object"}``).
 
 ``/ramdaq/results``
     The final result of each hit, written by a live trial: ``{"index", "accepted", "reason",
     "analysis"}``, the analysis in SI as in ``ramdaq analyze``'s report.json (null when the hit
-    was rejected); ``log_time`` = device time of the hit's onset.
+    was rejected); ``publish_time`` = device time of the hit's onset. Schema
+    ``ramdaq.Result`` (:data:`ramdaq.daq.topics.RESULTS_JSON_SCHEMA`).
+
+``/ramdaq/gages``, ``/ramdaq/gages/trace``
+    Each channel in SI per block (min, max, mean as named fields) and decimated, derived by the
+    recorder for Foxglove's Plot panel (:mod:`ramdaq.daq.topics`; ``docs/topics.md``).
+
+Times
+-----
+``publish_time`` is the stream's device time; ``log_time`` is UTC in ns since 1970, anchored
+at the recording's start: the recorder takes the wall clock when the first block arrives, less
+that block's length, as the UTC of its first sample (metadata ``ramdaq.clock``: ``utc_ns``,
+``device_ns``), and ``log_time = utc_ns + (device time - device_ns)``. Two recordings line up
+in Foxglove by their ``log_time``. Recordings made before this held device time in both fields;
+readers take device time from ``publish_time``, so both read the same.
 
 Stream metadata
 ---------------

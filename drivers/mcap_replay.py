@@ -80,7 +80,8 @@ _DAMAGE = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, R
 
 
 class JsonMessage(NamedTuple):
-    """A message of a JSON topic: its ``log_time`` (device time, ns) and decoded object."""
+    """A message of a JSON topic: its device time (ns; the record's ``publish_time``, which
+    recordings made before ``log_time`` became UTC hold in ``log_time`` too) and decoded object."""
 
     t_ns: int
     obj: Any
@@ -395,6 +396,8 @@ class McapReplayDevice(Device):
         self._blocks: Iterator[Block] | None = None
         self._pending: Block | None = None
         self._start: tuple[float, int] | None = None  # (monotonic time, first sample) of block 0
+        self._scanner: RecordScanner | None = None
+        self._meta: dict[str, str] = {}
 
     # -- Device hooks ------------------------------------------------------------------------
     def _open(self) -> StreamInfo:
@@ -403,7 +406,8 @@ class McapReplayDevice(Device):
         f = open(self.path, "rb")  # noqa: SIM115 - closed by _close, or below on failure
         try:
             info = self._read_info(f)
-            self._blocks = self._iter_blocks(RecordScanner(f, self.path, strict=True), info.fs_hz)
+            self._scanner = RecordScanner(f, self.path, strict=True)
+            self._blocks = self._iter_blocks(self._scanner, info.fs_hz)
         except BaseException:
             f.close()
             raise
@@ -438,6 +442,7 @@ class McapReplayDevice(Device):
                 f"{self.path}: not a ramdaq recording (no {fmt.STREAM_METADATA} metadata "
                 f"or no {fmt.BLOCK_TOPIC} topic)"
             )
+        self._meta = dict(meta[fmt.STREAM_METADATA])
         try:
             return fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())
         except (fmt.NotARamdaqRecording, UnicodeDecodeError) as err:
@@ -506,19 +511,31 @@ class McapReplayDevice(Device):
 
     # -- other topics ------------------------------------------------------------------------
     @property
+    def metadata(self) -> dict[str, str]:
+        """The ``ramdaq.stream`` metadata record as written (``created_utc``, ``ramdaq_version``,
+        ...; see :mod:`ramdaq.drivers.mcap_format`)."""
+        self.open()
+        return dict(self._meta)
+
+    @property
+    def bytes_read(self) -> int:
+        """Bytes of the file read so far by the block iterator (for a progress bar)."""
+        return self._scanner.good_bytes if self._scanner is not None else 0
+
+    @property
     def rig_toml(self) -> str:
         """The rig file recorded with the stream (``""`` if none)."""
         return self.info.rig_toml
 
     def json_messages(self, topic: str) -> list[JsonMessage]:
         """All messages of a JSON topic, in log-time order (``[]`` if the topic is absent);
-        chunk CRCs checked."""
+        chunk CRCs checked. Times are device times (``publish_time``)."""
         self.open()
         with open(self.path, "rb") as f:
             reader = SeekingReader(f, validate_crcs=True)
             try:
                 return [
-                    JsonMessage(m.log_time, fmt.decode_json(m.data))
+                    JsonMessage(m.publish_time, fmt.decode_json(m.data))
                     for _, _, m in reader.iter_messages(topics=[topic])
                 ]
             except (*_DAMAGE, OSError) as err:

@@ -2,8 +2,9 @@
 report -- a JSON document of every number with units and standard errors, PNG plots, and a
 summary table for the terminal.
 
-The recording is replayed as a device (``ramdaq.drivers.mcap_replay``), block by block, through the
-same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.judge_event` as a live trial.
+The recording is read (:func:`ramdaq.daq.recording.read_recording`), block by block, through the
+same :class:`~ramdaq.daq.trigger.Trigger` and :func:`~ramdaq.daq.analyzer.judge_event` as a live
+trial (:func:`ramdaq.daq.api.analyze_hits`).
 """
 
 from __future__ import annotations
@@ -16,13 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from ...analysis.model.geometry import gage_geometry
-from ...analysis.model.rig import Rig, parse_rig
+from ...analysis.model.rig import Rig
 from ...analysis.model.structure import added_mass
 from ...analysis.model.surface import Surface
 from ...analysis.model.units import from_si
-from ...drivers.mcap_replay import McapReplayDevice
-from ..analyzer import HitResult, analysis_to_json, finite_json, judge_event, trial_summary
-from ..trigger import Trigger
+from ..analyzer import HitResult, analysis_to_json, finite_json, trial_summary
+from ..api import analyze_hits, decay_samples
+from ..recording import read_recording, rig_or_fail
+from .progress import bytes_bar, progress_bar
 
 MODEL_MOTIONS = ("v", "gamma", "alpha")
 """The model's motion names; ``report.json``'s ``surface.motions`` gives what the rig calls each
@@ -33,35 +35,18 @@ UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "
 
 
 def run_analysis(path: str | Path, *, impact: int | None = None,
-                 progress: Callable[[str], None] | None = None) -> tuple[Rig, list[HitResult]]:
-    """Replay ``path`` through the trigger and analyse each hit (or only hit ``impact``)."""
-    with McapReplayDevice(path) as dev:
-        info = dev.info
-        if not info.rig_toml:
-            raise ValueError(f"{path}: the recording carries no rig; analysis needs gage positions")
-        rig = parse_rig(info.rig_toml, source=f"{path}:rig.toml")
-        if "medium" in info.extra and info.extra["medium"] != rig.medium:
-            rig = rig.with_medium(info.extra["medium"])
-        trigger = Trigger(info)
-        hits: list[HitResult] = []
-
-        def take(events: list) -> None:
-            for ev in events:
-                k = len(hits)
-                if impact is not None and k != impact:
-                    hits.append(HitResult(k, ev, False, "not requested", None))
-                    continue
-                if progress:
-                    progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
-                             f"{(ev.last_sample - ev.onset_sample) / info.fs_hz:.1f} s of decay")
-                hits.append(judge_event(k, ev, info, rig))
-
-        for block in dev:
-            take(trigger.process(block))
-        take(trigger.flush())
-    if impact is not None and impact >= len(hits):
-        raise ValueError(f"{path}: --impact {impact} asked for, but {len(hits)} impacts found")
-    return rig, hits
+                 progress: Callable[[str], None] | None = None,
+                 bars: bool | None = False) -> tuple[Rig, list[HitResult]]:
+    """Read ``path`` through the trigger and analyse each hit (or only hit ``impact``); with
+    ``bars`` (``None``: when standard error is a terminal) a progress bar over the reading and
+    one over the hits."""
+    name = Path(path).name
+    with bytes_bar(f"reading {name}", Path(path).stat().st_size, show=bars) as update:
+        rec = read_recording(path, progress=update)
+    rig = rig_or_fail(rec)
+    n = len(rec.impacts) if impact is None else 1
+    with progress_bar(f"analysing {name}", n, unit="hits", show=bars if n > 1 else False) as advance:
+        return rig, analyze_hits(rec, impact=impact, progress=progress, done=lambda h: advance())
 
 
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
@@ -213,11 +198,8 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
     if plots:
         from ..reports.impact_plots import plot_impact
 
-        n_gages = len(rig.gages_by_channel())
         for h in hits:
             if h.accepted and h.analysis is not None and h.event.record is not None:
-                rec = h.event.record
-                i0 = round(h.analysis.decay_start_s * rec.fs_hz) - rec.first_sample
-                files += plot_impact(h.analysis, rec.values()[:n_gages, i0:], rec.fs_hz, rig, out,
-                                     h.index)
+                files += plot_impact(h.analysis, decay_samples(h, rig), h.event.record.fs_hz, rig,
+                                     out, h.index)
     return report, files

@@ -54,6 +54,16 @@ from ..errors import RecordingError, ViewError
 from .gap_bench import SEED_SETS
 
 RECORDINGS = Path("recordings")
+DESCRIPTION = """\
+Impact vibration trials of ship rudders and stern planes (after DTMB Report 1836): record 16
+accelerometers while a ram strikes, find each blow, and give every gage's frequency and
+logarithmic decrement, the rudder's damping constants and virtual mass -- live, and again from
+the recording.
+
+  ramdaq trial --rig albacore --duration 30 --impact-every 10 --name demo    a simulated trial
+  ramdaq analyze recordings/albacore-water.mcap                               the trial report
+  ramdaq gap recordings/sampson-water.mcap                                    model against trial
+"""
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -281,8 +291,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     def progress(msg: str) -> None:
         print(msg, flush=True)
 
-    rig, hits = run_analysis(src, impact=args.impact, progress=progress)
-    air = run_analysis(Path(args.air), progress=progress) if args.air else None
+    rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None)
+    air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
     report, files = write_analysis(src, rig, hits, out, plots=not args.no_plots, air=air)
     print(format_summary(report, args.units))
     print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
@@ -290,30 +300,22 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_gap(args: argparse.Namespace) -> int:
-    """Sim-to-real gap diagnosis of a recording, or the benchmark that proves it."""
+    """Sim-to-real gap diagnosis of a recording (``ramdaq gap-benchmark`` proves it)."""
     from ...analysis.gap.diagnose import Settings
     from ...analysis.gap.effects import get_effect
+    from .progress import progress_bar
 
     effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
     for e in effects or ():
         get_effect(e)
-    if args.file == "benchmark":
-        from .gap_bench import run_benchmark
-
-        if sum((args.dev, args.check, args.seeds is not None)) > 1:
-            raise SystemExit("ramdaq gap benchmark: give one of --dev, --check, --seeds")
-        seeds = "dev" if args.dev else "check" if args.check else args.seeds or "benchmark"
-        out = Path(args.out or "gap_benchmark")
-        return run_benchmark(out, per_class=args.per_class, seeds=seeds, jobs=args.jobs,
-                             rescore=args.rescore, thresholds=args.thresholds,
-                             progress=lambda m: print(m, flush=True))
     from .gap import run_gap, summary_lines, write_report
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
-    lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
-                        progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
-                        post_max_s=args.post_s, held_out_every=args.held_out_every)
+    with progress_bar(f"gap diagnosis of {src.name}", None):  # steps unknown: spinner and time
+        lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
+                            progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
+                            post_max_s=args.post_s, held_out_every=args.held_out_every)
     files = write_report(d, out, plots=not args.no_plots, source=str(src))
     print("\n".join(summary_lines(d)))
     print(f"\nwrote {len(files)} files to {out}/ (gap.json with every number)")
@@ -333,12 +335,17 @@ def cmd_import(args: argparse.Namespace) -> int:
     options: dict = {"rig": load_rig(args.rig), "channels": parse_channel_map(args.channels)}
     if args.medium:
         options["medium"] = args.medium
+    from .progress import progress_bar
+
     device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
-    info, imp = device.info, device.info.extra.get("import", {})
+    with progress_bar(f"reading {src.name}", None):  # parsing the file: no count to show
+        info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
     exact = sum(c["method"] != "requantised" for c in chans)
     worst = max((c["max_error_m_s2"] for c in chans), default=0.0)
-    s = record(device, out, readout=False, overwrite=args.overwrite)
+    with progress_bar(f"writing {out.name}", imp.get("rows"), unit="samples") as advance:
+        s = record(device, out, readout=False, overwrite=args.overwrite,
+                   progress=lambda b: advance(b.n_samples))
     print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
@@ -416,8 +423,11 @@ def cmd_gap_benchmark(args: argparse.Namespace) -> int:
     if sum((args.dev, args.check, args.seeds is not None)) > 1:
         raise SystemExit("ramdaq gap-benchmark: give one of --dev, --check, --seeds")
     seeds = "dev" if args.dev else "check" if args.check else args.seeds or "benchmark"
+    from .progress import progress_bar
+
     kw = dict(per_class=args.per_class, seeds=seeds, jobs=args.jobs, effects=effects, rescore=args.rescore,
-              thresholds=args.thresholds, progress=lambda m: print(m, flush=True))
+              thresholds=args.thresholds, progress=lambda m: print(m, flush=True),
+              bar=lambda n: progress_bar("gap benchmark", n, unit="scenarios"))
     out = Path(args.out or "gap_benchmark")
     if not args.scheduler or args.rescore:
         return run_benchmark(out, **kw)
@@ -490,7 +500,11 @@ def _device_args(r: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="ramdaq", description=__doc__.split("\n")[0])
+    from ramdaq import __version__
+
+    p = argparse.ArgumentParser(prog="ramdaq", description=DESCRIPTION,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"ramdaq {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("record", help="record a device into an MCAP file")
@@ -509,7 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=cmd_trial)
 
     p_ = sub.add_parser("replay", help="a recording through the same trigger and analyzer")
-    p_.add_argument("file")
+    p_.add_argument("file", help="a recording (.mcap)")
     p_.add_argument("--realtime", action="store_true", help="at the recording's own pace")
     p_.add_argument("--rrd", help="write a Rerun view of the replay here")
     _web_args(p_)
@@ -520,18 +534,18 @@ def build_parser() -> argparse.ArgumentParser:
     p_.set_defaults(func=cmd_replay)
 
     i = sub.add_parser("info", help="describe a recording")
-    i.add_argument("file")
+    i.add_argument("file", help="a recording (.mcap), finished or not")
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=cmd_info)
 
     c = sub.add_parser("recover", help="write a valid copy of a recording that lost its footer "
                        "or has damaged chunks (every intact record kept)")
-    c.add_argument("file")
+    c.add_argument("file", help="the damaged or unfinished recording (.mcap); it is only read")
     c.add_argument("-o", "--out", help="output file (default FILE.recovered.mcap)")
     c.set_defaults(func=cmd_recover)
 
     a = sub.add_parser("analyze", help="trial report: frequency, decrement, Report 1836 chain")
-    a.add_argument("file")
+    a.add_argument("file", help="a recording (.mcap) that carries its rig")
     a.add_argument("--impact", type=int, help="analyse only this hit (0-based)")
     a.add_argument("--air", help="the same rudder's in-air recording, for Eq 18 (file is in water)")
     a.add_argument("--out", help="output folder (default FILE_analysis/)")
@@ -541,32 +555,20 @@ def build_parser() -> argparse.ArgumentParser:
     a.set_defaults(func=cmd_analyze)
 
     gp = sub.add_parser("gap", help="sim-to-real gap: where the model misses, which unmodelled "
-                       "effect, how far adding it closes the gap ('gap benchmark' proves it)")
-    gp.add_argument("file", help="recording (.mcap; ramdaq's own or imported), or the word 'benchmark'")
+                       "effect, how far adding it closes the gap ('gap-benchmark' proves it)")
+    gp.add_argument("file", help="recording (.mcap; ramdaq's own or imported)")
     gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
-    gp.add_argument("--out", help="output folder (default FILE_gap/, or gap_benchmark/)")
+    gp.add_argument("--out", help="output folder (default FILE_gap/)")
     gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
     gp.add_argument("--pre-s", type=float, default=1.0, help="pre-trigger window, s (default 1)")
     gp.add_argument("--post-s", type=float, default=4.0, help="longest decay compared, s (default 4)")
     gp.add_argument("--held-out-every", type=int, default=3,
                    help="every Nth impact is held out of the calibration (default 3)")
-    gp.add_argument("--per-class", type=int, default=20, help="benchmark: scenarios per effect class")
-    gp.add_argument("--seeds", choices=list(SEED_SETS),
-                    help="benchmark: the seed set: " + "; ".join(f"{k}, {v[1]}" for k, v in SEED_SETS.items())
-                    + " (default benchmark)")
-    gp.add_argument("--dev", action="store_true", help="benchmark: --seeds dev (tunes the thresholds)")
-    gp.add_argument("--check", action="store_true", help="benchmark: --seeds check")
-    gp.add_argument("--jobs", type=int, default=2, help="benchmark: worker processes (default 2)")
-    gp.add_argument("--rescore", action="store_true",
-                    help="benchmark: score the results stored in --out again instead of running")
-    gp.add_argument("--thresholds", type=Path,
-                    help="benchmark: thresholds file to score with (default: the shipped ones; --dev "
-                         "writes new ones to OUT/gap_thresholds.json)")
     gp.set_defaults(func=cmd_gap)
 
     g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
-    g.add_argument("rig")
+    g.add_argument("rig", help="a rig file (TOML) or a shipped rig's name, e.g. albacore")
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
@@ -652,6 +654,9 @@ def _quiet_stdout() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code (module docstring, *Exit codes*)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:2] == ["gap", "benchmark"]:  # the older spelling of gap-benchmark
+        argv = ["gap-benchmark", *argv[2:]]
     args = build_parser().parse_args(argv)  # usage errors: SystemExit(2)
     where = f"ramdaq {args.command}"
     with _sigterm_as_ctrl_c():

@@ -1,9 +1,9 @@
 """``ramdaq gap``: a recorded trial held against its rig's model -- where the gap lies, which
 unmodelled effect causes it, how far adding it closes the gap on held-out impacts.
 
-The recording (ramdaq's own or an imported one) is replayed as a device through the same
-trigger as ``ramdaq analyze``; the whole stream is kept in memory (a six-impact, 16-channel trial
-at 2 kHz is ~15 MB), gaps as NaN, and handed with the trigger's onsets to
+The recording (ramdaq's own or an imported one) is read whole
+(:func:`ramdaq.daq.recording.read_recording`) through the same trigger as ``ramdaq analyze``
+(a six-impact, 16-channel trial at 2 kHz is ~15 MB), gaps as NaN, and handed with the trigger's onsets to
 :func:`ramdaq.analysis.gap.diagnose.diagnose`.
 """
 
@@ -19,9 +19,10 @@ import numpy as np
 
 from ...analysis.gap.diagnose import Diagnosis, Settings, diagnose
 from ...analysis.gap.trialdata import TrialData, prepare
-from ...analysis.model.rig import Rig, RigError, load_rig, parse_rig
+from ...analysis.model.rig import Gage, Rig, RigError
+from ...drivers.block import StreamInfo
 from ...drivers.mcap_replay import McapReplayDevice
-from ..trigger import Trigger
+from ..recording import Recording, read_recording, rig_of, rig_or_fail
 
 
 @dataclass
@@ -39,51 +40,45 @@ class LoadedTrial:
     source: str
 
 
-def load_trial(path: str | Path, rig: Rig | str | Path | None = None,
+def load_trial(src: str | Path | Recording, rig: Rig | str | Path | None = None,
                progress: Callable[[str], None] | None = None) -> LoadedTrial:
-    """Read a recording, find its impacts, and line its channels up with the rig's gages."""
+    """Read a recording (or take one read), find its impacts, and line its channels up with the
+    rig's gages."""
     say = progress or (lambda s: None)
-    with McapReplayDevice(path) as dev:
-        info = dev.info
-        if rig is None:
-            if not info.rig_toml:
-                raise RigError(f"{path}: the recording carries no rig; pass --rig")
-            rig = parse_rig(info.rig_toml, source=f"{path}:rig.toml")
-        elif not isinstance(rig, Rig):
-            rig = load_rig(rig)
-        if "medium" in info.extra and info.extra["medium"] != rig.medium:
-            rig = rig.with_medium(info.extra["medium"])
-        rows = {g: i for i, g in enumerate(info.gages) if g}
-        have = [g for g in rig.gages_by_channel() if g.number in rows]
-        if len(have) < 3:
-            raise RigError(f"{path}: only {len(have)} of the rig's gages are in the recording "
-                           f"(gages {sorted(rows)}); the gap diagnosis needs three or more")
-        trigger = Trigger(info)
-        blocks, events = [], []
-        for b in dev:
-            blocks.append(b)
-            events += trigger.process(b)
-        events += trigger.flush()
-    if not blocks:
+    path = src.path if isinstance(src, Recording) else src
+    with McapReplayDevice(path) as dev:  # the summary only: refuse too few gages before reading
+        _gages_present(path, dev.info, rig_of(path, dev.info, rig))
+    rec = src if isinstance(src, Recording) and rig is None else read_recording(path, rig=rig)
+    info, rig = rec.info, rig_or_fail(rec)
+    rows = {g: i for i, g in enumerate(info.gages) if g}
+    have = _gages_present(path, info, rig)
+    if rec.n_samples == 0:
         raise ValueError(f"{path}: the recording holds no samples")
-    first = blocks[0].first_sample
-    n = blocks[-1].first_sample + blocks[-1].counts.shape[1] - first
     if len(have) < len(rig.gages):
         rig = replace(rig, gages=tuple(replace(g, channel=k) for k, g in enumerate(have)))
-    x = np.full((len(have), n), np.nan)
-    pick = [rows[g.number] for g in have]
-    for b in blocks:
-        a = b.first_sample - first
-        x[:, a:a + b.counts.shape[1]] = b.counts[pick] * b.scale[pick, None]
-    scale = blocks[0].scale[pick]
+    x = rec.gage_values([g.number for g in have])
+    scale = rec.scale[[rows[g.number] for g in have]]
     bits = info.extra.get("adc_bits")
     rails = None
     if bits:
         rails = (-(2.0 ** (bits - 1)) * scale, (2.0 ** (bits - 1) - 1) * scale)
-    onsets = np.array([ev.onset_s for ev in events]) - first / info.fs_hz
+    onsets = np.array([ev.onset_s for ev in rec.impacts]) - rec.first_sample / info.fs_hz
+    n = rec.n_samples
     say(f"{path}: {n / info.fs_hz:.1f} s of {len(have)} gages at {info.fs_hz:g} Hz, "
         f"{len(onsets)} impacts found")
-    return LoadedTrial(rig, x, info.fs_hz, onsets, rails, events, str(path))
+    return LoadedTrial(rig, x, info.fs_hz, onsets, rails, list(rec.impacts), str(path))
+
+
+def _gages_present(path: str | Path, info: StreamInfo, rig: Rig | None) -> list[Gage]:
+    """The rig's gages the recording has, in the rig's channel order; three or more."""
+    if rig is None:
+        raise RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
+    rows = {g for g in info.gages if g}
+    have = [g for g in rig.gages_by_channel() if g.number in rows]
+    if len(have) < 3:
+        raise RigError(f"{path}: only {len(have)} of the rig's gages are in the recording "
+                       f"(gages {sorted(rows)}); the gap diagnosis needs three or more")
+    return have
 
 
 def trial_data(lt: LoadedTrial, *, pre_s: float = 1.0, post_max_s: float = 4.0,

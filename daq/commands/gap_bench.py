@@ -26,6 +26,7 @@ import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import AbstractContextManager, nullcontext
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -309,7 +310,8 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
 
 
 def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str], None],
-         client: Client | None = None) -> list[dict]:
+         client: Client | None = None,
+         bar: Callable[[int], AbstractContextManager[Callable[[], None]]] | None = None) -> list[dict]:
     """Run the scenarios on ``jobs`` worker processes or, when a ``distributed.Client`` is
     given, on its cluster (through its ``concurrent.futures`` executor: the same submissions
     and the same :func:`run_one`, so the same results). Results keep the scenarios' order."""
@@ -324,9 +326,10 @@ def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str],
     # idles at the end behind one long diagnosis; results keep the scenarios' order
     order = sorted(range(len(scs)), key=lambda i: scs[i]["medium"] != "air")
     results: list[dict] = [{}] * len(scs)
-    with pool:
+    with pool, (bar(len(scs)) if bar else nullcontext(lambda: None)) as advance:
         futs = {pool.submit(run_one, scs[i], str(out)): i for i in order}
         for n, f in enumerate(as_completed(futs)):
+            advance()
             r = results[futs[f]] = f.result()
             tag = r.get("named") or r.get("verdict") or r.get("error")
             say(f"[{n + 1}/{len(scs)}] {r['effect']:16s} size {r['size']:.2f} {r['rig']}/{r['medium']}: "
@@ -337,14 +340,16 @@ def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str],
 def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", jobs: int = 2,
                   effects: tuple[str, ...] | None = None, rescore: bool = False,
                   thresholds: Path | None = None, progress: Callable[[str], None] | None = None,
-                  client: Client | None = None) -> int:
+                  client: Client | None = None,
+                  bar: Callable[[int], AbstractContextManager[Callable[[], None]]] | None = None) -> int:
     """Run the benchmark on the seed set ``seeds`` (:data:`SEED_SETS`) and print its figures; 0
     when done. The scenarios run on ``jobs`` processes, or on the dask cluster of ``client`` (a
     ``distributed.Client``) when given. ``dev`` writes the thresholds to
     ``out/gap_thresholds.json``; every other set is scored with ``thresholds`` (default: the
     shipped :data:`THRESHOLDS`).
     ``rescore``: score the results an earlier run stored in ``out`` again (after re-tuning on
-    the development seeds) instead of running the scenarios."""
+    the development seeds) instead of running the scenarios. ``bar(n)``: a progress bar over
+    the ``n`` scenarios (a context manager yielding the step to call after each)."""
     from ...analysis.gap.diagnose import Settings
 
     say = progress or (lambda s: None)
@@ -357,7 +362,7 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
         results = json.loads(stored.read_text())
         say(f"re-scoring {len(results)} stored {seeds} scenarios from {out}")
     else:
-        results = _run(scenarios(per_class, seeds, effects), out, seeds, jobs, say, client)
+        results = _run(scenarios(per_class, seeds, effects), out, seeds, jobs, say, client, bar)
         stored.write_text(json.dumps(results, indent=1, default=float))
     wall = time.perf_counter() - t0
     st = Settings()

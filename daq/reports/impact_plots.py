@@ -1,124 +1,218 @@
-"""Plots of one analysed impact, as PNG files: what a person would rather look at than read.
+"""Plots of one analysed impact, as matplotlib Figures (a notebook shows them inline; the report
+writes them as PNG files): what a person would rather look at than read.
 
-- ``decay``: each gage's free decay with the fitted envelope of the predominant mode;
-- ``spectrum``: the rudder gages' spectrum with the identified modes marked;
-- ``modeshape``: the predominant mode over the gage layout (elevation, x aft, z up);
+- ``decay``: per gage and mode, the log-envelope of the mode's own component against time with
+  its fitted line -- the decrement shown is the one the eye can see;
+- ``spectrum``: the rudder gages' spectrum with the identified modes marked and listed;
+- ``modeshape``: the predominant mode as the gages measure it -- athwartship amplitude against
+  height, seen from aft, and each gage's amplitude and phase;
 - ``stock``: Report 1836's Figures 8 and 9 -- (d_v,alpha) and gamma along the stock.
+
+The figures are built with :class:`matplotlib.figure.Figure`, not ``pyplot``: no backend is
+chosen or needed, nothing is left open in a figure manager, and they draw in any thread.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import scipy.signal
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import scipy.signal  # noqa: E402
-
-from ...analysis.impact import ImpactAnalysis  # noqa: E402
-from ...analysis.modal.peaks import bandpass_mode  # noqa: E402
-from ...analysis.model.rig import Rig  # noqa: E402
+from ...analysis.impact import ImpactAnalysis
+from ...analysis.modal.peaks import bandpass_mode
+from ...analysis.model.rig import Rig
 
 BODY_COLOURS = {"rudder": "tab:blue", "stock": "tab:orange", "hull": "tab:grey"}
+DPI = 150
+VERDICT_TEXT = {"ok": "usable", "dead": "dead channel", "clipped": "clipped",
+                "no_decay": "no free decay seen", "too_few_cycles": "too few cycles",
+                "negative_damping": "grows instead of decaying"}
+"""The gage verdicts (:class:`~ramdaq.analysis.modal.verdicts.Verdict`) in words, for titles."""
+
+
+def impact_figures(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> dict[str, Figure]:
+    """The plots of one impact by kind; ``x`` (n_gages, n) is the decay analysed (m/s^2) from
+    ``a.decay_start_s``, rows in ``a.gage_numbers`` order."""
+    figs = {"decay": decay_figure(a, x, fs_hz), "spectrum": spectrum_figure(a, x, fs_hz, rig),
+            "modeshape": modeshape_figure(a, rig)}
+    if a.stock_curves:
+        figs["stock"] = stock_figure(a, rig)
+    return figs
 
 
 def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_dir: Path,
                 k: int) -> list[Path]:
-    """Write the four plots of impact ``k``; ``x`` (n_gages, n) is the decay analysed (m/s^2),
-    rows in ``a.gage_numbers`` order. Returns the files written."""
+    """Write the plots of impact ``k`` as ``impact{k}_{kind}.png`` (:func:`impact_figures`).
+    Returns the files written."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    files = [_decay(a, x, fs_hz, out_dir / f"impact{k}_decay.png"),
-             _spectrum(a, x, fs_hz, rig, out_dir / f"impact{k}_spectrum.png"),
-             _modeshape(a, rig, out_dir / f"impact{k}_modeshape.png")]
-    if a.stock_curves:
-        files.append(_stock(a, rig, out_dir / f"impact{k}_stock.png"))
+    files = []
+    for kind, fig in impact_figures(a, x, fs_hz, rig).items():
+        files.append(out_dir / f"impact{k}_{kind}.png")
+        fig.savefig(files[-1], dpi=DPI)
     return files
 
 
-def _decay(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, path: Path) -> Path:
-    m, p = a.modes, a.predominant
-    row_of = {n: j for j, n in enumerate(a.active_gages)}
+def mode_components(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> np.ndarray:
+    """Each mode's own component on each used gage: the decay less the offset and the other
+    fitted modes, band-passed around the mode (m/s^2), shape (n_active, n_modes, n)."""
+    m = a.modes
+    rows = [a.gage_numbers.index(n) for n in a.active_gages]
     t = np.arange(x.shape[1]) / fs_hz
-    env = np.exp(-m.delta[p] * m.frequency_hz[p] * t)
-    fig, axes = plt.subplots(4, 4, figsize=(16, 11), sharex=True)
-    band = bandpass_mode(x, fs_hz, float(m.frequency_hz[p]))
-    for i, (n, ax) in enumerate(zip(a.gage_numbers, axes.flat, strict=False)):
-        ax.plot(t, x[i], lw=0.3, color="0.8")
-        ax.plot(t, band[i], lw=0.4, color="0.2")
+    lam = -m.delta * m.frequency_hz + 2j * np.pi * m.frequency_hz
+    each = np.real(m.complex_amplitude[:, :, None] * np.exp(lam[None, :, None] * t))
+    rest = x[rows] - m.offset[:, None] - each.sum(axis=1)
+    out = np.empty_like(each)
+    for k, f in enumerate(m.frequency_hz):
+        bw = min(0.4, 1.6 * (fs_hz / 2 - f) / f)  # keep the upper edge below Nyquist
+        out[:, k] = bandpass_mode(rest + each[:, k], fs_hz, float(f), rel_bandwidth=bw)
+    return out
+
+
+def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
+    """Per gage a panel; per mode in it the envelope of the mode's own component (solid, log
+    scale) and the envelope of its fitted decay, |a| exp(-delta f t) (dashed)."""
+    m = a.modes
+    row_of = {n: j for j, n in enumerate(a.active_gages)}
+    comp = mode_components(a, x, fs_hz)
+    env = np.abs(scipy.signal.hilbert(comp, axis=-1))
+    for k, f in enumerate(m.frequency_hz):  # the band-pass's and Hilbert's end effect: about one
+        env[:, k, max(1, x.shape[1] - round(fs_hz / (0.4 * f))):] = np.nan  # bandwidth's time
+    t = np.arange(x.shape[1]) / fs_hz
+    n_col = 4
+    n_row = -(-len(a.gage_numbers) // n_col)
+    fig = Figure(figsize=(16, 2.6 * n_row + 1), layout="constrained")
+    axes = fig.subplots(n_row, n_col, sharex=True, squeeze=False).ravel()
+    colours = [f"C{k}" for k in range(len(m.frequency_hz))]
+    floor = np.nanmax(env) * 1e-4  # four decades below the largest envelope
+    for ax, n in zip(axes, a.gage_numbers, strict=False):
+        if n not in row_of:
+            v = a.verdicts[n]
+            ax.text(0.5, 0.5, f"gage {n} not used:\n{VERDICT_TEXT.get(str(v.code), str(v.code))}",
+                    ha="center", va="center", transform=ax.transAxes, color="0.4")
+            ax.set_facecolor("0.93")
+            ax.tick_params(left=False, labelleft=False)
+            continue
+        j = row_of[n]
+        for k, c in enumerate(colours):
+            amp = abs(m.complex_amplitude[j, k])
+            d, f = m.channel_delta[j, k], m.channel_frequency_hz[j, k]
+            ax.semilogy(t, np.maximum(env[j, k], floor), color=c, lw=0.8)
+            if np.isfinite(d) and amp > 0:
+                ax.semilogy(t, amp * np.exp(-d * f * t), color=c, lw=1.2, ls="--")
+        g = a.gages.get(n)
         title = f"gage {n}"
-        if n in row_of:
-            amp = abs(m.complex_amplitude[row_of[n], p])
-            ax.plot(t, amp * env, "r", lw=1)
-            ax.plot(t, -amp * env, "r", lw=1)
-            g = a.gages.get(n)
-            if g is not None and np.isfinite(g.delta):
-                title += f": delta {g.delta:.4f} +- {g.delta_se:.1g}"
-        else:
-            title += f": {a.verdicts[n].code}"
+        if g is not None and np.isfinite(g.delta):
+            title += f": δ = {g.delta:.4f} ± {g.delta_se:.1g} at {g.f_hz:.2f} Hz"
+        else:  # not a number: said, never drawn as zero
+            title += ": δ of the predominant mode not measured"
         ax.set_title(title, fontsize=9)
-    for ax in axes[-1]:
-        ax.set_xlabel("time after decay start (s)")
-    fig.suptitle(f"Free decay at {a.decay_start_s:.3f} s (grey: as recorded; black: band-passed "
-                 f"around the {a.f_hz:.3f} Hz mode; red: its fitted envelope), m/s^2")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+        ax.set_ylim(floor, None)
+    for ax in axes[len(a.gage_numbers):]:
+        ax.set_visible(False)
+    for ax in axes[::n_col]:
+        ax.set_ylabel("envelope (m/s²)")
+    for ax in axes[-n_col:]:
+        ax.set_xlabel("time after the decay's start (s)")
+    labels = [f"{f:.2f} Hz, δ = {d:.4f}{' (predominant)' if k == a.predominant else ''}"
+              for k, (f, d) in enumerate(zip(m.frequency_hz, m.delta, strict=True))]
+    proxies = [axes[0].plot([], [], color=c)[0] for c in colours]
+    fig.legend(proxies, labels, loc="outside upper right", ncols=len(labels), fontsize=9,
+               title="solid: envelope of the mode's own component in the data; dashed: its fitted "
+                     "decay |a| exp(−δ f t)", title_fontsize=9)
+    fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01, ha="left")
+    return fig
 
 
-def _spectrum(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, path: Path) -> Path:
-    rows = [i for i, n in enumerate(a.gage_numbers) if rig.gage(n).body == "rudder"]
+def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> Figure:
+    """Mean power spectral density of the rudder gages' decay (Welch, 8 s segments at most) on
+    log-log axes, each identified mode a numbered line listed in the legend."""
+    rows = [i for i, n in enumerate(a.gage_numbers) if rig.gage(n).body == "rudder"] or \
+        list(range(len(a.gage_numbers)))
     nper = min(x.shape[1], int(8 * fs_hz))
     f, pxx = scipy.signal.welch(x[rows], fs_hz, nperseg=nper, axis=-1)
-    fig, ax = plt.subplots(figsize=(11, 5))
-    ax.semilogy(f, pxx.mean(axis=0), lw=0.8)
-    for i, (fi, di) in enumerate(zip(a.modes.frequency_hz, a.modes.delta, strict=True)):
-        ax.axvline(fi, color="r" if i == a.predominant else "0.6", ls="--", lw=0.8)
-        ax.annotate(f"{fi:.2f} Hz\ndelta {di:.4f}", (fi, ax.get_ylim()[1]), fontsize=8,
-                    va="top", ha="left")
-    ax.set_xlim(0, min(fs_hz / 2, 1.5 * float(np.max(a.modes.frequency_hz))))
+    p = pxx.mean(axis=0)
+    fm = a.modes.frequency_hz
+    fig = Figure(figsize=(11, 5), layout="constrained")
+    ax = fig.subplots()
+    lo, hi = 0.5 * float(np.min(fm)), min(fs_hz / 2, 1.5 * float(np.max(fm)))
+    keep = (f >= lo) & (f <= hi)
+    ax.loglog(f[keep], p[keep], lw=0.8, color="0.2")
+    for k, (fk, dk) in enumerate(zip(fm, a.modes.delta, strict=True)):
+        pred = k == a.predominant
+        ax.axvline(fk, color="C3" if pred else f"C{k % 3}", ls="--", lw=1.2 if pred else 0.8,
+                   label=f"{k + 1}: {fk:.2f} Hz, δ = {dk:.4f}{' (predominant)' if pred else ''}")
+        ax.annotate(str(k + 1), (fk, 1.0), xycoords=("data", "axes fraction"), xytext=(3, -12),
+                    textcoords="offset points", fontsize=9)
+    top = float(np.max(p[keep]))
+    ax.set_ylim(max(float(np.percentile(p[keep], 5)) / 3, top * 1e-7), top * 3)
+    ax.set_xlim(lo, hi)
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel(f"PSD, {rig.surface.body('rudder')} gages ((m/s^2)^2/Hz)")
-    ax.set_title("Spectrum of the decay with the identified modes (red: predominant)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    ax.set_ylabel(f"PSD, mean of the {rig.surface.body('rudder')} gages ((m/s²)²/Hz)")
+    ax.set_title("Spectrum of the free decay with the identified modes")
+    ax.legend(fontsize=9, loc="lower left")
+    return fig
 
 
-def _modeshape(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
+def _reference(shape: dict[int, complex]) -> complex:
+    """Gage 4's component (the report's reference), else the largest."""
+    return shape.get(4) or max(shape.values(), key=abs)
+
+
+def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
+    """The predominant mode at the decay's start: left, each athwartship gage's amplitude in
+    phase with the reference gage (m/s^2) against its height, seen from aft; right, every used
+    gage's amplitude (m/s^2) with its phase against the reference, one row per gage."""
     m, p = a.modes, a.predominant
-    shape = dict(zip(a.active_gages, m.mode_shape[:, p], strict=True))
-    ref = shape.get(4, 1.0)
-    fig, ax = plt.subplots(figsize=(8, 8))
-    span = max(abs(c) for g in rig.gages for c in (g.position_m[0], g.position_m[2]))
-    for g in rig.gages:  # in the surface's plane: x along the chord, z along the stock
-        x, _, z = g.position_m
-        ax.plot(x, z, "o", color=BODY_COLOURS[g.body])
-        ax.annotate(str(g.number), (x, z), textcoords="offset points", xytext=(4, 4), fontsize=8)
-        if g.number in shape:
-            s = float(np.real(shape[g.number] * np.conj(ref) / abs(ref)))
-            ax.arrow(x, z, 0.25 * span * s, 0, width=0.01 * span, color="r",
-                     length_includes_head=True)
-    ax.set_aspect("equal")
-    sf, names = rig.surface, rig.surface.body
-    stock = "up" if sf.is_rudder else "along the stock, to the hull"
-    ax.set_xlabel("x, aft (m)")
-    ax.set_ylabel(f"{'z' if sf.is_rudder else 'inboard'}, {stock} (m)")
-    ax.set_title(f"Mode shape at {a.f_hz:.3f} Hz ({'athwartship' if sf.is_rudder else 'vertical'}"
-                 f" amplitude, signed by gage 4)\n"
-                 f"blue {names('rudder')}, orange stock, grey {names('hull')}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    amp = dict(zip(a.active_gages, m.complex_amplitude[:, p], strict=True))
+    ref = _reference(amp)
+    turn = np.conj(ref) / abs(ref)
+    fig = Figure(figsize=(13, 6.5), layout="constrained")
+    ax, bars = fig.subplots(1, 2)
+    marks = {"rudder": "o", "stock": "s", "hull": "^"}
+    placed: dict[float, int] = {}  # labels at one height, stacked so that none overprints
+    for n, c in amp.items():
+        g = rig.gage(n)
+        if abs(g.direction[1]) < 0.9:  # not athwartship: only in the right panel
+            continue
+        x, z = float(np.real(c * turn)) * np.sign(g.direction[1]), g.position_m[2]
+        ax.plot([0, x], [z, z], color=BODY_COLOURS[g.body], lw=2, alpha=0.6)
+        ax.plot(x, z, marks[g.body], color=BODY_COLOURS[g.body], ms=7)
+        k = placed.get(z, 0)
+        placed[z] = k + 1
+        ax.annotate(str(n), (x, z), xytext=(5, 5 - 13 * k), textcoords="offset points", fontsize=8)
+    ax.axvline(0, color="k", lw=0.5)
+    sf = rig.surface  # drawn in the surface's plane: z along the stock
+    across = "athwartship" if sf.is_rudder else "vertical"
+    ax.set_xlabel(f"{across} amplitude in phase with gage {4 if 4 in amp else '(largest)'} (m/s²)")
+    ax.set_ylabel("z, up (m)" if sf.is_rudder else "inboard, along the stock to the hull (m)")
+    ax.set_title(f"{across} gages seen from aft", fontsize=10)
+    for body, mk in marks.items():
+        ax.plot([], [], mk, color=BODY_COLOURS[body], label=sf.body(body))
+    ax.legend(fontsize=8, loc="best")
+    order = sorted(amp, key=lambda n: (-rig.gage(n).position_m[2], n))
+    y = np.arange(len(order))
+    bars.barh(y, [abs(amp[n]) for n in order], color=[BODY_COLOURS[rig.gage(n).body] for n in order])
+    for yi, n in zip(y, order, strict=True):
+        bars.annotate(f"{np.degrees(np.angle(amp[n] * turn)):+.0f}°", (abs(amp[n]), yi),
+                      xytext=(3, 0), textcoords="offset points", va="center", fontsize=8)
+    bars.set_yticks(y, [f"gage {n} ({sf.body(rig.gage(n).body)}, x {rig.gage(n).position_m[0]:+.2f}, "
+                        f"z {rig.gage(n).position_m[2]:+.2f} m)" for n in order], fontsize=8)
+    bars.invert_yaxis()
+    bars.margins(x=0.15)
+    bars.set_xlabel("amplitude (m/s²); label: phase against the reference gage")
+    bars.set_title("every used gage", fontsize=10)
+    fig.suptitle(f"Mode at {a.f_hz:.3f} Hz, δ = {m.delta[p]:.4f}, at the decay's start")
+    return fig
 
 
-def _stock(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
+def stock_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
+    """Report 1836's Figures 8 and 9: the bending amplitude (d_v,alpha) and the torsion gamma
+    along the stock, with the effective attachment heights (named as the rig's surface names them)."""
     c, sf = a.stock_curves, rig.surface
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 6), sharey=True)
+    fig = Figure(figsize=(11, 6), layout="constrained")
+    ax1, ax2 = fig.subplots(1, 2, sharey=True)
     ax1.plot(c["d_v_alpha"], c["z_stock_m"], "o-", label=f"stock (d_{sf.label('v')},alpha)")
     ax1.plot(c["d_hull"], c["z_hull_m"], "s--", label=f"{sf.body('hull')} gages 13, 14")
     for ax, key in ((ax1, "z_attach_bending_m"), (ax2, "z_attach_torsion_m")):
@@ -133,7 +227,4 @@ def _stock(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
     ax2.set_xlabel(f"{sf.label('gamma')}, mode amplitude per m")
     ax2.legend()
     ax2.set_title(f"Figure 9: torsion, l_T = {a.stock_lengths.get('torsion_m', float('nan')):.3f} m")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return fig

@@ -1,0 +1,287 @@
+"""The Python API of a trial: a recording analysed as ``ramdaq analyze`` does, or held against its
+rig's model as ``ramdaq gap`` does, with typed results and tables for a notebook.
+
+::
+
+    import ramdaq
+    res = ramdaq.analyze("recordings/albacore-water.mcap")
+    res.to_dataframe()          # one row per hit x gage x mode: f, delta, zeta, standard errors, verdict
+    figs = res.figures(0)       # matplotlib Figures of hit 0 (decay, spectrum, mode shape, stock)
+    gap = ramdaq.diagnose("recordings/sampson-water.mcap")
+    gap.to_dataframe()          # one row per candidate explanation, best first
+
+The numbers are those of the command line to the last digit when the process runs with one BLAS
+thread (``import ramdaq`` sets ``OPENBLAS_NUM_THREADS=1`` when NumPy is not yet loaded;
+:func:`analyze` warns once when it could not).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..analysis.gap.diagnose import Diagnosis, Settings
+from ..analysis.impact import ImpactAnalysis
+from ..analysis.model.rig import Rig
+from .analyzer import HitResult, judge_event, trial_summary
+from .recording import Recording, optional_import, read_recording, rig_or_fail
+
+__all__ = ["ModeEstimate", "TrialAnalysis", "Candidate", "TrialDiagnosis", "analyze", "analyze_hits",
+           "diagnose", "as_recording"]
+
+Source = str | PathLike | Recording
+
+
+def as_recording(src: Source, rig: Rig | str | Path | None = None) -> Recording:
+    """``src`` itself if it is a :class:`Recording` read with the same rig, else the file read."""
+    if isinstance(src, Recording) and rig is None:
+        return src
+    path = src.path if isinstance(src, Recording) else src
+    return read_recording(path, rig=rig)
+
+
+@dataclass(frozen=True)
+class ModeEstimate:
+    """One mode on one gage of one hit.
+
+    ``f_hz``, ``f_se_hz`` damped frequency and its standard error (Hz); ``delta``,
+    ``delta_se`` the logarithmic decrement (1); ``zeta``, ``zeta_se`` the damping ratio (1):
+    the gage's own fit (the report's per-gage decrement, Eq 7). ``mode_f_hz`` ...
+    ``mode_zeta_se``: the same of the fit shared by all gages (one value per mode, repeated on
+    each gage's row; what ``ramdaq batch analyze``'s table holds). ``amplitude`` the mode's
+    amplitude on the gage at the decay's start (m/s^2), ``phase_rad`` its phase against the
+    gage where the mode is largest (the mode shape's). ``verdict`` is the gage's
+    (``ok`` or what is wrong with its decay) and ``reason`` the hit's when it was rejected, else
+    the gage's. A rejected hit has one row, gage 0 and mode -1, numbers NaN.
+    """
+
+    hit: int
+    onset_s: float
+    accepted: bool
+    gage: int
+    mode: int
+    predominant: bool
+    f_hz: float
+    f_se_hz: float
+    delta: float
+    delta_se: float
+    zeta: float
+    zeta_se: float
+    mode_f_hz: float
+    mode_f_se_hz: float
+    mode_delta: float
+    mode_delta_se: float
+    mode_zeta: float
+    mode_zeta_se: float
+    amplitude: float
+    phase_rad: float
+    verdict: str
+    reason: str
+
+
+def _zeta(delta: float, delta_se: float) -> tuple[float, float]:
+    """Damping ratio of a log decrement, zeta = delta / sqrt(4 pi^2 + delta^2), and its standard
+    error by the derivative d zeta / d delta = 4 pi^2 / (4 pi^2 + delta^2)^1.5."""
+    k = 4 * math.pi**2
+    return delta / math.sqrt(k + delta**2), delta_se * k / (k + delta**2) ** 1.5
+
+
+def _rows_of(h: HitResult) -> Iterator[ModeEstimate]:
+    nan = float("nan")
+    a = h.analysis
+    if not h.accepted or a is None:
+        yield ModeEstimate(h.index, h.event.onset_s, False, 0, -1, False, *[nan] * 14, "", h.reason)
+        return
+    m = a.modes
+    row = {n: j for j, n in enumerate(a.active_gages)}
+    for n in a.gage_numbers:
+        v = a.verdicts[n]
+        if n not in row:
+            yield ModeEstimate(h.index, a.onset_s, True, n, -1, False, *[nan] * 14, str(v.code),
+                               v.reason)
+            continue
+        j = row[n]
+        for k in range(len(m.frequency_hz)):
+            d, dse = float(m.channel_delta[j, k]), float(m.channel_delta_se[j, k])
+            z, zse = _zeta(d, dse)
+            shared = (m.frequency_hz[k], m.frequency_se_hz[k], m.delta[k], m.delta_se[k], m.zeta[k],
+                      m.zeta_se[k])
+            yield ModeEstimate(h.index, a.onset_s, True, n, k, k == a.predominant,
+                               float(m.channel_frequency_hz[j, k]),
+                               float(m.channel_frequency_se_hz[j, k]), d, dse, z, zse,
+                               *(float(x) for x in shared), float(abs(m.complex_amplitude[j, k])),
+                               float(np.angle(m.mode_shape[j, k])), str(v.code), v.reason)
+
+
+@dataclass(frozen=True, eq=False)
+class TrialAnalysis:
+    """A recording's hits judged and analysed (``ramdaq analyze``): ``hits`` in time order, each
+    with its trigger event, acceptance and :class:`~ramdaq.analysis.impact.ImpactAnalysis`."""
+
+    recording: Recording
+    rig: Rig
+    hits: tuple[HitResult, ...]
+
+    @property
+    def analyses(self) -> list[ImpactAnalysis]:
+        """The accepted hits' analyses."""
+        return [h.analysis for h in self.hits if h.accepted and h.analysis is not None]
+
+    def rows(self) -> list[ModeEstimate]:
+        """One :class:`ModeEstimate` per hit x gage x mode (a rejected hit: one row)."""
+        return [r for h in self.hits for r in _rows_of(h)]
+
+    def to_dataframe(self) -> Any:
+        """:meth:`rows` as a ``pandas.DataFrame``, one column per :class:`ModeEstimate` field."""
+        pd = optional_import("pandas")
+        return pd.DataFrame([r.__dict__ for r in self.rows()])
+
+    def summary(self) -> dict:
+        """The trial summary of ``report.json`` (means and scatter over accepted hits)."""
+        return trial_summary(list(self.hits))
+
+    def figures(self, hit: int) -> dict[str, Any]:
+        """The plots of accepted hit ``hit`` as matplotlib Figures, by kind (``decay``,
+        ``spectrum``, ``modeshape``, ``stock``); the caller shows, saves or closes them."""
+        from .reports.impact_plots import impact_figures
+
+        h = self.hits[hit]
+        if not h.accepted or h.analysis is None or h.event.record is None:
+            raise ValueError(f"{self.recording.path}: hit {hit} was not analysed ({h.reason})")
+        return impact_figures(h.analysis, decay_samples(h, self.rig), self.recording.fs_hz, self.rig)
+
+
+def decay_samples(h: HitResult, rig: Rig) -> np.ndarray:
+    """The gage rows of hit ``h``'s record from its decay's start (SI, shape (n_gages, n))."""
+    rec, a = h.event.record, h.analysis
+    i0 = round(a.decay_start_s * rec.fs_hz) - rec.first_sample
+    return rec.values()[:len(rig.gages_by_channel()), i0:]
+
+
+def analyze_hits(rec: Recording, *, impact: int | None = None,
+                 progress: Callable[[str], None] | None = None,
+                 done: Callable[[HitResult], None] | None = None) -> list[HitResult]:
+    """Judge and analyse each of ``rec.impacts`` (or only hit ``impact``, the others marked "not
+    requested") as a live trial does; ``progress`` hears of each hit before its analysis,
+    ``done`` gets each analysed hit."""
+    rig = rig_or_fail(rec)
+    if impact is not None and not 0 <= impact < len(rec.impacts):
+        raise ValueError(f"{rec.path}: impact {impact} asked for, but {len(rec.impacts)} impacts found")
+    hits = []
+    for k, ev in enumerate(rec.impacts):
+        if impact is not None and k != impact:
+            hits.append(HitResult(k, ev, False, "not requested", None))
+            continue
+        if progress:
+            progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
+                     f"{(ev.last_sample - ev.onset_sample) / rec.fs_hz:.1f} s of decay")
+        hits.append(judge_event(k, ev, rec.info, rig))
+        if done:
+            done(hits[-1])
+    return hits
+
+
+_BLAS_WARNED: list[bool] = []
+
+
+def _check_blas_threads() -> None:
+    if os.environ.get("OPENBLAS_NUM_THREADS") == "1" or _BLAS_WARNED:
+        return
+    _BLAS_WARNED.append(True)
+    warnings.warn("OPENBLAS_NUM_THREADS is not 1 (NumPy was imported before ramdaq): numbers may "
+                  "differ from the ramdaq command's in the last digits and fits run slower; "
+                  "set OPENBLAS_NUM_THREADS=1 before starting Python", RuntimeWarning, stacklevel=3)
+
+
+def analyze(src: Source, *, rig: Rig | str | Path | None = None, impact: int | None = None,
+            progress: Callable[[str], None] | None = None) -> TrialAnalysis:
+    """Analyse a recording (a path or a :class:`Recording`) as ``ramdaq analyze`` does.
+
+    ``rig`` replaces the recorded rig (a :class:`Rig`, a shipped rig's name or a file);
+    ``impact`` analyses that hit only. Raises ``RigError`` when there is no rig, ``ValueError``
+    for an impact that is not there, ``RecordingError`` for a file that does not read.
+    """
+    _check_blas_threads()
+    rec = as_recording(src, rig)
+    return TrialAnalysis(rec, rig_or_fail(rec), tuple(analyze_hits(rec, impact=impact, progress=progress)))
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One explanation the gap diagnosis tried: ``effect`` (``+`` joins a pair), ``dbic`` its
+    evidence against the calibrated model (negative is better), ``gap_fitted`` and
+    ``gap_held_out`` the gap it leaves (noise variances), ``closed_fitted`` and
+    ``closed_held_out`` the share of the gap it closes (1 = all) with the held-out share's 95 %
+    interval ``closed_held_out_lo`` .. ``_hi``; ``named`` when it is the diagnosis's answer."""
+
+    rank: int
+    effect: str
+    named: bool
+    dbic: float
+    dbic_marginal: float
+    gap_fitted: float
+    gap_held_out: float
+    closed_fitted: float
+    closed_held_out: float
+    closed_held_out_lo: float
+    closed_held_out_hi: float
+
+
+@dataclass(frozen=True, eq=False)
+class TrialDiagnosis:
+    """A recording held against its rig's model (``ramdaq gap``): the full
+    :class:`~ramdaq.analysis.gap.diagnose.Diagnosis` and the recording it came from."""
+
+    recording: Recording
+    diagnosis: Diagnosis
+    trial: Any = field(repr=False)
+    """The :class:`~ramdaq.daq.commands.gap.LoadedTrial` the diagnosis read."""
+
+    @property
+    def verdict(self) -> str:
+        return self.diagnosis.verdict
+
+    @property
+    def effect(self) -> str | None:
+        """The named effect, ``None`` unless the verdict is "explained"."""
+        return self.diagnosis.best.name if self.diagnosis.best else None
+
+    def candidates(self) -> list[Candidate]:
+        d = self.diagnosis
+        best = d.best.name if d.best else None
+        return [Candidate(k, c.name, c.name == best, c.dbic,
+                          float("nan") if c.dbic_marginal is None else c.dbic_marginal,
+                          c.gap_fit, c.gap_held, c.closed_fit, c.closed_held, *c.closed_held_ci)
+                for k, c in enumerate(d.candidates)]
+
+    def to_dataframe(self) -> Any:
+        """:meth:`candidates` as a ``pandas.DataFrame``, best first."""
+        return optional_import("pandas").DataFrame([c.__dict__ for c in self.candidates()])
+
+    def figures(self) -> dict[str, Any]:
+        """The diagnosis's plots as matplotlib Figures, by kind (``map``, ``features``,
+        ``decays``, ``ranking``)."""
+        from .reports.gap_plots import diagnosis_figures
+
+        return diagnosis_figures(self.diagnosis)
+
+
+def diagnose(src: Source, *, rig: Rig | str | Path | None = None, settings: Settings | None = None,
+             progress: Callable[[str], None] | None = None) -> TrialDiagnosis:
+    """Hold a recording against its rig's model as ``ramdaq gap`` does (minutes on two cores)."""
+    from ..analysis.gap.diagnose import diagnose as run
+    from .commands.gap import load_trial, trial_data
+
+    _check_blas_threads()
+    rec = as_recording(src, rig)
+    lt = load_trial(rec, progress=progress)
+    return TrialDiagnosis(rec, run(trial_data(lt), settings or Settings(), progress), lt)
+

@@ -1,0 +1,79 @@
+"""The report's plots: Figures, no backend chosen at import, a decay panel whose fitted line is the
+envelope drawn, PNGs at 150 dpi."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.signal
+from matplotlib.figure import Figure
+
+import ramdaq
+from ramdaq.daq.api import decay_samples
+from ramdaq.daq.reports.impact_plots import DPI, mode_components, plot_impact
+
+WATER = Path(__file__).parent.parent / "recordings" / "albacore-water.mcap"
+
+
+@pytest.fixture(scope="module")
+def hit0() -> ramdaq.TrialAnalysis:
+    return ramdaq.analyze(WATER, impact=0)
+
+
+def test_importing_the_plots_leaves_the_backend_alone() -> None:
+    code = ("import matplotlib; b = matplotlib.get_backend(); "
+            "import ramdaq.daq.reports.impact_plots, ramdaq.daq.reports.gap_plots, sys; "
+            "print(matplotlib.get_backend() == b, 'matplotlib.pyplot' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={"MPLBACKEND": "svg", "PATH": ""})
+    assert out.stdout.split() == ["True", "False"]
+
+
+def test_figures_by_kind(hit0: ramdaq.TrialAnalysis) -> None:
+    figs = hit0.figures(0)
+    assert set(figs) >= {"decay", "spectrum", "modeshape"}
+    assert all(isinstance(f, Figure) for f in figs.values())
+    with pytest.raises(ValueError, match="hit 1 was not analysed"):
+        hit0.figures(1)
+
+
+def test_decay_panel_line_is_the_envelope_drawn(hit0: ramdaq.TrialAnalysis) -> None:
+    """Per gage and mode the log-envelope drawn falls at the rate of the fitted line drawn,
+    -delta f: the decrement shown is the one the eye sees."""
+    h = hit0.hits[0]
+    a, fs = h.analysis, hit0.recording.fs_hz
+    x = decay_samples(h, hit0.rig)
+    env = np.abs(scipy.signal.hilbert(mode_components(a, x, fs), axis=-1))
+    t = np.arange(x.shape[1]) / fs
+    m, checked = a.modes, 0
+    for j in range(len(a.active_gages)):
+        for k in range(len(m.frequency_hz)):
+            rate = m.channel_delta[j, k] * m.channel_frequency_hz[j, k]
+            line = abs(m.complex_amplitude[j, k]) * np.exp(-rate * t)
+            # where the mode stands 10x above the gage's noise, away from the filter's ends
+            use = (t > 0.5) & (t < t[-1] - 1) & (line > 10 * m.noise_std[j])
+            if use.sum() < 600:
+                continue
+            slope = np.polyfit(t[use], np.log(env[j, k, use]), 1)[0]
+            # the envelope's relative noise there is <= 0.1 per sample, so the slope fitted over
+            # >= 600 samples has a standard error well under 1 %: 2 % holds it
+            assert -slope == pytest.approx(rate, rel=0.02), (a.active_gages[j], k)
+            checked += 1
+    assert checked >= 10
+
+
+def test_pngs_at_150_dpi(hit0: ramdaq.TrialAnalysis, tmp_path: Path) -> None:
+    h = hit0.hits[0]
+    files = plot_impact(h.analysis, decay_samples(h, hit0.rig), hit0.recording.fs_hz, hit0.rig,
+                        tmp_path, 0)
+    assert DPI >= 150 and {f.name for f in files} >= {"impact0_decay.png", "impact0_spectrum.png",
+                                                       "impact0_modeshape.png"}
+    import matplotlib.image
+
+    for f in files:
+        fig_in = {"decay": 16, "spectrum": 11, "modeshape": 13, "stock": 11}[f.stem.split("_")[1]]
+        assert matplotlib.image.imread(f).shape[1] == fig_in * DPI  # width px = inches x dpi
