@@ -10,13 +10,16 @@ finding from one of the six checks with probability at most 0.6 %."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
-from ramdaq.analysis.gap.datamodel import P_CHANCE, Layer, free_modal_model
+from ramdaq.analysis.gap.datamodel import P_CHANCE, Finding, Layer, free_modal_model
+from ramdaq.analysis.gap.layers import model_gages, precedence, unconfirmed
 from ramdaq.analysis.gap.sensors import check_trial
+from ramdaq.daq.commands.cli import main
 from ramdaq.daq.commands.gap import load_trial
 from tests.sensor_injection import HULL, injected_recording
 
@@ -30,6 +33,7 @@ def trials(tmp_path_factory):
         if effect not in cache:
             mcap, what = injected_recording(tmp, effect)
             lt = load_trial(mcap)
+            lt.source = str(mcap)
             cache[effect] = (check_trial(lt.x, lt.fs_hz, lt.onsets_s, lt.rig.gages_by_channel()), what, lt)
         return cache[effect]
     return get
@@ -132,3 +136,56 @@ def test_free_modal_model_shares_poles_across_impacts():
     r = np.abs(fm.amp[2]) / np.abs(fm.amp[0])
     ok = fm.snr()[0] > 100
     assert np.allclose(r[ok], 2.0, rtol=0.02)
+
+
+def _finding(check: str, layer: Layer, gages: tuple[int, ...]) -> Finding:
+    return Finding(check=check, layer=layer, gages=gages, statistic=100.0, chance_level=10.0,
+                   size=1.2, unit="ratio", text=check)
+
+
+def test_a_data_sensor_finding_takes_precedence_on_the_same_gages():
+    data = [_finding("gain", Layer.SENSOR, (3,)), _finding("double_hit", Layer.EXCITATION, (1, 2, 3))]
+    # the model blames gage 3's alignment: set aside for the data layer's gain there
+    (p,) = precedence(data, "gage_alignment", model_gages([3], [3, 4], "gage_alignment"))
+    assert p.gages == (3,) and p.finding == "gain" and p.model_effect == "gage_alignment"
+    assert p.to_json()["kept"] == "data_only"
+    # a sensor effect placed without a gage of its own is read where it closed the gap
+    assert model_gages([], [4, 3], "highpass") == {3, 4}
+    # the model blames gage 5's sensitivity, the rigid-body check finds gage 3's gain: gage 3
+    (p,) = precedence(data, "gage_sensitivity", {5})
+    assert p.gages == (3,) and p.model_gages == (5,)
+    # another gage and another kind, or an effect that names no gage: nothing set aside (an
+    # excitation finding of the data layer never overrides)
+    assert precedence(data, "time_skew", {5}) == []
+    assert precedence(data, "hull_coupling", model_gages([], [3], "hull_coupling")) == []
+    assert precedence(data, None, {3}) == []
+
+
+def test_a_model_effect_the_data_checks_looked_for_and_did_not_find_is_unconfirmed():
+    looked = ("gain", "time_skew", "highpass", "clipping", "ambient_tone", "double_hit")
+    data = [_finding("gain", Layer.SENSOR, (3,))]
+    assert unconfirmed(data, looked, "double_hit") == ["double_hit"]
+    assert unconfirmed(data, looked, "gage_sensitivity") == []
+    assert unconfirmed(data, looked, "double_hit+highpass") == ["double_hit", "highpass"]
+    assert unconfirmed(data, looked, "hull_coupling") == []       # no data-only counterpart
+
+
+def test_gap_reports_the_data_only_layer_first_and_it_takes_precedence(trials, capsys, tmp_path):
+    """``ramdaq gap`` prints the data-only section before the model's cause and ranking, writes
+    it to gap.json, and when the model blames a gage's sensitivity the data-only gain stands.
+    (One candidate effect only, to keep the model layer's run short.)"""
+    dc, what, lt = trials("gain")
+    capsys.readouterr()
+    out = tmp_path / "gap"
+    assert main(["gap", lt.source, "--no-plots", "--effects", "gage_sensitivity", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.index("data-only (no stiffness or mass model") < text.index("ranking (")
+    assert "gage 3: gain x1.1" in text
+    doc = json.loads((out / "gap.json").read_text())
+    (f,) = doc["data_only"]["findings"]
+    assert f["check"] == "gain" and f["gages"] == [3] and f["layer"] == "sensor"
+    assert f["statistic"] > f["chance_level"]
+    if doc["effect"] == "gage_sensitivity":
+        (p,) = doc["precedence"]
+        assert p["gages"] == [3] and p["kept"] == "data_only"
+        assert "set aside: the data-only gain on gage(s) 3" in text
