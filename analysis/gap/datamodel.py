@@ -126,9 +126,9 @@ class FreeModal:
     fs_hz : float
         The rate the amplitudes were solved at, Hz.
     steady : ndarray (K,) bool
-        Poles that lose less than :data:`STEADY_LOSS` of their amplitude over the window: a
-        line that does not decay (an ambient tone) rather than a mode the blows excite. The
-        shape checks leave them out.
+        Poles that lose less than :data:`STEADY_LOSS` of their amplitude over the window and
+        whose phase is not the same from blow to blow: a line that does not decay (an ambient
+        tone) rather than a mode the blows excite. The shape checks leave them out.
     """
 
     f_hz: np.ndarray
@@ -221,7 +221,19 @@ def free_modal_model(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, *, pre_s
         amp, se, noise = _amplitudes(seg, fs_hz, f, d)
     return FreeModal(f_hz=f, delta=d, f_se_hz=tab.frequency_se_hz[keep], delta_se=tab.delta_se[keep],
                      amp=amp, amp_se=se, noise=noise, t0_s=starts / fs_hz, n_s=n_s, fs_hz=fs_hz,
-                     steady=np.exp(-d * f * n_s / fs_hz) > 1 - STEADY_LOSS, info={"identify": tab.info})
+                     steady=_steady(amp, f, d, n_s / fs_hz), info={"identify": tab.info})
+
+
+def _steady(amp: np.ndarray, f: np.ndarray, d: np.ndarray, window_s: float) -> np.ndarray:
+    """(K,) bool: poles that barely decay over the window (envelope loss under
+    :data:`STEADY_LOSS`) and whose phase at the onset is not the same blow after blow (a mode a
+    blow excites starts in the same phase every time; a tone's phase is wherever it happens to
+    be): the Rayleigh test at the gage where the pole is strongest, ``exp(-n R^2) > 0.01``."""
+    slow = np.exp(-d * f * window_s) > 1 - STEADY_LOSS
+    g = np.argmax(np.sum(np.abs(amp), axis=0), axis=0)                 # (K,)
+    a = amp[:, g, np.arange(f.size)]                                    # (n_imp, K)
+    R = np.abs(np.mean(a / np.maximum(np.abs(a), 1e-300), axis=0))
+    return slow & (np.exp(-amp.shape[0] * R**2) > 0.01)
 
 
 def _amplitudes(seg: np.ndarray, fs_hz: float, f: np.ndarray,

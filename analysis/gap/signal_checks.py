@@ -91,9 +91,11 @@ def _pre_noise(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray, pre_s: float) 
 
 PRE_GUARD_S = 0.01
 """Left out just before each onset, s (the trigger's onset is good to a sample or two)."""
-LINE_F_MIN_CYCLES = 1.5
+LINE_F_MIN_CYCLES = 2.0
 """The lowest line looked for has this many cycles in the pre window (below, a Hann window's
-own leakage of the window's mean and slope)."""
+own leakage of the window's mean and slope, and a 1/f noise that the running median, cut off
+at 0 Hz, reads too low: a clean truth-simulator trial showed a 1.5 Hz "line" just over the
+chance level)."""
 LINGER = 1e-4
 """A pole still rings in a pre window when this fraction of its amplitude is left there."""
 LEVEL_HALF_WIDTH_HZ = 5.0
