@@ -52,43 +52,79 @@ def _rows(gages: list[int], which) -> list[int]:
     return [gages.index(g) for g in which]
 
 
+def _gain(x, fs, gages, seed):
+    y = x.copy()
+    (r,) = _rows(gages, [3])
+    y[r] *= 1.15
+    return y, Injected("gain", (3,), 1.15)
+
+
+def _skew(x, fs, gages, seed):
+    y = x.copy()
+    (r,) = _rows(gages, [6])
+    y[r, 3:] = x[r, :-3]                           # this channel's samples 3 late
+    return y, Injected("skew", (6,), 3 / fs)
+
+
+def _clipping(x, fs, gages, seed):
+    y = x.copy()
+    (r,) = _rows(gages, [1])
+    top = 0.5 * np.max(np.abs(x[r]))
+    y[r] = np.clip(x[r], -top, top)
+    return y, Injected("clipping", (1,), 0.5)
+
+
+def _tone(x, fs, gages, seed):
+    y = x.copy()
+    t = np.arange(x.shape[1]) / fs
+    k0 = int(IMPACTS[0] * fs)
+    for r in _rows(gages, HULL):
+        ring = np.max(np.abs(x[r, k0:k0 + int(2 * fs)]))    # the hull gage's ringing after a blow
+        y[r] += 0.12 * ring * np.sin(2 * np.pi * 2.3 * t + r)
+    return y, Injected("tone", HULL, 2.3)
+
+
+def _highpass(x, fs, gages, seed):
+    y = x.copy()
+    rows = _rows(gages, [1, 2, 3, 4])
+    b, a = scipy.signal.butter(1, 1.5, btype="highpass", fs=fs)
+    y[rows] = scipy.signal.lfilter(b, a, x[rows], axis=1)
+    return y, Injected("highpass", (1, 2, 3, 4), 1.5)
+
+
+def _double_hit(x, fs, gages, seed):
+    clean, _, _ = simulate(seed, noise=False)
+    k = int(round(0.030 * fs))
+    y = x.copy()
+    y[:, k:] += 0.3 * clean[:, :-k]                # the ram back 30 ms later at 30 % of the blow
+    return y, Injected("double_hit", tuple(gages), 0.030)
+
+
+def _noisy(x, fs, gages, seed):
+    y = x.copy()
+    (r,) = _rows(gages, [10])
+    y[r] += np.random.default_rng(seed + 100).normal(0.0, 3 * albacore_water().daq.noise_m_s2_rms,
+                                                      x.shape[1])
+    return y, Injected("noisy", (10,), 3.0)
+
+
+def _dead(x, fs, gages, seed):
+    y = x.copy()
+    y[_rows(gages, [8])] = 0.0                     # a broken cable reads zero
+    return y, Injected("dead", (8,), 0.0)
+
+
+INJECT = {"gain": _gain, "skew": _skew, "clipping": _clipping, "tone": _tone,
+          "highpass": _highpass, "double_hit": _double_hit, "noisy": _noisy, "dead": _dead,
+          "none": lambda x, fs, gages, seed: (x.copy(), Injected("none", (), 0.0))}
+"""Each effect: (x m/s^2, rate Hz, gage per row, seed) -> (a changed copy, what was done)."""
+
+
 def inject(effect: str, x: np.ndarray, fs: float, gages: list[int], seed: int) -> tuple[np.ndarray, Injected]:
     """``x`` with one sensor effect applied (a copy)."""
-    y = x.copy()
-    if effect == "gain":
-        (r,) = _rows(gages, [3])
-        y[r] *= 1.15
-        return y, Injected(effect, (3,), 1.15)
-    if effect == "skew":
-        (r,) = _rows(gages, [6])
-        y[r, 3:] = x[r, :-3]                       # this channel's samples 3 late
-        return y, Injected(effect, (6,), 3 / fs)
-    if effect == "clipping":
-        (r,) = _rows(gages, [1])
-        top = 0.5 * np.max(np.abs(x[r]))
-        y[r] = np.clip(x[r], -top, top)
-        return y, Injected(effect, (1,), 0.5)
-    if effect == "tone":
-        rows = _rows(gages, HULL)
-        t = np.arange(x.shape[1]) / fs
-        k0 = int(IMPACTS[0] * fs)
-        for r in rows:
-            ring = np.max(np.abs(x[r, k0:k0 + int(2 * fs)]))   # the hull gage's ringing after a blow
-            y[r] += 0.12 * ring * np.sin(2 * np.pi * 2.3 * t + r)
-        return y, Injected(effect, HULL, 2.3)
-    if effect == "highpass":
-        rows = _rows(gages, [1, 2, 3, 4])
-        b, a = scipy.signal.butter(1, 1.5, btype="highpass", fs=fs)
-        y[rows] = scipy.signal.lfilter(b, a, x[rows], axis=1)
-        return y, Injected(effect, (1, 2, 3, 4), 1.5)
-    if effect == "double_hit":
-        clean, _, _ = simulate(seed, noise=False)
-        k = int(round(0.030 * fs))
-        y[:, k:] += 0.3 * clean[:, :-k]            # the ram back 30 ms later at 30 % of the blow
-        return y, Injected(effect, tuple(gages), 0.030)
-    if effect == "none":
-        return y, Injected(effect, (), 0.0)
-    raise ValueError(f"unknown injected effect {effect!r}")
+    if effect not in INJECT:
+        raise ValueError(f"unknown injected effect {effect!r}")
+    return INJECT[effect](x, fs, gages, seed)
 
 
 def write_csv(path: Path, x: np.ndarray, fs: float, gages: list[int]) -> None:

@@ -112,6 +112,23 @@ def test_double_hit_30_ms_after_the_blow(trials):
     assert more["blows"] == 6
 
 
+def test_noisy_gage(trials):
+    dc, what, _ = trials("noisy")
+    (f,) = _only(dc, "noisy")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    # white noise of 0.015 m/s^2 rms added, which first differences read without bias; the
+    # simulated floor (anti-alias filtered, 0.004 in first differences) adds under 4 % in
+    # quadrature, and ~2000 differences know the rms to ~2 %
+    assert 0.015 * 0.96 < f.size < 0.015 * 1.08
+
+
+def test_dead_gage(trials):
+    dc, what, _ = trials("dead")
+    (f,) = _only(dc, "dead")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    assert dc.modal.n_modes == 4                  # the other gages still give the four modes
+
+
 def test_free_modal_model_shares_poles_across_impacts():
     """Three impacts of different force on four gages, two modes: the poles come back to their
     standard errors, and each impact's shapes scale with its force."""

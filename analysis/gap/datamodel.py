@@ -214,7 +214,8 @@ def free_modal_model(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, *, pre_s
         keep &= tab.frequency_hz <= max_hz
     f, d = tab.frequency_hz[keep], tab.delta[keep]
     amp, se, noise = _amplitudes(seg, fs_hz, f, d)
-    strong = np.median(np.max(np.abs(amp) / se, axis=1), axis=0) >= MIN_SNR
+    snr = np.abs(amp) / np.maximum(se, 1e-300)          # a dead gage: 0 / 0 -> 0
+    strong = np.median(np.max(snr, axis=1), axis=0) >= MIN_SNR
     if not strong.all():
         keep = np.flatnonzero(keep)[strong]
         f, d = tab.frequency_hz[keep], tab.delta[keep]

@@ -36,7 +36,7 @@ import scipy.stats
 from ..model.rig import Gage
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer, free_modal_model
 from .features import rigid_projector
-from .signal_checks import double_hits, flat_tops, pre_trigger_lines
+from .signal_checks import dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
 
 PHASE_FLOOR_RAD = 0.02
 """Phase scatter accepted on top of each estimate's standard error: the free shapes of a real
@@ -75,14 +75,17 @@ class DataChecks:
 
 def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequence[Gage], *,
                 pre_s: float = 1.0) -> DataChecks:
-    """Every data-only check of a trial. A clipped gage is left out of the poles'
+    """Every data-only check of a trial. A dead or clipped gage is left out of the poles'
     identification and of every shape check (its harmonics are no modes, its shapes are cut);
     a gage with a timing or high-pass finding is left out of the rigid-body reconstruction of
     its neighbours (its complex shapes would bend theirs). A double hit is looked for on the
     gages that are not clipped."""
     numbers = tuple(g.number for g in gages)
-    clipped = flat_tops(x, fs_hz, onsets_s, numbers, pre_s=pre_s)
-    gone = {g for f in clipped for g in f.gages}
+    health = dead_or_noisy(x, fs_hz, onsets_s, numbers, pre_s=pre_s)
+    dead = {g for f in health if f.check == "dead" for g in f.gages}
+    live = [i for i, n in enumerate(numbers) if n not in dead]
+    clipped = health + flat_tops(x[live], fs_hz, onsets_s, [numbers[i] for i in live], pre_s=pre_s)
+    gone = {g for f in clipped if f.check != "noisy" for g in f.gages}
     rows = tuple(i for i, n in enumerate(numbers) if n in gone)
     fm = free_modal_model(x, fs_hz, onsets_s, pre_s=pre_s, exclude_rows=rows)
     timing = [f for f in chain_phase(fm, numbers) if not set(f.gages) & gone]
@@ -92,8 +95,8 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(x[keep], fs_hz, onsets_s, [numbers[i] for i in keep], fm)
     return DataChecks(modal=fm, findings=found,
-                      looked=("gain", "time_skew", "highpass", "clipping", "ambient_tone",
-                              "double_hit"))
+                      looked=("dead", "noisy", "gain", "time_skew", "highpass", "clipping",
+                              "ambient_tone", "double_hit"))
 
 
 # ---------------------------------------------------------------- channel timing and chain

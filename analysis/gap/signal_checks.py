@@ -87,6 +87,43 @@ def _pre_noise(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray, pre_s: float) 
     return float(np.std(np.diff(seg)) / math.sqrt(2)) if seg.size > 8 else 0.0
 
 
+NOISE_RATIO_FLOOR = 4.0
+"""A gage is called noisy only when its noise variance is at least this many times the median
+gage's (twice the rms): accelerometers of one trial differ by less, but not by nothing."""
+
+
+def dead_or_noisy(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int], *,
+                  pre_s: float = 1.0) -> list[Finding]:
+    """A dead gage (its record never leaves one value, or its blows move it by less than one
+    converter step) and a noisy one: its noise variance before the blows (from first
+    differences) over the median gage's. Under equal noise that ratio is F-distributed with
+    about ``n`` and ``n`` degrees of freedom (``n`` samples each); the chance level is its
+    ``P_CHANCE / n_g`` upper quantile, and at least :data:`NOISE_RATIO_FLOOR`."""
+    out = []
+    var = np.array([_pre_noise(v, fs_hz, onsets_s, pre_s) for v in x]) ** 2
+    n = max(2, int((pre_s - 0.01) * fs_hz) - 1)
+    level = max(NOISE_RATIO_FLOOR, float(scipy.stats.f.isf(P_CHANCE / len(numbers), n, n)))
+    med = float(np.median(var))
+    a, b = int(onsets_s[0] * fs_hz), int((onsets_s[0] + CLIP_SPAN_S) * fs_hz)
+    moves = np.array([float(np.ptp(v[np.isfinite(v)])) if np.isfinite(v).any() else 0.0
+                      for v in x[:, a:b]])
+    for g, num in enumerate(numbers):
+        if moves[g] <= _step(x[g]) and np.median(moves) > 0:
+            out.append(Finding(check="dead", layer=Layer.SENSOR, gages=(num,), statistic=math.inf,
+                               chance_level=1.0, size=moves[g], unit="m/s^2", window="early",
+                               text=f"gage {num} is dead: its first blow moves it by {moves[g]:.3g} m/s^2 "
+                                    "(one converter step or less)",
+                               null="a live gage moves by more than one step in a blow"))
+        elif med > 0 and var[g] / med > level:
+            out.append(Finding(check="noisy", layer=Layer.SENSOR, gages=(num,),
+                               statistic=float(var[g] / med), chance_level=level,
+                               size=math.sqrt(var[g]), unit="m/s^2", window="pre",
+                               text=f"gage {num} is noisy: {math.sqrt(var[g]):.3g} m/s^2 rms before the "
+                                    f"blows, {math.sqrt(var[g] / med):.1f}x the median gage's",
+                               null=f"F({n}, {n}) variance ratio"))
+    return out
+
+
 # ---------------------------------------------------------------- lines before the blows
 
 PRE_GUARD_S = 0.01
