@@ -236,6 +236,8 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list:
             return out
         num = gages[i].number
         what = "dead" if g < 0.1 else f"gain x{g:.3f} against its body's rigid-body motion"
+        if 0.1 <= g < 1:       # a tilted gage reads cos(tilt) of its axis where nothing sees across it
+            what += f" (or its axis tilted {math.degrees(math.acos(g)):.0f} deg)"
         out.append(_gain_finding(fm, num, z, level, g, f"gage {num}: {what} (se {s:.3f})"))
         live.remove(i)
     return out

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.ndimage
+import scipy.optimize
 import scipy.stats
 
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer
@@ -236,7 +237,8 @@ EARLY_TO_S = 0.2
 """The early window ends here, s after the onset: a second blow later than this is a new
 impact for the trigger."""
 RHO_GRID = np.geomspace(0.02, 2.0, 14)
-"""Sizes of a second blow tried, relative to the first."""
+"""Sizes of a second blow tried, relative to the first (the scan's; the size reported is
+refined between the best one's neighbours)."""
 
 
 def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int],
@@ -261,7 +263,7 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
         return []
     stat = max(b[0] for _, b in hits)
     d = float(np.median([b[1] for _, b in hits]))
-    rho = float(np.median([b[2] for _, b in hits]))
+    rho = float(np.median([_refined_size(x, fs_hz, onsets_s[j], poles, sig, b[1], b[2]) for j, b in hits]))
     blows = ", ".join(str(j + 1) for j, _ in hits)
     return [Finding(
         check="double_hit", layer=Layer.EXCITATION, gages=tuple(numbers), statistic=stat,
@@ -301,6 +303,23 @@ def _drop_at(e1: np.ndarray, y: np.ndarray, tau: np.ndarray, i: int, poles: np.n
     rss = _rss(e1[None] + RHO_GRID[:, None, None] * e2[None], y)     # (n_rho,)
     m = int(np.argmin(rss))
     return float(rss0 - rss[m]), d, float(RHO_GRID[m])
+
+
+def _refined_size(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray, sig: np.ndarray,
+                  d: float, rho: float) -> float:
+    """The second blow's size at delay ``d`` refined from the grid's ``rho`` by a bounded scalar
+    minimisation of the residual between the grid's neighbours."""
+    a = int(round((onset_s + EARLY_FROM_S) * fs_hz))
+    b = int(round((onset_s + EARLY_TO_S) * fs_hz))
+    y = (x[:, a:b] / sig[:, None]).T
+    tau = (a + np.arange(y.shape[0])) / fs_hz - onset_s
+    e1 = np.exp(np.multiply.outer(tau, poles))
+    e2 = np.where((tau >= d - 0.5 / fs_hz)[:, None], np.exp(np.multiply.outer(tau - d, poles)), 0)
+    step = RHO_GRID[1] / RHO_GRID[0]
+    res = scipy.optimize.minimize_scalar(lambda r: float(_rss(e1 + r * e2, y)),
+                                         bounds=(rho / step, rho * step), method="bounded",
+                                         options={"xatol": 1e-3 * rho})
+    return float(res.x)
 
 
 def _rss(e: np.ndarray, y: np.ndarray) -> np.ndarray:
