@@ -62,7 +62,7 @@ class DataChecks:
     level (``findings``); ``looked`` names the checks run."""
 
     modal: FreeModal
-    findings: list
+    findings: list[Finding]
     looked: tuple[str, ...]
 
     def to_json(self) -> dict:
@@ -81,16 +81,15 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     its neighbours (its complex shapes would bend theirs). A double hit is looked for on the
     gages that are not clipped."""
     numbers = tuple(g.number for g in gages)
-    health = dead_or_noisy(x, fs_hz, onsets_s, numbers, pre_s=pre_s)
-    dead = {g for f in health if f.check == "dead" for g in f.gages}
+    found = dead_or_noisy(x, fs_hz, onsets_s, numbers, pre_s=pre_s)
+    dead = {g for f in found if f.check == "dead" for g in f.gages}
     live = [i for i, n in enumerate(numbers) if n not in dead]
-    clipped = health + flat_tops(x[live], fs_hz, onsets_s, [numbers[i] for i in live], pre_s=pre_s)
-    gone = {g for f in clipped if f.check != "noisy" for g in f.gages}
+    found += flat_tops(x[live], fs_hz, onsets_s, [numbers[i] for i in live], pre_s=pre_s)
+    gone = {g for f in found if f.check in ("dead", "clipping") for g in f.gages}
     rows = tuple(i for i, n in enumerate(numbers) if n in gone)
     fm = free_modal_model(x, fs_hz, onsets_s, pre_s=pre_s, exclude_rows=rows)
     timing = [f for f in chain_phase(fm, numbers) if not set(f.gages) & gone]
-    skip = gone | {g for f in timing for g in f.gages}
-    found = clipped + timing + rigid_gain(fm, gages, skip=skip)
+    found += timing + rigid_gain(fm, gages, skip=gone | {g for f in timing for g in f.gages})
     found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s)
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(x[keep], fs_hz, onsets_s, [numbers[i] for i in keep], fm)
@@ -132,7 +131,7 @@ FC_GRID_HZ = np.concatenate([[0.0], np.geomspace(0.05, 20.0, 400)])
 """First-order high-pass corners tried, Hz."""
 
 
-def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list:
+def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
     """Per gage, its phase off the other gages across all modes and impacts, held against a
     time skew (``phi = -2 pi f tau``) and a first-order high-pass (``phi = atan(fc / f)``).
 
@@ -180,7 +179,8 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list:
 
 
 def _finding(check: str, num: int, stat: float, level: float, size: float, unit: str,
-             modes: tuple[float, ...], text: str):
+             modes: tuple[float, ...], text: str) -> Finding:
+    """A timing or signal-chain finding on one gage."""
     return Finding(check=check, layer=Layer.SENSOR, gages=(num,), statistic=float(stat),
                    chance_level=level, size=size, unit=unit, text=text, window="decay",
                    mode_hz=modes, p_chance=P_CHANCE,
@@ -190,7 +190,7 @@ def _finding(check: str, num: int, stat: float, level: float, size: float, unit:
 # ---------------------------------------------------------------- spatial redundancy
 
 
-def rigid_gain(fm: FreeModal, gages: Sequence[Gage], *, skip: set[int] = frozenset()) -> list:
+def rigid_gain(fm: FreeModal, gages: Sequence[Gage], *, skip: set[int] = frozenset()) -> list[Finding]:
     """Each gage of a rigid body (the rudder, the hull) whose free shapes the body's other gages
     predict by rigid-body kinematics: its gain ``g`` (least squares over every mode and impact
     of ``a = g p``, ``p`` the prediction from the others, each entry weighted by the inverse of
@@ -217,7 +217,7 @@ def _real_modes(fm: FreeModal) -> tuple[np.ndarray, np.ndarray]:
     return np.real(a * np.exp(-1j * th)), fm.amp_se
 
 
-def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list:
+def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[Finding]:
     G = {i: np.concatenate([gages[i].direction, np.cross(gages[i].position_m, gages[i].direction)])
          for i in rows}
     a, se = _real_modes(fm)
@@ -273,7 +273,7 @@ def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
     return float(np.sum(w * p * a[:, i, :]) / den), math.sqrt(1.0 / den)
 
 
-def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str):
+def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str) -> Finding:
     return Finding(check="gain", layer=Layer.SENSOR, gages=(num,), statistic=float(z),
                    chance_level=level, size=g, unit="ratio", text=text, window="decay",
                    mode_hz=tuple(float(f) for f in fm.f_hz), p_chance=P_CHANCE,
