@@ -94,7 +94,7 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(x[keep], fs_hz, onsets_s, [numbers[i] for i in keep], fm)
     return DataChecks(modal=fm, findings=found,
-                      looked=("dead", "noisy", "gain", "time_skew", "highpass", "clipping",
+                      looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
                               "ambient_tone", "double_hit"))
 
 
@@ -235,11 +235,17 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
         if z <= level:
             return out
         num = gages[i].number
-        what = "dead" if g < 0.1 else f"gain x{g:.3f} against its body's rigid-body motion"
-        if 0.1 <= g < 1:       # a tilted gage reads cos(tilt) of its axis where nothing sees across it
+        live.remove(i)
+        spread, spread_level = _mode_spread(a, se, G, i, live, fm.steady)
+        if spread > spread_level:      # a gain is one ratio at every mode; this is the body's shape
+            out.append(_rigid_finding(fm, gages[i], spread, spread_level))
+            continue
+        what = f"gain x{g:.3f} against its body's rigid-body motion"
+        if g < 0:
+            what += " (its polarity reversed)"
+        elif g < 1:            # a tilted gage reads cos(tilt) of its axis where nothing sees across it
             what += f" (or its axis tilted {math.degrees(math.acos(g)):.0f} deg)"
         out.append(_gain_finding(fm, num, z, level, g, f"gage {num}: {what} (se {s:.3f})"))
-        live.remove(i)
     return out
 
 
@@ -254,7 +260,7 @@ def _spread_without(a: np.ndarray, se: np.ndarray, G: dict, live: list[int], c: 
 
 
 def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
-             steady: np.ndarray) -> tuple[float, float] | None:
+             steady: np.ndarray, min_entries: int = 2) -> tuple[float, float] | None:
     """(gain, its standard error) of row ``i`` against its prediction from the rows ``others``,
     or None when they do not determine its rigid-body motion. Steady poles are left out."""
     Go = np.array([G[r] for r in others])
@@ -266,11 +272,46 @@ def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
     var = se[:, i, :] ** 2 + np.einsum("o,jok->jk", h**2, se[:, others, :] ** 2)
     var = var + (GAIN_FLOOR * p) ** 2
     ok = (p**2 >= MIN_ENTRY_SNR**2 * var) & ~steady[None, :]
-    if ok.sum() < 2:
+    if ok.sum() < min_entries:
         return None
     w = np.where(ok, 1.0 / var, 0.0)
     den = float(np.sum(w * p**2))
     return float(np.sum(w * p * a[:, i, :]) / den), math.sqrt(1.0 / den)
+
+
+def _mode_spread(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
+                 steady: np.ndarray) -> tuple[float, float]:
+    """How far row ``i``'s gain differs from mode to mode: the chi-square of the per-mode gains
+    about their weighted mean, each gain's variance its standard error squared plus
+    :data:`GAIN_FLOOR` squared; and its chance level, the chi-square(K - 1) upper ``P_CHANCE``
+    quantile (K modes with a gain). With fewer than two such modes a gain cannot be told from
+    the body's shape: (inf, 0), read as the body's."""
+    gk, vk = [], []
+    for k in range(a.shape[2]):
+        one = np.zeros_like(steady)
+        one[k] = True
+        e = _gain_of(a, se, G, i, others, ~one | steady, min_entries=1)
+        if e is not None:
+            gk.append(e[0])
+            vk.append(e[1] ** 2 + (GAIN_FLOOR * e[0]) ** 2)
+    if len(gk) < 2:            # one mode: a gain is not told from the body's shape
+        return math.inf, 0.0
+    gk, w = np.array(gk), 1.0 / np.array(vk)
+    mean = float(np.sum(w * gk) / np.sum(w))
+    return float(np.sum(w * (gk - mean) ** 2)), float(scipy.stats.chi2.isf(P_CHANCE, len(gk) - 1))
+
+
+def _rigid_finding(fm: FreeModal, gage: Gage, stat: float, level: float) -> Finding:
+    """A gage its body's other gages do not predict by rigid-body kinematics with one gain for
+    all modes: the rig's rigid body is not what moves there (a flexible part, a wrong position
+    or body in the rig file), a model-form finding, not a sensor's."""
+    return Finding(check="rigid_body", layer=Layer.MODEL_FORM, gages=(gage.number,),
+                   statistic=stat, chance_level=level, size=float("nan"), unit="",
+                   window="decay", mode_hz=tuple(float(f) for f in fm.f_hz[~fm.steady]),
+                   text=f"gage {gage.number} does not move with the {gage.body}'s other gages as one "
+                        "rigid body, and not by one gain at every mode (a flexible part, or its "
+                        "position or body in the rig)",
+                   null="chi-square of per-mode gains about their mean, K-1 dof")
 
 
 def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str) -> Finding:

@@ -175,8 +175,12 @@ def pre_trigger_lines(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers
     (``n_bins`` independent frequencies searched). Gages whose lines fall within one
     resolution ``1/T`` are one finding; how steady it is: the spread of its amplitude over the
     blows. A line within ``1/T`` of a mode is kept only when the first pre window alone (no
-    blow before it) shows it beyond its own chance level (Gamma(1, 1) quantile)."""
-    pw = pre_windows(x, fs_hz, onsets_s, fm, pre_s)
+    blow before it) shows it beyond its own chance level (Gamma(1, 1) quantile). A pre window
+    the record's start cuts is left out."""
+    whole = np.asarray(onsets_s) >= pre_s          # a window cut by the record's start holds the blow
+    if not whole.any():
+        return []
+    pw = pre_windows(x, fs_hz, onsets_s, fm, pre_s)[whole]
     n_imp, n_g, n = pw.shape
     nfft = 4 * n
     f = np.fft.rfftfreq(nfft, 1 / fs_hz)
@@ -193,7 +197,7 @@ def pre_trigger_lines(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers
     # a line at a mode's frequency may be the previous blows' ringing left over (a mode the
     # free model splits or damps slightly wrong): it is a tone only if it is there before the
     # first blow too, where nothing rings
-    first = P[0] / np.maximum(level, 1e-300)
+    first = P[0] / np.maximum(level, 1e-300) if whole[0] else np.zeros_like(level)
     chance1 = float(scipy.stats.gamma.isf(P_CHANCE / (n_g * max(1, n_bins)), 1))
     modes = fm.f_hz[~fm.steady]
     groups = [grp for grp in _group(peaks, f, fs_hz / n)
