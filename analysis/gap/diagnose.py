@@ -60,6 +60,8 @@ from .evidence import (
 )
 from .features import FeatureMap, feature_map
 from .forward import Forward
+from .layers import Precedence, model_gages, precedence, unconfirmed
+from .sensors import DataChecks
 from .terms import Placement, Term
 from .trialdata import TrialData
 from .verdict import choose, closed_share, closure, detection_score, location
@@ -177,6 +179,26 @@ class Diagnosis:
     """The calibrated model's replicate residuals (n_rep, n_seg, n_g, n_s), m/s^2."""
     features_seconds: float = 0.0
     """What reading :attr:`features` cost, s (0 until it is read)."""
+    data: DataChecks | None = None
+    """The data-only layer's checks of the same trial (:mod:`ramdaq.analysis.gap.sensors`), when
+    they were run: reported before the model's ranking, and a sensor finding there takes
+    precedence over the model's attribution of the same gages (:attr:`precedence`)."""
+
+    @property
+    def precedence(self) -> list[Precedence]:
+        """The model's attributions set aside for a data-only sensor finding on the same gages."""
+        if self.data is None or self.best is None:
+            return []
+        loc = self.best.location
+        gages = model_gages(loc.get("effect_gages", []), loc.get("gages", []), self.best.name)
+        return precedence(self.data.findings, self.best.name, gages)
+
+    @property
+    def unconfirmed(self) -> list[str]:
+        """The data-only checks that looked for the named effect and found nothing."""
+        if self.data is None or self.best is None:
+            return []
+        return unconfirmed(self.data.findings, self.data.looked, self.best.name)
 
     @functools.cached_property
     def features(self) -> FeatureMap | None:
@@ -209,6 +231,9 @@ class Diagnosis:
             "map_fitted": self.map_fit.to_json(),
             "map_held_out": self.map_held.to_json() if self.map_held else None,
             "features": self.features.to_json() if self.features else None,
+            "data_only": self.data.to_json() if self.data else None,
+            "precedence": [p.to_json() for p in self.precedence],
+            "unconfirmed_by_data_only": self.unconfirmed,
             "ranking": [c.to_json() for c in self.candidates],
             "signatures": [{"effect": s.effect.name, "z": round(s.z, 2) if np.isfinite(s.z) else None,
                             "where": s.placement.key if s.placement else None,

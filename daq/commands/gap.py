@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ...analysis.gap.datamodel import P_CHANCE
 from ...analysis.gap.diagnose import Diagnosis, Settings, diagnose
+from ...analysis.gap.sensors import DataChecks, check_trial
 from ...analysis.gap.trialdata import TrialData, prepare
 from ...analysis.model.rig import Gage, Rig, RigError
 from ...drivers.block import StreamInfo
@@ -88,11 +90,31 @@ def trial_data(lt: LoadedTrial, *, pre_s: float = 1.0, post_max_s: float = 4.0,
 
 
 def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settings | None = None,
-            progress: Callable[[str], None] | None = None,
+            progress: Callable[[str], None] | None = None, data_checks: bool = True,
             **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
+    """Load, cut and diagnose a recording; with ``data_checks`` the data-only layer
+    (:func:`data_only`) runs first and its findings join the diagnosis."""
     lt = load_trial(path, rig, progress)
     td = trial_data(lt, **prep)
-    return lt, td, diagnose(td, settings or Settings(), progress)
+    data, note = data_only(lt, td, prep.get("pre_s", 1.0), progress) if data_checks else (None, None)
+    d = diagnose(td, settings or Settings(), progress)
+    d.data = data
+    if note:
+        d.notes.append(note)
+    return lt, td, d
+
+
+def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,
+              progress: Callable[[str], None] | None = None) -> tuple[DataChecks | None, str | None]:
+    """The data-only checks (:func:`ramdaq.analysis.gap.sensors.check_trial`) of the recording at
+    its own rate, on the impacts the diagnosis compares, with the pre-trigger window ``pre_s``
+    (s); (None, why) when the trial leaves them nothing to read (too short a decay between
+    blows)."""
+    (progress or (lambda s: None))("data-only checks (free modal model, sensors, blows, ambient)")
+    try:
+        return check_trial(lt.x, lt.fs_hz, td.onsets_s, lt.rig.gages_by_channel(), pre_s=pre_s), None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return None, f"data-only checks not run: {exc}"
 
 
 def _pct(v: float) -> str:
@@ -110,6 +132,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
     held = (f", {float(np.max(d.map_held.z)):.1f} held out; the largest the held-out impacts reproduce "
             f"z = {d.z_detect:.1f}" if d.map_held else "")
     out.append(f"  largest map cell z = {zf:.1f} on the fitted impacts{held}")
+    out += data_lines(d)
     cal = ", ".join(f"{p.name} x{math.exp(t):.3f}"
                     for p, t in zip(d.forward.params, d.base.theta, strict=True)
                     if abs(t) > 0.01)
@@ -120,6 +143,9 @@ def summary_lines(d: Diagnosis) -> list[str]:
         where = ", ".join(f"{k} {v}" for k, v in (b.terms[0].to_json()["where"] or {}).items())
         out.append(f"  cause: {' + '.join(t.effect.label for t in b.terms)}"
                    + (f" ({where})" if where else ""))
+        out += [f"    set aside: {p.text()}" for p in d.precedence]
+        out += [f"    not confirmed: the data-only {c} check finds nothing beyond chance"
+                for c in d.unconfirmed]
         for t in b.terms:
             ps = ", ".join(f"{n} = {v['value']:.4g} {v['unit']}" for n, v in t.to_json()["params"].items())
             if ps:
@@ -150,6 +176,23 @@ def summary_lines(d: Diagnosis) -> list[str]:
         ms = "; ".join(f"{m['f_hz']:.3f} Hz delta {m['delta']:.4f}" for m in d.best.modes_after)
         out.append(f"  with {d.best.name}:    {ms}")
     out += [f"  note: {n}" for n in d.notes]
+    return out
+
+
+def data_lines(d: Diagnosis) -> list[str]:
+    """The data-only section: what the recording says without the rig's stiffness or mass model,
+    each finding with its layer, where, and its statistic against its chance level."""
+    if d.data is None:
+        return []
+    dc = d.data
+    modes = ", ".join(f"{f:.2f}" for f, s in zip(dc.modal.f_hz, dc.modal.steady, strict=True) if not s)
+    out = [f"  data-only (no stiffness or mass model; free modes {modes or '-'} Hz; each check's "
+           f"chance level is what a trial without the fault passes with probability {P_CHANCE:g}):"]
+    if not dc.findings:
+        return out + ["    nothing beyond chance (" + ", ".join(dc.looked) + ")"]
+    for f in dc.findings:
+        out.append(f"    [{f.layer}] {f.text} ({f.window} window; statistic {f.statistic:.4g} > "
+                   f"{f.chance_level:.3g})")
     return out
 
 

@@ -1,0 +1,321 @@
+"""The data-only checks of a trial: what its recording says about its sensors, its blows and its
+ambient without any stiffness or mass model -- gage positions and sensing axes only.
+
+Each check is a plain function over arrays returning :class:`~ramdaq.analysis.gap.datamodel.Finding`
+objects, each with its statistic and the level the statistic exceeds by chance with probability
+``P_CHANCE`` on a trial without the fault (Bonferroni over everything the check looked at):
+
+- :func:`rigid_gain` -- spatial redundancy: each rudder or hull gage's free mode shapes
+  predicted from the other gages of its body by rigid-body kinematics (the least-squares,
+  minimum-variance reconstruction of Kullaa 2010 with the rigid-body motions as the subspace
+  Kerschen et al. 2005 take from a PCA of healthy data): a gain is an amplitude ratio consistent
+  over every mode and impact, a dead gage one near zero;
+- :func:`chain_phase` -- channel timing and the signal chain: a gage's phase against the other
+  gages, mode by mode, is ``-2 pi f tau`` for a time skew ``tau`` and ``atan(fc / f)`` for a
+  first-order high-pass (AC coupling) at ``fc``;
+- :func:`flat_tops` -- clipping: runs of equal samples at a segment's extreme;
+- :func:`pre_trigger_lines` -- lines before the blows (an ambient tone), after the previous
+  blow's decay is taken out with the free modal model;
+- :func:`double_hits` -- the early window at full rate: a second blow of the ram, its delay and
+  size relative to the first.
+
+Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate, gages in DAQ channel order; ``gages`` the
+rig's :class:`~ramdaq.analysis.model.rig.Gage` per row.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.stats
+
+from ..model.rig import Gage
+from .datamodel import P_CHANCE, Finding, FreeModal, Layer, free_modal_model
+from .features import rigid_projector
+from .signal_checks import dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
+
+PHASE_FLOOR_RAD = 0.02
+"""Phase scatter accepted on top of each estimate's standard error: the free shapes of a real
+structure are slightly complex (non-proportional damping). Measured on clean trials of the truth
+simulator (ALBACORE in water and in air, SAMPSON): well-measured entries' phases sit up to
+0.01-0.04 rad off their mode's, mean over six blows; a 1.5 Hz high-pass leads by 0.12 rad at
+13 Hz, a 3-sample skew at 2 kHz lags by 0.55 rad at 60 Hz."""
+PHASE_MIN_RAD = 0.1
+"""Least phase a reported skew or high-pass turns some measured mode by (5x the floor, 2.5x the
+largest mean departure measured on clean trials; a clean SAMPSON trial of the truth simulator
+otherwise reads its 2.2 and 4.4 Hz modes' complexity as a 0.1-0.15 Hz high-pass)."""
+GAIN_FLOOR = 0.005
+"""Relative amplitude scatter accepted on top of the standard errors in the rigid-body
+reconstruction (gage positions are known to a few millimetres on metre baselines)."""
+MIN_ENTRY_SNR = 20.0
+"""A shape entry is used by the phase and gain checks when its amplitude is this many standard
+errors (its phase then known to 0.05 rad)."""
+
+
+@dataclass(frozen=True)
+class DataChecks:
+    """The data-only layer's result: the free modal model and every finding beyond its chance
+    level (``findings``); ``looked`` names the checks run."""
+
+    modal: FreeModal
+    findings: list[Finding]
+    looked: tuple[str, ...]
+
+    def to_json(self) -> dict:
+        m = self.modal
+        return {"checks": list(self.looked), "p_chance": P_CHANCE,
+                "free_modes": [{"f_hz": round(float(f), 4), "delta": round(float(d), 5)}
+                               for f, d in zip(m.f_hz, m.delta, strict=True)],
+                "findings": [f.to_json() for f in self.findings]}
+
+
+def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequence[Gage], *,
+                pre_s: float = 1.0) -> DataChecks:
+    """Every data-only check of a trial. A dead or clipped gage is left out of the poles'
+    identification and of every shape check (its harmonics are no modes, its shapes are cut);
+    a gage with a timing or high-pass finding is left out of the rigid-body reconstruction of
+    its neighbours (its complex shapes would bend theirs). A double hit is looked for on the
+    gages that are not clipped."""
+    numbers = tuple(g.number for g in gages)
+    found = dead_or_noisy(x, fs_hz, onsets_s, numbers, pre_s=pre_s)
+    dead = {g for f in found if f.check == "dead" for g in f.gages}
+    live = [i for i, n in enumerate(numbers) if n not in dead]
+    found += flat_tops(x[live], fs_hz, onsets_s, [numbers[i] for i in live], pre_s=pre_s)
+    gone = {g for f in found if f.check in ("dead", "clipping") for g in f.gages}
+    rows = tuple(i for i, n in enumerate(numbers) if n in gone)
+    fm = free_modal_model(x, fs_hz, onsets_s, pre_s=pre_s, exclude_rows=rows)
+    timing = [f for f in chain_phase(fm, numbers) if not set(f.gages) & gone]
+    found += timing + rigid_gain(fm, gages, skip=gone | {g for f in timing for g in f.gages})
+    found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s)
+    keep = [i for i in range(len(numbers)) if i not in rows]
+    found += double_hits(x[keep], fs_hz, onsets_s, [numbers[i] for i in keep], fm)
+    return DataChecks(modal=fm, findings=found,
+                      looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
+                              "ambient_tone", "double_hit"))
+
+
+# ---------------------------------------------------------------- channel timing and chain
+
+
+def _departures(fm: FreeModal) -> tuple[np.ndarray, np.ndarray]:
+    """Each shape entry's phase off its mode's (mod pi: a real mode's entries are in or out of
+    phase), rad, and its standard error, (n_imp, n_g, K). The reference is the median over the
+    well-measured gages, so a few faulty ones do not move it."""
+    a = fm.amp
+    th = 0.5 * np.angle(np.sum(a**2, axis=1, keepdims=True))
+    dep = _wrap(np.angle(a) - th)
+    snr = fm.snr()
+    good = snr >= MIN_ENTRY_SNR
+    with warnings.catch_warnings():          # a mode no gage measures well has no reference
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med = np.nanmedian(np.where(good, dep, np.nan), axis=1, keepdims=True)
+    dep = _wrap(dep - np.nan_to_num(med))
+    se = np.sqrt(1.0 / np.maximum(snr, 1e-12) ** 2 + PHASE_FLOOR_RAD**2)
+    good &= ~fm.steady[None, None, :]
+    return np.where(good, dep, np.nan), se
+
+
+def _wrap(phi: np.ndarray) -> np.ndarray:
+    """Phase wrapped into [-pi/2, pi/2) (mod pi)."""
+    return (phi + math.pi / 2) % math.pi - math.pi / 2
+
+
+TAU_GRID_SAMPLES = np.arange(-8.0, 8.0001, 0.02)
+"""Time skews tried, in samples of the recorded rate (a skew beyond 8 samples would be an
+error of the acquisition's channel order, not a sensor's)."""
+FC_GRID_HZ = np.concatenate([[0.0], np.geomspace(0.05, 20.0, 400)])
+"""First-order high-pass corners tried, Hz."""
+
+
+def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
+    """Per gage, its phase off the other gages across all modes and impacts, held against a
+    time skew (``phi = -2 pi f tau``) and a first-order high-pass (``phi = atan(fc / f)``).
+
+    Statistic: the drop in the phases' chi-square (each departure over its standard error
+    ``1/SNR`` with :data:`PHASE_FLOOR_RAD`) when the better-fitting of the two is added; under no
+    fault it is chi-square with 1 degree of freedom (one parameter fitted), so its chance level is
+    that distribution's ``P_CHANCE / (2 n_g)`` quantile (two models, every gage). A skew or a
+    corner is reported only when it turns some measured mode by :data:`PHASE_MIN_RAD`."""
+    dep, se = _departures(fm)
+    f = fm.f_hz[None, :]
+    level = float(scipy.stats.chi2.isf(P_CHANCE / (2 * len(numbers)), 1))
+    out = []
+    for g, num in enumerate(numbers):
+        phi, s = dep[:, g, :], se[:, g, :]
+        ok = np.isfinite(phi)
+        if ok.sum() < 2:
+            continue
+        w = np.where(ok, 1.0 / s**2, 0.0)
+        phi = np.where(ok, phi, 0.0)
+        chi0 = float(np.sum(w * phi**2))
+        tau_s = TAU_GRID_SAMPLES / fm.fs_hz
+        c_tau = np.array([np.sum(w * _wrap(phi + 2 * math.pi * f * t) ** 2) for t in tau_s])
+        c_fc = np.array([np.sum(w * _wrap(phi - np.arctan(fc / f)) ** 2) for fc in FC_GRID_HZ])
+        i, k = int(np.argmin(c_tau)), int(np.argmin(c_fc))
+        f_ok = fm.f_hz[np.any(ok, axis=0)]
+        # a skew or a corner too small to turn any measured mode by PHASE_MIN_RAD is not told
+        # from the shapes' own complexity
+        big_tau = 2 * math.pi * f_ok.max() * abs(tau_s[i]) >= PHASE_MIN_RAD
+        big_fc = math.atan(FC_GRID_HZ[k] / f_ok.min()) >= PHASE_MIN_RAD
+        drop_tau, drop_fc = (chi0 - c_tau[i]) * big_tau, (chi0 - c_fc[k]) * big_fc
+        modes = tuple(float(v) for v in f_ok)
+        if max(drop_tau, drop_fc) <= level:
+            continue
+        if drop_tau >= drop_fc:
+            tau = float(tau_s[i])
+            out.append(_finding("time_skew", num, drop_tau, level, tau, "s", modes,
+                                f"gage {num} runs {1e3 * tau:+.2f} ms ({tau * fm.fs_hz:+.1f} samples) "
+                                "off the other gages: its phase is linear in frequency over the modes"))
+        else:
+            fc = float(FC_GRID_HZ[k])
+            out.append(_finding("highpass", num, drop_fc, level, fc, "Hz", modes,
+                                f"gage {num} leads the other gages as a first-order high-pass at "
+                                f"{fc:.2f} Hz would (AC coupling or drift filter)"))
+    return out
+
+
+def _finding(check: str, num: int, stat: float, level: float, size: float, unit: str,
+             modes: tuple[float, ...], text: str) -> Finding:
+    """A timing or signal-chain finding on one gage."""
+    return Finding(check=check, layer=Layer.SENSOR, gages=(num,), statistic=float(stat),
+                   chance_level=level, size=size, unit=unit, text=text, window="decay",
+                   mode_hz=modes, p_chance=P_CHANCE,
+                   null="chi-square, 1 dof (phase departures over their standard errors)")
+
+
+# ---------------------------------------------------------------- spatial redundancy
+
+
+def rigid_gain(fm: FreeModal, gages: Sequence[Gage], *, skip: set[int] = frozenset()) -> list[Finding]:
+    """Each gage of a rigid body (the rudder, the hull) whose free shapes the body's other gages
+    predict by rigid-body kinematics: its gain ``g`` (least squares over every mode and impact
+    of ``a = g p``, ``p`` the prediction from the others, each entry weighted by the inverse of
+    its variance) and ``z = (g - 1) / se(g)``; a gain is reported when ``|z|`` passes the normal
+    distribution's two-sided ``P_CHANCE / n`` quantile (``n`` gages tested). Shapes are read as
+    real modes (each entry's component along its mode's phase), so a small phase error barely
+    moves them. The suspect is the gage whose removal leaves the others most consistent (a
+    faulty gage bends every prediction it enters, a far one most); it is taken out and the rest
+    tested again. Gages numbered in ``skip`` are left out."""
+    out = []
+    for body in ("rudder", "hull"):
+        rows = [i for i, g in enumerate(gages) if g.body == body and g.number not in skip]
+        if len(rows) < 2 or rigid_projector(list(gages), np.array(rows)) is None:
+            continue
+        out += _body_gains(fm, gages, rows)
+    return out
+
+
+def _real_modes(fm: FreeModal) -> tuple[np.ndarray, np.ndarray]:
+    """Each shape entry's component along its mode's phase (n_imp, n_g, K) m/s^2, and its
+    standard error."""
+    a = fm.amp
+    th = 0.5 * np.angle(np.sum(a**2, axis=1, keepdims=True))
+    return np.real(a * np.exp(-1j * th)), fm.amp_se
+
+
+def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[Finding]:
+    G = {i: np.concatenate([gages[i].direction, np.cross(gages[i].position_m, gages[i].direction)])
+         for i in rows}
+    a, se = _real_modes(fm)
+    out, live = [], list(rows)
+    while len(live) > 2:
+        res = {i: e for i in live if (e := _gain_of(a, se, G, i, [r for r in live if r != i], fm.steady))}
+        if not res:
+            return out
+        level = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(res))))
+        if max(abs(g - 1) / s for g, s in res.values()) <= level:
+            return out
+        i = min(res, key=lambda c: _spread_without(a, se, G, live, c, fm.steady))
+        g, s = res[i]
+        z = abs(g - 1) / s
+        if z <= level:
+            return out
+        num = gages[i].number
+        live.remove(i)
+        spread, spread_level = _mode_spread(a, se, G, i, live, fm.steady)
+        if spread > spread_level:      # a gain is one ratio at every mode; this is the body's shape
+            out.append(_rigid_finding(fm, gages[i], spread, spread_level))
+            continue
+        what = f"gain x{g:.3f} against its body's rigid-body motion"
+        if g < 0:
+            what += " (its polarity reversed)"
+        elif g < 1:            # a tilted gage reads cos(tilt) of its axis where nothing sees across it
+            what += f" (or its axis tilted {math.degrees(math.acos(g)):.0f} deg)"
+        out.append(_gain_finding(fm, num, z, level, g, f"gage {num}: {what} (se {s:.3f})"))
+    return out
+
+
+def _spread_without(a: np.ndarray, se: np.ndarray, G: dict, live: list[int], c: int,
+                    steady: np.ndarray) -> float:
+    """The largest gain z among the gages ``live`` other than ``c``, each predicted from the
+    rest without ``c``: how inconsistent the body stays if ``c`` is the faulty one."""
+    rest = [r for r in live if r != c]
+    zs = [abs(e[0] - 1) / e[1] for i in rest
+          if (e := _gain_of(a, se, G, i, [r for r in rest if r != i], steady))]
+    return max(zs, default=0.0)
+
+
+def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
+             steady: np.ndarray, min_entries: int = 2) -> tuple[float, float] | None:
+    """(gain, its standard error) of row ``i`` against its prediction from the rows ``others``,
+    or None when they do not determine its rigid-body motion. Steady poles are left out."""
+    Go = np.array([G[r] for r in others])
+    rank = np.linalg.matrix_rank
+    if not others or rank(np.vstack([Go, G[i]]), tol=1e-9) > rank(Go, tol=1e-9):
+        return None
+    h = G[i] @ np.linalg.pinv(Go)                                   # prediction weights (n_o,)
+    p = np.einsum("o,jok->jk", h, a[:, others, :])
+    var = se[:, i, :] ** 2 + np.einsum("o,jok->jk", h**2, se[:, others, :] ** 2)
+    var = var + (GAIN_FLOOR * p) ** 2
+    ok = (p**2 >= MIN_ENTRY_SNR**2 * var) & ~steady[None, :]
+    if ok.sum() < min_entries:
+        return None
+    w = np.where(ok, 1.0 / var, 0.0)
+    den = float(np.sum(w * p**2))
+    return float(np.sum(w * p * a[:, i, :]) / den), math.sqrt(1.0 / den)
+
+
+def _mode_spread(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
+                 steady: np.ndarray) -> tuple[float, float]:
+    """How far row ``i``'s gain differs from mode to mode: the chi-square of the per-mode gains
+    about their weighted mean, each gain's variance its standard error squared plus
+    :data:`GAIN_FLOOR` squared; and its chance level, the chi-square(K - 1) upper ``P_CHANCE``
+    quantile (K modes with a gain). With fewer than two such modes a gain cannot be told from
+    the body's shape: (inf, 0), read as the body's."""
+    gk, vk = [], []
+    for k in range(a.shape[2]):
+        one = np.zeros_like(steady)
+        one[k] = True
+        e = _gain_of(a, se, G, i, others, ~one | steady, min_entries=1)
+        if e is not None:
+            gk.append(e[0])
+            vk.append(e[1] ** 2 + (GAIN_FLOOR * e[0]) ** 2)
+    if len(gk) < 2:            # one mode: a gain is not told from the body's shape
+        return math.inf, 0.0
+    gk, w = np.array(gk), 1.0 / np.array(vk)
+    mean = float(np.sum(w * gk) / np.sum(w))
+    return float(np.sum(w * (gk - mean) ** 2)), float(scipy.stats.chi2.isf(P_CHANCE, len(gk) - 1))
+
+
+def _rigid_finding(fm: FreeModal, gage: Gage, stat: float, level: float) -> Finding:
+    """A gage its body's other gages do not predict by rigid-body kinematics with one gain for
+    all modes: the rig's rigid body is not what moves there (a flexible part, a wrong position
+    or body in the rig file), a model-form finding, not a sensor's."""
+    return Finding(check="rigid_body", layer=Layer.MODEL_FORM, gages=(gage.number,),
+                   statistic=stat, chance_level=level, size=float("nan"), unit="",
+                   window="decay", mode_hz=tuple(float(f) for f in fm.f_hz[~fm.steady]),
+                   text=f"gage {gage.number} does not move with the {gage.body}'s other gages as one "
+                        "rigid body, and not by one gain at every mode (a flexible part, or its "
+                        "position or body in the rig)",
+                   null="chi-square of per-mode gains about their mean, K-1 dof")
+
+
+def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str) -> Finding:
+    return Finding(check="gain", layer=Layer.SENSOR, gages=(num,), statistic=float(z),
+                   chance_level=level, size=g, unit="ratio", text=text, window="decay",
+                   mode_hz=tuple(float(f) for f in fm.f_hz), p_chance=P_CHANCE,
+                   null="normal (gain estimate over its standard error)")

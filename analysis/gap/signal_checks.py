@@ -1,0 +1,350 @@
+"""Data-only checks of the recorded values themselves, at the recorded rate: flat tops
+(clipping), lines before the blows (an ambient tone) and a second blow in the early window
+(a double hit). Each returns :class:`~ramdaq.analysis.gap.datamodel.Finding` objects with the
+statistic's chance level at :data:`~ramdaq.analysis.gap.datamodel.P_CHANCE`.
+
+Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate ``fs_hz``; ``onsets_s`` (n_imp,) s from its
+first sample; ``numbers`` the gage number of each row.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.ndimage
+import scipy.optimize
+import scipy.stats
+
+from .datamodel import P_CHANCE, Finding, FreeModal, Layer
+
+CLIP_SPAN_S = 2.0
+"""How long after each onset flat tops are looked for, s (the ringing is largest early)."""
+
+
+def _longest_run(mask: np.ndarray) -> int:
+    """Longest run of True in a 1-d mask."""
+    if not mask.any():
+        return 0
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return int(np.max(np.flatnonzero(d == -1) - np.flatnonzero(d == 1)))
+
+
+def _step(v: np.ndarray) -> float:
+    """The converter's step in ``v`` (the smallest nonzero difference between its values)."""
+    u = np.unique(v[np.isfinite(v)])
+    d = np.diff(u)
+    d = d[d > 0]
+    return float(d.min()) if d.size else 0.0
+
+
+def flat_tops(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int], *,
+              pre_s: float = 1.0) -> list[Finding]:
+    """Gages whose blows run into a flat top: ``r`` samples in a row equal to the segment's
+    extreme value.
+
+    Under no clipping two neighbouring samples at a peak are equal when their difference, of
+    standard deviation ``sqrt(2) sigma`` (``sigma`` the gage's noise before the blow), falls
+    within one converter step ``q``: probability ``p = q / (2 sqrt(pi) sigma)``; a run of ``r``
+    has ``p^(r-1)``. The chance level is the run length that probability reaches
+    ``P_CHANCE / (2 n_imp n_g)`` at (both signs of every blow of every gage), and at least 3."""
+    out = []
+    n_places = 2 * len(onsets_s) * len(numbers)
+    for g, num in enumerate(numbers):
+        runs, tops = [], []
+        q = _step(x[g, : int(min(x.shape[1], (onsets_s[0] + CLIP_SPAN_S) * fs_hz))])
+        sig = _pre_noise(x[g], fs_hz, onsets_s, pre_s)
+        p = min(0.999, q / (2 * math.sqrt(math.pi) * sig)) if sig > 0 else 0.999
+        level = max(3.0, 1.0 + math.log(P_CHANCE / n_places) / math.log(p))
+        for t in onsets_s:
+            seg = x[g, int(t * fs_hz): int((t + CLIP_SPAN_S) * fs_hz)]
+            seg = seg[np.isfinite(seg)]
+            if seg.size == 0:
+                continue
+            for sgn in (1.0, -1.0):
+                top = np.max(sgn * seg)
+                runs.append(_longest_run(sgn * seg >= top - 0.5 * q))
+                tops.append(top)
+        r = max(runs, default=0)
+        if r > level:
+            n_hit = sum(k > level for k in runs)
+            lvl = float(np.median([t for t, k in zip(tops, runs, strict=True) if k > level]))
+            out.append(Finding(
+                check="clipping", layer=Layer.SENSOR, gages=(num,), statistic=float(r),
+                chance_level=level, size=lvl, unit="m/s^2", window="peaks",
+                text=f"gage {num} is flat at {lvl:.4g} m/s^2 at its peaks: runs of up to {r} equal "
+                     f"samples ({n_hit} of {len(runs)} peaks; chance level {level:.1f})",
+                null=f"run of equal samples at the peak, p(equal neighbours) = {p:.2g}"))
+    return out
+
+
+def _pre_noise(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray, pre_s: float) -> float:
+    """A gage's noise rms before its first blow, from first differences (a slow line or drift
+    barely moves them), m/s^2."""
+    b = int(onsets_s[0] * fs_hz) - int(0.01 * fs_hz)
+    seg = v[max(0, b - int(pre_s * fs_hz)): b]
+    seg = seg[np.isfinite(seg)]
+    return float(np.std(np.diff(seg)) / math.sqrt(2)) if seg.size > 8 else 0.0
+
+
+NOISE_RATIO_FLOOR = 4.0
+"""A gage is called noisy only when its noise variance is at least this many times the median
+gage's (twice the rms): accelerometers of one trial differ by less, but not by nothing."""
+
+
+def dead_or_noisy(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int], *,
+                  pre_s: float = 1.0) -> list[Finding]:
+    """A dead gage (its record never leaves one value, or its blows move it by less than one
+    converter step) and a noisy one: its noise variance before the blows (from first
+    differences) over the median gage's. Under equal noise that ratio is F-distributed with
+    about ``n`` and ``n`` degrees of freedom (``n`` samples each); the chance level is its
+    ``P_CHANCE / n_g`` upper quantile, and at least :data:`NOISE_RATIO_FLOOR`."""
+    out = []
+    var = np.array([_pre_noise(v, fs_hz, onsets_s, pre_s) for v in x]) ** 2
+    n = max(2, int((pre_s - 0.01) * fs_hz) - 1)
+    level = max(NOISE_RATIO_FLOOR, float(scipy.stats.f.isf(P_CHANCE / len(numbers), n, n)))
+    med = float(np.median(var))
+    a, b = int(onsets_s[0] * fs_hz), int((onsets_s[0] + CLIP_SPAN_S) * fs_hz)
+    moves = np.array([float(np.ptp(v[np.isfinite(v)])) if np.isfinite(v).any() else 0.0
+                      for v in x[:, a:b]])
+    for g, num in enumerate(numbers):
+        if moves[g] <= _step(x[g]) and np.median(moves) > 0:
+            out.append(Finding(check="dead", layer=Layer.SENSOR, gages=(num,), statistic=math.inf,
+                               chance_level=1.0, size=moves[g], unit="m/s^2", window="early",
+                               text=f"gage {num} is dead: its first blow moves it by {moves[g]:.3g} m/s^2 "
+                                    "(one converter step or less)",
+                               null="a live gage moves by more than one step in a blow"))
+        elif med > 0 and var[g] / med > level:
+            out.append(Finding(check="noisy", layer=Layer.SENSOR, gages=(num,),
+                               statistic=float(var[g] / med), chance_level=level,
+                               size=math.sqrt(var[g]), unit="m/s^2", window="pre",
+                               text=f"gage {num} is noisy: {math.sqrt(var[g]):.3g} m/s^2 rms before the "
+                                    f"blows, {math.sqrt(var[g] / med):.1f}x the median gage's",
+                               null=f"F({n}, {n}) variance ratio"))
+    return out
+
+
+# ---------------------------------------------------------------- lines before the blows
+
+PRE_GUARD_S = 0.01
+"""Left out just before each onset, s (the trigger's onset is good to a sample or two)."""
+LINE_F_MIN_CYCLES = 2.0
+"""The lowest line looked for has this many cycles in the pre window (below, a Hann window's
+own leakage of the window's mean and slope, and a 1/f noise that the running median, cut off
+at 0 Hz, reads too low: a clean truth-simulator trial showed a 1.5 Hz "line" just over the
+chance level)."""
+LINGER = 1e-4
+"""A pole still rings in a pre window when this fraction of its amplitude is left there."""
+LEVEL_HALF_WIDTH_HZ = 5.0
+"""Half-width of the neighbourhood the noise level is read from, Hz (coloured noise)."""
+
+
+def pre_windows(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, fm: FreeModal,
+                pre_s: float) -> np.ndarray:
+    """Each impact's pre window with the previous blows' ringing taken out: every pole of the
+    free modal model that keeps more than :data:`LINGER` of its amplitude from the previous
+    onset to the window is fitted with free amplitudes and removed, and so is the mean (an
+    extrapolation over seconds leaves a lightly damped mode's ringing at a few % of itself).
+    (n_imp, n_g, n_pre) m/s^2. A steady pole (a tone) stays; a steady tone at a lingering
+    mode's frequency is removed with the mode."""
+    n_pre = int((pre_s - PRE_GUARD_S) * fs_hz)
+    tt = np.arange(n_pre) / fs_hz
+    out = []
+    for j, t in enumerate(onsets_s):
+        a = max(0, int(round((t - pre_s) * fs_hz)))
+        seg = x[:, a:a + n_pre]
+        if seg.shape[1] < n_pre:
+            seg = np.pad(seg, ((0, 0), (0, n_pre - seg.shape[1])))
+        seg = np.nan_to_num(seg)
+        since = a / fs_hz - onsets_s[j - 1] if j else math.inf
+        keep = (np.exp(fm.poles.real * since) > LINGER) & ~fm.steady
+        e = np.exp(np.multiply.outer(tt, fm.poles[keep]))
+        A = np.column_stack([e.real, e.imag, np.ones(n_pre)])
+        c, *_ = np.linalg.lstsq(A, seg.T, rcond=None)
+        out.append(seg - (A @ c).T)
+    return np.stack(out)
+
+
+def pre_trigger_lines(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int],
+                      fm: FreeModal, *, pre_s: float = 1.0) -> list[Finding]:
+    """Spectral lines before the blows: per gage, the Hann periodograms of every pre window
+    (previous blows' decay taken out) summed over the impacts and divided by the local noise
+    level (running median over +-:data:`LEVEL_HALF_WIDTH_HZ`, over ``ln 2``). With no line that
+    ratio is Gamma(n_imp, 1); its chance level is the ``P_CHANCE / (n_g n_bins)`` upper quantile
+    (``n_bins`` independent frequencies searched). Gages whose lines fall within one
+    resolution ``1/T`` are one finding; how steady it is: the spread of its amplitude over the
+    blows. A line within ``1/T`` of a mode is kept only when the first pre window alone (no
+    blow before it) shows it beyond its own chance level (Gamma(1, 1) quantile). A pre window
+    the record's start cuts is left out."""
+    whole = np.asarray(onsets_s) >= pre_s          # a window cut by the record's start holds the blow
+    if not whole.any():
+        return []
+    pw = pre_windows(x, fs_hz, onsets_s, fm, pre_s)[whole]
+    n_imp, n_g, n = pw.shape
+    nfft = 4 * n
+    f = np.fft.rfftfreq(nfft, 1 / fs_hz)
+    P = np.abs(np.fft.rfft(pw * np.hanning(n), n=nfft, axis=-1)) ** 2
+    S = P.sum(axis=0)
+    half = max(3, int(LEVEL_HALF_WIDTH_HZ * nfft / fs_hz))
+    level = scipy.ndimage.median_filter(S / n_imp, size=(1, 2 * half + 1), mode="nearest") / math.log(2)
+    T = S / np.maximum(level, 1e-300)
+    band = (f >= LINE_F_MIN_CYCLES * fs_hz / n) & (f <= 0.4 * fs_hz)
+    n_bins = int(band.sum() * n / nfft)
+    chance = float(scipy.stats.gamma.isf(P_CHANCE / (n_g * max(1, n_bins)), n_imp))
+    T[:, ~band] = 0.0
+    peaks = [(int(np.argmax(T[g])), g) for g in range(n_g) if T[g].max() > chance]
+    # a line at a mode's frequency may be the previous blows' ringing left over (a mode the
+    # free model splits or damps slightly wrong): it is a tone only if it is there before the
+    # first blow too, where nothing rings
+    first = P[0] / np.maximum(level, 1e-300) if whole[0] else np.zeros_like(level)
+    chance1 = float(scipy.stats.gamma.isf(P_CHANCE / (n_g * max(1, n_bins)), 1))
+    modes = fm.f_hz[~fm.steady]
+    groups = [grp for grp in _group(peaks, f, fs_hz / n)
+              if np.min(np.abs(modes - f[grp[0][0]]), initial=np.inf) > fs_hz / n
+              or any(first[g, k] > chance1 for k, g in grp)]
+    return [_line_finding(pw, fs_hz, f, T, grp, numbers, chance) for grp in groups]
+
+
+def _group(peaks: list[tuple[int, int]], f: np.ndarray, res_hz: float) -> list[list[tuple[int, int]]]:
+    """Peaks (bin, gage) grouped by frequency: within ``res_hz`` of a group's first member."""
+    groups: list[list[tuple[int, int]]] = []
+    for k, g in sorted(peaks):
+        for grp in groups:
+            if abs(f[grp[0][0]] - f[k]) <= res_hz:
+                grp.append((k, g))
+                break
+        else:
+            groups.append([(k, g)])
+    return groups
+
+
+def _line_finding(pw: np.ndarray, fs_hz: float, f: np.ndarray, T: np.ndarray,
+                  grp: list[tuple[int, int]], numbers: Sequence[int], chance: float) -> Finding:
+    rows = sorted(g for _, g in grp)
+    k = int(np.argmax(T[rows].sum(axis=0)))
+    t = np.arange(pw.shape[-1]) / fs_hz
+    # the peak refined on a grid 20x finer than the padded spectrum's, over every blow and gage
+    fine = f[k] + np.linspace(-1, 1, 41) * (f[1] - f[0])
+    xw = pw[:, rows, :] * np.hanning(t.size)
+    power = [np.sum(np.abs(xw @ np.exp(-2j * math.pi * fq * t)) ** 2) for fq in fine]
+    f0 = float(fine[int(np.argmax(power))])
+    B = np.column_stack([np.cos(2 * math.pi * f0 * t), np.sin(2 * math.pi * f0 * t)])
+    c, *_ = np.linalg.lstsq(B, pw[:, rows, :].reshape(-1, t.size).T, rcond=None)
+    amp = np.hypot(c[0], c[1]).reshape(pw.shape[0], len(rows))       # (n_imp, rows)
+    with np.errstate(invalid="ignore", divide="ignore"):     # per gage over the blows
+        spread = float(np.nanmedian(np.std(amp, axis=0) / np.mean(amp, axis=0)))
+    gnums = tuple(numbers[g] for g in rows)
+    stat = float(max(T[g, kk] for kk, g in grp))
+    return Finding(
+        check="ambient_tone", layer=Layer.EXCITATION, gages=gnums, statistic=stat,
+        chance_level=chance, size=float(np.median(amp)), unit="m/s^2", window="pre",
+        mode_hz=(f0,),
+        text=f"a {f0:.2f} Hz line before the blows on gages {', '.join(map(str, gnums))}: "
+             f"{np.median(amp):.3g} m/s^2 (spread over the blows {100 * spread:.0f} %)",
+        null="summed Hann periodogram over its local level: Gamma(n_impacts, 1)",
+        more=(("f_hz", f0, "Hz"), ("spread", spread, "fraction")))
+
+
+# ---------------------------------------------------------------- the early window
+
+EARLY_FROM_S = 0.012
+"""The early window starts this long after the onset, s: past a ram's contact (5 ms nominal)
+and the anti-alias filter's transient."""
+EARLY_TO_S = 0.2
+"""The early window ends here, s after the onset: a second blow later than this is a new
+impact for the trigger."""
+RHO_GRID = np.geomspace(0.02, 2.0, 14)
+"""Sizes of a second blow tried, relative to the first (the scan's; the size reported is
+refined between the best one's neighbours)."""
+
+
+def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int],
+                fm: FreeModal) -> list[Finding]:
+    """A second blow of the ram in each impact's early window, at full rate: the free modal
+    model's poles with each gage's amplitudes free, once as one blow and once with a second
+    blow ``rho`` times the first ``d`` later (the same modal participation, shifted), every
+    ``d`` on the sample grid and ``rho`` in :data:`RHO_GRID` tried. Statistic: the drop in the
+    whitened residual sum of squares (each gage by its noise before the blows); under one blow it
+    is about chi-square with 2 degrees of freedom, and its chance level is that distribution's
+    ``P_CHANCE / (n_delays n_imp)`` upper quantile."""
+    if fm.n_modes == 0:
+        return []
+    sig = np.array([_pre_noise(v, fs_hz, onsets_s, 1.0) for v in x])
+    sig = np.maximum(sig, 1e-12)
+    poles = fm.poles[~fm.steady]                   # a second blow does not start a tone again
+    best = [_double_hit_scan(x, fs_hz, t, poles, sig) for t in onsets_s]
+    n_d = best[0][3]
+    chance = float(scipy.stats.chi2.isf(P_CHANCE / (n_d * len(onsets_s)), 2))
+    hits = [(j, b) for j, b in enumerate(best) if b[0] > chance]
+    if not hits:
+        return []
+    stat = max(b[0] for _, b in hits)
+    d = float(np.median([b[1] for _, b in hits]))
+    rho = float(np.median([_refined_size(x, fs_hz, onsets_s[j], poles, sig, b[1], b[2]) for j, b in hits]))
+    blows = ", ".join(str(j + 1) for j, _ in hits)
+    return [Finding(
+        check="double_hit", layer=Layer.EXCITATION, gages=tuple(numbers), statistic=stat,
+        chance_level=chance, size=rho, unit="ratio", window="early",
+        mode_hz=tuple(float(v) for v in fm.f_hz),
+        text=f"a second blow {1e3 * d:.1f} ms after the first at {100 * rho:.0f} % of it "
+             f"(blows {blows} of {len(onsets_s)})",
+        null="whitened residual drop, chi-square 2 dof, Bonferroni over delays and blows",
+        more=(("delay_s", d, "s"), ("blows", float(len(hits)), "count")))]
+
+
+def _double_hit_scan(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
+                     sig: np.ndarray) -> tuple[float, float, float, int]:
+    """(best residual drop, its delay s, its size, delays tried) for one impact."""
+    a = int(round((onset_s + EARLY_FROM_S) * fs_hz))
+    b = int(round((onset_s + EARLY_TO_S) * fs_hz))
+    y = (x[:, a:b] / sig[:, None]).T                                 # (N, n_g)
+    if y.shape[0] < 16 or not np.all(np.isfinite(y)):
+        return 0.0, float("nan"), float("nan"), 1
+    tau = (a + np.arange(y.shape[0])) / fs_hz - onset_s
+    e1 = np.exp(np.multiply.outer(tau, poles))                        # (N, K)
+    rss0 = _rss(e1, y)
+    delays = np.arange(2, y.shape[0] - int(0.02 * fs_hz))
+    # every other delay first, then the neighbours of the best (the drop is smooth over a sample)
+    coarse = [_drop_at(e1, y, tau, i, poles, rss0) for i in delays[::2]]
+    i0 = int(delays[::2][int(np.argmax([c[0] for c in coarse]))])
+    fine = [_drop_at(e1, y, tau, i, poles, rss0) for i in (i0 - 1, i0 + 1) if i in delays]
+    return (*max(coarse + fine, key=lambda c: c[0]), len(delays))
+
+
+def _drop_at(e1: np.ndarray, y: np.ndarray, tau: np.ndarray, i: int, poles: np.ndarray,
+             rss0: float) -> tuple[float, float, float]:
+    """(residual drop, delay s, size) of the best second blow at sample ``i`` of the window."""
+    d = float(tau[i] - tau[0] + EARLY_FROM_S)
+    e2 = np.zeros_like(e1)
+    e2[i:] = np.exp(np.multiply.outer(tau[i:] - d, poles))
+    rss = _rss(e1[None] + RHO_GRID[:, None, None] * e2[None], y)     # (n_rho,)
+    m = int(np.argmin(rss))
+    return float(rss0 - rss[m]), d, float(RHO_GRID[m])
+
+
+def _refined_size(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray, sig: np.ndarray,
+                  d: float, rho: float) -> float:
+    """The second blow's size at delay ``d`` refined from the grid's ``rho`` by a bounded scalar
+    minimisation of the residual between the grid's neighbours."""
+    a = int(round((onset_s + EARLY_FROM_S) * fs_hz))
+    b = int(round((onset_s + EARLY_TO_S) * fs_hz))
+    y = (x[:, a:b] / sig[:, None]).T
+    tau = (a + np.arange(y.shape[0])) / fs_hz - onset_s
+    e1 = np.exp(np.multiply.outer(tau, poles))
+    e2 = np.where((tau >= d - 0.5 / fs_hz)[:, None], np.exp(np.multiply.outer(tau - d, poles)), 0)
+    step = RHO_GRID[1] / RHO_GRID[0]
+    res = scipy.optimize.minimize_scalar(lambda r: float(_rss(e1 + r * e2, y)),
+                                         bounds=(rho / step, rho * step), method="bounded",
+                                         options={"xatol": 1e-3 * rho})
+    return float(res.x)
+
+
+def _rss(e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Residual sum of squares of ``y`` (N, n_g) on the real basis of complex columns ``e``
+    (..., N, K) (their real and imaginary parts) and a constant."""
+    ones = np.ones(e.shape[:-1] + (1,))
+    A = np.concatenate([e.real, e.imag, ones], axis=-1)
+    Q, _ = np.linalg.qr(A)
+    proj = np.swapaxes(Q, -1, -2) @ y
+    return float(np.sum(y**2)) - np.sum(proj**2, axis=(-2, -1))

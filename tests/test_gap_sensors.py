@@ -1,0 +1,209 @@
+"""The data-only layer of the gap diagnosis (issue 17 item 1, and its second "Done when"):
+sensor effects injected outside the library in plain numpy on a simulated ALBACORE-in-water
+trial's recorded values (six blows), exported as CSV, re-imported with ``ramdaq import``, and
+found by :func:`ramdaq.analysis.gap.sensors.check_trial` with the right gages and layer; the
+clean trial raises nothing.
+
+False-alarm level: every check's chance level is its null distribution's upper
+``P_CHANCE`` = 1e-3 quantile after Bonferroni over what it searched, so a clean trial raises a
+finding from one of the six checks with probability at most 0.6 %."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from ramdaq.analysis.gap.datamodel import P_CHANCE, Finding, Layer, free_modal_model
+from ramdaq.analysis.gap.layers import model_gages, precedence, unconfirmed
+from ramdaq.analysis.gap.sensors import check_trial
+from ramdaq.daq.commands.cli import main
+from ramdaq.daq.commands.gap import load_trial
+from tests.sensor_injection import HULL, injected_recording
+
+
+@pytest.fixture(scope="module")
+def trials(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("injected")
+    cache: dict = {}
+
+    def get(effect: str):
+        if effect not in cache:
+            mcap, what = injected_recording(tmp, effect)
+            lt = load_trial(mcap)
+            lt.source = str(mcap)
+            cache[effect] = (check_trial(lt.x, lt.fs_hz, lt.onsets_s, lt.rig.gages_by_channel()), what, lt)
+        return cache[effect]
+    return get
+
+
+def _only(dc, check: str) -> list:
+    assert dc.findings, "nothing found"
+    assert {f.check for f in dc.findings} == {check}, [f.text for f in dc.findings]
+    for f in dc.findings:
+        assert f.statistic > f.chance_level and f.p_chance == P_CHANCE
+    return dc.findings
+
+
+def test_clean_trial_raises_nothing(trials):
+    dc, _, _ = trials("none")
+    assert dc.findings == [], [f.text for f in dc.findings]
+    # the free model: ALBACORE in water's four compared modes, none steady
+    assert dc.modal.n_modes == 4 and not dc.modal.steady.any()
+
+
+def test_gain_on_one_gage(trials):
+    dc, what, _ = trials("gain")
+    (f,) = _only(dc, "gain")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    # its standard error on this trial is 0.001 and the rigid-body reconstruction carries a
+    # 0.5 % form floor: within 1 % of the injected 1.15
+    assert f.size == pytest.approx(1.15, abs=0.01)
+
+
+def test_three_sample_skew_on_one_gage(trials):
+    dc, what, lt = trials("skew")
+    (f,) = _only(dc, "time_skew")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    # phases at four modes up to 215 Hz, each known to ~1e-3 rad: the delay to a tenth of a
+    # sample (the scan's step is 0.02 sample)
+    assert f.size * lt.fs_hz == pytest.approx(3.0, abs=0.1)
+
+
+def test_clipping_at_half_the_peak(trials):
+    dc, what, lt = trials("clipping")
+    (f,) = _only(dc, "clipping")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    (row,) = [i for i, g in enumerate(lt.rig.gages_by_channel()) if g.number == 1]
+    # the flat top is the clip level itself, to the converter's step
+    assert f.size == pytest.approx(np.max(np.abs(lt.x[row])), rel=1e-6)
+
+
+def test_hull_tone_before_the_blows(trials):
+    dc, what, _ = trials("tone")
+    (f,) = _only(dc, "ambient_tone")
+    assert set(f.gages) == set(HULL) and f.layer is Layer.EXCITATION and f.window == "pre"
+    # six 0.99 s windows on six gages, the line ~20 dB over the noise in each: its frequency
+    # to ~0.01 Hz; the refining grid's step is 0.0125 Hz
+    assert f.mode_hz[0] == pytest.approx(2.3, abs=0.03)
+    assert dc.modal.steady.sum() == 1          # the tone is a steady line, not a mode
+
+
+def test_highpass_on_four_gages(trials):
+    dc, what, _ = trials("highpass")
+    fs = _only(dc, "highpass")
+    assert {f.gages[0] for f in fs} == set(what.gages)
+    # the lead atan(fc/f) at 6.8 and 13 Hz is 0.2 and 0.1 rad, known to ~0.01 rad: fc to 10 %
+    for f in fs:
+        assert f.size == pytest.approx(1.5, rel=0.1) and f.layer is Layer.SENSOR
+
+
+def test_double_hit_30_ms_after_the_blow(trials):
+    dc, _, _ = trials("double_hit")
+    (f,) = _only(dc, "double_hit")
+    assert f.layer is Layer.EXCITATION and f.window == "early"
+    more = {n: v for n, v, _ in f.more}
+    # the delay on the sample grid (0.49 ms) to two samples; the size from a residual whose
+    # signal-to-noise is ~10^3 per blow, to 5 % (the early window's unmodelled modes above the
+    # free model's band and the anti-alias filter's transient are what is left)
+    assert more["delay_s"] == pytest.approx(0.030, abs=1e-3)
+    assert f.size == pytest.approx(0.3, rel=0.05)
+    assert more["blows"] == 6
+
+
+def test_noisy_gage(trials):
+    dc, what, _ = trials("noisy")
+    (f,) = _only(dc, "noisy")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    # white noise of 0.015 m/s^2 rms added, which first differences read without bias; the
+    # simulated floor (anti-alias filtered, 0.004 in first differences) adds under 4 % in
+    # quadrature, and ~2000 differences know the rms to ~2 %
+    assert 0.015 * 0.96 < f.size < 0.015 * 1.08
+
+
+def test_dead_gage(trials):
+    dc, what, _ = trials("dead")
+    (f,) = _only(dc, "dead")
+    assert f.gages == what.gages and f.layer is Layer.SENSOR
+    assert dc.modal.n_modes == 4                  # the other gages still give the four modes
+
+
+def test_free_modal_model_shares_poles_across_impacts():
+    """Three impacts of different force on four gages, two modes: the poles come back to their
+    standard errors, and each impact's shapes scale with its force."""
+    fs, rng = 1024.0, np.random.default_rng(5)
+    f0, d0 = np.array([11.0, 47.0]), np.array([0.05, 0.02])
+    shape = np.array([[1.0, 0.5], [-0.7, 1.0], [0.3, -0.8], [0.9, 0.2]])
+    onsets, force = [2.0, 7.0, 12.0], [1.0, 0.5, 2.0]
+    t = np.arange(int(17 * fs)) / fs
+    x = rng.normal(0, 1e-3, (4, t.size))
+    for on, a in zip(onsets, force, strict=True):
+        tau = t - on
+        e = np.where(tau[None] >= 0, np.exp(-d0[:, None] * f0[:, None] * tau) *
+                     np.sin(2 * math.pi * f0[:, None] * tau), 0.0)
+        x += a * shape @ e
+    fm = free_modal_model(x, fs, np.array(onsets))
+    assert fm.n_modes == 2
+    assert np.all(np.abs(fm.f_hz - f0) < 5 * fm.f_se_hz)
+    assert np.all(np.abs(fm.delta - d0) < 5 * fm.delta_se)
+    # amplitudes at each window's start: the ratio between impacts is the force ratio, up to
+    # the previous blow's ringing still there (the 11 Hz mode keeps exp(-0.05 * 11 * 5) = 6 %
+    # of the half-force blow 5 s earlier: 1.6 % of the third blow's amplitude, in any phase)
+    r = np.abs(fm.amp[2]) / np.abs(fm.amp[0])
+    ok = fm.snr()[0] > 100
+    assert np.allclose(r[ok], 2.0, rtol=0.02)
+
+
+def _finding(check: str, layer: Layer, gages: tuple[int, ...]) -> Finding:
+    return Finding(check=check, layer=layer, gages=gages, statistic=100.0, chance_level=10.0,
+                   size=1.2, unit="ratio", text=check)
+
+
+def test_a_data_sensor_finding_takes_precedence_on_the_same_gages():
+    data = [_finding("gain", Layer.SENSOR, (3,)), _finding("double_hit", Layer.EXCITATION, (1, 2, 3))]
+    # the model blames gage 3's alignment: set aside for the data layer's gain there
+    (p,) = precedence(data, "gage_alignment", model_gages([3], [3, 4], "gage_alignment"))
+    assert p.gages == (3,) and p.finding == "gain" and p.model_effect == "gage_alignment"
+    assert p.to_json()["kept"] == "data_only"
+    # a sensor effect placed without a gage of its own is read where it closed the gap
+    assert model_gages([], [4, 3], "highpass") == {3, 4}
+    # the model blames gage 5's sensitivity, the rigid-body check finds gage 3's gain: gage 3
+    (p,) = precedence(data, "gage_sensitivity", {5})
+    assert p.gages == (3,) and p.model_gages == (5,)
+    # another gage and another kind, or an effect that names no gage: nothing set aside (an
+    # excitation finding of the data layer never overrides)
+    assert precedence(data, "time_skew", {5}) == []
+    assert precedence(data, "hull_coupling", model_gages([], [3], "hull_coupling")) == []
+    assert precedence(data, None, {3}) == []
+
+
+def test_a_model_effect_the_data_checks_looked_for_and_did_not_find_is_unconfirmed():
+    looked = ("gain", "time_skew", "highpass", "clipping", "ambient_tone", "double_hit")
+    data = [_finding("gain", Layer.SENSOR, (3,))]
+    assert unconfirmed(data, looked, "double_hit") == ["double_hit"]
+    assert unconfirmed(data, looked, "gage_sensitivity") == []
+    assert unconfirmed(data, looked, "double_hit+highpass") == ["double_hit", "highpass"]
+    assert unconfirmed(data, looked, "hull_coupling") == []       # no data-only counterpart
+
+
+def test_gap_reports_the_data_only_layer_first_and_it_takes_precedence(trials, capsys, tmp_path):
+    """``ramdaq gap`` prints the data-only section before the model's cause and ranking, writes
+    it to gap.json, and when the model blames a gage's sensitivity the data-only gain stands.
+    (One candidate effect only, to keep the model layer's run short.)"""
+    dc, what, lt = trials("gain")
+    capsys.readouterr()
+    out = tmp_path / "gap"
+    assert main(["gap", lt.source, "--no-plots", "--effects", "gage_sensitivity", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.index("data-only (no stiffness or mass model") < text.index("ranking (")
+    assert "gage 3: gain x1.1" in text
+    doc = json.loads((out / "gap.json").read_text())
+    (f,) = doc["data_only"]["findings"]
+    assert f["check"] == "gain" and f["gages"] == [3] and f["layer"] == "sensor"
+    assert f["statistic"] > f["chance_level"]
+    if doc["effect"] == "gage_sensitivity":
+        (p,) = doc["precedence"]
+        assert p["gages"] == [3] and p["kept"] == "data_only"
+        assert "set aside: the data-only gain on gage(s) 3" in text
