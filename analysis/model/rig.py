@@ -16,8 +16,11 @@ A wrong rig is refused with :class:`RigError`, a one-line message naming the fil
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -39,6 +42,59 @@ N_GAGES = 16
 ALIGN_TOL_M = 1e-3
 """Gages that the report's equations pair (2 and 6 on a vertical, 4 and 8 on a horizontal) must
 line up to this tolerance: 1 mm is well inside how precisely a gage is placed on a rudder."""
+
+MAX_COORDINATE_M = 100.0
+"""Largest coordinate of a gage or of the ram's blow from the centre of mass, m: a ship's rudder
+or stern plane with its hull gages fits in a 200 m box; more is a typo or a unit in mm."""
+
+
+@dataclass(frozen=True)
+class Span:
+    """The plausible values of one rig number: ``lo`` to ``hi`` in ``unit``, and why."""
+
+    lo: float
+    hi: float
+    unit: str
+    why: str
+
+
+_LENGTH = Span(1e-3, 100.0, "m", "a model's millimetres to a large ship's control surface")
+_INERTIA = Span(1e-6, 1e8, "kg m^2", "a model's surface to a large ship's")
+_MODULUS = Span(1e8, 1e12, "Pa", "structural plastics to the stiffest steels")
+_DAMPER = Span(0.0, 1e9, "N s/m or N m s/rad", "the report's constants are 1e2 to 1e5")
+PLAUSIBLE: dict[str, Span] = {
+    "daq.sample_rate_hz": Span(50.0, 51_200.0, "Hz", "the rates the trigger supports"),
+    "daq.adc_full_scale_V": Span(1e-3, 1e3, "V", "converter input ranges"),
+    "daq.anti_alias_hz": Span(1.0, 25_600.0, "Hz", "below the highest Nyquist frequency"),
+    "daq.noise_m_s2_rms": Span(0.0, 100.0, "m/s^2", "an accelerometer's noise, not its signal"),
+    "water.density_kg_m3": Span(900.0, 1100.0, "kg/m^3", "fresh water 998, sea water 1025"),
+    "rudder.mass_kg": Span(1e-2, 1e6, "kg", "a model's grams to a large ship's control surface"),
+    "rudder.Iz_kg_m2": _INERTIA, "rudder.Ix_kg_m2": _INERTIA,
+    "rudder.Ixz_kg_m2": Span(-1e8, 1e8, "kg m^2", "a model's surface to a large ship's"),
+    "rudder.chord_m": _LENGTH, "rudder.span_m": _LENGTH, "rudder.thickness_m": _LENGTH,
+    "rudder.stock_x_m": Span(-100.0, 100.0, "m", "within the control surface"),
+    "rudder.attach_z_m": _LENGTH,
+    "rudder.added_mass_factor": Span(0.0, 10.0, "1", "1 is Eq 19-21 as printed"),
+    "stock.E_Pa": _MODULUS, "stock.G_Pa": _MODULUS,
+    "stock.I_m4": Span(1e-14, 10.0, "m^4", "a 2 mm rod to a 3 m solid shaft"),
+    "stock.J_m4": Span(1e-14, 10.0, "m^4", "a 2 mm rod to a 3 m solid shaft"),
+    "stock.shear_area_m2": Span(1e-8, 100.0, "m^2", "a 2 mm rod to a 3 m solid shaft"),
+    "stock.bending_length_m": _LENGTH, "stock.torsion_length_m": _LENGTH,
+    "damping.air.C_N_s_per_m": _DAMPER, "damping.air.c_N_m_s_per_rad": _DAMPER,
+    "damping.air.c_alpha_N_m_s_per_rad": _DAMPER, "damping.water.C_N_s_per_m": _DAMPER,
+    "damping.water.c_N_m_s_per_rad": _DAMPER, "damping.water.c_alpha_N_m_s_per_rad": _DAMPER,
+    "hull.modes[].frequency_hz": Span(0.1, 1e4, "Hz", "a ship's hull modes"),
+    "hull.modes[].modal_mass_kg": Span(1e-3, 1e10, "kg", "a model's to a large ship's hull"),
+    "impact.peak_force_N": Span(1e-3, 1e8, "N", "a modal hammer's to a heavy ram's blow"),
+    "impact.duration_s": Span(1e-5, 1.0, "s", "a hammer's tap to a slow ram's push"),
+    "ambient[].frequency_hz": Span(0.01, 1e4, "Hz", "a ship's machinery and hull"),
+    "ambient[].v_b_amplitude_m": Span(0.0, 1.0, "m", "vibration, not motion"),
+    "gages[].sensitivity_V_per_m_s2": Span(1e-6, 10.0, "V per m/s^2",
+                                           "accelerometers of 0.01 mV/g to 100 V/g"),
+}
+"""Ranges outside which a rig's number is an error, not a trial (a mass of 2.87e30 kg is a typo),
+by generic path (list indices as ``[]``). Each is wide: it catches units and exponents gone
+wrong, not unusual structures."""
 
 
 class RigError(ValueError):
@@ -287,7 +343,7 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     )
     gages = _read_gages(r, rudder, stock)
     ambient = _read_ambient(r, len(hull_modes))
-    return Rig(
+    rig = Rig(
         name=r.text("name"),
         medium=medium,
         water_density_kg_m3=r.positive("water.density_kg_m3", default=1025.0),
@@ -302,6 +358,8 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         source=source,
         text=text,
     )
+    r.refuse_unknown_keys()
+    return rig
 
 
 def _read_daq(r: _Reader) -> Daq:
@@ -450,11 +508,13 @@ class _Reader:
     def __init__(self, doc: dict[str, Any], source: str) -> None:
         self.doc = doc
         self.source = source
+        self.asked: set[str] = set()  # every path read, list indices as [] (the valid keys)
 
     def fail(self, field: str, why: str) -> None:
         raise RigError(f"{self.source}: {field}: {why}")
 
     def get(self, path: str, default: Any = _MISSING) -> Any:
+        self.asked.add(_generic(path))
         node: Any = self.doc
         for part in path.replace("]", "").replace("[", ".").split("."):
             if isinstance(node, list) and part.isdigit() and int(part) < len(node):
@@ -464,7 +524,9 @@ class _Reader:
             else:
                 if default is not self._MISSING:
                     return default
-                self.fail(path, "missing")
+                have = list(node) if isinstance(node, dict) else []
+                near = difflib.get_close_matches(part, have, n=1, cutoff=0.6)
+                self.fail(path, f"missing (the file has {near[0]!r}: misspelt?)" if near else "missing")
         return node
 
     def has(self, path: str) -> bool:
@@ -477,10 +539,21 @@ class _Reader:
         return v
 
     def number(self, path: str, default: Any = _MISSING) -> float:
+        return self._plausible(path, self._finite(path, default))
+
+    def _finite(self, path: str, default: Any) -> float:
         v = self.get(path, default)
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             self.fail(path, f"expected a finite number, got {v!r}")
         return float(v)
+
+    def _plausible(self, path: str, v: float) -> float:
+        """``v``, or a failure when it lies outside :data:`PLAUSIBLE`'s span for ``path``."""
+        span = PLAUSIBLE.get(_generic(path))
+        if span is not None and not span.lo <= v <= span.hi:
+            self.fail(path, f"{v:g} {span.unit} is implausible: expected {span.lo:g} to "
+                      f"{span.hi:g} {span.unit} ({span.why})")
+        return v
 
     def integer(self, path: str) -> int:
         v = self.get(path)
@@ -489,16 +562,16 @@ class _Reader:
         return v
 
     def positive(self, path: str, default: Any = _MISSING) -> float:
-        v = self.number(path, default)
+        v = self._finite(path, default)
         if v <= 0:
             self.fail(path, f"must be positive, got {v}")
-        return v
+        return self._plausible(path, v)
 
     def nonnegative(self, path: str, default: Any = _MISSING) -> float:
-        v = self.number(path, default)
+        v = self._finite(path, default)
         if v < 0:
             self.fail(path, f"must not be negative, got {v}")
-        return v
+        return self._plausible(path, v)
 
     def vector(self, path: str) -> tuple[float, float, float]:
         v = self.get(path)
@@ -506,6 +579,9 @@ class _Reader:
             isinstance(c, int | float) and not isinstance(c, bool) for c in v)
         if not ok:
             self.fail(path, f"expected [x, y, z] in metres, got {v!r}")
+        if not all(abs(c) <= MAX_COORDINATE_M for c in v):
+            self.fail(path, f"{v!r} is implausible: every coordinate must lie within "
+                      f"{MAX_COORDINATE_M:g} m of the centre of mass")
         return (float(v[0]), float(v[1]), float(v[2]))
 
     def axis(self, path: str, default: Any = _MISSING) -> str:
@@ -513,3 +589,34 @@ class _Reader:
         if v not in AXES:
             self.fail(path, f"unknown axis {v!r} (expected one of {', '.join(AXES)})")
         return v
+
+    def refuse_unknown_keys(self) -> None:
+        """Fail on the first key of the file that the parser never read, naming the nearest
+        valid key at its level (a misspelt ``added_mass_factr`` is not silently the default)."""
+        for path in _key_paths(self.doc, ""):
+            if path in self.asked or any(a.startswith((path + ".", path + "[")) for a in self.asked):
+                continue
+            parent, _, key = path.rpartition(".")
+            level = [a[len(parent) + 1:] if parent else a for a in self.asked
+                     if not parent or a.startswith(parent + ".")]
+            valid = sorted({re.split(r"[.\[]", a)[0] for a in level})
+            near = difflib.get_close_matches(key, valid, n=1, cutoff=0.6)
+            hint = f"did you mean {near[0]!r}?" if near else f"valid keys here: {', '.join(valid)}"
+            self.fail(path.replace("[]", ""), f"unknown key {key!r}; {hint}")
+
+
+def _generic(path: str) -> str:
+    """``"hull.modes[0].name"`` -> ``"hull.modes[].name"``: a path with its list indices dropped."""
+    return re.sub(r"\[\d+\]", "[]", path)
+
+
+def _key_paths(node: Any, prefix: str) -> Iterator[str]:
+    """Every key of a parsed TOML document as a generic dotted path, parents before children."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            path = f"{prefix}.{k}" if prefix else str(k)
+            yield path
+            yield from _key_paths(v, path)
+    elif isinstance(node, list):
+        for item in node:
+            yield from _key_paths(item, f"{prefix}[]")
