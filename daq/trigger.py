@@ -86,6 +86,7 @@ from typing import Any
 import numpy as np
 
 from ..analysis import onset as ons
+from ..analysis.model.rig import STRUCTURE_TABLES
 from ..drivers.block import Block, StreamInfo
 
 __all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "StreamHealth", "Trigger",
@@ -1071,18 +1072,22 @@ def _force_row(info: StreamInfo, s: TriggerSettings) -> int | None:
 def _rig_delay_s(info: StreamInfo) -> float:
     """Group delay of the anti-alias filter the stream's rig describes (``[daq]``
     ``anti_alias_order`` and ``anti_alias_hz`` in ``info.rig_toml``), s; 0 for a stream that
-    carries no rig. ValueError naming the problem for a rig that does not say it usably."""
+    carries no rig, or a channels-only rig that names no filter (an imported record's).
+    ValueError naming the problem for a rig that does not say it usably."""
     if not info.rig_toml.strip():
         return 0.0
     where = f"{info.device}: the stream's rig"
     fix = "fix the rig, or give the trigger delay_s"
     try:
-        daq = tomllib.loads(info.rig_toml).get("daq")
+        doc = tomllib.loads(info.rig_toml)
+        daq = doc.get("daq")
     except tomllib.TOMLDecodeError as err:
         raise ValueError(f"{where} is not valid TOML ({err}); {fix}") from err
     if not isinstance(daq, dict):
         raise ValueError(f"{where} has no [daq] table to say its anti-alias filter; {fix}")
     order, corner = daq.get("anti_alias_order"), daq.get("anti_alias_hz")
+    if order is None and corner is None and not any(t in doc for t in STRUCTURE_TABLES):
+        return 0.0  # a channels-only rig (an imported record's) names no filter: none to remove
     if isinstance(order, float) and order.is_integer():
         order = int(order)
     if isinstance(order, bool) or not isinstance(order, int) or order < 1:

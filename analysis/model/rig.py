@@ -39,6 +39,12 @@ AXES: dict[str, tuple[float, float, float]] = {
 BODIES = ("rudder", "stock", "hull")
 MEDIA = ("air", "water")
 N_GAGES = 16
+MAX_CHANNELS = 64
+"""Most channels (gages and force channels) a rig may have."""
+FORCE_UNITS: dict[str, float] = {"N": 1.0, "kN": 1000.0, "lbf": 4.4482216152605}
+"""Units a force channel may be given in, with newtons per unit (lbf: the avoirdupois pound-force)."""
+STRUCTURE_TABLES = ("rudder", "stock", "damping", "hull", "impact")
+"""The tables that describe the structure; a rig with none of them is a channels-only rig."""
 ALIGN_TOL_M = 1e-3
 """Gages that the report's equations pair (2 and 6 on a vertical, 4 and 8 on a horizontal) must
 line up to this tolerance: 1 mm is well inside how precisely a gage is placed on a rudder."""
@@ -99,6 +105,23 @@ wrong, not unusual structures."""
 
 class RigError(ValueError):
     """A rig file that cannot describe a trial; the message names the file and field."""
+
+
+@dataclass(frozen=True)
+class ForceChannel:
+    """A force channel: a load cell in the ram, or an instrumented hammer. ``name`` is its
+    channel name in the stream; ``channel`` the DAQ channel index; ``unit`` the unit its source
+    gives (``N``, ``kN``, ``lbf``; the stream is always in N); ``location_m`` where the force acts
+    (m, None if not known)."""
+
+    name: str
+    channel: int
+    unit: str = "N"
+    location_m: tuple[float, float, float] | None = None
+
+    @property
+    def newtons_per_unit(self) -> float:
+        return FORCE_UNITS[self.unit]
 
 
 @dataclass(frozen=True)
@@ -235,21 +258,43 @@ class Ambient:
 
 @dataclass(frozen=True)
 class Rig:
-    """A whole trial description. See the module docstring for coordinates and units."""
+    """A whole trial description. See the module docstring for coordinates and units.
+
+    A *channels-only* rig (no ``[rudder]``, ``[stock]``, ``[damping]``, ``[hull]`` or
+    ``[impact]``: what ``ramdaq import`` writes for a record without a rig) has ``rudder``,
+    ``stock`` and ``impact`` None, no damping or hull modes, and gages that need only a number
+    and a channel; :meth:`require_structure` refuses it where a model is needed."""
 
     name: str
     medium: str
     water_density_kg_m3: float
     daq: Daq
-    rudder: Rudder
-    stock: Stock
+    rudder: Rudder | None
+    stock: Stock | None
     damping: dict[str, Damping]
     hull_modes: tuple[HullMode, ...]
-    impact: ImpactSpec
+    impact: ImpactSpec | None
     gages: tuple[Gage, ...]
     ambient: tuple[Ambient, ...] = ()
     source: str = "<string>"
     text: str = ""
+    forces: tuple[ForceChannel, ...] = ()
+
+    @property
+    def structural(self) -> bool:
+        """The rig describes the structure (rudder, stock, hull), not only its channels."""
+        return self.rudder is not None
+
+    def require_structure(self, what: str) -> None:
+        """Raise :class:`RigError` if this is a channels-only rig; ``what`` needs the structure."""
+        if not self.structural:
+            raise RigError(f"{self.source}: rig {self.name!r} describes only its channels (no "
+                           f"[rudder], [stock], [hull]); {what} needs the structure")
+
+    @property
+    def n_channels(self) -> int:
+        """DAQ channels: gages and force channels."""
+        return len(self.gages) + len(self.forces)
 
     @property
     def hull_attach_z_m(self) -> float:
@@ -266,6 +311,12 @@ class Rig:
                 return g
         raise KeyError(number)
 
+    def force(self, name: str) -> ForceChannel:
+        for f in self.forces:
+            if f.name == name:
+                return f
+        raise KeyError(name)
+
     def gages_by_channel(self) -> tuple[Gage, ...]:
         """Gages in DAQ channel order (the row order of every block)."""
         return tuple(sorted(self.gages, key=lambda g: g.channel))
@@ -274,7 +325,7 @@ class Rig:
         """The same rig in another medium ("air" or "water")."""
         if medium not in MEDIA:
             raise RigError(f"{self.source}: medium: {medium!r} is not one of {', '.join(MEDIA)}")
-        if medium not in self.damping:
+        if self.structural and medium not in self.damping:
             raise RigError(f"{self.source}: damping.{medium}: missing, so medium {medium} is unusable")
         return replace(self, medium=medium)
 
@@ -322,6 +373,8 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     medium = r.text("medium")
     if medium not in MEDIA:
         r.fail("medium", f"{medium!r} is not one of {', '.join(MEDIA)}")
+    if not any(r.has(t) for t in STRUCTURE_TABLES):
+        return _parse_channels_only(r, medium, text)
     daq = _read_daq(r)
     rudder = _read_rudder(r)
     stock = Stock(
@@ -342,6 +395,7 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         direction=r.axis("impact.direction", default="y"),
     )
     gages = _read_gages(r, rudder, stock)
+    forces = _read_forces(r, len(gages))
     ambient = _read_ambient(r, len(hull_modes))
     rig = Rig(
         name=r.text("name"),
@@ -357,9 +411,75 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         ambient=ambient,
         source=source,
         text=text,
+        forces=forces,
     )
     r.refuse_unknown_keys()
     return rig
+
+
+def _parse_channels_only(r: _Reader, medium: str, text: str) -> Rig:
+    """A rig of channels only: ``name``, ``medium``, ``[daq] sample_rate_hz`` (the rest of
+    ``[daq]`` optional), gages with a number (1..64) and a channel, force channels."""
+    daq = Daq(sample_rate_hz=r.positive("daq.sample_rate_hz"),
+              adc_bits=int(r.positive("daq.adc_bits", default=24)),
+              adc_full_scale_V=r.positive("daq.adc_full_scale_V", default=10.0),
+              anti_alias_hz=r.positive("daq.anti_alias_hz") if r.has("daq.anti_alias_hz")
+              else math.nan,  # not known: the trigger then removes no filter delay
+              anti_alias_order=int(r.positive("daq.anti_alias_order", default=1)),
+              noise_m_s2_rms=r.nonnegative("daq.noise_m_s2_rms", default=0.0))
+    gages: list[Gage] = []
+    seen: dict[int, int] = {}
+    for i, _ in enumerate(r.get("gages", default=[])):
+        p = f"gages[{i}]"
+        number = r.integer(f"{p}.number")
+        if not 1 <= number <= MAX_CHANNELS:
+            r.fail(f"{p}.number", f"{number} is outside 1..{MAX_CHANNELS}")
+        if number in seen:
+            r.fail(f"{p}.number", f"duplicate gage {number} (also gages[{seen[number]}])")
+        seen[number] = i
+        axis = r.get(f"{p}.axis", default=None)
+        gages.append(Gage(number=number, body=r.text(f"{p}.body", default=""),
+                          position_m=r.vector(f"{p}.position_m") if r.has(f"{p}.position_m")
+                          else (math.nan,) * 3,
+                          axis=r.axis(f"{p}.axis") if axis is not None else "",
+                          sensitivity_V_per_m_s2=r.positive(f"{p}.sensitivity_V_per_m_s2",
+                                                            default=math.nan),
+                          channel=r.integer(f"{p}.channel")))
+    forces = _read_forces(r, 0)
+    channels = sorted([g.channel for g in gages] + [f.channel for f in forces])
+    if not channels:
+        r.fail("gages", "a rig needs at least one [[gages]] or [[forces]] channel")
+    if channels != list(range(len(channels))) or len(channels) > MAX_CHANNELS:
+        r.fail("gages", f"channels {channels} are not 0..{len(channels) - 1} without holes or "
+               f"repeats (at most {MAX_CHANNELS})")
+    rig = Rig(name=r.text("name"), medium=medium,
+              water_density_kg_m3=r.positive("water.density_kg_m3", default=1025.0), daq=daq,
+              rudder=None, stock=None, damping={}, hull_modes=(), impact=None,
+              gages=tuple(sorted(gages, key=lambda g: g.number)), source=r.source, text=text,
+              forces=forces)
+    r.refuse_unknown_keys()
+    return rig
+
+
+def _read_forces(r: _Reader, first_channel: int) -> tuple[ForceChannel, ...]:
+    """``[[forces]]``: name, channel (from ``first_channel`` up when the gages come first: a
+    structural rig's gages hold 0..15), unit (N, kN, lbf; default N), location_m (optional)."""
+    forces: list[ForceChannel] = []
+    for i, _ in enumerate(r.get("forces", default=[])):
+        p = f"forces[{i}]"
+        unit = r.text(f"{p}.unit", default="N")
+        if unit not in FORCE_UNITS:
+            r.fail(f"{p}.unit", f"{unit!r} is not a force unit ({', '.join(FORCE_UNITS)})")
+        f = ForceChannel(name=r.text(f"{p}.name"), channel=r.integer(f"{p}.channel"), unit=unit,
+                         location_m=r.vector(f"{p}.location_m") if r.has(f"{p}.location_m")
+                         else None)
+        if first_channel and f.channel != first_channel + i:
+            r.fail(f"{p}.channel", f"{f.channel}: force channels follow the gages "
+                   f"({first_channel + i} expected)")
+        if not f.name.strip() or any(f.name == o.name for o in forces):
+            r.fail(f"{p}.name", f"{f.name!r} is empty or repeated")
+        forces.append(f)
+    return tuple(forces)
 
 
 def _read_daq(r: _Reader) -> Daq:

@@ -327,9 +327,16 @@ def cmd_import(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else src.with_suffix(".mcap")
     if out.exists() and not args.overwrite:
         raise FileExistsError(f"{out} exists; --overwrite replaces it")
-    options: dict = {"rig": load_rig(args.rig), "channels": parse_channel_map(args.channels)}
+    options: dict = {"rig": load_rig(args.rig), "channels": parse_channel_map(args.channels),
+                     "fs_hz": args.fs, "force_channel": args.force_channel,
+                     "allow_gaps": args.allow_gaps}
     if args.medium:
         options["medium"] = args.medium
+    fmt = args.format or src.suffix.lower().lstrip(".")
+    if args.time_unit:
+        if fmt != "csv":
+            raise ValueError(f"--time-unit is for a CSV file, not {src}")
+        options["time_unit"] = args.time_unit
     device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
     info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
@@ -574,6 +581,14 @@ def build_parser() -> argparse.ArgumentParser:
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
     m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
+    m.add_argument("--fs", type=float, help="the file's sample rate, Hz, when it differs from the "
+                   "rig's (the file's own rate must agree with it)")
+    m.add_argument("--time-unit", choices=("s", "ms", "us"), help="CSV: the time column's unit, "
+                   "when its header does not say it (time_s, 't [ms]', 'time (us)')")
+    m.add_argument("--force-channel", help="the source channel that is the force (a load cell or "
+                   "instrumented hammer, in N, kN or lbf)")
+    m.add_argument("--allow-gaps", action="store_true", help="import a missing value (empty, NaN) "
+                   "as a gap in the recording instead of refusing the file")
     m.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     m.set_defaults(func=cmd_import)
 
