@@ -100,12 +100,13 @@ class CsvImportDevice(FileImportDevice):
 
     def _load(self) -> SourceTable:
         return read_csv_table(self.path.read_bytes(), str(self.path), fs_hz=self.fs_hz,
-                              time_unit=self.time_unit)
+                              time_unit=self.time_unit, rate_hint=self.rig.daq.sample_rate_hz)
 
 
 def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = None,
-                   time_unit: str | None = None) -> SourceTable:
+                   time_unit: str | None = None, rate_hint: float | None = None) -> SourceTable:
     """Parse CSV bytes into a :class:`SourceTable`; see the module docstring for the format.
+    ``rate_hint`` (Hz, the rig's) is the rate taken when the times allow it (:func:`sample_grid`).
 
     Raises
     ------
@@ -155,7 +156,8 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
     if table.shape[0] == 0:
         raise ImportFormatError(f"{name}: no data rows after the header")
     t = table[:, 0] * _TIME_UNITS[_time_unit(names[0], units[0], time_unit, name)]
-    index, fs, notes = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name)
+    index, fs, notes = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name,
+                                   rate_hint=rate_hint)
     channel_units = units[1:]
     return SourceTable(names=names[1:], units=channel_units, sample_index=index, fs_hz=fs,
                        t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
@@ -275,7 +277,7 @@ def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
 
 
 def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
-                name: str) -> tuple[np.ndarray, float, dict]:
+                name: str, rate_hint: float | None = None) -> tuple[np.ndarray, float, dict]:
     """Place rows with times ``t`` (s) on one sample grid; refuse a non-uniform clock.
 
     Parameters
@@ -289,6 +291,9 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
         ``where(row)`` -> where that row is in the file (``"line 12"``), for messages.
     name : str
         The file, for messages.
+    rate_hint : float, optional
+        A rate, Hz, taken instead of the snapped one when it keeps every row as close to its
+        grid point (a short file's times allow many rates; the rig's is the one meant).
 
     Returns
     -------
@@ -333,7 +338,9 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
             if not 1e-3 <= fs_fit <= 1e9:
                 raise ImportFormatError(f"{name}: the time column gives a sample rate of "
                                         f"{fs_fit:g} Hz")
-            fs = snap_rate(fs_fit, 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0))
+            tol = 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0)
+            fs = rate_hint if rate_hint and abs(rate_hint / fs_fit - 1) <= tol else \
+                snap_rate(fs_fit, tol)
         else:
             fs = float(fs_hz)
             if not fs > 0:
