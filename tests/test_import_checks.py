@@ -94,3 +94,105 @@ def test_cli_names_the_rate_and_takes_fs(decay, tmp_path, capsys):
     assert len(err) == 1 and "disagrees with rig" in err[0] and not out.exists()
     assert main([*base, "--time-unit", "s", "--fs", "1000"]) == 0
     assert "2 ch at 1000 Hz" in capsys.readouterr().out
+
+
+# -- force channels ------------------------------------------------------------------------------
+FORCE_RIG = (RIGS / "albacore.toml").read_text() + '\n[[forces]]\nname = "ram"\nchannel = 16\n'
+
+
+def _force_rig(text: str = FORCE_RIG):
+    from ramdaq.analysis.model.rig import parse_rig
+
+    return parse_rig(text, "force.toml")
+
+
+@pytest.mark.parametrize(("old", "new", "msg"), [
+    ("channel = 16\n", "channel = 17\n", r"forces\[0\]\.channel: 17: force channels follow"),
+    ('name = "ram"', 'name = "ram"\nunit = "kgf"', r"forces\[0\]\.unit: 'kgf' is not a force"),
+    ('name = "ram"', 'name = "ram"\nuint = "N"', r"forces\.uint: unknown key.*'unit'"),
+])
+def test_rig_force_channel_checked(old, new, msg):
+    from ramdaq.analysis.model.rig import RigError
+
+    rig = _force_rig()
+    assert [f.name for f in rig.forces] == ["ram"] and rig.n_channels == 17
+    with pytest.raises(RigError, match=rf"^force\.toml: {msg}"):
+        _force_rig(FORCE_RIG.replace(old, new))
+
+
+@pytest.fixture(scope="module")
+def forced():
+    """5 s with a ram load cell, a 20 ms blow at 2.5 s (the rig's ram lasts 5 ms): info, blocks."""
+    from ramdaq.drivers.sim import Impact
+
+    rig = _force_rig()
+    blow = Impact(2.5, rig.impact.peak_force_N, 0.020, rig.impact.location_m, "y")
+    with SimDevice(rig, duration_s=5.0, impacts=[blow], seed=2) as dev:
+        blocks = list(dev)
+        return dev.info, blocks, rig
+
+
+def test_sim_force_channel_drives_the_trigger_and_the_decay_start(forced):
+    """The simulator streams the ram's force in N; the trigger takes its onset from it and the
+    analysis starts the free decay after the contact the force shows (20 ms + 10 ms settling),
+    not after the rig's nominal 2 x 5 ms + 10 ms."""
+    from ramdaq.daq.analyzer import judge_event
+    from ramdaq.daq.trigger import Trigger
+
+    info, blocks, rig = forced
+    assert info.channels[-1] == "ram" and info.units[-1] == "N" and info.gages[-1] == 0
+    trig = Trigger(info)
+    events = [e for b in blocks for e in trig.process(b)] + trig.flush()
+    assert trig.mode == "force" and len(events) == 1
+    # onset: the blow's start less the anti-alias delay the trigger removes (the sim's force is
+    # unfiltered), within 2 samples
+    assert abs(events[0].onset_s - 2.5) < 2 / info.fs_hz + trig.delay_s
+    hit = judge_event(0, events[0], info, rig)
+    assert hit.accepted, hit.reason
+    skip = hit.analysis.decay_start_s - events[0].onset_s
+    # the half-sine's 5 % points lie 1 % of its length from its ends; 1 sample of rounding
+    assert abs(skip - 0.030) < 0.02 * 0.020 + 2 / info.fs_hz, skip
+    assert abs(hit.analysis.f_hz / 24.5 - 1) < 0.02
+
+
+@pytest.mark.parametrize(("unit", "per_unit"), [("N", 1.0), ("kN", 1000.0), ("lbf", 4.4482216152605)])
+def test_csv_force_column_in_any_force_unit(forced, tmp_path, unit, per_unit):
+    info, blocks, rig = forced
+    x = np.concatenate([b.counts * b.scale[:, None] for b in blocks], axis=1)[:, :3000]
+    names = [*info.channels[:16], "Load"]
+    x = np.vstack([x[:16], x[16] / per_unit])
+    p = write_csv(tmp_path / "f.csv", np.arange(x.shape[1]) / FS, x, names,
+                  units=["m/s^2"] * 16 + [unit])
+    with pytest.raises(ImportFormatError, match=r"channel 'Load' is not a gage name"):
+        with open_device(str(p), rig=rig):
+            pass
+    with open_device(str(p), rig=rig, force_channel="Load") as dev:
+        got = np.concatenate([b.counts * b.scale[:, None] for b in dev], axis=1)
+        assert dev.info.channels[-1] == "ram" and dev.info.units[-1] == "N"
+        assert dev.info.extra["import"]["channels"]["ram"]["source"] == "Load"
+    # requantised to 24 bits: within 1/2^23 of the peak (plus the printed digits, %.17g)
+    assert np.max(np.abs(got[16] - x[16] * per_unit)) <= 1.2e-7 * np.max(np.abs(x[16] * per_unit))
+
+
+def test_uff_and_tdms_force_records(forced, tmp_path):
+    """UFF: a type 58 record of an excitation force (spec data type 13) is 'force NODE:DIR';
+    TDMS: a channel named like the rig's force channel, unit_string N."""
+    import pyuff
+
+    from tests.test_imports import write_tdms, write_uff58
+
+    info, blocks, rig = forced
+    x = np.concatenate([b.counts * b.scale[:, None] for b in blocks], axis=1)[:, :2048]
+    p = write_uff58(tmp_path / "f.uff", x[:16], list(info.gages[:16]))
+    pyuff.UFF(str(p)).write_sets([dict(
+        type=58, binary=0, func_type=1, rsp_node=4, rsp_dir=2, ref_node=0, ref_dir=0,
+        abscissa_spacing=1, x=np.arange(x.shape[1]) / FS, data=x[16], id1="ram",
+        ordinate_spec_data_type=13, abscissa_spec_data_type=17, orddenom_spec_data_type=0,
+        ordinate_axis_units_lab="N", abscissa_axis_units_lab="s")], mode="add")
+    with open_device(str(p), rig=rig, force_channel="force 4:+2") as dev:
+        assert dev.info.units[-1] == "N"
+        got = np.concatenate([b.counts * b.scale[:, None] for b in dev], axis=1)
+    assert np.max(np.abs(got[16] - x[16])) <= 1e-11 * np.max(np.abs(x[16]))  # E20.12: 13 digits
+    t = write_tdms(tmp_path / "f.tdms", x, list(info.channels), units=["m/s^2"] * 16 + ["N"])
+    with open_device(str(t), rig=rig) as dev:  # named like the rig's force: no option needed
+        assert dev.info.channels[-1] == "ram" and dev.info.units[-1] == "N"
