@@ -247,6 +247,7 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
         "stock_lengths_m": a.stock_lengths,
         "table2b": finite_json(a.table2b()),
         "notes": list(a.notes),
+        "skipped": [s.to_json() for s in a.skipped],
     }
 
 

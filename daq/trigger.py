@@ -204,12 +204,16 @@ class TriggerSettings:
             raise ValueError(f"ar_order ({self.ar_order}) must be a whole number >= 1")
 
     @classmethod
-    def for_rate(cls, fs_hz: float, **overrides: Any) -> TriggerSettings:
+    def for_rate(cls, fs_hz: float, n_voters: int | None = None, **overrides: Any) -> TriggerSettings:
         """The settings ``TriggerSettings(**overrides)``, with every length that was not given
         and that ``fs_hz`` cannot resolve lengthened to the fewest samples it needs
         (:func:`_samples_needed`; at 50 Hz: ``sta_s`` and ``innovation_sta_s`` 0.1 s,
         ``ar_guard_s`` 0.02 s, ``ar_fit_s`` 0.6 s). Where the defaults resolve (from 1.6 kHz
-        up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it."""
+        up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it, with
+        ``n_voters`` the stream's gages: a ``k_of_n`` not given votes ``k = min(3, n_voters)``,
+        so a record of one or two gages triggers on them."""
+        if "k_of_n" not in overrides and n_voters is not None and 1 <= n_voters < cls.k_of_n[0]:
+            overrides["k_of_n"] = (n_voters, None)
         s = cls(**overrides)
         longer = {name: need / fs_hz for name, (need, _) in _samples_needed(s).items()
                   if name not in overrides and round(getattr(s, name) * fs_hz) < need}
@@ -568,8 +572,8 @@ class Trigger:
     info : StreamInfo
         The stream: channel names, units, gage numbers, ``fs_hz``, ``rig_toml``, ``extra``.
     settings : TriggerSettings, optional
-        Default ``TriggerSettings.for_rate(info.fs_hz)``: the defaults, lengthened where the
-        stream's rate cannot resolve them.
+        Default ``TriggerSettings.for_rate(info.fs_hz, n_voters)``: the defaults, lengthened
+        where the stream's rate cannot resolve them, voting k of at most the stream's gages.
 
     Raises
     ------
@@ -579,7 +583,8 @@ class Trigger:
     """
 
     def __init__(self, info: StreamInfo, settings: TriggerSettings | None = None) -> None:
-        s = TriggerSettings.for_rate(info.fs_hz) if settings is None else settings
+        s = TriggerSettings.for_rate(info.fs_hz, n_voters=sum(g > 0 for g in info.gages)) \
+            if settings is None else settings
         self.info, self.settings, self.fs_hz = info, s, float(info.fs_hz)
         self._len = _Lengths.at(s, self.fs_hz)
         self._vidx, self._k = _voting_rows(info, s)

@@ -20,8 +20,8 @@ FS = 2048.0
 
 @pytest.fixture(scope="module")
 def decay():
-    """2 s of the ALBACORE-like rig in air, a blow at 0.5 s: values (16, n) m/s^2, gages."""
-    with SimDevice(RIG, duration_s=2.0, impacts=[0.5], seed=1) as dev:
+    """5 s of the ALBACORE-like rig in air, a blow at 2.5 s: values (16, n) m/s^2, gages."""
+    with SimDevice(RIG, duration_s=5.0, impacts=[2.5], seed=1) as dev:
         blocks = list(dev)
         gages = list(dev.info.gages)
     counts = np.concatenate([b.counts for b in blocks], axis=1)
@@ -196,3 +196,93 @@ def test_uff_and_tdms_force_records(forced, tmp_path):
     t = write_tdms(tmp_path / "f.tdms", x, list(info.channels), units=["m/s^2"] * 16 + ["N"])
     with open_device(str(t), rig=rig) as dev:  # named like the rig's force: no option needed
         assert dev.info.channels[-1] == "ram" and dev.info.units[-1] == "N"
+
+
+# -- a record without a rig, and a record of part of the layout ----------------------------------
+def _run(argv, capsys):
+    rc = main(argv)
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def test_import_without_a_rig_makes_one_and_analyze_reports_each_gage(forced, tmp_path, capsys):
+    """One response and the force, no rig: ``import --fs --units --force-channel`` writes a
+    channels-only rig beside the recording, and ``analyze`` gives the gage's f, delta, zeta with
+    standard errors and names every step of the chain it skipped (issue 18: two commands)."""
+    import json
+
+    info, blocks, _ = forced
+    x = np.concatenate([b.counts * b.scale[:, None] for b in blocks], axis=1)
+    p = write_csv(tmp_path / "hammer.csv", np.arange(x.shape[1]) / FS, np.vstack([x[3], x[16]]),
+                  ["acc", "Load"], units=["", "N"])
+    rc, out, err = _run(["import", str(p), "--units", "m/s^2"], capsys)
+    assert rc == 1 and "without --rig, give --fs HZ and --units" in err
+    rc, out, err = _run(["import", str(p), "--fs", "2048", "--units", "m/s^2", "--force-channel",
+                         "Load"], capsys)
+    assert rc == 0, err
+    rig_file = tmp_path / "hammer.rig.toml"
+    assert f"to {rig_file}" in out
+    from ramdaq.analysis.model.rig import load_rig
+
+    rig = load_rig(rig_file)
+    assert not rig.structural and [g.number for g in rig.gages] == [1]
+    assert [f.name for f in rig.forces] == ["Load"] and rig.daq.sample_rate_hz == 2048.0
+    rc, out, err = _run(["import", str(p), "--fs", "2048", "--units", "m/s^2"], capsys)
+    assert rc == 1 and "exists" in err  # the recording and its rig are not overwritten silently
+    rc, out, err = _run(["analyze", str(tmp_path / "hammer.mcap"), "--out",
+                         str(tmp_path / "an")], capsys)
+    assert rc == 0, err
+    rep = json.loads((tmp_path / "an" / "report.json").read_text())
+    hit = rep["impacts"][0]
+    assert hit["accepted"], hit["reason"]
+    g = hit["analysis"]["gages"]["g01"]
+    assert abs(g["f_hz"] / 24.5 - 1) < 0.02  # the rig's predominant mode in air (Table 2a)
+    for k in ("f_se_hz", "delta", "delta_se", "zeta", "zeta_se"):
+        assert g[k] is not None and g[k] > 0, k
+    assert g["zeta"] == pytest.approx(g["delta"] / np.hypot(2 * np.pi, g["delta"]))
+    steps = {s["step"] for s in rep["skipped"]}
+    assert len(steps) == 6 and "virtual inertias (Eq 18-21)" in steps
+    assert rep["virtual_inertias"] is None and rep["geometry_m"] is None
+    assert "g01: f = 24." in out and "skipped: rudder motions (Eq 1-6b)" in out
+    assert (tmp_path / "an" / "impact0_spectrum.png").exists()
+
+
+def test_part_of_the_layout_runs_the_steps_its_gages_allow(decay, tmp_path, capsys):
+    """Gages 2, 4, 6, 8 of the full rig: the rudder motions and Eq 16/17 run; the steps that need
+    hull or stock gages are skipped with the gages they lack (was: ``ramdaq analyze: 4``)."""
+    import json
+
+    x, gages = decay
+    rows = [gages.index(n) for n in (2, 4, 6, 8)]
+    p = write_csv(tmp_path / "four.csv", np.arange(x.shape[1]) / FS, x[rows],
+                  ["g02", "g04", "g06", "g08"])
+    assert _run(["import", str(p), "--rig", str(RIG)], capsys)[0] == 0
+    rc, out, err = _run(["analyze", str(tmp_path / "four.mcap"), "--no-plots", "--out",
+                         str(tmp_path / "an")], capsys)
+    assert rc == 0, err
+    a = json.loads((tmp_path / "an" / "report.json").read_text())["impacts"][0]["analysis"]
+    assert set(a["motions"]) == {"gamma", "alpha", "v_2_6", "v_4_8"}
+    assert a["damping"]["C_N_s_per_m"] is not None and a["relative_to_hull"] == {}
+    skipped = {s["step"]: s["reason"] for s in a["skipped"]}
+    assert skipped == {
+        "decrements relative to the hull (Eq 8-13)":
+            "needs gage(s) 5, 13, 14, which the record does not have",
+        "effective stock lengths (Figures 8, 9)":
+            "needs gage(s) 1, 3, 7, 10, 11, 12, 13, 14, which the record does not have",
+        "damping constants with hull motion (Eq 14, 15)":
+            "needs gage(s) 5, 13, 14, which the record does not have"}
+
+
+@pytest.mark.parametrize(("n_gages", "k"), [(1, 1), (2, 2), (3, 3), (16, 3)])
+def test_trigger_votes_k_of_at_most_the_gages_it_has(n_gages, k):
+    """k of n follows the channel count (was: ``k_of_n k (3) must lie in 1..2``); a k given is
+    kept, and refused when the stream cannot meet it."""
+    from ramdaq.daq.trigger import Trigger, TriggerSettings
+    from ramdaq.drivers.block import StreamInfo
+
+    info = StreamInfo("test", 2048.0, tuple(f"g{n:02d}" for n in range(1, n_gages + 1)),
+                      ("m/s^2",) * n_gages, tuple(range(1, n_gages + 1)))
+    assert Trigger(info).settings.k_of_n == (k, None)
+    if n_gages < 3:
+        with pytest.raises(ValueError, match=r"k_of_n k \(3\) must lie in 1\.\."):
+            Trigger(info, TriggerSettings(k_of_n=(3, None)))

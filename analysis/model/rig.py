@@ -43,6 +43,8 @@ MAX_CHANNELS = 64
 """Most channels (gages and force channels) a rig may have."""
 FORCE_UNITS: dict[str, float] = {"N": 1.0, "kN": 1000.0, "lbf": 4.4482216152605}
 """Units a force channel may be given in, with newtons per unit (lbf: the avoirdupois pound-force)."""
+GAGE_UNITS = ("m/s^2", "g")
+"""Units a gage may be given in by an imported file that states none."""
 STRUCTURE_TABLES = ("rudder", "stock", "damping", "hull", "impact")
 """The tables that describe the structure; a rig with none of them is a channels-only rig."""
 ALIGN_TOL_M = 1e-3
@@ -130,7 +132,9 @@ class Gage:
 
     ``position_m`` is (x, y, z) in metres from the rudder's centre of mass; ``axis`` the sensing
     direction (``"y"`` athwartship, ``"z"`` vertical, signs allowed); ``sensitivity_V_per_m_s2``
-    volts per m/s^2; ``channel`` the DAQ channel index (0-based row of every block).
+    volts per m/s^2; ``channel`` the DAQ channel index (0-based row of every block); ``unit``
+    the unit an imported file gives it in when the file says none (``"m/s^2"`` or ``"g"``; the
+    stream is always in m/s^2).
     """
 
     number: int
@@ -139,6 +143,7 @@ class Gage:
     axis: str
     sensitivity_V_per_m_s2: float
     channel: int
+    unit: str = "m/s^2"
 
     @property
     def direction(self) -> np.ndarray:
@@ -442,9 +447,9 @@ def _parse_channels_only(r: _Reader, medium: str, text: str) -> Rig:
                           position_m=r.vector(f"{p}.position_m") if r.has(f"{p}.position_m")
                           else (math.nan,) * 3,
                           axis=r.axis(f"{p}.axis") if axis is not None else "",
-                          sensitivity_V_per_m_s2=r.positive(f"{p}.sensitivity_V_per_m_s2",
-                                                            default=math.nan),
-                          channel=r.integer(f"{p}.channel")))
+                          sensitivity_V_per_m_s2=r.positive(f"{p}.sensitivity_V_per_m_s2")
+                          if r.has(f"{p}.sensitivity_V_per_m_s2") else math.nan,
+                          channel=r.integer(f"{p}.channel"), unit=_gage_unit(r, p)))
     forces = _read_forces(r, 0)
     channels = sorted([g.channel for g in gages] + [f.channel for f in forces])
     if not channels:
@@ -459,6 +464,13 @@ def _parse_channels_only(r: _Reader, medium: str, text: str) -> Rig:
               forces=forces)
     r.refuse_unknown_keys()
     return rig
+
+
+def _gage_unit(r: _Reader, p: str) -> str:
+    unit = r.text(f"{p}.unit", default="m/s^2")
+    if unit not in GAGE_UNITS:
+        r.fail(f"{p}.unit", f"{unit!r} is not an acceleration unit ({', '.join(GAGE_UNITS)})")
+    return unit
 
 
 def _read_forces(r: _Reader, first_channel: int) -> tuple[ForceChannel, ...]:
@@ -596,7 +608,7 @@ def _read_gages(r: _Reader, rudder: Rudder, stock: Stock) -> tuple[Gage, ...]:
         gage = Gage(number=number, body=body, position_m=r.vector(f"{p}.position_m"),
                     axis=r.axis(f"{p}.axis"),
                     sensitivity_V_per_m_s2=r.positive(f"{p}.sensitivity_V_per_m_s2"),
-                    channel=channel)
+                    channel=channel, unit=_gage_unit(r, p))
         z = gage.position_m[2]
         top, bottom = rudder.attach_z_m + stock.bending_length_m, rudder.attach_z_m
         if body == "stock" and not bottom - ALIGN_TOL_M <= z <= top + ALIGN_TOL_M:

@@ -30,8 +30,9 @@ def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_di
     rows in ``a.gage_numbers`` order. Returns the files written."""
     out_dir.mkdir(parents=True, exist_ok=True)
     files = [_decay(a, x, fs_hz, out_dir / f"impact{k}_decay.png"),
-             _spectrum(a, x, fs_hz, rig, out_dir / f"impact{k}_spectrum.png"),
-             _modeshape(a, rig, out_dir / f"impact{k}_modeshape.png")]
+             _spectrum(a, x, fs_hz, rig, out_dir / f"impact{k}_spectrum.png")]
+    if rig.structural:  # a channels-only rig has no gage positions to draw the shape on
+        files.append(_modeshape(a, rig, out_dir / f"impact{k}_modeshape.png"))
     if a.stock_curves:
         files.append(_stock(a, out_dir / f"impact{k}_stock.png"))
     return files
@@ -69,7 +70,8 @@ def _decay(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, path: Path) -> Path:
 
 
 def _spectrum(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, path: Path) -> Path:
-    rows = [i for i, n in enumerate(a.gage_numbers) if rig.gage(n).body == "rudder"]
+    rows = [i for i, n in enumerate(a.gage_numbers) if rig.gage(n).body == "rudder"] or \
+        list(range(len(a.gage_numbers)))  # all gages where the rig names no rudder gage
     nper = min(x.shape[1], int(8 * fs_hz))
     f, pxx = scipy.signal.welch(x[rows], fs_hz, nperseg=nper, axis=-1)
     fig, ax = plt.subplots(figsize=(11, 5))

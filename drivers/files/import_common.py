@@ -224,6 +224,10 @@ def unit_factor(unit: str | None, channel: str, source: str) -> float:
                             f"lbf is named with --force-channel)")
 
 
+def _stated(unit: str | None) -> bool:
+    return unit is not None and bool(unit.strip()) and unit.strip().upper() != "NONE"
+
+
 def force_unit_factor(unit: str | None, rig_unit: str, channel: str, source: str) -> float:
     """N per unit of a force channel: the file's ``unit`` (N, kN, lbf), or the rig's
     ``rig_unit`` when the file states none.
@@ -233,9 +237,7 @@ def force_unit_factor(unit: str | None, rig_unit: str, channel: str, source: str
     ImportFormatError
         Any other unit, naming the channel.
     """
-    if unit is None or not unit.strip() or unit.strip().upper() == "NONE":
-        unit = rig_unit
-    u = unit.strip()
+    u = unit.strip() if _stated(unit) else rig_unit
     for name, factor in FORCE_UNITS.items():
         if u.lower() == name.lower():
             return factor
@@ -513,14 +515,16 @@ class FileImportDevice(Device):
                     f"imports it as a gap in the recording")
             factor = (force_unit_factor(src.units[i], self.rig.force(pick.name).unit,
                                         src.names[i], name) if pick.is_force
-                      else unit_factor(src.units[i], src.names[i], name))
+                      else unit_factor(src.units[i] if _stated(src.units[i])
+                                       else self.rig.gage(pick.gage).unit, src.names[i], name))
             try:
                 counts[row], q = quantise(x, factor)
             except ValueError as err:
                 raise ImportFormatError(f"{what}: {err}") from None
             missing |= np.isnan(x)
             scales.append(q.scale)
-            assumed = self.rig.force(pick.name).unit if pick.is_force else "m/s^2"
+            assumed = self.rig.force(pick.name).unit if pick.is_force else \
+                self.rig.gage(pick.gage).unit
             notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
                                 **q.to_json()}
         if missing.all():
