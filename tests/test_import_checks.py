@@ -286,3 +286,20 @@ def test_trigger_votes_k_of_at_most_the_gages_it_has(n_gages, k):
     if n_gages < 3:
         with pytest.raises(ValueError, match=r"k_of_n k \(3\) must lie in 1\.\."):
             Trigger(info, TriggerSettings(k_of_n=(3, None)))
+
+
+def test_channels_only_rig_refused_where_a_structure_is_needed(tmp_path):
+    """The simulator, export-uff and the gap diagnosis need the structure: a channels-only rig
+    is refused in one line naming what needs it, never an AttributeError on None."""
+    from ramdaq.analysis.model.rig import RigError, parse_rig
+    from ramdaq.drivers.files.minimal_rig import minimal_rig
+
+    rig = parse_rig(minimal_rig(["a", "b"], name="two", fs_hz=100.0, units="g").text, "two.toml")
+    assert [g.unit for g in rig.gages] == ["g", "g"] and rig.daq.sample_rate_hz == 100.0
+    with pytest.raises(RigError, match=r"^two\.toml: rig 'two' describes only its channels .*"
+                       r"the simulator needs the structure"):
+        SimDevice(rig)
+    from ramdaq.drivers.files.export_uff import export_uff
+
+    with pytest.raises(RigError, match=r"export-uff .* needs the structure"):
+        export_uff(tmp_path / "x.uff", [], rig)

@@ -399,6 +399,9 @@ def cmd_rig(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
     print(f"rig {rig.name} ({args.rig}): {len(rig.gages)} gages, "
           f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
+    if not rig.structural:
+        print("channels only (no rudder, stock or hull): no modes to compute")
+        return EXIT_OK
     for medium in ("air", "water"):
         if medium not in rig.damping:
             continue

@@ -53,6 +53,7 @@ def load_trial(path: str | Path, rig: Rig | str | Path | None = None,
             rig = load_rig(rig)
         if "medium" in info.extra and info.extra["medium"] != rig.medium:
             rig = rig.with_medium(info.extra["medium"])
+        rig.require_structure("the gap diagnosis (a model of the structure); pass --rig")
         rows = {g: i for i, g in enumerate(info.gages) if g}
         have = [g for g in rig.gages_by_channel() if g.number in rows]
         if len(have) < 3:
