@@ -37,7 +37,7 @@ Pipeline
    swell, a sensor's recovery) left in the residual hides weak modes and inflates every
    standard error, so Legendre trend columns beyond the constant are tried one or two at a
    time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
-   modes refitted with them; if any are taken, the selection is run again with them in the
+   modes' poles held; if any are taken, the selection is run again with them in the
    model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
    result is as without it.
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
@@ -87,7 +87,7 @@ from .subspace import (
     poles_to_modes,
 )
 from .table import ModeTable
-from .varpro import Projector, damped_basis, fit_modes_varpro, uniform_grid
+from .varpro import Projector, damped_basis, fit_modes_varpro, linear_amplitudes, uniform_grid
 
 __all__ = ["ModeTable", "identify_modes"]
 
@@ -328,25 +328,25 @@ def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
 def _trend_order(sel: ModeSelector, false_alarm: float, max_terms: int) -> int:
     """How many trend columns (Legendre P₀ … ) the model of ``sel``'s modes needs: from the
     current one, one or two more are tried (a drift may be odd or even about the record's
-    middle) and the fewest taken whose likelihood ratio Λ = Σ_c ΔRSS_c / σ̂²_c exceeds the
-    χ²(step · n_channels) quantile at ``false_alarm``; until neither does."""
+    middle), the modes' poles held (linear least squares: cheap, and Λ with the poles held is
+    at most Λ with them refitted, so the test errs towards fewer columns), and the fewest taken
+    whose likelihood ratio Λ = Σ_c ΔRSS_c / σ̂²_c exceeds the χ²(step · n_channels) quantile at
+    ``false_alarm``; until neither does."""
+    f = sel.fit.f_hz if sel.fit is not None else np.empty(0)
+    d = sel.fit.delta if sel.fit is not None else np.empty(0)
     p = int(sel.fit_offset)
-    rss = sel.fit.rss if sel.fit is not None else sel.rss
     n_ch, n = sel.Y.shape
+
+    def rss_with(terms: int) -> np.ndarray:
+        return linear_amplitudes(sel.t, sel.Y, f, d, fit_offset=terms)[2]
+
+    rss = rss_with(p)
     while p < max_terms:
         for step in (1, 2):
             if p + step > max_terms:
-                break
-            trial = ModeSelector(sel.Y, sel.t, p + step, sel.threshold, sel.zeta_max, sel.f_lim,
-                                 sel.w)
-            if sel.fit is not None:
-                fit = trial.refit(sel.fit.f_hz, sel.fit.delta, trial=True)
-                if fit is None:
-                    continue
-                rss_new, var = fit.rss, fit.noise_std**2
-            else:
-                rss_new = trial.rss
-                var = rss_new / max(n - p - step, 1)
+                return p
+            rss_new = rss_with(p + step)
+            var = rss_new / max(n - 2 * f.size - p - step, 1)
             lam = float(np.sum((rss - rss_new) / np.maximum(var, 1e-300)))
             if lam > stats.chi2.isf(false_alarm, step * n_ch):
                 p, rss = p + step, rss_new
