@@ -51,8 +51,13 @@ def test_rate_that_disagrees_with_the_rig_is_refused_unless_stated(decay, tmp_pa
                        r"disagrees with rig 'albacore-like' \(daq\.sample_rate_hz = 2048 Hz\).*"
                        r"--fs 1000"):
         _read(p)
-    info, _ = _read(p, fs_hz=1000.0)
-    assert info.fs_hz == 1000.0
+    with pytest.raises(ImportFormatError, match=r"at 1000 Hz rig 'albacore-like''s anti-alias "
+                       r"corner \(800 Hz, daq\.anti_alias_hz\) lies above Nyquist"):
+        _read(p, fs_hz=1000.0)  # its analysis would refuse the rig's filter; said at import
+    rig = tmp_path / "slow.toml"
+    rig.write_text(RIG.read_text().replace("anti_alias_hz = 800.0", "anti_alias_hz = 400.0"))
+    with open_device(str(p), rig=rig, fs_hz=1000.0) as dev:
+        assert dev.info.fs_hz == 1000.0
     with pytest.raises(ImportFormatError, match=r"sample rate is 1000 Hz, not the 2048 Hz stated"):
         _read(p, fs_hz=2048.0)
 
@@ -92,6 +97,9 @@ def test_cli_names_the_rate_and_takes_fs(decay, tmp_path, capsys):
     assert main([*base, "--time-unit", "s"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "disagrees with rig" in err[0] and not out.exists()
+    rig = tmp_path / "slow.toml"
+    rig.write_text(RIG.read_text().replace("anti_alias_hz = 800.0", "anti_alias_hz = 400.0"))
+    base[3] = str(rig)
     assert main([*base, "--time-unit", "s", "--fs", "1000"]) == 0
     assert "2 ch at 1000 Hz" in capsys.readouterr().out
 

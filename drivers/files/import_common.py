@@ -557,6 +557,12 @@ class FileImportDevice(Device):
             if abs(fs / self.fs_hz - 1) > RATE_TOLERANCE:
                 raise ImportFormatError(f"{name}: the file's sample rate is {fs:g} Hz, not the "
                                         f"{self.fs_hz:g} Hz stated (fs_hz=, --fs)")
+            corner = self.rig.daq.anti_alias_hz
+            if corner >= fs / 2:  # NaN (a channels-only rig that names no filter) passes
+                raise ImportFormatError(f"{name}: at {fs:g} Hz rig {self.rig.name!r}'s "
+                                        f"anti-alias corner ({corner:g} Hz, daq.anti_alias_hz) "
+                                        f"lies above Nyquist: the rig cannot describe this "
+                                        f"record; use a rig of this rate")
             return
         rig_fs = self.rig.daq.sample_rate_hz
         if abs(fs / rig_fs - 1) > RATE_TOLERANCE:
