@@ -66,16 +66,69 @@ def mode_energy(amplitude: np.ndarray, decay_rate_per_s: np.ndarray) -> np.ndarr
 
 @dataclass(frozen=True)
 class Decrement:
-    """A decrement with its standard error, from the estimator and from the report's peaks."""
+    """A decrement with its standard error, from the estimator and from the report's peaks;
+    the frequency (Hz) with its standard error where the estimator gives one."""
 
     f_hz: float
     delta: float
     delta_se: float
     peak_delta: float
     peak_delta_se: float
+    f_se_hz: float = float("nan")
+
+    @property
+    def zeta(self) -> float:
+        """Damping ratio of the decrement, ``delta / sqrt(4 pi^2 + delta^2)``."""
+        return float(self.delta / np.hypot(2 * np.pi, self.delta))
+
+    @property
+    def zeta_se(self) -> float:
+        """Its standard error, ``d zeta / d delta * delta_se`` (``4 pi^2 / (4 pi^2 + delta^2)^1.5``)."""
+        return float(4 * np.pi**2 / np.hypot(2 * np.pi, self.delta) ** 3 * self.delta_se)
 
     def to_json(self) -> dict:
-        return {k: _num(v) for k, v in self.__dict__.items()}
+        return {k: _num(v) for k, v in (*self.__dict__.items(), ("zeta", self.zeta),
+                                        ("zeta_se", self.zeta_se))}
+
+
+@dataclass(frozen=True)
+class SkippedStep:
+    """A step of the report's chain that did not run for this layout: ``step`` names it (with
+    its equations), ``reason`` says why in one line (the gages it needs that the record lacks,
+    or a rig that describes no structure)."""
+
+    step: str
+    reason: str
+
+    def to_json(self) -> dict:
+        return {"step": self.step, "reason": self.reason}
+
+
+CHAIN_STEPS: dict[str, tuple[int, ...]] = {
+    "rudder motions (Eq 1-6b)": (2, 4, 6, 8),
+    "decrements relative to the hull (Eq 8-13)": (2, 4, 5, 6, 8, 13, 14),
+    "effective stock lengths (Figures 8, 9)": (1, 3, 7, 10, 11, 12, 13, 14),
+    "damping constants (Eq 16, 17)": (2, 4, 6, 8),
+    "damping constants with hull motion (Eq 14, 15)": (2, 4, 5, 6, 8, 13, 14),
+}
+"""The steps of the report's chain after the per-gage decrements, and the gages each needs in the
+record (Report 1836's numbering); every step also needs a rig that describes the structure."""
+
+
+def skipped_steps(rig: Rig, gage_numbers: tuple[int, ...]) -> tuple[SkippedStep, ...]:
+    """The steps of :data:`CHAIN_STEPS` that cannot run on a record of ``gage_numbers`` with
+    ``rig``, each with its reason."""
+    if not rig.structural:
+        return tuple(SkippedStep(step, f"rig {rig.name!r} describes only its channels (no rudder, "
+                                       f"stock or hull)") for step in CHAIN_STEPS)
+    have = set(gage_numbers)
+    out = []
+    for step, need in CHAIN_STEPS.items():
+        lacking = [n for n in need if n not in have]
+        if lacking:
+            out.append(SkippedStep(step, f"needs gage(s) {', '.join(map(str, lacking))}, which "
+                                         f"the record does not have"))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -167,6 +220,7 @@ class ImpactAnalysis:
     hull_motions: dict[str, Decrement] = field(default_factory=dict)
     """The hull section's (a stern plane's fixed portion's) own motions at the stock and their
     decrements: ``alpha_b`` (Eq 8), ``gamma_b`` (from gages 5 and 13 when level), ``v_b``."""
+    skipped: tuple[SkippedStep, ...] = ()
 
     @property
     def f_hz(self) -> float:
@@ -288,8 +342,26 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),
                                         float(table.channel_delta[j, k]),
                                         float(table.channel_delta_se[j, k]),
-                                        *_peak_decrement(x[i], fs_hz, f))
+                                        *_peak_decrement(x[i], fs_hz, f),
+                                        f_se_hz=float(table.channel_frequency_se_hz[j, k]))
              for j, i in enumerate(good)}
+    amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
+    skipped = skipped_steps(rig, tuple(gage_numbers))
+    chain = _chain(x, fs_hz, rig, gage_numbers, verdicts, table, k, gages, amp,
+                   {s.step for s in skipped}, notes)
+    return ImpactAnalysis(
+        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
+        modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
+        gages=gages, **chain, notes=tuple(notes), skipped=skipped)
+
+
+def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
+           verdicts: dict[int, GageVerdict], table: ModeTable, k: int,
+           gages: dict[int, Decrement], amp: dict[int, complex], skip: set[str],
+           notes: list[str]) -> dict:
+    """The report's chain on the predominant mode ``k`` of ``table``: each step of
+    :data:`CHAIN_STEPS` not in ``skip``. Returns the :class:`ImpactAnalysis` fields it fills."""
+    f = float(table.frequency_hz[k])
     rows = {n: i for i, n in enumerate(gage_numbers)}
 
     def d(n: int) -> np.ndarray:
@@ -298,20 +370,24 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     def decrement(sig: np.ndarray) -> tuple[Decrement, complex]:
         return signal_decrement(np.asarray(sig), fs_hz, f, len(table))
 
-    signals = _rudder_motions(d, rig)
-    motions, amps = _motion_decrements(signals, verdicts, decrement, notes)
-    relative = _relative_decrements(d, rig, signals, decrement, notes)
-    hull = {name: decrement(sig)[0] for name, sig in _hull_motions(d, rig, verdicts).items()}
+    steps = list(CHAIN_STEPS)
+    motions: dict[str, Decrement] = {}
+    amps: dict[str, complex] = {}
+    relative: dict[str, Decrement] = {}
+    if steps[0] not in skip:
+        signals = _rudder_motions(d, rig)
+        motions, amps = _motion_decrements(signals, verdicts, decrement, notes)
+        if steps[1] not in skip:
+            relative = _relative_decrements(d, rig, signals, decrement, notes)
+    hull = ({name: decrement(sig)[0] for name, sig in _hull_motions(d, rig, verdicts).items()}
+            if rig.structural else {})
     ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
-    amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
-    lengths, curves = _stock_lengths(amp, rig, notes)
-    damping = _damping(rig, f, float(table.delta[k]), gages, motions, ratio, amp, curves, notes)
-    return ImpactAnalysis(
-        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
-        modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
-        gages=gages, motions=motions, relative=relative, alpha1_over_gamma1=ratio,
-        damping=damping, stock_lengths=lengths, stock_curves=curves, notes=tuple(notes),
-        hull_motions=hull)
+    lengths, curves = _stock_lengths(amp, rig, notes) if steps[2] not in skip else ({}, {})
+    damping = _damping(rig, f, float(table.delta[k]), gages, motions, ratio, amp, curves, notes,
+                       full=steps[4] not in skip)
+    return {"motions": motions, "relative": relative, "alpha1_over_gamma1": ratio,
+            "damping": damping, "stock_lengths": lengths, "stock_curves": curves,
+            "hull_motions": hull}
 
 
 def predominant_mode(table: ModeTable, rudder_rows: list[int]) -> int:
@@ -380,7 +456,7 @@ def _hull_motions(d: Callable[[int], np.ndarray], rig: Rig,
     ``d13 + (z13 - z_attach) alpha_b``. For a stern plane, the fixed portion's alpha, beta, w."""
     ok = {n for n, v in verdicts.items() if v.ok}
     out: dict[str, np.ndarray] = {}
-    p5, p13, p14 = (rig.gage(n).position_m for n in (5, 13, 14))
+    p5, p13, p14 = (rig.gage(n).position_m if n in ok else (np.nan,) * 3 for n in (5, 13, 14))
     if {13, 14} <= ok and abs(p13[0] - p14[0]) <= ALIGN_TOL_M:
         out["alpha_b"] = alpha_b_from_13_14(d(13), d(14), p14[2] - p13[2])
         out["v_b"] = d(13) + (p13[2] - rig.hull_attach_z_m) * out["alpha_b"]
@@ -391,23 +467,39 @@ def _hull_motions(d: Callable[[int], np.ndarray], rig: Rig,
 
 def _damping(rig: Rig, f: float, delta: float, gages: dict[int, Decrement],
              motions: dict[str, Decrement], ratio: float, amp: dict[int, complex],
-             curves: dict[str, list[float]], notes: list[str]) -> DampingConstants:
+             curves: dict[str, list[float]], notes: list[str], full: bool = True) -> DampingConstants:
     """Eq 16 and 17 with the rig's masses (plus the added mass in water), the modal decrement
-    (Eq 7) over the rudder gages, and Eq 14 and 15 (:func:`_full_damping`). ``f``, ``delta``:
-    the predominant mode's; ``ratio``: alpha1 / gamma1."""
+    (Eq 7) over the rudder gages, and, with ``full``, Eq 14 and 15 (:func:`_full_damping`).
+    ``f``, ``delta``: the predominant mode's; ``ratio``: alpha1 / gamma1. A channels-only rig
+    has no masses (NaN) and its modal decrement is the mean over every gage (it names no
+    bodies)."""
+    if not rig.structural:
+        notes.append("delta_modal: the mean over every gage (the rig names no rudder gages)")
+        return DampingConstants(m_y_kg=np.nan, I_z_kg_m2=np.nan, I_xz_kg_m2=np.nan,
+                                delta_modal=float(np.mean([g.delta for g in gages.values()])),
+                                C_N_s_per_m=np.nan, c_N_m_s_per_rad=np.nan)
     add = added_mass(rig)
     r = rig.rudder
     m_y = r.mass_kg + add["m_vir"]
     I_z = r.Iz_kg_m2 + add["Iz_vir"]
     return DampingConstants(
         m_y_kg=m_y, I_z_kg_m2=I_z, I_xz_kg_m2=r.Ixz_kg_m2,
-        delta_modal=float(np.nanmean([gages[n].delta for n in gages
-                                      if rig.gage(n).body == "rudder"])),
+        delta_modal=_rudder_mean([gages[n].delta for n in gages if rig.gage(n).body == "rudder"],
+                                 notes),
         C_N_s_per_m=float(C_translational(m_y, f, motions["v_2_6"].delta))
         if "v_2_6" in motions else np.nan,
         c_N_m_s_per_rad=float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f, motions["gamma"].delta))
         if "gamma" in motions and np.isfinite(ratio) else np.nan,
-        full=_full_damping(amp, f, delta, rig, m_y, I_z, curves, notes))
+        full=_full_damping(amp, f, delta, rig, m_y, I_z, curves, notes) if full else None)
+
+
+def _rudder_mean(deltas: list[float], notes: list[str]) -> float:
+    """Eq 7: the mean decrement over the rudder gages; NaN, with a note, when none is usable."""
+    finite = [v for v in deltas if np.isfinite(v)]
+    if not finite:
+        notes.append("delta_modal (Eq 7): no usable rudder gage")
+        return float("nan")
+    return float(np.mean(finite))
 
 
 def _stock_lengths(amp: dict[int, complex], rig: Rig,

@@ -36,7 +36,8 @@ from numpy.typing import ArrayLike
 from scipy import signal
 
 __all__ = [
-    "StaLtaState", "aic", "aic_pick", "ar_prediction_filter", "butterworth_delay_s",
+    "CONTACT_FRACTION", "StaLtaState", "aic", "aic_pick", "ar_prediction_filter",
+    "butterworth_delay_s", "contact_duration_s",
     "exp_average", "first_hold", "hinge_onset", "next_trigger", "prediction_error",
     "recursive_sta_lta", "recursive_sta_lta_ref",
 ]
@@ -412,3 +413,20 @@ def butterworth_delay_s(order: int, corner_hz: float, fs_hz: float) -> float:
     b, a = signal.butter(_check_n("order", order), corner_hz, fs=fs_hz)
     _, gd = signal.group_delay((b, a), w=[1e-6 * fs_hz], fs=fs_hz)
     return float(gd[0]) / fs_hz
+
+
+CONTACT_FRACTION = 0.05
+"""A blow's contact lasts while its force is above this fraction of its peak: 5 % is well above
+a load cell's noise after a blow of any useful size, and cuts a half-sine within 3 % of its
+length."""
+
+
+def contact_duration_s(force: ArrayLike, fs_hz: float, *, window_s: float = 0.5) -> float:
+    """How long a blow's force lasts, s, from its onset (sample 0 of ``force``, N, shape (n,)):
+    to the last sample within ``window_s`` where ``|F|`` is at least :data:`CONTACT_FRACTION` of
+    its peak there. NaN when the window holds no force (all zero or not finite)."""
+    f = np.abs(np.asarray(force, dtype=np.float64)[: max(1, round(window_s * fs_hz))])
+    if f.size == 0 or not np.all(np.isfinite(f)) or not f.max() > 0:
+        return float("nan")
+    on = np.flatnonzero(f >= CONTACT_FRACTION * f.max())
+    return float(on[-1] + 1) / fs_hz

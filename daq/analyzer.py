@@ -21,6 +21,7 @@ import numpy as np
 
 from ..analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
 from ..analysis.model.rig import Rig
+from ..analysis.onset import contact_duration_s
 from ..drivers.block import StreamInfo
 from .trigger import ImpactEvent, StreamHealth
 
@@ -95,10 +96,32 @@ def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
     return LookDone(job.onset_sample, look)
 
 
-def decay_skip_s(rig: Rig) -> float:
-    """Time after the onset before the free decay is taken, s: the ram's contact (twice its
-    nominal duration, for a ram that dwells) plus 10 ms for the anti-alias filter to settle."""
-    return 2 * rig.impact.duration_s + 0.010
+DEFAULT_CONTACT_S = 0.005
+"""A blow's contact, s, where neither a force channel nor the rig's ``[impact]`` says it: a
+hammer's or a light ram's (the rigs' rams last 5 ms)."""
+
+
+def decay_skip_s(rig: Rig, force: np.ndarray | None = None, fs_hz: float | None = None) -> float:
+    """Time after the onset before the free decay is taken, s: the blow's contact plus 10 ms for
+    the anti-alias filter to settle. The contact is measured on ``force`` (N from the onset,
+    shape (n,), at ``fs_hz``) where the stream has a force channel, else twice the rig's nominal
+    ram duration (for a ram that dwells), else twice :data:`DEFAULT_CONTACT_S`."""
+    if force is not None and fs_hz:
+        contact = contact_duration_s(force, fs_hz)
+        if np.isfinite(contact):
+            return contact + 0.010
+    nominal = rig.impact.duration_s if rig.impact is not None else DEFAULT_CONTACT_S
+    return 2 * nominal + 0.010
+
+
+def _force_from_onset(event: ImpactEvent, info: StreamInfo) -> np.ndarray | None:
+    """The first force channel's samples from the onset on (N), or None without one."""
+    rows = [i for i, u in enumerate(info.units) if u == "N"]
+    rec = event.record
+    if not rows or rec is None:
+        return None
+    i0 = max(0, event.onset_sample - rec.first_sample)
+    return rec.counts[rows[0], i0:] * rec.scale[rows[0]]
 
 
 def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
@@ -115,7 +138,8 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) ->
     rec = event.record
     if rec is None:
         return HitResult(index, event, False, "no record kept for this event", None)
-    start = event.onset_sample + round(decay_skip_s(rig) * info.fs_hz)
+    start = event.onset_sample + round(decay_skip_s(rig, _force_from_onset(event, info),
+                                                    info.fs_hz) * info.fs_hz)
     i0 = start - rec.first_sample
     x = rec.counts[:, i0:] * rec.scale[:, None]
     # The trigger's too_short only says the record was cut (next blow, gap, end of stream)
@@ -228,6 +252,7 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
         "table2b": finite_json(a.table2b()),
         "hull_table": finite_json(a.hull_table()),
         "notes": list(a.notes),
+        "skipped": [s.to_json() for s in a.skipped],
     }
 
 

@@ -160,10 +160,11 @@ class TrialAnalysis:
 
 
 def decay_samples(h: HitResult, rig: Rig) -> np.ndarray:
-    """The gage rows of hit ``h``'s record from its decay's start (SI, shape (n_gages, n))."""
+    """The gage rows of hit ``h``'s record from its decay's start (SI, shape (n_gages, n)); ``rig``
+    is the recording's (kept for callers; the analysis knows its gages)."""
     rec, a = h.event.record, h.analysis
     i0 = round(a.decay_start_s * rec.fs_hz) - rec.first_sample
-    return rec.values()[:len(rig.gages_by_channel()), i0:]
+    return rec.values()[:len(a.gage_numbers), i0:]  # the gage rows come first, force channels after
 
 
 def analyze_hits(rec: Recording, *, impact: int | None = None,

@@ -86,6 +86,7 @@ from typing import Any
 import numpy as np
 
 from ..analysis import onset as ons
+from ..analysis.model.rig import STRUCTURE_TABLES
 from ..drivers.block import Block, StreamInfo
 
 __all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "StreamHealth", "Trigger",
@@ -203,12 +204,16 @@ class TriggerSettings:
             raise ValueError(f"ar_order ({self.ar_order}) must be a whole number >= 1")
 
     @classmethod
-    def for_rate(cls, fs_hz: float, **overrides: Any) -> TriggerSettings:
+    def for_rate(cls, fs_hz: float, n_voters: int | None = None, **overrides: Any) -> TriggerSettings:
         """The settings ``TriggerSettings(**overrides)``, with every length that was not given
         and that ``fs_hz`` cannot resolve lengthened to the fewest samples it needs
         (:func:`_samples_needed`; at 50 Hz: ``sta_s`` and ``innovation_sta_s`` 0.1 s,
         ``ar_guard_s`` 0.02 s, ``ar_fit_s`` 0.6 s). Where the defaults resolve (from 1.6 kHz
-        up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it."""
+        up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it, with
+        ``n_voters`` the stream's gages: a ``k_of_n`` not given votes ``k = min(3, n_voters)``,
+        so a record of one or two gages triggers on them."""
+        if "k_of_n" not in overrides and n_voters is not None and 1 <= n_voters < cls.k_of_n[0]:
+            overrides["k_of_n"] = (n_voters, None)
         s = cls(**overrides)
         longer = {name: need / fs_hz for name, (need, _) in _samples_needed(s).items()
                   if name not in overrides and round(getattr(s, name) * fs_hz) < need}
@@ -567,8 +572,8 @@ class Trigger:
     info : StreamInfo
         The stream: channel names, units, gage numbers, ``fs_hz``, ``rig_toml``, ``extra``.
     settings : TriggerSettings, optional
-        Default ``TriggerSettings.for_rate(info.fs_hz)``: the defaults, lengthened where the
-        stream's rate cannot resolve them.
+        Default ``TriggerSettings.for_rate(info.fs_hz, n_voters)``: the defaults, lengthened
+        where the stream's rate cannot resolve them, voting k of at most the stream's gages.
 
     Raises
     ------
@@ -578,7 +583,8 @@ class Trigger:
     """
 
     def __init__(self, info: StreamInfo, settings: TriggerSettings | None = None) -> None:
-        s = TriggerSettings.for_rate(info.fs_hz) if settings is None else settings
+        s = TriggerSettings.for_rate(info.fs_hz, n_voters=sum(g > 0 for g in info.gages)) \
+            if settings is None else settings
         self.info, self.settings, self.fs_hz = info, s, float(info.fs_hz)
         self._len = _Lengths.at(s, self.fs_hz)
         self._vidx, self._k = _voting_rows(info, s)
@@ -1071,18 +1077,22 @@ def _force_row(info: StreamInfo, s: TriggerSettings) -> int | None:
 def _rig_delay_s(info: StreamInfo) -> float:
     """Group delay of the anti-alias filter the stream's rig describes (``[daq]``
     ``anti_alias_order`` and ``anti_alias_hz`` in ``info.rig_toml``), s; 0 for a stream that
-    carries no rig. ValueError naming the problem for a rig that does not say it usably."""
+    carries no rig, or a channels-only rig that names no filter (an imported record's).
+    ValueError naming the problem for a rig that does not say it usably."""
     if not info.rig_toml.strip():
         return 0.0
     where = f"{info.device}: the stream's rig"
     fix = "fix the rig, or give the trigger delay_s"
     try:
-        daq = tomllib.loads(info.rig_toml).get("daq")
+        doc = tomllib.loads(info.rig_toml)
+        daq = doc.get("daq")
     except tomllib.TOMLDecodeError as err:
         raise ValueError(f"{where} is not valid TOML ({err}); {fix}") from err
     if not isinstance(daq, dict):
         raise ValueError(f"{where} has no [daq] table to say its anti-alias filter; {fix}")
     order, corner = daq.get("anti_alias_order"), daq.get("anti_alias_hz")
+    if order is None and corner is None and not any(t in doc for t in STRUCTURE_TABLES):
+        return 0.0  # a channels-only rig (an imported record's) names no filter: none to remove
     if isinstance(order, float) and order.is_integer():
         order = int(order)
     if isinstance(order, bool) or not isinstance(order, int) or order < 1:

@@ -8,7 +8,9 @@ whether paced in real time or run as fast as possible.
 
 Impacts come from a schedule (``impacts=[1.0, 4.0]`` seconds, or :class:`Impact` s) or on command
 (``device.impact()`` hits at the start of the next block). Every impact the device delivers is
-kept in ``delivered_impacts`` as ground truth, with its exact start time.
+kept in ``delivered_impacts`` as ground truth, with its exact start time. A rig with
+``[[forces]]`` channels gets them after the gages: the ram's force in N, the blows' half-sines
+(ideal: no noise, no anti-alias filter), 24-bit with four times the rig's blow as full scale.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from ..analysis.model.response import ModalSimulator, modal_form
 from ..analysis.model.rig import AXES, Rig, load_rig
@@ -81,6 +85,7 @@ class SimDevice(Device):
         super().__init__()
         rig = rig if isinstance(rig, Rig) else load_rig(rig)
         self.rig = rig.with_medium(medium) if medium else rig
+        self.rig.require_structure("the simulator")
         if pace not in ("fast", "realtime"):
             raise ValueError(f"pace must be 'fast' or 'realtime', got {pace!r}")
         self.fs_hz = float(fs_hz or self.rig.daq.sample_rate_hz)
@@ -125,10 +130,14 @@ class SimDevice(Device):
                                    anti_alias=self.anti_alias)
         self._t_start = time.monotonic()
         gages = self.rig.gages_by_channel()
+        forces = tuple(sorted(self.rig.forces, key=lambda f: f.channel))
+        # a force channel: the blows' half-sines, 24-bit with 4x headroom over the rig's blow
+        self._force_scale = np.full(len(forces), 4 * self.rig.impact.peak_force_N / (2**23 - 1))
         return StreamInfo(
             device="sim", fs_hz=self.fs_hz,
-            channels=tuple(f"g{g.number:02d}" for g in gages),
-            units=("m/s^2",) * len(gages), gages=tuple(g.number for g in gages),
+            channels=tuple(f"g{g.number:02d}" for g in gages) + tuple(f.name for f in forces),
+            units=("m/s^2",) * len(gages) + ("N",) * len(forces),
+            gages=tuple(g.number for g in gages) + (0,) * len(forces),
             rig_toml=self.rig.text,
             extra={"seed": self.seed, "medium": self.rig.medium, "block_samples": self.block_n,
                    "adc_bits": self.rig.daq.adc_bits, "noise": self.noise,
@@ -159,14 +168,29 @@ class SimDevice(Device):
             if wait > 0:
                 time.sleep(wait)
         counts = self._sensor.process(self._sim.advance(n))
+        scale = self._sensor.scale
+        if self._force_scale.size:
+            f = np.rint(self._force(start, n) / self._force_scale[0]).astype(np.int32)
+            counts = np.vstack([counts, np.tile(f, (self._force_scale.size, 1))])
+            scale = np.concatenate([scale, self._force_scale])
         block = Block(seq=self._seq, first_sample=start,
                       t0_ns=sample_time_ns(start, self.fs_hz), fs_hz=self.fs_hz,
-                      counts=counts, scale=self._sensor.scale)
+                      counts=counts, scale=scale)
         self._seq += 1
         return block
+
+    def _force(self, start: int, n: int) -> np.ndarray:
+        """The ram's force over samples ``start .. start+n-1``, N: the half-sines of the blows
+        delivered (the force channel of a rig with ``[[forces]]``), shape (n,)."""
+        t = (start + np.arange(n)) / self.fs_hz
+        f = np.zeros(n)
+        for b in self.delivered_impacts:
+            on = (t >= b.t_s) & (t < b.t_s + b.duration_s)
+            f[on] += b.peak_force_N * np.sin(np.pi * (t[on] - b.t_s) / b.duration_s)
+        return f
 
     @property
     def clipped_samples(self) -> dict[str, int]:
         """Samples clipped at the ADC rails so far, by channel name (only those that clipped)."""
         return {name: int(c) for name, c in zip(self.info.channels, self._sensor.clipped,
-                                                strict=True) if c}
+                                                strict=False) if c}  # gages, then forces

@@ -193,7 +193,10 @@ def test_missing_values_and_rows_are_gaps_not_interpolated(sim, tmp_path):
     keep[3000:3005] = False  # rows missing from the file: a jump in the time column
     path = write_csv(tmp_path / "gaps.csv", t[keep], x[:, keep], _names(gages))
     path.write_text(_set_cell(path.read_text(), 2002, 6, "nan"))  # row 2000: a literal nan
-    extra, got, _, blocks = imported(path)
+    with pytest.raises(ImportFormatError, match=r"gaps\.csv: line 1002, column 'g03': missing "
+                       r"value .*--allow-gaps"):
+        imported(path)  # never silent: a gap from a missing value is asked for
+    extra, got, _, blocks = imported(path, allow_gaps=True)
     present = np.ones(n, bool)
     present[1000:1010] = present[2000] = present[3000:3005] = False
     starts = [b.first_sample for b in blocks]

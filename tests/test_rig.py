@@ -89,3 +89,43 @@ def test_error_is_one_line_and_names_file(tmp_path):
     p.write_text("name = [")
     with pytest.raises(RigError, match="not valid TOML"):
         load_rig(p)
+
+
+@pytest.mark.parametrize(("old", "new", "field", "hint"), [
+    ("added_mass_factor = 1.0", "added_mass_factr = 1.0", r"rudder\.added_mass_factr",
+     "did you mean 'added_mass_factor'"),
+    ("[damping.water]", "[damping.watr]", r"damping\.watr", "did you mean 'water'"),
+    ('medium = "air"', 'medium = "air"\nmedum = "water"', "medum", "did you mean 'medium'"),
+    ("frequency_hz = 8.0", "frequency_hz = 8.0\nfreq = 8.0", r"hull\.modes\.freq",
+     "valid keys here: .*frequency_hz"),
+    ("axis = \"y\"", "axis = \"y\"\naxsi = \"y\"", r"gages\.axsi", "did you mean 'axis'"),
+    ("[impact]", "[impacts]", r"impact\.peak_force_N", "missing \\(the file has .impacts.: misspelt\\?\\)"),
+])
+def test_unknown_keys_named_with_the_nearest_valid_one(old, new, field, hint):
+    """A misspelt key at any level is an error naming the file, the key and the nearest valid
+    key, not a silent default (issue 18: added_mass_factr, [damping.watr])."""
+    bad = _edit((RIGS / "albacore.toml").read_text(), old, new)
+    with pytest.raises(RigError, match=rf"^bad\.toml: {field}: (unknown key )?.*{hint}") as err:
+        parse_rig(bad, "bad.toml")
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(("old", "new", "field"), [
+    ("mass_kg = 2870.2", "mass_kg = 2.87e30", r"rudder\.mass_kg"),
+    ("mass_kg = 2870.2", "mass_kg = 0.0", r"rudder\.mass_kg"),
+    ("sample_rate_hz = 2048.0", "sample_rate_hz = 20.0", r"daq\.sample_rate_hz"),
+    ("sample_rate_hz = 2048.0", "sample_rate_hz = 102400.0", r"daq\.sample_rate_hz"),
+    ("E_Pa = 2.07e11", "E_Pa = 2.07e16", r"stock\.E_Pa"),
+    ("I_m4 = 2.235e-3", "I_m4 = 2.235e3", r"stock\.I_m4"),
+    ("frequency_hz = 8.0", "frequency_hz = 8.0e6", r"hull\.modes\[0\]\.frequency_hz"),
+    ("frequency_hz = 8.0", "frequency_hz = 0.0", r"hull\.modes\[0\]\.frequency_hz"),
+    ("density_kg_m3 = 1027.6", "density_kg_m3 = 1.0276", r"water\.density_kg_m3"),
+    ("[-0.70, 0.0, 1.55]", "[-700.0, 0.0, 1550.0]", r"gages\[0\]\.position_m"),
+])
+def test_implausible_values_named(old, new, field):
+    """Numbers outside physical ranges (a unit or an exponent gone wrong) are one-line errors
+    naming the key; the shipped rigs lie well inside every range."""
+    bad = _edit((RIGS / "albacore.toml").read_text(), old, new)
+    with pytest.raises(RigError, match=rf"^bad\.toml: {field}: .*(implausible|positive)") as err:
+        parse_rig(bad, "bad.toml")
+    assert "\n" not in str(err.value)

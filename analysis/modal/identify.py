@@ -32,7 +32,14 @@ Pipeline
    mode with probability about ``false_alarm``. A second round takes candidates from the
    residual (weak modes hidden by strong ones), and accepted modes whose Λ falls below the
    threshold are removed again. With ``n_modes`` given, the strongest n candidates are fitted
-   as they are.
+   as they are (when they do not fit together, the order is selected up to n; fewer modes than
+   asked are said in ``info["fewer_modes"]``). Then the trend: a slow drift (a DC step, a
+   swell, a sensor's recovery) left in the residual hides weak modes and inflates every
+   standard error, so Legendre trend columns beyond the constant are tried one or two at a
+   time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
+   modes' poles held; if any are taken, the selection is run again with them in the
+   model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
+   result is as without it.
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
 7. Terms with less than one cycle in the record (drift, a slow step) are kept in the model but
    not reported (``info["nuisance_terms_hz"]``).
@@ -80,7 +87,7 @@ from .subspace import (
     poles_to_modes,
 )
 from .table import ModeTable
-from .varpro import Projector, damped_basis, fit_modes_varpro, uniform_grid
+from .varpro import Projector, damped_basis, fit_modes_varpro, linear_amplitudes, uniform_grid
 
 __all__ = ["ModeTable", "identify_modes"]
 
@@ -145,6 +152,7 @@ def identify_modes(
     fit_offset: bool = True,
     max_modes: int = 12,
     max_samples: int = 400_000,
+    max_trend_terms: int = 16,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -155,7 +163,9 @@ def identify_modes(
     fs_hz : float
         Sample rate (Hz).
     n_modes : int, optional
-        Number of modes to fit; None selects the order by the likelihood-ratio test.
+        Number of modes to fit; None selects the order by the likelihood-ratio test. When the n
+        strongest candidates do not fit together, the order is selected up to n; a table with
+        fewer modes than asked says so in ``info["fewer_modes"]``.
     f_range_hz : (float, float), optional
         Report only modes in [lo, hi] Hz. Modes outside are still modelled when present; for
         records that must be decimated the band is limited to 1.25·hi.
@@ -168,7 +178,9 @@ def identify_modes(
     per_channel : bool
         Also fit each channel on its own (``channel_delta`` etc.).
     fit_offset : bool
-        Fit a constant offset per channel.
+        Fit a constant offset per channel and, where the likelihood-ratio test asks for it, a
+        slow drift: Legendre trend columns up to ``max_trend_terms`` (``info["trend_terms"]``;
+        module docstring, step 5).
     max_modes : int
         Largest number of modes the selection may accept.
     max_samples : int
@@ -202,27 +214,46 @@ def identify_modes(
     w0 = 1.0 / sig
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
 
-    def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by weights ``w``."""
-        f_c, d_c = _candidates(Z, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
-        return _rank(Z, t, w, f_c, d_c, fit_offset)
-
-    fc, dc = ranked_candidates(Y, w0)
-    info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": int(fc.size)}
-
     threshold = float(stats.chi2.isf(false_alarm / (2.0 * Y.shape[-1]), 2 * Y.shape[0]))
-    sel = ModeSelector(Y, t, fit_offset, threshold, zeta_max, f_lim, w0)
-    if n_modes is not None:
-        sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
-    else:
-        _select_order(sel, fc, dc, ranked_candidates, max_modes)
-    if sel.fit is not None:  # refit with weights from its own residual
-        sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
-        sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
-    info |= {"lr_threshold": threshold}
+
+    def select(trend: bool | int) -> tuple[ModeSelector, int]:
+        """The modes selected with ``trend`` columns in the model; and the candidates' count."""
+        def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
+            f_c, d_c = _candidates(Z, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
+            return _rank(Z, t, w, f_c, d_c, trend)
+
+        fc, dc = ranked_candidates(Y, w0)
+        sel = ModeSelector(Y, t, trend, threshold, zeta_max, f_lim, w0)
+        if n_modes is not None:
+            sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
+            if sel.fit is None and fc.size:  # the n strongest do not fit together: select up to n
+                info["n_modes_fit"] = (f"the {min(n_modes, fc.size)} strongest candidates did not "
+                                       f"fit together; the order was selected (at most {n_modes})")
+                _select_order(sel, fc, dc, ranked_candidates, n_modes)
+        else:
+            _select_order(sel, fc, dc, ranked_candidates, max_modes)
+        if sel.fit is not None:  # refit with weights from its own residual
+            sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
+            sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
+        return sel, int(fc.size)
+
+    sel, n_cand = select(fit_offset)
+    if fit_offset:  # a drift: more trend columns where the likelihood-ratio test asks for them
+        trend = _trend_order(sel, false_alarm, max_trend_terms)
+        if trend > 1:
+            sel, n_cand = select(trend)
+        info |= {"trend_terms": trend}
+    info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": n_cand,
+             "lr_threshold": threshold}
     if sel.fit is None:
-        return _empty(n_ch, fs_hz, n, method, info | {"reason": "no significant mode"})
-    return _table(sel, X, active, fs_hz, d_nls, taps, f_range_hz, per_channel, method, info)
+        table = _empty(n_ch, fs_hz, n, method, info | {"reason": "no significant mode"})
+    else:
+        table = _table(sel, X, active, fs_hz, d_nls, taps, f_range_hz, per_channel, method, info)
+    if n_modes is not None and len(table) < n_modes:
+        table.info["fewer_modes"] = (f"n_modes={n_modes} asked, {len(table)} found "
+                                     f"({n_cand} candidate(s) in the band)")
+    return table
 
 
 def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,
@@ -279,14 +310,50 @@ def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
             break
         misses = 0 if sel.try_add(f_c, d_c) else misses + 1
     if sel.fit is not None and sel.fit.f_hz.size < max_modes:  # residual round
-        B = sel.fit.amplitude
-        model = _synth(sel.t, sel.fit.f_hz, sel.fit.delta, B) + sel.fit.offset[:, None]
+        if int(sel.fit_offset) > 1:  # the modes and the whole trend, refitted linearly
+            proj = Projector(damped_basis(sel.t, sel.fit.f_hz, sel.fit.delta, sel.fit_offset,
+                                          uniform_grid(sel.t)))
+            model = (proj.Phi @ proj.coef(sel.Y.T)).T
+        else:
+            B = sel.fit.amplitude
+            model = _synth(sel.t, sel.fit.f_hz, sel.fit.delta, B) + sel.fit.offset[:, None]
         fr, dr = ranked_candidates(sel.Y - model, sel.w)
         for f_c, d_c in zip(fr[:4], dr[:4], strict=True):
             if sel.fit.f_hz.size >= max_modes:
                 break
             sel.try_add(f_c, d_c)
     sel.prune()
+
+
+def _trend_order(sel: ModeSelector, false_alarm: float, max_terms: int) -> int:
+    """How many trend columns (Legendre P₀ … ) the model of ``sel``'s modes needs: from the
+    current one, one or two more are tried (a drift may be odd or even about the record's
+    middle), the modes' poles held (linear least squares: cheap, and Λ with the poles held is
+    at most Λ with them refitted, so the test errs towards fewer columns), and the fewest taken
+    whose likelihood ratio Λ = Σ_c ΔRSS_c / σ̂²_c exceeds the χ²(step · n_channels) quantile at
+    ``false_alarm``; until neither does."""
+    f = sel.fit.f_hz if sel.fit is not None else np.empty(0)
+    d = sel.fit.delta if sel.fit is not None else np.empty(0)
+    p = int(sel.fit_offset)
+    n_ch, n = sel.Y.shape
+
+    def rss_with(terms: int) -> np.ndarray:
+        return linear_amplitudes(sel.t, sel.Y, f, d, fit_offset=terms)[2]
+
+    rss = rss_with(p)
+    while p < max_terms:
+        for step in (1, 2):
+            if p + step > max_terms:
+                return p
+            rss_new = rss_with(p + step)
+            var = rss_new / max(n - 2 * f.size - p - step, 1)
+            lam = float(np.sum((rss - rss_new) / np.maximum(var, 1e-300)))
+            if lam > stats.chi2.isf(false_alarm, step * n_ch):
+                p, rss = p + step, rss_new
+                break
+        else:
+            return p
+    return p
 
 
 def _sum_exp(t: np.ndarray, rate: np.ndarray) -> np.ndarray:

@@ -37,6 +37,7 @@ from .varpro import (
     fit_modes_varpro,
     gauss_newton_gain,
     linear_amplitudes,
+    trend_basis,
 )
 
 __all__ = ["ModeSelector", "floor_noise"]
@@ -58,8 +59,8 @@ class ModeSelector:
     ----------
     Y : numpy.ndarray, shape (n_channels, n_samples)
         Data. ``t`` (n_samples,) are its times (s).
-    fit_offset : bool
-        Constant per channel in the model.
+    fit_offset : bool or int
+        Constant per channel in the model (True), or p trend columns (a drift of degree p - 1).
     threshold : float
         Λ a mode must exceed.
     zeta_max : float
@@ -79,7 +80,11 @@ class ModeSelector:
         self.w = w0
         self.fit: VarProFit | None = None
         self._held: tuple[VarProFit, np.ndarray, HeldPoleFitter] | None = None
-        resid = Y - (Y.mean(axis=1, keepdims=True) if fit_offset else 0.0)
+        if int(fit_offset) > 1:  # the trend alone: least squares on its columns
+            T = trend_basis(t, int(fit_offset))
+            resid = Y - linalg.lstsq(T.T, Y.T)[0].T @ T
+        else:
+            resid = Y - (Y.mean(axis=1, keepdims=True) if fit_offset else 0.0)
         self.rss = np.sum(resid**2, axis=1)
 
     def refit(self, f: np.ndarray, d: np.ndarray, trial: bool = False) -> VarProFit | None:

@@ -68,7 +68,7 @@ class VarProFit:
     amplitude : numpy.ndarray, shape (n_channels, n_modes), complex
         Complex amplitudes at t = 0.
     offset : numpy.ndarray, shape (n_channels,)
-        Constant offsets (0 when not fitted).
+        Constant offsets, the trend's P₀ coefficient (0 when not fitted).
     rss : numpy.ndarray, shape (n_channels,)
         Unweighted residual sum of squares per channel.
     noise_std : numpy.ndarray, shape (n_channels,)
@@ -107,11 +107,15 @@ def uniform_grid(t: np.ndarray) -> tuple[float, float] | None:
 
 
 def damped_basis(
-    t: np.ndarray, f: np.ndarray, d: np.ndarray, offset: bool,
+    t: np.ndarray, f: np.ndarray, d: np.ndarray, offset: bool | int,
     grid: tuple[float, float] | None = None, scratch: dict | None = None,
     out: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Φ, shape (n_samples, 2K [+1]): columns e·cos, e·sin per mode (+ a constant), e = exp(−δ f t).
+    """Φ, shape (n_samples, 2K [+p]): columns e·cos, e·sin per mode (+ a trend), e = exp(−δ f t).
+
+    The trend: ``offset`` (True = 1, or an int p) columns, the Legendre polynomials P₀ … P₍p₋₁₎ of
+    the time mapped onto [−1, 1] over the record: a constant, then a slow drift of degree p − 1
+    (:func:`trend_basis`).
 
     Returned as the transpose of a C-ordered (2K [+1], n_samples) array, so that every product
     with Φ runs along contiguous samples. On a uniform grid (``grid`` from
@@ -122,7 +126,8 @@ def damped_basis(
     a (2K [+1], n_samples) array to fill with Φᵀ.
     """
     K, n = f.size, t.size
-    PhiT = np.empty((2 * K + int(offset), n)) if out is None else out
+    n_trend = int(offset)
+    PhiT = np.empty((2 * K + n_trend, n)) if out is None else out
     s = -(d * f) + 1j * (_TWO_PI * f)
     blocked = False
     if grid is not None and K:
@@ -153,9 +158,19 @@ def damped_basis(
         arg = _TWO_PI * f[:, None] * t[None, :]
         PhiT[0 : 2 * K : 2] = env * np.cos(arg)
         PhiT[1 : 2 * K : 2] = env * np.sin(arg)
-    if offset:
+    if n_trend == 1:
         PhiT[-1] = 1.0
+    elif n_trend > 1:
+        PhiT[2 * K :] = trend_basis(t, n_trend)
     return PhiT.T
+
+
+def trend_basis(t: np.ndarray, n_trend: int) -> np.ndarray:
+    """The trend columns of :func:`damped_basis` as rows, shape (n_trend, n_samples): Legendre
+    P₀ … P₍n₋₁₎ of τ = 2 (t − t₀)/(t_last − t₀) − 1 (well conditioned on a uniform grid)."""
+    span = float(t[-1] - t[0]) if t.size > 1 else 1.0
+    tau = 2.0 * (t - t[0]) / (span if span > 0 else 1.0) - 1.0
+    return np.polynomial.legendre.legvander(tau, n_trend - 1).T
 
 
 def linear_amplitudes(
@@ -171,8 +186,8 @@ def linear_amplitudes(
         Data.
     f_hz, delta : array_like, shape (n_modes,)
         Fixed poles.
-    fit_offset : bool
-        Include a constant per channel.
+    fit_offset : bool or int
+        Include a constant per channel (True), or p trend columns (:func:`damped_basis`).
 
     Returns
     -------
@@ -187,7 +202,7 @@ def linear_amplitudes(
     rss = np.sum((y.T - proj.Phi @ B) ** 2, axis=0)
     K = f.size
     amp = (B[0 : 2 * K : 2] - 1j * B[1 : 2 * K : 2]).T
-    off = B[-1] if fit_offset else np.zeros(y.shape[0])
+    off = B[2 * K] if fit_offset else np.zeros(y.shape[0])  # P₀'s coefficient: the constant
     return amp, off, rss
 
 
@@ -457,12 +472,13 @@ def _damped_step(A: np.ndarray, g: np.ndarray, lam: float, theta: np.ndarray, lo
     """The scaled damped Gauss–Newton step u of (A + λI) u = −g, and LAPACK's ``info`` (non-zero:
     not positive definite). Coordinates on a bound whose descent direction (−g) leaves the box
     are held (u = 0 there) and the step is solved for the others (projected, active-set LM; all
-    free inside the box)."""
+    free inside the box); with every coordinate held the step is zero (no 0 x 0 system reaches
+    LAPACK)."""
     # = linalg.solve(..., assume_a="pos") (same LAPACK call and triangle, less overhead)
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
         raise ValueError("array must not contain infs or NaNs")
     held = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
-    if np.all(held):        # every coordinate on a bound it would leave: no step (LAPACK refuses 0 x 0)
+    if np.all(held):  # every coordinate pinned: no step (a KKT point, which the caller judges)
         return np.zeros_like(g), 0
     if np.any(held):
         u, free = np.zeros_like(g), ~held
@@ -521,8 +537,8 @@ def fit_modes_varpro(
         Starting frequencies (Hz) and decrements.
     weights : array_like, shape (n_channels,), optional
         1/σ_c per channel (default 1): the fit is weighted least squares.
-    fit_offset : bool
-        Fit a constant offset per channel.
+    fit_offset : bool or int
+        Fit a constant offset per channel (True), or p trend columns (:func:`damped_basis`).
     f_bounds_hz, delta_bounds : tuple of float
         Box bounds on every f (Hz) and δ.
     max_iter : int
@@ -566,7 +582,7 @@ def fit_modes_varpro(
         delta=theta[1::2].copy(),
         covariance=cov,
         amplitude=amp,
-        offset=B[-1] if fit_offset else np.zeros(C),
+        offset=B[2 * K] if fit_offset else np.zeros(C),
         rss=rss,
         noise_std=np.sqrt(rss / max(N - P - 2 * K / C, 1)),
         n_eval=int(n_eval),

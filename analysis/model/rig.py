@@ -16,8 +16,11 @@ A wrong rig is refused with :class:`RigError`, a one-line message naming the fil
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -38,13 +41,91 @@ AXES: dict[str, tuple[float, float, float]] = {
 BODIES = ("rudder", "stock", "hull")
 MEDIA = ("air", "water")
 N_GAGES = 16
+MAX_CHANNELS = 64
+"""Most channels (gages and force channels) a rig may have."""
+FORCE_UNITS: dict[str, float] = {"N": 1.0, "kN": 1000.0, "lbf": 4.4482216152605}
+"""Units a force channel may be given in, with newtons per unit (lbf: the avoirdupois pound-force)."""
+GAGE_UNITS = ("m/s^2", "g")
+"""Units a gage may be given in by an imported file that states none."""
+STRUCTURE_TABLES = ("rudder", "stock", "damping", "hull", "impact")
+"""The tables that describe the structure; a rig with none of them is a channels-only rig."""
 ALIGN_TOL_M = 1e-3
 """Gages that the report's equations pair (2 and 6 on a vertical, 4 and 8 on a horizontal) must
 line up to this tolerance: 1 mm is well inside how precisely a gage is placed on a rudder."""
 
+MAX_COORDINATE_M = 100.0
+"""Largest coordinate of a gage or of the ram's blow from the centre of mass, m: a ship's rudder
+or stern plane with its hull gages fits in a 200 m box; more is a typo or a unit in mm."""
+
+
+@dataclass(frozen=True)
+class Span:
+    """The plausible values of one rig number: ``lo`` to ``hi`` in ``unit``, and why."""
+
+    lo: float
+    hi: float
+    unit: str
+    why: str
+
+
+_LENGTH = Span(1e-3, 100.0, "m", "a model's millimetres to a large ship's control surface")
+_INERTIA = Span(1e-6, 1e8, "kg m^2", "a model's surface to a large ship's")
+_MODULUS = Span(1e8, 1e12, "Pa", "structural plastics to the stiffest steels")
+_DAMPER = Span(0.0, 1e9, "N s/m or N m s/rad", "the report's constants are 1e2 to 1e5")
+PLAUSIBLE: dict[str, Span] = {
+    "daq.sample_rate_hz": Span(50.0, 51_200.0, "Hz", "the rates the trigger supports"),
+    "daq.adc_full_scale_V": Span(1e-3, 1e3, "V", "converter input ranges"),
+    "daq.anti_alias_hz": Span(1.0, 25_600.0, "Hz", "below the highest Nyquist frequency"),
+    "daq.noise_m_s2_rms": Span(0.0, 100.0, "m/s^2", "an accelerometer's noise, not its signal"),
+    "water.density_kg_m3": Span(900.0, 1100.0, "kg/m^3", "fresh water 998, sea water 1025"),
+    "rudder.mass_kg": Span(1e-2, 1e6, "kg", "a model's grams to a large ship's control surface"),
+    "rudder.Iz_kg_m2": _INERTIA, "rudder.Ix_kg_m2": _INERTIA,
+    "rudder.Ixz_kg_m2": Span(-1e8, 1e8, "kg m^2", "a model's surface to a large ship's"),
+    "rudder.chord_m": _LENGTH, "rudder.span_m": _LENGTH, "rudder.thickness_m": _LENGTH,
+    "rudder.stock_x_m": Span(-100.0, 100.0, "m", "within the control surface"),
+    "rudder.attach_z_m": _LENGTH,
+    "rudder.added_mass_factor": Span(0.0, 10.0, "1", "1 is Eq 19-21 as printed"),
+    "stock.E_Pa": _MODULUS, "stock.G_Pa": _MODULUS,
+    "stock.I_m4": Span(1e-14, 10.0, "m^4", "a 2 mm rod to a 3 m solid shaft"),
+    "stock.J_m4": Span(1e-14, 10.0, "m^4", "a 2 mm rod to a 3 m solid shaft"),
+    "stock.shear_area_m2": Span(1e-8, 100.0, "m^2", "a 2 mm rod to a 3 m solid shaft"),
+    "stock.bending_length_m": _LENGTH, "stock.torsion_length_m": _LENGTH,
+    "damping.air.C_N_s_per_m": _DAMPER, "damping.air.c_N_m_s_per_rad": _DAMPER,
+    "damping.air.c_alpha_N_m_s_per_rad": _DAMPER, "damping.water.C_N_s_per_m": _DAMPER,
+    "damping.water.c_N_m_s_per_rad": _DAMPER, "damping.water.c_alpha_N_m_s_per_rad": _DAMPER,
+    "hull.modes[].frequency_hz": Span(0.1, 1e4, "Hz", "a ship's hull modes"),
+    "hull.modes[].modal_mass_kg": Span(1e-3, 1e10, "kg", "a model's to a large ship's hull"),
+    "impact.peak_force_N": Span(1e-3, 1e8, "N", "a modal hammer's to a heavy ram's blow"),
+    "impact.duration_s": Span(1e-5, 1.0, "s", "a hammer's tap to a slow ram's push"),
+    "ambient[].frequency_hz": Span(0.01, 1e4, "Hz", "a ship's machinery and hull"),
+    "ambient[].v_b_amplitude_m": Span(0.0, 1.0, "m", "vibration, not motion"),
+    "gages[].sensitivity_V_per_m_s2": Span(1e-6, 10.0, "V per m/s^2",
+                                           "accelerometers of 0.01 mV/g to 100 V/g"),
+}
+"""Ranges outside which a rig's number is an error, not a trial (a mass of 2.87e30 kg is a typo),
+by generic path (list indices as ``[]``). Each is wide: it catches units and exponents gone
+wrong, not unusual structures."""
+
 
 class RigError(ValueError):
     """A rig file that cannot describe a trial; the message names the file and field."""
+
+
+@dataclass(frozen=True)
+class ForceChannel:
+    """A force channel: a load cell in the ram, or an instrumented hammer. ``name`` is its
+    channel name in the stream; ``channel`` the DAQ channel index; ``unit`` the unit its source
+    gives (``N``, ``kN``, ``lbf``; the stream is always in N); ``location_m`` where the force acts
+    (m, None if not known)."""
+
+    name: str
+    channel: int
+    unit: str = "N"
+    location_m: tuple[float, float, float] | None = None
+
+    @property
+    def newtons_per_unit(self) -> float:
+        return FORCE_UNITS[self.unit]
 
 
 @dataclass(frozen=True)
@@ -53,7 +134,9 @@ class Gage:
 
     ``position_m`` is (x, y, z) in metres from the rudder's centre of mass; ``axis`` the sensing
     direction (``"y"`` athwartship, ``"z"`` vertical, signs allowed); ``sensitivity_V_per_m_s2``
-    volts per m/s^2; ``channel`` the DAQ channel index (0-based row of every block).
+    volts per m/s^2; ``channel`` the DAQ channel index (0-based row of every block); ``unit``
+    the unit an imported file gives it in when the file says none (``"m/s^2"`` or ``"g"``; the
+    stream is always in m/s^2).
     """
 
     number: int
@@ -62,6 +145,7 @@ class Gage:
     axis: str
     sensitivity_V_per_m_s2: float
     channel: int
+    unit: str = "m/s^2"
 
     @property
     def direction(self) -> np.ndarray:
@@ -181,23 +265,45 @@ class Ambient:
 
 @dataclass(frozen=True)
 class Rig:
-    """A whole trial description. See the module docstring for coordinates and units."""
+    """A whole trial description. See the module docstring for coordinates and units.
+
+    A *channels-only* rig (no ``[rudder]``, ``[stock]``, ``[damping]``, ``[hull]`` or
+    ``[impact]``: what ``ramdaq import`` writes for a record without a rig) has ``rudder``,
+    ``stock`` and ``impact`` None, no damping or hull modes, and gages that need only a number
+    and a channel; :meth:`require_structure` refuses it where a model is needed."""
 
     name: str
     medium: str
     water_density_kg_m3: float
     daq: Daq
-    rudder: Rudder
-    stock: Stock
+    rudder: Rudder | None
+    stock: Stock | None
     damping: dict[str, Damping]
     hull_modes: tuple[HullMode, ...]
-    impact: ImpactSpec
+    impact: ImpactSpec | None
     gages: tuple[Gage, ...]
     ambient: tuple[Ambient, ...] = ()
     source: str = "<string>"
     text: str = ""
     surface: Surface = Surface()
     """What the surface is (rudder or stern plane); every vector above is in its frame."""
+    forces: tuple[ForceChannel, ...] = ()
+
+    @property
+    def structural(self) -> bool:
+        """The rig describes the structure (rudder, stock, hull), not only its channels."""
+        return self.rudder is not None
+
+    def require_structure(self, what: str) -> None:
+        """Raise :class:`RigError` if this is a channels-only rig; ``what`` needs the structure."""
+        if not self.structural:
+            raise RigError(f"{self.source}: rig {self.name!r} describes only its channels (no "
+                           f"[rudder], [stock], [hull]); {what} needs the structure")
+
+    @property
+    def n_channels(self) -> int:
+        """DAQ channels: gages and force channels."""
+        return len(self.gages) + len(self.forces)
 
     @property
     def hull_attach_z_m(self) -> float:
@@ -214,6 +320,12 @@ class Rig:
                 return g
         raise KeyError(number)
 
+    def force(self, name: str) -> ForceChannel:
+        for f in self.forces:
+            if f.name == name:
+                return f
+        raise KeyError(name)
+
     def gages_by_channel(self) -> tuple[Gage, ...]:
         """Gages in DAQ channel order (the row order of every block)."""
         return tuple(sorted(self.gages, key=lambda g: g.channel))
@@ -222,7 +334,7 @@ class Rig:
         """The same rig in another medium ("air" or "water")."""
         if medium not in MEDIA:
             raise RigError(f"{self.source}: medium: {medium!r} is not one of {', '.join(MEDIA)}")
-        if medium not in self.damping:
+        if self.structural and medium not in self.damping:
             raise RigError(f"{self.source}: damping.{medium}: missing, so medium {medium} is unusable")
         return replace(self, medium=medium)
 
@@ -274,6 +386,8 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     medium = r.text("medium")
     if medium not in MEDIA:
         r.fail("medium", f"{medium!r} is not one of {', '.join(MEDIA)}")
+    if not any(r.has(t) for t in STRUCTURE_TABLES):
+        return _parse_channels_only(r, medium, text)
     daq = _read_daq(r)
     rudder = _read_rudder(r)
     stock = Stock(
@@ -294,8 +408,9 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         direction=r.axis("impact.direction", default="y"),
     )
     gages = _read_gages(r, rudder, stock)
+    forces = _read_forces(r, len(gages))
     ambient = _read_ambient(r, len(hull_modes))
-    return Rig(
+    rig = Rig(
         name=r.text("name"),
         medium=medium,
         water_density_kg_m3=r.positive("water.density_kg_m3", default=1025.0),
@@ -310,7 +425,82 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         source=source,
         text=text,
         surface=surface,
+        forces=forces,
     )
+    r.refuse_unknown_keys()
+    return rig
+
+
+def _parse_channels_only(r: _Reader, medium: str, text: str) -> Rig:
+    """A rig of channels only: ``name``, ``medium``, ``[daq] sample_rate_hz`` (the rest of
+    ``[daq]`` optional), gages with a number (1..64) and a channel, force channels."""
+    daq = Daq(sample_rate_hz=r.positive("daq.sample_rate_hz"),
+              adc_bits=int(r.positive("daq.adc_bits", default=24)),
+              adc_full_scale_V=r.positive("daq.adc_full_scale_V", default=10.0),
+              anti_alias_hz=r.positive("daq.anti_alias_hz") if r.has("daq.anti_alias_hz")
+              else math.nan,  # not known: the trigger then removes no filter delay
+              anti_alias_order=int(r.positive("daq.anti_alias_order", default=1)),
+              noise_m_s2_rms=r.nonnegative("daq.noise_m_s2_rms", default=0.0))
+    gages: list[Gage] = []
+    seen: dict[int, int] = {}
+    for i, _ in enumerate(r.get("gages", default=[])):
+        p = f"gages[{i}]"
+        number = r.integer(f"{p}.number")
+        if not 1 <= number <= MAX_CHANNELS:
+            r.fail(f"{p}.number", f"{number} is outside 1..{MAX_CHANNELS}")
+        if number in seen:
+            r.fail(f"{p}.number", f"duplicate gage {number} (also gages[{seen[number]}])")
+        seen[number] = i
+        axis = r.get(f"{p}.axis", default=None)
+        gages.append(Gage(number=number, body=r.text(f"{p}.body", default=""),
+                          position_m=r.vector(f"{p}.position_m") if r.has(f"{p}.position_m")
+                          else (math.nan,) * 3,
+                          axis=r.axis(f"{p}.axis") if axis is not None else "",
+                          sensitivity_V_per_m_s2=r.positive(f"{p}.sensitivity_V_per_m_s2")
+                          if r.has(f"{p}.sensitivity_V_per_m_s2") else math.nan,
+                          channel=r.integer(f"{p}.channel"), unit=_gage_unit(r, p)))
+    forces = _read_forces(r, 0)
+    channels = sorted([g.channel for g in gages] + [f.channel for f in forces])
+    if not channels:
+        r.fail("gages", "a rig needs at least one [[gages]] or [[forces]] channel")
+    if channels != list(range(len(channels))) or len(channels) > MAX_CHANNELS:
+        r.fail("gages", f"channels {channels} are not 0..{len(channels) - 1} without holes or "
+               f"repeats (at most {MAX_CHANNELS})")
+    rig = Rig(name=r.text("name"), medium=medium,
+              water_density_kg_m3=r.positive("water.density_kg_m3", default=1025.0), daq=daq,
+              rudder=None, stock=None, damping={}, hull_modes=(), impact=None,
+              gages=tuple(sorted(gages, key=lambda g: g.number)), source=r.source, text=text,
+              forces=forces)
+    r.refuse_unknown_keys()
+    return rig
+
+
+def _gage_unit(r: _Reader, p: str) -> str:
+    unit = r.text(f"{p}.unit", default="m/s^2")
+    if unit not in GAGE_UNITS:
+        r.fail(f"{p}.unit", f"{unit!r} is not an acceleration unit ({', '.join(GAGE_UNITS)})")
+    return unit
+
+
+def _read_forces(r: _Reader, first_channel: int) -> tuple[ForceChannel, ...]:
+    """``[[forces]]``: name, channel (from ``first_channel`` up when the gages come first: a
+    structural rig's gages hold 0..15), unit (N, kN, lbf; default N), location_m (optional)."""
+    forces: list[ForceChannel] = []
+    for i, _ in enumerate(r.get("forces", default=[])):
+        p = f"forces[{i}]"
+        unit = r.text(f"{p}.unit", default="N")
+        if unit not in FORCE_UNITS:
+            r.fail(f"{p}.unit", f"{unit!r} is not a force unit ({', '.join(FORCE_UNITS)})")
+        f = ForceChannel(name=r.text(f"{p}.name"), channel=r.integer(f"{p}.channel"), unit=unit,
+                         location_m=r.vector(f"{p}.location_m") if r.has(f"{p}.location_m")
+                         else None)
+        if first_channel and f.channel != first_channel + i:
+            r.fail(f"{p}.channel", f"{f.channel}: force channels follow the gages "
+                   f"({first_channel + i} expected)")
+        if not f.name.strip() or any(f.name == o.name for o in forces):
+            r.fail(f"{p}.name", f"{f.name!r} is empty or repeated")
+        forces.append(f)
+    return tuple(forces)
 
 
 def _read_daq(r: _Reader) -> Daq:
@@ -427,7 +617,7 @@ def _read_gages(r: _Reader, rudder: Rudder, stock: Stock) -> tuple[Gage, ...]:
         gage = Gage(number=number, body=body, position_m=r.vector(f"{p}.position_m"),
                     axis=r.axis(f"{p}.axis"),
                     sensitivity_V_per_m_s2=r.positive(f"{p}.sensitivity_V_per_m_s2"),
-                    channel=channel)
+                    channel=channel, unit=_gage_unit(r, p))
         z = gage.position_m[2]
         top, bottom = rudder.attach_z_m + stock.bending_length_m, rudder.attach_z_m
         if body == "stock" and not bottom - ALIGN_TOL_M <= z <= top + ALIGN_TOL_M:
@@ -461,6 +651,7 @@ class _Reader:
         self.doc = doc
         self.source = source
         self.renames = renames or {}
+        self.asked: set[str] = set()  # every path read, list indices as [] (the valid keys)
 
     def fail(self, field: str, why: str) -> None:
         for model, file in self.renames.items():  # a stern plane's file names its own fields
@@ -468,6 +659,7 @@ class _Reader:
         raise RigError(f"{self.source}: {field}: {why}")
 
     def get(self, path: str, default: Any = _MISSING) -> Any:
+        self.asked.add(_generic(path))
         node: Any = self.doc
         for part in path.replace("]", "").replace("[", ".").split("."):
             if isinstance(node, list) and part.isdigit() and int(part) < len(node):
@@ -477,7 +669,9 @@ class _Reader:
             else:
                 if default is not self._MISSING:
                     return default
-                self.fail(path, "missing")
+                have = list(node) if isinstance(node, dict) else []
+                near = difflib.get_close_matches(part, have, n=1, cutoff=0.6)
+                self.fail(path, f"missing (the file has {near[0]!r}: misspelt?)" if near else "missing")
         return node
 
     def has(self, path: str) -> bool:
@@ -490,10 +684,21 @@ class _Reader:
         return v
 
     def number(self, path: str, default: Any = _MISSING) -> float:
+        return self._plausible(path, self._finite(path, default))
+
+    def _finite(self, path: str, default: Any) -> float:
         v = self.get(path, default)
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             self.fail(path, f"expected a finite number, got {v!r}")
         return float(v)
+
+    def _plausible(self, path: str, v: float) -> float:
+        """``v``, or a failure when it lies outside :data:`PLAUSIBLE`'s span for ``path``."""
+        span = PLAUSIBLE.get(_generic(path))
+        if span is not None and not span.lo <= v <= span.hi:
+            self.fail(path, f"{v:g} {span.unit} is implausible: expected {span.lo:g} to "
+                      f"{span.hi:g} {span.unit} ({span.why})")
+        return v
 
     def integer(self, path: str) -> int:
         v = self.get(path)
@@ -502,16 +707,16 @@ class _Reader:
         return v
 
     def positive(self, path: str, default: Any = _MISSING) -> float:
-        v = self.number(path, default)
+        v = self._finite(path, default)
         if v <= 0:
             self.fail(path, f"must be positive, got {v}")
-        return v
+        return self._plausible(path, v)
 
     def nonnegative(self, path: str, default: Any = _MISSING) -> float:
-        v = self.number(path, default)
+        v = self._finite(path, default)
         if v < 0:
             self.fail(path, f"must not be negative, got {v}")
-        return v
+        return self._plausible(path, v)
 
     def vector(self, path: str) -> tuple[float, float, float]:
         v = self.get(path)
@@ -519,6 +724,9 @@ class _Reader:
             isinstance(c, int | float) and not isinstance(c, bool) for c in v)
         if not ok:
             self.fail(path, f"expected [x, y, z] in metres, got {v!r}")
+        if not all(abs(c) <= MAX_COORDINATE_M for c in v):
+            self.fail(path, f"{v!r} is implausible: every coordinate must lie within "
+                      f"{MAX_COORDINATE_M:g} m of the centre of mass")
         return (float(v[0]), float(v[1]), float(v[2]))
 
     def axis(self, path: str, default: Any = _MISSING) -> str:
@@ -526,3 +734,34 @@ class _Reader:
         if v not in AXES:
             self.fail(path, f"unknown axis {v!r} (expected one of {', '.join(AXES)})")
         return v
+
+    def refuse_unknown_keys(self) -> None:
+        """Fail on the first key of the file that the parser never read, naming the nearest
+        valid key at its level (a misspelt ``added_mass_factr`` is not silently the default)."""
+        for path in _key_paths(self.doc, ""):
+            if path in self.asked or any(a.startswith((path + ".", path + "[")) for a in self.asked):
+                continue
+            parent, _, key = path.rpartition(".")
+            level = [a[len(parent) + 1:] if parent else a for a in self.asked
+                     if not parent or a.startswith(parent + ".")]
+            valid = sorted({re.split(r"[.\[]", a)[0] for a in level})
+            near = difflib.get_close_matches(key, valid, n=1, cutoff=0.6)
+            hint = f"did you mean {near[0]!r}?" if near else f"valid keys here: {', '.join(valid)}"
+            self.fail(path.replace("[]", ""), f"unknown key {key!r}; {hint}")
+
+
+def _generic(path: str) -> str:
+    """``"hull.modes[0].name"`` -> ``"hull.modes[].name"``: a path with its list indices dropped."""
+    return re.sub(r"\[\d+\]", "[]", path)
+
+
+def _key_paths(node: Any, prefix: str) -> Iterator[str]:
+    """Every key of a parsed TOML document as a generic dotted path, parents before children."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            path = f"{prefix}.{k}" if prefix else str(k)
+            yield path
+            yield from _key_paths(v, path)
+    elif isinstance(node, list):
+        for item in node:
+            yield from _key_paths(item, f"{prefix}[]")

@@ -73,13 +73,16 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
     summary = trial_summary(hits)
     f_other = trial_summary(air[1])["f_hz"]["mean"] if air else None
     f_here = summary["f_hz"]["mean"]
-    vi = virtual_inertias(rig, f_other, f_here) if air and rig.medium == "water" else \
-        virtual_inertias(rig)
+    vi = None
+    if rig.structural:
+        vi = virtual_inertias(rig, f_other, f_here) if air and rig.medium == "water" else \
+            virtual_inertias(rig)
     surface = rig.surface
     return finite_json({
         "recording": str(path), "rig": rig.name, "medium": rig.medium,
         "surface": {"kind": surface.kind, "motions": {m: surface.label(m) for m in MODEL_MOTIONS}},
-        "geometry_m": gage_geometry(rig).__dict__,
+        "geometry_m": gage_geometry(rig).__dict__ if rig.structural else None,
+        "skipped": _skipped(rig, hits),
         "units": UNITS,
         "impacts": [{"index": h.index, "onset_s": h.event.onset_s, "accepted": h.accepted,
                      "reason": h.reason, "flags": {"double_hit": h.event.double_hit,
@@ -102,6 +105,18 @@ def _in_words(surface: Surface, analysis: dict) -> dict:
     return out
 
 
+def _skipped(rig: Rig, hits: list[HitResult]) -> list[dict]:
+    """The chain's steps skipped on any accepted hit, once each (the rig's layout decides them,
+    so every hit skips the same), as ``{"step", "reason"}``; the rig and Eq 18-21 likewise."""
+    seen: dict[str, str] = {}
+    for h in hits:
+        if h.analysis is not None:
+            seen |= {s.step: s.reason for s in h.analysis.skipped}
+    if not rig.structural:
+        seen["virtual inertias (Eq 18-21)"] = f"rig {rig.name!r} describes no structure"
+    return [{"step": k, "reason": v} for k, v in seen.items()]
+
+
 def format_summary(report: dict, units: str = "si") -> str:
     """A readable table: each hit, then per gage and motion the mean decrement and scatter."""
     kind = report.get("surface", {}).get("kind", "rudder").replace("_", " ")
@@ -110,12 +125,20 @@ def format_summary(report: dict, units: str = "si") -> str:
         a = imp["analysis"]
         if a:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  accepted   "
-                         f"f = {a['f_hz']:.3f} Hz  delta_modal = {a['damping']['delta_modal']:.4f}")
+                         f"f = {a['f_hz']:.3f} Hz  delta_modal = {_fmt(a['damping']['delta_modal'])}")
+            lines += [f"    {g}: f = {_fmt(d['f_hz'], '.4f')} +- {_fmt(d['f_se_hz'], '.2g')} Hz, "
+                      f"delta = {_fmt(d['delta'])} +- {_fmt(d['delta_se'], '.2g')}, zeta = "
+                      f"{_fmt(d['zeta'], '.4%')} +- {_fmt(d['zeta_se'], '.2%')}"
+                      for g, d in a["gages"].items()]
         else:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
                          f"{imp['reason']}")
     lines += summary_table(report["summary"], units)
+    for s in report.get("skipped", []):
+        lines.append(f"skipped: {s['step']}: {s['reason']}")
     vi = report["virtual_inertias"]
+    if vi is None:
+        return "\n".join(lines)
     surface = Surface(kind=report.get("surface", {}).get("kind", "rudder"))
     conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
     mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
@@ -131,6 +154,11 @@ def format_summary(report: dict, units: str = "si") -> str:
                      f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
                      f" {vi['eq18_vs_eq19_pct']:+.1f} % against Eq 19")
     return "\n".join(lines)
+
+
+def _fmt(v: float | None, spec: str = ".4f") -> str:
+    """A report number as text; ``None`` (not measured) as ``-``."""
+    return "-" if v is None else format(v, spec)
 
 
 def summary_table(s: dict, units: str = "si") -> list[str]:

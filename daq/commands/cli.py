@@ -330,11 +330,23 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".mcap")
-    if out.exists() and not args.overwrite:
-        raise FileExistsError(f"{out} exists; --overwrite replaces it")
-    options: dict = {"rig": load_rig(args.rig), "channels": parse_channel_map(args.channels)}
+    fmt = args.format or src.suffix.lower().lstrip(".")
+    rig_out = None if args.rig else out.with_name(out.stem + ".rig.toml")
+    for path in filter(None, (out, rig_out)):
+        if path.exists() and not args.overwrite:
+            raise FileExistsError(f"{path} exists; --overwrite replaces it")
+    options: dict = {"channels": parse_channel_map(args.channels), "fs_hz": args.fs,
+                     "force_channel": args.force_channel, "allow_gaps": args.allow_gaps}
+    if args.rig:
+        options["rig"] = load_rig(args.rig)
+    else:
+        options["rig"], options["channels"] = _channels_only_rig(args, src, fmt, rig_out)
     if args.medium:
         options["medium"] = args.medium
+    if args.time_unit:
+        if fmt != "csv":
+            raise ValueError(f"--time-unit is for a CSV file, not {src}")
+        options["time_unit"] = args.time_unit
     from .progress import progress_bar
 
     device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
@@ -351,7 +363,30 @@ def cmd_import(args: argparse.Namespace) -> int:
           f"({imp.get('missing_samples', 0)} samples missing)")
     print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
           f"requantised to 24 bits; largest error {worst:.3g} m/s^2")
+    if rig_out is not None:
+        rig_out.write_text(options["rig"].text)
+        print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
+              f"ramdaq analyze {out} gives each gage's frequency and decrement")
     return EXIT_OK
+
+
+def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
+                       rig_out: Path) -> tuple[object, dict[str, int]]:
+    """Without ``--rig``: a channels-only rig for the file's channels (``--channels`` names
+    them, else every one), and the source -> gage map. Needs ``--fs`` and ``--units``."""
+    from ...analysis.model.rig import parse_rig
+    from ...drivers.files.minimal_rig import minimal_rig, source_channel_names
+
+    if args.fs is None or args.units is None:
+        raise ValueError("without --rig, give --fs HZ and --units g|m/s^2: they make the "
+                         "channels-only rig the record is imported with")
+    if args.channels:
+        raise ValueError("without --rig, every channel is imported (--force-channel names the "
+                         "force); --channels maps channels onto a rig's gages")
+    names = source_channel_names(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit)
+    made = minimal_rig(names, name=src.stem, fs_hz=args.fs, units=args.units,
+                       force_channel=args.force_channel, medium=args.medium or "air")
+    return parse_rig(made.text, source=str(rig_out)), made.channels
 
 
 def cmd_export_uff(args: argparse.Namespace) -> int:
@@ -374,6 +409,9 @@ def cmd_rig(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
     print(f"rig {rig.name} ({args.rig}): {rig.surface.title}, {len(rig.gages)} gages, "
           f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
+    if not rig.structural:
+        print("channels only (no rudder, stock or hull): no modes to compute")
+        return EXIT_OK
     for medium in ("air", "water"):
         if medium not in rig.damping:
             continue
@@ -573,12 +611,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
     m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
-    m.add_argument("--rig", required=True, help="rig file (TOML) of the trial")
+    m.add_argument("--rig", help="rig file (TOML) of the trial; without it, --fs and --units make "
+                   "a channels-only rig, written beside the output as OUT.rig.toml")
+    m.add_argument("--units", choices=("g", "m/s^2"), help="without --rig: the unit of the "
+                   "acceleration channels whose file states none")
     m.add_argument("--out", help="output recording (default FILE.mcap)")
     m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
     m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
+    m.add_argument("--fs", type=float, help="the file's sample rate, Hz, when it differs from the "
+                   "rig's (the file's own rate must agree with it)")
+    m.add_argument("--time-unit", choices=("s", "ms", "us"), help="CSV: the time column's unit, "
+                   "when its header does not say it (time_s, 't [ms]', 'time (us)')")
+    m.add_argument("--force-channel", help="the source channel that is the force (a load cell or "
+                   "instrumented hammer, in N, kN or lbf)")
+    m.add_argument("--allow-gaps", action="store_true", help="import a missing value (empty, NaN) "
+                   "as a gap in the recording instead of refusing the file")
     m.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     m.set_defaults(func=cmd_import)
 

@@ -35,8 +35,9 @@ VERDICT_TEXT = {"ok": "usable", "dead": "dead channel", "clipped": "clipped",
 def impact_figures(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> dict[str, Figure]:
     """The plots of one impact by kind; ``x`` (n_gages, n) is the decay analysed (m/s^2) from
     ``a.decay_start_s``, rows in ``a.gage_numbers`` order."""
-    figs = {"decay": decay_figure(a, x, fs_hz), "spectrum": spectrum_figure(a, x, fs_hz, rig),
-            "modeshape": modeshape_figure(a, rig)}
+    figs = {"decay": decay_figure(a, x, fs_hz), "spectrum": spectrum_figure(a, x, fs_hz, rig)}
+    if rig.structural:  # a channels-only rig has no gage positions to draw the shape on
+        figs["modeshape"] = modeshape_figure(a, rig)
     if a.stock_curves:
         figs["stock"] = stock_figure(a, rig)
     return figs

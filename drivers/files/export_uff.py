@@ -84,6 +84,7 @@ def export_uff(path: str | PathLike, analysis_hits: Sequence, rig: Rig, *, sourc
     """
     import pyuff
 
+    rig.require_structure("export-uff (the gages' positions and directions)")
     path = Path(path)
     stamp = time.strftime("%d-%b-%y %H:%M:%S").upper()
     id2 = f"ramdaq rig {rig.name} in {rig.medium}"[:80]

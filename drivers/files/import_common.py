@@ -21,10 +21,13 @@ Counts and scale, per channel, in the file's own unit:
   far below any accelerometer's noise.
 
 ``StreamInfo.extra["import"]["channels"]["g01"]`` says which, with the step, the scale, the
-measured largest error and the guaranteed bound (m/s^2). A row with a missing value (NaN, empty)
-in any imported channel is not streamed: the blocks split there, a gap, never interpolated.
-Units: m/s^2 and g (9.80665 m/s^2); anything else is refused naming the channel. Every problem
-with a file is an :class:`ImportFormatError`: one line naming the file and what.
+measured largest error and the guaranteed bound (m/s^2). A missing value (NaN, empty) is an
+error naming where it is, unless ``allow_gaps``: then its row is not streamed, the blocks split
+there, a gap the recording keeps, never interpolated. Units: m/s^2 and g (9.80665 m/s^2) for a
+gage; N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in the stream by its rig
+name, unit ``"N"``, gage 0); anything else is refused naming the channel. The file's sample
+rate must be the rig's unless ``fs_hz`` states it. Every problem with a file is an
+:class:`ImportFormatError`: one line naming the file and what.
 """
 
 from __future__ import annotations
@@ -38,14 +41,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ...analysis.model.rig import Rig, load_rig
+from ...analysis.model.rig import FORCE_UNITS, Rig, load_rig
 from ..base import Device
 from ..block import Block, StreamInfo, sample_time_ns
 from ..errors import DeviceError, DeviceNotFound
 
 __all__ = ["G0", "FULL_SCALE_COUNTS", "STEP_TOLERANCE", "ImportFormatError", "SourceTable",
            "Quantisation", "FileImportDevice", "gage_of_name", "parse_channel_map",
-           "map_channels", "unit_factor", "quantise", "detect_step", "snap_rate"]
+           "map_channels", "unit_factor", "force_unit_factor", "quantise", "detect_step",
+           "snap_rate", "Pick", "RATE_TOLERANCE"]
 
 G0 = 9.80665
 """Standard gravity, m/s^2 per g."""
@@ -54,6 +58,9 @@ FULL_SCALE_COUNTS = 2**23 - 1
 STEP_TOLERANCE = 0.01
 """Largest distance of a value from its step grid, in steps, for the channel to count as
 quantised."""
+RATE_TOLERANCE = 1e-4
+"""Largest relative difference between a file's sample rate and its rig's that is the same rate:
+100 ppm, twice a crystal clock's tolerance and far below any rate set in a different number."""
 _INT32_MAX = 2**31 - 1
 _STEP_SAMPLE = 200_000  # values searched for the step (all values are checked against it)
 _TINY, _HUGE = 1e-290, 1e290  # m/s^2: a channel's peak beyond these is refused, not scaled
@@ -100,8 +107,24 @@ def parse_channel_map(text: str | None) -> dict[str, int] | None:
     return out
 
 
+@dataclass(frozen=True)
+class Pick:
+    """One source channel to import: its index in the file, the gage it is (0 for a force
+    channel), its name in the stream (``g01``, or the rig's force channel name) and its rig
+    DAQ channel."""
+
+    index: int
+    gage: int
+    name: str
+    channel: int
+
+    @property
+    def is_force(self) -> bool:
+        return self.gage == 0
+
+
 def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
-                 source: str) -> list[tuple[int, int]]:
+                 source: str, force_channel: str | None = None) -> list[Pick]:
     """Pick the source channels to import and their gages, in the rig's channel order.
 
     Parameters
@@ -115,15 +138,43 @@ def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
         must be named like a gage (``g01``, ``gage 1``, ``1``).
     source : str
         The file, for messages.
+    force_channel : str, optional
+        The source channel that is the rig's (first) force channel; by default a source channel
+        named like one of the rig's ``[[forces]]`` is that force channel.
 
     Returns
     -------
-    list of (int, int)
-        ``(index into names, gage number)``, sorted by the gage's rig channel.
+    list of Pick
+        Sorted by rig channel.
     """
+    forces = _pick_forces(names, rig, force_channel, source)
+    taken = {p.index for p in forces}
+    names = [n if i not in taken else "" for i, n in enumerate(names)]  # "" is no gage name
+    return sorted(forces + [Pick(i, g, f"g{g:02d}", rig.gage(g).channel)
+                            for i, g in _pick_gages(names, rig, channels, source, bool(forces))],
+                  key=lambda p: p.channel)
+
+
+def _pick_forces(names: list[str], rig: Rig, force_channel: str | None, source: str) -> list[Pick]:
+    """The source channels that are the rig's force channels (see :func:`map_channels`)."""
+    if force_channel is not None:
+        if force_channel not in names:
+            raise ImportFormatError(f"{source}: force channel {force_channel!r} is not in the file "
+                                    f"(it has {', '.join(repr(n) for n in names[:20])})")
+        if not rig.forces:
+            raise ImportFormatError(f"{source}: force channel {force_channel!r} given, but rig "
+                                    f"{rig.name!r} has no [[forces]] channel")
+        f = rig.forces[0]
+        return [Pick(names.index(force_channel), 0, f.name, f.channel)]
+    return [Pick(names.index(f.name), 0, f.name, f.channel) for f in rig.forces if f.name in names]
+
+
+def _pick_gages(names: list[str], rig: Rig, channels: Mapping[str, int] | None, source: str,
+                have_force: bool) -> list[tuple[int, int]]:
+    """``(index into names, gage number)`` of the gage channels; ``""`` names are taken."""
     known = {g.number: g.channel for g in rig.gages}
     if channels is None:
-        pairs = [(i, n, gage_of_name(n)) for i, n in enumerate(names)]
+        pairs = [(i, n, gage_of_name(n)) for i, n in enumerate(names) if n]
     else:
         index = {n: i for i, n in enumerate(names)}
         missing = [k for k in channels if k not in index]
@@ -144,9 +195,9 @@ def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
             raise ImportFormatError(f"{source}: channels {picked[gage][1]!r} and {n!r} are "
                                     f"both gage {gage}")
         picked[gage] = (i, n)
-    if not picked:
+    if not picked and not have_force:
         raise ImportFormatError(f"{source}: no channels to import")
-    return sorted(((i, g) for g, (i, _) in picked.items()), key=lambda p: known[p[1]])
+    return [(i, g) for g, (i, _) in picked.items()]
 
 
 _MS2 = {"m/s^2", "m/s2", "m/s/s", "ms^-2", "m*s^-2", "m.s^-2", "ms-2", "m/sec^2", "m/sec2"}
@@ -169,7 +220,29 @@ def unit_factor(unit: str | None, channel: str, source: str) -> float:
     if u in _GEE:
         return G0
     raise ImportFormatError(f"{source}: channel {channel!r} is in {unit.strip()!r}; only m/s^2 "
-                            f"and g are accepted")
+                            f"and g are accepted for an acceleration (a force channel in N, kN or "
+                            f"lbf is named with --force-channel)")
+
+
+def _stated(unit: str | None) -> bool:
+    return unit is not None and bool(unit.strip()) and unit.strip().upper() != "NONE"
+
+
+def force_unit_factor(unit: str | None, rig_unit: str, channel: str, source: str) -> float:
+    """N per unit of a force channel: the file's ``unit`` (N, kN, lbf), or the rig's
+    ``rig_unit`` when the file states none.
+
+    Raises
+    ------
+    ImportFormatError
+        Any other unit, naming the channel.
+    """
+    u = unit.strip() if _stated(unit) else rig_unit
+    for name, factor in FORCE_UNITS.items():
+        if u.lower() == name.lower():
+            return factor
+    raise ImportFormatError(f"{source}: force channel {channel!r} is in {u!r}; expected "
+                            f"{', '.join(FORCE_UNITS)}")
 
 
 # -- counts and scale ----------------------------------------------------------------------------
@@ -334,6 +407,8 @@ class SourceTable:
         Format-specific facts for ``StreamInfo.extra["import"]`` (JSON-serialisable).
     close : callable, optional
         Releases the file once every channel has been read.
+    where : callable, optional
+        ``where(row)`` -> where that row is in the file (``"line 12"``), for messages.
     """
 
     names: list[str]
@@ -345,6 +420,7 @@ class SourceTable:
     fmt: str
     notes: dict = field(default_factory=dict)
     close: Callable[[], None] | None = None
+    where: Callable[[int], str] | None = None
 
 
 class FileImportDevice(Device):
@@ -362,6 +438,15 @@ class FileImportDevice(Device):
         Override the rig's medium ("air" or "water").
     block_s : float
         Longest block, s.
+    fs_hz : float, optional
+        The file's sample rate, Hz, as the user states it. Without it the file's own rate must
+        be the rig's ``daq.sample_rate_hz`` (within :data:`RATE_TOLERANCE`); with it, the
+        file's rate must be this one (a CSV's rows are placed on its grid).
+    force_channel : str, optional
+        The source channel that is the rig's force channel (:func:`map_channels`).
+    allow_gaps : bool
+        A missing value (NaN, an empty cell) drops its row, a gap in the stream that the
+        recording keeps. Without it a missing value is an error naming where it is.
     """
 
     kind = "import"
@@ -369,8 +454,11 @@ class FileImportDevice(Device):
 
     def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
                  channels: Mapping[str, int] | None = None, medium: str | None = None,
-                 block_s: float = 0.1) -> None:
+                 block_s: float = 0.1, fs_hz: float | None = None,
+                 force_channel: str | None = None, allow_gaps: bool = False) -> None:
         super().__init__()
+        if fs_hz is not None and not (isinstance(fs_hz, int | float) and 0 < fs_hz < 1e9):
+            raise ValueError(f"{self.kind}: fs_hz ({fs_hz}) must be a positive rate in Hz")
         if not block_s > 0:
             raise ValueError(f"{self.kind}: block_s ({block_s}) must be positive")
         self.path = Path(path)
@@ -378,6 +466,9 @@ class FileImportDevice(Device):
         self.rig = rig.with_medium(medium) if medium else rig
         self.channels = dict(channels) if channels is not None else None
         self.block_s = float(block_s)
+        self.fs_hz = None if fs_hz is None else float(fs_hz)
+        self.force_channel = force_channel
+        self.allow_gaps = bool(allow_gaps)
         self._blocks: Iterator[Block] | None = None
 
     def _load(self) -> SourceTable:
@@ -403,27 +494,39 @@ class FileImportDevice(Device):
         if not (1e-3 <= fs <= 1e9 and abs(t0) < _MAX_TIME_S and (idx[-1] + 1) / fs < _MAX_TIME_S):
             raise ImportFormatError(f"{name}: sample rate {fs:g} Hz, start {t0:g} s or length "
                                     f"{int(idx[-1]) + 1} samples is out of range")
-        picks = map_channels(src.names, self.rig, self.channels, name)
+        self._check_rate(fs, name)
+        picks = map_channels(src.names, self.rig, self.channels, name, self.force_channel)
         counts = np.empty((len(picks), idx.size), np.int32)
         missing = np.zeros(idx.size, bool)
         scales, notes = [], {}
-        for row, (i, gage) in enumerate(picks):
+        for row, pick in enumerate(picks):
+            i = pick.index
             x = np.asarray(src.read(i), dtype=np.float64)
             what = f"{name}: channel {src.names[i]!r}"
             if x.shape != idx.shape:
                 raise ImportFormatError(f"{what} has {x.size} samples, expected {idx.size}")
             if np.any(np.isinf(x)):
                 raise ImportFormatError(f"{what} is infinite at sample {np.argmax(np.isinf(x))}")
+            if not self.allow_gaps and np.any(np.isnan(x)):
+                r = int(np.argmax(np.isnan(x)))
+                raise ImportFormatError(
+                    f"{name}: {src.where(r) if src.where else f'row {r}'}, column "
+                    f"{src.names[i]!r}: missing value (empty or NaN); allow_gaps= (--allow-gaps) "
+                    f"imports it as a gap in the recording")
+            factor = (force_unit_factor(src.units[i], self.rig.force(pick.name).unit,
+                                        src.names[i], name) if pick.is_force
+                      else unit_factor(src.units[i] if _stated(src.units[i])
+                                       else self.rig.gage(pick.gage).unit, src.names[i], name))
             try:
-                counts[row], q = quantise(x, unit_factor(src.units[i], src.names[i], name))
-            except ImportFormatError:
-                raise
+                counts[row], q = quantise(x, factor)
             except ValueError as err:
                 raise ImportFormatError(f"{what}: {err}") from None
             missing |= np.isnan(x)
             scales.append(q.scale)
-            notes[f"g{gage:02d}"] = {"source": src.names[i],
-                                     "unit": src.units[i] or "m/s^2 (assumed)", **q.to_json()}
+            assumed = self.rig.force(pick.name).unit if pick.is_force else \
+                self.rig.gage(pick.gage).unit
+            notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
+                                **q.to_json()}
         if missing.all():
             raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
         # samples count from the file's time zero, so times in ramdaq are the file's times
@@ -440,13 +543,32 @@ class FileImportDevice(Device):
                   "missing_samples": int(idx[-1] - idx[0] + 1 - self._idx.size),
                   "channels": notes}
         self._blocks = self._iter_blocks()
-        gages = tuple(g for _, g in picks)
         return StreamInfo(
             device=f"{self.kind}://{self.path}", fs_hz=fs,
-            channels=tuple(f"g{g:02d}" for g in gages), units=("m/s^2",) * len(gages),
-            gages=gages, rig_toml=self.rig.text,
+            channels=tuple(p.name for p in picks),
+            units=tuple("N" if p.is_force else "m/s^2" for p in picks),
+            gages=tuple(p.gage for p in picks), rig_toml=self.rig.text,
             extra={"medium": self.rig.medium, "rig_name": self.rig.name,
                    "block_samples": self._block_n, "import": report})
+
+    def _check_rate(self, fs: float, name: str) -> None:
+        """The file's rate ``fs`` (Hz) against ``fs_hz`` as stated, else against the rig's."""
+        if self.fs_hz is not None:
+            if abs(fs / self.fs_hz - 1) > RATE_TOLERANCE:
+                raise ImportFormatError(f"{name}: the file's sample rate is {fs:g} Hz, not the "
+                                        f"{self.fs_hz:g} Hz stated (fs_hz=, --fs)")
+            corner = self.rig.daq.anti_alias_hz
+            if corner >= fs / 2:  # NaN (a channels-only rig that names no filter) passes
+                raise ImportFormatError(f"{name}: at {fs:g} Hz rig {self.rig.name!r}'s "
+                                        f"anti-alias corner ({corner:g} Hz, daq.anti_alias_hz) "
+                                        f"lies above Nyquist: the rig cannot describe this "
+                                        f"record; use a rig of this rate")
+            return
+        rig_fs = self.rig.daq.sample_rate_hz
+        if abs(fs / rig_fs - 1) > RATE_TOLERANCE:
+            raise ImportFormatError(f"{name}: the file's sample rate {fs:g} Hz disagrees with rig "
+                                    f"{self.rig.name!r} (daq.sample_rate_hz = {rig_fs:g} Hz); if "
+                                    f"the file is right, state it with fs_hz= (--fs {fs:g})")
 
     def _iter_blocks(self) -> Iterator[Block]:
         seq = 0

@@ -15,11 +15,17 @@ UTF-8 text (a byte-order mark is allowed), lines ending in LF or CRLF:
   in the header is the delimiter); the **first column is time**, the others are channels named
   like gages (``g01``, ``gage 1``, ``1``) unless ``channels=`` maps them;
 * units either in the names, ``"g01 [m/s^2]"`` or ``"g01 (g)"``, or in a row right after the
-  header whose first cell is not a number (``s,m/s^2,g,...``). Time may be in s, ms or us;
-  channels in m/s^2 or g. A channel without a unit is taken as m/s^2 (and said so in
-  ``StreamInfo.extra``);
+  header whose first cell is not a number (``s,m/s^2,g,...``). Time is in s, ms or us, stated
+  there or by the column's name (``time_s``, ``t_ms``), else given as ``time_unit=``
+  (``--time-unit``): a time column that says no unit is an error, never taken as seconds.
+  Channels are in m/s^2 or g, a force channel in N, kN or lbf. A channel without a unit is taken
+  as m/s^2 (a force channel: its rig unit), and said so in ``StreamInfo.extra``;
 * one row per sample, decimal point, no thousands separators. An empty cell or ``nan`` is a
-  missing sample: that row is not streamed (a gap). Blank lines and ``#`` lines are skipped.
+  missing sample: an error naming its line and column, or with ``allow_gaps=``
+  (``--allow-gaps``) a gap: that row is not streamed. Blank lines and ``#`` lines are skipped.
+
+The rate fitted to the time column must be the rig's ``daq.sample_rate_hz`` unless ``fs_hz=``
+(``--fs``) states it.
 
 The times must lie on one sample grid: the rate is fitted to them and snapped to the value
 with the fewest digits that keeps every row within 0.1 sample of its grid point (times printed
@@ -53,6 +59,7 @@ _NUMBER = re.compile(r"^[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|inf
                      re.IGNORECASE)
 _NAME_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]$")
 _TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "\u00b5s": 1e-6}
+_TIME_NAME = re.compile(r"^(?:t|time|zeit)[\s_\-/]+(s|sec|ms|us|\u00b5s)$", re.IGNORECASE)
 
 
 class CsvImportDevice(FileImportDevice):
@@ -71,23 +78,35 @@ class CsvImportDevice(FileImportDevice):
     block_s : float
         Longest block, s.
     fs_hz : float, optional
-        Sample rate, Hz, instead of the one fitted to the time column (needed for one row).
+        Sample rate, Hz, instead of the one fitted to the time column (needed for one row);
+        the rows must lie on its grid. Needed when the rig's rate differs.
+    time_unit : {"s", "ms", "us"}, optional
+        The time column's unit when its header does not say it.
+    force_channel, allow_gaps
+        As :class:`FileImportDevice`.
     """
 
     kind = "csv"
 
     def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
                  channels: Mapping[str, int] | None = None, medium: str | None = None,
-                 block_s: float = 0.1, fs_hz: float | None = None) -> None:
-        super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s)
-        self.fs_hz = fs_hz
+                 block_s: float = 0.1, fs_hz: float | None = None, time_unit: str | None = None,
+                 force_channel: str | None = None, allow_gaps: bool = False) -> None:
+        super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s,
+                         fs_hz=fs_hz, force_channel=force_channel, allow_gaps=allow_gaps)
+        if time_unit is not None and time_unit not in _TIME_UNITS:
+            raise ValueError(f"csv: time_unit {time_unit!r} is not one of s, ms, us")
+        self.time_unit = time_unit
 
     def _load(self) -> SourceTable:
-        return read_csv_table(self.path.read_bytes(), str(self.path), fs_hz=self.fs_hz)
+        return read_csv_table(self.path.read_bytes(), str(self.path), fs_hz=self.fs_hz,
+                              time_unit=self.time_unit, rate_hint=self.rig.daq.sample_rate_hz)
 
 
-def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = None) -> SourceTable:
+def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = None,
+                   time_unit: str | None = None, rate_hint: float | None = None) -> SourceTable:
     """Parse CSV bytes into a :class:`SourceTable`; see the module docstring for the format.
+    ``rate_hint`` (Hz, the rig's) is the rate taken when the times allow it (:func:`sample_grid`).
 
     Raises
     ------
@@ -136,16 +155,37 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
     table, line_of_row = _parse_rows(text, lines.pos, lines.number, delim, names, name)
     if table.shape[0] == 0:
         raise ImportFormatError(f"{name}: no data rows after the header")
-    t_unit = (units[0] or "s").strip().lower()
-    if t_unit not in _TIME_UNITS:
-        raise ImportFormatError(f"{name}: time column {names[0]!r} is in {units[0]!r}; expected "
-                                f"s, ms or us")
-    t = table[:, 0] * _TIME_UNITS[t_unit]
-    index, fs, notes = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name)
+    t = table[:, 0] * _TIME_UNITS[_time_unit(names[0], units[0], time_unit, name)]
+    index, fs, notes = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name,
+                                   rate_hint=rate_hint)
     channel_units = units[1:]
     return SourceTable(names=names[1:], units=channel_units, sample_index=index, fs_hz=fs,
                        t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
-                       notes={"delimiter": delim, "time_column": names[0], **notes})
+                       notes={"delimiter": delim, "time_column": names[0], **notes},
+                       where=lambda r: f"line {line_of_row[r]}")
+
+
+def _time_unit(column: str, stated: str | None, given: str | None, name: str) -> str:
+    """The time column's unit (a key of ``_TIME_UNITS``): the one its header or units row
+    states (``"t [ms]"``, ``"time (us)"``), else its name's suffix (``time_s``, ``t_ms``), else
+    ``given`` (``--time-unit``). Stated and given must agree; neither is an error."""
+    if stated is None:
+        m = _TIME_NAME.match(column.strip())
+        stated = m.group(1) if m else None
+    if stated is not None:
+        unit = stated.strip().lower()
+        if unit not in _TIME_UNITS:
+            raise ImportFormatError(f"{name}: time column {column!r} is in {stated!r}; expected "
+                                    f"s, ms or us")
+        if given is not None and _TIME_UNITS[given] != _TIME_UNITS[unit]:
+            raise ImportFormatError(f"{name}: time column {column!r} says {stated!r}, but the time "
+                                    f"unit given is {given!r}")
+        return unit
+    if given is None:
+        raise ImportFormatError(f"{name}: time column {column!r} does not say its unit; name it "
+                                f"like time_s, 't [ms]', 'time (us)', or give time_unit= "
+                                f"(--time-unit s|ms|us)")
+    return given
 
 
 class _Lines:
@@ -237,7 +277,7 @@ def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
 
 
 def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
-                name: str) -> tuple[np.ndarray, float, dict]:
+                name: str, rate_hint: float | None = None) -> tuple[np.ndarray, float, dict]:
     """Place rows with times ``t`` (s) on one sample grid; refuse a non-uniform clock.
 
     Parameters
@@ -251,6 +291,9 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
         ``where(row)`` -> where that row is in the file (``"line 12"``), for messages.
     name : str
         The file, for messages.
+    rate_hint : float, optional
+        A rate, Hz, taken instead of the snapped one when it keeps every row as close to its
+        grid point (a short file's times allow many rates; the rig's is the one meant).
 
     Returns
     -------
@@ -295,11 +338,17 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
             if not 1e-3 <= fs_fit <= 1e9:
                 raise ImportFormatError(f"{name}: the time column gives a sample rate of "
                                         f"{fs_fit:g} Hz")
-            fs = snap_rate(fs_fit, 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0))
+            tol = 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0)
+            fs = rate_hint if rate_hint and abs(rate_hint / fs_fit - 1) <= tol else \
+                snap_rate(fs_fit, tol)
         else:
             fs = float(fs_hz)
             if not fs > 0:
                 raise ValueError(f"fs_hz ({fs_hz}) must be positive")
+            if dt.size and abs(fs * float(np.median(dt)) - 1) > 0.01:  # printed steps: ~1e-3
+                raise ImportFormatError(f"{name}: the time column's sample rate is "
+                                        f"{1 / float(np.median(dt)):.6g} Hz, not the {fs:g} Hz "
+                                        f"stated (fs_hz=, --fs)")
         pos = rel * fs
         if pos[-1] > 2**40:
             raise ImportFormatError(f"{name}: the time column spans {pos[-1]:.3g} samples")

@@ -58,14 +58,18 @@ class TdmsImportDevice(FileImportDevice):
         Longest block, s.
     group : str, optional
         Import only this group's channels.
+    fs_hz, force_channel, allow_gaps
+        As :class:`~ramdaq.drivers.files.import_common.FileImportDevice`.
     """
 
     kind = "tdms"
 
     def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
                  channels: Mapping[str, int] | None = None, medium: str | None = None,
-                 block_s: float = 0.1, group: str | None = None) -> None:
-        super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s)
+                 block_s: float = 0.1, group: str | None = None, fs_hz: float | None = None,
+                 force_channel: str | None = None, allow_gaps: bool = False) -> None:
+        super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s,
+                         fs_hz=fs_hz, force_channel=force_channel, allow_gaps=allow_gaps)
         self.group = group
 
     def _load(self) -> SourceTable:

@@ -11,7 +11,10 @@ time abscissa), real, evenly spaced (an uneven abscissa is accepted when its poi
 grid). A record's channel is its response node, which is the gage number unless ``channels=``
 maps it (``{"101": 1}``); a node measured in several directions is named ``"node:dir"``
 (``"5:+2"``) and must be mapped. The unit is the ordinate's axis-units label (m/s^2 or g; a
-missing label is taken as m/s^2 when the ordinate is an acceleration, spec data type 12).
+missing label is taken as m/s^2 when the ordinate is an acceleration, spec data type 12). A
+record of an excitation force (spec data type 13; N, kN or lbf) is the channel
+``"force NODE:DIR"`` (``"force 1:+2"``), imported as the rig's force channel with
+``force_channel=``.
 
 Records sharing a start time (``abscissa_min``) form one segment, which must hold every channel
 once with equal lengths; segments at different start times are streamed in time order with gaps
@@ -39,6 +42,7 @@ _INC_PRECISION = 6e-6  # relative: E13.5 keeps six significant digits
 _FUNC_TYPES = {0: "general", 1: "time response", 2: "auto spectrum", 3: "cross spectrum",
                4: "frequency response function", 5: "transmissibility", 6: "coherence",
                9: "power spectral density"}
+_FORCE_TYPE = 13  # ordinate spec data type "excitation force"
 _SPEC_TYPES = {8: "displacement", 11: "velocity", 13: "excitation force", 15: "pressure",
                2: "stress", 3: "strain", 5: "temperature"}
 
@@ -67,12 +71,12 @@ class UffImportDevice(FileImportDevice):
 
 
 class _Record:
-    __slots__ = ("number", "node", "direction", "unit", "start", "inc", "data")
+    __slots__ = ("number", "node", "direction", "unit", "start", "inc", "data", "force")
 
     def __init__(self, number: int, node: int, direction: int, unit: str | None, start: float,
-                 inc: float, data: np.ndarray) -> None:
+                 inc: float, data: np.ndarray, force: bool = False) -> None:
         self.number, self.node, self.direction, self.unit = number, node, direction, unit
-        self.start, self.inc, self.data = start, inc, data
+        self.start, self.inc, self.data, self.force = start, inc, data, force
 
 
 def read_uff_table(path: Path) -> SourceTable:
@@ -131,7 +135,7 @@ def _check_record(d: dict, number: int, path: Path) -> _Record:
     if ord_type not in (2, 4) or np.iscomplexobj(data):
         raise ImportFormatError(f"{where}: complex ordinates (data type {ord_type}); a time "
                                 f"record is real")
-    if y_type in _SPEC_TYPES:
+    if y_type in _SPEC_TYPES and y_type != _FORCE_TYPE:
         raise ImportFormatError(f"{where}: node {node} records {_SPEC_TYPES[y_type]}, not "
                                 f"acceleration")
     if data.ndim != 1 or data.size != n or n == 0:
@@ -150,7 +154,15 @@ def _check_record(d: dict, number: int, path: Path) -> _Record:
         raise ImportFormatError(f"{where}: abscissa start {start} s, increment {inc} s unusable")
     unit = None if label.upper() in ("", "NONE") else label
     return _Record(number, node, direction, unit, start, inc,
-                   np.asarray(data, dtype=np.float64))
+                   np.asarray(data, dtype=np.float64), force=y_type == _FORCE_TYPE)
+
+
+def _channel_name(r: _Record, dirs: dict[int, set[int]]) -> str:
+    """``"5"``, ``"5:+2"`` where node 5 has records in several directions, ``"force 5:+2"``
+    for a force record (not a gage name: mapped by ``force_channel=``)."""
+    if r.force:
+        return f"force {r.node}:{r.direction:+d}"
+    return str(r.node) if len(dirs[r.node]) == 1 else f"{r.node}:{r.direction:+d}"
 
 
 def _table(records: list[_Record], path: Path, n_sets: int) -> SourceTable:
@@ -165,7 +177,7 @@ def _table(records: list[_Record], path: Path, n_sets: int) -> SourceTable:
         dirs.setdefault(r.node, set()).add(r.direction)
 
     def name(r: _Record) -> str:
-        return str(r.node) if len(dirs[r.node]) == 1 else f"{r.node}:{r.direction:+d}"
+        return _channel_name(r, dirs)
 
     t0 = min(r.start for r in records)
     segments: dict[int, dict[str, _Record]] = {}
