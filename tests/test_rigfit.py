@@ -10,9 +10,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from ramdaq.analysis.gap.calibrate import Stop
 from ramdaq.analysis.gap.modal_level import compare, trial_modes
+from ramdaq.analysis.gap.rigfit import calibrate_to_modes, fit_params, get_value, set_value
 from ramdaq.analysis.gap.trialdata import prepare
-from ramdaq.analysis.model.rig import load_rig
+from ramdaq.analysis.model.rig import RigError, load_rig, parse_rig
 from ramdaq.drivers.sim import SimDevice
 
 IMPACTS = [3.0 + 5.0 * i for i in range(6)]
@@ -62,3 +64,65 @@ def test_a_mistuned_rig_pairs_by_shape_and_shows_its_error(albacore_air, nominal
     # the 24.5 Hz mode is the stock's bending: 30 % less EI takes it down ~16 % (k_s ~ EI)
     assert -0.2 < c.pairs[1].df_rel < -0.1
     assert abs(c.pairs[0].df_rel) < 0.01
+
+
+PERTURB = {"rudder.mass_kg": 1.2, "rudder.Iz_kg_m2": 0.8, "rudder.Ix_kg_m2": 1.15, "stock.I_m4": 0.82,
+           "stock.J_m4": 1.2, "hull.modes[0].frequency_hz": 0.85, "hull.modes[0].modal_mass_kg": 1.2}
+
+
+def perturbed(rig, factors):
+    for name, f in factors.items():
+        rig = set_value(rig, name, get_value(rig, name) * f)
+    return rig
+
+
+def test_calibration_to_modes_recovers_them_from_a_perturbed_start(albacore_air, nominal_modes):
+    """The trial is the nominal rig's; the fit starts from a rig with masses, inertias and
+    stiffnesses 15-20 % off and must come back to the trial's modes."""
+    _, tm = nominal_modes
+    start = perturbed(albacore_air, PERTURB)
+    mf = calibrate_to_modes(tm, start)
+    assert mf.stop is Stop.CONVERGED and not mf.at_bounds(), mf.solver_text()
+    assert "polished" in mf.message
+    assert mf.before.pairs[1].df_rel < -0.05         # the start was visibly off
+    truth = compare(tm, albacore_air)
+    assert len(mf.after.pairs) == 3
+    for p, t in zip(mf.after.pairs, truth.pairs, strict=True):
+        # the fitted model's modes where the data's are, as closely as the true model's (within
+        # 4 standard errors of the identification: a 1-in-16000 chance per mode)
+        assert abs(p.f_model_hz - p.f_id_hz) < 4 * p.f_id_se_hz, p
+        assert abs(p.f_model_hz - t.f_model_hz) < 4 * p.f_id_se_hz, (p, t)
+        assert abs(p.zeta_model - t.zeta_model) < 4 * p.zeta_id_se, (p, t)
+        assert p.mac > t.mac - 1e-4
+    assert mf.form == () and mf.form_text() == "none beyond the identification's uncertainty"
+    assert mf.cost_after < 1e-3 * mf.cost_before
+
+
+def test_what_no_constant_explains_is_model_form(albacore_air, nominal_modes):
+    """A stock twice too stiff, with its stiffness held: the 24.5 Hz mode cannot be reached
+    by the other constants, and the fit says where and how far off it is."""
+    _, tm = nominal_modes
+    crude = perturbed(albacore_air, {"stock.I_m4": 2.0})
+    mf = calibrate_to_modes(tm, crude, {"stock.I_m4": (1.0, 1.0), "stock.J_m4": (1.0, 1.0),
+                                        "rudder.Iz_kg_m2": (0.9, 1.1), "rudder.Ix_kg_m2": (0.9, 1.1)})
+    assert "stock.I_m4" not in [p.name for p in mf.params]
+    assert mf.form, mf.after.pairs
+    worst = max(mf.form, key=lambda e: abs(e.z_f))
+    assert worst.f_id_hz == pytest.approx(24.5, rel=0.01)
+    assert abs(worst.df_rel) > 0.01
+    assert "24.51 Hz: df" in mf.form_text()
+    assert "at their bounds" in mf.solver_text()
+
+
+def test_bounds_are_checked_and_read_from_the_rig_file(albacore_air):
+    with pytest.raises(RigError, match=r"--bound stock\.EI: not a constant the fit can move"):
+        fit_params(albacore_air, {"stock.EI": (0.5, 2.0)})
+    with pytest.raises(RigError, match=r"--bound stock\.I_m4: bounds must be"):
+        fit_params(albacore_air, {"stock.I_m4": (1.2, 2.0)})
+    text = albacore_air.text + '\n[uncertainty]\n"stock.I_m4" = [0.9, 1.1]\n"rudder.Ix_kg_m2" = [1, 1]\n'
+    rig = parse_rig(text, source="u.toml")
+    ps = {p.name: p for p in fit_params(rig)}
+    assert (ps["stock.I_m4"].lo, ps["stock.I_m4"].hi) == (0.9, 1.1)
+    assert "rudder.Ix_kg_m2" not in ps and "rudder.mass_kg" not in ps
+    with pytest.raises(RigError, match=r"u\.toml: uncertainty\.stock\.I_m4: bounds"):
+        fit_params(parse_rig(albacore_air.text + '\n[uncertainty]\n"stock.I_m4" = 2\n', source="u.toml"))
