@@ -396,3 +396,74 @@ def form_errors(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> tuple[FormErr
                              one_minus_mac_hull=float("nan"),
                              gages=tuple(tm.gage_numbers[g] for g in big), missing=True))
     return tuple(sorted(out, key=lambda e: e.f_id_hz))
+
+
+# -- the fitted rig file ---------------------------------------------------------------------------
+_TABLE = re.compile(r"^\s*(\[\[?)\s*([\w.]+)\s*\]\]?")
+
+
+def fitted_rig_text(mf: ModeFit, trial: str, date: str) -> str:
+    """The start rig's text with each fitted constant's value replaced (its line keeps its
+    place, the old value in a comment), and a header saying what was fitted, from which trial
+    ``trial`` and when (``date``). The result parses to the fitted values. Raises RigError
+    when a constant's table is not in the text as a ``[table]`` header (an inline table)."""
+    lines = mf.start.text.splitlines()
+    for p in mf.params:
+        lines = _set_line(lines, p, mf.start.source)
+    ids = ", ".join(f"{q.f_id_hz:.3f}" for q in mf.after.pairs)
+    head = [f"# Fitted by `ramdaq rig fit` on {date} from {trial} ({mf.after.trial.n_impacts} impacts; "
+            f"modes {ids} Hz), starting from {mf.start.source} (medium {mf.start.medium}).",
+            "# Fitted constants (x start value): " + ", ".join(
+                f"{p.name} x{p.factor:.4g}" for p in mf.params) + ".",
+            f"# Solver: {mf.solver_text()}.",
+            f"# Model form left: {mf.form_text()}.",
+            "# The rudder's mass is the scale of the others (modes fix masses and stiffnesses only "
+            "up to a common factor).", ""]
+    text = "\n".join(head + lines) + "\n"
+    _check_written(text, mf)
+    return text
+
+
+def _set_line(lines: list[str], p: FittedParam, source: str) -> list[str]:
+    """``lines`` with key ``p.name`` set to its fitted value in its table (added after the
+    table's header when the key was left at its default)."""
+    if (m := _HULL.match(p.name)) is not None:
+        table, index, key = "hull.modes", int(m[1]), m[2]
+    else:
+        table, _, key = p.name.rpartition(".")
+        index = 0
+    seen, inside, header = -1, False, None
+    for n, line in enumerate(lines):
+        t = _TABLE.match(line)
+        if t:
+            if inside:
+                break
+            if t[2] == table:
+                seen += 1
+                inside = seen == index
+                header = n if inside else header
+            continue
+        if inside and re.match(rf"^\s*{re.escape(key)}\s*=", line):
+            out = list(lines)
+            out[n] = _value_line(line[: line.index("=")].rstrip(), p)
+            return out
+    if header is None:
+        raise RigError(f"{source}: {p.name}: no [{table}] table header for it in the text "
+                       "(an inline table?); the fitted rig cannot be written in its place")
+    out = list(lines)
+    out.insert(header + 1, _value_line(key, p))
+    return out
+
+
+def _value_line(key: str, p: FittedParam) -> str:
+    return (f"{key} = {p.value:.9g}    # fitted: x{p.factor:.4g} of {p.start:.6g}"
+            + (" (at its bound)" if p.at_bound else ""))
+
+
+def _check_written(text: str, mf: ModeFit) -> None:
+    from ..model.rig import parse_rig
+    back = parse_rig(text, source=mf.start.source)
+    for p in mf.params:
+        v = get_value(back, p.name)
+        if not math.isclose(v, p.value, rel_tol=1e-8):
+            raise RigError(f"{mf.start.source}: {p.name}: written as {v}, fitted {p.value}")
