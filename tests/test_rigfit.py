@@ -4,6 +4,7 @@ and ``ramdaq rig fit`` writing the calibrated rig."""
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from dataclasses import replace
@@ -203,3 +204,50 @@ def test_rig_fit_refuses_bad_bounds_in_one_line(perturbed_trial, capsys):
     assert main(["rig", "fit", str(mcap), "--rig", str(start), "--bound", "mass=0.5:2"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("ramdaq rig: --bound mass: not a constant the fit can move") and "\n" not in err
+
+
+def test_gap_with_a_perturbed_rig_says_no_effect_and_model_form(perturbed_trial, capsys):
+    """A clean trial held against a rig whose masses, inertias and stiffnesses are each up to
+    20 % off the trial's own: the rig is calibrated to the modes first, and the effect search
+    finds nothing on what is left."""
+    tmp, _, truth, mcap = perturbed_trial
+    off = {("rudder", "mass_kg"): 0.85, ("rudder", "Iz_kg_m2"): 1.2, ("rudder", "Ix_kg_m2"): 0.82,
+           ("stock", "I_m4"): 1.18, ("stock", "J_m4"): 0.8, ("hull.modes", "frequency_hz"): 1.15,
+           ("hull.modes", "modal_mass_kg"): 0.8}
+    rig = tmp / "off20.toml"
+    rig.write_text(scaled_text(truth.text, off))
+    out = tmp / "gap20"
+    assert main(["gap", str(mcap), "--rig", str(rig), "--no-plots", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    verdict = next(line for line in text.splitlines() if line.startswith("verdict: "))
+    assert verdict.startswith("verdict: NO EFFECT; model form: "), verdict
+    doc = json.loads((out / "gap.json").read_text())
+    assert doc["verdict"] == "no gap beyond noise" and doc["effect"] is None
+    level = doc["model_level"]
+    assert level["fitted"] and level["stop"] == "converged"
+    assert len(level["modes"]) >= 2
+    for m in level["modes"]:
+        # the start rig's modes were visibly off, the fitted ones are the trial's (0.1 %: the
+        # fit's frequency floor, FORM_F)
+        assert abs(m["f_fitted_hz"] / m["f_id_hz"] - 1) < 1e-3
+    assert max(abs(m["f_start_hz"] / m["f_id_hz"] - 1) for m in level["modes"]) > 0.03
+
+
+def test_gap_with_a_crude_rig_states_its_form_error(perturbed_trial, capsys):
+    """A rig whose stock is three times too soft and whose hull mode is 1.8 times too high:
+    beyond the calibration's bounds. The diagnosis says so, and names no effect on a clean
+    trial."""
+    tmp, start, truth, mcap = perturbed_trial
+    crude = {("stock", "I_m4"): 0.3, ("stock", "J_m4"): 0.3, ("hull.modes", "frequency_hz"): 1.8}
+    rig = tmp / "crude.toml"
+    rig.write_text(scaled_text(truth.text, crude))
+    out = tmp / "gap_crude"
+    assert main(["gap", str(mcap), "--rig", str(rig), "--no-plots", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    verdict = next(line for line in text.splitlines() if line.startswith("verdict: "))
+    head = "verdict: NO EFFECT NAMED, THE GAP IS THE RIG MODEL'S FORM; model form: "
+    assert verdict.startswith(head), verdict
+    assert "Hz: df " in verdict and "at their bounds: " in verdict
+    doc = json.loads((out / "gap.json").read_text())
+    assert doc["effect"] is None
+    assert doc["model_level"]["form_errors"]

@@ -60,6 +60,7 @@ from .evidence import (
 )
 from .features import FeatureMap, feature_map
 from .forward import Forward
+from .rigfit import ModelLevel
 from .terms import Placement, Term
 from .trialdata import TrialData
 from .verdict import choose, closed_share, closure, detection_score, location
@@ -177,6 +178,23 @@ class Diagnosis:
     """The calibrated model's replicate residuals (n_rep, n_seg, n_g, n_s), m/s^2."""
     features_seconds: float = 0.0
     """What reading :attr:`features` cost, s (0 until it is read)."""
+    model_level: ModelLevel | None = None
+    """The rig calibrated to the trial's identified modes before this diagnosis, and the
+    model's form error it left (:func:`~ramdaq.analysis.gap.rigfit.model_level`); None when
+    the diagnosis started from the rig as given."""
+
+    @property
+    def headline(self) -> str:
+        """The verdict in one line: with a model level, "no effect; model form: ..." when no
+        gap stands beyond the noise, else the verdict and the model's form error beside it."""
+        if self.model_level is None:
+            return self.verdict
+        level = self.model_level
+        head = {"no gap beyond noise": "no effect",
+                "unexplained": ("no effect named, the gap is the rig model's form"
+                                if level.fit is not None and level.fit.form else "unexplained")
+                }.get(self.verdict, self.verdict)
+        return f"{head}; {level.statement()}"
 
     @functools.cached_property
     def features(self) -> FeatureMap | None:
@@ -196,6 +214,8 @@ class Diagnosis:
         fw = self.forward
         return {
             "verdict": self.verdict,
+            "headline": self.headline,
+            "model_level": self.model_level.to_json() if self.model_level else None,
             "detection_z": round(self.z_detect, 2) if np.isfinite(self.z_detect) else None,
             "effect": self.best.name if self.best else None,
             "best": self.best.to_json() if self.best else None,

@@ -31,7 +31,8 @@ import scipy.optimize
 
 from ..model.rig import Rig, RigError
 from .calibrate import Stop
-from .modal_level import ModalComparison, TrialModes, compare, model_modes_at_gages
+from .modal_level import ModalComparison, TrialModes, compare, model_modes_at_gages, trial_modes
+from .trialdata import TrialData
 
 FORM_F = 1e-3
 """Relative frequency difference a model is held to at best (0.1 %: the report quotes its
@@ -467,3 +468,62 @@ def _check_written(text: str, mf: ModeFit) -> None:
         v = get_value(back, p.name)
         if not math.isclose(v, p.value, rel_tol=1e-8):
             raise RigError(f"{mf.start.source}: {p.name}: written as {v}, fitted {p.value}")
+
+
+# -- the gap diagnosis's first step --------------------------------------------------------------
+@dataclass(frozen=True)
+class ModelLevel:
+    """The model level of a diagnosis: the trial's modes (None when they could not be
+    identified), the rig calibrated to them (None when nothing could be fitted) and ``note``,
+    why not, when either is missing."""
+
+    modes: TrialModes | None
+    fit: ModeFit | None
+    note: str = ""
+
+    def statement(self) -> str:
+        """``model form: ...`` -- what the fitted rig still misses, or why it was not fitted."""
+        if self.fit is None:
+            return f"model form: not assessed ({self.note})"
+        s = f"model form: {self.fit.form_text()}"
+        if self.fit.stop is not Stop.CONVERGED or self.fit.at_bounds():
+            s += f" (calibration to the modes {self.fit.solver_text()})"
+        return s
+
+    def to_json(self) -> dict:
+        if self.fit is None:
+            return {"fitted": False, "note": self.note,
+                    "modes_hz": [] if self.modes is None else np.round(self.modes.f_hz, 4).tolist()}
+        f = self.fit
+        return {
+            "fitted": True, "statement": self.statement(), "stop": f.stop.value, "message": f.message,
+            "constants": {p.name: {"start": p.start, "value": p.value, "factor": round(p.factor, 5),
+                                   "bounds": [p.lo, p.hi], "at_bound": p.at_bound} for p in f.params},
+            "modes": [{"f_id_hz": p.f_id_hz, "f_id_se_hz": p.f_id_se_hz, "f_start_hz": b.f_model_hz,
+                       "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
+                       "mac_start": b.mac, "mac_fitted": p.mac}
+                      for p, b in _matched(f.after, f.before)],
+            "form_errors": [{"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
+                             "gages": list(e.gages), "missing_in_model": e.missing} for e in f.form],
+        }
+
+
+def _matched(after: ModalComparison, before: ModalComparison) -> list:
+    b = {p.i_id: p for p in before.pairs}
+    return [(p, b[p.i_id]) for p in after.pairs if p.i_id in b]
+
+
+def model_level(td: TrialData, bounds: dict[str, tuple[float, float]] | None = None) -> ModelLevel:
+    """Identify ``td``'s modes and calibrate its rig to them. Never raises on what the data or
+    the rig may be (no decay, no mode recurring, no mode pairing, a model that cannot be
+    built): says why instead."""
+    try:
+        tm = trial_modes(td)
+    except (ValueError, np.linalg.LinAlgError) as err:
+        return ModelLevel(None, None, f"modes not identified: {err}")
+    if tm.n_modes == 0:
+        return ModelLevel(tm, None, "no mode recurs across the impacts")
+    try:
+        return ModelLevel(tm, calibrate_to_modes(tm, td.rig, bounds))
+    except (ValueError, np.linalg.LinAlgError) as err:
+        return ModelLevel(tm, None, str(err))
