@@ -303,7 +303,7 @@ def cmd_gap(args: argparse.Namespace) -> int:
         seeds = "dev" if args.dev else "check" if args.check else args.seeds or "benchmark"
         out = Path(args.out or "gap_benchmark")
         return run_benchmark(out, per_class=args.per_class, seeds=seeds, jobs=args.jobs,
-                             rescore=args.rescore, thresholds=args.thresholds,
+                             rescore=args.rescore, thresholds=args.thresholds, perturb=args.perturb,
                              progress=lambda m: print(m, flush=True))
     from .gap import run_gap, summary_lines, write_report
 
@@ -573,6 +573,10 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--dev", action="store_true", help="benchmark: --seeds dev (tunes the thresholds)")
     gp.add_argument("--check", action="store_true", help="benchmark: --seeds check")
     gp.add_argument("--jobs", type=int, default=2, help="benchmark: worker processes (default 2)")
+    gp.add_argument("--perturb", type=float, default=0.0, metavar="FRACTION",
+                    help="benchmark: hand the diagnosis rigs whose masses, inertias and stiffnesses "
+                         "are off by up to this fraction (0.25: +-25 %%), calibrated to each trial's "
+                         "modes first")
     gp.add_argument("--rescore", action="store_true",
                     help="benchmark: score the results stored in --out again instead of running")
     gp.add_argument("--thresholds", type=Path,
