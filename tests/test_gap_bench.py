@@ -155,3 +155,19 @@ def test_no_effect_with_a_perturbed_rig_scores_as_no_effect(tmp_path):
     s = score([r], {}, 8.0, 10.0, 0.0)
     assert s["false_alarms"] == 0.0
     assert s["perturbed_none"]["no_effect"] == 1 and s["perturbed_none"]["n"] == 1
+
+
+def test_an_effect_only_where_the_model_form_misses_is_not_named():
+    """Scoring follows ramdaq gap: with a perturbed rig whose calibration to the modes still
+    misses gage 6, an effect acting at gage 6 alone is not told from that form error."""
+    from ramdaq.daq.commands.gap_bench import _decide
+
+    cand = {"name": "gage_alignment", "dbic": -100.0, "dbic_marginal": None, "closed_held": 0.9,
+            "closed_fit": 0.9, "location": {"gages": [6]}}
+    r = {"candidates": [cand], "zdetect": 20.0, "perturb": 0.25, "min_closure": 0.5}
+    assert _decide(r | {"form_gages": []}, 8.0, 10.0, 0.0) == "gage_alignment"
+    assert _decide(r | {"form_gages": [6, 13]}, 8.0, 10.0, 0.0) == "none"
+    assert _decide(r | {"form_gages": [13]}, 8.0, 10.0, 0.0) == "gage_alignment"
+    # and an effect closing less than the raised floor is not named either
+    low = r | {"candidates": [cand | {"closed_held": 0.3}], "form_gages": [13]}
+    assert _decide(low, 8.0, 10.0, 0.0) == "none"

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 import scipy.optimize
 
 from ..modal.identify import identify_modes
@@ -68,6 +69,8 @@ class TrialModes:
     n_impacts: int
     noise_std: np.ndarray
     gage_numbers: tuple[int, ...]
+    skipped: tuple[str, ...] = ()
+    """Impacts whose identification failed, and why (they are left out)."""
 
     @property
     def n_modes(self) -> int:
@@ -150,16 +153,23 @@ def trial_modes(td: TrialData, *, f_lo_hz: float = 0.5, min_share: float = 0.5) 
     the trial's low-pass corner. Raises ValueError when no impact leaves a decay to identify."""
     found = []          # per impact: (f, f_se, zeta, zeta_se, shapes (n_g, k))
     noise = []
+    skipped: list[str] = []
     for j in range(td.n_seg):
         y = _decay(td, j)
         if y is None:
             continue
-        mt = identify_modes(y, td.fs_hz, f_range_hz=(f_lo_hz, 0.9 * td.lowpass_hz), per_channel=False)
+        try:
+            mt = identify_modes(y, td.fs_hz, f_range_hz=(f_lo_hz, 0.9 * td.lowpass_hz),
+                                per_channel=False)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError, scipy.linalg.LinAlgError) as err:
+            skipped.append(f"impact {j + 1}: {type(err).__name__}: {err}")
+            continue
         noise.append(mt.noise_std)
         found.append((mt.frequency_hz, mt.frequency_se_hz, mt.zeta, mt.zeta_se,
                       np.nan_to_num(mt.complex_amplitude)))
     if not found:
-        raise ValueError("no impact leaves a decay of a second or more to identify modes on")
+        raise ValueError("no impact leaves a decay of a second or more to identify modes on"
+                         + (f" ({'; '.join(skipped)})" if skipped else ""))
     need = max(math.ceil(min_share * len(found)), min(2, len(found)))
     merged = sorted((_merge(found, members) for members in _clusters(found, need)),
                     key=lambda m: m[0])
@@ -171,7 +181,8 @@ def trial_modes(td: TrialData, *, f_lo_hz: float = 0.5, min_share: float = 0.5) 
         shapes=col(4).T if merged else np.empty((n_g, 0), complex),
         shape_se=col(5).T if merged else np.empty((n_g, 0)),
         n_seen=col(6).astype(int) if merged else np.empty(0, int), n_impacts=len(found),
-        noise_std=np.nanmedian(np.array(noise), axis=0), gage_numbers=td.gage_numbers)
+        noise_std=np.nanmedian(np.array(noise), axis=0), gage_numbers=td.gage_numbers,
+        skipped=tuple(skipped))
 
 
 def _mean_se(v: np.ndarray, se: np.ndarray) -> tuple[float, float]:

@@ -462,6 +462,8 @@ def _damped_step(A: np.ndarray, g: np.ndarray, lam: float, theta: np.ndarray, lo
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
         raise ValueError("array must not contain infs or NaNs")
     held = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
+    if np.all(held):           # every coordinate held on its bound: no step (LAPACK refuses 0 x 0)
+        return np.zeros_like(g), 0
     if np.any(held):
         u, free = np.zeros_like(g), ~held
         _, u_free, info = lapack.dposv(A[np.ix_(free, free)] + lam * np.eye(np.sum(free)),

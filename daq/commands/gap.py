@@ -121,6 +121,11 @@ def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settin
         say(level.statement())
     d = diagnose(td, settings, progress)
     d.model_level = level
+    if level is not None and d.best is not None and level.absorbs(d.best.location["gages"]):
+        d.notes.append(f"{d.best.name} at gages {', '.join(map(str, d.best.location['gages']))} would "
+                       "close the gap, but the rig calibrated to the trial's modes still misses them "
+                       "there: not separable from the model's form error, not named")
+        d.verdict, d.best = "unexplained", None
     return lt, td, d
 
 

@@ -159,7 +159,8 @@ def run_one(sc: dict, workdir: str) -> dict:
         "location": d.best.location if d.best else None,
         "band_edges_hz": d.map_fit.bands.edges_hz.tolist(),
         "seconds": t_diag, "seconds_generate": t_gen,
-    } | ({"headline": d.headline, "min_closure": _min_closure(d)} if perturb else {})
+    } | ({"headline": d.headline, "min_closure": _min_closure(d),
+          "form_gages": sorted(d.model_level.form_gages()) if d.model_level else []} if perturb else {})
 
 
 def _min_closure(d) -> float:
@@ -178,9 +179,18 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
 
     if "error" in r:
         return "none"
-    # a perturbed-rig trial whose model level left a form error asked more closure of an effect
+    # a perturbed-rig trial whose model level left a form error asks more closure of an effect
+    # and names none acting only where that form error is; a gap it names nothing for is the
+    # model's form: "no effect; model form" (ramdaq.daq.commands.gap)
     floor = max(min_closure, r.get("min_closure", 0.0))
-    return choose(r["candidates"], _z(r) > z_gap, bic_min, floor) or "none"
+    named = choose(r["candidates"], _z(r) > z_gap, bic_min, floor)
+    form = set(r.get("form_gages", []))
+    if form:
+        c = next((c for c in r["candidates"] if c["name"] == named), None)
+        if named == "unexplained" or (c is not None and c["location"]["gages"]
+                                      and set(c["location"]["gages"]) <= form):
+            return "none"
+    return named or "none"
 
 
 def _z(r: dict) -> float:
