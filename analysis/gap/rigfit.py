@@ -14,9 +14,13 @@ says how closely a model is expected to match at all (:data:`FORM_F`, :data:`FOR
 frequency, and without the floors the fit would trade every shape for the last digit of one
 frequency.
 
-Whatever the fit leaves beyond both is the model's form error (:class:`FormError`): per
-paired mode the frequency difference and 1 - MAC with the gages that carry it, and identified
-modes the model has no mode for.
+When the fit leaves nothing beyond the floors it is polished with the identification's errors
+alone as weights, so that a rig of the right form ends within the identification's uncertainty.
+
+Whatever the fit leaves beyond both is the model's form error (:class:`FormError`, judged by
+:func:`significant`): per paired mode the frequency difference and 1 - MAC with the gages that
+carry it, and identified modes the model has no mode for. :func:`model_level` is the gap
+diagnosis's first step (``ramdaq gap``): the effect search then runs against the calibrated rig.
 """
 
 from __future__ import annotations
