@@ -508,8 +508,11 @@ class ModelLevel:
         return s
 
     def form_gages(self) -> set[int]:
-        """The gages where the fitted rig still misses the trial's modes (empty: none)."""
-        return set() if self.fit is None else {g for e in self.fit.form for g in e.gages}
+        """The gages where the fitted rig still misses the shape or frequency of a mode it has
+        (empty: none). A mode the model lacks altogether is not counted: an extra mode or a
+        steady tone is what the effect search's structural and excitation effects add."""
+        return set() if self.fit is None else {g for e in self.fit.form if not e.missing
+                                               for g in e.gages}
 
     def absorbs(self, gages: list[int]) -> bool:
         """Whether an effect acting at ``gages`` (its location) is not separable from the
