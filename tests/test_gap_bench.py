@@ -125,3 +125,49 @@ def test_benchmark_command_takes_one_seed_set(tmp_path, capsys):
     # a re-score of results that were never stored names the file it looked for
     assert main(["gap", "benchmark", "--seeds", "holdout", "--rescore", "--out", str(tmp_path)]) == 1
     assert "holdout_results.json: no stored results" in capsys.readouterr().err
+
+
+def test_perturbed_rig_is_seeded_and_within_its_fraction():
+    from ramdaq.analysis.gap.rigfit import get_value
+    from ramdaq.analysis.model.rig import load_rig
+    from ramdaq.daq.commands.gap_bench import PERTURBED, perturbed_rig
+
+    rig = load_rig("albacore")
+    a, b = perturbed_rig(rig, 0.25, 7), perturbed_rig(rig, 0.25, 7)
+    names = list(PERTURBED) + ["hull.modes[0].frequency_hz", "hull.modes[0].modal_mass_kg"]
+    f = np.array([get_value(a, n) / get_value(rig, n) for n in names])
+    assert np.all(np.abs(f - 1) <= 0.25) and np.any(np.abs(f - 1) > 0.1)
+    assert [get_value(b, n) for n in names] == [get_value(a, n) for n in names]
+    assert get_value(perturbed_rig(rig, 0.25, 8), "stock.I_m4") != get_value(a, "stock.I_m4")
+    with pytest.raises(ValueError, match="--perturb 1.5"):
+        scenarios(1, "check", perturb=1.5)
+
+
+def test_no_effect_with_a_perturbed_rig_scores_as_no_effect(tmp_path):
+    """A no-effect trial handed a rig 25 % off: calibrated to the modes first, it must come out
+    "no effect; model form: ...", which the score counts as correct, not as a false alarm."""
+    from ramdaq.daq.commands.gap_bench import run_one
+
+    sc = next(s for s in scenarios(1, "check", ("none",), perturb=0.25))
+    r = run_one(sc, str(tmp_path))
+    assert "error" not in r, r.get("error")
+    assert r["headline"].startswith("no effect; model form: "), r["headline"]
+    s = score([r], {}, 8.0, 10.0, 0.0)
+    assert s["false_alarms"] == 0.0
+    assert s["perturbed_none"]["no_effect"] == 1 and s["perturbed_none"]["n"] == 1
+
+
+def test_an_effect_only_where_the_model_form_misses_is_not_named():
+    """Scoring follows ramdaq gap: with a perturbed rig whose calibration to the modes still
+    misses gage 6, an effect acting at gage 6 alone is not told from that form error."""
+    from ramdaq.daq.commands.gap_bench import _decide
+
+    cand = {"name": "gage_alignment", "dbic": -100.0, "dbic_marginal": None, "closed_held": 0.9,
+            "closed_fit": 0.9, "location": {"gages": [6]}}
+    r = {"candidates": [cand], "zdetect": 20.0, "perturb": 0.25, "min_closure": 0.5}
+    assert _decide(r | {"form_gages": []}, 8.0, 10.0, 0.0) == "gage_alignment"
+    assert _decide(r | {"form_gages": [6, 13]}, 8.0, 10.0, 0.0) == "none"
+    assert _decide(r | {"form_gages": [13]}, 8.0, 10.0, 0.0) == "gage_alignment"
+    # and an effect closing less than the raised floor is not named either
+    low = r | {"candidates": [cand | {"closed_held": 0.3}], "form_gages": [13]}
+    assert _decide(low, 8.0, 10.0, 0.0) == "none"

@@ -61,6 +61,7 @@ from .evidence import (
 from .features import FeatureMap, feature_map
 from .forward import Forward
 from .layers import Precedence, model_gages, precedence, unconfirmed
+from .rigfit import ModelLevel
 from .sensors import DataChecks
 from .terms import Placement, Term
 from .trialdata import TrialData
@@ -200,6 +201,24 @@ class Diagnosis:
             return []
         return unconfirmed(self.data.findings, self.data.looked, self.best.name)
 
+    model_level: ModelLevel | None = None
+    """The rig calibrated to the trial's identified modes before this diagnosis, and the
+    model's form error it left (:func:`~ramdaq.analysis.gap.rigfit.model_level`); None when
+    the diagnosis started from the rig as given."""
+
+    @property
+    def headline(self) -> str:
+        """The verdict in one line: with a model level, "no effect; model form: ..." when no
+        gap stands beyond the noise, else the verdict and the model's form error beside it."""
+        if self.model_level is None:
+            return self.verdict
+        level = self.model_level
+        head = {"no gap beyond noise": "no effect",
+                "unexplained": ("no effect named, the gap is the rig model's form"
+                                if level.fit is not None and level.fit.form else "unexplained")
+                }.get(self.verdict, self.verdict)
+        return f"{head}; {level.statement()}"
+
     @functools.cached_property
     def features(self) -> FeatureMap | None:
         """Where the calibrated model misses, in physical terms (:mod:`ramdaq.analysis.gap.features`),
@@ -218,6 +237,8 @@ class Diagnosis:
         fw = self.forward
         return {
             "verdict": self.verdict,
+            "headline": self.headline,
+            "model_level": self.model_level.to_json() if self.model_level else None,
             "detection_z": round(self.z_detect, 2) if np.isfinite(self.z_detect) else None,
             "effect": self.best.name if self.best else None,
             "best": self.best.to_json() if self.best else None,

@@ -4,7 +4,8 @@ Commands: ``trial`` (record, detect hits, analyse and show them live), ``replay`
 through the same pipeline), ``analyze`` (the trial report), ``record`` (a device into an MCAP
 file, with a live readout), ``info`` (what a recording holds), ``recover`` (a valid copy of a
 recording whose writer was killed or whose bytes were damaged), ``rig`` (a rig's modes in air
-and in water, and Eq 18 on them), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff``
+and in water, and Eq 18 on them; ``rig fit`` tunes a rig's constants to a trial's identified
+modes and writes the new rig), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff``
 (modes and decays as UFF).
 
 Outputs: ``--name NAME`` writes ``recordings/NAME.mcap`` and cannot leave ``recordings/`` (no
@@ -406,6 +407,10 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
 def cmd_rig(args: argparse.Namespace) -> int:
     from ...analysis.model.rig_modes import eq18_check, modes_in
 
+    if args.rig == "fit":
+        return cmd_rig_fit(args)
+    if args.trial or args.start or args.out or args.bound:
+        raise SystemExit("ramdaq rig: a trial, --rig, --out and --bound go with 'ramdaq rig fit'")
     rig = load_rig(args.rig)
     print(f"rig {rig.name} ({args.rig}): {rig.surface.title}, {len(rig.gages)} gages, "
           f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
@@ -430,6 +435,19 @@ def cmd_rig(args: argparse.Namespace) -> int:
               f" the predominant mode couples v with alpha and gamma, whose added inertias "
               f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
               f"0.2735 ton s^2/ft, -18 %).")
+    return EXIT_OK
+
+
+def cmd_rig_fit(args: argparse.Namespace) -> int:
+    """``ramdaq rig fit TRIAL --rig START``: the rig's constants tuned to the trial's modes."""
+    from .rigfit import fit_lines, parse_bounds, run_rig_fit
+
+    if not args.trial or not args.start:
+        raise SystemExit("ramdaq rig fit: give the trial and the start rig: "
+                         "ramdaq rig fit TRIAL.mcap --rig START.toml")
+    mf, path = run_rig_fit(args.trial, args.start, out=Path(args.out) if args.out else None,
+                           bounds=parse_bounds(args.bound), progress=lambda m: print(m, flush=True))
+    print("\n".join(fit_lines(mf, path)))
     return EXIT_OK
 
 
@@ -464,7 +482,7 @@ def cmd_gap_benchmark(args: argparse.Namespace) -> int:
     from .progress import progress_bar
 
     kw = dict(per_class=args.per_class, seeds=seeds, jobs=args.jobs, effects=effects, rescore=args.rescore,
-              thresholds=args.thresholds, progress=lambda m: print(m, flush=True),
+              thresholds=args.thresholds, perturb=args.perturb, progress=lambda m: print(m, flush=True),
               bar=lambda n: progress_bar("gap benchmark", n, unit="scenarios"))
     out = Path(args.out or "gap_benchmark")
     if not args.scheduler or args.rescore:
@@ -514,6 +532,9 @@ def _batch_parsers(sub: argparse._SubParsersAction) -> None:
                    "local, the local cluster's workers")
     g.add_argument("--scheduler", help="tcp://HOST:8786: run the scenarios on this dask cluster; 'local': "
                    "on a local dask cluster of --jobs workers")
+    g.add_argument("--perturb", type=float, default=0.0, metavar="FRACTION",
+                   help="hand the diagnosis rigs whose masses, inertias and stiffnesses are off by up "
+                        "to this fraction (0.25: +-25 %%), calibrated to each trial's modes first")
     g.add_argument("--rescore", action="store_true", help="score the results stored in --out again")
     g.add_argument("--thresholds", type=Path, help="thresholds file to score with (default: the shipped "
                    "ones)")
@@ -605,8 +626,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every Nth impact is held out of the calibration (default 3)")
     gp.set_defaults(func=cmd_gap)
 
-    g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them")
-    g.add_argument("rig", help="a rig file (TOML) or a shipped rig's name, e.g. albacore")
+    g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them; "
+                       "'rig fit TRIAL --rig START' tunes a rig to a trial's modes")
+    g.add_argument("rig", help="rig file or shipped rig's name, or the word 'fit'")
+    g.add_argument("trial", nargs="?", help="fit: the recording (.mcap) whose modes the rig is tuned to")
+    g.add_argument("--rig", dest="start", help="fit: the start rig (file or shipped name)")
+    g.add_argument("--out", help="fit: the fitted rig file (default TRIAL_rig.toml beside the trial)")
+    g.add_argument("--bound", action="append", metavar="NAME=LO:HI",
+                   help="fit: bounds of a constant as multipliers of its start value, e.g. "
+                        "stock.I_m4=0.8:1.25 (1:1 holds it); repeatable")
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")

@@ -36,6 +36,8 @@ import numpy as np
 if TYPE_CHECKING:
     from distributed import Client
 
+    from ...analysis.model.rig import Rig
+
 RIGS = (("albacore", "air"), ("albacore", "water"), ("sampson", "water"))
 SEED_SETS = {
     "dev": (1_000, "development seeds: tune the thresholds (written to OUT/gap_thresholds.json)"),
@@ -66,9 +68,13 @@ def false_alarm_bound(n_alarms: int, n_trials: int, confidence: float = 0.95) ->
 
 
 def scenarios(per_class: int, seeds: str = "benchmark",
-              effects: tuple[str, ...] | None = None) -> list[dict]:
+              effects: tuple[str, ...] | None = None, perturb: float = 0.0) -> list[dict]:
     """The fixed scenario list: every effect class x ``per_class`` sizes, rigs in turn, from the
-    seed set named ``seeds`` (a key of :data:`SEED_SETS`)."""
+    seed set named ``seeds`` (a key of :data:`SEED_SETS`). With ``perturb`` the diagnosis is
+    handed a rig whose constants are off the generator's by up to that fraction
+    (:func:`perturbed_rig`)."""
+    if not 0 <= perturb < 1:
+        raise ValueError(f"--perturb {perturb}: a fraction from 0 to below 1 (0.25 is +-25 %)")
     from ...analysis.truth.trial import EFFECTS
 
     if seeds not in SEED_SETS:
@@ -87,8 +93,28 @@ def scenarios(per_class: int, seeds: str = "benchmark",
             j = int(np.random.default_rng(base + k).permutation(n)[i])
             name, medium = rigs[i % len(rigs)]
             out.append({"effect": eff, "size": 0.0 if eff == "none" else float(sizes[j]),
-                        "rig": name, "medium": medium, "seed": base + 1000 * k + i})
+                        "rig": name, "medium": medium, "seed": base + 1000 * k + i}
+                       | ({"perturb": perturb} if perturb else {}))
     return out
+
+
+PERTURBED = ("rudder.mass_kg", "rudder.Iz_kg_m2", "rudder.Ix_kg_m2", "stock.I_m4", "stock.J_m4")
+"""The constants :func:`perturbed_rig` moves, besides every hull mode's frequency and modal mass:
+the masses, inertias and stiffnesses of issue 17's perturbed rigs."""
+
+
+def perturbed_rig(rig: Rig, fraction: float, seed: int) -> Rig:
+    """``rig`` with its masses, inertias and stiffnesses (:data:`PERTURBED`, each hull mode's
+    frequency and modal mass) each multiplied by a factor drawn uniformly from
+    ``1 +- fraction`` (seeded): the rig file a trial engineer would have written."""
+    from ...analysis.gap.rigfit import get_value, set_value
+
+    rng = np.random.default_rng([seed, 17])
+    names = list(PERTURBED) + [f"hull.modes[{k}].{key}" for k in range(len(rig.hull_modes))
+                               for key in ("frequency_hz", "modal_mass_kg")]
+    for name in names:
+        rig = set_value(rig, name, get_value(rig, name) * rng.uniform(1 - fraction, 1 + fraction))
+    return rig
 
 
 def run_one(sc: dict, workdir: str) -> dict:
@@ -110,8 +136,13 @@ def run_one(sc: dict, workdir: str) -> dict:
                       extra={"medium": tt.rig.medium, "adc_bits": tt.rig.daq.adc_bits})
     record(dev, path, readout=False, overwrite=True)
     t1 = time.perf_counter()
+    perturb = sc.get("perturb", 0.0)
     try:
-        lt, td, d = run_gap(path, settings=Settings(), data_checks=False)
+        # with the generator's own rig the figures are of the effect search alone; a perturbed
+        # rig is first calibrated to the trial's modes, as ramdaq gap does
+        given = perturbed_rig(tt.rig, perturb, sc["seed"]) if perturb else None
+        lt, td, d = run_gap(path, rig=given, settings=Settings(), data_checks=False,
+                            model_level=bool(perturb))
     except Exception as exc:  # a scenario that breaks the diagnosis is a result, not a crash
         return sc | {"error": f"{type(exc).__name__}: {exc}", "seconds": time.perf_counter() - t1}
     finally:
@@ -130,7 +161,17 @@ def run_one(sc: dict, workdir: str) -> dict:
         "location": d.best.location if d.best else None,
         "band_edges_hz": d.map_fit.bands.edges_hz.tolist(),
         "seconds": t_diag, "seconds_generate": t_gen,
-    }
+    } | ({"headline": d.headline, "min_closure": _min_closure(d),
+          "form_gages": sorted(d.model_level.form_gages()) if d.model_level else []} if perturb else {})
+
+
+def _min_closure(d) -> float:
+    """The least closure the diagnosis asked of a named effect (raised when the model level
+    left a form error: :data:`~ramdaq.daq.commands.gap.FORM_MIN_CLOSURE`)."""
+    from .gap import FORM_MIN_CLOSURE
+
+    form = d.model_level is not None and d.model_level.fit is not None and d.model_level.fit.form
+    return FORM_MIN_CLOSURE if form else 0.0
 
 
 def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
@@ -140,7 +181,18 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
 
     if "error" in r:
         return "none"
-    return choose(r["candidates"], _z(r) > z_gap, bic_min, min_closure) or "none"
+    # a perturbed-rig trial whose model level left a form error asks more closure of an effect
+    # and names none acting only where that form error is; a gap it names nothing for is the
+    # model's form: "no effect; model form" (ramdaq.daq.commands.gap)
+    floor = max(min_closure, r.get("min_closure", 0.0))
+    named = choose(r["candidates"], _z(r) > z_gap, bic_min, floor)
+    form = set(r.get("form_gages", []))
+    if form:
+        c = next((c for c in r["candidates"] if c["name"] == named), None)
+        if named == "unexplained" or (c is not None and c["location"]["gages"]
+                                      and set(c["location"]["gages"]) <= form):
+            return "none"
+    return named or "none"
 
 
 def _z(r: dict) -> float:
@@ -269,9 +321,23 @@ def score(results: list[dict], thresholds: dict[str, float], z_gap: float, bic_m
         "per_class_top1": {e: float(np.mean([pred[id(r)] == e for r in above if r["effect"] == e]))
                            for e in sorted({r["effect"] for r in above})},
         "confusion": conf,
+        "perturbed_none": _perturbed_none(none, pred),
         "seconds_median": float(np.median([r["seconds"] for r in results])) if results else 0.0,
         "seconds_max": float(np.max([r["seconds"] for r in results])) if results else 0.0,
     }
+
+
+def _perturbed_none(none: list[dict], pred: dict[int, str]) -> dict | None:
+    """No-effect trials diagnosed against a perturbed rig: how many named no effect (correct:
+    "no effect; model form: ..."), and how many of those the model level found free of form
+    error. None when the rigs were the generator's."""
+    pert = [r for r in none if r.get("perturb")]
+    if not pert:
+        return None
+    right = [r for r in pert if pred[id(r)] == "none"]
+    return {"n": len(pert), "no_effect": len(right),
+            "form_clean": sum("model form: none" in r.get("headline", "") for r in right),
+            "perturb": pert[0]["perturb"]}
 
 
 def _jsonable(thr: dict[str, float]) -> dict[str, float | None]:
@@ -300,6 +366,7 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
            f"seeds reaches {100 * POD:.0f} %): " + ", ".join(
                f"{k} {v:.2f}" for k, v in sorted(thresholds.items())),
            "per-class top-1: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in s["per_class_top1"].items()),
+           *_perturbed_lines(s),
            "confusion matrix (rows: hidden effect, columns: named):"]
     labels = list(next(iter(s["confusion"].values())).keys()) if s["confusion"] else []
     short = [lab[:6] for lab in labels]
@@ -307,6 +374,16 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
     for t, row in s["confusion"].items():
         out.append(f"{t:17s} " + " ".join(f"{row[p]:6d}" for p in labels))
     return out
+
+
+def _perturbed_lines(s: dict) -> list[str]:
+    p = s.get("perturbed_none")
+    if not p:
+        return []
+    return [f"rigs perturbed by up to +-{100 * p['perturb']:.0f} % (masses, inertias, stiffnesses), "
+            f"calibrated to each trial's modes first: no-effect trials said 'no effect; model form': "
+            f"{p['no_effect']} of {p['n']} (counted correct, not as alarms; {p['form_clean']} with no "
+            "form error left)"]
 
 
 def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str], None],
@@ -341,7 +418,8 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
                   effects: tuple[str, ...] | None = None, rescore: bool = False,
                   thresholds: Path | None = None, progress: Callable[[str], None] | None = None,
                   client: Client | None = None,
-                  bar: Callable[[int], AbstractContextManager[Callable[[], None]]] | None = None) -> int:
+                  bar: Callable[[int], AbstractContextManager[Callable[[], None]]] | None = None,
+                  perturb: float = 0.0) -> int:
     """Run the benchmark on the seed set ``seeds`` (:data:`SEED_SETS`) and print its figures; 0
     when done. The scenarios run on ``jobs`` processes, or on the dask cluster of ``client`` (a
     ``distributed.Client``) when given. ``dev`` writes the thresholds to
@@ -349,12 +427,17 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
     shipped :data:`THRESHOLDS`).
     ``rescore``: score the results an earlier run stored in ``out`` again (after re-tuning on
     the development seeds) instead of running the scenarios. ``bar(n)``: a progress bar over
-    the ``n`` scenarios (a context manager yielding the step to call after each)."""
+    the ``n`` scenarios (a context manager yielding the step to call after each). ``perturb``:
+    hand the diagnosis rigs perturbed by up to that fraction (:func:`perturbed_rig`); its
+    results are stored apart (``SEEDS_perturbP_results.json``)."""
     from ...analysis.gap.diagnose import Settings
 
     say = progress or (lambda s: None)
     out.mkdir(parents=True, exist_ok=True)
-    stored = out / f"{seeds}_results.json"
+    if perturb and seeds == "dev":
+        raise ValueError("--perturb with --dev: the thresholds are tuned with the generator's own rigs")
+    tag = f"{seeds}_perturb{perturb:g}" if perturb else seeds
+    stored = out / f"{tag}_results.json"
     t0 = time.perf_counter()
     if rescore:
         if not stored.exists():
@@ -362,7 +445,7 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
         results = json.loads(stored.read_text())
         say(f"re-scoring {len(results)} stored {seeds} scenarios from {out}")
     else:
-        results = _run(scenarios(per_class, seeds, effects), out, seeds, jobs, say, client, bar)
+        results = _run(scenarios(per_class, seeds, effects, perturb), out, seeds, jobs, say, client, bar)
         stored.write_text(json.dumps(results, indent=1, default=float))
     wall = time.perf_counter() - t0
     st = Settings()
@@ -402,7 +485,7 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
     also = {f"the a{100 * POD_LAX:.0f} thresholds": lax,
             f"the tail rule's a{100 * POD:.0f} (>= {100 * POD:.0f} % of the trials from that size up)": tail}
     s_also = {k: score(results, t, st.z_gap, st.bic_min, st.min_closure) for k, t in also.items() if t}
-    (out / f"{seeds}_score.json").write_text(json.dumps(s | {"also": s_also}, indent=1, default=float))
+    (out / f"{tag}_score.json").write_text(json.dumps(s | {"also": s_also}, indent=1, default=float))
     print("\n".join(format_score(s, thr)))
     for k, sa in s_also.items():
         print(f"top-1 over effects above {k}: {100 * sa['top1']:.1f} % of {sa['n_above']} "

@@ -1,0 +1,295 @@
+"""The model level of the gap diagnosis: a trial's identified modes held against its rig's modes.
+
+:func:`trial_modes` identifies the modes of each impact's free decay on its own (poles shared by
+all gages, :func:`~ramdaq.analysis.modal.identify.identify_modes`) and keeps those found again in
+most impacts: a mode of the structure rings after every blow, while the spurious poles an order
+selection admits now and then (noise fitted at a false-alarm level) do not come back at the same
+frequency. What is kept is averaged over the impacts, and its uncertainty is the impacts'
+spread -- the noise floor comes from the data, never from the rig file.
+
+:func:`compare` pairs those modes with the rig model's (:func:`model_modes_at_gages`) by mode
+shape and frequency and tabulates per pair the frequencies, damping ratios and the modal
+assurance criterion (MAC) over all gages and per gage body (:class:`ModePair`).
+
+Mode shapes are complex accelerations at the gages (m/s^2 per unit, any scale), in the trial's
+gage (DAQ channel) order; they are compared by the complex MAC
+``|phi_a^H phi_b|^2 / (|phi_a|^2 |phi_b|^2)``, which no common complex factor changes (the
+filters in the signal chain act alike on every gage).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from ..modal.identify import identify_modes
+from ..model.response import modal_form
+from ..model.rig import BODIES, Rig
+from ..model.structure import build_model
+from .trialdata import TrialData
+
+SAME_MODE_REL = 0.01
+"""Two impacts' poles within 1 % in frequency are one mode: a structure's mode moves far less
+than that between blows (the spread across impacts of a mode is ~1e-5 relative at a ram blow's
+signal-to-noise), while the spurious poles of order selection land anywhere in the band."""
+MAX_PAIR_RATIO = 2.0
+"""A model mode and an identified one are paired only within a factor 2 in frequency: a rig
+whose stiffness or mass is off by a factor of 2 (a crude rig) moves its modes by sqrt(2)."""
+QUIET_BODY = 1e-3
+"""A body whose gages carry less than this share of a model mode's shape norm is not predicted
+to move in that mode: its MAC there is not defined (NaN)."""
+
+
+@dataclass(frozen=True)
+class TrialModes:
+    """Modes identified on a trial's impacts, sorted by frequency.
+
+    ``f_hz``, ``f_se_hz`` (K,) damped frequency and its standard error, Hz; ``zeta``,
+    ``zeta_se`` (K,) damping ratio and standard error; ``shapes`` (n_gages, K) complex
+    acceleration shape, unit norm, its largest entry real and positive; ``shape_se``
+    (n_gages, K) standard error of each entry (absolute, in units of the unit-norm shape);
+    ``n_seen`` (K,) impacts in which the mode was found, of ``n_impacts`` identified;
+    ``noise_std`` (n_gages,) the decay windows' noise rms, m/s^2 (median over impacts), as the
+    identification measured it; ``gage_numbers`` the report's number of each shape row.
+    Standard errors are the spread over the impacts divided by sqrt(n_seen), never smaller than
+    the single fits' own standard errors divided by sqrt(n_seen).
+    """
+
+    f_hz: np.ndarray
+    f_se_hz: np.ndarray
+    zeta: np.ndarray
+    zeta_se: np.ndarray
+    shapes: np.ndarray
+    shape_se: np.ndarray
+    n_seen: np.ndarray
+    n_impacts: int
+    noise_std: np.ndarray
+    gage_numbers: tuple[int, ...]
+    skipped: tuple[str, ...] = ()
+    """Impacts whose identification failed, and why (they are left out)."""
+
+    @property
+    def n_modes(self) -> int:
+        return len(self.f_hz)
+
+
+@dataclass(frozen=True)
+class ModelModesAtGages:
+    """A rig model's modes as the gages see them: ``f_hz``, ``zeta`` (m,), ``shapes``
+    (n_gages, m) complex acceleration per unit modal state, gage (DAQ channel) order."""
+
+    f_hz: np.ndarray
+    zeta: np.ndarray
+    shapes: np.ndarray
+
+
+@dataclass(frozen=True)
+class ModePair:
+    """One identified mode against the model mode paired with it.
+
+    ``f_id_hz`` +- ``f_id_se_hz`` and ``zeta_id`` +- ``zeta_id_se`` identified; ``f_model_hz``,
+    ``zeta_model`` the model's; ``mac`` over all gages; ``mac_rudder``, ``mac_stock``,
+    ``mac_hull`` over each body's gages (NaN where the model does not move that body in this
+    mode, or the body has fewer than two gages); ``i_id``, ``i_model`` the modes' indices in
+    :class:`TrialModes` and :class:`ModelModesAtGages`.
+    """
+
+    i_id: int
+    i_model: int
+    f_id_hz: float
+    f_id_se_hz: float
+    f_model_hz: float
+    zeta_id: float
+    zeta_id_se: float
+    zeta_model: float
+    mac: float
+    mac_rudder: float
+    mac_stock: float
+    mac_hull: float
+
+    @property
+    def df_rel(self) -> float:
+        """(f_model - f_id) / f_id."""
+        return self.f_model_hz / self.f_id_hz - 1
+
+    def mac_of(self, body: str) -> float:
+        return {"rudder": self.mac_rudder, "stock": self.mac_stock, "hull": self.mac_hull}[body]
+
+
+@dataclass(frozen=True)
+class ModalComparison:
+    """The pairs, and the modes left unpaired on either side (indices)."""
+
+    pairs: tuple[ModePair, ...]
+    unpaired_id: tuple[int, ...]
+    unpaired_model: tuple[int, ...]
+    trial: TrialModes
+    model: ModelModesAtGages
+
+
+# -- identification ----------------------------------------------------------------------------
+def _decay(td: TrialData, j: int) -> np.ndarray | None:
+    """Impact ``j``'s decay window (n_gages, n) up to the first sample any gage lacks, or None
+    when less than a second is left."""
+    y = td.x[j, :, td.windows.early.start:]
+    bad = np.flatnonzero(~np.all(np.isfinite(y), axis=0))
+    n = bad[0] if len(bad) else y.shape[1]
+    return y[:, :n] if n >= td.fs_hz else None
+
+
+def _unit_shape(a: np.ndarray) -> np.ndarray:
+    """``a`` scaled to unit norm, its largest entry real and positive."""
+    k = int(np.argmax(np.abs(a)))
+    return a * np.conj(a[k]) / (np.abs(a[k]) * np.linalg.norm(a))
+
+
+def trial_modes(td: TrialData, *, f_lo_hz: float = 0.5, min_share: float = 0.5) -> TrialModes:
+    """The modes of a trial's impacts: identified on each decay, kept when found in at least
+    ``min_share`` of the impacts (and in two, if two were identified), between ``f_lo_hz`` and
+    the trial's low-pass corner. Raises ValueError when no impact leaves a decay to identify."""
+    found = []          # per impact: (f, f_se, zeta, zeta_se, shapes (n_g, k))
+    noise = []
+    skipped: list[str] = []
+    for j in range(td.n_seg):
+        y = _decay(td, j)
+        if y is None:
+            continue
+        try:
+            mt = identify_modes(y, td.fs_hz, f_range_hz=(f_lo_hz, 0.9 * td.lowpass_hz),
+                                per_channel=False)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError, scipy.linalg.LinAlgError) as err:
+            skipped.append(f"impact {j + 1}: {type(err).__name__}: {err}")
+            continue
+        noise.append(mt.noise_std)
+        found.append((mt.frequency_hz, mt.frequency_se_hz, mt.zeta, mt.zeta_se,
+                      np.nan_to_num(mt.complex_amplitude)))
+    if not found:
+        raise ValueError("no impact leaves a decay of a second or more to identify modes on"
+                         + (f" ({'; '.join(skipped)})" if skipped else ""))
+    need = max(math.ceil(min_share * len(found)), min(2, len(found)))
+    merged = sorted((_merge(found, members) for members in _clusters(found, need)),
+                    key=lambda m: m[0])
+    n_g = td.n_gages
+    col = lambda i: np.array([m[i] for m in merged])   # noqa: E731
+    return TrialModes(
+        f_hz=col(0) if merged else np.empty(0), f_se_hz=col(1) if merged else np.empty(0),
+        zeta=col(2) if merged else np.empty(0), zeta_se=col(3) if merged else np.empty(0),
+        shapes=col(4).T if merged else np.empty((n_g, 0), complex),
+        shape_se=col(5).T if merged else np.empty((n_g, 0)),
+        n_seen=col(6).astype(int) if merged else np.empty(0, int), n_impacts=len(found),
+        noise_std=np.nanmedian(np.array(noise), axis=0), gage_numbers=td.gage_numbers,
+        skipped=tuple(skipped))
+
+
+def _mean_se(v: np.ndarray, se: np.ndarray) -> tuple[float, float]:
+    """Mean of one quantity over impacts and its standard error: the impacts' spread over
+    sqrt(n), never below the single fits' own errors over sqrt(n)."""
+    n = len(v)
+    spread = float(np.std(v, ddof=1)) if n > 1 else 0.0
+    return float(np.mean(v)), max(spread, float(np.sqrt(np.mean(se**2)))) / math.sqrt(n)
+
+
+def _merge(found: list[tuple], members: list[tuple[int, int]]) -> tuple:
+    """One mode from its (impact, index) members: (f, f_se, zeta, zeta_se, unit shape,
+    shape standard error per gage, n_seen)."""
+    get = lambda i: np.array([found[j][i][k] for j, k in members])   # noqa: E731
+    f, f_se = _mean_se(get(0), get(1))
+    z, z_se = _mean_se(get(2), get(3))
+    phis = np.array([_unit_shape(found[j][4][:, k]) for j, k in members])
+    phis = np.array([p * np.exp(-1j * np.angle(np.vdot(phis[0], p))) for p in phis])
+    phi = _unit_shape(np.mean(phis, axis=0))
+    n = len(members)
+    phi_se = np.abs(phis - phi).std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.zeros(len(phi))
+    return f, f_se, z, z_se, phi, phi_se, n
+
+
+def _clusters(found: list[tuple], need: int) -> list[list[tuple[int, int]]]:
+    """Groups of (impact, mode index) within :data:`SAME_MODE_REL` of each other, at most one
+    per impact (the nearest to the group's first member), found in ``need`` impacts or more;
+    groups are formed in order of frequency."""
+    poles = sorted(((float(f), j, k) for j, fd in enumerate(found) for k, f in enumerate(fd[0])))
+    used: set[tuple[int, int]] = set()
+    rows = []
+    for f0, _, _ in poles:
+        members: dict[int, tuple[float, int]] = {}
+        for f, j, k in poles:
+            if (j, k) in used or abs(f / f0 - 1) > SAME_MODE_REL:
+                continue
+            if j not in members or abs(f - f0) < abs(members[j][0] - f0):
+                members[j] = (f, k)
+        if len(members) >= need:
+            group = [(j, k) for j, (_, k) in sorted(members.items())]
+            used.update(group)
+            rows.append(group)
+    return rows
+
+
+# -- the model's side ----------------------------------------------------------------------------
+def model_modes_at_gages(rig: Rig) -> ModelModesAtGages:
+    """The rig model's modes (in the rig's medium) with their gage acceleration shapes."""
+    form = modal_form(build_model(rig))
+    lam = form.eigenvalues
+    return ModelModesAtGages(lam.imag / (2 * math.pi), -lam.real / np.abs(lam), form.gage_acc)
+
+
+def mac(a: np.ndarray, b: np.ndarray) -> float:
+    """Complex modal assurance criterion of two shapes, 0..1 (NaN if either is zero)."""
+    na, nb = np.vdot(a, a).real, np.vdot(b, b).real
+    if na <= 0 or nb <= 0:
+        return float("nan")
+    return float(abs(np.vdot(a, b)) ** 2 / (na * nb))
+
+
+def body_mac(rig: Rig, a: np.ndarray, model_shape: np.ndarray, body: str) -> float:
+    """MAC over the gages on ``body`` (NaN when fewer than two, or the model does not move
+    the body in this mode: below :data:`QUIET_BODY` of the shape's norm)."""
+    rows = np.array([g.body == body for g in rig.gages_by_channel()])
+    if rows.sum() < 2:
+        return float("nan")
+    m = model_shape[rows]
+    if np.linalg.norm(m) < QUIET_BODY * np.linalg.norm(model_shape):
+        return float("nan")
+    return mac(a[rows], m)
+
+
+def compare(tm: TrialModes, rig: Rig, *, top_hz: float | None = None) -> ModalComparison:
+    """Pair the identified modes ``tm`` with ``rig``'s model modes below ``top_hz`` (default:
+    twice the highest identified mode): the assignment that minimises the summed
+    ``(1 - MAC) + |ln(f_model / f_id)| / ln 2`` over pairs within :data:`MAX_PAIR_RATIO` in
+    frequency whose cost stays below 1.2 (a pair sharing no shape and a factor 1.5 apart is no
+    pair)."""
+    mm = model_modes_at_gages(rig)
+    top = top_hz if top_hz is not None else 2 * float(np.max(tm.f_hz, initial=0.0))
+    cand = np.flatnonzero((mm.f_hz > 0) & (mm.f_hz < top))
+    K = tm.n_modes
+    cost = np.full((K, len(cand)), 1e6)
+    for i in range(K):
+        for c, m in enumerate(cand):
+            ratio = abs(math.log(mm.f_hz[m] / tm.f_hz[i]))
+            if ratio <= math.log(MAX_PAIR_RATIO):
+                cost[i, c] = (1 - mac(tm.shapes[:, i], mm.shapes[:, m])) + ratio / math.log(2)
+    pairs = []
+    if K and len(cand):
+        rows, cols = scipy.optimize.linear_sum_assignment(cost)
+        for i, c in zip(rows, cols, strict=True):
+            if cost[i, c] < 1.2:
+                pairs.append(_pair(tm, mm, rig, int(i), int(cand[c])))
+    got_id = {p.i_id for p in pairs}
+    got_m = {p.i_model for p in pairs}
+    return ModalComparison(
+        pairs=tuple(sorted(pairs, key=lambda p: p.f_id_hz)),
+        unpaired_id=tuple(i for i in range(K) if i not in got_id),
+        unpaired_model=tuple(int(m) for m in cand if m not in got_m), trial=tm, model=mm)
+
+
+def _pair(tm: TrialModes, mm: ModelModesAtGages, rig: Rig, i: int, m: int) -> ModePair:
+    a, b = tm.shapes[:, i], mm.shapes[:, m]
+    by = {body: body_mac(rig, a, b, body) for body in BODIES}
+    return ModePair(i_id=i, i_model=m, f_id_hz=float(tm.f_hz[i]), f_id_se_hz=float(tm.f_se_hz[i]),
+                    f_model_hz=float(mm.f_hz[m]), zeta_id=float(tm.zeta[i]),
+                    zeta_id_se=float(tm.zeta_se[i]), zeta_model=float(mm.zeta[m]),
+                    mac=mac(a, b), mac_rudder=by["rudder"], mac_stock=by["stock"], mac_hull=by["hull"])

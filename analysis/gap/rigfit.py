@@ -1,0 +1,563 @@
+"""A rig's uncertain constants calibrated to a trial's identified modes (frequencies, damping
+ratios and mode shapes at the gages), and what no calibration explains: the model's form error.
+
+The constants are fitted as log multipliers of the start rig's values, each within bounds
+(:func:`fit_params`: defaults by kind, an optional ``[uncertainty]`` table in the rig file,
+the user's own), by ``scipy.optimize.least_squares`` on the whitened differences of paired
+modes (:func:`calibrate_to_modes`). The rudder's mass is not fitted: modes and shapes fix
+masses and stiffnesses only up to one common factor (the ram's force, solved per impact,
+absorbs it), so the mass is the scale the others are measured in.
+
+Each difference is divided by the identification's standard error combined with a floor that
+says how closely a model is expected to match at all (:data:`FORM_F`, :data:`FORM_ZETA`,
+:data:`FORM_SHAPE`): at a ram blow's signal-to-noise the identification's errors are 1e-6 of a
+frequency, and without the floors the fit would trade every shape for the last digit of one
+frequency.
+
+When the fit leaves nothing beyond the floors it is polished with the identification's errors
+alone as weights, so that a rig of the right form ends within the identification's uncertainty.
+
+Whatever the fit leaves beyond both is the model's form error (:class:`FormError`, judged by
+:func:`significant`): per paired mode the frequency difference and 1 - MAC with the gages that
+carry it, and identified modes the model has no mode for. :func:`model_level` is the gap
+diagnosis's first step (``ramdaq gap``): the effect search then runs against the calibrated rig.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.optimize
+import scipy.stats
+
+from ..model.rig import Rig, RigError
+from .calibrate import Stop
+from .modal_level import ModalComparison, TrialModes, compare, model_modes_at_gages, trial_modes
+from .trialdata import TrialData
+
+FORM_F = 1e-3
+"""Relative frequency difference a model is held to at best (0.1 %: the report quotes its
+frequencies to three or four figures, and a rig's form error -- a stock of one element, a
+rigid rudder -- shows first at that level)."""
+FORM_ZETA = 0.05
+"""Relative damping-ratio difference held to at best (5 %: a free decay's decrement is read
+to a few per cent across gages, Report 1836 Table 4)."""
+FORM_SHAPE = 0.01
+"""Difference held to at best per gage entry of a mode shape, relative to that entry (1 %: a
+gage's sensitivity is calibrated to about 1 %). Relative, not of the shape's norm: a hull gage
+that sees a rudder mode at a thousandth of the rudder's gages still sees it hundreds of times
+above its noise, and the time-domain comparison holds every gage to its noise."""
+PRIOR_SD = math.log(4.0)
+"""A weak pull of each damping constant towards its start value (log sd: a factor 4): three
+viscous constants and a hull mode's damping ratio meet in a few modes' damping ratios, and a
+combination the modes cannot see stays where the rig's author put it. Masses, inertias and
+stiffnesses are not pulled: the shapes and frequencies fix them, and a pull would hold the
+frequencies off the data's by ~1e-6, several of their standard errors."""
+FORM_FALSE_ALARM = 0.01
+"""The chance that a model of the right form is reported with a form error: each difference
+is judged against Student's t (the standard errors come from a few impacts' spread: n - 1
+degrees of freedom) at this level shared over every frequency and gage entry compared."""
+
+
+def significant(n_seen: int, n_tests: int) -> float:
+    """The score beyond which one of ``n_tests`` differences, each with a standard error from
+    ``n_seen`` impacts, is a form error (:data:`FORM_FALSE_ALARM`, two-sided, Bonferroni)."""
+    return float(scipy.stats.t.isf(FORM_FALSE_ALARM / (2 * max(n_tests, 1)), max(n_seen - 1, 1)))
+
+
+@dataclass(frozen=True)
+class FitParam:
+    """A fitted constant: ``name`` is its key in the rig file (``stock.I_m4``,
+    ``hull.modes[0].frequency_hz``); ``start`` its start value (SI, the key's unit); ``lo``,
+    ``hi`` the bounds as multipliers of ``start``."""
+
+    name: str
+    start: float
+    lo: float
+    hi: float
+
+
+@dataclass(frozen=True)
+class FittedParam:
+    """A constant after the fit: its start and fitted value, its bounds (multipliers) and
+    whether it ended at one of them (within 0.1 %)."""
+
+    name: str
+    start: float
+    value: float
+    lo: float
+    hi: float
+
+    @property
+    def factor(self) -> float:
+        return self.value / self.start
+
+    @property
+    def at_bound(self) -> bool:
+        return (abs(math.log(self.factor / self.lo)) < 1e-3
+                or abs(math.log(self.factor / self.hi)) < 1e-3)
+
+
+@dataclass(frozen=True)
+class FormError:
+    """What the fitted model still misses in one identified mode (``f_id_hz``): the frequency
+    difference ``df_rel`` (model/identified - 1) and its score ``z_f`` against the combined
+    standard error; ``one_minus_mac`` over all gages and per body (NaN where not defined);
+    ``gages`` the gages carrying most of the shape difference, worst first; ``missing`` when
+    the model has no mode for it at all."""
+
+    f_id_hz: float
+    df_rel: float
+    z_f: float
+    one_minus_mac: float
+    one_minus_mac_rudder: float
+    one_minus_mac_hull: float
+    gages: tuple[int, ...]
+    missing: bool = False
+
+    def text(self) -> str:
+        if self.missing:
+            return (f"a mode at {self.f_id_hz:.2f} Hz the model lacks "
+                    f"(gages {', '.join(map(str, self.gages))})")
+        bodies = ", ".join(f"{b} {v:.3f}" for b, v in (("rudder", self.one_minus_mac_rudder),
+                                                        ("hull", self.one_minus_mac_hull))
+                           if np.isfinite(v))
+        return (f"{self.f_id_hz:.2f} Hz: df {100 * self.df_rel:+.2f} %, 1-MAC {self.one_minus_mac:.3f}"
+                + (f" ({bodies})" if bodies else "")
+                + (f", gages {', '.join(map(str, self.gages))}" if self.gages else ""))
+
+
+@dataclass(frozen=True)
+class ModeFit:
+    """The result of :func:`calibrate_to_modes`: the start and fitted rigs, the constants, how
+    the solver ended (``stop``, with ``message`` and ``nfev``), the comparison before and after,
+    the form errors left (empty: the fitted model matches every identified mode within the
+    identification's uncertainty and the floors) and ``cost_before``/``cost_after`` (sum of
+    squared whitened differences, priors excluded)."""
+
+    start: Rig
+    rig: Rig
+    params: tuple[FittedParam, ...]
+    stop: Stop
+    message: str
+    nfev: int
+    before: ModalComparison
+    after: ModalComparison
+    form: tuple[FormError, ...]
+    cost_before: float
+    cost_after: float
+
+    def at_bounds(self) -> list[FittedParam]:
+        return [p for p in self.params if p.at_bound]
+
+    def form_text(self) -> str:
+        """One line: the model's form error, or that none is left."""
+        if not self.form:
+            return "none beyond the identification's uncertainty"
+        return "; ".join(f.text() for f in self.form)
+
+    def solver_text(self) -> str:
+        """How the solver ended, and the constants it left at their bounds."""
+        s = ("converged" if self.stop is Stop.CONVERGED else
+             f"{self.stop.value} after {self.nfev} evaluations ({self.message}): the constants are "
+             "where it stopped, not a minimum shown to be one")
+        b = self.at_bounds()
+        if b:
+            s += "; at their bounds: " + ", ".join(f"{p.name} x{p.factor:.3g}" for p in b)
+        return s
+
+
+# -- the constants and their bounds -------------------------------------------------------------
+_HULL = re.compile(r"^hull\.modes\[(\d+)\]\.(\w+)$")
+
+
+def _kinds(rig: Rig) -> list[tuple[str, tuple[float, float]]]:
+    """Every constant the fit may move, with its default bounds (multipliers): masses,
+    inertias and stiffnesses a factor 2 either way (a crude rig); damping a factor 5 (the least
+    known); a hull mode's frequency a factor 1.5 (further, it would become another mode)."""
+    wide, damp, hull_f = (0.5, 2.0), (0.2, 5.0), (1 / 1.5, 1.5)
+    names = [("rudder.Iz_kg_m2", wide), ("rudder.Ix_kg_m2", wide), ("rudder.Ixz_kg_m2", wide),
+             ("stock.I_m4", wide), ("stock.J_m4", wide)]
+    if rig.medium == "water":
+        names.append(("rudder.added_mass_factor", wide))
+    m = rig.medium
+    names += [(f"damping.{m}.C_N_s_per_m", damp), (f"damping.{m}.c_N_m_s_per_rad", damp),
+              (f"damping.{m}.c_alpha_N_m_s_per_rad", damp)]
+    for k in range(len(rig.hull_modes)):
+        names += [(f"hull.modes[{k}].frequency_hz", hull_f), (f"hull.modes[{k}].modal_mass_kg", wide),
+                  (f"hull.modes[{k}].damping_ratio", damp)]
+    return names
+
+
+def get_value(rig: Rig, name: str) -> float:
+    """The value of the rig-file key ``name`` in ``rig``."""
+    if (m := _HULL.match(name)) is not None:
+        return float(getattr(rig.hull_modes[int(m[1])], m[2]))
+    part = name.split(".")
+    if part[0] == "damping":
+        return float(getattr(rig.damping[part[1]], part[2]))
+    return float(getattr(getattr(rig, part[0]), part[1]))
+
+
+def set_value(rig: Rig, name: str, value: float) -> Rig:
+    """``rig`` with the rig-file key ``name`` set to ``value``."""
+    if (m := _HULL.match(name)) is not None:
+        k = int(m[1])
+        modes = list(rig.hull_modes)
+        modes[k] = replace(modes[k], **{m[2]: value})
+        return replace(rig, hull_modes=tuple(modes))
+    part = name.split(".")
+    if part[0] == "damping":
+        d = replace(rig.damping[part[1]], **{part[2]: value})
+        return replace(rig, damping={**rig.damping, part[1]: d})
+    return replace(rig, **{part[0]: replace(getattr(rig, part[0]), **{part[1]: value})})
+
+
+def fit_params(rig: Rig, bounds: dict[str, tuple[float, float]] | None = None) -> list[FitParam]:
+    """The constants to fit and their bounds (multipliers of the start value): the defaults of
+    each kind, then the rig file's optional ``[uncertainty]`` table (``"stock.I_m4" = [0.8,
+    1.25]``), then ``bounds``. A constant bounded ``[1, 1]`` is held. Raises RigError naming a
+    key that is not a fitted constant or bounds that do not hold the start value."""
+    kinds = dict(_kinds(rig))
+    given = {}
+    doc = tomllib.loads(rig.text) if rig.text else {}
+    for name, b in doc.get("uncertainty", {}).items():
+        given[name] = (b, f"{rig.source}: uncertainty.{name}")
+    for name, b in (bounds or {}).items():
+        given[name] = (b, f"--bound {name}")
+    for name, (b, where) in given.items():
+        if name not in kinds:
+            raise RigError(f"{where}: not a constant the fit can move (those are: "
+                           f"{', '.join(kinds)})")
+        ok = (isinstance(b, list | tuple) and len(b) == 2
+              and all(isinstance(v, int | float) and math.isfinite(v) for v in b))
+        if not ok or not 0 < b[0] <= 1 <= b[1]:
+            raise RigError(f"{where}: bounds must be [lo, hi] multipliers with 0 < lo <= 1 <= hi, "
+                           f"got {b!r}")
+        kinds[name] = (float(b[0]), float(b[1]))
+    out = []
+    for name, (lo, hi) in kinds.items():
+        v = get_value(rig, name)
+        if hi > lo and v != 0:
+            out.append(FitParam(name, v, lo, hi))
+    return out
+
+
+def apply(rig: Rig, params: list[FitParam], theta: np.ndarray) -> Rig:
+    """``rig`` with each constant at ``start * exp(theta)``."""
+    for p, t in zip(params, theta, strict=True):
+        rig = set_value(rig, p.name, p.start * math.exp(t))
+    return rig
+
+
+# -- the fit -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Pairs:
+    """The paired modes a fit compares: identified ``i_id`` with model ``i_model``, and each
+    difference's combined standard error (relative for f and zeta; per gage for the shape;
+    ``s_zeta`` NaN where the identified damping is too uncertain to fit)."""
+
+    i_id: np.ndarray
+    i_model: np.ndarray
+    s_f: np.ndarray
+    s_zeta: np.ndarray
+    s_shape: np.ndarray
+
+
+FLOORS = (FORM_F, FORM_ZETA, FORM_SHAPE)
+NO_FLOORS = (1e-12, 1e-12, 1e-12)
+"""The identification's own standard errors alone (a floor only against a zero)."""
+
+
+def _pairs(tm: TrialModes, cmp: ModalComparison, floors: tuple[float, float, float] = FLOORS) -> _Pairs:
+    i = np.array([p.i_id for p in cmp.pairs], int)
+    m = np.array([p.i_model for p in cmp.pairs], int)
+    s_f = np.hypot(tm.f_se_hz[i] / tm.f_hz[i], floors[0])
+    z, z_se = tm.zeta[i], tm.zeta_se[i]
+    s_z = np.where(z > 3 * z_se, np.hypot(z_se / np.where(z > 0, z, 1.0), floors[1]), np.nan)
+    return _Pairs(i, m, s_f, s_z, np.maximum(np.hypot(tm.shape_se[:, i], floors[2] * np.abs(tm.shapes[:, i])),
+                                             1e-12))
+
+
+def _differences(tm: TrialModes, rig: Rig, pr: _Pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Whitened differences of the paired modes: frequency (n_pairs,), damping ratio
+    (n_pairs,; 0 where not fitted) and shape (n_gages, n_pairs) complex, the model's shape
+    scaled by the complex factor that matches it best to the identified one."""
+    mm = model_modes_at_gages(rig)
+    if len(mm.f_hz) <= pr.i_model.max(initial=-1) or np.any(mm.f_hz[pr.i_model] <= 0):
+        raise ValueError("the model lost a paired mode")
+    f = np.log(mm.f_hz[pr.i_model] / tm.f_hz[pr.i_id]) / pr.s_f
+    z = np.nan_to_num(np.log(mm.zeta[pr.i_model] / np.abs(tm.zeta[pr.i_id])) / pr.s_zeta)
+    phi_m, phi = mm.shapes[:, pr.i_model], tm.shapes[:, pr.i_id]
+    a = np.sum(np.conj(phi_m) * phi, axis=0) / np.sum(np.abs(phi_m) ** 2, axis=0)
+    return f, z, (a * phi_m - phi) / pr.s_shape
+
+
+def _residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+              theta: np.ndarray) -> np.ndarray:
+    f, z, d = _differences(tm, apply(start, params, theta), pr)
+    return np.concatenate([f, z, d.real.ravel(), d.imag.ravel(), theta * _pull(params)])
+
+
+def _pull(params: list[FitParam]) -> np.ndarray:
+    """1 / prior sd of each constant: :data:`PRIOR_SD` for damping, none for the rest."""
+    return np.array([1 / PRIOR_SD if p.name.startswith("damping.") or p.name.endswith("damping_ratio")
+                     else 0.0 for p in params])
+
+
+def calibrate_to_modes(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float, float]] | None = None,
+                       *, max_nfev: int = 400, passes: int = 3) -> ModeFit:
+    """Fit ``start``'s constants (:func:`fit_params`, within their bounds) to the identified
+    modes ``tm``. The modes are paired once (:func:`~ramdaq.analysis.gap.modal_level.compare`),
+    fitted, and paired again with the fitted model; while the pairing changes the fit is
+    repeated (at most ``passes`` times). When no form error is left, the fit is polished with
+    the identification's own standard errors as the only weights (the floors let it stop a
+    hundred standard errors short), and the polish is kept if it leaves no form error either.
+    Raises ValueError when no identified mode pairs with a model mode (nothing to fit)."""
+    params = fit_params(start, bounds)
+    top = 2 * float(np.max(tm.f_hz, initial=0.0))
+    before = compare(tm, start, top_hz=top)
+    if not before.pairs:
+        raise ValueError("no identified mode pairs with a mode of the rig's model: nothing to fit")
+    if not params:
+        return _result(tm, start, params, np.zeros(0), top, before, (Stop.NOTHING_TO_FIT,
+                                                                      "no constant to fit", 0))
+    theta, cmp, nfev = np.zeros(len(params)), before, 0
+    for _ in range(passes):
+        theta, how = _solve(tm, start, params, _pairs(tm, cmp), theta, max_nfev)
+        nfev += how[2]
+        new = compare(tm, apply(start, params, theta), top_hz=top)
+        same = [(p.i_id, p.i_model) for p in new.pairs] == [(p.i_id, p.i_model) for p in cmp.pairs]
+        cmp = new
+        if same:
+            break
+    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev))
+    if out.form or out.stop is not Stop.CONVERGED:
+        return out
+    fine = _pairs(tm, cmp, NO_FLOORS)
+    theta2, how2 = _solve(tm, start, params, fine, theta, 3 * max_nfev)
+    note = "" if how2[0] is Stop.CONVERGED else f" ({how2[0].value}, {how2[2]} evaluations, but lower)"
+    polished = _result(tm, start, params, theta2, top, before,
+                       (Stop.CONVERGED, f"{how[1]}; polished on the identification's errors{note}",
+                        nfev + how2[2]))
+    better = _cost(tm, polished.rig, cmp, fine) < _cost(tm, out.rig, cmp, fine)
+    return polished if not polished.form and better else out
+
+
+def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray,
+           max_nfev: int) -> tuple[np.ndarray, tuple[Stop, str, int]]:
+    """One bounded least-squares run from ``theta``: the end point and (stop, message, nfev)."""
+    lo = np.log([p.lo for p in params])
+    hi = np.log([p.hi for p in params])
+    res = scipy.optimize.least_squares(lambda th: _safe(tm, start, params, pr, th),
+                                       np.clip(theta, lo, hi), bounds=(lo, hi), method="trf",
+                                       x_scale=0.1, max_nfev=max_nfev)
+    stop = Stop.CONVERGED if res.status > 0 else Stop.ITERATION_LIMIT
+    return res.x, (stop, str(res.message), int(res.nfev))
+
+
+def _result(tm: TrialModes, start: Rig, params: list[FitParam], theta: np.ndarray, top: float,
+            before: ModalComparison, how: tuple[Stop, str, int]) -> ModeFit:
+    rig = apply(start, params, theta)
+    fitted = tuple(FittedParam(p.name, p.start, get_value(rig, p.name), p.lo, p.hi) for p in params)
+    after = compare(tm, rig, top_hz=top)
+    return ModeFit(start=start, rig=rig, params=fitted, stop=how[0], message=how[1], nfev=how[2],
+                   before=before, after=after, form=form_errors(tm, rig, after),
+                   cost_before=_cost(tm, start, before), cost_after=_cost(tm, rig, after))
+
+
+def _safe(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray) -> np.ndarray:
+    """:func:`_residual`, or a large constant where the model cannot be built (an inertia
+    matrix no longer positive definite, an overdamped mode): the solver backs off."""
+    n = 2 * len(pr.i_id) + 2 * pr.s_shape.size + len(theta)
+    try:
+        r = _residual(tm, start, params, pr, theta)
+    except (ValueError, np.linalg.LinAlgError):
+        return np.full(n, 1e4)
+    return np.where(np.isfinite(r), r, 1e4)
+
+
+def _cost(tm: TrialModes, rig: Rig, cmp: ModalComparison, pr: _Pairs | None = None) -> float:
+    """Sum of squared whitened differences of ``cmp``'s pairs (by default with the floors)."""
+    if not cmp.pairs:
+        return float("nan")
+    f, z, d = _differences(tm, rig, pr or _pairs(tm, cmp))
+    return float(f @ f + z @ z + np.sum(np.abs(d) ** 2))
+
+
+def form_errors(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> tuple[FormError, ...]:
+    """The differences of ``cmp``'s pairs beyond :func:`significant` combined standard errors
+    (frequency, or a gage's shape entry), and the identified modes left unpaired."""
+    out = []
+    if cmp.pairs:
+        pr = _pairs(tm, cmp)
+        f, _, d = _differences(tm, rig, pr)
+        n_tests = d.size + len(f)
+        for k, p in enumerate(cmp.pairs):
+            limit = significant(int(tm.n_seen[p.i_id]), n_tests)
+            zg = np.abs(d[:, k])
+            worst = [i for i in np.argsort(-zg) if zg[i] > limit][:4]
+            if abs(f[k]) <= limit and not worst:
+                continue
+            out.append(FormError(f_id_hz=p.f_id_hz, df_rel=p.df_rel, z_f=float(f[k]),
+                                 one_minus_mac=1 - p.mac, one_minus_mac_rudder=1 - p.mac_rudder,
+                                 one_minus_mac_hull=1 - p.mac_hull,
+                                 gages=tuple(tm.gage_numbers[i] for i in worst)))
+    for i in cmp.unpaired_id:
+        big = np.argsort(-np.abs(tm.shapes[:, i]))[:3]
+        out.append(FormError(f_id_hz=float(tm.f_hz[i]), df_rel=float("nan"), z_f=float("nan"),
+                             one_minus_mac=float("nan"), one_minus_mac_rudder=float("nan"),
+                             one_minus_mac_hull=float("nan"),
+                             gages=tuple(tm.gage_numbers[g] for g in big), missing=True))
+    return tuple(sorted(out, key=lambda e: e.f_id_hz))
+
+
+# -- the fitted rig file ---------------------------------------------------------------------------
+_TABLE = re.compile(r"^\s*(\[\[?)\s*([\w.]+)\s*\]\]?")
+
+
+def fitted_rig_text(mf: ModeFit, trial: str, date: str) -> str:
+    """The start rig's text with each fitted constant's value replaced (its line keeps its
+    place, the old value in a comment), and a header saying what was fitted, from which trial
+    ``trial`` and when (``date``). The result parses to the fitted values. Raises RigError
+    when a constant's table is not in the text as a ``[table]`` header (an inline table)."""
+    lines = mf.start.text.splitlines()
+    for p in mf.params:
+        lines = _set_line(lines, p, mf.start.source)
+    ids = ", ".join(f"{q.f_id_hz:.3f}" for q in mf.after.pairs)
+    head = [f"# Fitted by `ramdaq rig fit` on {date} from {trial} ({mf.after.trial.n_impacts} impacts; "
+            f"modes {ids} Hz), starting from {mf.start.source} (medium {mf.start.medium}).",
+            "# Fitted constants (x start value): " + ", ".join(
+                f"{p.name} x{p.factor:.4g}" for p in mf.params) + ".",
+            f"# Solver: {mf.solver_text()}.",
+            f"# Model form left: {mf.form_text()}.",
+            "# The rudder's mass is the scale of the others (modes fix masses and stiffnesses only "
+            "up to a common factor).", ""]
+    text = "\n".join(head + lines) + "\n"
+    _check_written(text, mf)
+    return text
+
+
+def _set_line(lines: list[str], p: FittedParam, source: str) -> list[str]:
+    """``lines`` with key ``p.name`` set to its fitted value in its table (added after the
+    table's header when the key was left at its default)."""
+    if (m := _HULL.match(p.name)) is not None:
+        table, index, key = "hull.modes", int(m[1]), m[2]
+    else:
+        table, _, key = p.name.rpartition(".")
+        index = 0
+    seen, inside, header = -1, False, None
+    for n, line in enumerate(lines):
+        t = _TABLE.match(line)
+        if t:
+            if inside:
+                break
+            if t[2] == table:
+                seen += 1
+                inside = seen == index
+                header = n if inside else header
+            continue
+        if inside and re.match(rf"^\s*{re.escape(key)}\s*=", line):
+            out = list(lines)
+            out[n] = _value_line(line[: line.index("=")].rstrip(), p)
+            return out
+    if header is None:
+        raise RigError(f"{source}: {p.name}: no [{table}] table header for it in the text "
+                       "(an inline table?); the fitted rig cannot be written in its place")
+    out = list(lines)
+    out.insert(header + 1, _value_line(key, p))
+    return out
+
+
+def _value_line(key: str, p: FittedParam) -> str:
+    return (f"{key} = {p.value:.9g}    # fitted: x{p.factor:.4g} of {p.start:.6g}"
+            + (" (at its bound)" if p.at_bound else ""))
+
+
+def _check_written(text: str, mf: ModeFit) -> None:
+    from ..model.rig import parse_rig
+    back = parse_rig(text, source=mf.start.source)
+    for p in mf.params:
+        v = get_value(back, p.name)
+        if not math.isclose(v, p.value, rel_tol=1e-8):
+            raise RigError(f"{mf.start.source}: {p.name}: written as {v}, fitted {p.value}")
+
+
+# -- the gap diagnosis's first step --------------------------------------------------------------
+@dataclass(frozen=True)
+class ModelLevel:
+    """The model level of a diagnosis: the trial's modes (None when they could not be
+    identified), the rig calibrated to them (None when nothing could be fitted) and ``note``,
+    why not, when either is missing."""
+
+    modes: TrialModes | None
+    fit: ModeFit | None
+    note: str = ""
+
+    def statement(self) -> str:
+        """``model form: ...`` -- what the fitted rig still misses, or why it was not fitted."""
+        if self.fit is None:
+            return f"model form: not assessed ({self.note})"
+        s = f"model form: {self.fit.form_text()}"
+        if self.fit.stop is not Stop.CONVERGED or self.fit.at_bounds():
+            s += f" (calibration to the modes {self.fit.solver_text()})"
+        return s
+
+    def form_gages(self) -> set[int]:
+        """The gages where the fitted rig still misses the shape or frequency of a mode it has
+        (empty: none). A mode the model lacks altogether is not counted: an extra mode or a
+        steady tone is what the effect search's structural and excitation effects add."""
+        return set() if self.fit is None else {g for e in self.fit.form if not e.missing
+                                               for g in e.gages}
+
+    def absorbs(self, gages: list[int]) -> bool:
+        """Whether an effect acting at ``gages`` (its location) is not separable from the
+        model's form error: every one of them is where the calibrated rig still misses a mode.
+        A sensor fault there and a rig that is wrong there look alike in the modes; the model
+        level does not tell them apart, so such an effect is not named on its strength."""
+        form = self.form_gages()
+        return bool(form) and bool(gages) and set(gages) <= form
+
+    def to_json(self) -> dict:
+        skipped = [] if self.modes is None else list(self.modes.skipped)
+        if self.fit is None:
+            return {"fitted": False, "note": self.note, "identification_failed": skipped,
+                    "modes_hz": [] if self.modes is None else np.round(self.modes.f_hz, 4).tolist()}
+        f = self.fit
+        return {
+            "fitted": True, "identification_failed": skipped, "statement": self.statement(),
+            "stop": f.stop.value, "message": f.message,
+            "constants": {p.name: {"start": p.start, "value": p.value, "factor": round(p.factor, 5),
+                                   "bounds": [p.lo, p.hi], "at_bound": p.at_bound} for p in f.params},
+            "modes": [{"f_id_hz": p.f_id_hz, "f_id_se_hz": p.f_id_se_hz, "f_start_hz": b.f_model_hz,
+                       "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
+                       "mac_start": b.mac, "mac_fitted": p.mac}
+                      for p, b in _matched(f.after, f.before)],
+            "form_errors": [{"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
+                             "gages": list(e.gages), "missing_in_model": e.missing} for e in f.form],
+        }
+
+
+def _matched(after: ModalComparison, before: ModalComparison) -> list:
+    b = {p.i_id: p for p in before.pairs}
+    return [(p, b[p.i_id]) for p in after.pairs if p.i_id in b]
+
+
+def model_level(td: TrialData, bounds: dict[str, tuple[float, float]] | None = None) -> ModelLevel:
+    """Identify ``td``'s modes and calibrate its rig to them. Never raises on what the data or
+    the rig may be (no decay, no mode recurring, no mode pairing, a model that cannot be
+    built): says why instead."""
+    try:
+        tm = trial_modes(td)
+    except (ValueError, np.linalg.LinAlgError) as err:
+        return ModelLevel(None, None, f"modes not identified: {err}")
+    if tm.n_modes == 0:
+        return ModelLevel(tm, None, "no mode recurs across the impacts")
+    try:
+        return ModelLevel(tm, calibrate_to_modes(tm, td.rig, bounds))
+    except (ValueError, np.linalg.LinAlgError) as err:
+        return ModelLevel(tm, None, str(err))

@@ -1,0 +1,96 @@
+"""``ramdaq rig fit TRIAL --rig START``: a rig's constants tuned to a trial's identified modes
+and shapes (:mod:`ramdaq.analysis.gap.rigfit`), written as a new rig file, with the modes before
+and after. The noise floor, and so every uncertainty, comes from the trial, not the rig file."""
+
+from __future__ import annotations
+
+import datetime
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from ...analysis.gap.modal_level import ModalComparison, trial_modes
+from ...analysis.gap.rigfit import ModeFit, calibrate_to_modes, fitted_rig_text
+from ...analysis.model.rig import RigError
+from .gap import load_trial, trial_data
+
+
+def parse_bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    """``["stock.I_m4=0.8:1.25", ...]`` as ``{name: (lo, hi)}`` multipliers. Raises RigError
+    naming the item that is not ``NAME=LO:HI``."""
+    out = {}
+    for item in items or ():
+        name, eq, rest = item.partition("=")
+        lo, colon, hi = rest.partition(":")
+        try:
+            if not (eq and colon and name.strip()):
+                raise ValueError
+            out[name.strip()] = (float(lo), float(hi))
+        except ValueError:
+            raise RigError(f"--bound {item!r}: expected NAME=LO:HI, multipliers of the start "
+                           "value, e.g. stock.I_m4=0.8:1.25") from None
+    return out
+
+
+def run_rig_fit(trial: str | Path, start: str | Path, *, out: Path | None = None,
+                bounds: dict[str, tuple[float, float]] | None = None,
+                progress: Callable[[str], None] | None = None) -> tuple[ModeFit, Path]:
+    """Identify ``trial``'s modes, fit ``start``'s constants to them, write the fitted rig to
+    ``out`` (default: the trial's folder, ``TRIAL_rig.toml``). Returns the fit and the path."""
+    say = progress or (lambda s: None)
+    lt = load_trial(trial, start, say)
+    td = trial_data(lt)
+    say(f"identifying modes on {td.n_seg} impacts")
+    tm = trial_modes(td)
+    if tm.n_modes == 0:
+        raise ValueError(f"{trial}: no mode recurs across the impacts: nothing to fit the rig to")
+    say(f"fitting the rig's constants to {tm.n_modes} modes")
+    mf = calibrate_to_modes(tm, lt.rig, bounds)
+    path = out if out is not None else Path(trial).with_name(Path(trial).stem + "_rig.toml")
+    text = fitted_rig_text(mf, str(trial), datetime.date.today().isoformat())
+    path.write_text(text, encoding="utf-8")
+    return mf, path
+
+
+def _f(v: float, fmt: str) -> str:
+    return format(v, fmt) if math.isfinite(v) else "-".rjust(len(format(1.0, fmt)))
+
+
+def mode_table(before: ModalComparison, after: ModalComparison) -> list[str]:
+    """The identified modes beside the start and the fitted model's: frequency, damping ratio,
+    MAC over all gages and per body."""
+    tm = before.trial
+    out = [f"modes identified on {tm.n_impacts} impacts (+- standard error from their spread) "
+           "against the start rig and the fitted one:",
+           "   identified               |  start rig                  |  fitted rig",
+           "   f (Hz)   +-       zeta    |  f (Hz)   df %   zeta   MAC  |  f (Hz)   df %   zeta   MAC"
+           "   MAC rudder/hull"]
+    b = {p.i_id: p for p in before.pairs}
+    a = {p.i_id: p for p in after.pairs}
+    for i in range(tm.n_modes):
+        row = f"{tm.f_hz[i]:9.4f} {tm.f_se_hz[i]:7.1e} {tm.zeta[i]:7.4f}   |"
+        for p in (b.get(i), a.get(i)):
+            if p is None:
+                row += "  (no model mode pairs with it)  |"
+                continue
+            row += (f" {p.f_model_hz:8.3f} {100 * p.df_rel:+6.2f} {p.zeta_model:6.4f} "
+                    f"{p.mac:6.4f} |")
+        p = a.get(i)
+        if p is not None:
+            row += f"  {_f(p.mac_rudder, '.4f')}/{_f(p.mac_hull, '.4f')}"
+        out.append(row.rstrip(" |"))
+    return out
+
+
+def fit_lines(mf: ModeFit, path: Path) -> list[str]:
+    """What ``ramdaq rig fit`` prints: the modes, the constants, the solver's end, the form."""
+    out = mode_table(mf.before, mf.after)
+    out.append("")
+    out.append("constants (fitted value, x start value, bounds):")
+    for p in mf.params:
+        out.append(f"  {p.name:40s} {p.value:12.6g}  x{p.factor:6.4f}  [{p.lo:g}, {p.hi:g}]"
+                   + ("  AT BOUND" if p.at_bound else ""))
+    out.append(f"solver: {mf.solver_text()}")
+    out.append(f"model form left: {mf.form_text()}")
+    out.append(f"wrote {path}")
+    return out
