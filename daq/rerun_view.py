@@ -133,7 +133,9 @@ class RerunView:
         Rows per second per channel of the live gage traces (each row ``[min, max]``).
     live_batch_s : float
         Stream seconds of live rows gathered per ``send_columns`` call (viewer latency, s); fewer,
-        bigger chunks cost less CPU and file (0.2 s: ~33 B per row; per 50 ms block: ~40 B).
+        bigger chunks cost less CPU and file (0.2 s: ~33 B per row; per 50 ms block: ~40 B), and
+        less memory: the ``.rrd`` footer's manifest holds ~1 kB per chunk until :meth:`close`
+        (16 channels every 0.2 s grew a trial's RSS by ~5 MB a minute; every 1 s, ~1 MB).
     memory_limit : str
         Buffer limit of the gRPC server (late-joining web viewers replay it) and of a spawned native
         viewer, e.g. ``"25%"`` of RAM or ``"2GB"``; the oldest data is dropped beyond it.
@@ -149,7 +151,7 @@ class RerunView:
                  recording_name: str | None = None, rrd_path: Path | None = None,
                  serve_web: bool = False, web_port: int = 9090, grpc_port: int = 9876,
                  connect: str | None = None, live_rate_hz: float = 2000.0,
-                 live_batch_s: float = 0.2, memory_limit: str = "25%") -> None:
+                 live_batch_s: float = 1.0, memory_limit: str = "25%") -> None:
         if live_rate_hz <= 0:
             raise ValueError(f"live_rate_hz must be positive, got {live_rate_hz}")
         if serve_web:
@@ -391,7 +393,8 @@ class RerunView:
 
         ``results/gXX/f_hz`` (Hz), ``results/gXX/delta`` (log decrement, -) and
         ``results/gXX/amplitude`` (SI) get a point each (final results as large diamonds, and a
-        ``results/log`` line). With ``decay_t_s`` (s since stream start, shape (n,)) and ``decay``
+        ``results/log`` line); a value that is not a finite number (a first look's amplitude) is
+        not logged. With ``decay_t_s`` (s since stream start, shape (n,)) and ``decay``
         (SI, (n,)) the fitted signal goes to ``impacts/<k>/decay/gXX``; ``envelope`` ((n,) amplitude,
         drawn as +e and -e, or (n, 2)) to ``impacts/<k>/decay/gXX/envelope``.
         """
@@ -399,7 +402,8 @@ class RerunView:
         style = rr.SeriesPoints(markers="diamond" if final else "circle", marker_sizes=6 if final else 2.5)
         self._at(t_s)
         for name, v in (("f_hz", f_hz), ("delta", delta), ("amplitude", amplitude)):
-            self.rec.log(f"results/{g}/{name}", rr.Scalars(float(v)), style)
+            if math.isfinite(v):
+                self.rec.log(f"results/{g}/{name}", rr.Scalars(float(v)), style)
         if final:
             self.rec.log("results/log", rr.TextLog(
                 f"impact {k} {g}: f = {f_hz:.4g} Hz, delta = {delta:.4g}, amplitude = {amplitude:.4g}"))
