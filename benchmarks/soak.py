@@ -73,10 +73,12 @@ def fit_growth(t_s: np.ndarray, rss_mb: np.ndarray) -> Growth:
 
 
 class RssSampler:
-    """Samples this process's RSS every ``every_s`` s on its own thread and prints it."""
+    """Samples this process's RSS every ``every_s`` s on its own thread and prints it, with
+    the stream seconds ``stream_s()`` says the session has taken; only samples taken while the
+    stream still ran are kept (after it, the session only waits for its last finals)."""
 
-    def __init__(self, every_s: float) -> None:
-        self.every_s = every_s
+    def __init__(self, every_s: float, stream_s, duration_s: float) -> None:
+        self.every_s, self.stream_s, self.duration_s = every_s, stream_s, duration_s
         self.samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
         self._stop = threading.Event()
         self._proc = psutil.Process()
@@ -94,8 +96,12 @@ class RssSampler:
     def _run(self) -> None:
         while not self._stop.wait(self.every_s):
             t, rss = time.monotonic() - self._t0, self._proc.memory_info().rss / 1e6
-            self.samples.append((t, rss))
-            print(f"  t = {t:6.0f} s   RSS {rss:8.1f} MB", flush=True)
+            stream = self.stream_s()
+            if stream < self.duration_s:
+                self.samples.append((t, rss))
+            print(f"  t = {t:6.0f} s   stream {stream:6.1f} s   RSS {rss:8.1f} MB"
+                  + ("" if stream < self.duration_s else "   (stream ended: not fitted)"),
+                  flush=True)
 
 
 def run_trial(args: argparse.Namespace, folder: Path) -> tuple[object, list[tuple[float, float]]]:
@@ -107,10 +113,11 @@ def run_trial(args: argparse.Namespace, folder: Path) -> tuple[object, list[tupl
                     fs_hz=args.rate, pace="realtime")
     info = dev.open()
     view = RerunView(info, rrd_path=folder / "soak.rrd") if args.view else None
-    with RssSampler(args.every) as rss:
+    session = Session(dev, record_path=folder / "soak.mcap", view=view, readout=False,
+                      log=print if args.verbose else None)
+    with RssSampler(args.every, lambda: session.samples / info.fs_hz, duration) as rss:
         try:
-            outcome = Session(dev, record_path=folder / "soak.mcap", view=view, readout=False,
-                              log=print if args.verbose else None).run()
+            outcome = session.run()
         finally:
             if view is not None:
                 view.close()
