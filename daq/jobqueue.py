@@ -1,12 +1,14 @@
 """The live analyzer's job queue: bounded, with a stated policy for when the analyzer falls behind.
 
-The queue holds the jobs waiting for the analyzer thread and the one it is running. Its bound
-(:class:`QueuePolicy`) is on the bytes of samples those jobs hold and on the number of finals.
-A live trial cannot wait for the analyzer -- the device does not stop -- so when the analyzer
-falls behind the queue *sheds* work, in this order:
+The queue has two lanes, each with its own analyzer thread: first looks and finals, so that a
+long final never holds up the next blow's first looks. It holds the jobs waiting and the ones
+running; its bound (:class:`QueuePolicy`) is on the bytes of samples those jobs hold together
+and on the number of finals. A live trial cannot wait for the analyzer -- the device does not
+stop -- so when the analyzer falls behind the queue *sheds* work, in this order:
 
-1. **First looks go first.** A first look is queued only when the analyzer has nothing else to
-   do; a final that arrives pushes every first look still waiting out of the queue.
+1. **First looks go first.** A first look is queued only when no other look is waiting or
+   running; a final whose record would take the queue past its bytes bound pushes the first
+   look still waiting out of the queue.
 2. **Then finals run coarse.** A final that arrives while another final is waiting or running
    (or whose record would take the queue past its bytes bound) is cut, on arrival, to the first
    ``coarse_decay_s`` of its free decay, and is analysed decimated to about ``coarse_rate_hz``
@@ -92,7 +94,7 @@ class JobQueue:
         self.policy = policy
         self.fs_hz, self.skip_n = fs_hz, skip_n
         self._jobs: deque[FinalJob | LookJob] = deque()
-        self._running: FinalJob | LookJob | None = None
+        self._running: dict[type, FinalJob | LookJob | None] = {FinalJob: None, LookJob: None}
         self._held = 0  # bytes of the jobs waiting and running
         self._stopped = False
         self._cond = threading.Condition()
@@ -101,9 +103,10 @@ class JobQueue:
 
     # -- the acquisition side -------------------------------------------------------------------
     def put_look(self, job: LookJob) -> bool:
-        """Queue a first look if the analyzer has nothing else to do; False if it has."""
+        """Queue a first look unless another is waiting or running, or its samples would take
+        the queue past its bytes bound; False if not queued."""
         with self._cond:
-            if self._running is not None or self._jobs:
+            if self._looks() or self._held + job_bytes(job) > self.policy.max_bytes:
                 return False
             self._add(job)
             return True
@@ -112,7 +115,7 @@ class JobQueue:
         """Queue a final: with ``wait``, block until it fits the bound (or the queue is empty);
         otherwise make room by the policy (module docstring)."""
         with self._cond:
-            dropped = self._drop_looks()
+            dropped = () if self._fits_bytes(job) else self._drop_looks()
             if wait:
                 self._cond.wait_for(lambda: self._fits(job) or self._idle())
                 self._add(job)
@@ -141,33 +144,50 @@ class JobQueue:
     def pending(self) -> int:
         """Jobs waiting or running."""
         with self._cond:
-            return len(self._jobs) + (self._running is not None)
+            return len(self._jobs) + sum(j is not None for j in self._running.values())
+
+    @property
+    def looks_pending(self) -> int:
+        """First looks waiting or running."""
+        with self._cond:
+            return self._looks()
 
     # -- the analyzer side ----------------------------------------------------------------------
-    def get(self) -> FinalJob | LookJob | None:
-        """The next job (it counts as held until :meth:`done`); None once stopped and empty."""
+    def get(self, kind: type[FinalJob] | type[LookJob]) -> FinalJob | LookJob | None:
+        """The next job of ``kind``, the lane of the calling thread (it counts as held until
+        :meth:`done`); None once stopped and no job of that kind is waiting."""
         with self._cond:
-            self._cond.wait_for(lambda: self._jobs or self._stopped)
-            if not self._jobs:
+            self._cond.wait_for(lambda: self._next(kind) is not None or self._stopped)
+            job = self._next(kind)
+            if job is None:
                 return None
-            self._running = self._jobs.popleft()
-            return self._running
+            self._jobs.remove(job)
+            self._running[kind] = job
+            return job
 
-    def done(self) -> None:
-        """The running job has finished: its samples are released."""
+    def done(self, kind: type[FinalJob] | type[LookJob]) -> None:
+        """The running job of ``kind`` has finished: its samples are released."""
         with self._cond:
-            if self._running is not None:
-                self._held -= job_bytes(self._running)
-                self._running = None
+            job = self._running[kind]
+            if job is not None:
+                self._held -= job_bytes(job)
+                self._running[kind] = None
             self._cond.notify_all()
 
     # -- inside the lock ------------------------------------------------------------------------
     def _idle(self) -> bool:
-        return self._running is None and not self._jobs
+        return not self._jobs and all(j is None for j in self._running.values())
+
+    def _next(self, kind: type) -> FinalJob | LookJob | None:
+        return next((j for j in self._jobs if isinstance(j, kind)), None)
 
     def _finals(self) -> int:
-        held = [*self._jobs, self._running]
-        return sum(isinstance(j, FinalJob) for j in held)
+        return (sum(isinstance(j, FinalJob) for j in self._jobs)
+                + (self._running[FinalJob] is not None))
+
+    def _looks(self) -> int:
+        return (sum(isinstance(j, LookJob) for j in self._jobs)
+                + (self._running[LookJob] is not None))
 
     def _fits_bytes(self, job: FinalJob) -> bool:
         return self._held + job_bytes(job) <= self.policy.max_bytes

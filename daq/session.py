@@ -5,14 +5,17 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
 - the caller's thread reads the device and never waits on disk or analysis: each block goes to
   the recorder's bounded queue, through the trigger (vectorised, far faster than real time), to
   the live views;
-- one analyzer thread takes work from the main loop through a bounded queue
-  (:mod:`ramdaq.daq.jobqueue`): every finished impact record (a final analysis) and, while the
-  rudder still rings, a first look at the decay so far. A first look is asked for only when the
-  analyzer is idle. When the analyzer falls behind a live device, first looks are skipped first,
-  then finals run on a shorter, decimated decay, and last a final is left unanalysed -- each
-  counted in the summary and written as an event; samples are never skipped, and the queue never
-  holds more than its bound. A device that can wait (``pace == "fast"``: a replay, a simulator
-  run flat out) waits for room instead, so its finals are always whole.
+- two analyzer threads take work from the main loop through a bounded queue
+  (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis), the other,
+  while the rudder still rings, first looks at the decay so far -- so a final never holds up the
+  next blow's first looks. A first look is asked for when the last one is done: the first after
+  ``first_look_s`` of free decay, then every ``first_look_s`` until one is sure enough to show
+  (:data:`LOOK_REL_SE`), then every ``update_s``. When the analyzer falls behind a live device,
+  first looks are skipped first, then finals run on a shorter, decimated decay, and last a
+  final is left unanalysed -- each counted in the summary and written as an event; samples are
+  never skipped, and the queue never holds more than its bound. A device that can wait
+  (``pace == "fast"``: a replay, a simulator run flat out) waits for room instead, so its
+  finals are always whole.
 
 Final numbers come from the impact's complete record alone, so a replay of the recording
 (``McapReplayDevice`` through the same session) gives the same impacts and the same numbers.
@@ -25,6 +28,8 @@ from __future__ import annotations
 import dataclasses
 import queue
 import threading
+import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,6 +63,10 @@ from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""
+LOOK_REL_SE = 0.25
+"""A first look is shown when the median over gages of its decrement's standard error relative
+to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
+worth a glance, a wilder one is not)."""
 SUMMARY_TOPIC = "/ramdaq/summary"
 """The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 
@@ -68,6 +77,17 @@ class JobFailed:
 
     job: FinalJob | LookJob
     error: Exception
+
+
+@dataclass(frozen=True)
+class Shown:
+    """When a hit's numbers were shown: hit ``index``, ``kind`` ("look" or "final"), the blow's
+    onset (s of stream) and the wall clock then (``time.monotonic()``, s)."""
+
+    index: int
+    kind: str
+    onset_s: float
+    wall_s: float
 
 
 @dataclass
@@ -104,7 +124,10 @@ class Session:
     readout : LiveReadout or False or None
         Terminal table; ``None`` makes one, ``False`` shows nothing.
     update_s : float
-        Stream seconds between first looks at a ringing decay.
+        Stream seconds between first looks at a ringing decay once one has been shown.
+    first_look_s : float
+        Seconds of free decay before the first look, and between looks until one is sure
+        enough to show.
     trigger_settings : TriggerSettings, optional
         The trigger's settings (default ``TriggerSettings()``).
     queue_policy : QueuePolicy, optional
@@ -119,7 +142,8 @@ class Session:
 
     def __init__(self, device: Device, *, record_path: str | Path | None = None,
                  overwrite: bool = False, view=None, readout: LiveReadout | bool | None = None,
-                 update_s: float = 0.5, trigger_settings: TriggerSettings | None = None,
+                 update_s: float = 0.5, first_look_s: float = 0.1,
+                 trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None,
                  queue_policy: QueuePolicy | None = None, shed: bool | None = None) -> None:
         self.device = device
@@ -135,6 +159,8 @@ class Session:
         self.readout = (LiveReadout(self.info, adc_bits=self.info.extra.get("adc_bits"))
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
+        self.first_n = max(1, round(first_look_s * self.info.fs_hz))
+        self._look_sure = False  # a first look of the ringing hit has been shown
         self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
         self._jobs = JobQueue(queue_policy or QueuePolicy(), self.info.fs_hz,
@@ -149,6 +175,8 @@ class Session:
         self.finals_coarse = 0
         self.finals_unanalysed = 0
         self._t_ns = 0  # device time of the latest block's first sample
+        self.shown: deque[Shown] = deque(maxlen=4096)  # the latest numbers shown, for timing
+        self.wall_at_start: float | None = None  # monotonic s when sample 0 would have come
         self._rec: Recorder | None = None
         self._truth_written = 0  # simulator truth messages already in the recording
         self._next_sample: int | None = None  # where the next block starts if there is no gap
@@ -159,10 +187,10 @@ class Session:
         self._gage_rows = [i for i, g in enumerate(self.info.gages) if g]
         self._gages = tuple(self.info.gages[i] for i in self._gage_rows)
 
-    # -- the analyzer thread ------------------------------------------------------------------
-    def _worker(self) -> None:
+    # -- the analyzer threads -----------------------------------------------------------------
+    def _worker(self, kind: type[FinalJob] | type[LookJob]) -> None:
         while True:
-            job = self._jobs.get()
+            job = self._jobs.get(kind)
             if job is None:
                 return
             try:
@@ -171,13 +199,13 @@ class Session:
                 self._done.put(JobFailed(job, err))
             finally:
                 del job  # the samples go with the job's result, not with this frame
-                self._jobs.done()
+                self._jobs.done(kind)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
         """Stream the device to its end (or Ctrl-C), then wait for every final analysis."""
-        worker = threading.Thread(target=self._worker, name="ramdaq-analyzer", daemon=True)
-        worker.start()
+        for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):
+            threading.Thread(target=self._worker, args=(kind,), name=name, daemon=True).start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
                if self.record_path else None)
         self._rec = rec
@@ -237,6 +265,8 @@ class Session:
             self._say(f"device fault: {fault.kind} {fault.detail}")
         gap = self._next_sample is not None and block.first_sample != self._next_sample
         self._next_sample = block.next_sample
+        if self.wall_at_start is None:
+            self.wall_at_start = time.monotonic() - block.next_sample / self.info.fs_hz
         self._t_ns = block.t0_ns
         self.samples += block.n_samples
         for ev in self.trigger.process(block):
@@ -292,19 +322,17 @@ class Session:
             self._say(f"hit {self._n_events} at {onset / self.info.fs_hz:.3f} s: ringing")
             if self.readout:
                 self.readout.clear_results()
-            self._next_look = start + self.update_n
-        if now < self._next_look:
+            self._next_look = start + self.first_n
+            self._look_sure = False
+        if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
             return
-        self._next_look = now + self.update_n
-        if self._jobs.pending:
-            self._look_skipped(onset, "the analyzer was busy")
-            return
+        self._next_look = now + (self.update_n if self._look_sure else self.first_n)
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
         if not self._jobs.put_look(LookJob(onset, x)):
-            self._look_skipped(onset, "the analyzer was busy")
+            self._look_skipped(onset, "its samples would pass the queue's bytes bound")
 
     def _look_skipped(self, onset: int, why: str) -> None:
         self.skipped_updates += 1
@@ -315,7 +343,7 @@ class Session:
         """Count and record what the queue did to take hit ``ev``'s final; a final it refused
         is this hit's result at once, rejected with the reason."""
         for onset in adm.looks_dropped:
-            self._look_skipped(onset, "a final analysis came")
+            self._look_skipped(onset, "a final's record needed its room in the queue")
         job = adm.job
         k = self._n_events - 1
         if job is not None and job.coarse is not None:
@@ -352,9 +380,13 @@ class Session:
                           f"failed: {type(done.error).__name__}: {done.error}")
 
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
-        if look is None:
+        """Show a first look whose decrements are sure enough (:data:`LOOK_REL_SE`)."""
+        if look is None or not _sure(look):
             return
+        self._look_sure = True
         self.first_looks += 1
+        self.shown.append(Shown(-1 if self._ringing_hit is None else self._ringing_hit, "look",
+                                onset / self.info.fs_hz, time.monotonic()))
         if self.readout:
             for n, (f, d, _) in look.gages.items():
                 self.readout.set_result(f"g{n:02d}", f, d, final=False)
@@ -368,6 +400,7 @@ class Session:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
         thread (:func:`~ramdaq.daq.analyzer.hit_to_json`). The hit is kept without its samples."""
         self.hits.append(dataclasses.replace(hit, event=dataclasses.replace(hit.event, record=None)))
+        self.shown.append(Shown(hit.index, "final", hit.event.onset_s, time.monotonic()))
         a = hit.analysis
         if rec:
             rec.write_json(RESULTS_TOPIC, {k: doc[k] for k in ("index", "accepted", "reason", "analysis")},
@@ -419,6 +452,13 @@ class Session:
             self.readout.hit(text)
         elif self.log:
             self.log(text)
+
+
+def _sure(look: FirstLook) -> bool:
+    """True if the median over gages of the decrement's relative standard error is at most
+    :data:`LOOK_REL_SE` (gages whose error the estimator could not give left out)."""
+    rel = [se / abs(d) for _, d, se in look.gages.values() if d and np.isfinite(se)]
+    return bool(rel) and float(np.median(rel)) <= LOOK_REL_SE
 
 
 def _flags(ev: ImpactEvent) -> dict:

@@ -34,27 +34,41 @@ def one_blow(albacore):
 def test_looks_go_first_then_finals_run_coarse_then_are_refused(albacore, one_blow):
     info, ev = one_blow
     skip = round(decay_skip_s(albacore.with_medium("water")) * info.fs_hz)
-    policy = QueuePolicy(max_finals=2, coarse_decay_s=1.0)
-    q = JobQueue(policy, info.fs_hz, skip)
     look = LookJob(ev.onset_sample, ev.record.values()[:, :2048])
+    whole = ev.record.counts.nbytes
+    # room for the whole record and a coarse one (0.5 s of decay), not for the look beside them
+    policy = QueuePolicy(max_finals=2, coarse_decay_s=0.5, max_bytes=whole + look.x.nbytes - 1)
+    q = JobQueue(policy, info.fs_hz, skip)
     assert q.put_look(look)
-    assert not q.put_look(look)  # the analyzer has work: a second look is not queued
+    assert not q.put_look(look)  # one look at a time: a second is not queued
     first = q.put_final(FinalJob(0, ev), wait=False)
     assert first.looks_dropped == (ev.onset_sample,)  # the waiting look made room
     assert first.job.coarse is None  # nothing ahead of it: analysed whole
     second = q.put_final(FinalJob(1, ev), wait=False)
+    assert second.looks_dropped == ()
     assert second.job.coarse is not None and "1 final(s) ahead" in second.job.coarse.why
-    # cut on arrival to the onset's skip plus 1 s of decay: the long record is not held
-    n = ev.onset_sample + skip + 2048 - ev.record.first_sample
+    # cut on arrival to the onset's skip plus 0.5 s of decay: the long record is not held
+    n = ev.onset_sample + skip + 1024 - ev.record.first_sample
     assert second.job.event.record.counts.shape[1] == n
     third = q.put_final(FinalJob(2, ev), wait=False)
     assert third.job is None and third.refused.startswith("not analysed: the analyzer queue "
                                                           "was at its bound (2 of 2 finals")
     assert q.peak_finals == 2
     assert q.peak_bytes == job_bytes(first.job) + job_bytes(second.job) <= policy.max_bytes
-    assert q.get() is first.job
-    q.done()
+    assert q.get(FinalJob) is first.job
+    q.done(FinalJob)
     assert q.pending == 1
+
+
+def test_a_look_runs_beside_a_final(albacore, one_blow):
+    """Two lanes: a final running does not hold up the next blow's first look."""
+    info, ev = one_blow
+    q = JobQueue(QueuePolicy(), info.fs_hz, round(decay_skip_s(albacore) * info.fs_hz))
+    q.put_final(FinalJob(0, ev), wait=False)
+    assert q.get(FinalJob).index == 0  # running
+    look = LookJob(ev.onset_sample, ev.record.values()[:, :2048])
+    assert q.put_look(look) and q.looks_pending == 1
+    assert q.get(LookJob) is look
 
 
 def test_a_record_past_the_bytes_bound_runs_coarse_alone(albacore, one_blow):
