@@ -82,7 +82,7 @@ class JobFailed:
 @dataclass(frozen=True)
 class Shown:
     """When a hit's numbers were shown: hit ``index``, ``kind`` ("look" or "final"), the blow's
-    onset (s of stream) and the wall clock then (``time.monotonic()``, s)."""
+    onset sample in s of stream, and the wall clock then (``time.monotonic()``, s)."""
 
     index: int
     kind: str
@@ -161,6 +161,7 @@ class Session:
         self.update_n = round(update_s * self.info.fs_hz)
         self.first_n = max(1, round(first_look_s * self.info.fs_hz))
         self._look_sure = False  # a first look of the ringing hit has been shown
+        self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
         self._jobs = JobQueue(queue_policy or QueuePolicy(), self.info.fs_hz,
@@ -323,7 +324,7 @@ class Session:
             if self.readout:
                 self.readout.clear_results()
             self._next_look = start + self.first_n
-            self._look_sure = False
+            self._look_sure, self._ringing_onset = False, onset
         if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
             return
         self._next_look = now + (self.update_n if self._look_sure else self.first_n)
@@ -380,8 +381,9 @@ class Session:
                           f"failed: {type(done.error).__name__}: {done.error}")
 
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
-        """Show a first look whose decrements are sure enough (:data:`LOOK_REL_SE`)."""
-        if look is None or not _sure(look):
+        """Show a first look whose decrements are sure enough (:data:`LOOK_REL_SE`), unless a
+        later blow already rings."""
+        if look is None or onset != self._ringing_onset or not _sure(look):
             return
         self._look_sure = True
         self.first_looks += 1
@@ -400,7 +402,8 @@ class Session:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
         thread (:func:`~ramdaq.daq.analyzer.hit_to_json`). The hit is kept without its samples."""
         self.hits.append(dataclasses.replace(hit, event=dataclasses.replace(hit.event, record=None)))
-        self.shown.append(Shown(hit.index, "final", hit.event.onset_s, time.monotonic()))
+        self.shown.append(Shown(hit.index, "final", hit.event.onset_sample / self.info.fs_hz,
+                                time.monotonic()))
         a = hit.analysis
         if rec:
             rec.write_json(RESULTS_TOPIC, {k: doc[k] for k in ("index", "accepted", "reason", "analysis")},
