@@ -112,7 +112,8 @@ def run_trial(args: argparse.Namespace, folder: Path) -> tuple[object, list[tupl
     dev = SimDevice(RIG, medium="water", seed=args.seed, duration_s=duration, impacts=impacts,
                     fs_hz=args.rate, pace="realtime")
     info = dev.open()
-    view = RerunView(info, rrd_path=folder / "soak.rrd") if args.view else None
+    view = (RerunView(info, rrd_path=folder / "soak.rrd", footer=args.footer) if args.view
+            else None)
     session = Session(dev, record_path=folder / "soak.mcap", view=view, readout=False,
                       log=print if args.verbose else None)
     with RssSampler(args.every, lambda: session.samples / info.fs_hz, duration) as rss:
@@ -131,6 +132,9 @@ def main() -> None:
                     help="trial length (default 10 at 2048 Hz, 5 at higher rates)")
     ap.add_argument("--view", action=argparse.BooleanOptionalAction, default=True,
                     help="log to a Rerun .rrd as the trial does")
+    ap.add_argument("--footer", action=argparse.BooleanOptionalAction, default=True,
+                    help="finish the .rrd with Rerun's footer, as the trial does (its chunk "
+                         "manifest is held in memory until the end)")
     ap.add_argument("--impact-every", type=float, default=30.0, help="s between blows")
     ap.add_argument("--every", type=float, default=5.0, help="s between RSS samples")
     ap.add_argument("--warmup", type=float, default=60.0, help="s left out of the fit")
@@ -142,8 +146,9 @@ def main() -> None:
     if args.minutes is None:
         args.minutes = 10.0 if args.rate <= 2048 else 5.0
     warmup = args.warmup
+    view = f"on ({'with' if args.footer else 'without'} .rrd footer)" if args.view else "off"
     print(f"soak: {args.minutes:g} min at {args.rate:g} Hz, 16 gages, a blow every "
-          f"{args.impact_every:g} s, view {'on' if args.view else 'off'}; fit after {warmup:g} s")
+          f"{args.impact_every:g} s, view {view}; fit after {warmup:g} s")
     with tempfile.TemporaryDirectory() as tmp:
         outcome, samples = run_trial(args, Path(tmp))
         size = {p.suffix: p.stat().st_size / 1e6 for p in Path(tmp).iterdir()}

@@ -136,6 +136,12 @@ class RerunView:
         bigger chunks cost less CPU and file (0.2 s: ~33 B per row; per 50 ms block: ~40 B), and
         less memory: the ``.rrd`` footer's manifest holds ~1 kB per chunk until :meth:`close`
         (16 channels every 0.2 s grew a trial's RSS by ~5 MB a minute; every 1 s, ~1 MB).
+    footer : bool
+        Finish the ``.rrd`` with Rerun's footer (a manifest of every chunk: random access, and
+        ``rerun rrd verify`` passes). Rerun keeps that manifest in memory until :meth:`close`:
+        a live trial's RSS grows by ~20 MB a minute with it (16 gages at 2048 Hz, a blow every
+        10 s, ``benchmarks/soak.py``) and stays flat without. ``False`` for long sessions;
+        ``rerun rrd optimize`` adds a footer afterwards.
     memory_limit : str
         Buffer limit of the gRPC server (late-joining web viewers replay it) and of a spawned native
         viewer, e.g. ``"25%"`` of RAM or ``"2GB"``; the oldest data is dropped beyond it.
@@ -151,7 +157,8 @@ class RerunView:
                  recording_name: str | None = None, rrd_path: Path | None = None,
                  serve_web: bool = False, web_port: int = 9090, grpc_port: int = 9876,
                  connect: str | None = None, live_rate_hz: float = 2000.0,
-                 live_batch_s: float = 1.0, memory_limit: str = "25%") -> None:
+                 live_batch_s: float = 1.0, footer: bool = True,
+                 memory_limit: str = "25%") -> None:
         if live_rate_hz <= 0:
             raise ValueError(f"live_rate_hz must be positive, got {live_rate_hz}")
         if serve_web:
@@ -179,7 +186,7 @@ class RerunView:
         sinks: list = []
         if self.rrd_path is not None:
             self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
-            sinks.append(rr.FileSink(self.rrd_path))
+            sinks.append(rr.FileSink(self.rrd_path, write_footer=footer))
         if serve_web:
             server = rr.GrpcServerSink(LOCALHOST, grpc_port, server_memory_limit=memory_limit)
             sinks.append(server)
