@@ -164,6 +164,9 @@ class ImpactAnalysis:
     stock_lengths: dict[str, float] = field(default_factory=dict)
     stock_curves: dict[str, list[float]] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    hull_motions: dict[str, Decrement] = field(default_factory=dict)
+    """The hull section's (a stern plane's fixed portion's) own motions at the stock and their
+    decrements: ``alpha_b`` (Eq 8), ``gamma_b`` (from gages 5 and 13 when level), ``v_b``."""
 
     @property
     def f_hz(self) -> float:
@@ -174,6 +177,21 @@ class ImpactAnalysis:
         """The gages whose decay the mode fit used (verdict ok), in ``gage_numbers`` order: the
         rows of ``modes.complex_amplitude``, ``modes.amplitude`` and ``modes.mode_shape``."""
         return tuple(n for n in self.gage_numbers if self.verdicts[n].ok)
+
+    def hull_table(self) -> dict:
+        """Table 2f's fixed-portion column done automatically: the decrements of the hull
+        section's (fixed portion's) motions gamma_b, alpha_b, v_b, their average and each one's
+        percent deviation from it; the finite ones only (``None`` rows for the others)."""
+        names = ("gamma_b", "alpha_b", "v_b")
+        vals = {n: self.hull_motions[n].delta for n in names if n in self.hull_motions}
+        good = {n: v for n, v in vals.items() if np.isfinite(v)}
+        rows = {n: {"delta": None, "deviation_pct": None} for n in names}
+        if not good:
+            return {"rows": rows, "average": None, "mean_abs_deviation_pct": None}
+        mean, dev, mean_abs = percent_deviation_from_average(list(good.values()))
+        for n, d in zip(good, dev, strict=True):
+            rows[n] = {"delta": good[n], "deviation_pct": d}
+        return {"rows": rows, "average": mean, "mean_abs_deviation_pct": mean_abs}
 
     def table2b(self) -> dict:
         """Table 2b done automatically: delta_gamma, delta_alpha, delta_v, delta_modal, their
@@ -283,6 +301,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     signals = _rudder_motions(d, rig)
     motions, amps = _motion_decrements(signals, verdicts, decrement, notes)
     relative = _relative_decrements(d, rig, signals, decrement, notes)
+    hull = {name: decrement(sig)[0] for name, sig in _hull_motions(d, rig, verdicts).items()}
     ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
     amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
     lengths, curves = _stock_lengths(amp, rig, notes)
@@ -291,7 +310,8 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
         modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
         gages=gages, motions=motions, relative=relative, alpha1_over_gamma1=ratio,
-        damping=damping, stock_lengths=lengths, stock_curves=curves, notes=tuple(notes))
+        damping=damping, stock_lengths=lengths, stock_curves=curves, notes=tuple(notes),
+        hull_motions=hull)
 
 
 def predominant_mode(table: ModeTable, rudder_rows: list[int]) -> int:
@@ -351,6 +371,22 @@ def _relative_decrements(d: Callable[[int], np.ndarray], rig: Rig, signals: dict
     rel_signals = {"gamma_R": signals["gamma"] - gamma_b, "alpha_R": signals["alpha"] - alpha_b,
                    "v_R_2_6": signals["v_2_6"] - d_rh, "v_R_4_8": signals["v_4_8"] - d_rh}
     return {name: decrement(sig)[0] for name, sig in rel_signals.items()}
+
+
+def _hull_motions(d: Callable[[int], np.ndarray], rig: Rig,
+                  verdicts: dict[int, GageVerdict]) -> dict[str, np.ndarray]:
+    """The hull section's rigid motions at the stock from its gages (those usable): alpha_b
+    (Eq 8, 13 and 14), gamma_b (5 and 13, when level) and v_b at the stock's hull attachment,
+    ``d13 + (z13 - z_attach) alpha_b``. For a stern plane, the fixed portion's alpha, beta, w."""
+    ok = {n for n, v in verdicts.items() if v.ok}
+    out: dict[str, np.ndarray] = {}
+    p5, p13, p14 = (rig.gage(n).position_m for n in (5, 13, 14))
+    if {13, 14} <= ok and abs(p13[0] - p14[0]) <= ALIGN_TOL_M:
+        out["alpha_b"] = alpha_b_from_13_14(d(13), d(14), p14[2] - p13[2])
+        out["v_b"] = d(13) + (p13[2] - rig.hull_attach_z_m) * out["alpha_b"]
+    if {5, 13} <= ok and abs(p5[2] - p13[2]) <= ALIGN_TOL_M and abs(p13[0] - p5[0]) > ALIGN_TOL_M:
+        out["gamma_b"] = (d(13) - d(5)) / (p13[0] - p5[0])
+    return out
 
 
 def _damping(rig: Rig, f: float, delta: float, gages: dict[int, Decrement],

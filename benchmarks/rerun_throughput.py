@@ -3,16 +3,20 @@ and how big the .rrd grows per second of stream.
 
 For 16 channels at 2048 Hz and 25.6 kHz (simulated albacore trial, blocks pre-computed so only the
 logging is timed) prints input samples/s through ``log_block`` (min/max decimation + one
-``send_columns`` per channel per block + flush to the file), the multiple of real time, and the
+``send_columns`` of all gages per batch + flush to the file), the multiple of real time, and the
 .rrd bytes per second of stream. Then, for reference, raw Rerun rates at full rate: one entity of
-16-wide rows, 16 entities via ``send_columns``, and ``rr.log`` per sample.
+16-wide rows, 16 entities via ``send_columns``, and ``rr.log`` per sample. Last, the size that
+matters to a user: ``ramdaq trial`` (simulated ALBACORE in water, 40 s, a blow every 10 s, as fast
+as it goes) writes its MCAP and its .rrd; their ratio (issue target: .rrd <= 3x the MCAP).
 
-    python benchmarks/rerun_throughput.py [--seconds 20] [--live-rate 2000]
+    python benchmarks/rerun_throughput.py [--seconds 20] [--live-rate 100]
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -20,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from ramdaq.daq.rerun_view import RerunView
+from ramdaq.daq.rerun_view import LIVE_RATE_HZ, RerunView
 from ramdaq.drivers.block import Block
 from ramdaq.drivers.sim import SimDevice
 
@@ -100,15 +104,27 @@ def bench_raw(fs_hz: float, seconds: float, tmp: Path) -> None:
     run("rr.log per sample", per_sample, n_log)
 
 
+def bench_trial(tmp: Path) -> None:
+    mcap, rrd = tmp / "trial.mcap", tmp / "trial.rrd"
+    subprocess.run([sys.executable, "-m", "ramdaq", "trial", "--rig", str(RIG), "--medium", "water",
+                    "--duration", "40", "--impact-every", "10", "--fast", "--quiet",
+                    "--out", str(mcap), "--rrd", str(rrd)], check=True, stdout=subprocess.DEVNULL)
+    m, r = mcap.stat().st_size, rrd.stat().st_size
+    print(f"ramdaq trial, 40 s, 4 blows: MCAP {m / 1e6:.2f} MB, .rrd {r / 1e6:.2f} MB "
+          f"= {r / m:.2f}x the MCAP")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="stream seconds per rate")
-    ap.add_argument("--live-rate", type=float, default=2000.0, help="live rows/s per channel")
+    ap.add_argument("--live-rate", type=float, default=LIVE_RATE_HZ,
+                    help=f"live rows/s per channel (default {LIVE_RATE_HZ:g})")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         for fs in (2048.0, 25600.0):
             bench_view(fs, args.seconds, args.live_rate, Path(tmp))
         bench_raw(25600.0, min(args.seconds, 10.0), Path(tmp))
+        bench_trial(Path(tmp))
 
 
 if __name__ == "__main__":

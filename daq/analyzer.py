@@ -247,6 +247,9 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
         "delta_motion": {m: _mean_scatter([a.motions[m].delta for a in ok if m in a.motions])
                          for m in motions},
         "delta_modal": _mean_scatter([a.damping["delta_modal"] for a in ok]),
+        "delta_hull_motion": {m: _mean_scatter([a.hull_motions[m].delta for a in ok
+                                                if m in a.hull_motions])
+                              for m in sorted({m for a in ok for m in a.hull_motions})},
         "C_N_s_per_m": _mean_scatter([a.damping["C_N_s_per_m"] for a in ok]),
         "c_N_m_s_per_rad": _mean_scatter([a.damping["c_N_m_s_per_rad"] for a in ok]),
     }
@@ -285,10 +288,12 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
         "gages": {f"g{n:02d}": d.to_json() for n, d in sorted(a.gages.items())},
         "motions": {k: d.to_json() for k, d in a.motions.items()},
         "relative_to_hull": {k: d.to_json() for k, d in a.relative.items()},
+        "hull_motions": {k: d.to_json() for k, d in a.hull_motions.items()},
         "alpha1_over_gamma1": finite_json(a.alpha1_over_gamma1),
         "damping": a.damping.to_json(),
         "stock_lengths_m": a.stock_lengths,
         "table2b": finite_json(a.table2b()),
+        "hull_table": finite_json(a.hull_table()),
         "notes": list(a.notes),
     }
 

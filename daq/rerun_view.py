@@ -7,24 +7,28 @@ first sample (a duration timeline, integer ns from the sample clock, never wall 
 
 Entity layout (``<k>`` the impact number, ``gXX`` the channel name)::
 
-    gages/gXX                    live trace: one [min, max] row per bucket of ~fs/live_rate_hz samples
-                                 (a channel that is not a gage: signals/<name>)
+    gages                        live traces of every gage channel, one row per bucket of
+                                 ~fs/live_rate_hz samples: series "gXX min", "gXX max" per channel
+                                 (channels that are not gages: signals)
     impacts/markers, impacts/log  a point at each onset (green accepted, red rejected, grey pending)
                                  and a TextLog line per decision
     impacts/<k>                  AnyValues: onset_s, status, reason and the detector's flags
-    impacts/<k>/traces/gXX       full-rate trace around impact k
-    impacts/<k>/decay/gXX        the decay a result was fitted to; .../envelope (+e, -e)
+    impacts/<k>/traces           full-rate traces around impact k, one series per channel
+    impacts/<k>/decay/gXX        the decay a result was fitted to, if given; .../envelope (+e, -e)
     impacts/<k>/mode             Arrows3D of the last mode shape of impact k (+ f_hz)
     results/gXX/{f_hz,delta,amplitude}, results/log   per-gage estimates; final ones also logged
-    layout/{gages,axes,rudder,stock}   static gage positions coloured by body, axes, outline
+    layout/{gages,axes,rudder,stock}   static gage positions coloured by body, axes, outline, in
+                                 ship axes (``rudder``: the control surface, a stern plane too)
     layout/mode                  the mode shape at the time cursor: arrows along the sensing axes
 
 Min/max rather than a plain decimated series: a 25.6 kHz trace in a plot a few thousand pixels wide
 is drawn as a band per pixel anyway; each bucket's extremes give the same band and never hide a
 peak, a clip or a spike, which keeping every n-th sample would alias or drop. A row holds
-``[min, max]`` (series "gXX min", "gXX max"), or the one sample when no decimation is needed. The
-viewer holds ~70 B per point, so the live traces are never full rate (16 ch x 2000 rows/s x 2 is
-64 k points/s, ~4.5 MB/s of viewer memory); full rate is only sent around impacts.
+``[min, max]`` per channel (series "gXX min", "gXX max"), or the one sample when no decimation is
+needed. All channels of a group share one entity and one time column: one entity per channel
+cost a time stamp per value and a chunk per channel per batch, most of the file. The
+viewer holds ~70 B per point, so the live traces are never full rate (16 ch x 100 rows/s x 2 is
+3.2 k points/s, ~0.2 MB/s of viewer memory); full rate is only sent around impacts.
 """
 
 from __future__ import annotations
@@ -53,6 +57,10 @@ BODY_COLORS = {"rudder": (60, 130, 230), "stock": (240, 150, 40), "hull": (150, 
 STATUS_COLORS = {True: (40, 190, 80), False: (220, 50, 50), None: (160, 160, 160)}
 SIGN_COLORS = ((60, 110, 230), (230, 70, 60))  # negative, positive modal displacement
 LOCALHOST = "127.0.0.1"
+# Live rows per second per channel, each [min, max] of its bucket: a 10 s window on a plot 1000
+# pixels wide is 100 pixels a second, so every pixel column still holds its own bucket's band,
+# at a twentieth of the file and viewer memory of 2000 rows/s. Full rate goes around each blow.
+LIVE_RATE_HZ = 100.0
 
 
 def _ns(sample: np.ndarray | int, fs_hz: float) -> np.ndarray:
@@ -130,17 +138,16 @@ class RerunView:
     connect : str, optional
         Also stream to a running viewer, e.g. ``"rerun+http://127.0.0.1:9876/proxy"``.
     live_rate_hz : float
-        Rows per second per channel of the live gage traces (each row ``[min, max]``).
+        Rows per second per channel of the live gage traces (each row ``[min, max]``; default
+        ``LIVE_RATE_HZ``).
     live_batch_s : float
         Stream seconds of live rows gathered per ``send_columns`` call (viewer latency, s); fewer,
-        bigger chunks cost less CPU and file (0.2 s: ~33 B per row; per 50 ms block: ~40 B), and
-        less memory: the ``.rrd`` footer's manifest holds ~1 kB per chunk until :meth:`close`
-        (16 channels every 0.2 s grew a trial's RSS by ~5 MB a minute; every 1 s, ~1 MB).
+        bigger chunks cost less CPU and file.
     footer : bool
         Finish the ``.rrd`` with Rerun's footer (a manifest of every chunk: random access, and
-        ``rerun rrd verify`` passes). Rerun keeps that manifest in memory until :meth:`close`:
-        a live trial's RSS grows by ~20 MB a minute with it (16 gages at 2048 Hz, a blow every
-        10 s, ``benchmarks/soak.py``) and stays flat without. ``False`` for long sessions;
+        ``rerun rrd verify`` passes). Rerun keeps that manifest in memory until :meth:`close`,
+        ~1 kB per chunk written, so a long trial's RSS grows with it (``benchmarks/soak.py
+        --no-footer`` shows the difference); ``False`` for long sessions, and
         ``rerun rrd optimize`` adds a footer afterwards.
     memory_limit : str
         Buffer limit of the gRPC server (late-joining web viewers replay it) and of a spawned native
@@ -156,8 +163,8 @@ class RerunView:
     def __init__(self, info: StreamInfo, *, application_id: str = "ramdaq",
                  recording_name: str | None = None, rrd_path: Path | None = None,
                  serve_web: bool = False, web_port: int = 9090, grpc_port: int = 9876,
-                 connect: str | None = None, live_rate_hz: float = 2000.0,
-                 live_batch_s: float = 1.0, footer: bool = True,
+                 connect: str | None = None, live_rate_hz: float = LIVE_RATE_HZ,
+                 live_batch_s: float = 0.2, footer: bool = True,
                  memory_limit: str = "25%") -> None:
         if live_rate_hz <= 0:
             raise ValueError(f"live_rate_hz must be positive, got {live_rate_hz}")
@@ -177,8 +184,10 @@ class RerunView:
         self.web_url: str | None = None
         self.grpc_url: str | None = None
         self._web_proc: subprocess.Popen | None = None
-        self._paths = {c: (f"gages/{c}" if g else f"signals/{c}")
-                       for c, g in zip(info.channels, info.gages, strict=True)}
+        # live entity -> its channels' rows in the stream
+        self._groups = {path: np.flatnonzero([bool(g) == want for g in info.gages])
+                        for path, want in (("gages", True), ("signals", False))}
+        self._groups = {p: rows for p, rows in self._groups.items() if rows.size}
 
         self.rec = rr.RecordingStream(application_id, make_default=False)
         self.rec.set_log_tick_enabled(False)  # only the sample-clock timeline
@@ -241,32 +250,40 @@ class RerunView:
 
     def _log_static(self) -> None:
         """Series styling and, when the stream has a rig, the 3-D layout (all static)."""
-        names, n = (["min", "max"] if self.bucket > 1 else ["value"]), len(self._paths)
-        for i, (c, path) in enumerate(self._paths.items()):  # evenly spaced hues, both lines alike
-            rgb = tuple(int(255 * v) for v in colorsys.hsv_to_rgb(i / n, 0.75, 0.9))
-            self.rec.log(path, rr.SeriesLines(colors=[rgb] * len(names), widths=1.0,
-                                              names=[f"{c} {m}" for m in names]), static=True)
+        names = ["min", "max"] if self.bucket > 1 else ["value"]
+        for path, rows in self._groups.items():  # per channel a hue, its min and max lines alike
+            chans = [self.info.channels[i] for i in rows]
+            self.rec.log(path, rr.SeriesLines(colors=[self._hue(i) for i in rows for _ in names],
+                                              widths=1.0, names=[f"{c} {m}" for c in chans for m in names]),
+                         static=True)
         self.rec.log("impacts/markers", rr.SeriesPoints(markers="diamond", marker_sizes=6.0,
                                                         names="impact"), static=True)
         if self.rig is None:
             return
         self.rec.log("layout", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         gages = self.rig.gages_by_channel()
-        pos = np.array([g.position_m for g in gages])
+        sf = self.rig.surface  # the layout is drawn in ship axes, a stern plane's stock athwartship
+        pos = np.array([sf.to_ship(g.position_m) for g in gages])
         size = self._extent()
         self.rec.log("layout/gages", rr.Points3D(
             pos, radii=0.012 * size, colors=[BODY_COLORS[g.body] for g in gages],
-            labels=[f"g{g.number:02d} ({g.body}, {g.axis})" for g in gages]), static=True)
+            labels=[f"g{g.number:02d} ({sf.body(g.body)}, {sf.ship_axis(g.axis)})" for g in gages]),
+            static=True)
         self.rec.log("layout/axes", rr.Arrows3D(
-            origins=pos, vectors=[0.05 * size * g.direction for g in gages],
+            origins=pos, vectors=[0.05 * size * np.array(sf.to_ship(g.direction)) for g in gages],
             colors=[BODY_COLORS[g.body] for g in gages], radii=0.002 * size), static=True)
         r = self.rig.rudder
         self.rec.log("layout/rudder", rr.Boxes3D(
-            half_sizes=[r.chord_m / 2, r.thickness_m / 2, r.span_m / 2],
-            colors=BODY_COLORS["rudder"], labels="rudder (approx.)"), static=True)
+            half_sizes=np.abs(sf.to_ship((r.chord_m / 2, r.thickness_m / 2, r.span_m / 2))),
+            colors=BODY_COLORS["rudder"], labels=f"{sf.title} (approx.)"), static=True)
         self.rec.log("layout/stock", rr.LineStrips3D(
-            [[(r.stock_x_m, 0.0, r.attach_z_m), (r.stock_x_m, 0.0, self.rig.hull_attach_z_m)]],
+            [[sf.to_ship((r.stock_x_m, 0.0, r.attach_z_m)),
+              sf.to_ship((r.stock_x_m, 0.0, self.rig.hull_attach_z_m))]],
             colors=BODY_COLORS["stock"], radii=0.004 * size), static=True)
+
+    def _hue(self, i: int) -> tuple[int, int, int]:
+        """Channel ``i``'s colour: hues evenly spaced over the channels."""
+        return tuple(int(255 * v) for v in colorsys.hsv_to_rgb(i / self.info.n_channels, 0.75, 0.9))
 
     def _extent(self) -> float:
         """Largest span of the gage layout along any axis, m (1 m without a rig)."""
@@ -349,10 +366,10 @@ class RerunView:
         if not self._pending:
             return
         t = rr.TimeColumn(TIMELINE, duration=np.concatenate([p[0] for p in self._pending]))
-        rows = np.concatenate([p[1] for p in self._pending], axis=1)
+        rows = np.concatenate([p[1] for p in self._pending], axis=1)  # (n_ch, n_rows[, 2])
         self._pending, self._pending_rows = [], 0
-        for i, path in enumerate(self._paths.values()):
-            self._send_rows(path, t, rows[i])
+        for path, chans in self._groups.items():  # (n_rows, n_chans x width), channel-major
+            self._send_rows(path, t, np.moveaxis(rows[chans], 0, 1).reshape(rows.shape[1], -1))
 
     def _flush_tail(self) -> None:  # the carried incomplete bucket becomes a row of its own
         if self._tail is not None and self._tail.shape[1]:
@@ -361,7 +378,7 @@ class RerunView:
 
     def log_full_rate(self, first_sample: int, values: np.ndarray, fs_hz: float,
                       k: int | None = None) -> None:
-        """Log full-rate traces around an impact under ``impacts/<k>/traces/gXX``.
+        """Log full-rate traces around an impact under ``impacts/<k>/traces`` (a series per channel).
 
         ``values`` (n_channels, n) are SI (m/s^2, N) in channel order, sampled at ``fs_hz`` Hz from
         stream sample ``first_sample``; ``k`` defaults to the last impact given to :meth:`log_impact`.
@@ -371,8 +388,10 @@ class RerunView:
             raise ValueError(f"values must be ({self.info.n_channels}, n), got {values.shape}")
         k = self._last_k if k is None else k
         t = _ns(first_sample + np.arange(values.shape[1]), fs_hz)
-        for i, c in enumerate(self.info.channels):
-            self._send_rows(f"impacts/{k}/traces/{c}", t, values[i])
+        path = f"impacts/{k}/traces"
+        self.rec.log(path, rr.SeriesLines(colors=[self._hue(i) for i in range(self.info.n_channels)],
+                                          widths=1.0, names=list(self.info.channels)), static=True)
+        self._send_rows(path, t, values.T)
 
     def log_impact(self, k: int, onset_s: float, flags: Mapping[str, object] | None = None,
                    accepted: bool | None = None, reason: str = "") -> None:
@@ -447,8 +466,9 @@ class RerunView:
         rel = real / (float(np.abs(real).max()) or 1.0)
         length = 0.3 * self._extent()
         arrows = rr.Arrows3D(
-            origins=[g.position_m for g, _ in items],
-            vectors=[length * r * g.direction for (g, _), r in zip(items, rel, strict=True)],
+            origins=[self.rig.surface.to_ship(g.position_m) for g, _ in items],
+            vectors=[length * r * np.array(self.rig.surface.to_ship(g.direction))
+                     for (g, _), r in zip(items, rel, strict=True)],
             colors=[SIGN_COLORS[int(r >= 0)] for r in rel],
             labels=[f"g{g.number:02d} {r:+.2f}" for (g, _), r in zip(items, rel, strict=True)],
             radii=0.006 * self._extent())

@@ -63,6 +63,14 @@ from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""
+# Points of a drawn decay envelope e^(-x): a chord over h time constants is off by at most h²/8
+# relative, so 256 points keep it within 0.1 % (h <= 0.089) over 22 time constants, by which the
+# envelope is e^-22 of its start, below any ADC's noise floor.
+ENVELOPE_POINTS = 256
+# Full rate in the view from the record's start (the trigger's pre-trigger window) to this long
+# after the onset: the blow, a double hit, clipping and the first cycles of the decay, where the
+# detail is; the rest of the decay is in the live min/max trace (rerun_view.LIVE_RATE_HZ rows/s).
+FULL_RATE_AFTER_S = 1.0
 LOOK_REL_SE = 0.25
 """A first look is shown when the median over gages of its decrement's standard error relative
 to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
@@ -412,7 +420,8 @@ class Session:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s REJECTED: {hit.reason}")
         else:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s accepted: f = {a.f_hz:.3f} Hz,"
-                      f" delta_modal = {a.damping['delta_modal']:.4f}, delta_v = "
+                      f" delta_modal = {a.damping['delta_modal']:.4f}, "
+                      f"delta_{self.rig.surface.label('v')} = "
                       f"{a.motions['v_2_6'].delta if 'v_2_6' in a.motions else float('nan'):.4f}")
             if self.readout and self._ringing_hit in (None, hit.index):
                 for n, g in a.gages.items():
@@ -420,9 +429,11 @@ class Session:
         if self.view is not None:
             ev = hit.event
             self.view.log_impact(hit.index, ev.onset_s, _flags(ev), hit.accepted, hit.reason)
-            if ev.record is not None:  # full rate only around impacts
-                self.view.log_full_rate(ev.record.first_sample, ev.record.values(),
-                                        self.info.fs_hz, k=hit.index)
+            if ev.record is not None:  # full rate only around the blow
+                rec_, fs = ev.record, self.info.fs_hz
+                end = round((ev.onset_s + FULL_RATE_AFTER_S) * fs) - rec_.first_sample + 1
+                self.view.log_full_rate(rec_.first_sample, rec_.values()[:, :max(end, 1)], fs,
+                                        k=hit.index)
             if a is not None:
                 self._log_decays(hit, a)
                 k = a.predominant
@@ -432,22 +443,19 @@ class Session:
                                                              strict=True)})
 
     def _log_decays(self, hit: HitResult, a) -> None:
-        """Each gage's decay with the fitted envelope of the predominant mode, and its final
-        frequency, decrement and amplitude, to the Rerun view."""
-        rec, m, k = hit.event.record, a.modes, a.predominant
-        fs = self.info.fs_hz
-        i0 = round(a.decay_start_s * fs) - rec.first_sample
-        x = rec.values()[:, i0:]
-        t_rel = np.arange(x.shape[1]) / fs
+        """Each gage's fitted envelope of the predominant mode over its decay, and its final
+        frequency, decrement and amplitude, to the Rerun view. The decay itself is the full-rate
+        trace already logged for the hit; the envelope, a smooth exponential, goes at
+        ``ENVELOPE_POINTS`` points rather than at full rate."""
+        m, k = a.modes, a.predominant
+        t_rel = np.linspace(0.0, a.duration_s, ENVELOPE_POINTS)
         envelope = np.exp(-m.delta[k] * m.frequency_hz[k] * t_rel)
-        active = a.active_gages
-        amp = dict(zip(active, m.amplitude[:, k], strict=True))
-        row = {g: i for i, g in enumerate(self.info.gages)}
+        amp = dict(zip(a.active_gages, m.amplitude[:, k], strict=True))
         t_end = a.decay_start_s + a.duration_s
         for n, g in a.gages.items():
             self.view.log_gage_result(hit.index, f"g{n:02d}", t_end, g.f_hz, g.delta,
                                       float(amp.get(n, np.nan)), final=True,
-                                      decay_t_s=a.decay_start_s + t_rel, decay=x[row[n]],
+                                      decay_t_s=a.decay_start_s + t_rel,
                                       envelope=amp.get(n, np.nan) * envelope)
 
     def _say(self, text: str) -> None:

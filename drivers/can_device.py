@@ -167,15 +167,7 @@ class CanDevice(Device):
                  bus_options: dict | None = None) -> None:
         super().__init__()
         interface, channel, q, more = parse_address(address)
-        unknown = {k: q.pop(k) for k in list(q) if k not in _OPTIONS}
-        self.bus_options = {**unknown, **(bus_options or {})}
-        for k, v in dict(bitrate=bitrate, data_bitrate=data_bitrate).items():
-            v = v if v is not None else q.get(k)
-            if v is not None:
-                self.bus_options[k] = int(v)
-        self.fd = bool(fd if fd is not None else q.get("fd", False))
-        if self.fd:
-            self.bus_options["fd"] = True
+        self._bus_settings(q, bitrate, data_bitrate, fd, bus_options)
         self.specs = [(interface, channel)] + [self._split(s) for s in [*more, *extra_buses]]
         self.codec = FrameCodec(dbc if dbc is not None else q.get("dbc"), fd=self.fd)
         rig = rig if rig is not None else q.get("rig")
@@ -189,19 +181,7 @@ class CanDevice(Device):
         self.clock_tolerance_s = float(tol)
         if not self.clock_tolerance_s > 0:
             raise ValueError(f"can://{address}: clock_tolerance_s ({tol}) must be positive")
-        self.groups = {g: CycleAssembler(lay, cycles_per_s=self.fs_hz / lay.samples_per_cycle,
-                                         tolerance_s=self.clock_tolerance_s)
-                       for g, lay in self.codec.groups.items() if max(lay.channels) <= n}
-        if sorted(c for gr in self.groups.values() for c in gr.lay.channels) != list(range(1, n + 1)):
-            groups = {g: f"{lay.channels[0]}-{lay.channels[-1]}" for g, lay in self.codec.groups.items()}
-            raise ValueError(f"can://{address}: channels 1-{n} are not whole groups of {self.codec.name} "
-                             f"(groups {groups})")
-        if n_rig is not None and n_rig < n:
-            raise ValueError(f"can://{address}: {n} channels, but the rig has {n_rig}")
-        bits = min(gr.lay.sample_bits for gr in self.groups.values())
-        if self.rig and self.rig.daq.adc_bits > bits:
-            raise ValueError(f"can://{address}: rig ADC has {self.rig.daq.adc_bits} bits, "
-                             f"{self.codec.name} carries {bits}-bit samples")
+        self.groups = self._assemblers(address, n, n_rig)
         self.block_n = max(1, round(float(block_s or q.get("block_s", 0.05)) * self.fs_hz))
         dur = duration_s if duration_s is not None else q.get("duration_s")
         self.total_n = None if dur is None else round(float(dur) * self.fs_hz)
@@ -209,12 +189,7 @@ class CanDevice(Device):
         self.idle_s = None if idle is None else float(idle)
         self.group_timeout_s = float(group_timeout_s or q.get("group_timeout_s", 0.5))
         self.report_s = report_s
-        if self.rig:
-            self.scale = channel_scales(self.rig)[:n]
-        else:
-            s = scale if scale is not None else q.get("scale", 1.0)
-            self.scale = np.broadcast_to(np.asarray(
-                [float(x) for x in s.split(",")] if isinstance(s, str) else s, float), (n,)).copy()
+        self.scale = self._scales(scale if scale is not None else q.get("scale", 1.0), n)
         self.units = "m/s^2" if self.rig or scale is not None or "scale" in q else "count"
         self.order = np.argsort([c for gr in self.groups.values() for c in gr.lay.channels])
         self.address = address
@@ -238,6 +213,44 @@ class CanDevice(Device):
         self._silent: set[int] = set()
         self._stateful: list[bool] = []
         self._rr = 0
+
+    def _bus_settings(self, q: dict, bitrate: int | None, data_bitrate: int | None,
+                      fd: bool | None, bus_options: dict | None) -> None:
+        """``self.bus_options`` and ``self.fd`` from the arguments, else the address's query."""
+        unknown = {k: q.pop(k) for k in list(q) if k not in _OPTIONS}
+        self.bus_options = {**unknown, **(bus_options or {})}
+        for k, v in dict(bitrate=bitrate, data_bitrate=data_bitrate).items():
+            v = v if v is not None else q.get(k)
+            if v is not None:
+                self.bus_options[k] = int(v)
+        self.fd = bool(fd if fd is not None else q.get("fd", False))
+        if self.fd:
+            self.bus_options["fd"] = True
+
+    def _assemblers(self, address: str, n: int, n_rig: int | None) -> dict[int, CycleAssembler]:
+        """One cycle assembler per frame group of channels 1..n; refuses a layout that splits a
+        group, a rig with fewer channels, or a rig ADC finer than the frames carry."""
+        groups = {g: CycleAssembler(lay, cycles_per_s=self.fs_hz / lay.samples_per_cycle,
+                                    tolerance_s=self.clock_tolerance_s)
+                  for g, lay in self.codec.groups.items() if max(lay.channels) <= n}
+        if sorted(c for gr in groups.values() for c in gr.lay.channels) != list(range(1, n + 1)):
+            names = {g: f"{lay.channels[0]}-{lay.channels[-1]}" for g, lay in self.codec.groups.items()}
+            raise ValueError(f"can://{address}: channels 1-{n} are not whole groups of {self.codec.name} "
+                             f"(groups {names})")
+        if n_rig is not None and n_rig < n:
+            raise ValueError(f"can://{address}: {n} channels, but the rig has {n_rig}")
+        bits = min(gr.lay.sample_bits for gr in groups.values())
+        if self.rig and self.rig.daq.adc_bits > bits:
+            raise ValueError(f"can://{address}: rig ADC has {self.rig.daq.adc_bits} bits, "
+                             f"{self.codec.name} carries {bits}-bit samples")
+        return groups
+
+    def _scales(self, scale: float | str | list[float], n: int) -> np.ndarray:
+        """Counts -> m/s^2 per channel, shape (n,): the rig's, else ``scale`` (one or n values)."""
+        if self.rig:
+            return channel_scales(self.rig)[:n]
+        return np.broadcast_to(np.asarray(
+            [float(x) for x in scale.split(",")] if isinstance(scale, str) else scale, float), (n,)).copy()
 
     @staticmethod
     def _split(spec: str) -> tuple[str, str]:

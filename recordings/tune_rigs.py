@@ -5,6 +5,10 @@ and the rudder's I_x (not given in the report) are solved so that the predominan
 rig's default blow is 24.5 Hz in air and 13.0 Hz in water (Report 1836, Table 2a).
 SAMPSON-like: the two hull modes' dry frequencies and the stock diameter are solved so that, in
 water, the coupled modes lie at 2.18, 4.36 and 7.6 Hz (Table 2g).
+Stern plane (ALBACORE-like, in air only): the stock diameter, the plane's I_y (about the stock's
+direction) and the fixed plane's dry frequency are solved so that the modes lie at 20, 77 and
+120 Hz (Table 2e); then the damping C (with c_alpha = C x 0.1 m^2) so that the 20 Hz mode's
+decrement is Table 2f's 0.0933.
 
     python recordings/tune_rigs.py
 """
@@ -15,7 +19,8 @@ import dataclasses as dc
 import math
 from pathlib import Path
 
-from scipy.optimize import least_squares
+import numpy as np
+from scipy.optimize import brentq, least_squares
 
 from ramdaq.analysis.model.rig import Rig, load_rig
 from ramdaq.analysis.model.rig_modes import modes_in
@@ -64,6 +69,34 @@ def tune_sampson() -> None:
           f" residuals {fit.fun}")
 
 
+def tune_stern_plane() -> None:
+    rig = load_rig(HERE / "stern_plane.toml")
+
+    def build(p):
+        modes = (dc.replace(rig.hull_modes[0], frequency_hz=p[2]),)
+        return dc.replace(with_stock_diameter(rig, p[0]), hull_modes=modes,
+                          rudder=dc.replace(rig.rudder, Iz_kg_m2=p[1]))  # the model's I_z is I_y
+
+    def residual(p):
+        f = modes_in(build(p), "air").table.frequency_hz
+        return [f[0] / 20 - 1, f[1] / 77 - 1, f[2] / 120 - 1]
+
+    fit = least_squares(residual, [0.22, 145.0, 138.0], x_scale=[0.01, 20.0, 5.0], diff_step=1e-4,
+                        bounds=([0.05, 20, 50], [0.5, 2000, 300]))
+    tuned = build(fit.x)
+    delta = 0.0933
+    zeta = delta / np.hypot(2 * np.pi, delta)
+
+    def zeta_20(C):
+        d = dc.replace(tuned.damping["air"], C_N_s_per_m=C, c_alpha_N_m_s_per_rad=0.1 * C)
+        return modes_in(dc.replace(tuned, damping={"air": d}), "air").table.damping_ratio[0] - zeta
+
+    C = brentq(zeta_20, 1000.0, 10000.0)
+    print(f"stern plane: stock d = {fit.x[0]:.4f} m, I_y = {fit.x[1]:.2f} kg m^2, fixed plane dry "
+          f"{fit.x[2]:.3f} Hz, C = {C:.0f} N s/m, residuals {fit.fun}")
+
+
 if __name__ == "__main__":
     tune_albacore()
     tune_sampson()
+    tune_stern_plane()

@@ -12,7 +12,13 @@ import pytest
 
 from ramdaq.analysis.model import units as u
 from ramdaq.analysis.report1836.damping import C_translational, c_rotational
-from ramdaq.analysis.report1836.table2 import Row, check_report_consistency, reproduce_table2
+from ramdaq.analysis.report1836.table2 import (
+    TABLE_2F_FIXED,
+    TABLE_2F_MOVABLE,
+    Row,
+    check_report_consistency,
+    reproduce_table2,
+)
 from ramdaq.analysis.report1836.virtual_mass import (
     Ix_vir,
     Iz_vir_elliptic,
@@ -166,3 +172,42 @@ def test_other_findings(statements: list[str]) -> None:
     assert _find(statements, "Eq 19: the printed m_vir imply").startswith("INCONSISTENT")
     assert all(s.split(":")[0] in {"consistent", "INCONSISTENT", "DIFFERS within input rounding"}
                for s in statements)
+
+
+# --------------------------------------------------------------------------- Table 2f
+
+def test_table_2f_fixtures_as_printed() -> None:
+    # the fixtures are the printed text (source: Report 1836 Table 2f, lines 323-336 of
+    # shared/reference/dtmb-report-1836.md); every value is a decrement, every deviation a %
+    assert TABLE_2F_FIXED.values == ("0.0933", "0.0792", "0.1116")
+    assert TABLE_2F_MOVABLE.values == ("0.1098", "0.0568", "0.0971", "0.1163")
+    assert "delta_modal" not in TABLE_2F_FIXED.names  # printed "----"
+    for t in (TABLE_2F_FIXED, TABLE_2F_MOVABLE):
+        assert len(t.names) == len(t.values) == len(t.deviations_pct)
+        assert "Table 2" in t.source and "lines 323-336" in t.source
+
+
+def test_table_2f_fixed_portion(statements: list[str]) -> None:
+    # 0.0933, 0.0792, 0.1116 average 0.0947 as printed, and the ± 11.9 % is their mean
+    # |deviation|; but delta_w = 0.1116 is +17.8 % above 0.0947, not the printed +11.8 %
+    avg = _find(statements, "fixed portion", "average 0.094700")
+    assert avg.startswith("consistent") and "printed 0.0947" in avg
+    dev = _find(statements, "fixed portion", "deviations:")
+    assert dev.startswith("INCONSISTENT") and "delta_w printed +11.8 %, computed +17.8 %" in dev
+    assert "delta_alpha" not in dev and "delta_beta" not in dev
+    mad = _find(statements, "fixed portion", "printed ±11.9")
+    assert mad.startswith("consistent") and "11.90 % from the values" in mad
+    assert "a printed deviation is off" in mad
+
+
+def test_table_2f_movable_portion(statements: list[str]) -> None:
+    # the four printed values average 0.0950, 1.8 % above the printed 0.0933; delta_beta's and
+    # delta_modal's deviations fit neither average, and the ± 20.4 % fits neither mean
+    avg = _find(statements, "movable portion", "average 0.095000")
+    assert avg.startswith("INCONSISTENT") and "printed 0.0933 (-1.8 %)" in avg
+    dev = _find(statements, "movable portion", "deviations:")
+    assert dev.startswith("INCONSISTENT")
+    assert "delta_beta printed -37.7 %" in dev and "delta_modal printed +20.6 %" in dev
+    assert "delta_alpha" not in dev and "delta_w" not in dev
+    mad = _find(statements, "movable portion", "printed ±20.4")
+    assert mad.startswith("INCONSISTENT") and "20.11 % from the values" in mad

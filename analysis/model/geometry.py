@@ -7,7 +7,9 @@ the gages sit where the equations assume, refusing a rig that does not with a
 (x = 0), 4 and 8 on the horizontal (z = 0), 13 and 14 on one vertical, each stock pair (7/11,
 10/12) at one height, all to ``ALIGN_TOL_M``. Gages 15 and 16 give ``Y_P`` as the difference of
 their y; their heights are not checked. Which gage of a stock pair is aft is read from the
-positions, not assumed (the report's B-4/B-5 and B-6 disagree on it).
+positions, not assumed (the report's B-4/B-5 and B-6 disagree on it). For a stern plane the
+rig's positions are in its surface frame (``analysis/model/surface.py``): "vertical" is along the
+stock; the errors name the positions as its file writes them, in ship axes.
 """
 
 from __future__ import annotations
@@ -33,12 +35,21 @@ def _pos(rig: Rig, n: int) -> tuple[float, float, float]:
     return rig.gage(n).position_m
 
 
+def _ship(rig: Rig, p: tuple[float, float, float]) -> tuple[float, ...]:
+    """A position as the rig file writes it (ship axes), rounded to the micrometre."""
+    return tuple(round(c, 6) + 0.0 for c in rig.surface.to_ship(p))
+
+
+def _height(rig: Rig) -> str:
+    return "height" if rig.surface.is_rudder else "distance along the stock"
+
+
 def stock_pair(rig: Rig, a: int, b: int) -> StockPair:
     """Order a stock (or rudder-top) gage pair by which is aft of the stock axis."""
     pa, pb = _pos(rig, a), _pos(rig, b)
     if abs(pa[2] - pb[2]) > ALIGN_TOL_M:
-        raise RigError(f"{rig.source}: gages {a} and {b} must be at one height "
-                       f"(z {pa[2]} vs {pb[2]} m)")
+        raise RigError(f"{rig.source}: gages {a} and {b} must be at one {_height(rig)} "
+                       f"({_ship(rig, pa)} vs {_ship(rig, pb)} m)")
     aft, fwd = (a, b) if pa[0] > pb[0] else (b, a)
     half = abs(pa[0] - pb[0]) / 2
     return StockPair(aft, fwd, pa[2], half)
@@ -48,13 +59,16 @@ def gage_geometry(rig: Rig) -> GageGeometry:
     """The report's distances for ``rig`` (metres), checked against its assumptions."""
     p = {n: _pos(rig, n) for n in range(1, 17)}
     h, b = rig.rudder.stock_x_m, rig.rudder.attach_z_m
+    along = "vertical" if rig.surface.is_rudder else "line along the stock"
     for n, axis in ((2, 0), (6, 0), (4, 2), (8, 2)):
         if abs(p[n][axis]) > ALIGN_TOL_M:
-            line = "vertical" if axis == 0 else "horizontal"
+            line = along if axis == 0 else "chord line" if not rig.surface.is_rudder \
+                else "horizontal"
             raise RigError(f"{rig.source}: gage {n} is off the {line} through the centre of mass "
-                           f"({p[n]}); Eq 1-3 assume it on it")
+                           f"({_ship(rig, p[n])}); Eq 1-3 assume it on it")
     if abs(p[13][0] - p[14][0]) > ALIGN_TOL_M:
-        raise RigError(f"{rig.source}: gages 13 and 14 are not on one vertical ({p[13]}, {p[14]})")
+        raise RigError(f"{rig.source}: gages 13 and 14 are not on one {along} "
+                       f"({_ship(rig, p[13])}, {_ship(rig, p[14])})")
     return GageGeometry(
         x1=p[4][0], x2=-p[8][0], z1=p[2][2], z2=-p[6][2],
         x5=p[3][0] - h, x6=h - p[1][0],

@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from .surface import Surface, SurfaceError, to_surface_frame
+
 AXES: dict[str, tuple[float, float, float]] = {
     "x": (1.0, 0.0, 0.0),
     "y": (0.0, 1.0, 0.0),
@@ -194,6 +196,8 @@ class Rig:
     ambient: tuple[Ambient, ...] = ()
     source: str = "<string>"
     text: str = ""
+    surface: Surface = Surface()
+    """What the surface is (rudder or stern plane); every vector above is in its frame."""
 
     @property
     def hull_attach_z_m(self) -> float:
@@ -259,7 +263,11 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise RigError(f"{source}: not valid TOML ({err})") from err
-    r = _Reader(doc, source)
+    try:
+        doc, surface, renames = to_surface_frame(doc)
+    except SurfaceError as err:
+        raise RigError(f"{source}: {err}") from err
+    r = _Reader(doc, source, renames)
     units = r.text("units", default="SI")
     if units != "SI":
         r.fail("units", f"{units!r} is not supported; rig files are in SI (m, kg, s, N, rad)")
@@ -301,6 +309,7 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
         ambient=ambient,
         source=source,
         text=text,
+        surface=surface,
     )
 
 
@@ -447,11 +456,15 @@ class _Reader:
 
     _MISSING = object()
 
-    def __init__(self, doc: dict[str, Any], source: str) -> None:
+    def __init__(self, doc: dict[str, Any], source: str,
+                 renames: dict[str, str] | None = None) -> None:
         self.doc = doc
         self.source = source
+        self.renames = renames or {}
 
     def fail(self, field: str, why: str) -> None:
+        for model, file in self.renames.items():  # a stern plane's file names its own fields
+            field = field.replace(model, file)
         raise RigError(f"{self.source}: {field}: {why}")
 
     def get(self, path: str, default: Any = _MISSING) -> Any:

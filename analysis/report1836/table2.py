@@ -26,7 +26,8 @@ from .virtual_mass import (
     m_vir_from_frequencies,
 )
 
-__all__ = ["Input", "Row", "reproduce_table2", "check_report_consistency"]
+__all__ = ["Input", "Row", "PrintedDecrements", "TABLE_2F_FIXED", "TABLE_2F_MOVABLE",
+           "reproduce_table2", "check_report_consistency"]
 
 
 def _half_ulp(text: str) -> float:
@@ -249,6 +250,53 @@ def reproduce_table2() -> list[Row]:
 
 # --------------------------------------------------------------------------- consistency
 
+@dataclass(frozen=True)
+class PrintedDecrements:
+    """One column of a printed decrement table, every number as the text the report prints.
+
+    ``names`` the decrements (``delta_alpha``...), ``values`` their printed values (1),
+    ``deviations_pct`` the printed percent deviations from the average, ``average`` and
+    ``mean_abs_deviation_pct`` the printed AVERAGE row (value and its ±), ``source`` where in the
+    report they stand.
+    """
+
+    table: str
+    names: tuple[str, ...]
+    values: tuple[str, ...]
+    deviations_pct: tuple[str, ...]
+    average: str
+    mean_abs_deviation_pct: str
+    source: str
+
+    def as_check(self) -> tuple:
+        """The arguments of the consistency check of a decrement table."""
+        return (self.table, self.names, self.values, self.deviations_pct, self.average,
+                self.mean_abs_deviation_pct)
+
+
+TABLE_2F_FIXED = PrintedDecrements(
+    table="Table 2f stern planes, fixed portion (20 Hz, air)",
+    names=("delta_alpha", "delta_beta", "delta_w"),   # no delta_modal: printed "----"
+    values=("0.0933", "0.0792", "0.1116"),             # 0.0792 is printed "0.0792."
+    deviations_pct=("-1.5", "-16.4", "+11.8"),
+    average="0.0947", mean_abs_deviation_pct="11.9",
+    source="Report 1836, Table 2 (cont'd) 2. Stern planes (f), 'Logarithmic decrement (20 cps)', "
+           "FIXED PORTION columns (shared/reference/dtmb-report-1836.md, lines 323-336)")
+"""Table 2f's fixed portion: alpha, beta, w are motions about x, about y and along z (its
+footnote: the stern planes' orientation)."""
+
+TABLE_2F_MOVABLE = PrintedDecrements(
+    table="Table 2f stern planes, movable portion (20 Hz, air; values from the OCR text only)",
+    names=("delta_alpha", "delta_beta", "delta_w", "delta_modal"),
+    values=("0.1098", "0.0568", "0.0971", "0.1163"),
+    deviations_pct=("+17.7", "-37.7", "+4.1", "+20.6"),
+    average="0.0933", mean_abs_deviation_pct="20.4",
+    source="Report 1836, Table 2 (cont'd) 2. Stern planes (f), 'Logarithmic decrement (20 cps)', "
+           "MOVABLE PORTION columns (shared/reference/dtmb-report-1836.md, lines 323-336)")
+"""Table 2f's movable portion; delta_modal is Eq 7's mean over the gages of the stern-plane
+system (the report's text, 'one value for the stern plane system')."""
+
+
 _DECREMENT_TABLES = (
     # (table, names, values, printed deviations %, printed average, printed mean |deviation| %)
     ("Table 2b ALBACORE rudder in air (24.5 Hz)",
@@ -259,13 +307,8 @@ _DECREMENT_TABLES = (
      ("delta_gamma", "delta_alpha", "delta_v", "delta_modal"),
      ("0.0952", "0.0936", "0.1212", "0.1717"), ("-20.8", "-22.3", "+0.1", "+42.5"),
      "0.1285", "21.3"),
-    ("Table 2f stern planes, fixed portion (20 Hz, air)",
-     ("delta_alpha", "delta_beta", "delta_w"),
-     ("0.0933", "0.0792", "0.1116"), ("-1.5", "-16.4", "+11.8"), "0.0947", "11.9"),
-    ("Table 2f stern planes, movable portion (20 Hz, air; values from the OCR text only)",
-     ("delta_alpha", "delta_beta", "delta_w", "delta_modal"),
-     ("0.1098", "0.0568", "0.0971", "0.1163"), ("+17.7", "-37.7", "+4.1", "+20.6"),
-     "0.0933", "20.4"),
+    TABLE_2F_FIXED.as_check(),
+    TABLE_2F_MOVABLE.as_check(),
     ("Table 2h SAMPSON rudder delta_modal (2.18 Hz, two records)",
      ("record 1", "record 2"), ("0.02225", "0.0582"), ("-44.8", "+44.8"), "0.0402", "44.8"),
 )

@@ -18,10 +18,15 @@ import numpy as np
 from ...analysis.model.geometry import gage_geometry
 from ...analysis.model.rig import Rig, parse_rig
 from ...analysis.model.structure import added_mass
+from ...analysis.model.surface import Surface
 from ...analysis.model.units import from_si
 from ...drivers.mcap_replay import McapReplayDevice
 from ..analyzer import HitResult, analysis_to_json, finite_json, judge_event, trial_summary
 from ..trigger import Trigger
+
+MODEL_MOTIONS = ("v", "gamma", "alpha")
+"""The model's motion names; ``report.json``'s ``surface.motions`` gives what the rig calls each
+(a stern plane's w, beta, alpha), and every key of its analyses uses those names."""
 
 UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "m",
          "mass": "kg", "inertia": "kg m^2", "time": "s"}
@@ -61,7 +66,12 @@ def run_analysis(path: str | Path, *, impact: int | None = None,
 
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
                      f_water_hz: float | None = None) -> dict:
-    """Eq 19-21 from the rig's geometry; Eq 18 when both trials' frequencies are given."""
+    """Eq 19-21 from the rig's geometry; Eq 18 when both trials' frequencies are given. A rig
+    without water damping (a surface tested in air only, as the report's stern planes) has none:
+    the dict holds only ``not_computed``, the reason."""
+    if "water" not in rig.damping:
+        return {"not_computed": f"rig {rig.name} has no [damping.water]: tested in air only, "
+                                "so no virtual inertias (as Report 1836 for its stern planes)"}
     add = added_mass(rig.with_medium("water"))
     out = {"m_vir_eq19_kg": add["m_vir"], "Iz_vir_eq20_kg_m2": add["Iz_vir"],
            "Ix_vir_eq21_kg_m2": add["Ix_vir"]}
@@ -80,8 +90,10 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
     f_here = summary["f_hz"]["mean"]
     vi = virtual_inertias(rig, f_other, f_here) if air and rig.medium == "water" else \
         virtual_inertias(rig)
+    surface = rig.surface
     return finite_json({
         "recording": str(path), "rig": rig.name, "medium": rig.medium,
+        "surface": {"kind": surface.kind, "motions": {m: surface.label(m) for m in MODEL_MOTIONS}},
         "geometry_m": gage_geometry(rig).__dict__,
         "units": UNITS,
         "impacts": [{"index": h.index, "onset_s": h.event.onset_s, "accepted": h.accepted,
@@ -89,16 +101,26 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                                                    "clipped": list(h.event.clipped),
                                                    "too_short": h.event.too_short},
                      "snr_db": finite_json(h.event.snr_db),
-                     "analysis": analysis_to_json(h.analysis) if h.analysis else None}
+                     "analysis": _in_words(surface, analysis_to_json(h.analysis)) if h.analysis
+                     else None}
                     for h in hits],
-        "summary": summary,
+        "summary": surface.relabel(summary),
         "virtual_inertias": vi,
     })
 
 
+def _in_words(surface: Surface, analysis: dict) -> dict:
+    """One hit's analysis (:func:`analysis_to_json`) with its keys and notes named as the rig's
+    surface names them."""
+    out = surface.relabel(analysis)
+    out["notes"] = [surface.words(n) for n in analysis["notes"]]
+    return out
+
+
 def format_summary(report: dict, units: str = "si") -> str:
     """A readable table: each hit, then per gage and motion the mean decrement and scatter."""
-    lines = [f"{report['recording']}: rig {report['rig']} in {report['medium']}"]
+    kind = report.get("surface", {}).get("kind", "rudder").replace("_", " ")
+    lines = [f"{report['recording']}: rig {report['rig']} ({kind}) in {report['medium']}"]
     for imp in report["impacts"]:
         a = imp["analysis"]
         if a:
@@ -109,12 +131,16 @@ def format_summary(report: dict, units: str = "si") -> str:
                          f"{imp['reason']}")
     lines += summary_table(report["summary"], units)
     vi = report["virtual_inertias"]
+    surface = Surface(kind=report.get("surface", {}).get("kind", "rudder"))
     conv = (lambda v, q: from_si(v, q)) if units == "report" else (lambda v, q: v)
     mu, iu = ("ton s^2/ft", "ft ton s^2") if units == "report" else ("kg", "kg m^2")
-    lines.append(f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
-                 f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
-                 f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g}"
-                 f" {iu}")
+    if "not_computed" in vi:
+        lines.append(f"\nvirtual inertias: {vi['not_computed']}")
+        return "\n".join(lines)
+    lines.append(surface.label(
+        f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
+        f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
+        f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g} {iu}"))
     if "m_vir_eq18_kg" in vi:
         lines.append(f"virtual mass, Eq 18 (air {vi['f_air_hz']:.3f} Hz, water "
                      f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
@@ -145,6 +171,9 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
     for m, d in s["delta_motion"].items():
         row(f"delta_{m}", d)
     row("delta_modal", s["delta_modal"])
+    # the hull section's motions (a stern plane's fixed portion's: its summary is relabelled)
+    for m, d in (s.get("delta_hull_motion") or s.get("delta_fixed_portion_motion") or {}).items():
+        row(f"delta_{m}", d)
     for g, d in s["delta_gage"].items():
         row(f"delta {g}", d)
     for key, q in (("C_N_s_per_m", "damping_translational"), ("c_N_m_s_per_rad",

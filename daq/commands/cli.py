@@ -47,7 +47,8 @@ import traceback  # noqa: E402
 from collections.abc import Iterator  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from ...analysis.model.rig import RigError, load_rig
+from ...analysis.model.rig import RigError, load_rig, parse_rig
+from ...analysis.model.surface import Surface
 from ...drivers.errors import DeviceError
 from ..errors import RecordingError, ViewError
 from .gap_bench import SEED_SETS
@@ -211,13 +212,15 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
     return outcome
 
 
-def _print_outcome(outcome, args: argparse.Namespace) -> None:
-    """The trial summary on the terminal and, with ``--json``, the per-hit results in a file."""
+def _print_outcome(outcome, args: argparse.Namespace, rig_toml: str = "") -> None:
+    """The trial summary on the terminal, its motions named as the stream's rig names them
+    (``rig_toml``), and, with ``--json``, the per-hit results in a file."""
     from .analyze import json_default, summary_table
 
+    surface = parse_rig(rig_toml, "rig").surface if rig_toml else Surface()
     for k, why in outcome.summary["rejected"].items():
         print(f"hit {k} rejected: {why}")
-    print("\n".join(summary_table(outcome.summary, args.units)))
+    print("\n".join(summary_table(surface.relabel(outcome.summary), args.units)))
     load = outcome.load
     print(f"analyzer: {load.looks_shown} first looks shown while ringing, {load.looks_skipped} "
           f"skipped because it was busy; {load.finals_coarse} final(s) coarse, "
@@ -251,7 +254,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     outcome = _run_session(device, args, out, rrd)
     print(f"{'interrupted: ' if outcome.interrupted else ''}wrote {out}"
           + (f" and {rrd}" if rrd else ""))
-    _print_outcome(outcome, args)
+    _print_outcome(outcome, args, device.info.rig_toml)
     return _stream_result(outcome, args)
 
 
@@ -267,7 +270,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     print(f"replaying {args.file} ({'real time' if args.realtime else 'as fast as possible'})",
           flush=True)
     outcome = _run_session(device, args, None, rrd)
-    _print_outcome(outcome, args)
+    _print_outcome(outcome, args, device.info.rig_toml)
     return _stream_result(outcome, args)
 
 
@@ -364,7 +367,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
     from ...analysis.model.rig_modes import eq18_check, modes_in
 
     rig = load_rig(args.rig)
-    print(f"rig {rig.name} ({args.rig}): {len(rig.gages)} gages, "
+    print(f"rig {rig.name} ({args.rig}): {rig.surface.title}, {len(rig.gages)} gages, "
           f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
     for medium in ("air", "water"):
         if medium not in rig.damping:

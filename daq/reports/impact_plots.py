@@ -33,7 +33,7 @@ def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_di
              _spectrum(a, x, fs_hz, rig, out_dir / f"impact{k}_spectrum.png"),
              _modeshape(a, rig, out_dir / f"impact{k}_modeshape.png")]
     if a.stock_curves:
-        files.append(_stock(a, out_dir / f"impact{k}_stock.png"))
+        files.append(_stock(a, rig, out_dir / f"impact{k}_stock.png"))
     return files
 
 
@@ -80,7 +80,7 @@ def _spectrum(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, path: Pa
                     va="top", ha="left")
     ax.set_xlim(0, min(fs_hz / 2, 1.5 * float(np.max(a.modes.frequency_hz))))
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel("PSD, rudder gages ((m/s^2)^2/Hz)")
+    ax.set_ylabel(f"PSD, {rig.surface.body('rudder')} gages ((m/s^2)^2/Hz)")
     ax.set_title("Spectrum of the decay with the identified modes (red: predominant)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -94,7 +94,7 @@ def _modeshape(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
     ref = shape.get(4, 1.0)
     fig, ax = plt.subplots(figsize=(8, 8))
     span = max(abs(c) for g in rig.gages for c in (g.position_m[0], g.position_m[2]))
-    for g in rig.gages:
+    for g in rig.gages:  # in the surface's plane: x along the chord, z along the stock
         x, _, z = g.position_m
         ax.plot(x, z, "o", color=BODY_COLOURS[g.body])
         ax.annotate(str(g.number), (x, z), textcoords="offset points", xytext=(4, 4), fontsize=8)
@@ -103,30 +103,34 @@ def _modeshape(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
             ax.arrow(x, z, 0.25 * span * s, 0, width=0.01 * span, color="r",
                      length_includes_head=True)
     ax.set_aspect("equal")
+    sf, names = rig.surface, rig.surface.body
+    stock = "up" if sf.is_rudder else "along the stock, to the hull"
     ax.set_xlabel("x, aft (m)")
-    ax.set_ylabel("z, up (m)")
-    ax.set_title(f"Mode shape at {a.f_hz:.3f} Hz (athwartship amplitude, signed by gage 4)\n"
-                 "blue rudder, orange stock, grey hull")
+    ax.set_ylabel(f"{'z' if sf.is_rudder else 'inboard'}, {stock} (m)")
+    ax.set_title(f"Mode shape at {a.f_hz:.3f} Hz ({'athwartship' if sf.is_rudder else 'vertical'}"
+                 f" amplitude, signed by gage 4)\n"
+                 f"blue {names('rudder')}, orange stock, grey {names('hull')}")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
 
 
-def _stock(a: ImpactAnalysis, path: Path) -> Path:
-    c = a.stock_curves
+def _stock(a: ImpactAnalysis, rig: Rig, path: Path) -> Path:
+    c, sf = a.stock_curves, rig.surface
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 6), sharey=True)
-    ax1.plot(c["d_v_alpha"], c["z_stock_m"], "o-", label="stock (d_v,alpha)")
-    ax1.plot(c["d_hull"], c["z_hull_m"], "s--", label="hull gages 13, 14")
+    ax1.plot(c["d_v_alpha"], c["z_stock_m"], "o-", label=f"stock (d_{sf.label('v')},alpha)")
+    ax1.plot(c["d_hull"], c["z_hull_m"], "s--", label=f"{sf.body('hull')} gages 13, 14")
     for ax, key in ((ax1, "z_attach_bending_m"), (ax2, "z_attach_torsion_m")):
         if key in c:
             ax.axhline(c[key][0], color="0.6", ls=":", label="effective attachment")
-    ax1.set_xlabel("(d_v,alpha), mode amplitude")
-    ax1.set_ylabel("z' above the rudder top (m)")
+    ax1.set_xlabel(f"(d_{sf.label('v')},alpha), mode amplitude")
+    ax1.set_ylabel("z' above the rudder top (m)" if sf.is_rudder
+                   else "z' along the stock from the plane's root (m)")
     ax1.set_title(f"Figure 8: bending, l = {a.stock_lengths.get('bending_m', float('nan')):.3f} m")
     ax1.legend()
     ax2.plot(c["gamma"], c["z_stock_m"], "o-")
-    ax2.set_xlabel("gamma, mode amplitude per m")
+    ax2.set_xlabel(f"{sf.label('gamma')}, mode amplitude per m")
     ax2.legend()
     ax2.set_title(f"Figure 9: torsion, l_T = {a.stock_lengths.get('torsion_m', float('nan')):.3f} m")
     fig.tight_layout()

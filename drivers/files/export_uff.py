@@ -9,7 +9,8 @@ The file holds, in this order (all SI: m, s, m/s^2):
 
 * **UFF 164** units: SI (metre, newton, kelvin).
 * **UFF 15** nodes: one per gage of the rig, node number = gage number, coordinates = the gage's
-  ``position_m`` (x aft, y athwartship, z up, from the rudder's centre of mass).
+  ``position_m`` in ship axes (x aft, y athwartship, z up, from the control surface's centre of
+  mass; a stern plane's rig is turned back from its surface frame).
 * **UFF 55** per accepted hit and identified mode: a complex mode shape (analysis type 3,
   complex eigenvalue first order; data characteristic 2, three translations per node; specific
   data type 8, displacement). The eigenvalue is ``lambda = -delta*f + j*2*pi*f`` (1/s, f the
@@ -93,9 +94,9 @@ def export_uff(path: str | PathLike, analysis_hits: Sequence, rig: Rig, *, sourc
         {"type": 15, "node_nums": [g.number for g in rig.gages],
          "def_cs": [0] * len(rig.gages), "disp_cs": [0] * len(rig.gages),
          "color": [0] * len(rig.gages),
-         "x": [float(g.position_m[0]) for g in rig.gages],
-         "y": [float(g.position_m[1]) for g in rig.gages],
-         "z": [float(g.position_m[2]) for g in rig.gages]},
+         "x": [rig.surface.to_ship(g.position_m)[0] for g in rig.gages],
+         "y": [rig.surface.to_ship(g.position_m)[1] for g in rig.gages],
+         "z": [rig.surface.to_ship(g.position_m)[2] for g in rig.gages]},
     ]
     hits = modes = records = 0
     for h in analysis_hits:
@@ -131,7 +132,7 @@ def _mode_sets(index: int, a: ImpactAnalysis, rig: Rig, ids: dict) -> list[dict]
         for n, s in zip(gages, shapes[:, k], strict=True):
             if not np.isfinite(s):
                 continue
-            code = AXIS_CODES[rig.gage(n).axis]
+            code = AXIS_CODES[rig.surface.ship_axis(rig.gage(n).axis)]
             v = np.zeros((3, 1), complex)
             v[abs(code) - 1, 0] = s if code > 0 else -s
             nodes.append(n)
@@ -172,7 +173,8 @@ def _decay_sets(h, rig: Rig, ids: dict, binary: bool) -> list[dict]:
             "id4": f"first_sample {first} fs_hz {fs!r}"[:80], **ids,
             "func_type": 1, "func_id": len(out) + 1, "ver_num": 0, "load_case_id": h.index + 1,
             "rsp_ent_name": f"g{n:02d}", "rsp_node": n,
-            "rsp_dir": AXIS_CODES[rig.gage(n).axis], "ref_ent_name": "NONE", "ref_node": 0,
+            "rsp_dir": AXIS_CODES[rig.surface.ship_axis(rig.gage(n).axis)],
+            "ref_ent_name": "NONE", "ref_node": 0,
             "ref_dir": 0, "abscissa_spacing": 1, "x": t, "data": np.ascontiguousarray(values[row]),
             "abscissa_spec_data_type": 17, "abscissa_axis_lab": "time",
             "abscissa_axis_units_lab": "s", "ordinate_spec_data_type": 12,

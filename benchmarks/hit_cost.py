@@ -1,0 +1,72 @@
+"""CPU cost of one hit's analysis, and where it goes.
+
+Run:  python benchmarks/hit_cost.py [--hits 5] [--medium water|air]
+
+A simulated ALBACORE trial (16 gages, 2048 Hz, noise as the rig states, one blow per record) gives
+``--hits`` records of 6 s of free decay; each goes through
+:func:`ramdaq.analysis.impact.analyze_decay` (what ``ramdaq analyze``, replay and the live
+trial's finals run per hit). Printed: the median and largest CPU seconds per hit (one core,
+single-threaded BLAS), and the median CPU of its two largest parts run on their own: the
+per-gage verdicts (:func:`~ramdaq.analysis.modal.verdicts.assess_decay`, 16 single-gage order
+searches) and the joint fit of all gages (:func:`~ramdaq.analysis.modal.identify.identify_modes`).
+Issue 19's target: a whole 16-gage hit in <= 0.2 s CPU at unchanged accuracy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from ramdaq.analysis.impact import analyze_decay  # noqa: E402
+from ramdaq.analysis.modal.identify import identify_modes  # noqa: E402
+from ramdaq.analysis.modal.verdicts import assess_decay  # noqa: E402
+from ramdaq.analysis.model.rig import load_rig  # noqa: E402
+from ramdaq.drivers.sim import SimDevice  # noqa: E402
+
+ONSET_S, DECAY_S, SKIP_S = 1.0, 6.0, 0.03
+
+
+def records(medium: str, hits: int) -> tuple[object, list[np.ndarray], float, tuple[int, ...]]:
+    """The rig, ``hits`` free decays (n_gages, n) in m/s^2, the rate (Hz) and the gage per row."""
+    rig = load_rig("albacore").with_medium(medium)
+    out = []
+    for seed in range(hits):
+        with SimDevice(rig, duration_s=ONSET_S + SKIP_S + DECAY_S, impacts=[ONSET_S], seed=seed) as dev:
+            x = np.hstack([b.values() for b in dev])
+            gages = dev.info.gages
+        fs = rig.daq.sample_rate_hz
+        out.append(x[:, round((ONSET_S + SKIP_S) * fs):])
+    return rig, out, fs, gages
+
+
+def cpu(fn) -> float:
+    t0 = time.process_time()
+    fn()
+    return time.process_time() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hits", type=int, default=5, help="records (default 5)")
+    ap.add_argument("--medium", choices=("water", "air"), default="water")
+    args = ap.parse_args()
+    rig, xs, fs, gages = records(args.medium, args.hits)
+    whole = [cpu(lambda x=x: analyze_decay(x, fs, rig, gages, onset_s=ONSET_S,
+                                           decay_start_s=ONSET_S + SKIP_S)) for x in xs]
+    verdicts = [cpu(lambda x=x: assess_decay(x, fs)) for x in xs]
+    joint = [cpu(lambda x=x: identify_modes(x, fs, per_channel=True)) for x in xs]
+    print(f"ALBACORE in {args.medium}: {len(gages)} gages x {xs[0].shape[1]} samples at {fs:g} Hz, "
+          f"{args.hits} hits")
+    print(f"  analyze_decay  median {np.median(whole):.3f} s CPU, max {np.max(whole):.3f} s (target 0.2)")
+    print(f"  of which, run alone: verdicts (assess_decay) {np.median(verdicts):.3f} s, "
+          f"joint fit (identify_modes) {np.median(joint):.3f} s")
+
+
+if __name__ == "__main__":
+    main()
