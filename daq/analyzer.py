@@ -5,6 +5,9 @@ and the live trial: one implementation, so live and replay cannot drift apart. A
 analyzer thread takes typed jobs (:class:`FinalJob`, :class:`LookJob`) and gives back typed
 results (:class:`FinalDone`, :class:`LookDone`) through :func:`run_job`.
 
+A final run while the analyzer is behind may be *coarse* (:class:`Coarse`: its free decay cut
+short and decimated, :mod:`ramdaq.daq.jobqueue` says when); the hit's result says so.
+
 Each hit is accepted or rejected with a reason: a blow the trigger saw but could not place
 (still arming, or its onset at a gap), a double hit, an overload (clipped channels), a decay too
 short to measure, an analysis that found no usable decay, or one that failed. The trial summary
@@ -18,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import signal
 
 from ..analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
 from ..analysis.model.rig import Rig
@@ -33,21 +37,37 @@ NOT_ANALYSABLE = "blow seen but not analysable"
 
 @dataclass(frozen=True)
 class HitResult:
-    """One hit: its trigger event, whether it counts, why not, and its analysis if any."""
+    """One hit: its trigger event, whether it counts, why not, and its analysis if any;
+    ``coarse`` says how the analysis was made coarser than the record allowed ("" if not)."""
 
     index: int
     event: ImpactEvent
     accepted: bool
     reason: str
     analysis: ImpactAnalysis | None
+    coarse: str = ""
+
+
+@dataclass(frozen=True)
+class Coarse:
+    """How a final is made cheaper when the analyzer is behind: its free decay cut to the first
+    ``decay_s`` s (of ``full_decay_s`` s recorded) and decimated by the largest whole factor
+    that keeps the rate at or above ``rate_hz`` (Hz); ``why`` says how far behind it was."""
+
+    decay_s: float
+    full_decay_s: float
+    rate_hz: float
+    why: str
 
 
 @dataclass(frozen=True)
 class FinalJob:
-    """Judge and analyse hit ``index`` from its complete record (``event.record``)."""
+    """Judge and analyse hit ``index`` from its complete record (``event.record``), coarsely
+    if ``coarse`` is given."""
 
     index: int
     event: ImpactEvent
+    coarse: Coarse | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,12 +102,12 @@ def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
             gages: tuple[int, ...]) -> FinalDone | LookDone:
     """Do one analyzer job; ``gages`` are the report gage numbers of ``LookJob.x``'s rows."""
     if isinstance(job, FinalJob):
-        hit = judge_event(job.index, job.event, info, rig)
+        hit = judge_event(job.index, job.event, info, rig, job.coarse)
         try:
             return FinalDone(hit, hit_to_json(hit))
         except Exception as err:  # noqa: BLE001 -- a hit whose numbers cannot be written is rejected, not lost
             hit = HitResult(hit.index, hit.event, False,
-                            f"analysis failed: {type(err).__name__}: {err}", None)
+                            f"analysis failed: {type(err).__name__}: {err}", None, hit.coarse)
             return FinalDone(hit, hit_to_json(hit))
     try:
         look = first_look(job.x, info.fs_hz, rig, gages)
@@ -124,8 +144,24 @@ def _force_from_onset(event: ImpactEvent, info: StreamInfo) -> np.ndarray | None
     return rec.counts[rows[0], i0:] * rec.scale[rows[0]]
 
 
-def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
-    """Judge and analyse one trigger event that carries its record."""
+def coarsen(x: np.ndarray, fs_hz: float, coarse: Coarse) -> tuple[np.ndarray, float, str]:
+    """The free decay ``x`` (n_gages, n_samples) cut to ``coarse.decay_s`` and decimated (FIR
+    anti-alias filter, zero phase) by ``floor(fs_hz / coarse.rate_hz)``: the samples, their
+    rate (Hz), and a sentence saying what was done and why."""
+    keep = min(x.shape[1], round(coarse.decay_s * fs_hz))
+    q = max(1, int(fs_hz // coarse.rate_hz))
+    y = x[:, :keep]
+    if q > 1:
+        y = signal.decimate(y, q, ftype="fir", zero_phase=True, axis=1)
+    text = (f"coarse: {keep / fs_hz:.2f} s of the {coarse.full_decay_s:.2f} s decay"
+            + (f", decimated {q}x to {fs_hz / q:g} Hz" if q > 1 else "") + f" ({coarse.why})")
+    return y, fs_hz / q, text
+
+
+def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
+                  coarse: Coarse | None = None) -> HitResult:
+    """Judge and analyse one trigger event that carries its record; with ``coarse``, on the
+    shorter, decimated decay it describes (:func:`coarsen`)."""
     if event.not_analysable:
         return HitResult(index, event, False,
                          f"{NOT_ANALYSABLE}: {event.not_analysable}", None)
@@ -149,24 +185,28 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) ->
                          f"decay too short: {x.shape[1] / info.fs_hz:.2f} s "
                          f"(< {MIN_DECAY_S} s, ended by {event.end_reason})", None)
     gage_rows = [i for i, g in enumerate(info.gages) if g]
+    x, fs, text = x[gage_rows], info.fs_hz, ""
+    if coarse is not None:
+        x, fs, text = coarsen(x, fs, coarse)
     try:
-        result = analyze_decay(x[gage_rows], info.fs_hz, rig,
-                               tuple(info.gages[i] for i in gage_rows),
+        result = analyze_decay(x, fs, rig, tuple(info.gages[i] for i in gage_rows),
                                onset_s=event.onset_s, decay_start_s=start / info.fs_hz,
                                adc_full_scale=_full_scale(info, rec.scale[gage_rows]))
     except ValueError as err:
-        return HitResult(index, event, False, f"no usable decay: {err}", None)
-    return HitResult(index, event, True, "", result)
+        return HitResult(index, event, False, f"no usable decay: {err}", None, text)
+    return HitResult(index, event, True, "", result, text)
 
 
-def judge_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig) -> HitResult:
+def judge_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
+                coarse: Coarse | None = None) -> HitResult:
     """:func:`analyze_event`; if the analysis raises, the hit is rejected as "analysis failed:
     <exception>": a blow the trigger saw never vanishes from the trial."""
     try:
-        return analyze_event(index, event, info, rig)
+        return analyze_event(index, event, info, rig, coarse)
     except Exception as err:  # any failure is this hit's verdict, not the end of the trial
         return HitResult(index, event, False,
-                         f"analysis failed: {type(err).__name__}: {err}", None)
+                         f"analysis failed: {type(err).__name__}: {err}", None,
+                         "" if coarse is None else f"coarse ({coarse.why})")
 
 
 def _full_scale(info: StreamInfo, scale: np.ndarray) -> float | None:
@@ -185,11 +225,36 @@ def _mean_scatter(values: list[float]) -> dict:
             "deviation_pct": [float(100 * (x / mean - 1)) for x in v]}
 
 
-def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None) -> dict:
+@dataclass(frozen=True)
+class AnalyzerLoad:
+    """What a live trial's analyzer did and left undone: first looks shown and skipped (the
+    analyzer had other work, or a final pushed them out of the queue), finals run coarse and
+    finals not analysed at all (the queue was at its bound); the most the queue held (jobs
+    waiting or running: bytes of samples, and finals) against its bounds."""
+
+    looks_shown: int
+    looks_skipped: int
+    finals_coarse: int
+    finals_unanalysed: int
+    peak_bytes: int
+    peak_finals: int
+    max_bytes: int
+    max_finals: int
+
+    def to_json(self) -> dict:
+        return {"looks_shown": self.looks_shown, "looks_skipped": self.looks_skipped,
+                "finals_coarse": self.finals_coarse, "finals_unanalysed": self.finals_unanalysed,
+                "peak_MB": self.peak_bytes / 1e6, "peak_finals": self.peak_finals,
+                "max_MB": self.max_bytes / 1e6, "max_finals": self.max_finals}
+
+
+def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
+                  load: AnalyzerLoad | None = None) -> dict:
     """Per gage and per motion: mean decrement over accepted hits, its standard deviation and
     each hit's percent deviation from the mean; the predominant frequency likewise. How many
     blows were seen but not analysable, and, given the trigger's ``stream`` health, its gaps,
-    missing, blind and arming time (s)."""
+    missing, blind and arming time (s); given the analyzer's ``load``, the work it skipped or
+    made coarse, and which hits were coarse."""
     ok = [h.analysis for h in hits if h.accepted and h.analysis is not None]
     gages = sorted({n for a in ok for n in a.gages})
     motions = sorted({m for a in ok for m in a.motions})
@@ -198,6 +263,8 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None) -> 
         "rejected": {h.index: h.reason for h in hits if not h.accepted},
         "not_analysable": sum(h.event.not_analysable is not None for h in hits),
         "stream": None if stream is None else stream.to_json(),
+        "analyzer": None if load is None else load.to_json(),
+        "coarse": {h.index: h.coarse for h in hits if h.coarse},
         "f_hz": _mean_scatter([a.f_hz for a in ok]),
         "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages])
                        for n in gages},
@@ -260,4 +327,5 @@ def hit_to_json(hit: HitResult) -> dict:
     """One hit as the results topic, ``replay --json`` and the live trial write it."""
     return finite_json({"index": hit.index, "onset_sample": hit.event.onset_sample,
                         "onset_s": hit.event.onset_s, "accepted": hit.accepted, "reason": hit.reason,
+                        "coarse": hit.coarse or None,
                         "analysis": analysis_to_json(hit.analysis) if hit.analysis else None})

@@ -143,6 +143,12 @@ class RerunView:
     live_batch_s : float
         Stream seconds of live rows gathered per ``send_columns`` call (viewer latency, s); fewer,
         bigger chunks cost less CPU and file.
+    footer : bool
+        Finish the ``.rrd`` with Rerun's footer (a manifest of every chunk: random access, and
+        ``rerun rrd verify`` passes). Rerun keeps that manifest in memory until :meth:`close`,
+        ~1 kB per chunk written, so a long trial's RSS grows with it (``benchmarks/soak.py
+        --no-footer`` shows the difference); ``False`` for long sessions, and
+        ``rerun rrd optimize`` adds a footer afterwards.
     memory_limit : str
         Buffer limit of the gRPC server (late-joining web viewers replay it) and of a spawned native
         viewer, e.g. ``"25%"`` of RAM or ``"2GB"``; the oldest data is dropped beyond it.
@@ -158,7 +164,8 @@ class RerunView:
                  recording_name: str | None = None, rrd_path: Path | None = None,
                  serve_web: bool = False, web_port: int = 9090, grpc_port: int = 9876,
                  connect: str | None = None, live_rate_hz: float = LIVE_RATE_HZ,
-                 live_batch_s: float = 0.2, memory_limit: str = "25%") -> None:
+                 live_batch_s: float = 0.2, footer: bool = True,
+                 memory_limit: str = "25%") -> None:
         if live_rate_hz <= 0:
             raise ValueError(f"live_rate_hz must be positive, got {live_rate_hz}")
         if serve_web:
@@ -188,7 +195,7 @@ class RerunView:
         sinks: list = []
         if self.rrd_path is not None:
             self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
-            sinks.append(rr.FileSink(self.rrd_path))
+            sinks.append(rr.FileSink(self.rrd_path, write_footer=footer))
         if serve_web:
             server = rr.GrpcServerSink(LOCALHOST, grpc_port, server_memory_limit=memory_limit)
             sinks.append(server)
@@ -412,7 +419,8 @@ class RerunView:
 
         ``results/gXX/f_hz`` (Hz), ``results/gXX/delta`` (log decrement, -) and
         ``results/gXX/amplitude`` (SI) get a point each (final results as large diamonds, and a
-        ``results/log`` line). With ``decay_t_s`` (s since stream start, shape (n,)) and ``decay``
+        ``results/log`` line); a value that is not a finite number (a first look's amplitude) is
+        not logged. With ``decay_t_s`` (s since stream start, shape (n,)) and ``decay``
         (SI, (n,)) the fitted signal goes to ``impacts/<k>/decay/gXX``; ``envelope`` ((n,) amplitude,
         drawn as +e and -e, or (n, 2)) to ``impacts/<k>/decay/gXX/envelope``.
         """
@@ -420,7 +428,8 @@ class RerunView:
         style = rr.SeriesPoints(markers="diamond" if final else "circle", marker_sizes=6 if final else 2.5)
         self._at(t_s)
         for name, v in (("f_hz", f_hz), ("delta", delta), ("amplitude", amplitude)):
-            self.rec.log(f"results/{g}/{name}", rr.Scalars(float(v)), style)
+            if math.isfinite(v):
+                self.rec.log(f"results/{g}/{name}", rr.Scalars(float(v)), style)
         if final:
             self.rec.log("results/log", rr.TextLog(
                 f"impact {k} {g}: f = {f_hz:.4g} Hz, delta = {delta:.4g}, amplitude = {amplitude:.4g}"))

@@ -5,20 +5,31 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
 - the caller's thread reads the device and never waits on disk or analysis: each block goes to
   the recorder's bounded queue, through the trigger (vectorised, far faster than real time), to
   the live views;
-- one analyzer thread takes work from the main loop: every finished impact record (a final
-  analysis -- never dropped) and, while the rudder still rings, a first look at the decay so far.
-  A first look is asked for only when the analyzer is idle: when it falls behind, updates are
-  skipped and counted, samples never are.
+- two analyzer threads take work from the main loop through a bounded queue
+  (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis), the other,
+  while the rudder still rings, first looks at the decay so far -- so a final never holds up the
+  next blow's first looks. A first look is asked for when the last one is done: the first after
+  ``first_look_s`` of free decay, then every ``first_look_s`` until one is sure enough to show
+  (:data:`LOOK_REL_SE`), then every ``update_s``. When the analyzer falls behind a live device,
+  first looks are skipped first, then finals run on a shorter, decimated decay, and last a
+  final is left unanalysed -- each counted in the summary and written as an event; samples are
+  never skipped, and the queue never holds more than its bound. A device that can wait
+  (``pace == "fast"``: a replay, a simulator run flat out) waits for room instead, so its
+  finals are always whole.
 
 Final numbers come from the impact's complete record alone, so a replay of the recording
 (``McapReplayDevice`` through the same session) gives the same impacts and the same numbers.
-Results go into the recording on ``/ramdaq/impacts`` (detections) and ``/ramdaq/results``.
+Results go into the recording on ``/ramdaq/impacts`` (detections), ``/ramdaq/results`` and,
+at the end, ``/ramdaq/summary``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import queue
 import threading
+import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,22 +43,26 @@ from ..drivers.block import Block
 from ..drivers.errors import DeviceError
 from ..drivers.mcap_format import IMPACTS_TOPIC
 from .analyzer import (
+    AnalyzerLoad,
     FinalDone,
     FinalJob,
     HitResult,
     LookDone,
     LookJob,
     decay_skip_s,
+    finite_json,
     hit_to_json,
     run_job,
     trial_summary,
 )
+from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import LiveReadout
 from .record import store_block
 from .recorder import Recorder
 from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 RESULTS_TOPIC = "/ramdaq/results"
+"""Per-hit final results (JSON, SI units) written into the recording by a live trial."""
 # Points of a drawn decay envelope e^(-x): a chord over h time constants is off by at most h²/8
 # relative, so 256 points keep it within 0.1 % (h <= 0.089) over 22 time constants, by which the
 # envelope is e^-22 of its start, below any ADC's noise floor.
@@ -56,7 +71,12 @@ ENVELOPE_POINTS = 256
 # after the onset: the blow, a double hit, clipping and the first cycles of the decay, where the
 # detail is; the rest of the decay is in the live min/max trace (rerun_view.LIVE_RATE_HZ rows/s).
 FULL_RATE_AFTER_S = 1.0
-"""Per-hit final results (JSON, SI units) written into the recording by a live trial."""
+LOOK_REL_SE = 0.25
+"""A first look is shown when the median over gages of its decrement's standard error relative
+to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
+worth a glance, a wilder one is not)."""
+SUMMARY_TOPIC = "/ramdaq/summary"
+"""The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +85,17 @@ class JobFailed:
 
     job: FinalJob | LookJob
     error: Exception
+
+
+@dataclass(frozen=True)
+class Shown:
+    """When a hit's numbers were shown: hit ``index``, ``kind`` ("look" or "final"), the blow's
+    onset sample in s of stream, and the wall clock then (``time.monotonic()``, s)."""
+
+    index: int
+    kind: str
+    onset_s: float
+    wall_s: float
 
 
 @dataclass
@@ -80,6 +111,7 @@ class TrialOutcome:
     recording: Path | None = None
     rrd: Path | None = None
     notes: list[str] = field(default_factory=list)
+    load: AnalyzerLoad | None = None
 
     def results_json(self) -> list[dict]:
         """Final per-hit results, the numbers replay must reproduce exactly."""
@@ -100,15 +132,28 @@ class Session:
     readout : LiveReadout or False or None
         Terminal table; ``None`` makes one, ``False`` shows nothing.
     update_s : float
-        Stream seconds between first looks at a ringing decay.
+        Stream seconds between first looks at a ringing decay once one has been shown.
+    first_look_s : float
+        Seconds of free decay before the first look, and between looks until one is sure
+        enough to show.
     trigger_settings : TriggerSettings, optional
         The trigger's settings (default ``TriggerSettings()``).
+    queue_policy : QueuePolicy, optional
+        Bounds of the analyzer queue and its coarse finals (default ``QueuePolicy()``).
+    shed : bool, optional
+        Shed work when the analyzer falls behind (:mod:`ramdaq.daq.jobqueue`) rather than wait
+        for it; default: shed unless the device can wait (``device.pace == "fast"``).
+
+    Held for the summary per hit: its numbers and its trigger event, without the samples (the
+    recording has them), so that memory stays flat however long the trial.
     """
 
     def __init__(self, device: Device, *, record_path: str | Path | None = None,
                  overwrite: bool = False, view=None, readout: LiveReadout | bool | None = None,
-                 update_s: float = 0.5, trigger_settings: TriggerSettings | None = None,
-                 log: Callable[[str], None] | None = None) -> None:
+                 update_s: float = 0.5, first_look_s: float = 0.1,
+                 trigger_settings: TriggerSettings | None = None,
+                 log: Callable[[str], None] | None = None,
+                 queue_policy: QueuePolicy | None = None, shed: bool | None = None) -> None:
         self.device = device
         self.info = device.open()
         if not self.info.rig_toml:
@@ -122,16 +167,26 @@ class Session:
         self.readout = (LiveReadout(self.info, adc_bits=self.info.extra.get("adc_bits"))
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
+        self.first_n = max(1, round(first_look_s * self.info.fs_hz))
+        self._look_sure = False  # a first look of the ringing hit has been shown
+        self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
-        self._jobs: queue.Queue[FinalJob | LookJob | None] = queue.Queue()  # None: stop
+        self._jobs = JobQueue(queue_policy or QueuePolicy(), self.info.fs_hz,
+                              round(decay_skip_s(self.rig) * self.info.fs_hz))
+        self.shed = getattr(device, "pace", "realtime") != "fast" if shed is None else shed
         self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
-        self._busy = threading.Event()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
         self.samples = 0
         self.skipped_updates = 0
         self.first_looks = 0
+        self.finals_coarse = 0
+        self.finals_unanalysed = 0
+        self._t_ns = 0  # device time of the latest block's first sample
+        self.shown: deque[Shown] = deque(maxlen=4096)  # the latest numbers shown, for timing
+        self.wall_at_start: float | None = None  # monotonic s when sample 0 would have come
+        self._rec: Recorder | None = None
         self._truth_written = 0  # simulator truth messages already in the recording
         self._next_sample: int | None = None  # where the next block starts if there is no gap
         self._next_look = None
@@ -141,44 +196,55 @@ class Session:
         self._gage_rows = [i for i, g in enumerate(self.info.gages) if g]
         self._gages = tuple(self.info.gages[i] for i in self._gage_rows)
 
-    # -- the analyzer thread ------------------------------------------------------------------
-    def _worker(self) -> None:
+    # -- the analyzer threads -----------------------------------------------------------------
+    def _worker(self, kind: type[FinalJob] | type[LookJob]) -> None:
         while True:
-            job = self._jobs.get()
+            job = self._jobs.get(kind)
             if job is None:
                 return
-            self._busy.set()
             try:
                 self._done.put(run_job(job, self.info, self.rig, self._gages))
             except Exception as err:  # never let the analyzer thread die silently
                 self._done.put(JobFailed(job, err))
             finally:
-                self._busy.clear()
-                self._jobs.task_done()
+                del job  # the samples go with the job's result, not with this frame
+                self._jobs.done(kind)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
         """Stream the device to its end (or Ctrl-C), then wait for every final analysis."""
-        worker = threading.Thread(target=self._worker, name="ramdaq-analyzer", daemon=True)
-        worker.start()
+        for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):
+            threading.Thread(target=self._worker, args=(kind,), name=name, daemon=True).start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
                if self.record_path else None)
+        self._rec = rec
         if self.readout:
             self.readout.__enter__()
         try:
             interrupted = self._stream(rec)
             self._end_of_stream(rec)
+            self.hits.sort(key=lambda h: h.index)
+            summary = trial_summary(self.hits, self.trigger.health, self.load)
+            if rec:
+                rec.write_json(SUMMARY_TOPIC, finite_json(summary), self._t_ns)
         finally:
-            self._jobs.put(None)
+            self._jobs.stop()
             if self.readout:
                 self.readout.__exit__(None, None, None)
             if rec:
                 rec.close()
             self.device.close()
-        self.hits.sort(key=lambda h: h.index)
-        return TrialOutcome(self.hits, trial_summary(self.hits, self.trigger.health), self.samples,
-                            self.skipped_updates, self.first_looks, interrupted, self.record_path,
-                            notes=self.notes)
+        return TrialOutcome(self.hits, summary, self.samples, self.skipped_updates,
+                            self.first_looks, interrupted, self.record_path, notes=self.notes,
+                            load=self.load)
+
+    @property
+    def load(self) -> AnalyzerLoad:
+        """What the analyzer did and skipped so far."""
+        q = self._jobs
+        return AnalyzerLoad(self.first_looks, self.skipped_updates, self.finals_coarse,
+                            self.finals_unanalysed, q.peak_bytes, q.peak_finals,
+                            q.policy.max_bytes, q.policy.max_finals)
 
     def _stream(self, rec: Recorder | None) -> bool:
         """Take every block of the device; True if Ctrl-C ended the stream."""
@@ -208,6 +274,9 @@ class Session:
             self._say(f"device fault: {fault.kind} {fault.detail}")
         gap = self._next_sample is not None and block.first_sample != self._next_sample
         self._next_sample = block.next_sample
+        if self.wall_at_start is None:
+            self.wall_at_start = time.monotonic() - block.next_sample / self.info.fs_hz
+        self._t_ns = block.t0_ns
         self.samples += block.n_samples
         for ev in self.trigger.process(block):
             self._on_event(ev, rec)
@@ -228,7 +297,7 @@ class Session:
             self._say(f"device fault: {fault.kind} {fault.detail}")
         for ev in self.trigger.flush():
             self._on_event(ev, rec)
-        self._say(f"waiting for the analyzer to finish {self._jobs.unfinished_tasks} job(s)")
+        self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
         self._jobs.join()
         self._drain(rec)
 
@@ -245,7 +314,7 @@ class Session:
                   + (", " + ", ".join(flags) if flags else "") + "): analysing")
         if self.view is not None:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
-        self._jobs.put(FinalJob(k, ev))
+        self._admitted(self._jobs.put_final(FinalJob(k, ev), wait=not self.shed), ev, rec)
         self._next_look = None
         self._ringing_hit = None
 
@@ -262,18 +331,43 @@ class Session:
             self._say(f"hit {self._n_events} at {onset / self.info.fs_hz:.3f} s: ringing")
             if self.readout:
                 self.readout.clear_results()
-            self._next_look = start + self.update_n
-        if now < self._next_look:
+            self._next_look = start + self.first_n
+            self._look_sure, self._ringing_onset = False, onset
+        if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
             return
-        self._next_look = now + self.update_n
-        if self._busy.is_set() or self._jobs.unfinished_tasks:
-            self.skipped_updates += 1
-            return
+        self._next_look = now + (self.update_n if self._look_sure else self.first_n)
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
-        self._jobs.put(LookJob(onset, x))
+        if not self._jobs.put_look(LookJob(onset, x)):
+            self._look_skipped(onset, "its samples would pass the queue's bytes bound")
+
+    def _look_skipped(self, onset: int, why: str) -> None:
+        self.skipped_updates += 1
+        if self._rec:
+            self._rec.event("look_skipped", self._t_ns, onset_sample=onset, reason=why)
+
+    def _admitted(self, adm: Admission, ev: ImpactEvent, rec: Recorder | None) -> None:
+        """Count and record what the queue did to take hit ``ev``'s final; a final it refused
+        is this hit's result at once, rejected with the reason."""
+        for onset in adm.looks_dropped:
+            self._look_skipped(onset, "a final's record needed its room in the queue")
+        job = adm.job
+        k = self._n_events - 1
+        if job is not None and job.coarse is not None:
+            self.finals_coarse += 1
+            self._say(f"hit {k}: the analyzer is behind ({job.coarse.why}); its final runs "
+                      f"on {job.coarse.decay_s:g} s of decay at about {job.coarse.rate_hz:g} Hz")
+            if rec:
+                rec.event("final_coarse", ev.t_ns, index=k, why=job.coarse.why,
+                          decay_s=job.coarse.decay_s, rate_hz=job.coarse.rate_hz)
+        if job is None:
+            self.finals_unanalysed += 1
+            if rec:
+                rec.event("final_unanalysed", ev.t_ns, index=k, reason=adm.refused)
+            hit = HitResult(k, ev, False, adm.refused, None)
+            self._show_final(hit, hit_to_json(hit), rec)
 
     def _drain(self, rec: Recorder | None) -> None:
         while True:
@@ -295,9 +389,14 @@ class Session:
                           f"failed: {type(done.error).__name__}: {done.error}")
 
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
-        if look is None:
+        """Show a first look whose decrements are sure enough (:data:`LOOK_REL_SE`), unless a
+        later blow already rings."""
+        if look is None or onset != self._ringing_onset or not _sure(look):
             return
+        self._look_sure = True
         self.first_looks += 1
+        self.shown.append(Shown(-1 if self._ringing_hit is None else self._ringing_hit, "look",
+                                onset / self.info.fs_hz, time.monotonic()))
         if self.readout:
             for n, (f, d, _) in look.gages.items():
                 self.readout.set_result(f"g{n:02d}", f, d, final=False)
@@ -309,8 +408,10 @@ class Session:
 
     def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
-        thread (:func:`~ramdaq.daq.analyzer.hit_to_json`)."""
-        self.hits.append(hit)
+        thread (:func:`~ramdaq.daq.analyzer.hit_to_json`). The hit is kept without its samples."""
+        self.hits.append(dataclasses.replace(hit, event=dataclasses.replace(hit.event, record=None)))
+        self.shown.append(Shown(hit.index, "final", hit.event.onset_sample / self.info.fs_hz,
+                                time.monotonic()))
         a = hit.analysis
         if rec:
             rec.write_json(RESULTS_TOPIC, {k: doc[k] for k in ("index", "accepted", "reason", "analysis")},
@@ -362,6 +463,13 @@ class Session:
             self.readout.hit(text)
         elif self.log:
             self.log(text)
+
+
+def _sure(look: FirstLook) -> bool:
+    """True if the median over gages of the decrement's relative standard error is at most
+    :data:`LOOK_REL_SE` (gages whose error the estimator could not give left out)."""
+    rel = [se / abs(d) for _, d, se in look.gages.values() if d and np.isfinite(se)]
+    return bool(rel) and float(np.median(rel)) <= LOOK_REL_SE
 
 
 def _flags(ev: ImpactEvent) -> dict:

@@ -232,8 +232,10 @@ def _print_outcome(outcome, args: argparse.Namespace, rig_toml: str = "") -> Non
     for k, why in outcome.summary["rejected"].items():
         print(f"hit {k} rejected: {why}")
     print("\n".join(summary_table(surface.relabel(outcome.summary), args.units)))
-    print(f"{outcome.first_looks} first looks shown while ringing, {outcome.skipped_updates} "
-          f"skipped because the analyzer was busy (no samples skipped)")
+    load = outcome.load
+    print(f"analyzer: {load.looks_shown} first looks shown while ringing, {load.looks_skipped} "
+          f"skipped because it was busy; {load.finals_coarse} final(s) coarse, "
+          f"{load.finals_unanalysed} not analysed (no samples skipped)")
     if args.json:
         Path(args.json).write_text(json.dumps(outcome.results_json(), indent=1,
                                               default=json_default))

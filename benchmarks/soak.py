@@ -1,0 +1,172 @@
+"""Soak: a live trial on the simulated device, paced in real time, with the process's resident
+memory (RSS) printed every few seconds and its growth fitted in MB per minute.
+
+The trial is the session ``ramdaq trial`` runs (:class:`ramdaq.daq.session.Session`: recorder,
+trigger, analyzer, optionally the Rerun view into an ``.rrd``), into a temporary folder, on the
+ALBACORE-like rig in water with a blow every ``--impact-every`` s. The growth is the slope of a
+least-squares line through the RSS samples after ``--warmup`` s (the first records, caches and
+Rerun's batcher fill up then), with its standard error, twice: through every sample, and through
+the lowest sample of each ``--window`` s (the floor the process returns to between analyses: a
+sample taken while a 16-gage analysis holds its copies sits tens of MB above it, which in a
+short run moves the first slope by more than the goal). The verdict is on the floor's slope;
+both are printed. Issue 22's goal: <= 5 MB/min, over 10 minutes at 2048 Hz with the view and
+5 minutes at 25.6 kHz.
+
+    python benchmarks/soak.py                         # 10 min at 2048 Hz, with the view
+    python benchmarks/soak.py --rate 25600            # 5 min at 25.6 kHz, with the view
+    python benchmarks/soak.py --minutes 2 --no-view   # a short check
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the CLI sets it (daq/commands/cli.py)
+
+import tempfile  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import psutil  # noqa: E402
+
+from ramdaq.daq.rerun_view import RerunView  # noqa: E402
+from ramdaq.daq.session import Session  # noqa: E402
+from ramdaq.drivers.sim import SimDevice  # noqa: E402
+
+RIG = Path(__file__).resolve().parent.parent / "recordings" / "rigs" / "albacore.toml"
+GOAL_MB_PER_MIN = 5.0
+"""Issue 22's bound on RSS growth."""
+
+
+@dataclass(frozen=True)
+class Growth:
+    """RSS growth fitted over the samples after the warm-up: slope and its standard error,
+    MB/min, and the RSS at the first and last sample fitted, MB."""
+
+    mb_per_min: float
+    se_mb_per_min: float
+    first_mb: float
+    last_mb: float
+    n: int
+
+
+def floor_of(t_s: np.ndarray, rss_mb: np.ndarray, window_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest RSS sample of each ``window_s`` window, with its time."""
+    k = np.floor(t_s / window_s)
+    idx = [int(np.flatnonzero(k == w)[np.argmin(rss_mb[k == w])]) for w in np.unique(k)]
+    return t_s[idx], rss_mb[idx]
+
+
+def fit_growth(t_s: np.ndarray, rss_mb: np.ndarray) -> Growth:
+    """Least-squares line through (t_s, rss_mb); the slope's standard error from the residual
+    scatter (RSS moves in steps, so this is a rough figure, not a statistical test)."""
+    if t_s.size < 3:
+        raise ValueError(f"soak: {t_s.size} RSS samples after the warm-up; run longer")
+    a, b = np.polyfit(t_s, rss_mb, 1)
+    resid = rss_mb - (a * t_s + b)
+    se = np.sqrt(resid @ resid / (t_s.size - 2) / np.sum((t_s - t_s.mean()) ** 2))
+    return Growth(60 * a, 60 * se, float(rss_mb[0]), float(rss_mb[-1]), int(t_s.size))
+
+
+class RssSampler:
+    """Samples this process's RSS every ``every_s`` s on its own thread and prints it, with
+    the stream seconds ``stream_s()`` says the session has taken; only samples taken while the
+    stream still ran are kept (after it, the session only waits for its last finals)."""
+
+    def __init__(self, every_s: float, stream_s, duration_s: float) -> None:
+        self.every_s, self.stream_s, self.duration_s = every_s, stream_s, duration_s
+        self.samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
+        self._stop = threading.Event()
+        self._proc = psutil.Process()
+        self._t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="soak-rss", daemon=True)
+
+    def __enter__(self) -> RssSampler:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.every_s):
+            t, rss = time.monotonic() - self._t0, self._proc.memory_info().rss / 1e6
+            stream = self.stream_s()
+            if stream < self.duration_s:
+                self.samples.append((t, rss))
+            print(f"  t = {t:6.0f} s   stream {stream:6.1f} s   RSS {rss:8.1f} MB"
+                  + ("" if stream < self.duration_s else "   (stream ended: not fitted)"),
+                  flush=True)
+
+
+def run_trial(args: argparse.Namespace, folder: Path) -> tuple[object, list[tuple[float, float]]]:
+    """The paced trial with the RSS sampler running; its outcome and the RSS samples."""
+    duration = 60 * args.minutes
+    impacts = [args.impact_every / 2 + args.impact_every * k
+               for k in range(int(duration // args.impact_every))]
+    dev = SimDevice(RIG, medium="water", seed=args.seed, duration_s=duration, impacts=impacts,
+                    fs_hz=args.rate, pace="realtime")
+    info = dev.open()
+    view = (RerunView(info, rrd_path=folder / "soak.rrd", footer=args.footer) if args.view
+            else None)
+    session = Session(dev, record_path=folder / "soak.mcap", view=view, readout=False,
+                      log=print if args.verbose else None)
+    with RssSampler(args.every, lambda: session.samples / info.fs_hz, duration) as rss:
+        try:
+            outcome = session.run()
+        finally:
+            if view is not None:
+                view.close()
+    return outcome, rss.samples
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rate", type=float, default=2048.0, help="sample rate, Hz")
+    ap.add_argument("--minutes", type=float, default=None,
+                    help="trial length (default 10 at 2048 Hz, 5 at higher rates)")
+    ap.add_argument("--view", action=argparse.BooleanOptionalAction, default=True,
+                    help="log to a Rerun .rrd as the trial does")
+    ap.add_argument("--footer", action=argparse.BooleanOptionalAction, default=True,
+                    help="finish the .rrd with Rerun's footer, as the trial does (its chunk "
+                         "manifest is held in memory until the end)")
+    ap.add_argument("--impact-every", type=float, default=30.0, help="s between blows")
+    ap.add_argument("--every", type=float, default=5.0, help="s between RSS samples")
+    ap.add_argument("--warmup", type=float, default=60.0, help="s left out of the fit")
+    ap.add_argument("--window", type=float, default=15.0,
+                    help="s per window of the RSS floor (the lowest sample in each)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--verbose", action="store_true", help="print the session's hit messages")
+    args = ap.parse_args()
+    if args.minutes is None:
+        args.minutes = 10.0 if args.rate <= 2048 else 5.0
+    warmup = args.warmup
+    view = f"on ({'with' if args.footer else 'without'} .rrd footer)" if args.view else "off"
+    print(f"soak: {args.minutes:g} min at {args.rate:g} Hz, 16 gages, a blow every "
+          f"{args.impact_every:g} s, view {view}; fit after {warmup:g} s")
+    with tempfile.TemporaryDirectory() as tmp:
+        outcome, samples = run_trial(args, Path(tmp))
+        size = {p.suffix: p.stat().st_size / 1e6 for p in Path(tmp).iterdir()}
+    t, mb = (np.array(v) for v in zip(*samples, strict=True))
+    after = t >= warmup
+    g = fit_growth(t[after], mb[after])
+    floor = fit_growth(*floor_of(t[after], mb[after], args.window))
+    s = outcome.summary
+    print(f"hits {s['hits']}, accepted {s['accepted']}; analyzer: {s['analyzer']}")
+    print("files: " + ", ".join(f"{k} {v:.1f} MB" for k, v in sorted(size.items())))
+    print(f"RSS {g.first_mb:.1f} -> {g.last_mb:.1f} MB over {g.n} samples after the warm-up; "
+          f"peak {mb.max():.1f} MB")
+    print(f"growth, every sample: {g.mb_per_min:+.2f} +- {g.se_mb_per_min:.2f} MB/min")
+    ok = floor.mb_per_min <= GOAL_MB_PER_MIN
+    print(f"growth of the floor ({floor.n} windows of {args.window:g} s): "
+          f"{floor.mb_per_min:+.2f} +- {floor.se_mb_per_min:.2f} MB/min: "
+          f"{'PASS' if ok else 'FAIL'} (<= {GOAL_MB_PER_MIN:g} MB/min)")
+
+
+if __name__ == "__main__":
+    main()
