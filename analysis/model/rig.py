@@ -409,6 +409,7 @@ def parse_rig(text: str, source: str = "<string>") -> Rig:
     )
     gages = _read_gages(r, rudder, stock)
     forces = _read_forces(r, len(gages))
+    r.read_elsewhere("uncertainty")  # bounds for calibrating the rig to a trial's modes
     ambient = _read_ambient(r, len(hull_modes))
     rig = Rig(
         name=r.text("name"),
@@ -676,6 +677,14 @@ class _Reader:
 
     def has(self, path: str) -> bool:
         return self.get(path, default=None) is not None
+
+    def read_elsewhere(self, table: str) -> None:
+        """Take ``table`` and everything in it as read: a table of the rig file that another
+        module reads and checks (``[uncertainty]``: :mod:`ramdaq.analysis.gap.rigfit`)."""
+        node = self.doc.get(table)
+        if node is not None:
+            self.asked.add(table)
+            self.asked.update(_key_paths(node, table))
 
     def text(self, path: str, default: Any = _MISSING) -> str:
         v = self.get(path, default)
