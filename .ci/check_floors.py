@@ -2,8 +2,9 @@
 
     python3 .ci/check_floors.py REPO [--installed]
 
-Every requirement of pyproject.toml -- ``[project] dependencies``, the ``test`` extra and
-``[build-system] requires`` -- has a ``>=`` floor, and lower-bounds.txt pins it to exactly that
+Every requirement of pyproject.toml -- ``[project] dependencies``, the ``test`` extra (with the
+project's own extras it names, e.g. ``ramdaq[notebook]``) and ``[build-system] requires`` -- has a
+``>=`` floor, and lower-bounds.txt pins it to exactly that
 version (``==``); lower-bounds.txt pins nothing else. With ``--installed`` (run by the venv's
 python), every pinned distribution is installed at its pin: a constraint only limits what pip
 installs, so a floor pinned there but not installed would go untested without a word.
@@ -40,7 +41,8 @@ def release(version: str) -> tuple[int, ...]:
 def floors(repo: Path) -> tuple[dict[str, str], list[str]]:
     """``{name: floor}`` of pyproject.toml's requirements, and the ones that have no ``>=``."""
     doc = tomllib.loads((repo / "pyproject.toml").read_text(encoding="utf-8"))
-    reqs = (doc["project"]["dependencies"] + doc["project"]["optional-dependencies"]["test"]
+    extras = doc["project"]["optional-dependencies"]
+    reqs = (doc["project"]["dependencies"] + _expand(extras["test"], doc["project"]["name"], extras)
             + doc["build-system"]["requires"])
     out: dict[str, str] = {}
     bad: list[str] = []
@@ -53,6 +55,20 @@ def floors(repo: Path) -> tuple[dict[str, str], list[str]]:
             continue
         out[canonical(m.group(1))] = spec[">="]
     return out, bad
+
+
+def _expand(reqs: list[str], project: str, extras: dict[str, list[str]]) -> list[str]:
+    """``reqs`` with each of the project's own extras (``ramdaq[notebook]``) replaced by that
+    extra's requirements."""
+    out: list[str] = []
+    for req in reqs:
+        m = re.match(r"^\s*([A-Za-z0-9][A-Za-z0-9._-]*)\s*\[([^\]]*)\]\s*$", req)
+        if m and canonical(m.group(1)) == canonical(project):
+            for extra in m.group(2).split(","):
+                out += _expand(extras[extra.strip()], project, extras)
+        else:
+            out.append(req)
+    return out
 
 
 def pins(path: Path) -> tuple[dict[str, str], list[str]]:
