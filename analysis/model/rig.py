@@ -446,12 +446,7 @@ def _parse_channels_only(r: _Reader, medium: str, text: str) -> Rig:
     seen: dict[int, int] = {}
     for i, _ in enumerate(r.get("gages", default=[])):
         p = f"gages[{i}]"
-        number = r.integer(f"{p}.number")
-        if not 1 <= number <= MAX_CHANNELS:
-            r.fail(f"{p}.number", f"{number} is outside 1..{MAX_CHANNELS}")
-        if number in seen:
-            r.fail(f"{p}.number", f"duplicate gage {number} (also gages[{seen[number]}])")
-        seen[number] = i
+        number = _gage_number(r, i, MAX_CHANNELS, seen)
         axis = r.get(f"{p}.axis", default=None)
         gages.append(Gage(number=number, body=r.text(f"{p}.body", default=""),
                           position_m=r.vector(f"{p}.position_m") if r.has(f"{p}.position_m")
@@ -474,6 +469,19 @@ def _parse_channels_only(r: _Reader, medium: str, text: str) -> Rig:
               forces=forces)
     r.refuse_unknown_keys()
     return rig
+
+
+def _gage_number(r: _Reader, i: int, top: int, seen: dict[int, int]) -> int:
+    """``gages[i].number``, refused outside 1..``top`` or when an earlier gage has it; ``seen``
+    (number -> index of the gage that has it) gains it."""
+    p = f"gages[{i}]"
+    number = r.integer(f"{p}.number")
+    if not 1 <= number <= top:
+        r.fail(f"{p}.number", f"{number} is outside 1..{top}")
+    if number in seen:
+        r.fail(f"{p}.number", f"duplicate gage {number} (also gages[{seen[number]}])")
+    seen[number] = i
+    return number
 
 
 def _gage_unit(r: _Reader, p: str) -> str:
@@ -599,12 +607,7 @@ def _read_gages(r: _Reader, rudder: Rudder, stock: Stock) -> tuple[Gage, ...]:
     seen_channels: dict[int, int] = {}
     for i, _ in enumerate(raw):
         p = f"gages[{i}]"
-        number = r.integer(f"{p}.number")
-        if not 1 <= number <= N_GAGES:
-            r.fail(f"{p}.number", f"{number} is outside 1..{N_GAGES}")
-        if number in seen_numbers:
-            r.fail(f"{p}.number", f"duplicate gage {number} (also gages[{seen_numbers[number]}])")
-        seen_numbers[number] = i
+        number = _gage_number(r, i, N_GAGES, seen_numbers)
         body = r.text(f"{p}.body")
         if body not in BODIES:
             r.fail(f"{p}.body", f"{body!r} is not one of {', '.join(BODIES)}")
