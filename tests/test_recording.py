@@ -4,6 +4,7 @@ Samples are compared bit for bit (``Block.same_as``): the format stores integer 
 scales, so there is nothing to tolerate.
 """
 
+import dataclasses
 import json
 import os
 import time
@@ -59,13 +60,13 @@ def test_round_trip_is_bit_identical_and_keeps_the_gap(tmp_path):
     assert events[0]["t_ns"] == blocks[20].t0_ns
 
     d = describe_recording(path)
-    assert d["gaps"] == [(19, 2, 2 * BLOCK_SAMPLES)] and d["events"] == {"gap": 1}
-    assert d["blocks"] == 30 and d["n_samples"] == 30 * BLOCK_SAMPLES and d["complete"]
-    assert d["duration_s"] == 30 * BLOCK_SAMPLES / FS_HZ
-    assert d["span_s"] == 32 * BLOCK_SAMPLES / FS_HZ
+    assert d.gaps == [(19, 2, 2 * BLOCK_SAMPLES)] and d.events == {"gap": 1}
+    assert d.blocks == 30 and d.n_samples == 30 * BLOCK_SAMPLES and d.complete
+    assert d.duration_s == 30 * BLOCK_SAMPLES / FS_HZ
+    assert d.span_s == 32 * BLOCK_SAMPLES / FS_HZ
     text = format_info(d)
     assert "after seq 19: 2 block(s)" in text and "device" in text
-    json.dumps(d)  # the CLI prints it as JSON
+    json.dumps(dataclasses.asdict(d))  # the CLI prints it as JSON
 
 
 def test_readable_with_only_mcap_and_mcap_protobuf(tmp_path):
@@ -136,7 +137,7 @@ def test_overflow_drops_counts_and_logs(tmp_path):
     logged = [s for d in overflows for s in range(d["first_seq"], d["last_seq"] + 1)]
     assert sorted(logged) == dropped
     assert all(d["samples"] == 100_000 * d["blocks"] and d["queue_blocks"] == 2 for d in overflows)
-    assert describe_recording(path)["overflows"] == len(dropped)
+    assert describe_recording(path).overflows == len(dropped)
 
 
 def test_bad_blocks_are_refused_by_put(tmp_path):
@@ -286,7 +287,7 @@ def test_json_topics_and_realtime_pace(tmp_path):
         rec.write_json("/ramdaq/sim/impacts", truth, blocks[2].t0_ns)
         with pytest.raises(ValueError):
             rec.write_json("/ramdaq/sim/impacts", {"peak_force_N": float("nan")}, 0)
-    assert describe_recording(path)["sim_impacts"] == [truth]
+    assert describe_recording(path).sim_impacts == [truth]
 
     dev = McapReplayDevice(path, pace="realtime", speed=3.0)
     with dev:

@@ -7,6 +7,7 @@ Samples are compared bit for bit (``Block.same_as``): the format stores integer 
 scales, so there is nothing to tolerate.
 """
 
+import dataclasses
 import json
 
 import numpy as np
@@ -118,7 +119,7 @@ def test_a_flipped_sample_rate_in_the_metadata_is_caught(recording, tmp_path):
     assert isinstance(err, CorruptRecording) and "data section fails its CRC" in str(err)
     assert len(got) == len(blocks)  # found at the end of the data section
     d = describe_recording(bad)
-    assert d["data_crc_ok"] is False and [x["what"] for x in d["damaged"]] == ["data section"]
+    assert d.data_crc_ok is False and [x.what for x in d.damaged] == ["data section"]
 
 
 def test_info_locates_damage_and_does_not_call_it_a_missing_footer(recording, tmp_path):
@@ -127,17 +128,17 @@ def test_info_locates_damage_and_does_not_call_it_a_missing_footer(recording, tm
     bad = _damaged(recording, tmp_path, [(_chunk_data(c) + k, 0xFF) for k in range(16)])
     d = describe_recording(bad)
     lost = _chunk_blocks(chunks, 7)
-    assert d["footer"] and d["complete"] and d["summary_ok"]
-    assert [(x["start"], x["what"], x["after_seq"]) for x in d["damaged"]] == [
+    assert d.footer and d.complete and d.summary_ok
+    assert [(x.start, x.what, x.after_seq) for x in d.damaged] == [
         (c.chunk_start_offset, "chunk", lost[0] - 1)]
-    assert d["damaged"][0]["end"] == chunks[8].chunk_start_offset  # the next chunk read on
-    assert d["blocks"] == 60 - len(lost) and d["gaps"] == [
+    assert d.damaged[0].end == chunks[8].chunk_start_offset  # the next chunk read on
+    assert d.blocks == 60 - len(lost) and d.gaps == [
         (lost[0] - 1, len(lost), len(lost) * N_SAMPLES)]
     text = format_info(d)
     assert "NO FOOTER" not in text and "DAMAGED: 1 damaged stretch(es)" in text
     assert "footer intact" in text.splitlines()[0]
     assert f"DAMAGED    chunk at byte {c.chunk_start_offset}" in text and "DAMAGED chunk" in text
-    json.dumps(d)
+    json.dumps(dataclasses.asdict(d))
 
 
 @pytest.mark.parametrize("where", ["records", "record length"])
@@ -161,7 +162,7 @@ def test_recover_steps_over_16_bad_bytes_and_keeps_everything_after(recording, t
     assert (s.damage.start, s.after_seq, s.next_seq, s.missing_samples) == (
         c.chunk_start_offset, lost[0] - 1, lost[-1] + 1, len(lost) * N_SAMPLES)
     d = describe_recording(dst)
-    assert not d["damaged"] and d["recovery"]["damaged"][0]["after_seq"] == lost[0] - 1
+    assert not d.damaged and d.recovery["damaged"][0]["after_seq"] == lost[0] - 1
     assert "damaged chunk left out by recover" in format_info(d)
 
 
@@ -203,7 +204,7 @@ def test_damaged_summary_refuses_replay_and_recover_rewrites_it(recording, tmp_p
     got, err = _replay_until_error(bad)
     assert isinstance(err, CorruptRecording) and got == []
     assert "summary section or footer fails its CRC" in str(err)
-    assert describe_recording(bad)["summary_ok"] is False
+    assert describe_recording(bad).summary_ok is False
     recover(bad, tmp_path / "fixed.mcap")
     got, err = _replay_until_error(tmp_path / "fixed.mcap")
     assert err is None and all(a.same_as(b) for a, b in zip(got, blocks, strict=True))

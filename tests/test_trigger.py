@@ -306,7 +306,7 @@ def test_events_are_json_for_the_impacts_topic(albacore, tmp_path):
             rec.write_json(IMPACTS_TOPIC, e.to_json(), e.t_ns)
             sent.append(e.to_json())
     assert len(sent) == 1 and sent[0]["double_hit"]
-    assert describe_recording(path)["impacts"] == sent
+    assert describe_recording(path).impacts == sent
     assert set(IMPACT_JSON_SCHEMA["required"]) <= set(sent[0])
     assert set(sent[0]) == set(IMPACT_JSON_SCHEMA["properties"])
     json.dumps(sent[0], allow_nan=False)

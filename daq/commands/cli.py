@@ -39,6 +39,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import re  # noqa: E402
 import signal  # noqa: E402
@@ -109,7 +110,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     from .info import describe_recording, format_info
 
     d = describe_recording(args.file)
-    print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
+    print(json.dumps(dataclasses.asdict(d), indent=2, default=str) if args.json else format_info(d))
     return EXIT_OK
 
 

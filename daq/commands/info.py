@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from mcap.records import Attachment, Channel, Message, Metadata
 
@@ -20,30 +21,151 @@ from ...drivers import mcap_format as fmt
 from ...drivers.mcap_replay import Damage, RecordScanner
 from ..errors import NotARamdaqRecording
 
-__all__ = ["describe_recording", "format_info"]
+__all__ = ["Gap", "DamagedStretch", "RecordingFacts", "describe_recording", "format_info"]
 
 
-def describe_recording(path: str | PathLike) -> dict[str, Any]:
-    """Facts about a ramdaq recording, as plain data.
+class Gap(NamedTuple):
+    """Blocks missing from the stream: after block ``after_seq``, ``missing_blocks`` blocks and
+    ``missing_samples`` samples per channel."""
 
-    Returns
-    -------
-    dict
-        ``path``, ``file_bytes``, ``complete`` (the data section was read to its end),
-        ``tail_bytes`` and ``stopped_because`` (for a torn file), ``footer`` (the file ends with
-        its footer), ``summary_ok`` and ``data_crc_ok`` (the CRCs of the summary and of the data
-        section matched; ``None``: absent or not reached), ``damaged`` (list of ``{"start",
-        "end", "bytes", "what", "reason", "after_seq"}``: byte range of each damaged stretch
-        stepped over, which check failed, the last block before it), ``chunks``, ``device``,
-        ``fs_hz``, ``channels``, ``units``, ``gages``, ``n_channels``, ``extra``,
-        ``rig_toml_bytes``, ``ramdaq_version``, ``created_utc``, ``blocks``, ``n_samples`` (per
-        channel, recorded), ``first_sample``, ``last_sample``, ``duration_s`` (recorded samples
-        / fs), ``span_s`` (first to last sample, gaps included), ``t0_ns``, ``gaps`` (list of
-        ``(after_seq, missing_blocks, missing_samples)``), ``missing_samples``, ``overflows`` and
-        ``overflow_samples`` (blocks and samples the recorder dropped), ``events`` (count by
-        kind), ``impacts`` (trigger detections), ``sim_impacts`` (simulator truth),
-        ``bytes_per_sample`` (file bytes per recorded sample and channel), ``recovery`` (the
-        ``ramdaq.recovery`` metadata, its ``damaged`` list parsed, if any).
+    after_seq: int
+    missing_blocks: int
+    missing_samples: int
+
+
+@dataclass(frozen=True)
+class DamagedStretch:
+    """A stretch of the data section stepped over: byte range ``start``..``end`` (``bytes`` long),
+    ``what`` failed (``chunk``, ``record``, ``data section``), ``reason`` in one line, and the last
+    block read before it (``after_seq``, -1 if none)."""
+
+    start: int
+    end: int
+    bytes: int
+    what: str
+    reason: str
+    after_seq: int
+
+
+@dataclass
+class RecordingFacts:
+    """Facts about a ramdaq recording (:func:`describe_recording`); SI units, sample counts per
+    channel.
+
+    ``complete``: the data section was read to its end; ``tail_bytes`` and ``stopped_because``
+    describe a torn file; ``footer``: the file ends with its footer; ``summary_ok`` and
+    ``data_crc_ok``: the CRCs of the summary and of the data section matched (``None``: absent or
+    not reached); ``damaged``: each damaged stretch stepped over. ``n_samples`` is recorded
+    samples per channel, ``first_sample``/``last_sample`` the stream's indices, ``duration_s``
+    recorded samples / fs, ``span_s`` first to last sample with the gaps; ``overflows`` and
+    ``overflow_samples`` are blocks and samples the recorder dropped (``overflow_runs`` their
+    ``(first_seq, last_seq)``); ``events`` counts events by kind; ``impacts`` are trigger
+    detections and ``sim_impacts`` the simulator's truth; ``bytes_per_sample`` is file bytes per
+    recorded sample and channel; ``recovery`` the ``ramdaq.recovery`` metadata with its
+    ``damaged`` list parsed, if any.
+    """
+
+    path: str
+    file_bytes: int
+    complete: bool
+    tail_bytes: int
+    stopped_because: str | None
+    footer: bool
+    summary_ok: bool | None
+    data_crc_ok: bool | None
+    damaged: list[DamagedStretch]
+    chunks: int
+    device: str
+    fs_hz: float
+    channels: list[str]
+    units: list[str]
+    gages: list[int]
+    n_channels: int
+    extra: Any
+    rig_toml_bytes: int
+    ramdaq_version: str
+    created_utc: str
+    blocks: int
+    n_samples: int
+    first_sample: int
+    last_sample: int
+    duration_s: float
+    span_s: float
+    t0_ns: int | None
+    gaps: list[Gap]
+    missing_samples: int
+    overflows: int
+    overflow_samples: int
+    overflow_runs: list[tuple[int, int]]
+    events: dict[str, int]
+    impacts: list[Any]
+    sim_impacts: list[Any]
+    bytes_per_sample: float | None
+    recovery: dict[str, Any] | None
+
+
+@dataclass
+class _Scan:
+    """What one pass over a recording's records collected."""
+
+    topics: dict[int, str] = field(default_factory=dict)
+    meta: dict[str, dict[str, str]] = field(default_factory=dict)
+    rig: bytes = b""
+    blocks: int = 0
+    n_samples: int = 0
+    overflow_blocks: int = 0
+    overflow_samples: int = 0
+    first: fmt.BlockHeader | None = None
+    prev: fmt.BlockHeader | None = None
+    gaps: list[Gap] = field(default_factory=list)
+    overflow_runs: list[tuple[int, int]] = field(default_factory=list)
+    events: Counter[str] = field(default_factory=Counter)
+    impacts: list[Any] = field(default_factory=list)
+    sim_impacts: list[Any] = field(default_factory=list)
+    damaged: list[DamagedStretch] = field(default_factory=list)
+
+    def add(self, record: object) -> None:
+        """Take one record (or a :class:`Damage`) of the scan."""
+        if isinstance(record, Damage):
+            self.damaged.append(DamagedStretch(record.start, record.end, record.bytes, record.what,
+                                               record.reason, self.prev.seq if self.prev else -1))
+        elif isinstance(record, Channel):
+            self.topics[record.id] = record.topic
+        elif isinstance(record, Metadata):
+            self.meta[record.name] = record.metadata
+        elif isinstance(record, Attachment) and record.name == fmt.RIG_ATTACHMENT:
+            self.rig = record.data
+        elif isinstance(record, Message):
+            self._message(self.topics.get(record.channel_id), record.data)
+
+    def _message(self, topic: str | None, data: bytes) -> None:
+        if topic == fmt.BLOCK_TOPIC:
+            self._block(fmt.decode_header(data))
+        elif topic == fmt.EVENTS_TOPIC:
+            event = fmt.decode_json(data)
+            self.events[event.get("kind", "?")] += 1
+            if event.get("kind") == "overflow":
+                detail = event["detail"]
+                self.overflow_runs.append((int(detail["first_seq"]), int(detail["last_seq"])))
+                self.overflow_blocks += int(detail.get("blocks", 0))
+                self.overflow_samples += int(detail.get("samples", 0))
+        elif topic == fmt.IMPACTS_TOPIC:
+            self.impacts.append(fmt.decode_json(data))
+        elif topic == fmt.SIM_IMPACTS_TOPIC:
+            self.sim_impacts.append(fmt.decode_json(data))
+
+    def _block(self, h: fmt.BlockHeader) -> None:
+        prev = self.prev
+        if prev is not None and (h.seq != prev.seq + 1 or h.first_sample != prev.next_sample):
+            self.gaps.append(Gap(prev.seq, h.seq - prev.seq - 1, h.first_sample - prev.next_sample))
+        self.first = self.first or h
+        self.prev = h
+        self.blocks += 1
+        self.n_samples += h.n_samples
+
+
+def describe_recording(path: str | PathLike) -> RecordingFacts:
+    """Facts about a ramdaq recording, read in one pass (see :class:`RecordingFacts`).
 
     Raises
     ------
@@ -51,103 +173,41 @@ def describe_recording(path: str | PathLike) -> dict[str, Any]:
         Not an MCAP file, or one without ``ramdaq.stream`` metadata.
     """
     path = Path(path)
-    topics: dict[int, str] = {}
-    meta: dict[str, dict[str, str]] = {}
-    rig = b""
-    blocks = n_samples = overflow_blocks = overflow_samples = 0
-    first: fmt.BlockHeader | None = None
-    prev: fmt.BlockHeader | None = None
-    gaps: list[tuple[int, int, int]] = []
-    overflow_runs: list[tuple[int, int]] = []
-    events: Counter[str] = Counter()
-    impacts: list[Any] = []
-    sim_impacts: list[Any] = []
-    damaged: list[dict[str, Any]] = []
+    scan = _Scan()
     with open(path, "rb") as f:
         scanner = RecordScanner(f, path)
         for record in scanner:
-            if isinstance(record, Damage):
-                damaged.append({"start": record.start, "end": record.end, "bytes": record.bytes,
-                                "what": record.what, "reason": record.reason,
-                                "after_seq": prev.seq if prev else -1})
-            elif isinstance(record, Channel):
-                topics[record.id] = record.topic
-            elif isinstance(record, Metadata):
-                meta[record.name] = record.metadata
-            elif isinstance(record, Attachment) and record.name == fmt.RIG_ATTACHMENT:
-                rig = record.data
-            elif isinstance(record, Message):
-                topic = topics.get(record.channel_id)
-                if topic == fmt.BLOCK_TOPIC:
-                    h = fmt.decode_header(record.data)
-                    if prev is not None and (
-                        h.seq != prev.seq + 1 or h.first_sample != prev.next_sample
-                    ):
-                        gaps.append((prev.seq, h.seq - prev.seq - 1, h.first_sample - prev.next_sample))
-                    first = first or h
-                    prev = h
-                    blocks += 1
-                    n_samples += h.n_samples
-                elif topic == fmt.EVENTS_TOPIC:
-                    event = fmt.decode_json(record.data)
-                    events[event.get("kind", "?")] += 1
-                    if event.get("kind") == "overflow":
-                        detail = event["detail"]
-                        overflow_runs.append((int(detail["first_seq"]), int(detail["last_seq"])))
-                        overflow_blocks += int(detail.get("blocks", 0))
-                        overflow_samples += int(detail.get("samples", 0))
-                elif topic == fmt.IMPACTS_TOPIC:
-                    impacts.append(fmt.decode_json(record.data))
-                elif topic == fmt.SIM_IMPACTS_TOPIC:
-                    sim_impacts.append(fmt.decode_json(record.data))
-    if fmt.STREAM_METADATA not in meta:
+            scan.add(record)
+    if fmt.STREAM_METADATA not in scan.meta:
         raise NotARamdaqRecording(f"{path}: not a ramdaq recording (no {fmt.STREAM_METADATA} metadata)")
-    stream = meta[fmt.STREAM_METADATA]
+    stream = scan.meta[fmt.STREAM_METADATA]
     try:
-        info = fmt.stream_info_from_metadata(stream, rig.decode())
+        info = fmt.stream_info_from_metadata(stream, scan.rig.decode())
     except NotARamdaqRecording as err:
         raise NotARamdaqRecording(f"{path}: {err}") from err
-    file_bytes = scanner.size
-    total_samples = n_samples * info.n_channels
-    return {
-        "path": str(path),
-        "file_bytes": file_bytes,
-        "complete": scanner.complete,
-        "tail_bytes": scanner.tail_bytes,
-        "stopped_because": scanner.reason,
-        "footer": scanner.end.footer,
-        "summary_ok": scanner.end.summary_ok,
-        "data_crc_ok": scanner.data_crc_ok,
-        "damaged": damaged,
-        "chunks": scanner.chunks,
-        "device": info.device,
-        "fs_hz": info.fs_hz,
-        "channels": list(info.channels),
-        "units": list(info.units),
-        "gages": list(info.gages),
-        "n_channels": info.n_channels,
-        "extra": info.extra,
-        "rig_toml_bytes": len(rig),
-        "ramdaq_version": stream.get("ramdaq_version", "?"),
-        "created_utc": stream.get("created_utc", "?"),
-        "blocks": blocks,
-        "n_samples": n_samples,
-        "first_sample": first.first_sample if first else -1,
-        "last_sample": prev.next_sample - 1 if prev else -1,
-        "duration_s": n_samples / info.fs_hz,
-        "span_s": (prev.next_sample - first.first_sample) / info.fs_hz if first and prev else 0.0,
-        "t0_ns": first.t0_ns if first else None,
-        "gaps": gaps,
-        "missing_samples": sum(g[2] for g in gaps),
-        "overflows": overflow_blocks,
-        "overflow_samples": overflow_samples,
-        "overflow_runs": overflow_runs,
-        "events": dict(events),
-        "impacts": impacts,
-        "sim_impacts": sim_impacts,
-        "bytes_per_sample": file_bytes / total_samples if total_samples else None,
-        "recovery": _recovery(meta.get("ramdaq.recovery")),
-    }
+    first, prev = scan.first, scan.prev
+    total_samples = scan.n_samples * info.n_channels
+    return RecordingFacts(
+        path=str(path), file_bytes=scanner.size, complete=scanner.complete,
+        tail_bytes=scanner.tail_bytes, stopped_because=scanner.reason, footer=scanner.end.footer,
+        summary_ok=scanner.end.summary_ok, data_crc_ok=scanner.data_crc_ok, damaged=scan.damaged,
+        chunks=scanner.chunks, device=info.device, fs_hz=info.fs_hz, channels=list(info.channels),
+        units=list(info.units), gages=list(info.gages), n_channels=info.n_channels,
+        extra=info.extra, rig_toml_bytes=len(scan.rig),
+        ramdaq_version=stream.get("ramdaq_version", "?"),
+        created_utc=stream.get("created_utc", "?"), blocks=scan.blocks, n_samples=scan.n_samples,
+        first_sample=first.first_sample if first else -1,
+        last_sample=prev.next_sample - 1 if prev else -1,
+        duration_s=scan.n_samples / info.fs_hz,
+        span_s=(prev.next_sample - first.first_sample) / info.fs_hz if first and prev else 0.0,
+        t0_ns=first.t0_ns if first else None, gaps=scan.gaps,
+        missing_samples=sum(g.missing_samples for g in scan.gaps),
+        overflows=scan.overflow_blocks, overflow_samples=scan.overflow_samples,
+        overflow_runs=scan.overflow_runs, events=dict(scan.events), impacts=scan.impacts,
+        sim_impacts=scan.sim_impacts,
+        bytes_per_sample=scanner.size / total_samples if total_samples else None,
+        recovery=_recovery(scan.meta.get("ramdaq.recovery")),
+    )
 
 
 def _recovery(meta: dict[str, str] | None) -> dict[str, Any] | None:
@@ -177,79 +237,79 @@ def _wrap(label: str, items: list[str], width: int = 100) -> list[str]:
     return [*lines, line.rstrip()]
 
 
-def _state(d: dict[str, Any]) -> str:
+def _state(d: RecordingFacts) -> str:
     """The file's state in a few words: complete, or what is wrong with it."""
     parts = []
-    if d["damaged"]:
-        parts.append(f"DAMAGED: {len(d['damaged'])} damaged stretch(es), "
-                     f"{_mb(sum(x['bytes'] for x in d['damaged']))} unreadable")
-    if d["summary_ok"] is False:
+    if d.damaged:
+        parts.append(f"DAMAGED: {len(d.damaged)} damaged stretch(es), "
+                     f"{_mb(sum(x.bytes for x in d.damaged))} unreadable")
+    if d.summary_ok is False:
         parts.append("summary DAMAGED (fails its CRC)")
-    if not d["footer"]:
-        parts.append(f"NO FOOTER, {_mb(d['tail_bytes'])} torn tail")
-    elif not d["complete"]:
+    if not d.footer:
+        parts.append(f"NO FOOTER, {_mb(d.tail_bytes)} torn tail")
+    elif not d.complete:
         parts.append(f"footer intact but the data section is unreadable for its last "
-                     f"{_mb(d['tail_bytes'])}")
+                     f"{_mb(d.tail_bytes)}")
     elif parts:
         parts.append("footer intact")
     return ", ".join(parts) or "complete"
 
 
-def _gap_cause(d: dict[str, Any], seq: int) -> str:
+def _gap_cause(d: RecordingFacts, seq: int) -> str:
     """Why the blocks after ``seq`` are missing: a damaged chunk, the recorder, or the device."""
-    if any(x["after_seq"] == seq for x in d["damaged"]):
+    if any(x.after_seq == seq for x in d.damaged):
         return "DAMAGED chunk"
-    if d["recovery"] and any(x.get("after_seq") == seq for x in d["recovery"]["damaged"]):
+    if d.recovery and any(x.get("after_seq") == seq for x in d.recovery["damaged"]):
         return "damaged chunk left out by recover"
-    if any(a <= seq + 1 <= b for a, b in d["overflow_runs"]):
+    if any(a <= seq + 1 <= b for a, b in d.overflow_runs):
         return "recorder overflow"
     return "device"
 
 
-def format_info(d: dict[str, Any]) -> str:
+def format_info(d: RecordingFacts) -> str:
     """Readable text of :func:`describe_recording`'s result, one fact per line."""
-    bps = f", {d['bytes_per_sample']:.2f} bytes/sample" if d["bytes_per_sample"] else ""
+    bps = f", {d.bytes_per_sample:.2f} bytes/sample" if d.bytes_per_sample else ""
     lines = [
-        f"{d['path']}  ({_mb(d['file_bytes'])}{bps}, {_state(d)})",
-        f"device     {d['device']}   created {d['created_utc']}   ramdaq {d['ramdaq_version']}",
-        f"stream     {d['n_channels']} channels at {d['fs_hz']:g} Hz: {d['duration_s']:.3f} s "
-        f"recorded ({d['n_samples']} samples/channel) in {d['blocks']} blocks, "
-        f"samples {d['first_sample']}..{d['last_sample']}",
+        f"{d.path}  ({_mb(d.file_bytes)}{bps}, {_state(d)})",
+        f"device     {d.device}   created {d.created_utc}   ramdaq {d.ramdaq_version}",
+        f"stream     {d.n_channels} channels at {d.fs_hz:g} Hz: {d.duration_s:.3f} s "
+        f"recorded ({d.n_samples} samples/channel) in {d.blocks} blocks, "
+        f"samples {d.first_sample}..{d.last_sample}",
         *_wrap(
             "channels   ",
             [f"{c} ({f'gage {g}, ' if g else ''}{u})"
-             for c, u, g in zip(d["channels"], d["units"], d["gages"], strict=True)],
+             for c, u, g in zip(d.channels, d.units, d.gages, strict=True)],
         ),
     ]
-    if d["gaps"]:
-        lines.append(f"gaps       {len(d['gaps'])}, {d['missing_samples']} samples missing:")
-        for seq, nb, ns in d["gaps"]:
+    if d.gaps:
+        lines.append(f"gaps       {len(d.gaps)}, {d.missing_samples} samples missing:")
+        for seq, nb, ns in d.gaps:
             lines.append(
                 f"           after seq {seq}: {nb} block(s), {ns} samples "
-                f"({ns / d['fs_hz']:.3f} s), {_gap_cause(d, seq)}"
+                f"({ns / d.fs_hz:.3f} s), {_gap_cause(d, seq)}"
             )
     else:
         lines.append("gaps       none")
     lines.append(
-        f"overflows  {d['overflows']} blocks ({d['overflow_samples']} samples) dropped by the recorder"
+        f"overflows  {d.overflows} blocks ({d.overflow_samples} samples) dropped by the recorder"
     )
-    kinds = ", ".join(f"{k} {n}" for k, n in sorted(d["events"].items())) or "none"
+    kinds = ", ".join(f"{k} {n}" for k, n in sorted(d.events.items())) or "none"
     lines.append(f"events     {kinds}")
-    lines.append(f"impacts    {len(d['impacts'])} detected, {len(d['sim_impacts'])} simulated (truth)")
-    if d["recovery"]:
-        r = d["recovery"]
+    lines.append(f"impacts    {len(d.impacts)} detected, {len(d.sim_impacts)} simulated (truth)")
+    if d.recovery:
+        r = d.recovery
         skipped = f", {len(r['damaged'])} damaged stretch(es) left out" if r["damaged"] else ""
         lines.append(f"recovered  from {r.get('source')} ({r.get('tail_bytes')} bytes of torn tail "
                      f"dropped{skipped})")
-    if d["recovery"] and d["recovery"].get("data_crc") == "failed":
+    if d.recovery and d.recovery.get("data_crc") == "failed":
         lines.append("WARNING    the source's data-section CRC failed although every chunk passed "
                      "its own: its stream metadata or header may be damaged")
-    for x in d["damaged"]:
-        lines.append(f"DAMAGED    {x['what']} at byte {x['start']} ({x['bytes']} bytes skipped, after "
-                     f"block seq {x['after_seq']}): {x['reason']}")
-    if d["damaged"] or d["summary_ok"] is False:
-        lines.append(f"WARNING    replay, analyze and gap refuse this file; `ramdaq recover {d['path']}` "
+    for x in d.damaged:
+        lines.append(f"DAMAGED    {x.what} at byte {x.start} ({x.bytes} bytes skipped, after "
+                     f"block seq {x.after_seq}): {x.reason}")
+    if d.damaged or d.summary_ok is False:
+        lines.append(f"WARNING    replay, analyze and gap refuse this file; `ramdaq recover {d.path}` "
                      f"copies every intact record to a new one")
-    elif not d["complete"]:
-        lines.append(f"WARNING    {d['stopped_because']}; run `ramdaq recover {d['path']}`")
+    elif not d.complete:
+        lines.append(f"WARNING    {d.stopped_because}; run `ramdaq recover {d.path}`")
     return "\n".join(lines)
