@@ -86,7 +86,7 @@ def measure(folder: Path, out: Path, workers: int) -> tuple[float, float, list[T
         finish(outcome)
         overhead = dispatch_overhead(client)
     bad = [r for r in outcome.results.values() if r.status != "ok"]
-    assert not bad, [(r.recording, r.reason) for r in bad]
+    assert not bad, [(r.recording, r.status_reason) for r in bad]
     return t_start, outcome.seconds, list(outcome.results.values()), overhead
 
 

@@ -20,9 +20,10 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .mode_table import ModeEstimate, mode_rows
+
 if TYPE_CHECKING:
     from ..analysis.gap.diagnose import Diagnosis
-    from .analyzer import HitResult
 
 STATUSES = ("ok", "failed", "lost", "interrupted")
 """A recording's status in the table: analysed (``ok``); its task ran and the recording could
@@ -40,34 +41,6 @@ class TaskSpec:
     sha256: str
     folder: str
     plots: bool
-
-
-@dataclass(frozen=True)
-class ModeRow:
-    """One hit x gage x mode of an analysed recording, SI. A rejected hit is one row whose
-    gage and mode are None; a gage whose own decay was not usable (``gage_verdict`` other than
-    "ok") has no mode-shape component (NaN). ``f_hz``, ``delta`` (logarithmic decrement, 1),
-    ``zeta`` (damping ratio, 1) and their standard errors are the mode's, fitted over all
-    active gages; ``shape_amp`` (1, largest component 1) and ``shape_phase_rad`` the gage's
-    component of that mode."""
-
-    hit: int
-    onset_s: float
-    accepted: bool
-    hit_reason: str
-    gage: int | None = None
-    gage_verdict: str | None = None
-    gage_reason: str | None = None
-    mode: int | None = None
-    predominant: bool | None = None
-    f_hz: float | None = None
-    f_se_hz: float | None = None
-    delta: float | None = None
-    delta_se: float | None = None
-    zeta: float | None = None
-    zeta_se: float | None = None
-    shape_amp: float | None = None
-    shape_phase_rad: float | None = None
 
 
 @dataclass(frozen=True)
@@ -97,15 +70,15 @@ class GapRow:
 class TaskResult:
     """What one task gives back: the recording's identity (``recording`` path, content
     ``sha256``, ``method`` digest of the code that ran, ``plots``), its ``status``
-    (:data:`STATUSES`) with a one-line ``reason`` when not ok, the report ``folder``, which
+    (:data:`STATUSES`) with a one-line ``status_reason`` when not ok, the report ``folder``, which
     ``worker`` ran it (host:pid) in ``seconds`` (wall, s), its ``hits_found`` and
     ``hits_accepted`` (for gap: impacts found and compared), and its ``rows``
-    (:class:`ModeRow` for analyze, :class:`GapRow` for gap)."""
+    (:class:`~ramdaq.daq.mode_table.ModeEstimate` for analyze, :class:`GapRow` for gap)."""
 
     recording: str
     sha256: str
     status: str
-    reason: str = ""
+    status_reason: str = ""
     folder: str = ""
     plots: bool = False
     method: str = ""
@@ -162,8 +135,8 @@ def _finish(spec: TaskSpec, t0: float, **kw) -> TaskResult:
 
 def analyze_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq analyze`` of one recording: its report folder written, its rows returned (one
-    per hit x gage x mode, :class:`ModeRow`). A recording that cannot be analysed is a
-    ``failed`` result naming why."""
+    per hit x gage x mode, :class:`~ramdaq.daq.mode_table.ModeEstimate`). A recording that
+    cannot be analysed is a ``failed`` result naming why."""
     from .commands.analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
@@ -171,40 +144,10 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
         rig, hits = run_analysis(spec.path)
         write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
     except Exception as exc:  # a recording that breaks the analysis is a row, not a crash
-        return _finish(spec, t0, status="failed", reason=one_line(exc))
-    rows = tuple(r for h in hits for r in hit_rows(h))
+        return _finish(spec, t0, status="failed", status_reason=one_line(exc))
+    rows = tuple(r for h in hits for r in mode_rows(h))
     return _finish(spec, t0, status="ok", hits_found=len(hits),
                    hits_accepted=sum(h.accepted for h in hits), rows=rows)
-
-
-def _num(v: object) -> float | None:
-    """A JSON number of :func:`~ramdaq.daq.commands.analyze.analysis_to_json` as a float
-    (None stays None: not finite)."""
-    return None if v is None else float(v)
-
-
-def hit_rows(h: HitResult) -> list[ModeRow]:
-    """The rows of one :class:`~ramdaq.daq.analyzer.HitResult`: gages x modes of its analysis,
-    read from the same JSON ``ramdaq analyze`` writes (so the table and report.json agree to
-    the digit); one row for a rejected hit."""
-    from .commands.analyze import analysis_to_json
-
-    head = dict(hit=h.index, onset_s=float(h.event.onset_s), accepted=bool(h.accepted),
-                hit_reason=h.reason)
-    if h.analysis is None:
-        return [ModeRow(**head)]
-    j = analysis_to_json(h.analysis)
-    rows = []
-    for gage, v in j["verdicts"].items():
-        for k, m in enumerate(j["modes"]):
-            amp, phase = m["shape"].get(gage, (math.nan, math.nan))
-            rows.append(ModeRow(**head, gage=int(gage[1:]), gage_verdict=v["verdict"],
-                                gage_reason=v["reason"], mode=k, predominant=k == j["predominant_mode"],
-                                f_hz=_num(m["f_hz"]), f_se_hz=_num(m["f_se_hz"]), delta=_num(m["delta"]),
-                                delta_se=_num(m["delta_se"]), zeta=_num(m["zeta"]),
-                                zeta_se=_num(m["zeta_se"]), shape_amp=_num(amp),
-                                shape_phase_rad=_num(phase)))
-    return rows
 
 
 def gap_task(spec: TaskSpec) -> TaskResult:
@@ -219,7 +162,7 @@ def gap_task(spec: TaskSpec) -> TaskResult:
         write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
         row = gap_row(d)
     except Exception as exc:  # a recording that breaks the diagnosis is a row, not a crash
-        return _finish(spec, t0, status="failed", reason=one_line(exc))
+        return _finish(spec, t0, status="failed", status_reason=one_line(exc))
     return _finish(spec, t0, status="ok", hits_found=len(lt.onsets_s), hits_accepted=int(td.n_seg),
                    rows=(row,))
 
@@ -244,5 +187,5 @@ def gap_row(d: Diagnosis, n_findings: int = 5) -> GapRow:
 
 TASKS = {"analyze": analyze_task, "gap": gap_task}
 """The task of each ``ramdaq batch`` kind."""
-ROWS = {"analyze": ModeRow, "gap": GapRow}
+ROWS = {"analyze": ModeEstimate, "gap": GapRow}
 """The row type of each kind."""

@@ -24,7 +24,6 @@ import pyarrow.parquet as pq
 import pytest
 
 from ramdaq.daq.batch_tasks import (
-    ModeRow,
     TaskResult,
     TaskSpec,
     analyze_task,
@@ -41,12 +40,13 @@ from ramdaq.daq.commands.batch import (
     report_folders,
     run_batch,
 )
+from ramdaq.daq.mode_table import ModeEstimate
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = [ROOT / "recordings" / n
            for n in ("albacore-air.mcap", "albacore-water.mcap", "sampson-water.mcap")]
 ENV = os.environ | {"OPENBLAS_NUM_THREADS": "1"}
-NUMBERS = [f.name for f in fields(ModeRow)]
+NUMBERS = [f.name for f in fields(ModeEstimate)]
 """A row's own columns; the result columns beside them (path, folder, worker, time) differ
 from run to run by design."""
 KEY = ["recording", "hit", "gage", "mode"]
@@ -91,7 +91,7 @@ def serial_sampson(tmp_path_factory) -> list[dict]:
     """The sampson sample's rows computed in this process, without dask."""
     p = SAMPLES[2]
     r = analyze_task(TaskSpec(str(p), file_sha256(p), str(tmp_path_factory.mktemp("serial")), False))
-    assert r.status == "ok", r.reason
+    assert r.status == "ok", r.status_reason
     return [{k: getattr(row, k) for k in NUMBERS} for row in r.rows]
 
 
@@ -126,7 +126,7 @@ def test_local_cluster_batch(client, fleet, serial_sampson, tmp_path):
     rows = t.to_pylist()
     keys = [tuple(r[k] for k in KEY) for r in rows]
     assert len(set(keys)) == len(keys)
-    status = {Path(r["recording"]).name: (r["status"], r["reason"]) for r in rows}
+    status = {Path(r["recording"]).name: (r["status"], r["status_reason"]) for r in rows}
     assert {k: v[0] for k, v in status.items()} == {
         "albacore-air.mcap": "ok", "albacore-water.mcap": "ok", "sampson-water.mcap": "ok",
         "sampson-copy.mcap": "ok", "truncated.mcap": "failed"}
@@ -136,9 +136,9 @@ def test_local_cluster_batch(client, fleet, serial_sampson, tmp_path):
     assert _equal(_rows_of(rows, "sampson-water.mcap"), serial_sampson)
     assert _equal(_rows_of(rows, "sampson-copy.mcap"), serial_sampson)
     # the table agrees with the report folder each task wrote
-    for r in (r for r in rows if r["status"] == "ok" and r["accepted"] and r["gage"] == 1):
+    for r in (r for r in rows if r["status"] == "ok" and r["accepted"] and r["gage"] == 1 and r["mode"] >= 0):
         doc = json.loads((Path(r["folder"]) / "report.json").read_text())
-        assert doc["impacts"][r["hit"]]["analysis"]["modes"][r["mode"]]["delta"] == r["delta"]
+        assert doc["impacts"][r["hit"]]["analysis"]["modes"][r["mode"]]["delta"] == r["mode_delta"]
     assert outcome.table.num_rows == len(rows)
 
     # a re-run: everything current, nothing submitted, the same table

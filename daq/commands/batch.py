@@ -98,7 +98,8 @@ _HEAD = [f.name for f in fields(TaskResult) if f.name != "rows"]
 
 def arrow_schema(kind: str) -> pa.Schema:
     """The table's columns: each result's identity and status (:class:`TaskResult`), then its
-    row (:class:`ModeRow` or :class:`GapRow`), typed from the dataclasses' hints."""
+    row (:class:`~ramdaq.daq.mode_table.ModeEstimate` or :class:`GapRow`), typed from the
+    dataclasses' hints."""
     import pyarrow as pa
 
     arrow = {str: pa.string(), float: pa.float64(), int: pa.int64(), bool: pa.bool_(),
@@ -297,7 +298,8 @@ def progress_bar(plan: BatchPlan, show: bool = True) -> Iterator[Callable[[TaskR
         def advance(r: TaskResult) -> None:
             bar.advance(task)
             if r.status != "ok":
-                bar.console.print(f"{r.status}: {r.recording}: {r.reason}", markup=False, highlight=False)
+                bar.console.print(f"{r.status}: {r.recording}: {r.status_reason}", markup=False,
+                                  highlight=False)
 
         yield advance
 
@@ -467,7 +469,7 @@ def summary_lines(outcome: BatchOutcome) -> list[str]:
         out.append("  verdicts: " + (", ".join(f"{v} {n}" for v, n in verdicts.items()) or "none"))
     for r in recs:
         if r["status"] in ("failed", "lost"):
-            out.append(f"  {r['status'].upper()} {r['recording']}: {r['reason']}")
+            out.append(f"  {r['status'].upper()} {r['recording']}: {r['status_reason']}")
     mine = method_digest()
     other = sum(r.method not in ("", mine) for r in rs)
     if other:
