@@ -89,7 +89,7 @@ from .subspace import (
 from .table import ModeTable
 from .varpro import Projector, damped_basis, fit_modes_varpro, linear_amplitudes, uniform_grid
 
-__all__ = ["ModeTable", "identify_modes"]
+__all__ = ["ModeTable", "identify_modes", "peak_above_noise"]
 
 _STARTS = {"mp": matrix_pencil_poles, "esprit": esprit_poles, "era": era_poles}
 _SUBSPACE_MAX_SAMPLES = 2000
@@ -153,6 +153,7 @@ def identify_modes(
     max_modes: int = 12,
     max_samples: int = 400_000,
     max_trend_terms: int = 16,
+    start: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -185,6 +186,11 @@ def identify_modes(
         Largest number of modes the selection may accept.
     max_samples : int
         Channels × samples above which the record is decimated (memory, time).
+    start : (f_hz, delta), optional
+        Candidate poles to start from instead of the subspace estimate (step 4), e.g. the modes
+        another fit found on channels of the same decay (a combination of them has the same
+        poles): ranked and selected as the subspace's would be; candidates from the residual
+        (step 5's second round) still come from the subspace.
 
     Returns
     -------
@@ -198,9 +204,7 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    P0 = kaiser_periodogram(Xa)  # shared by the noise estimate and the band test
-    sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
-    band = significant_band(Xa, fs_hz, sig0, false_alarm, P0)
+    band = _band(Xa, fs_hz, false_alarm)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -215,6 +219,8 @@ def identify_modes(
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
 
     threshold = float(stats.chi2.isf(false_alarm / (2.0 * Y.shape[-1]), 2 * Y.shape[0]))
+    if start is not None:
+        start_fd = tuple(np.atleast_1d(np.asarray(v, dtype=float)) for v in start)
 
     def select(trend: bool | int) -> tuple[ModeSelector, int]:
         """The modes selected with ``trend`` columns in the model; and the candidates' count."""
@@ -223,7 +229,7 @@ def identify_modes(
             f_c, d_c = _candidates(Z, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
             return _rank(Z, t, w, f_c, d_c, trend)
 
-        fc, dc = ranked_candidates(Y, w0)
+        fc, dc = ranked_candidates(Y, w0) if start is None else _rank(Y, t, w0, *start_fd, trend)
         sel = ModeSelector(Y, t, trend, threshold, zeta_max, f_lim, w0)
         if n_modes is not None:
             sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
@@ -254,6 +260,25 @@ def identify_modes(
         table.info["fewer_modes"] = (f"n_modes={n_modes} asked, {len(table)} found "
                                      f"({n_cand} candidate(s) in the band)")
     return table
+
+
+def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
+          P0: np.ndarray | None = None) -> float | None:
+    """Step 2 of the module docstring: the highest significant spectral peak of the channels
+    ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed."""
+    P0 = kaiser_periodogram(Xa) if P0 is None else P0  # for the noise estimate and the band test
+    sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
+    return significant_band(Xa, fs_hz, sig0, false_alarm, P0)
+
+
+def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4) -> np.ndarray:
+    """Whether each channel alone (rows of ``x``, (n_channels, n_samples)) shows a spectral peak
+    above its noise: where not, :func:`identify_modes` on that channel alone (automatic order,
+    same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test."""
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    P = kaiser_periodogram(X)
+    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, P[c : c + 1]) is not None
+                     for c in range(X.shape[0])], dtype=bool)
 
 
 def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,
