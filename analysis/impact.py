@@ -28,7 +28,7 @@ import numpy as np
 from .modal.identify import identify_modes
 from .modal.peaks import decrement_from_peaks
 from .modal.table import ModeTable
-from .modal.verdicts import DecayAssessment, Verdict, assess_decay_jointly
+from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_decay_jointly
 from .model.geometry import gage_geometry, stock_pair
 from .model.rig import ALIGN_TOL_M, Rig
 from .model.structure import added_mass
@@ -309,6 +309,21 @@ def signal_decrement(x: np.ndarray, fs_hz: float, f_hz: float, n_modes: int | No
                       *peak), complex(table.complex_amplitude[0, i]))
 
 
+def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list[int]) -> ModeTable:
+    """The modes of the usable channels ``good`` (rows of ``x``): the verdicts' joint fit when
+    it took exactly those; when it also took channels that hold noise only, the usable ones
+    refitted with its modes as start and its order (no new search: noise moved the modes by no
+    more than noise); else the usable ones searched afresh, so that no unusable channel (a
+    growing or steady oscillation) shapes the modes."""
+    tab = judged.table
+    if tab is not None and tuple(good) == judged.rows:
+        return tab
+    if tab is not None and len(tab) and set(judged.rows) - set(good) <= set(judged.quiet_rows):
+        return identify_modes(x[good], fs_hz, per_channel=True, n_modes=len(tab),
+                              start=(tab.frequency_hz, tab.delta))
+    return identify_modes(x[good], fs_hz, per_channel=True)
+
+
 def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
                   onset_s: float = 0.0, decay_start_s: float = 0.0,
                   adc_full_scale: float | None = None) -> ImpactAnalysis:
@@ -336,10 +351,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     if not good:
         raise ValueError("no channel holds a usable free decay: "
                          + "; ".join(f"g{n:02d} {v.code}" for n, v in verdicts.items()))
-    # The verdicts' joint fit is the one wanted when every channel it took is usable; else the
-    # usable ones are fitted again, so that no unusable channel shapes the modes.
-    table = (judged.table if judged.table is not None and tuple(good) == judged.rows
-             else identify_modes(x[good], fs_hz, per_channel=True))
+    table = _usable_fit(x, fs_hz, judged, good)
     if len(table) == 0:
         raise ValueError(f"no mode found above the noise ({table.info.get('reason', '')})")
     k = predominant_mode(table, [j for j, i in enumerate(good)

@@ -48,8 +48,9 @@ Threads
 -------
 A live trial fits in an analyzer thread while the main thread reads the device, and its numbers
 must equal those of a replay to the last bit. The estimators therefore keep no state between
-calls (the only cache, of window functions, holds read-only arrays), leave every buffer they
-allocate fully written before it is read, and change nothing process-wide: results depend on
+calls (the only caches, of window functions and of the peak method's band-pass filters, hold
+read-only arrays), leave every buffer they allocate fully written before it is read, and
+change nothing process-wide: results depend on
 the inputs and on the process's BLAS thread count alone, not on the calling thread, on
 concurrent calls, or on call order (``tests/test_modal_id.py`` checks all three).
 

@@ -159,12 +159,16 @@ class JointAssessment:
     own_searches : int
         Channels whose verdict needed their own order search (any verdict but ``ok``, or an
         ``ok`` the joint fit could not vouch for).
+    quiet_rows : tuple of int
+        Channels among ``rows`` with no mode significant in them, in the joint fit or in their
+        own search: noise only, which shaped the joint fit's modes by no more than noise.
     """
 
     verdicts: list[DecayAssessment]
     table: ModeTable | None
     rows: tuple[int, ...]
     own_searches: int
+    quiet_rows: tuple[int, ...] = ()
 
 
 def _screen(X: np.ndarray, adc_full_scale: float | None, clip_run: int) -> dict[int, DecayAssessment]:
@@ -233,32 +237,44 @@ def assess_decay_jointly(
             if got is not None:
                 out[c] = got
     own = [c for c in rows if c not in out]
+    quiet = []
     for c in own:
         # The channel on its own: a verdict must not borrow modes from other gages.
         tab = identify_modes(X[c], fs_hz, false_alarm=false_alarm, per_channel=False,
                              max_samples=max_samples)
         out[c] = _judge(c, tab, n / fs_hz, min_cycles, min_delta)
-    return JointAssessment([out[c] for c in range(n_ch)], table, rows, len(own))
+        if len(tab) == 0 and not _significant_in(table, rows.index(c), false_alarm).size:
+            quiet.append(c)
+    return JointAssessment([out[c] for c in range(n_ch)], table, rows, len(own), tuple(quiet))
 
 
-def _judge_from_joint(c: int, j: int, table: ModeTable, min_cycles: float, min_delta: float,
-                      false_alarm: float) -> DecayAssessment | None:
-    """Channel ``c``'s verdict from row ``j`` of the joint ``table`` when it is ``ok``; else None
-    (the channel is then judged on its own)."""
+def _significant_in(table: ModeTable, j: int, false_alarm: float) -> np.ndarray:
+    """Indices of the joint ``table``'s modes significant in its row ``j`` alone: Λ (≈ the mode's
+    energy in that channel over its noise variance, from its amplitude on the shared poles)
+    above the one-channel order search's threshold, χ²₂.isf(p) = −2 ln p, p = false_alarm /
+    (2 n_samples)."""
     if len(table) == 0:
-        return None
+        return np.empty(0, dtype=int)
     n, fs = table.n_samples, table.fs_hz
     amp = np.abs(table.complex_amplitude[j])
     sig = max(float(table.noise_std[j]), 1e-300)
     rate = table.delta * table.frequency_hz / fs  # envelope decay per sample
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         env2 = np.where(rate != 0, -np.expm1(-2.0 * rate * n) / -np.expm1(-2.0 * rate), float(n))
-    # Λ of each mode in this channel alone (≈ its energy over the noise variance) against the
-    # one-channel order search's threshold: χ²₂.isf(p) = −2 ln p, p = false_alarm / (2 n).
     energy = amp**2 * env2 / (2.0 * sig**2)
-    significant = np.flatnonzero(energy > -2.0 * np.log(false_alarm / (2.0 * n)))
+    return np.flatnonzero(energy > -2.0 * np.log(false_alarm / (2.0 * n)))
+
+
+def _judge_from_joint(c: int, j: int, table: ModeTable, min_cycles: float, min_delta: float,
+                      false_alarm: float) -> DecayAssessment | None:
+    """Channel ``c``'s verdict from row ``j`` of the joint ``table`` when it is ``ok``; else None
+    (the channel is then judged on its own)."""
+    significant = _significant_in(table, j, false_alarm)
     if significant.size == 0:
         return None
+    n, fs = table.n_samples, table.fs_hz
+    amp = np.abs(table.complex_amplitude[j])
+    sig = max(float(table.noise_std[j]), 1e-300)
     k = int(significant[np.argmax(amp[significant])])
     f, d = table.channel_frequency_hz[j, k], table.channel_delta[j, k]
     se = table.channel_delta_se[j, k]
