@@ -212,7 +212,7 @@ def _bandpassed(y: np.ndarray, fs_hz: float, f_hz: float, rel_bandwidth: float,
     white noise's std (the forward-backward pass applies |H|^2)."""
     sos, sigma_filt, noise_gain = _bandpass_design(float(fs_hz), float(f_hz),
                                                    float(rel_bandwidth), int(order))
-    return signal.sosfiltfilt(sos, y), sigma_filt, noise_gain
+    return signal.sosfiltfilt(sos.copy(), y), sigma_filt, noise_gain  # (its Cython wants it writable)
 
 
 @lru_cache(maxsize=64)
