@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullLocator
 
 from ...analysis.impact import ImpactAnalysis
 from ...analysis.modal.peaks import bandpass_mode
@@ -55,6 +56,35 @@ def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_di
     return files
 
 
+PLOT_POINTS = 1200
+"""Points per drawn curve at most (a panel is a few hundred pixels wide): longer curves are drawn
+through :func:`thinned`'s envelope of their extremes, which looks the same."""
+
+
+def thinned(t: np.ndarray, y: np.ndarray, n_max: int = PLOT_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)`` with at most about ``n_max`` points: the minimum and the maximum of each of
+    ``n_max // 2`` consecutive bins, in time order (NaNs kept as gaps), so that a noisy curve
+    keeps its band and every spike; short curves are returned as they are."""
+    n = y.size
+    if n <= n_max:
+        return t, y
+    m = -(-n // (n_max // 2))  # samples per bin
+    n_bins = -(-n // m)
+    pad = n_bins * m - n
+    yb = np.concatenate([y, np.full(pad, np.nan)]).reshape(n_bins, m)
+    tb = np.concatenate([t, np.full(pad, t[-1])]).reshape(n_bins, m)
+    finite = np.isfinite(yb)
+    has = finite.any(axis=1)
+    lo_i = np.argmin(np.where(finite, yb, np.inf), axis=1)
+    hi_i = np.argmax(np.where(finite, yb, -np.inf), axis=1)
+    first, second = np.minimum(lo_i, hi_i), np.maximum(lo_i, hi_i)
+    rows = np.arange(n_bins)
+    tt = np.stack([tb[rows, first], tb[rows, second]], axis=1).ravel()
+    yy = np.stack([yb[rows, first], yb[rows, second]], axis=1)
+    yy[~has] = np.nan
+    return tt, yy.ravel()
+
+
 def mode_components(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> np.ndarray:
     """Each mode's own component on each used gage: the decay less the offset and the other
     fitted modes, band-passed around the mode (m/s^2), shape (n_active, n_modes, n)."""
@@ -83,7 +113,12 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
     t = np.arange(x.shape[1]) / fs_hz
     n_col = 4
     n_row = -(-len(a.gage_numbers) // n_col)
-    fig = Figure(figsize=(16, 2.6 * n_row + 1), layout="constrained")
+    height = 2.6 * n_row + 1
+    # A fixed layout (inches kept for the titles, legend and labels): the constrained layout
+    # measured every tick label of every panel, and cost more than all the rest of the figure.
+    fig = Figure(figsize=(16, height))
+    fig.subplots_adjust(left=0.055, right=0.99, bottom=0.6 / height, top=1 - 1.05 / height,
+                        hspace=0.32, wspace=0.2)
     axes = fig.subplots(n_row, n_col, sharex=True, squeeze=False).ravel()
     colours = [f"C{k}" for k in range(len(m.frequency_hz))]
     floor = np.nanmax(env) * 1e-4  # four decades below the largest envelope
@@ -99,9 +134,10 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
         for k, c in enumerate(colours):
             amp = abs(m.complex_amplitude[j, k])
             d, f = m.channel_delta[j, k], m.channel_frequency_hz[j, k]
-            ax.semilogy(t, np.maximum(env[j, k], floor), color=c, lw=0.8)
-            if np.isfinite(d) and amp > 0:
-                ax.semilogy(t, amp * np.exp(-d * f * t), color=c, lw=1.2, ls="--")
+            ax.semilogy(*thinned(t, np.maximum(env[j, k], floor)), color=c, lw=0.8)
+            if np.isfinite(d) and amp > 0:  # a straight line on log axes: two points draw it
+                ends = t[[0, -1]]
+                ax.semilogy(ends, amp * np.exp(-d * f * ends), color=c, lw=1.2, ls="--")
         g = a.gages.get(n)
         title = f"gage {n}"
         if g is not None and np.isfinite(g.delta):
@@ -110,6 +146,7 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
             title += ": δ of the predominant mode not measured"
         ax.set_title(title, fontsize=9)
         ax.set_ylim(floor, None)
+        ax.yaxis.set_minor_locator(NullLocator())  # decades suffice (minor log ticks: costly)
     for ax in axes[len(a.gage_numbers):]:
         ax.set_visible(False)
     for ax in axes[::n_col]:
@@ -119,7 +156,8 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
     labels = [f"{f:.2f} Hz, δ = {d:.4f}{' (predominant)' if k == a.predominant else ''}"
               for k, (f, d) in enumerate(zip(m.frequency_hz, m.delta, strict=True))]
     proxies = [axes[0].plot([], [], color=c)[0] for c in colours]
-    fig.legend(proxies, labels, loc="outside upper right", ncols=len(labels), fontsize=9,
+    fig.legend(proxies, labels, loc="upper right", bbox_to_anchor=(0.99, 1.0), ncols=len(labels),
+               fontsize=9,
                title="solid: envelope of the mode's own component in the data; dashed: its fitted "
                      "decay |a| exp(−δ f t)", title_fontsize=9)
     fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01, ha="left")
