@@ -14,6 +14,7 @@ chosen or needed, nothing is left open in a figure manager, and they draw in any
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
@@ -33,24 +34,38 @@ VERDICT_TEXT = {"ok": "usable", "dead": "dead channel", "clipped": "clipped",
 """The gage verdicts (:class:`~ramdaq.analysis.modal.verdicts.Verdict`) in words, for titles."""
 
 
-def impact_figures(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> dict[str, Figure]:
+PLOT_KINDS = ("decay", "spectrum", "modeshape", "stock")
+"""Every kind of impact plot (:func:`impact_figures`)."""
+
+
+def impact_figures(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig,
+                   kinds: Collection[str] | None = None) -> dict[str, Figure]:
     """The plots of one impact by kind; ``x`` (n_gages, n) is the decay analysed (m/s^2) from
-    ``a.decay_start_s``, rows in ``a.gage_numbers`` order."""
-    figs = {"decay": decay_figure(a, x, fs_hz), "spectrum": spectrum_figure(a, x, fs_hz, rig)}
-    if rig.structural:  # a channels-only rig has no gage positions to draw the shape on
+    ``a.decay_start_s``, rows in ``a.gage_numbers`` order. ``kinds``: those of
+    :data:`PLOT_KINDS` to draw (default all; a kind the rig cannot give is left out)."""
+    kinds = PLOT_KINDS if kinds is None else tuple(kinds)
+    unknown = set(kinds) - set(PLOT_KINDS)
+    if unknown:
+        raise ValueError(f"unknown plot kind(s) {sorted(unknown)}; known: {', '.join(PLOT_KINDS)}")
+    figs = {}
+    if "decay" in kinds:
+        figs["decay"] = decay_figure(a, x, fs_hz)
+    if "spectrum" in kinds:
+        figs["spectrum"] = spectrum_figure(a, x, fs_hz, rig)
+    if "modeshape" in kinds and rig.structural:  # a channels-only rig has no gage positions
         figs["modeshape"] = modeshape_figure(a, rig)
-    if a.stock_curves:
+    if "stock" in kinds and a.stock_curves:
         figs["stock"] = stock_figure(a, rig)
     return figs
 
 
 def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_dir: Path,
-                k: int) -> list[Path]:
-    """Write the plots of impact ``k`` as ``impact{k}_{kind}.png`` (:func:`impact_figures`).
-    Returns the files written."""
+                k: int, kinds: Collection[str] | None = None) -> list[Path]:
+    """Write the plots of impact ``k`` as ``impact{k}_{kind}.png`` (:func:`impact_figures`,
+    ``kinds`` as there). Returns the files written."""
     out_dir.mkdir(parents=True, exist_ok=True)
     files = []
-    for kind, fig in impact_figures(a, x, fs_hz, rig).items():
+    for kind, fig in impact_figures(a, x, fs_hz, rig, kinds).items():
         files.append(out_dir / f"impact{k}_{kind}.png")
         fig.savefig(files[-1], dpi=DPI)
     return files
