@@ -64,6 +64,7 @@ must run with the same setting to give identical digits (``docs/estimators.md``,
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -156,6 +157,7 @@ def identify_modes(
     max_samples: int = 400_000,
     max_trend_terms: int = 16,
     start: tuple[ArrayLike, ArrayLike] | None = None,
+    search_max_samples: int = 60_000,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -188,6 +190,11 @@ def identify_modes(
         Largest number of modes the selection may accept.
     max_samples : int
         Channels × samples above which the record is decimated (memory, time).
+    search_max_samples : int
+        Channels × samples above which the order is searched on a copy decimated within the
+        band (where the band allows a factor of 2 or more; ``info["search_decimation"]``), the
+        modes it finds refitted on the record itself: the estimates and their standard errors
+        are those of the whole record, the search's trial fits touch a fraction of it.
     start : (f_hz, delta), optional
         Candidate poles to start from instead of the subspace estimate (step 4), e.g. the modes
         another fit found on channels of the same decay (a combination of them has the same
@@ -215,24 +222,26 @@ def identify_modes(
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
-    f_lim = (0.5 * f_lo, 0.49 * fs_nls)
-    sig = floor_noise(estimate_noise_std(Y), Y)
-    w0 = 1.0 / sig
+    full = _Data(Y, t, fs_nls, false_alarm)
+    # The order is searched on a copy decimated within the band when the record is long (the
+    # search's many trial fits then touch a fraction of the samples); the modes found are then
+    # refitted on the data themselves, so the estimates are those of the full record.
+    data = _search_data(full, band_hi, search_max_samples)
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
+    start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
+                                                for v in start)
 
-    threshold = float(chdtri(2 * Y.shape[0], false_alarm / (2.0 * Y.shape[-1])))
-    if start is not None:
-        start_fd = tuple(np.atleast_1d(np.asarray(v, dtype=float)) for v in start)
-
-    def select(trend: bool | int) -> tuple[ModeSelector, int]:
-        """The modes selected with ``trend`` columns in the model; and the candidates' count."""
+    def select(trend: bool | int, D: _Data) -> tuple[ModeSelector, int]:
+        """The modes selected in ``D`` with ``trend`` columns in the model; and the candidates'
+        count."""
         def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
-            f_c, d_c = _candidates(Z, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
-            return _rank(Z, t, w, f_c, d_c, trend)
+            f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo)
+            return _rank(Z, D.t, w, f_c, d_c, trend)
 
-        fc, dc = ranked_candidates(Y, w0) if start is None else _rank(Y, t, w0, *start_fd, trend)
-        sel = ModeSelector(Y, t, trend, threshold, zeta_max, f_lim, w0)
+        fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
+                  else _rank(D.Y, D.t, D.w0, *start_fd, trend))
+        sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0)
         if n_modes is not None:
             sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
             if sel.fit is None and fc.size:  # the n strongest do not fit together: select up to n
@@ -242,16 +251,25 @@ def identify_modes(
         else:
             _select_order(sel, fc, dc, ranked_candidates, max_modes)
         if sel.fit is not None:  # refit with weights from its own residual
-            sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
-            sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
+            _reweighted(sel)
         return sel, int(fc.size)
 
-    sel, n_cand = select(fit_offset)
-    if fit_offset:  # a drift: more trend columns where the likelihood-ratio test asks for them
-        trend = _trend_order(sel, false_alarm, max_trend_terms)
-        if trend > 1:
-            sel, n_cand = select(trend)
-        info |= {"trend_terms": trend}
+    def search(D: _Data) -> tuple[ModeSelector, int]:
+        sel, n_cand = select(fit_offset, D)
+        if fit_offset:  # a drift: more trend columns where the likelihood-ratio test asks for them
+            trend = _trend_order(sel, false_alarm, max_trend_terms)
+            if trend > 1:
+                sel, n_cand = select(trend, D)
+            info["trend_terms"] = trend
+        return sel, n_cand
+
+    sel, n_cand = search(data)
+    if data is not full:
+        info["search_decimation"] = data.decimation
+        if sel.fit is not None:
+            refined = _refined(sel, full, zeta_max, f_lo)
+            sel, n_cand = (refined, n_cand) if refined is not None else search(full)
+    threshold = full.threshold
     info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": n_cand,
              "lr_threshold": threshold}
     if sel.fit is None:
@@ -262,6 +280,58 @@ def identify_modes(
         table.info["fewer_modes"] = (f"n_modes={n_modes} asked, {len(table)} found "
                                      f"({n_cand} candidate(s) in the band)")
     return table
+
+
+@dataclass
+class _Data:
+    """What the order search runs on: data (n_channels, n_samples), times (s), rate (Hz), the
+    starting weights 1/σ and the likelihood-ratio threshold for its size; ``decimation``
+    relative to the NLS data."""
+
+    Y: np.ndarray
+    t: np.ndarray
+    fs: float
+    false_alarm: float
+    decimation: int = 1
+
+    def __post_init__(self) -> None:
+        self.w0 = 1.0 / floor_noise(estimate_noise_std(self.Y), self.Y)
+        self.threshold = float(chdtri(2 * self.Y.shape[0],
+                                      self.false_alarm / (2.0 * self.Y.shape[-1])))
+
+
+def _search_data(full: _Data, band_hi: float, max_samples: int) -> _Data:
+    """``full`` decimated within ``band_hi`` for the order search when it holds over
+    ``max_samples`` (channels x samples) and the band allows a factor of 2 or more; else
+    ``full`` itself."""
+    if full.Y.size <= max_samples:
+        return full
+    d = min(int(np.ceil(full.Y.size / max_samples)), int(full.fs // (2.5 * band_hi)))
+    if d < 2:
+        return full
+    Ys, idx, _ = decimate_valid(full.Y, full.fs, d, band_hi)
+    if Ys.shape[-1] < 256:
+        return full
+    return _Data(Ys, full.t[idx], full.fs / d, full.false_alarm, d)
+
+
+def _reweighted(sel: ModeSelector) -> None:
+    """``sel``'s fit refitted with weights from its own residual (converged to rounding)."""
+    sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)
+    sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
+
+
+def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> ModeSelector | None:
+    """The modes ``found`` by a search on decimated data refitted on ``full`` (same trend
+    columns; a trial fit with ``full``'s starting weights, then reweighted and converged as the
+    search's own last step); None when they do not fit there."""
+    sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
+                       (0.5 * f_lo, 0.49 * full.fs), full.w0)
+    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=True)
+    if sel.fit is None:
+        return None
+    _reweighted(sel)
+    return sel
 
 
 def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
