@@ -39,7 +39,10 @@ Pipeline
    time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
    modes' poles held; if any are taken, the selection is run again with them in the
    model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
-   result is as without it.
+   result is as without it. On records over ``search_max_samples`` (channels × samples) all of
+   this step runs on a copy decimated within the band (its many trial fits then touch a third
+   or less of the samples), and the modes it selects are refitted on the NLS data themselves
+   (``info["search_decimation"]``): the estimates are the whole record's.
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
 7. Terms with less than one cycle in the record (drift, a slow step) are kept in the model but
    not reported (``info["nuisance_terms_hz"]``).

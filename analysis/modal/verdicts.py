@@ -12,6 +12,12 @@ a number when the record cannot support one. Checks, in order:
    steady tone can trip this);
 3. ``no_decay`` — no mode significantly above noise (order selection of
    :func:`ramdaq.analysis.modal.identify.identify_modes`, run on the channel alone, finds none);
+
+Checks 3-7 are read off one joint fit of the channels that pass 1-2 (and show a spectral peak):
+each channel's modes significant in it alone, its own fit of them started at the shared poles;
+only a channel the joint fit cannot call ``ok`` is searched on its own, as every channel was
+before (:func:`assess_decay_jointly`: the same verdicts, one order search instead of one per
+channel, and the fit ``analyze_decay`` goes on with);
 4. ``too_few_cycles`` — the dominant mode spans fewer than ``min_cycles`` periods above noise
    (record length × f, or ln(A/σ)/δ cycles before it sinks into noise, whichever is less);
 5. ``negative_damping`` — dominant mode's δ below zero by more than 3 standard errors (growing);
