@@ -28,7 +28,7 @@ import numpy as np
 from .modal.identify import identify_modes
 from .modal.peaks import decrement_from_peaks
 from .modal.table import ModeTable
-from .modal.verdicts import DecayAssessment, Verdict, assess_decay
+from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_decay_jointly
 from .model.geometry import gage_geometry, stock_pair
 from .model.rig import ALIGN_TOL_M, Rig
 from .model.structure import added_mass
@@ -292,18 +292,36 @@ def _peak_decrement(x: np.ndarray, fs_hz: float, f_hz: float) -> tuple[float, fl
     return peak.delta, peak.std_error
 
 
-def signal_decrement(x: np.ndarray, fs_hz: float, f_hz: float,
-                     n_modes: int | None = None) -> tuple[Decrement, complex]:
+def signal_decrement(x: np.ndarray, fs_hz: float, f_hz: float, n_modes: int | None = None,
+                     start: tuple[np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[Decrement, complex]:
     """Decrement of the mode near ``f_hz`` in one signal (n_samples,), both ways, and the mode's
     complex amplitude there. ``n_modes``: how many modes to fit (the multi-channel fit's count
-    skips the order search, ten times faster); ``None`` searches."""
-    table = identify_modes(x[None, :], fs_hz, per_channel=False, n_modes=n_modes)
+    skips the order search, ten times faster); ``None`` searches. ``start``: (f_hz, delta) of
+    the modes to start from (the multi-channel fit's, when the signal combines its gages: no
+    subspace estimate needed)."""
+    table = identify_modes(x[None, :], fs_hz, per_channel=False, n_modes=n_modes, start=start)
     i = _nearest(table, f_hz)
     peak = _peak_decrement(x, fs_hz, f_hz)
     if i is None:
         return Decrement(f_hz, np.nan, np.nan, *peak), complex("nan")
     return (Decrement(float(table.frequency_hz[i]), float(table.delta[i]), float(table.delta_se[i]),
                       *peak), complex(table.complex_amplitude[0, i]))
+
+
+def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list[int]) -> ModeTable:
+    """The modes of the usable channels ``good`` (rows of ``x``): the verdicts' joint fit when
+    it took exactly those; when it also took channels that hold noise only, the usable ones
+    refitted with its modes as start and its order (no new search: noise moved the modes by no
+    more than noise); else the usable ones searched afresh, so that no unusable channel (a
+    growing or steady oscillation) shapes the modes."""
+    tab = judged.table
+    if tab is not None and tuple(good) == judged.rows:
+        return tab
+    if tab is not None and len(tab) and set(judged.rows) - set(good) <= set(judged.quiet_rows):
+        return identify_modes(x[good], fs_hz, per_channel=True, n_modes=len(tab),
+                              start=(tab.frequency_hz, tab.delta))
+    return identify_modes(x[good], fs_hz, per_channel=True)
 
 
 def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
@@ -327,13 +345,13 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         Converter full scale in m/s^2 (the smallest over channels), to judge clipping.
     """
     notes: list[str] = []
-    verdicts = {gage_numbers[a.channel]: GageVerdict.of(a)
-                for a in assess_decay(x, fs_hz, adc_full_scale=adc_full_scale)}
+    judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale)
+    verdicts = {gage_numbers[a.channel]: GageVerdict.of(a) for a in judged.verdicts}
     good = [i for i, n in enumerate(gage_numbers) if verdicts[n].ok]
     if not good:
         raise ValueError("no channel holds a usable free decay: "
                          + "; ".join(f"g{n:02d} {v.code}" for n, v in verdicts.items()))
-    table = identify_modes(x[good], fs_hz, per_channel=True)
+    table = _usable_fit(x, fs_hz, judged, good)
     if len(table) == 0:
         raise ValueError(f"no mode found above the noise ({table.info.get('reason', '')})")
     k = predominant_mode(table, [j for j, i in enumerate(good)
@@ -368,7 +386,8 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
         return x[rows[n]]
 
     def decrement(sig: np.ndarray) -> tuple[Decrement, complex]:
-        return signal_decrement(np.asarray(sig), fs_hz, f, len(table))
+        return signal_decrement(np.asarray(sig), fs_hz, f, len(table),
+                                start=(table.frequency_hz, table.delta))
 
     steps = list(CHAIN_STEPS)
     motions: dict[str, Decrement] = {}

@@ -14,7 +14,7 @@ SAMPLES = RIGS.parent
 def air_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("an")
     assert main(["analyze", str(SAMPLES / "albacore-air.mcap"), "--impact", "1", "--out",
-                 str(out), "--units", "report"]) == 0
+                 str(out), "--units", "report", "--plots", "all"]) == 0
     return out, json.loads((out / "report.json").read_text())
 
 
@@ -48,3 +48,17 @@ def test_not_a_recording_is_one_line(tmp_path, capsys):
     assert main(["analyze", str(bad)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "x.mcap" in err[0]
+
+
+def test_plot_kinds_default_all_named_and_unknown():
+    """``ramdaq analyze`` draws the decay panels unless asked (``--plots``); every kind stays
+    available, and a misspelt kind is refused before any analysis, naming the known ones."""
+    from ramdaq.daq.commands.analyze import DEFAULT_PLOTS, plot_kinds
+    from ramdaq.daq.reports.impact_plots import PLOT_KINDS
+
+    assert plot_kinds(None) is True and DEFAULT_PLOTS == ("decay",)
+    assert plot_kinds("all") == PLOT_KINDS
+    assert plot_kinds("spectrum, stock") == ("spectrum", "stock")
+    assert plot_kinds("all", off=True) is False
+    with pytest.raises(ValueError, match="known: decay, spectrum, modeshape, stock"):
+        plot_kinds("decay,spectra")

@@ -39,7 +39,10 @@ Pipeline
    time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
    modes' poles held; if any are taken, the selection is run again with them in the
    model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
-   result is as without it.
+   result is as without it. On records over ``search_max_samples`` (channels × samples) all of
+   this step runs on a copy decimated within the band (its many trial fits then touch a third
+   or less of the samples), and the modes it selects are refitted on the NLS data themselves
+   (``info["search_decimation"]``): the estimates are the whole record's.
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
 7. Terms with less than one cycle in the record (drift, a slow step) are kept in the model but
    not reported (``info["nuisance_terms_hz"]``).
@@ -48,8 +51,9 @@ Threads
 -------
 A live trial fits in an analyzer thread while the main thread reads the device, and its numbers
 must equal those of a replay to the last bit. The estimators therefore keep no state between
-calls (the only cache, of window functions, holds read-only arrays), leave every buffer they
-allocate fully written before it is read, and change nothing process-wide: results depend on
+calls (the only caches, of window functions and of the peak method's band-pass filters, hold
+read-only arrays), leave every buffer they allocate fully written before it is read, and
+change nothing process-wide: results depend on
 the inputs and on the process's BLAS thread count alone, not on the calling thread, on
 concurrent calls, or on call order (``tests/test_modal_id.py`` checks all three).
 
@@ -63,10 +67,12 @@ must run with the same setting to give identical digits (``docs/estimators.md``,
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import linalg, stats
+from scipy import linalg
+from scipy.special import chdtri  # χ² isf, as scipy.stats.chi2.isf (stats costs ~1.5 s to import)
 
 from .crb import damping_ratio_from_decrement
 from .order import ModeSelector, floor_noise
@@ -89,7 +95,7 @@ from .subspace import (
 from .table import ModeTable
 from .varpro import Projector, damped_basis, fit_modes_varpro, linear_amplitudes, uniform_grid
 
-__all__ = ["ModeTable", "identify_modes"]
+__all__ = ["ModeTable", "identify_modes", "peak_above_noise"]
 
 _STARTS = {"mp": matrix_pencil_poles, "esprit": esprit_poles, "era": era_poles}
 _SUBSPACE_MAX_SAMPLES = 2000
@@ -153,6 +159,8 @@ def identify_modes(
     max_modes: int = 12,
     max_samples: int = 400_000,
     max_trend_terms: int = 16,
+    start: tuple[ArrayLike, ArrayLike] | None = None,
+    search_max_samples: int = 60_000,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -185,6 +193,16 @@ def identify_modes(
         Largest number of modes the selection may accept.
     max_samples : int
         Channels × samples above which the record is decimated (memory, time).
+    search_max_samples : int
+        Channels × samples above which the order is searched on a copy decimated within the
+        band (where the band allows a factor of 2 or more; ``info["search_decimation"]``), the
+        modes it finds refitted on the record itself: the estimates and their standard errors
+        are those of the whole record, the search's trial fits touch a fraction of it.
+    start : (f_hz, delta), optional
+        Candidate poles to start from instead of the subspace estimate (step 4), e.g. the modes
+        another fit found on channels of the same decay (a combination of them has the same
+        poles): ranked and selected as the subspace's would be; candidates from the residual
+        (step 5's second round) still come from the subspace.
 
     Returns
     -------
@@ -198,9 +216,7 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    P0 = kaiser_periodogram(Xa)  # shared by the noise estimate and the band test
-    sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
-    band = significant_band(Xa, fs_hz, sig0, false_alarm, P0)
+    band = _band(Xa, fs_hz, false_alarm)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -209,22 +225,26 @@ def identify_modes(
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
-    f_lim = (0.5 * f_lo, 0.49 * fs_nls)
-    sig = floor_noise(estimate_noise_std(Y), Y)
-    w0 = 1.0 / sig
+    full = _Data(Y, t, fs_nls, false_alarm)
+    # The order is searched on a copy decimated within the band when the record is long (the
+    # search's many trial fits then touch a fraction of the samples); the modes found are then
+    # refitted on the data themselves, so the estimates are those of the full record.
+    data = _search_data(full, band_hi, search_max_samples)
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
+    start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
+                                                for v in start)
 
-    threshold = float(stats.chi2.isf(false_alarm / (2.0 * Y.shape[-1]), 2 * Y.shape[0]))
-
-    def select(trend: bool | int) -> tuple[ModeSelector, int]:
-        """The modes selected with ``trend`` columns in the model; and the candidates' count."""
+    def select(trend: bool | int, D: _Data) -> tuple[ModeSelector, int]:
+        """The modes selected in ``D`` with ``trend`` columns in the model; and the candidates'
+        count."""
         def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
-            f_c, d_c = _candidates(Z, t, fs_nls, band_hi, order, method, zeta_max, f_lo)
-            return _rank(Z, t, w, f_c, d_c, trend)
+            f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo)
+            return _rank(Z, D.t, w, f_c, d_c, trend)
 
-        fc, dc = ranked_candidates(Y, w0)
-        sel = ModeSelector(Y, t, trend, threshold, zeta_max, f_lim, w0)
+        fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
+                  else _rank(D.Y, D.t, D.w0, *start_fd, trend))
+        sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0)
         if n_modes is not None:
             sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
             if sel.fit is None and fc.size:  # the n strongest do not fit together: select up to n
@@ -234,16 +254,25 @@ def identify_modes(
         else:
             _select_order(sel, fc, dc, ranked_candidates, max_modes)
         if sel.fit is not None:  # refit with weights from its own residual
-            sel.w = 1.0 / floor_noise(sel.fit.noise_std, Y)
-            sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
+            _reweighted(sel)
         return sel, int(fc.size)
 
-    sel, n_cand = select(fit_offset)
-    if fit_offset:  # a drift: more trend columns where the likelihood-ratio test asks for them
-        trend = _trend_order(sel, false_alarm, max_trend_terms)
-        if trend > 1:
-            sel, n_cand = select(trend)
-        info |= {"trend_terms": trend}
+    def search(D: _Data) -> tuple[ModeSelector, int]:
+        sel, n_cand = select(fit_offset, D)
+        if fit_offset:  # a drift: more trend columns where the likelihood-ratio test asks for them
+            trend = _trend_order(sel, false_alarm, max_trend_terms)
+            if trend > 1:
+                sel, n_cand = select(trend, D)
+            info["trend_terms"] = trend
+        return sel, n_cand
+
+    sel, n_cand = search(data)
+    if data is not full:
+        info["search_decimation"] = data.decimation
+        if sel.fit is not None:
+            refined = _refined(sel, full, zeta_max, f_lo)
+            sel, n_cand = (refined, n_cand) if refined is not None else search(full)
+    threshold = full.threshold
     info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": n_cand,
              "lr_threshold": threshold}
     if sel.fit is None:
@@ -254,6 +283,77 @@ def identify_modes(
         table.info["fewer_modes"] = (f"n_modes={n_modes} asked, {len(table)} found "
                                      f"({n_cand} candidate(s) in the band)")
     return table
+
+
+@dataclass
+class _Data:
+    """What the order search runs on: data (n_channels, n_samples), times (s), rate (Hz), the
+    starting weights 1/σ and the likelihood-ratio threshold for its size; ``decimation``
+    relative to the NLS data."""
+
+    Y: np.ndarray
+    t: np.ndarray
+    fs: float
+    false_alarm: float
+    decimation: int = 1
+
+    def __post_init__(self) -> None:
+        self.w0 = 1.0 / floor_noise(estimate_noise_std(self.Y), self.Y)
+        self.threshold = float(chdtri(2 * self.Y.shape[0],
+                                      self.false_alarm / (2.0 * self.Y.shape[-1])))
+
+
+def _search_data(full: _Data, band_hi: float, max_samples: int) -> _Data:
+    """``full`` decimated within ``band_hi`` for the order search when it holds over
+    ``max_samples`` (channels x samples) and the band allows a factor of 2 or more; else
+    ``full`` itself."""
+    if full.Y.size <= max_samples:
+        return full
+    d = min(int(np.ceil(full.Y.size / max_samples)), int(full.fs // (2.5 * band_hi)))
+    if d < 2:
+        return full
+    Ys, idx, _ = decimate_valid(full.Y, full.fs, d, band_hi)
+    if Ys.shape[-1] < 256:
+        return full
+    return _Data(Ys, full.t[idx], full.fs / d, full.false_alarm, d)
+
+
+def _reweighted(sel: ModeSelector) -> None:
+    """``sel``'s fit refitted with weights from its own residual (converged to rounding)."""
+    sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)
+    sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
+
+
+def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> ModeSelector | None:
+    """The modes ``found`` by a search on decimated data refitted on ``full`` (same trend
+    columns; a trial fit with ``full``'s starting weights, then reweighted and converged as the
+    search's own last step); None when they do not fit there."""
+    sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
+                       (0.5 * f_lo, 0.49 * full.fs), full.w0)
+    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=True)
+    if sel.fit is None:
+        return None
+    _reweighted(sel)
+    return sel
+
+
+def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
+          P0: np.ndarray | None = None) -> float | None:
+    """Step 2 of the module docstring: the highest significant spectral peak of the channels
+    ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed."""
+    P0 = kaiser_periodogram(Xa) if P0 is None else P0  # for the noise estimate and the band test
+    sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
+    return significant_band(Xa, fs_hz, sig0, false_alarm, P0)
+
+
+def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4) -> np.ndarray:
+    """Whether each channel alone (rows of ``x``, (n_channels, n_samples)) shows a spectral peak
+    above its noise: where not, :func:`identify_modes` on that channel alone (automatic order,
+    same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test."""
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    P = kaiser_periodogram(X)
+    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, P[c : c + 1]) is not None
+                     for c in range(X.shape[0])], dtype=bool)
 
 
 def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,
@@ -348,7 +448,7 @@ def _trend_order(sel: ModeSelector, false_alarm: float, max_terms: int) -> int:
             rss_new = rss_with(p + step)
             var = rss_new / max(n - 2 * f.size - p - step, 1)
             lam = float(np.sum((rss - rss_new) / np.maximum(var, 1e-300)))
-            if lam > stats.chi2.isf(false_alarm, step * n_ch):
+            if lam > chdtri(step * n_ch, false_alarm):
                 p, rss = p + step, rss_new
                 break
         else:
@@ -397,7 +497,7 @@ def _table(sel, X, active, fs_hz, d_nls, taps, f_range, per_channel, method, inf
     K = f.size
     ch_f, ch_fse, ch_d, ch_dse = (np.full((n_ch, K), np.nan) for _ in range(4))
     if per_channel:
-        thr_c = stats.chi2.isf(1e-3, 2)
+        thr_c = chdtri(2, 1e-3)
         env2 = _sum_exp(sel.t, -2.0 * d * f) / 2.0
         for j, c in enumerate(np.flatnonzero(active)):
             snr = np.abs(fit.amplitude[j]) ** 2 * env2 / max(fit.noise_std[j] ** 2, 1e-300)

@@ -21,6 +21,7 @@ least-squares slope of ln Aᵢ (``delta_fit``) uses all peaks and is returned be
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -209,12 +210,23 @@ def _bandpassed(y: np.ndarray, fs_hz: float, f_hz: float, rel_bandwidth: float,
     """``y`` band-passed forward and backward around ``f_hz``; the slowest decay rate of the
     filter's poles (1/s), which limits the decays it can pass; and the factor by which it scales
     white noise's std (the forward-backward pass applies |H|^2)."""
+    sos, sigma_filt, noise_gain = _bandpass_design(float(fs_hz), float(f_hz),
+                                                   float(rel_bandwidth), int(order))
+    return signal.sosfiltfilt(sos.copy(), y), sigma_filt, noise_gain  # (its Cython wants it writable)
+
+
+@lru_cache(maxsize=64)
+def _bandpass_design(fs_hz: float, f_hz: float, rel_bandwidth: float,
+                     order: int) -> tuple[np.ndarray, float, float]:
+    """The band-pass of :func:`_bandpassed` (sos, read-only), its slowest pole's decay rate
+    (1/s) and its forward-backward noise gain. Cached: a hit's gages and motions all ask for the
+    same mode's filter (its design, roots and response cost more than filtering the record)."""
     sos = _bandpass_sos(fs_hz, f_hz, rel_bandwidth, order)
-    y = signal.sosfiltfilt(sos, y)
+    sos.setflags(write=False)
     poles = np.concatenate([np.roots(s[3:]) for s in sos])
     sigma_filt = float(np.min(-np.log(np.abs(poles)) * fs_hz))
     _, H = signal.sosfreqz(sos, worN=4096, fs=fs_hz)
-    return y, sigma_filt, np.sqrt(np.mean(np.abs(H) ** 4))
+    return sos, sigma_filt, float(np.sqrt(np.mean(np.abs(H) ** 4)))
 
 
 def _peaks_above(y: np.ndarray, fs_hz: float, period_n: float,

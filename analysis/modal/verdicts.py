@@ -12,6 +12,12 @@ a number when the record cannot support one. Checks, in order:
    steady tone can trip this);
 3. ``no_decay`` — no mode significantly above noise (order selection of
    :func:`ramdaq.analysis.modal.identify.identify_modes`, run on the channel alone, finds none);
+
+Checks 3-7 are read off one joint fit of the channels that pass 1-2 (and show a spectral peak):
+each channel's modes significant in it alone, its own fit of them started at the shared poles;
+only a channel the joint fit cannot call ``ok`` is searched on its own, as every channel was
+before (:func:`assess_decay_jointly`: the same verdicts, one order search instead of one per
+channel, and the fit ``analyze_decay`` goes on with);
 4. ``too_few_cycles`` — the dominant mode spans fewer than ``min_cycles`` periods above noise
    (record length × f, or ln(A/σ)/δ cycles before it sinks into noise, whichever is less);
 5. ``negative_damping`` — dominant mode's δ below zero by more than 3 standard errors (growing);
@@ -27,9 +33,10 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .identify import identify_modes
+from .identify import identify_modes, peak_above_noise
+from .table import ModeTable
 
-__all__ = ["DecayAssessment", "Verdict", "assess_decay"]
+__all__ = ["DecayAssessment", "JointAssessment", "Verdict", "assess_decay", "assess_decay_jointly"]
 
 
 class Verdict(StrEnum):
@@ -129,22 +136,49 @@ def assess_decay(
     false_alarm : float
         Passed to :func:`~ramdaq.analysis.modal.identify.identify_modes` (spurious-mode probability).
     max_samples : int
-        Longer channels are decimated to about this many samples before the verdict's fit (a
-        verdict needs the dominant mode roughly, not to the Cramér-Rao bound; this keeps 16
-        channels of a long decay to a fraction of a second each).
+        Longer channels are decimated to about this many samples before a channel's own order
+        search (a verdict needs the dominant mode roughly, not to the Cramér-Rao bound).
 
     Returns
     -------
     list of DecayAssessment
-        One per channel, in input order.
+        One per channel, in input order (:func:`assess_decay_jointly` says how they are reached).
     """
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    if X.ndim != 2:
-        raise ValueError(f"x must have shape (n_channels, n_samples), got {X.shape}")
-    if fs_hz <= 0:
-        raise ValueError(f"fs_hz ({fs_hz}) must be positive")
-    if adc_full_scale is not None and adc_full_scale <= 0:
-        raise ValueError(f"adc_full_scale ({adc_full_scale}) must be positive")
+    return assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale, min_cycles=min_cycles,
+                                min_delta=min_delta, clip_run=clip_run, false_alarm=false_alarm,
+                                max_samples=max_samples).verdicts
+
+
+@dataclass(frozen=True)
+class JointAssessment:
+    """What :func:`assess_decay_jointly` found.
+
+    Attributes
+    ----------
+    verdicts : list of DecayAssessment
+        One per input channel, in input order.
+    table : ModeTable or None
+        The joint fit (``identify_modes(x[rows], fs_hz, per_channel=True, false_alarm=...)``)
+        the verdicts read; None when no channel passed the cheap checks.
+    rows : tuple of int
+        The input rows ``table`` was fitted on (its channel order).
+    own_searches : int
+        Channels whose verdict needed their own order search (any verdict but ``ok``, or an
+        ``ok`` the joint fit could not vouch for).
+    quiet_rows : tuple of int
+        Channels among ``rows`` with no mode significant in them, in the joint fit or in their
+        own search: noise only, which shaped the joint fit's modes by no more than noise.
+    """
+
+    verdicts: list[DecayAssessment]
+    table: ModeTable | None
+    rows: tuple[int, ...]
+    own_searches: int
+    quiet_rows: tuple[int, ...] = ()
+
+
+def _screen(X: np.ndarray, adc_full_scale: float | None, clip_run: int) -> dict[int, DecayAssessment]:
+    """The cheap verdicts: dead, clipped, too short for any fit (by channel)."""
     n_ch, n = X.shape
     out: dict[int, DecayAssessment] = {}
     for c in range(n_ch):
@@ -155,26 +189,122 @@ def assess_decay(
             out[c] = DecayAssessment(c, Verdict.DEAD, f"flat at {xc[0]:.6g} for {n} samples")
         elif (why := _clipping(xc, adc_full_scale, clip_run)) is not None:
             out[c] = DecayAssessment(c, Verdict.CLIPPED, why)
-    for c in range(n_ch):
-        if c in out:
-            continue
-        if n < 32:
+        elif n < 32:
             out[c] = DecayAssessment(c, Verdict.TOO_FEW_CYCLES, f"only {n} samples")
-            continue
-        # Each channel on its own: a verdict must not borrow modes from other gages.
+    return out
+
+
+def assess_decay_jointly(
+    x: ArrayLike,
+    fs_hz: float,
+    *,
+    adc_full_scale: float | None = None,
+    min_cycles: float = 3.0,
+    min_delta: float = 1e-3,
+    clip_run: int = 3,
+    false_alarm: float = 1e-4,
+    max_samples: int = 8000,
+) -> JointAssessment:
+    """:func:`assess_decay` (same parameters and verdicts), with the joint fit it read.
+
+    The channels that pass the cheap checks (dead, clipped, too short, no spectral peak above
+    their noise: where a channel's own order search stops at its first test) are fitted together once
+    (:func:`~ramdaq.analysis.modal.identify.identify_modes`, automatic order, ``per_channel``).
+    A channel's verdict is then read from that fit: its modes significant in it alone (the
+    energy of its linear amplitude on the shared poles against its noise, above the one-channel
+    order search's threshold, χ²₂ at ``false_alarm`` / (2 n_samples)); the strongest of them is
+    its dominant mode, whose f, δ and standard error are the channel's own fit started at the
+    shared poles; the checks 4–7 of the module docstring run on those. Only an ``ok`` is taken
+    from the joint fit: a channel with no significant mode there, a failed own fit, or any
+    other verdict is judged again on its own (the channel's own order search, as each verdict
+    was reached before), so that no channel's fault is borrowed from, or hidden by, the others.
+    """
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    if X.ndim != 2:
+        raise ValueError(f"x must have shape (n_channels, n_samples), got {X.shape}")
+    if fs_hz <= 0:
+        raise ValueError(f"fs_hz ({fs_hz}) must be positive")
+    if adc_full_scale is not None and adc_full_scale <= 0:
+        raise ValueError(f"adc_full_scale ({adc_full_scale}) must be positive")
+    n_ch, n = X.shape
+    out = _screen(X, adc_full_scale, clip_run)
+    rest = [c for c in range(n_ch) if c not in out]
+    if rest:  # the channel's own order search would stop at its first test: no peak at all
+        for c, peak in zip(rest, peak_above_noise(X[rest], fs_hz, false_alarm=false_alarm),
+                           strict=True):
+            if not peak:
+                out[c] = DecayAssessment(c, Verdict.NO_DECAY, "no mode significantly above noise")
+    rows = tuple(c for c in range(n_ch) if c not in out)
+    table = None
+    if rows:
+        table = identify_modes(X[list(rows)], fs_hz, false_alarm=false_alarm, per_channel=True)
+        for j, c in enumerate(rows):
+            got = _judge_from_joint(c, j, table, min_cycles, min_delta, false_alarm)
+            if got is not None:
+                out[c] = got
+    own = [c for c in rows if c not in out]
+    quiet = []
+    for c in own:
+        # The channel on its own: a verdict must not borrow modes from other gages.
         tab = identify_modes(X[c], fs_hz, false_alarm=false_alarm, per_channel=False,
                              max_samples=max_samples)
         out[c] = _judge(c, tab, n / fs_hz, min_cycles, min_delta)
-    return [out[c] for c in range(n_ch)]
+        if len(tab) == 0 and not _significant_in(table, rows.index(c), false_alarm).size:
+            quiet.append(c)
+    return JointAssessment([out[c] for c in range(n_ch)], table, rows, len(own), tuple(quiet))
+
+
+def _significant_in(table: ModeTable, j: int, false_alarm: float) -> np.ndarray:
+    """Indices of the joint ``table``'s modes significant in its row ``j`` alone: Λ (≈ the mode's
+    energy in that channel over its noise variance, from its amplitude on the shared poles)
+    above the one-channel order search's threshold, χ²₂.isf(p) = −2 ln p, p = false_alarm /
+    (2 n_samples)."""
+    if len(table) == 0:
+        return np.empty(0, dtype=int)
+    n, fs = table.n_samples, table.fs_hz
+    amp = np.abs(table.complex_amplitude[j])
+    sig = max(float(table.noise_std[j]), 1e-300)
+    rate = table.delta * table.frequency_hz / fs  # envelope decay per sample
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        env2 = np.where(rate != 0, -np.expm1(-2.0 * rate * n) / -np.expm1(-2.0 * rate), float(n))
+    energy = amp**2 * env2 / (2.0 * sig**2)
+    return np.flatnonzero(energy > -2.0 * np.log(false_alarm / (2.0 * n)))
+
+
+def _judge_from_joint(c: int, j: int, table: ModeTable, min_cycles: float, min_delta: float,
+                      false_alarm: float) -> DecayAssessment | None:
+    """Channel ``c``'s verdict from row ``j`` of the joint ``table`` when it is ``ok``; else None
+    (the channel is then judged on its own)."""
+    significant = _significant_in(table, j, false_alarm)
+    if significant.size == 0:
+        return None
+    n, fs = table.n_samples, table.fs_hz
+    amp = np.abs(table.complex_amplitude[j])
+    sig = max(float(table.noise_std[j]), 1e-300)
+    k = int(significant[np.argmax(amp[significant])])
+    f, d = table.channel_frequency_hz[j, k], table.channel_delta[j, k]
+    se = table.channel_delta_se[j, k]
+    if not np.all(np.isfinite([f, d, se])):
+        return None
+    got = _judge_numbers(c, float(f), float(d), float(se), float(amp[k]) / sig, n / fs,
+                         min_cycles, min_delta)
+    return got if got.verdict is Verdict.OK else None
 
 
 def _judge(c, tab, duration_s, min_cycles, min_delta) -> DecayAssessment:
+    """Channel ``c``'s verdict from its own one-channel table ``tab``."""
     if len(tab) == 0:
         return DecayAssessment(c, Verdict.NO_DECAY, "no mode significantly above noise")
     k = int(np.argmax(tab.amplitude[0]))
-    f, d, se = tab.frequency_hz[k], tab.delta[k], tab.delta_se[k]
-    cycles = duration_s * f
     snr = tab.amplitude[0, k] / max(tab.noise_std[0], 1e-300)
+    return _judge_numbers(c, tab.frequency_hz[k], tab.delta[k], tab.delta_se[k], snr, duration_s,
+                          min_cycles, min_delta)
+
+
+def _judge_numbers(c: int, f: float, d: float, se: float, snr: float, duration_s: float,
+                   min_cycles: float, min_delta: float) -> DecayAssessment:
+    """Checks 4-7 on the dominant mode: f (Hz), δ, its standard error, amplitude / noise std."""
+    cycles = duration_s * f
     if d > 0 and snr > 1:
         cycles = min(cycles, np.log(snr) / d)
     if cycles < min_cycles:

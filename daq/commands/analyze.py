@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 
 import numpy as np
@@ -212,22 +212,50 @@ def json_default(o: object) -> object:
     return str(o)
 
 
-def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path, *, plots: bool = True,
+DEFAULT_PLOTS = ("decay",)
+"""The plots ``ramdaq analyze`` draws unless asked for others (``--plots``): each hit's decay
+panels, where every gage's decrement is seen; the spectrum, mode shape and stock figures (each
+about as dear to draw as the hit's whole analysis) on request."""
+
+
+def plot_kinds(spec: str | None, *, off: bool = False) -> bool | tuple[str, ...]:
+    """``--plots`` (comma-separated kinds, or ``all``) and ``--no-plots`` as
+    :func:`write_analysis`'s ``plots``; an unknown kind is an error naming the known ones."""
+    if off:
+        return False
+    if not spec:
+        return True
+    from ..reports.impact_plots import PLOT_KINDS
+
+    kinds = PLOT_KINDS if spec.strip() == "all" else tuple(k.strip() for k in spec.split(",")
+                                                           if k.strip())
+    unknown = [k for k in kinds if k not in PLOT_KINDS]
+    if unknown or not kinds:
+        raise ValueError(f"--plots {spec!r}: unknown kind(s) {unknown}; known: "
+                         f"{', '.join(PLOT_KINDS)} or all")
+    return kinds
+
+
+def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path, *,
+                   plots: bool | Collection[str] = True,
                    air: tuple[Rig, list[HitResult]] | None = None) -> tuple[dict, list[Path]]:
     """The folder ``ramdaq analyze`` writes: ``report.json`` (:func:`build_report`; replaced
-    whole, so a run killed while writing leaves the last complete one) and, with ``plots``, each
-    accepted hit's PNGs. Returns the report and the files written."""
+    whole, so a run killed while writing leaves the last complete one) and each accepted hit's
+    PNGs: ``plots`` True draws :data:`DEFAULT_PLOTS`, False none, else the kinds named
+    (:data:`~ramdaq.daq.reports.impact_plots.PLOT_KINDS`). Returns the report and the files
+    written."""
     report = build_report(path, rig, hits, air)
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / f".report.json.{os.getpid()}"
     tmp.write_text(json.dumps(report, indent=1, default=json_default))
     os.replace(tmp, out / "report.json")
     files = [out / "report.json"]
-    if plots:
+    kinds = DEFAULT_PLOTS if plots is True else () if plots is False else tuple(plots)
+    if kinds:
         from ..reports.impact_plots import plot_impact
 
         for h in hits:
             if h.accepted and h.analysis is not None and h.event.record is not None:
                 files += plot_impact(h.analysis, decay_samples(h, rig), h.event.record.fs_hz, rig,
-                                     out, h.index)
+                                     out, h.index, kinds)
     return report, files

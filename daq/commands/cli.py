@@ -287,7 +287,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from .analyze import format_summary, run_analysis, write_analysis
+    from .analyze import format_summary, plot_kinds, run_analysis, write_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
@@ -295,9 +295,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     def progress(msg: str) -> None:
         print(msg, flush=True)
 
+    plots = plot_kinds(args.plots, off=args.no_plots)  # checked before the analysis
     rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None)
     air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
-    report, files = write_analysis(src, rig, hits, out, plots=not args.no_plots, air=air)
+    report, files = write_analysis(src, rig, hits, out, plots=plots, air=air)
     print(format_summary(report, args.units))
     print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
     return EXIT_OK
@@ -614,6 +615,9 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--units", choices=("si", "report"), default="si",
                    help="terminal units: SI, or the report's ft / long ton / s")
     a.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    a.add_argument("--plots", metavar="KINDS",
+                   help="plot kinds per hit, comma-separated, or 'all': decay, spectrum, "
+                        "modeshape, stock (default: decay)")
     a.set_defaults(func=cmd_analyze)
 
     gp = sub.add_parser("gap", help="sim-to-real gap: where the model misses, which unmodelled "

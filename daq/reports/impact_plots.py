@@ -14,11 +14,13 @@ chosen or needed, nothing is left open in a figure manager, and they draw in any
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
 import scipy.signal
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullLocator
 
 from ...analysis.impact import ImpactAnalysis
 from ...analysis.modal.peaks import bandpass_mode
@@ -32,27 +34,70 @@ VERDICT_TEXT = {"ok": "usable", "dead": "dead channel", "clipped": "clipped",
 """The gage verdicts (:class:`~ramdaq.analysis.modal.verdicts.Verdict`) in words, for titles."""
 
 
-def impact_figures(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> dict[str, Figure]:
+PLOT_KINDS = ("decay", "spectrum", "modeshape", "stock")
+"""Every kind of impact plot (:func:`impact_figures`)."""
+
+
+def impact_figures(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig,
+                   kinds: Collection[str] | None = None) -> dict[str, Figure]:
     """The plots of one impact by kind; ``x`` (n_gages, n) is the decay analysed (m/s^2) from
-    ``a.decay_start_s``, rows in ``a.gage_numbers`` order."""
-    figs = {"decay": decay_figure(a, x, fs_hz), "spectrum": spectrum_figure(a, x, fs_hz, rig)}
-    if rig.structural:  # a channels-only rig has no gage positions to draw the shape on
+    ``a.decay_start_s``, rows in ``a.gage_numbers`` order. ``kinds``: those of
+    :data:`PLOT_KINDS` to draw (default all; a kind the rig cannot give is left out)."""
+    kinds = PLOT_KINDS if kinds is None else tuple(kinds)
+    unknown = set(kinds) - set(PLOT_KINDS)
+    if unknown:
+        raise ValueError(f"unknown plot kind(s) {sorted(unknown)}; known: {', '.join(PLOT_KINDS)}")
+    figs = {}
+    if "decay" in kinds:
+        figs["decay"] = decay_figure(a, x, fs_hz)
+    if "spectrum" in kinds:
+        figs["spectrum"] = spectrum_figure(a, x, fs_hz, rig)
+    if "modeshape" in kinds and rig.structural:  # a channels-only rig has no gage positions
         figs["modeshape"] = modeshape_figure(a, rig)
-    if a.stock_curves:
+    if "stock" in kinds and a.stock_curves:
         figs["stock"] = stock_figure(a, rig)
     return figs
 
 
 def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_dir: Path,
-                k: int) -> list[Path]:
-    """Write the plots of impact ``k`` as ``impact{k}_{kind}.png`` (:func:`impact_figures`).
-    Returns the files written."""
+                k: int, kinds: Collection[str] | None = None) -> list[Path]:
+    """Write the plots of impact ``k`` as ``impact{k}_{kind}.png`` (:func:`impact_figures`,
+    ``kinds`` as there). Returns the files written."""
     out_dir.mkdir(parents=True, exist_ok=True)
     files = []
-    for kind, fig in impact_figures(a, x, fs_hz, rig).items():
+    for kind, fig in impact_figures(a, x, fs_hz, rig, kinds).items():
         files.append(out_dir / f"impact{k}_{kind}.png")
         fig.savefig(files[-1], dpi=DPI)
     return files
+
+
+PLOT_POINTS = 1200
+"""Points per drawn curve at most (a panel is a few hundred pixels wide): longer curves are drawn
+through :func:`thinned`'s envelope of their extremes, which looks the same."""
+
+
+def thinned(t: np.ndarray, y: np.ndarray, n_max: int = PLOT_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)`` with at most about ``n_max`` points: the minimum and the maximum of each of
+    ``n_max // 2`` consecutive bins, in time order (NaNs kept as gaps), so that a noisy curve
+    keeps its band and every spike; short curves are returned as they are."""
+    n = y.size
+    if n <= n_max:
+        return t, y
+    m = -(-n // (n_max // 2))  # samples per bin
+    n_bins = -(-n // m)
+    pad = n_bins * m - n
+    yb = np.concatenate([y, np.full(pad, np.nan)]).reshape(n_bins, m)
+    tb = np.concatenate([t, np.full(pad, t[-1])]).reshape(n_bins, m)
+    finite = np.isfinite(yb)
+    has = finite.any(axis=1)
+    lo_i = np.argmin(np.where(finite, yb, np.inf), axis=1)
+    hi_i = np.argmax(np.where(finite, yb, -np.inf), axis=1)
+    first, second = np.minimum(lo_i, hi_i), np.maximum(lo_i, hi_i)
+    rows = np.arange(n_bins)
+    tt = np.stack([tb[rows, first], tb[rows, second]], axis=1).ravel()
+    yy = np.stack([yb[rows, first], yb[rows, second]], axis=1)
+    yy[~has] = np.nan
+    return tt, yy.ravel()
 
 
 def mode_components(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> np.ndarray:
@@ -83,7 +128,12 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
     t = np.arange(x.shape[1]) / fs_hz
     n_col = 4
     n_row = -(-len(a.gage_numbers) // n_col)
-    fig = Figure(figsize=(16, 2.6 * n_row + 1), layout="constrained")
+    height = 2.6 * n_row + 1
+    # A fixed layout (inches kept for the titles, legend and labels): the constrained layout
+    # measured every tick label of every panel, and cost more than all the rest of the figure.
+    fig = Figure(figsize=(16, height))
+    fig.subplots_adjust(left=0.055, right=0.99, bottom=0.6 / height, top=1 - 1.05 / height,
+                        hspace=0.32, wspace=0.2)
     axes = fig.subplots(n_row, n_col, sharex=True, squeeze=False).ravel()
     colours = [f"C{k}" for k in range(len(m.frequency_hz))]
     floor = np.nanmax(env) * 1e-4  # four decades below the largest envelope
@@ -99,17 +149,21 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
         for k, c in enumerate(colours):
             amp = abs(m.complex_amplitude[j, k])
             d, f = m.channel_delta[j, k], m.channel_frequency_hz[j, k]
-            ax.semilogy(t, np.maximum(env[j, k], floor), color=c, lw=0.8)
-            if np.isfinite(d) and amp > 0:
-                ax.semilogy(t, amp * np.exp(-d * f * t), color=c, lw=1.2, ls="--")
+            ax.semilogy(*thinned(t, np.maximum(env[j, k], floor)), color=c, lw=0.8)
+            if np.isfinite(d) and amp > 0:  # a straight line on log axes: two points draw it
+                ends = t[[0, -1]]
+                ax.semilogy(ends, amp * np.exp(-d * f * ends), color=c, lw=1.2, ls="--")
         g = a.gages.get(n)
         title = f"gage {n}"
         if g is not None and np.isfinite(g.delta):
             title += f": δ = {g.delta:.4f} ± {g.delta_se:.1g} at {g.f_hz:.2f} Hz"
         else:  # not a number: said, never drawn as zero
             title += ": δ of the predominant mode not measured"
-        ax.set_title(title, fontsize=9)
+        # y given: the title is not moved clear of top tick labels (there are none), which
+        # measured every tick label of the panel and was a third of the figure's drawing
+        ax.set_title(title, fontsize=9, y=1.0)
         ax.set_ylim(floor, None)
+        ax.yaxis.set_minor_locator(NullLocator())  # decades suffice (minor log ticks: costly)
     for ax in axes[len(a.gage_numbers):]:
         ax.set_visible(False)
     for ax in axes[::n_col]:
@@ -119,7 +173,8 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float) -> Figure:
     labels = [f"{f:.2f} Hz, δ = {d:.4f}{' (predominant)' if k == a.predominant else ''}"
               for k, (f, d) in enumerate(zip(m.frequency_hz, m.delta, strict=True))]
     proxies = [axes[0].plot([], [], color=c)[0] for c in colours]
-    fig.legend(proxies, labels, loc="outside upper right", ncols=len(labels), fontsize=9,
+    fig.legend(proxies, labels, loc="upper right", bbox_to_anchor=(0.99, 1.0), ncols=len(labels),
+               fontsize=9,
                title="solid: envelope of the mode's own component in the data; dashed: its fitted "
                      "decay |a| exp(−δ f t)", title_fontsize=9)
     fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01, ha="left")
@@ -151,7 +206,7 @@ def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) ->
     ax.set_xlim(lo, hi)
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"PSD, mean of the {rig.surface.body('rudder')} gages ((m/s²)²/Hz)")
-    ax.set_title("Spectrum of the free decay with the identified modes")
+    ax.set_title("Spectrum of the free decay with the identified modes", y=1.0)
     ax.legend(fontsize=9, loc="lower left")
     return fig
 
@@ -188,7 +243,7 @@ def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
     across = "athwartship" if sf.is_rudder else "vertical"
     ax.set_xlabel(f"{across} amplitude in phase with gage {4 if 4 in amp else '(largest)'} (m/s²)")
     ax.set_ylabel("z, up (m)" if sf.is_rudder else "inboard, along the stock to the hull (m)")
-    ax.set_title(f"{across} gages seen from aft", fontsize=10)
+    ax.set_title(f"{across} gages seen from aft", fontsize=10, y=1.0)
     for body, mk in marks.items():
         ax.plot([], [], mk, color=BODY_COLOURS[body], label=sf.body(body))
     ax.legend(fontsize=8, loc="best")
@@ -203,7 +258,7 @@ def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
     bars.invert_yaxis()
     bars.margins(x=0.15)
     bars.set_xlabel("amplitude (m/s²); label: phase against the reference gage")
-    bars.set_title("every used gage", fontsize=10)
+    bars.set_title("every used gage", fontsize=10, y=1.0)
     fig.suptitle(f"Mode at {a.f_hz:.3f} Hz, δ = {m.delta[p]:.4f}, at the decay's start")
     return fig
 
@@ -222,10 +277,12 @@ def stock_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
     ax1.set_xlabel(f"(d_{sf.label('v')},alpha), mode amplitude")
     ax1.set_ylabel("z' above the rudder top (m)" if sf.is_rudder
                    else "z' along the stock from the plane's root (m)")
-    ax1.set_title(f"Figure 8: bending, l = {a.stock_lengths.get('bending_m', float('nan')):.3f} m")
+    ax1.set_title(f"Figure 8: bending, l = {a.stock_lengths.get('bending_m', float('nan')):.3f} m",
+                  y=1.0)
     ax1.legend()
     ax2.plot(c["gamma"], c["z_stock_m"], "o-")
     ax2.set_xlabel(f"{sf.label('gamma')}, mode amplitude per m")
     ax2.legend()
-    ax2.set_title(f"Figure 9: torsion, l_T = {a.stock_lengths.get('torsion_m', float('nan')):.3f} m")
+    ax2.set_title(f"Figure 9: torsion, l_T = {a.stock_lengths.get('torsion_m', float('nan')):.3f} m",
+                  y=1.0)
     return fig
