@@ -57,3 +57,30 @@ def test_headless_trial_rrd_has_the_live_view(live):
                 "/impacts/0/decay/g04/envelope"}
     missing = {p for p in expected if p not in paths and p.lstrip("/") not in paths}
     assert not missing, sorted(paths)[:40]
+
+
+@pytest.fixture(scope="module")
+def floor_trial(tmp_path_factory, request):
+    """Water, two 1 kN blows 8 s apart: the first decay (32 dB over the noise) reaches the
+    noise floor about 7 s after its blow, before the second."""
+    from ramdaq.drivers.sim import Impact
+
+    rig = request.getfixturevalue("albacore").with_medium("water")
+    ram = rig.impact
+    blows = [Impact(t, 1000.0, ram.duration_s, ram.location_m, ram.direction) for t in (3.0, 11.0)]
+    tmp = tmp_path_factory.mktemp("floor")
+    dev = SimDevice(rig, duration_s=14.0, impacts=blows, seed=21)
+    return tmp, Session(dev, record_path=tmp / "floor.mcap", readout=False).run()
+
+
+def test_a_record_closes_at_the_noise_floor_and_replays_identically(floor_trial):
+    """The first hit's record ends where its decay reached the noise floor, before the next
+    blow (not at it); a replay ends it at the same sample and gives the same numbers."""
+    tmp, outcome = floor_trial
+    first, second = (h.event for h in outcome.hits)
+    assert first.end_reason == "decayed" and first.last_sample < second.onset_sample
+    assert first.decay_s == pytest.approx((first.last_sample - first.onset_sample) / first.fs_hz)
+    assert all(h.accepted for h in outcome.hits)
+    replayed = Session(McapReplayDevice(tmp / "floor.mcap"), readout=False).run()
+    assert [h.event.to_json() for h in replayed.hits] == [h.event.to_json() for h in outcome.hits]
+    assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
