@@ -9,8 +9,13 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
   next blow's first looks. A first look is asked for when the last one is done: the first after
-  ``first_look_s`` of free decay, then every ``first_look_s`` until one is sure enough to show
-  (:data:`LOOK_REL_SE`), then every ``update_s``. When the analyzer falls behind a live device,
+  :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
+  then the one the last sure look measured; ``first_look_s`` stands in for a period where the
+  rig has no model), then one period more each until one is sure enough to show
+  (:data:`LOOK_REL_SE`), then every ``update_s``. A later blow starts at the number of periods
+  the last blow's first sure look needed (its own standard error said how many were worth
+  waiting for), so a look that cannot be sure does not hold the look thread when the one that
+  can is due. When the analyzer falls behind a live device,
   first looks are skipped first, then finals run on a shorter, decimated decay, and last a
   final is left unanalysed -- each counted in the summary and written as an event; samples are
   never skipped, and the queue never holds more than its bound. A device that can wait
@@ -38,6 +43,7 @@ import numpy as np
 
 from ..analysis.impact import FirstLook
 from ..analysis.model.rig import Rig, parse_rig
+from ..analysis.model.rig_modes import modes_in
 from ..drivers.base import Device
 from ..drivers.block import Block
 from ..drivers.errors import DeviceError
@@ -75,6 +81,9 @@ LOOK_REL_SE = 0.25
 """A first look is shown when the median over gages of its decrement's standard error relative
 to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
 worth a glance, a wilder one is not)."""
+LOOK_CYCLES = 2
+"""Periods of the predominant mode of free decay before a blow's first look is tried: two
+periods are the least from which a decrement (the ratio of successive peaks) can come at all."""
 SUMMARY_TOPIC = "/ramdaq/summary"
 """The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 
@@ -134,8 +143,8 @@ class Session:
     update_s : float
         Stream seconds between first looks at a ringing decay once one has been shown.
     first_look_s : float
-        Seconds of free decay before the first look, and between looks until one is sure
-        enough to show.
+        Where the rig has no model to give the predominant mode's period: the seconds of free
+        decay that stand in for one period (:data:`LOOK_CYCLES`).
     trigger_settings : TriggerSettings, optional
         The trigger's settings (default ``TriggerSettings()``).
     queue_policy : QueuePolicy, optional
@@ -168,6 +177,13 @@ class Session:
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
         self.first_n = max(1, round(first_look_s * self.info.fs_hz))
+        period = _model_period_s(self.rig)
+        # samples per period of the predominant mode (first_look_s without a model), and the
+        # periods of free decay the next blow's first look is tried at
+        self._period_n = max(1.0, (period or first_look_s) * self.info.fs_hz)
+        self._start_cycles = LOOK_CYCLES if period else 1
+        self._look_cycles = self._start_cycles  # periods of the ringing hit's next look
+        self._look_first_sure: float | None = None  # periods of its first sure look
         self._look_sure = False  # a first look of the ringing hit has been shown
         self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
@@ -331,11 +347,17 @@ class Session:
             self._say(f"hit {self._n_events} at {onset / self.info.fs_hz:.3f} s: ringing")
             if self.readout:
                 self.readout.clear_results()
-            self._next_look = start + self.first_n
+            self._look_cycles = self._start_cycles
+            self._next_look = start + round(self._look_cycles * self._period_n)
             self._look_sure, self._ringing_onset = False, onset
+            self._look_first_sure = None
         if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
             return
-        self._next_look = now + (self.update_n if self._look_sure else self.first_n)
+        if self._look_sure:
+            self._next_look = now + self.update_n
+        else:  # one period more than this look has, at least
+            self._look_cycles = max(self._look_cycles, int((now - start) / self._period_n)) + 1
+            self._next_look = start + round(self._look_cycles * self._period_n)
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
@@ -395,6 +417,8 @@ class Session:
             return
         self._look_sure = True
         self.first_looks += 1
+        if self._look_first_sure is None:  # the next blow starts where this one became sure
+            self._learn_schedule(look)
         self.shown.append(Shown(-1 if self._ringing_hit is None else self._ringing_hit, "look",
                                 onset / self.info.fs_hz, time.monotonic()))
         if self.readout:
@@ -405,6 +429,15 @@ class Session:
             for n, (f, d, _) in look.gages.items():
                 self.view.log_gage_result(len(self.hits), f"g{n:02d}", t, f, d, float("nan"),
                                           final=False)
+
+    def _learn_schedule(self, look: FirstLook) -> None:
+        """The first sure look of a blow: its predominant frequency gives the period the next
+        blow's looks are timed in, and the whole periods of free decay it had (at least
+        :data:`LOOK_CYCLES`) are where the next blow's first look is tried."""
+        if np.isfinite(look.f_hz) and look.f_hz > 0:
+            self._period_n = self.info.fs_hz / look.f_hz
+            self._start_cycles = max(LOOK_CYCLES, int(look.duration_s * look.f_hz + 1e-9))
+        self._look_first_sure = look.duration_s * self.info.fs_hz / self._period_n
 
     def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
@@ -463,6 +496,18 @@ class Session:
             self.readout.hit(text)
         elif self.log:
             self.log(text)
+
+
+def _model_period_s(rig: Rig) -> float | None:
+    """Period of the predominant mode the rig's model predicts in its medium, s; None for a
+    rig without a structure (a channels-only rig) or whose model gives no finite mode."""
+    if not rig.structural:
+        return None
+    try:
+        f = modes_in(rig, rig.medium).predominant_hz
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+    return 1.0 / f if np.isfinite(f) and f > 0 else None
 
 
 def _sure(look: FirstLook) -> bool:

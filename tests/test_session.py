@@ -84,3 +84,23 @@ def test_a_record_closes_at_the_noise_floor_and_replays_identically(floor_trial)
     replayed = Session(McapReplayDevice(tmp / "floor.mcap"), readout=False).run()
     assert [h.event.to_json() for h in replayed.hits] == [h.event.to_json() for h in outcome.hits]
     assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
+
+
+def test_first_looks_are_tried_at_two_then_three_periods_of_the_predominant_mode(albacore):
+    """The look schedule (no analyzer: each look is done at once and never sure): a blow's
+    first look has two periods of the rig model's predominant mode (13.0 Hz in water, Table
+    2a) of free decay, the next three; a block (0.05 s) may add to each, never take away."""
+    water = albacore.with_medium("water")
+    dev = SimDevice(water, duration_s=4.0, impacts=[3.0], seed=4)
+    session = Session(dev, readout=False)
+    looks = []
+    session._jobs.put_look = lambda job: looks.append(job) or True
+    for block in dev:
+        session._take(block, None)
+    fs, period = dev.info.fs_hz, 1 / 13.0
+    decay = [job.x.shape[1] / fs for job in looks]
+    assert session._period_n == pytest.approx(period * fs, rel=0.01)
+    assert len(decay) >= 2 and looks[0].onset_sample == pytest.approx(3.0 * fs, abs=2)
+    block = dev.block_n / fs
+    for got, periods in zip(decay, (2, 3), strict=False):
+        assert periods * period - 1 / fs <= got < periods * period + block + 1 / fs, got
