@@ -63,6 +63,16 @@ def _key(hit, fs_hz: float) -> float:
     return round(hit.event.onset_sample / fs_hz, 3)
 
 
+def _parts(job, floor_wall: float | None) -> str:
+    """A final's latency after its decay reached the floor, in parts: the stream's lag (the
+    block that closed the record was taken this long after its last sample came), the wait for
+    the finals thread, and the analysis (wall and CPU), s."""
+    if job is None or floor_wall is None:
+        return " " * 40
+    return (f"{job.queued_s - floor_wall:6.3f}, {job.start_s - job.queued_s:6.3f}, "
+            f"{job.end_s - job.start_s:6.3f} ({job.cpu_s:5.2f})")
+
+
 def report(name: str, values: list[float], f_hz: float | None, n_blows: int, goal: str) -> bool:
     """Median and max of ``values`` (s; and in cycles of ``f_hz`` if given) beside the goal;
     True if the max meets ``goal`` (a number of s, or of cycles with ``f_hz``)."""
@@ -115,19 +125,28 @@ def main() -> None:
     looks, finals = latencies(session, "look"), latencies(session, "final")
     floors = floor_s(outcome, info.fs_hz)
     after_floor = {k: finals[k] - floors[k] for k in floors if k in finals}
+    jobs = {round(j.onset_sample / info.fs_hz, 3): j for j in session.job_times
+            if j.kind == "final"}
+    floor_wall = {k: session.wall_at_start + k + v for k, v in floors.items()}
     print("  blow onset s | first look s (cycles) | final s | decay at floor s | final after floor s"
-          " | record ended by")
+          " | of which: stream lag, queue wait, analysis wall (CPU) s | record ended by")
     for h in sorted(outcome.hits, key=lambda h: h.event.onset_sample):
         k = _key(h, info.fs_hz)
         look = looks.get(k)
         print(f"  {k:12.3f} | " + (f"{look:6.3f} ({look * f_hz:5.1f})" if look is not None
                                    else "   none       ")
               + f"        | {finals.get(k, float('nan')):7.3f} | {floors.get(k, float('nan')):16.3f}"
-              f" | {after_floor.get(k, float('nan')):19.3f} | {h.event.end_reason}")
+              f" | {after_floor.get(k, float('nan')):19.3f} | {_parts(jobs.get(k), floor_wall.get(k))}"
+              f" | {h.event.end_reason}")
     ok_look = report("first look", list(looks.values()), f_hz, n, f"<= {GOAL_CYCLES:g} cycles")
     report("final (from the blow)", list(finals.values()), f_hz, n, "<= inf s")
     ok_floor = report("final after noise floor", list(after_floor.values()), None, n,
                       f"<= {GOAL_FLOOR_S:g} s")
+    cpu_finals = [j.cpu_s for j in jobs.values()]
+    if cpu_finals:
+        print(f"  final analysis CPU per hit: median {statistics.median(cpu_finals):.2f} s, max "
+              f"{max(cpu_finals):.2f} s (issue 19: <= 0.2 s, helper hitcost's item; the latency "
+              f"after the noise floor cannot be below it)")
     load = outcome.load
     onsets = {_key(h, info.fs_hz) for h in outcome.hits}
     print(f"  looks shown {load.looks_shown}, skipped {load.looks_skipped}; finals coarse "

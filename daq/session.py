@@ -107,6 +107,20 @@ class Shown:
     wall_s: float
 
 
+@dataclass(frozen=True)
+class JobTime:
+    """One analyzer job's timing: ``kind`` ("look" or "final"), the blow's onset sample, when
+    it was queued, started and ended (``time.monotonic()``, s) and the CPU its thread spent on
+    it (``time.thread_time()``, s)."""
+
+    kind: str
+    onset_sample: int
+    queued_s: float
+    start_s: float
+    end_s: float
+    cpu_s: float
+
+
 @dataclass
 class TrialOutcome:
     """What a session leaves: every hit judged and analysed, the trial summary, and counts."""
@@ -201,6 +215,8 @@ class Session:
         self.finals_unanalysed = 0
         self._t_ns = 0  # device time of the latest block's first sample
         self.shown: deque[Shown] = deque(maxlen=4096)  # the latest numbers shown, for timing
+        self.job_times: deque[JobTime] = deque(maxlen=4096)  # the latest jobs run, for timing
+        self._queued: dict[int, float] = {}  # onset sample of a final queued -> when
         self.wall_at_start: float | None = None  # monotonic s when sample 0 would have come
         self._rec: Recorder | None = None
         self._truth_written = 0  # simulator truth messages already in the recording
@@ -218,11 +234,17 @@ class Session:
             job = self._jobs.get(kind)
             if job is None:
                 return
+            wall, cpu = time.monotonic(), time.thread_time()
             try:
                 self._done.put(run_job(job, self.info, self.rig, self._gages))
             except Exception as err:  # never let the analyzer thread die silently
                 self._done.put(JobFailed(job, err))
             finally:
+                onset = job.event.onset_sample if kind is FinalJob else job.onset_sample
+                self.job_times.append(JobTime(
+                    "final" if kind is FinalJob else "look", onset,
+                    self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
+                    time.monotonic(), time.thread_time() - cpu))
                 del job  # the samples go with the job's result, not with this frame
                 self._jobs.done(kind)
 
@@ -330,6 +352,7 @@ class Session:
                   + (", " + ", ".join(flags) if flags else "") + "): analysing")
         if self.view is not None:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
+        self._queued[ev.onset_sample] = time.monotonic()
         self._admitted(self._jobs.put_final(FinalJob(k, ev), wait=not self.shed), ev, rec)
         self._next_look = None
         self._ringing_hit = None
@@ -349,8 +372,10 @@ class Session:
                 self.readout.clear_results()
             self._look_cycles = self._start_cycles
             self._next_look = start + round(self._look_cycles * self._period_n)
-            self._look_sure, self._ringing_onset = False, onset
-            self._look_first_sure = None
+            self._look_sure, self._look_first_sure = False, None
+        # the detection sample until the trigger has refined the onset, which the looks carry
+        self._ringing_onset = onset
+        self._onsets[self._ringing_hit] = onset / self.info.fs_hz
         if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
             return
         if self._look_sure:
@@ -385,6 +410,7 @@ class Session:
                 rec.event("final_coarse", ev.t_ns, index=k, why=job.coarse.why,
                           decay_s=job.coarse.decay_s, rate_hz=job.coarse.rate_hz)
         if job is None:
+            self._queued.pop(ev.onset_sample, None)
             self.finals_unanalysed += 1
             if rec:
                 rec.event("final_unanalysed", ev.t_ns, index=k, reason=adm.refused)

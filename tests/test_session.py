@@ -104,3 +104,30 @@ def test_first_looks_are_tried_at_two_then_three_periods_of_the_predominant_mode
     block = dev.block_n / fs
     for got, periods in zip(decay, (2, 3), strict=False):
         assert periods * period - 1 / fs <= got < periods * period + block + 1 / fs, got
+
+
+def test_a_look_is_shown_when_the_blow_was_first_seen_before_its_onset_was_refined(albacore):
+    """Blocks of 10 samples: the trigger sees a blow a block before it has the look-ahead to
+    refine its onset (the session first sees the detection sample); the looks, taken later,
+    carry the refined onset and must still be shown as this blow's (they were dropped as a
+    previous blow's). Looks run at once here, in the main thread."""
+    from ramdaq.daq.analyzer import run_job
+
+    water = albacore.with_medium("water")
+    dev = SimDevice(water, duration_s=3.6, impacts=[3.0], seed=4, block_s=10 / 2048)
+    session = Session(dev, readout=False)
+    first_seen = []
+
+    def look_now(job):
+        first_seen.append(session._ringing_onset)
+        session._done.put(run_job(job, session.info, session.rig, session._gages))
+        return True
+
+    session._jobs.put_look = look_now
+    for block in dev:
+        if session.trigger.ringing and not first_seen:
+            first_seen.append(session.trigger.ringing[0])
+        session._take(block, None)
+    assert first_seen[0] != first_seen[1]  # the detection sample, then the refined onset
+    assert session.first_looks >= 1
+    assert {s.onset_s for s in session.shown} == {first_seen[1] / dev.info.fs_hz}
