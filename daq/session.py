@@ -109,12 +109,13 @@ class Shown:
 
 @dataclass(frozen=True)
 class JobTime:
-    """One analyzer job's timing: ``kind`` ("look" or "final"), the blow's onset sample, when
-    it was queued, started and ended (``time.monotonic()``, s) and the CPU its thread spent on
-    it (``time.thread_time()``, s)."""
+    """One analyzer job's timing: ``kind`` ("look" or "final"), the blow's onset sample, one
+    past the last sample the job had, when it was queued, started and ended
+    (``time.monotonic()``, s) and the CPU its thread spent on it (``time.thread_time()``, s)."""
 
     kind: str
     onset_sample: int
+    data_end: int
     queued_s: float
     start_s: float
     end_s: float
@@ -240,9 +241,12 @@ class Session:
             except Exception as err:  # never let the analyzer thread die silently
                 self._done.put(JobFailed(job, err))
             finally:
-                onset = job.event.onset_sample if kind is FinalJob else job.onset_sample
+                final = kind is FinalJob
+                onset = job.event.onset_sample if final else job.onset_sample
+                data_end = (job.event.last_sample + 1 if final else
+                            onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
                 self.job_times.append(JobTime(
-                    "final" if kind is FinalJob else "look", onset,
+                    "final" if final else "look", onset, data_end,
                     self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
                     time.monotonic(), time.thread_time() - cpu))
                 del job  # the samples go with the job's result, not with this frame

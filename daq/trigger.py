@@ -36,7 +36,10 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
 * **Decay and re-arm.** The envelope (recursive mean of x**2 over ``envelope_s``) of every
   responding gage must stay below ``rearm_ratio`` times its pre-event level for
   ``rearm_hold_s``. The record runs from ``pre_trigger_s`` before the onset to the decay's end,
-  but at least ``post_s`` and at most ``max_post_s`` after the onset. On re-arming, the LTA
+  but at least ``post_s`` and at most ``max_post_s`` after the onset. The record is handed over
+  as soon as the decay is at the noise floor (:mod:`ramdaq.daq.decay_end`: windows of the
+  loudest gages against the pre-event level), if that comes before the re-arm; the ringing is
+  then followed to the re-arm without a record, as after a gap. On re-arming, the LTA
   resumes from the larger of the pre-event level and the envelope, so what still rings (or a
   background that changed) cannot trigger at once.
 * **Clipping.** Counts at the ADC rails ``-2**(bits-1)`` / ``2**(bits-1) - 1`` (``adc_bits``
@@ -348,9 +351,10 @@ class ImpactEvent:
     over ``onset .. last_sample`` (SI units); ``snr_db`` is 20 log10(peak / pre-event rms) on the
     best responding channel. ``too_short``: the record was cut (gap, next impact, end of stream)
     before ``post_s`` or lacks part of its pre-trigger. ``end_reason``: ``decayed``,
-    ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to re-arm, or
-    ``None`` if the envelope never came back. ``not_analysable``: why a blow that was seen cannot
-    be analysed (``"trigger still arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
+    ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to the decay at the
+    noise floor (or to re-arm, if that came first), or ``None`` if the envelope never came
+    back. ``not_analysable``: why a blow that was seen cannot be analysed (``"trigger still
+    arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
     """
 
     onset_sample: int
