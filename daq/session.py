@@ -11,11 +11,11 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   next blow's first looks. A first look is asked for when the last one is done: the first after
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
-  rig has no model), then one period more each until one is sure enough to show
-  (:data:`LOOK_REL_SE`), then every ``update_s``. A later blow starts at the number of periods
-  the last blow's first sure look needed (its own standard error said how many were worth
-  waiting for), so a look that cannot be sure does not hold the look thread when the one that
-  can is due. When the analyzer falls behind a live device,
+  rig has no model), on the first block that ends by then; then one period more each until
+  one is sure enough to show (:data:`LOOK_REL_SE`), then every ``update_s``. A later blow
+  starts a period past the last blow's longest look that was not sure (its own standard error
+  said how many were worth waiting for), so a look that cannot be sure does not hold the look thread
+  when the one that can is due. When the analyzer falls behind a live device,
   first looks are skipped first, then finals run on a shorter, decimated decay, and last a
   final is left unanalysed -- each counted in the summary and written as an event; samples are
   never skipped, and the queue never holds more than its bound. A device that can wait
@@ -81,6 +81,9 @@ LOOK_REL_SE = 0.25
 """A first look is shown when the median over gages of its decrement's standard error relative
 to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
 worth a glance, a wilder one is not)."""
+LOOK_EARLY = 0.1
+"""A look due after k periods of free decay is taken on a block that ends this many periods
+early (a block's end rarely falls on a period's)."""
 LOOK_CYCLES = 2
 """Periods of the predominant mode of free decay before a blow's first look is tried: two
 periods are the least from which a decrement (the ratio of successive peaks) can come at all."""
@@ -199,6 +202,7 @@ class Session:
         self._start_cycles = LOOK_CYCLES if period else 1
         self._look_cycles = self._start_cycles  # periods of the ringing hit's next look
         self._look_first_sure: float | None = None  # periods of its first sure look
+        self._look_unsure = 0.0  # periods of its longest look not sure enough to show
         self._look_sure = False  # a first look of the ringing hit has been shown
         self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
@@ -362,6 +366,9 @@ class Session:
         self._ringing_hit = None
 
     def _maybe_look(self, now: int) -> None:
+        """Ask for a look at the ringing decay if one is due at the end of this block (sample
+        ``now``): the first block that ends at most :data:`LOOK_EARLY` of a period before the
+        look's time (a look at 2.9 periods is the look at 3)."""
         ringing = self.trigger.ringing
         if ringing is None:
             self._next_look = None
@@ -376,16 +383,18 @@ class Session:
                 self.readout.clear_results()
             self._look_cycles = self._start_cycles
             self._next_look = start + round(self._look_cycles * self._period_n)
-            self._look_sure, self._look_first_sure = False, None
+            self._look_sure, self._look_first_sure, self._look_unsure = False, None, 0.0
         # the detection sample until the trigger has refined the onset, which the looks carry
         self._ringing_onset = onset
         self._onsets[self._ringing_hit] = onset / self.info.fs_hz
-        if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
+        early = round(LOOK_EARLY * self._period_n)
+        if now + early < self._next_look or self._jobs.looks_pending:  # or still running
             return
         if self._look_sure:
             self._next_look = now + self.update_n
         else:  # one period more than this look has, at least
-            self._look_cycles = max(self._look_cycles, int((now - start) / self._period_n)) + 1
+            self._look_cycles = max(self._look_cycles,
+                                    int((now - start) / self._period_n + LOOK_EARLY)) + 1
             self._next_look = start + round(self._look_cycles * self._period_n)
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
@@ -443,7 +452,11 @@ class Session:
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
         """Show a first look whose decrements are sure enough (:data:`LOOK_REL_SE`), unless a
         later blow already rings."""
-        if look is None or onset != self._ringing_onset or not _sure(look):
+        if look is None or onset != self._ringing_onset:
+            return
+        if not look_is_sure(look):
+            self._look_unsure = max(self._look_unsure,
+                                    look.duration_s * self.info.fs_hz / self._period_n)
             return
         self._look_sure = True
         self.first_looks += 1
@@ -462,11 +475,14 @@ class Session:
 
     def _learn_schedule(self, look: FirstLook) -> None:
         """The first sure look of a blow: its predominant frequency gives the period the next
-        blow's looks are timed in, and the whole periods of free decay it had (at least
-        :data:`LOOK_CYCLES`) are where the next blow's first look is tried."""
+        blow's looks are timed in; the next blow's first look is tried one whole period past the
+        longest look of this blow that was not sure (at least :data:`LOOK_CYCLES`), or where
+        this blow's first was, if that was sure -- not at the sure look's own length, which a
+        busy look thread may have made longer than it needed."""
         if np.isfinite(look.f_hz) and look.f_hz > 0:
             self._period_n = self.info.fs_hz / look.f_hz
-            self._start_cycles = max(LOOK_CYCLES, int(look.duration_s * look.f_hz + 1e-9))
+        if self._look_unsure > 0:
+            self._start_cycles = max(LOOK_CYCLES, int(self._look_unsure + LOOK_EARLY) + 1)
         self._look_first_sure = look.duration_s * self.info.fs_hz / self._period_n
 
     def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
@@ -540,7 +556,7 @@ def _model_period_s(rig: Rig) -> float | None:
     return 1.0 / f if np.isfinite(f) and f > 0 else None
 
 
-def _sure(look: FirstLook) -> bool:
+def look_is_sure(look: FirstLook) -> bool:
     """True if the median over gages of the decrement's relative standard error is at most
     :data:`LOOK_REL_SE` (gages whose error the estimator could not give left out)."""
     rel = [se / abs(d) for _, d, se in look.gages.values() if d and np.isfinite(se)]
