@@ -9,8 +9,13 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
   next blow's first looks. A first look is asked for when the last one is done: the first after
-  ``first_look_s`` of free decay, then every ``first_look_s`` until one is sure enough to show
-  (:data:`LOOK_REL_SE`), then every ``update_s``. When the analyzer falls behind a live device,
+  :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
+  then the one the last sure look measured; ``first_look_s`` stands in for a period where the
+  rig has no model), on the first block that ends by then; then one period more each until
+  one is sure enough to show (:data:`LOOK_REL_SE`), then every ``update_s``. A later blow
+  starts a period past the last blow's longest look that was not sure (its own standard error
+  said how many were worth waiting for), so a look that cannot be sure does not hold the look thread
+  when the one that can is due. When the analyzer falls behind a live device,
   first looks are skipped first, then finals run on a shorter, decimated decay, and last a
   final is left unanalysed -- each counted in the summary and written as an event; samples are
   never skipped, and the queue never holds more than its bound. A device that can wait
@@ -38,6 +43,7 @@ import numpy as np
 
 from ..analysis.impact import FirstLook
 from ..analysis.model.rig import Rig, parse_rig
+from ..analysis.model.rig_modes import modes_in
 from ..drivers.base import Device
 from ..drivers.block import Block
 from ..drivers.errors import DeviceError
@@ -75,6 +81,12 @@ LOOK_REL_SE = 0.25
 """A first look is shown when the median over gages of its decrement's standard error relative
 to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
 worth a glance, a wilder one is not)."""
+LOOK_EARLY = 0.1
+"""A look due after k periods of free decay is taken on a block that ends this many periods
+early (a block's end rarely falls on a period's)."""
+LOOK_CYCLES = 2
+"""Periods of the predominant mode of free decay before a blow's first look is tried: two
+periods are the least from which a decrement (the ratio of successive peaks) can come at all."""
 SUMMARY_TOPIC = "/ramdaq/summary"
 """The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 
@@ -96,6 +108,21 @@ class Shown:
     kind: str
     onset_s: float
     wall_s: float
+
+
+@dataclass(frozen=True)
+class JobTime:
+    """One analyzer job's timing: ``kind`` ("look" or "final"), the blow's onset sample, one
+    past the last sample the job had, when it was queued, started and ended
+    (``time.monotonic()``, s) and the CPU its thread spent on it (``time.thread_time()``, s)."""
+
+    kind: str
+    onset_sample: int
+    data_end: int
+    queued_s: float
+    start_s: float
+    end_s: float
+    cpu_s: float
 
 
 @dataclass
@@ -134,8 +161,8 @@ class Session:
     update_s : float
         Stream seconds between first looks at a ringing decay once one has been shown.
     first_look_s : float
-        Seconds of free decay before the first look, and between looks until one is sure
-        enough to show.
+        Where the rig has no model to give the predominant mode's period: the seconds of free
+        decay that stand in for one period (:data:`LOOK_CYCLES`).
     trigger_settings : TriggerSettings, optional
         The trigger's settings (default ``TriggerSettings()``).
     queue_policy : QueuePolicy, optional
@@ -168,6 +195,14 @@ class Session:
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
         self.first_n = max(1, round(first_look_s * self.info.fs_hz))
+        period = _model_period_s(self.rig)
+        # samples per period of the predominant mode (first_look_s without a model), and the
+        # periods of free decay the next blow's first look is tried at
+        self._period_n = max(1.0, (period or first_look_s) * self.info.fs_hz)
+        self._start_cycles = LOOK_CYCLES if period else 1
+        self._look_cycles = self._start_cycles  # periods of the ringing hit's next look
+        self._look_first_sure: float | None = None  # periods of its first sure look
+        self._look_unsure = 0.0  # periods of its longest look not sure enough to show
         self._look_sure = False  # a first look of the ringing hit has been shown
         self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
@@ -185,6 +220,8 @@ class Session:
         self.finals_unanalysed = 0
         self._t_ns = 0  # device time of the latest block's first sample
         self.shown: deque[Shown] = deque(maxlen=4096)  # the latest numbers shown, for timing
+        self.job_times: deque[JobTime] = deque(maxlen=4096)  # the latest jobs run, for timing
+        self._queued: dict[int, float] = {}  # onset sample of a final queued -> when
         self.wall_at_start: float | None = None  # monotonic s when sample 0 would have come
         self._rec: Recorder | None = None
         self._truth_written = 0  # simulator truth messages already in the recording
@@ -202,11 +239,20 @@ class Session:
             job = self._jobs.get(kind)
             if job is None:
                 return
+            wall, cpu = time.monotonic(), time.thread_time()
             try:
                 self._done.put(run_job(job, self.info, self.rig, self._gages))
             except Exception as err:  # never let the analyzer thread die silently
                 self._done.put(JobFailed(job, err))
             finally:
+                final = kind is FinalJob
+                onset = job.event.onset_sample if final else job.onset_sample
+                data_end = (job.event.last_sample + 1 if final else
+                            onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
+                self.job_times.append(JobTime(
+                    "final" if final else "look", onset, data_end,
+                    self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
+                    time.monotonic(), time.thread_time() - cpu))
                 del job  # the samples go with the job's result, not with this frame
                 self._jobs.done(kind)
 
@@ -314,11 +360,15 @@ class Session:
                   + (", " + ", ".join(flags) if flags else "") + "): analysing")
         if self.view is not None:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
+        self._queued[ev.onset_sample] = time.monotonic()
         self._admitted(self._jobs.put_final(FinalJob(k, ev), wait=not self.shed), ev, rec)
         self._next_look = None
         self._ringing_hit = None
 
     def _maybe_look(self, now: int) -> None:
+        """Ask for a look at the ringing decay if one is due at the end of this block (sample
+        ``now``): the first block that ends at most :data:`LOOK_EARLY` of a period before the
+        look's time (a look at 2.9 periods is the look at 3)."""
         ringing = self.trigger.ringing
         if ringing is None:
             self._next_look = None
@@ -331,11 +381,21 @@ class Session:
             self._say(f"hit {self._n_events} at {onset / self.info.fs_hz:.3f} s: ringing")
             if self.readout:
                 self.readout.clear_results()
-            self._next_look = start + self.first_n
-            self._look_sure, self._ringing_onset = False, onset
-        if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
+            self._look_cycles = self._start_cycles
+            self._next_look = start + round(self._look_cycles * self._period_n)
+            self._look_sure, self._look_first_sure, self._look_unsure = False, None, 0.0
+        # the detection sample until the trigger has refined the onset, which the looks carry
+        self._ringing_onset = onset
+        self._onsets[self._ringing_hit] = onset / self.info.fs_hz
+        early = round(LOOK_EARLY * self._period_n)
+        if now + early < self._next_look or self._jobs.looks_pending:  # or still running
             return
-        self._next_look = now + (self.update_n if self._look_sure else self.first_n)
+        if self._look_sure:
+            self._next_look = now + self.update_n
+        else:  # one period more than this look has, at least
+            self._look_cycles = max(self._look_cycles,
+                                    int((now - start) / self._period_n + LOOK_EARLY)) + 1
+            self._next_look = start + round(self._look_cycles * self._period_n)
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
@@ -363,6 +423,7 @@ class Session:
                 rec.event("final_coarse", ev.t_ns, index=k, why=job.coarse.why,
                           decay_s=job.coarse.decay_s, rate_hz=job.coarse.rate_hz)
         if job is None:
+            self._queued.pop(ev.onset_sample, None)
             self.finals_unanalysed += 1
             if rec:
                 rec.event("final_unanalysed", ev.t_ns, index=k, reason=adm.refused)
@@ -391,10 +452,16 @@ class Session:
     def _show_look(self, onset: int, look: FirstLook | None) -> None:
         """Show a first look whose decrements are sure enough (:data:`LOOK_REL_SE`), unless a
         later blow already rings."""
-        if look is None or onset != self._ringing_onset or not _sure(look):
+        if look is None or onset != self._ringing_onset:
+            return
+        if not look_is_sure(look):
+            self._look_unsure = max(self._look_unsure,
+                                    look.duration_s * self.info.fs_hz / self._period_n)
             return
         self._look_sure = True
         self.first_looks += 1
+        if self._look_first_sure is None:  # the next blow starts where this one became sure
+            self._learn_schedule(look)
         self.shown.append(Shown(-1 if self._ringing_hit is None else self._ringing_hit, "look",
                                 onset / self.info.fs_hz, time.monotonic()))
         if self.readout:
@@ -405,6 +472,18 @@ class Session:
             for n, (f, d, _) in look.gages.items():
                 self.view.log_gage_result(len(self.hits), f"g{n:02d}", t, f, d, float("nan"),
                                           final=False)
+
+    def _learn_schedule(self, look: FirstLook) -> None:
+        """The first sure look of a blow: its predominant frequency gives the period the next
+        blow's looks are timed in; the next blow's first look is tried one whole period past the
+        longest look of this blow that was not sure (at least :data:`LOOK_CYCLES`), or where
+        this blow's first was, if that was sure -- not at the sure look's own length, which a
+        busy look thread may have made longer than it needed."""
+        if np.isfinite(look.f_hz) and look.f_hz > 0:
+            self._period_n = self.info.fs_hz / look.f_hz
+        if self._look_unsure > 0:
+            self._start_cycles = max(LOOK_CYCLES, int(self._look_unsure + LOOK_EARLY) + 1)
+        self._look_first_sure = look.duration_s * self.info.fs_hz / self._period_n
 
     def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
@@ -465,7 +544,19 @@ class Session:
             self.log(text)
 
 
-def _sure(look: FirstLook) -> bool:
+def _model_period_s(rig: Rig) -> float | None:
+    """Period of the predominant mode the rig's model predicts in its medium, s; None for a
+    rig without a structure (a channels-only rig) or whose model gives no finite mode."""
+    if not rig.structural:
+        return None
+    try:
+        f = modes_in(rig, rig.medium).predominant_hz
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+    return 1.0 / f if np.isfinite(f) and f > 0 else None
+
+
+def look_is_sure(look: FirstLook) -> bool:
     """True if the median over gages of the decrement's relative standard error is at most
     :data:`LOOK_REL_SE` (gages whose error the estimator could not give left out)."""
     rel = [se / abs(d) for _, d, se in look.gages.values() if d and np.isfinite(se)]

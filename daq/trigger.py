@@ -36,7 +36,10 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
 * **Decay and re-arm.** The envelope (recursive mean of x**2 over ``envelope_s``) of every
   responding gage must stay below ``rearm_ratio`` times its pre-event level for
   ``rearm_hold_s``. The record runs from ``pre_trigger_s`` before the onset to the decay's end,
-  but at least ``post_s`` and at most ``max_post_s`` after the onset. On re-arming, the LTA
+  but at least ``post_s`` and at most ``max_post_s`` after the onset. The record is handed over
+  as soon as the decay is at the noise floor (:mod:`ramdaq.daq.decay_end`: windows of the
+  loudest gages against the pre-event level), if that comes before the re-arm; the ringing is
+  then followed to the re-arm without a record, as after a gap. On re-arming, the LTA
   resumes from the larger of the pre-event level and the envelope, so what still rings (or a
   background that changed) cannot trigger at once.
 * **Clipping.** Counts at the ADC rails ``-2**(bits-1)`` / ``2**(bits-1) - 1`` (``adc_bits``
@@ -88,6 +91,7 @@ import numpy as np
 from ..analysis import onset as ons
 from ..analysis.model.rig import STRUCTURE_TABLES
 from ..drivers.block import Block, StreamInfo
+from .decay_end import FloorWatch, noise_bandwidth_fraction
 
 __all__ = ["IMPACT_JSON_SCHEMA", "ImpactEvent", "ImpactRecord", "StreamHealth", "Trigger",
            "TriggerSettings"]
@@ -347,9 +351,10 @@ class ImpactEvent:
     over ``onset .. last_sample`` (SI units); ``snr_db`` is 20 log10(peak / pre-event rms) on the
     best responding channel. ``too_short``: the record was cut (gap, next impact, end of stream)
     before ``post_s`` or lacks part of its pre-trigger. ``end_reason``: ``decayed``,
-    ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to re-arm, or
-    ``None`` if the envelope never came back. ``not_analysable``: why a blow that was seen cannot
-    be analysed (``"trigger still arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
+    ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to the decay at the
+    noise floor (or to re-arm, if that came first), or ``None`` if the envelope never came
+    back. ``not_analysable``: why a blow that was seen cannot be analysed (``"trigger still
+    arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
     """
 
     onset_sample: int
@@ -562,6 +567,7 @@ class _Event:
     not_analysable: str | None = None
     recorded: bool = True
     check_until: int = 0
+    floor: FloorWatch | None = None
 
 
 class Trigger:
@@ -592,6 +598,7 @@ class Trigger:
         self.mode = "sta_lta" if self._fidx is None else "force"
         self.delay_s = _rig_delay_s(info) if s.delay_s is None else float(s.delay_s)
         self._delay_n = self.delay_s * self.fs_hz
+        self._noise_bw = noise_bandwidth_fraction(info.rig_toml, self.fs_hz)
         bits = info.extra.get("adc_bits")
         self._rails = None if bits is None else (-(2 ** (int(bits) - 1)), 2 ** (int(bits) - 1) - 1)
         n = self._len
@@ -840,6 +847,7 @@ class Trigger:
             if (self._fidx is None and ev.scan.whitener is None
                     and end >= self._fit_start(ev) + n.fit):
                 self._fit(ev)
+            self._close_at_floor(ev, min(end, max_end + 1), out)
             r = self._scan_decay(ev, min(end, max_end + 1))
             s = self._scan_sharp(ev, end if r is None else r)
             if s is not None and s - ev.onset <= n.double and ev.recorded:
@@ -860,6 +868,22 @@ class Trigger:
             return decayed + 1
         ev.end, ev.end_reason = max_end, "max_length"
         return max_end + 1
+
+    def _close_at_floor(self, ev: _Event, limit: int, out: list[ImpactEvent]) -> None:
+        """Hand over the record of ``ev`` once its decay is at the noise floor
+        (:mod:`ramdaq.daq.decay_end`); its ringing is still followed to the re-arm, as the
+        ringing after a gap is, with no record of its own."""
+        if not ev.recorded:
+            return
+        if ev.floor is None:
+            ev.floor = FloorWatch.begin(ev.pre[ev.voters], ev.onset, self._len.post, self.fs_hz,
+                                        self._noise_bw)
+        rows = self._vidx[ev.voters]
+        end = ev.floor.scan(lambda a, b: self._values(a, b, rows), limit)
+        if end is not None:
+            ev.end, ev.end_reason = end, "decayed"
+            self._hand_over(ev, out)
+            ev.recorded = False
 
     def _edge(self, rows: Any, noise_var: np.ndarray | None, a: int, d: int) -> float:
         """AIC pick in ``a .. d + aic_post``, refined by the hinge fit when the ring allows."""
@@ -1025,6 +1049,8 @@ class Trigger:
         seg0, t0 = self._seg
         second = ev.second or (None, None)
         decayed = None if ev.decay is None else ev.decay.decayed
+        if ev.floor is not None and ev.floor.end is not None:
+            decayed = ev.floor.end
         return ImpactEvent(
             onset_sample=ev.onset, onset_s=ev.onset_s,
             t_ns=t0 + round((ev.onset_s * fs - seg0) * 1e9 / fs), trigger_sample=ev.detect,

@@ -57,3 +57,78 @@ def test_headless_trial_rrd_has_the_live_view(live):
                 "/impacts/0/decay/g04/envelope"}
     missing = {p for p in expected if p not in paths and p.lstrip("/") not in paths}
     assert not missing, sorted(paths)[:40]
+
+
+@pytest.fixture(scope="module")
+def floor_trial(tmp_path_factory, request):
+    """Water, two 1 kN blows 8 s apart: the first decay (32 dB over the noise) reaches the
+    noise floor about 7 s after its blow, before the second."""
+    from ramdaq.drivers.sim import Impact
+
+    rig = request.getfixturevalue("albacore").with_medium("water")
+    ram = rig.impact
+    blows = [Impact(t, 1000.0, ram.duration_s, ram.location_m, ram.direction) for t in (3.0, 11.0)]
+    tmp = tmp_path_factory.mktemp("floor")
+    dev = SimDevice(rig, duration_s=14.0, impacts=blows, seed=21)
+    return tmp, Session(dev, record_path=tmp / "floor.mcap", readout=False).run()
+
+
+def test_a_record_closes_at_the_noise_floor_and_replays_identically(floor_trial):
+    """The first hit's record ends where its decay reached the noise floor, before the next
+    blow (not at it); a replay ends it at the same sample and gives the same numbers."""
+    tmp, outcome = floor_trial
+    first, second = (h.event for h in outcome.hits)
+    assert first.end_reason == "decayed" and first.last_sample < second.onset_sample
+    assert first.decay_s == pytest.approx((first.last_sample - first.onset_sample) / first.fs_hz)
+    assert all(h.accepted for h in outcome.hits)
+    replayed = Session(McapReplayDevice(tmp / "floor.mcap"), readout=False).run()
+    assert [h.event.to_json() for h in replayed.hits] == [h.event.to_json() for h in outcome.hits]
+    assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
+
+
+def test_first_looks_are_tried_at_two_then_three_periods_of_the_predominant_mode(albacore):
+    """The look schedule (no analyzer: each look is done at once and never sure): a blow's
+    first look has two periods of the rig model's predominant mode (13.0 Hz in water, Table
+    2a) of free decay, the next three, each on the first block (0.05 s) that ends at most a
+    tenth of a period before it."""
+    water = albacore.with_medium("water")
+    dev = SimDevice(water, duration_s=4.0, impacts=[3.0], seed=4)
+    session = Session(dev, readout=False)
+    looks = []
+    session._jobs.put_look = lambda job: looks.append(job) or True
+    for block in dev:
+        session._take(block, None)
+    fs, period = dev.info.fs_hz, 1 / 13.0
+    decay = [job.x.shape[1] / fs for job in looks]
+    assert session._period_n == pytest.approx(period * fs, rel=0.01)
+    assert len(decay) >= 2 and looks[0].onset_sample == pytest.approx(3.0 * fs, abs=2)
+    block = dev.block_n / fs
+    for got, periods in zip(decay, (2, 3), strict=False):
+        assert (periods - 0.1) * period - 1 / fs <= got < periods * period + block + 1 / fs, got
+
+
+def test_a_look_is_shown_when_the_blow_was_first_seen_before_its_onset_was_refined(albacore):
+    """Blocks of 10 samples: the trigger sees a blow a block before it has the look-ahead to
+    refine its onset (the session first sees the detection sample); the looks, taken later,
+    carry the refined onset and must still be shown as this blow's (they were dropped as a
+    previous blow's). Looks run at once here, in the main thread."""
+    from ramdaq.daq.analyzer import run_job
+
+    water = albacore.with_medium("water")
+    dev = SimDevice(water, duration_s=3.6, impacts=[3.0], seed=4, block_s=10 / 2048)
+    session = Session(dev, readout=False)
+    first_seen = []
+
+    def look_now(job):
+        first_seen.append(session._ringing_onset)
+        session._done.put(run_job(job, session.info, session.rig, session._gages))
+        return True
+
+    session._jobs.put_look = look_now
+    for block in dev:
+        if session.trigger.ringing and not first_seen:
+            first_seen.append(session.trigger.ringing[0])
+        session._take(block, None)
+    assert first_seen[0] != first_seen[1]  # the detection sample, then the refined onset
+    assert session.first_looks >= 1
+    assert {s.onset_s for s in session.shown} == {first_seen[1] / dev.info.fs_hz}
