@@ -16,6 +16,12 @@ stop -- so when the analyzer falls behind the queue *sheds* work, in this order:
 3. **Last, a final is not analysed.** If the queue is still at its bound (``max_finals``
    finals, or ``max_bytes``), the hit is kept, rejected as "not analysed", with the reason.
 
+Apart from the shedding, a live final from a stream at least twice as fast as ``live_rate_hz``
+(the design rate, 2048 Hz) is analysed decimated to about it, its whole decay kept
+(:class:`~ramdaq.daq.analyzer.Coarse` with nothing cut; its result says so): at 25.6 kHz a whole
+30 s, 16-gage final held ~1 GB in the estimator's full-rate copies and took minutes of CPU, with
+a blow every 30 s. A 2048 Hz stream is analysed as recorded.
+
 Every look skipped and every final made coarse or left unanalysed is counted
 (:class:`~ramdaq.daq.analyzer.AnalyzerLoad`, in the trial summary) and the session writes each
 as an event into the recording. A source that can wait (a replay or a simulator run as fast as
@@ -49,17 +55,25 @@ class QueuePolicy:
     coarse_rate_hz : float
         A coarse final is decimated by the largest whole factor that keeps at least this rate,
         Hz (the design rate: 12x at 25.6 kHz).
+    live_rate_hz : float or None
+        A live final from a stream at least twice this fast is decimated by the largest whole
+        factor that keeps at least this rate, Hz, its whole decay kept (the modes sought are
+        below a few hundred Hz; the rigs' anti-alias corners are below 1 kHz). None: never.
     """
 
     max_bytes: int = 256 * 2**20
     max_finals: int = 3
     coarse_decay_s: float = 4.0
     coarse_rate_hz: float = 2048.0
+    live_rate_hz: float | None = 2048.0
 
     def __post_init__(self) -> None:
         if self.max_bytes <= 0 or self.max_finals < 1:
             raise ValueError(f"QueuePolicy: max_bytes ({self.max_bytes}) and max_finals "
                              f"({self.max_finals}) must be positive")
+        if self.live_rate_hz is not None and not self.live_rate_hz > 0:
+            raise ValueError(f"QueuePolicy: live_rate_hz ({self.live_rate_hz}) must be positive "
+                             "or None")
         if not (self.coarse_decay_s > 0 and self.coarse_rate_hz > 0):
             raise ValueError(f"QueuePolicy: coarse_decay_s ({self.coarse_decay_s}) and "
                              f"coarse_rate_hz ({self.coarse_rate_hz}) must be positive")
@@ -124,6 +138,8 @@ class JobQueue:
             if behind or not self._fits_bytes(job):
                 job = self._coarse(job, f"{behind} final(s) ahead in the analyzer" if behind
                                    else "its record would pass the queue's bytes bound")
+            else:
+                job = self._at_live_rate(job)
             if not (self._fits(job) or self._idle()):
                 return Admission(dropped, None, self._full_reason(job))
             self._add(job)
@@ -221,6 +237,19 @@ class JobQueue:
             rec = dataclasses.replace(rec, counts=rec.counts[:, :end].copy())
         coarse = Coarse(self.policy.coarse_decay_s, full_s, self.policy.coarse_rate_hz, why)
         return FinalJob(job.index, dataclasses.replace(job.event, record=rec), coarse)
+
+    def _at_live_rate(self, job: FinalJob) -> FinalJob:
+        """``job`` decimated to about ``live_rate_hz`` with its whole record, if the stream is
+        at least twice as fast (the analyzer thread decimates it, row by row)."""
+        rate, rec = self.policy.live_rate_hz, job.event.record
+        if rate is None or rec is None or self.fs_hz < 2 * rate:
+            return job
+        start = job.event.onset_sample + self.skip_n - rec.first_sample
+        full_s = max(0, rec.counts.shape[1] - start) / self.fs_hz
+        why = (f"a live {self.fs_hz:g} Hz final runs at about {rate:g} Hz, "
+               "to bound the analyzer's memory and time")
+        return FinalJob(job.index, job.event,
+                        Coarse(rec.counts.shape[1] / self.fs_hz, full_s, rate, why))
 
     def _full_reason(self, job: FinalJob) -> str:
         p = self.policy

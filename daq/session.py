@@ -357,8 +357,8 @@ class Session:
         k = self._n_events - 1
         if job is not None and job.coarse is not None:
             self.finals_coarse += 1
-            self._say(f"hit {k}: the analyzer is behind ({job.coarse.why}); its final runs "
-                      f"on {job.coarse.decay_s:g} s of decay at about {job.coarse.rate_hz:g} Hz")
+            self._say(f"hit {k}: {job.coarse.why}; its final runs on at most "
+                      f"{job.coarse.decay_s:.3g} s of decay at about {job.coarse.rate_hz:g} Hz")
             if rec:
                 rec.event("final_coarse", ev.t_ns, index=k, why=job.coarse.why,
                           decay_s=job.coarse.decay_s, rate_hz=job.coarse.rate_hz)
