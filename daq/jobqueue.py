@@ -246,8 +246,8 @@ class JobQueue:
             return job
         start = job.event.onset_sample + self.skip_n - rec.first_sample
         full_s = max(0, rec.counts.shape[1] - start) / self.fs_hz
-        why = (f"a live {self.fs_hz:g} Hz final runs at about {rate:g} Hz, "
-               "to bound the analyzer's memory and time")
+        why = (f"the stream's {self.fs_hz:g} Hz is more than twice the live analyzer's "
+               f"{rate:g} Hz (its memory and time)")
         return FinalJob(job.index, job.event,
                         Coarse(rec.counts.shape[1] / self.fs_hz, full_s, rate, why))
 
