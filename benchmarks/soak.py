@@ -115,8 +115,9 @@ class RssSampler:
     the stream seconds ``stream_s()`` says the session has taken; only samples taken while the
     stream still ran are kept (after it, the session only waits for its last finals)."""
 
-    def __init__(self, every_s: float, stream_s, duration_s: float, lag_s) -> None:
+    def __init__(self, every_s: float, stream_s, duration_s: float, lag_s, on_end) -> None:
         self.every_s, self.stream_s, self.duration_s = every_s, stream_s, duration_s
+        self.on_end = on_end  # called once, with this sampler, when the stream has ended
         self.lag_s = lag_s  # s the stream is behind the sample clock (wall; offset), or NaN
         self.samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
         self.loads: list[float] = []  # 1-min load average at each sample
@@ -147,9 +148,12 @@ class RssSampler:
                   f"   glibc heap {used:6.1f} used / {held:6.1f} held MB   load {load:5.2f}"
                   + ("" if stream < self.duration_s else "   (stream ended: not fitted)"),
                   flush=True)
+            if stream >= self.duration_s and self.on_end is not None:
+                self.on_end(self)  # the verdict now; the session still waits for its finals
+                self.on_end = None
 
 
-def run_trial(args: argparse.Namespace, folder: Path) -> tuple[object, RssSampler]:
+def run_trial(args: argparse.Namespace, folder: Path, on_end) -> tuple[object, RssSampler]:
     """The paced trial with the RSS sampler running; its outcome and the sampler."""
     duration = 60 * args.minutes
     impacts = [args.impact_every / 2 + args.impact_every * k
@@ -161,12 +165,14 @@ def run_trial(args: argparse.Namespace, folder: Path) -> tuple[object, RssSample
             else None)
     session = Session(dev, record_path=folder / "soak.mcap", view=view, readout=False,
                       log=print if args.verbose else None)
+
     def lag_s() -> float:
         start = session.wall_at_start
         return (float("nan") if start is None
                 else time.monotonic() - start - session.samples / info.fs_hz)
 
-    with RssSampler(args.every, lambda: session.samples / info.fs_hz, duration, lag_s) as rss:
+    with RssSampler(args.every, lambda: session.samples / info.fs_hz, duration, lag_s,
+                    on_end) as rss:
         try:
             outcome = session.run()
         finally:
@@ -192,6 +198,9 @@ def main() -> None:
                     help="s per window of the RSS floor (the lowest sample in each)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--verbose", action="store_true", help="print the session's hit messages")
+    ap.add_argument("--mmap-threshold", type=int, default=None, metavar="BYTES",
+                    help="glibc: give every allocation of BYTES or more its own mapping "
+                         "(a diagnostic of heap fragmentation; the trial does not set it)")
     args = ap.parse_args()
     if args.minutes is None:
         args.minutes = 10.0 if args.rate <= 2048 else 5.0
@@ -200,18 +209,26 @@ def main() -> None:
     print(f"soak: {args.minutes:g} min at {args.rate:g} Hz, 16 gages, a blow every "
           f"{args.impact_every:g} s, view {view}; fit after {warmup:g} s; {os.cpu_count()} "
           f"cores, load average {os.getloadavg()[0]:.2f} (1 min) at the start")
+    if args.mmap_threshold is not None:
+        set_mmap_threshold(args.mmap_threshold)
+        print(f"glibc: every allocation of {args.mmap_threshold} B or more in its own mapping")
     with tempfile.TemporaryDirectory() as tmp:
-        outcome, rss = run_trial(args, Path(tmp))
+        outcome, rss = run_trial(args, Path(tmp), lambda r: print_growth(r, args))
         size = {p.suffix: p.stat().st_size / 1e6 for p in Path(tmp).iterdir()}
-    t, mb = (np.array(v) for v in zip(*rss.samples, strict=True))
-    after = t >= warmup
-    g = fit_growth(t[after], mb[after])
-    floor = fit_growth(*floor_of(t[after], mb[after], args.window))
     s = outcome.summary
     print(f"hits {s['hits']}, accepted {s['accepted']}; analyzer: {s['analyzer']}")
     print("files: " + ", ".join(f"{k} {v:.1f} MB" for k, v in sorted(size.items()))
           + (f"; the .rrd is {size['.rrd'] / size['.mcap']:.2f}x the MCAP (issue 19: <= 3x)"
              if ".rrd" in size else ""))
+
+
+def print_growth(rss: RssSampler, args: argparse.Namespace) -> None:
+    """The fits, the machine's load and the verdict, printed as soon as the stream has ended
+    (at 25.6 kHz on a loaded machine the session may then wait minutes for its last finals)."""
+    t, mb = (np.array(v) for v in zip(*rss.samples, strict=True))
+    after = t >= args.warmup
+    g = fit_growth(t[after], mb[after])
+    floor = fit_growth(*floor_of(t[after], mb[after], args.window))
     print(f"RSS {g.first_mb:.1f} -> {g.last_mb:.1f} MB over {g.n} samples after the warm-up; "
           f"peak {mb.max():.1f} MB")
     print(f"growth, every sample: {g.mb_per_min:+.2f} +- {g.se_mb_per_min:.2f} MB/min")
@@ -222,7 +239,16 @@ def main() -> None:
           f"max {max(rss.loads):.2f}, on {os.cpu_count()} cores; the stream fell behind the "
           f"sample clock by up to {behind:.1f} s ({behind / (60 * args.minutes):.1%} of its "
           "length)")
-    print(verdict(floor))
+    print(verdict(floor), flush=True)
+
+
+def set_mmap_threshold(n_bytes: int) -> None:
+    """glibc: every allocation of ``n_bytes`` or more gets its own mapping, returned to the OS
+    when freed (``mallopt(M_MMAP_THRESHOLD)``; it also stops glibc raising the threshold to
+    the largest block freed so far, which lets arrays of up to 32 MB settle in the heap)."""
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    if libc.mallopt(-3, int(n_bytes)) != 1:  # M_MMAP_THRESHOLD
+        raise SystemExit(f"soak: mallopt(M_MMAP_THRESHOLD, {n_bytes}) failed")
 
 
 def verdict(floor: Growth) -> str:
