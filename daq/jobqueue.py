@@ -7,8 +7,10 @@ and on the number of finals. A live trial cannot wait for the analyzer -- the de
 stop -- so when the analyzer falls behind the queue *sheds* work, in this order:
 
 1. **First looks go first.** A first look is queued only when no other look is waiting or
-   running; a final whose record would take the queue past its bytes bound pushes the first
-   look still waiting out of the queue.
+   running and its samples fit ``max_look_bytes`` (a look is the decay so far, at the full
+   rate: 16 gages x 5 s at 25.6 kHz; at 2048 Hz a minute, never reached); a final whose record
+   would take the queue past its bytes bound pushes the first look still waiting out of the
+   queue.
 2. **Then finals run coarse.** A final that arrives while another final is waiting or running
    (or whose record would take the queue past its bytes bound) is cut, on arrival, to the first
    ``coarse_decay_s`` of its free decay, and is analysed decimated to about ``coarse_rate_hz``
@@ -50,6 +52,10 @@ class QueuePolicy:
         x 30 s at 25.6 kHz is 49 MB of int32 counts; 256 MiB holds five of them).
     max_finals : int
         Finals waiting and running together.
+    max_look_bytes : int
+        Bytes of samples one first look may hold (float64 SI values of the gages from the
+        decay's start): at 25.6 kHz a look at 17 s of decay held 57 MB, and its full-rate
+        spectrum several times that, while the final's numbers were seconds away.
     coarse_decay_s : float
         Seconds of free decay a coarse final keeps (a 13 Hz mode rings 52 cycles in 4 s).
     coarse_rate_hz : float
@@ -63,14 +69,16 @@ class QueuePolicy:
 
     max_bytes: int = 256 * 2**20
     max_finals: int = 3
+    max_look_bytes: int = 16 * 2**20
     coarse_decay_s: float = 4.0
     coarse_rate_hz: float = 2048.0
     live_rate_hz: float | None = 2048.0
 
     def __post_init__(self) -> None:
-        if self.max_bytes <= 0 or self.max_finals < 1:
-            raise ValueError(f"QueuePolicy: max_bytes ({self.max_bytes}) and max_finals "
-                             f"({self.max_finals}) must be positive")
+        if self.max_bytes <= 0 or self.max_finals < 1 or self.max_look_bytes <= 0:
+            raise ValueError(f"QueuePolicy: max_bytes ({self.max_bytes}), max_finals "
+                             f"({self.max_finals}) and max_look_bytes ({self.max_look_bytes}) "
+                             "must be positive")
         if self.live_rate_hz is not None and not self.live_rate_hz > 0:
             raise ValueError(f"QueuePolicy: live_rate_hz ({self.live_rate_hz}) must be positive "
                              "or None")
@@ -117,13 +125,18 @@ class JobQueue:
 
     # -- the acquisition side -------------------------------------------------------------------
     def put_look(self, job: LookJob) -> bool:
-        """Queue a first look unless another is waiting or running, or its samples would take
-        the queue past its bytes bound; False if not queued."""
+        """Queue a first look unless another is waiting or running, or its samples would pass
+        ``max_look_bytes`` or take the queue past its bytes bound; False if not queued."""
         with self._cond:
-            if self._looks() or self._held + job_bytes(job) > self.policy.max_bytes:
+            if not self._look_fits(job_bytes(job)):
                 return False
             self._add(job)
             return True
+
+    def too_big_for_a_look(self, n_bytes: int) -> bool:
+        """Whether ``n_bytes`` of samples pass ``max_look_bytes``: no look at them, ever (ask
+        before copying them: at 25.6 kHz a long decay is tens of MB)."""
+        return n_bytes > self.policy.max_look_bytes
 
     def put_final(self, job: FinalJob, *, wait: bool) -> Admission:
         """Queue a final: with ``wait``, block until it fits the bound (or the queue is empty);
@@ -204,6 +217,10 @@ class JobQueue:
     def _looks(self) -> int:
         return (sum(isinstance(j, LookJob) for j in self._jobs)
                 + (self._running[LookJob] is not None))
+
+    def _look_fits(self, n_bytes: int) -> bool:
+        return (not self._looks() and n_bytes <= self.policy.max_look_bytes
+                and self._held + n_bytes <= self.policy.max_bytes)
 
     def _fits_bytes(self, job: FinalJob) -> bool:
         return self._held + job_bytes(job) <= self.policy.max_bytes

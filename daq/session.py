@@ -336,6 +336,11 @@ class Session:
         if now < self._next_look or self._jobs.looks_pending:  # the last look is still running
             return
         self._next_look = now + (self.update_n if self._look_sure else self.first_n)
+        if self._jobs.too_big_for_a_look(8 * len(self._gage_rows) * (end - start)):
+            self._next_look = float("inf")  # until the next blow rings (jobqueue's look bound)
+            self._look_skipped(onset, "its decay so far passes the queue's bound for a look: "
+                                      "no more looks at this blow")
+            return
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:

@@ -72,6 +72,21 @@ def test_a_look_runs_beside_a_final(albacore, one_blow):
     assert q.get(LookJob) is look
 
 
+def test_a_look_past_its_bound_is_not_queued(albacore, one_blow):
+    """A first look is the decay so far at the full rate; past ``max_look_bytes`` it is not
+    queued, and the session can ask before copying the samples. The default bound holds a
+    30 s decay of 16 gages at 2048 Hz (nothing changes there) but not at 25.6 kHz."""
+    info, ev = one_blow
+    look = LookJob(ev.onset_sample, ev.record.values()[:, :2048])
+    q = JobQueue(QueuePolicy(max_look_bytes=look.x.nbytes - 1), info.fs_hz, 0)
+    assert q.too_big_for_a_look(look.x.nbytes) and not q.put_look(look)
+    assert q.looks_pending == 0
+    default = JobQueue(QueuePolicy(), info.fs_hz, 0)
+    assert not default.too_big_for_a_look(16 * 30 * 2048 * 8)
+    assert default.too_big_for_a_look(16 * 30 * 25600 * 8)
+    assert default.put_look(look)
+
+
 def test_a_record_past_the_bytes_bound_runs_coarse_alone(albacore, one_blow):
     info, ev = one_blow
     whole = ev.record.counts.nbytes
