@@ -39,6 +39,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from .analyzer import Coarse, FinalJob, LookJob
+from .heap import release_free_memory
 
 
 @dataclass(frozen=True)
@@ -195,13 +196,17 @@ class JobQueue:
             return job
 
     def done(self, kind: type[FinalJob] | type[LookJob]) -> None:
-        """The running job of ``kind`` has finished: its samples are released."""
+        """The running job of ``kind`` has finished: its samples are released; after a final,
+        the C heap's free pages go back to the OS (:mod:`ramdaq.daq.heap`), on the calling
+        analyzer thread, so that a trial's RSS follows what it holds, not its highest peak."""
         with self._cond:
             job = self._running[kind]
             if job is not None:
                 self._held -= job_bytes(job)
                 self._running[kind] = None
             self._cond.notify_all()
+        if kind is FinalJob:
+            release_free_memory()
 
     # -- inside the lock ------------------------------------------------------------------------
     def _idle(self) -> bool:
