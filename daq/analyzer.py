@@ -6,7 +6,8 @@ analyzer thread takes typed jobs (:class:`FinalJob`, :class:`LookJob`) and gives
 results (:class:`FinalDone`, :class:`LookDone`) through :func:`run_job`.
 
 A final run while the analyzer is behind may be *coarse* (:class:`Coarse`: its free decay cut
-short and decimated, :mod:`ramdaq.daq.jobqueue` says when); the hit's result says so.
+short and decimated, :mod:`ramdaq.daq.jobqueue` says when), as is a live final from a stream far
+above the design rate (decimated, nothing cut); the hit's result says so.
 
 Each hit is accepted or rejected with a reason: a blow the trigger saw but could not place
 (still arming, or its onset at a gap), a double hit, an overload (clipped channels), a decay too
@@ -144,15 +145,20 @@ def _force_from_onset(event: ImpactEvent, info: StreamInfo) -> np.ndarray | None
     return rec.counts[rows[0], i0:] * rec.scale[rows[0]]
 
 
-def coarsen(x: np.ndarray, fs_hz: float, coarse: Coarse) -> tuple[np.ndarray, float, str]:
+def coarsen(x: np.ndarray, fs_hz: float, coarse: Coarse,
+            scale: np.ndarray | None = None) -> tuple[np.ndarray, float, str]:
     """The free decay ``x`` (n_gages, n_samples) cut to ``coarse.decay_s`` and decimated (FIR
     anti-alias filter, zero phase) by ``floor(fs_hz / coarse.rate_hz)``: the samples, their
-    rate (Hz), and a sentence saying what was done and why."""
+    rate (Hz), and a sentence saying what was done and why. With ``scale`` (n_gages,), ``x``
+    is counts and each row is multiplied by its scale first. Row by row: at most one row is
+    held at the full rate in float64 (a whole 30 s, 16-gage decay at 25.6 kHz is 98 MB)."""
     keep = min(x.shape[1], round(coarse.decay_s * fs_hz))
     q = max(1, int(fs_hz // coarse.rate_hz))
-    y = x[:, :keep]
-    if q > 1:
-        y = signal.decimate(y, q, ftype="fir", zero_phase=True, axis=1)
+    scale = np.ones(x.shape[0]) if scale is None else scale
+    rows = [x[i, :keep] * scale[i] for i in range(x.shape[0])] if q == 1 else [
+        signal.decimate(x[i, :keep] * scale[i], q, ftype="fir", zero_phase=True)
+        for i in range(x.shape[0])]
+    y = np.stack(rows)
     text = (f"coarse: {keep / fs_hz:.2f} s of the {coarse.full_decay_s:.2f} s decay"
             + (f", decimated {q}x to {fs_hz / q:g} Hz" if q > 1 else "") + f" ({coarse.why})")
     return y, fs_hz / q, text
@@ -177,21 +183,26 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
     start = event.onset_sample + round(decay_skip_s(rig, _force_from_onset(event, info),
                                                     info.fs_hz) * info.fs_hz)
     i0 = start - rec.first_sample
-    x = rec.counts[:, i0:] * rec.scale[:, None]
+    n = rec.counts[:1, i0:].shape[1]  # decay samples (a view: nothing copied)
     # The trigger's too_short only says the record was cut (next blow, gap, end of stream)
     # before the ringing died; what counts here is whether enough decay remains to measure.
-    if x.shape[1] < MIN_DECAY_S * info.fs_hz:
+    if n < MIN_DECAY_S * info.fs_hz:
         return HitResult(index, event, False,
-                         f"decay too short: {x.shape[1] / info.fs_hz:.2f} s "
+                         f"decay too short: {n / info.fs_hz:.2f} s "
                          f"(< {MIN_DECAY_S} s, ended by {event.end_reason})", None)
     gage_rows = [i for i, g in enumerate(info.gages) if g]
-    x, fs, text = x[gage_rows], info.fs_hz, ""
-    if coarse is not None:
-        x, fs, text = coarsen(x, fs, coarse)
+    scale = rec.scale[gage_rows]
+    if coarse is None:
+        x, fs, text = rec.counts[gage_rows, i0:] * scale[:, None], info.fs_hz, ""
+    else:  # the gage rows as a view where they are contiguous (no full-rate copy at all)
+        lo, hi = (gage_rows[0], gage_rows[-1] + 1) if gage_rows else (0, 0)
+        counts = (rec.counts[lo:hi, i0:] if gage_rows == list(range(lo, hi))
+                  else rec.counts[gage_rows, i0:])
+        x, fs, text = coarsen(counts, info.fs_hz, coarse, scale)
     try:
         result = analyze_decay(x, fs, rig, tuple(info.gages[i] for i in gage_rows),
                                onset_s=event.onset_s, decay_start_s=start / info.fs_hz,
-                               adc_full_scale=_full_scale(info, rec.scale[gage_rows]))
+                               adc_full_scale=_full_scale(info, scale))
     except ValueError as err:
         return HitResult(index, event, False, f"no usable decay: {err}", None, text)
     return HitResult(index, event, True, "", result, text)

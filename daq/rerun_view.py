@@ -16,7 +16,8 @@ Entity layout (``<k>`` the impact number, ``gXX`` the channel name)::
     impacts/<k>/traces           full-rate traces around impact k, one series per channel
     impacts/<k>/decay/gXX        the decay a result was fitted to, if given; .../envelope (+e, -e)
     impacts/<k>/mode             Arrows3D of the last mode shape of impact k (+ f_hz)
-    results/gXX/{f_hz,delta,amplitude}, results/log   per-gage estimates; final ones also logged
+    results/gXX/{f_hz,delta,amplitude}, results/log   per-gage final estimates, also logged
+    results/looks/{f_hz,delta}   first looks: one row per look, a series per gage ("gXX look")
     layout/{gages,axes,rudder,stock}   static gage positions coloured by body, axes, outline, in
                                  ship axes (``rudder``: the control surface, a stern plane too)
     layout/mode                  the mode shape at the time cursor: arrows along the sensing axes
@@ -29,6 +30,12 @@ needed. All channels of a group share one entity and one time column: one entity
 cost a time stamp per value and a chunk per channel per batch, most of the file. The
 viewer holds ~70 B per point, so the live traces are never full rate (16 ch x 100 rows/s x 2 is
 3.2 k points/s, ~0.2 MB/s of viewer memory); full rate is only sent around impacts.
+
+Few entities, few chunks: every row logged to an entity at its own moment becomes a chunk of its
+own in the ``.rrd``, and the file's footer keeps a manifest entry per chunk in memory until the
+file is closed (~2 kB each, Rerun 0.41). First looks come every ~0.5 s while a blow rings; logged
+per gage (``results/gXX/...``) they were 32 chunks a look, ~8 MB/min of RSS and two thirds of the
+file (``benchmarks/soak.py``); as one row of all gages under ``results/looks`` they are 2.
 """
 
 from __future__ import annotations
@@ -177,6 +184,9 @@ class RerunView:
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []  # (times, rows) not yet sent
         self._tail: np.ndarray | None = None  # counts of an incomplete bucket, from _tail_start
         self._pending_rows = self._tail_start = self._last_sample = self._last_k = 0
+        # first looks: one column per gage channel, keyed "gXX" by its report gage number
+        self._look_cols = {_gage_name(g): j for j, g in enumerate(g for g in info.gages if g)}
+        self._look: tuple[float, np.ndarray] | None = None  # (t_s, [f_hz; delta] per gage) unsent
         self._scale = np.ones(info.n_channels)
         self._onsets: dict[int, float] = {}
         self._closed = False
@@ -234,7 +244,8 @@ class RerunView:
     def blueprint(self) -> rrb.Blueprint:
         """Default layout: gage traces and impacts (tabs), results, 3-D gage layout, event log."""
         chans = [c for c, g in zip(self.info.channels, self.info.gages, strict=True) if g]
-        f_hz, delta = ([f"results/{c}/{q}" for c in chans] for q in ("f_hz", "delta"))
+        f_hz, delta = ([f"results/{c}/{q}" for c in chans] + [f"results/looks/{q}"]
+                       for q in ("f_hz", "delta"))
         series = rrb.Tabs(
             rrb.TimeSeriesView(name="Gages (min/max)", origin="gages",
                                contents=["$origin/**", "impacts/markers"]),
@@ -258,6 +269,11 @@ class RerunView:
                          static=True)
         self.rec.log("impacts/markers", rr.SeriesPoints(markers="diamond", marker_sizes=6.0,
                                                         names="impact"), static=True)
+        gage_rows = [i for i, g in enumerate(self.info.gages) if g]
+        for q in ("f_hz", "delta"):
+            self.rec.log(f"results/looks/{q}", rr.SeriesPoints(
+                markers="circle", marker_sizes=2.5, colors=[self._hue(i) for i in gage_rows],
+                names=[f"{self.info.channels[i]} look" for i in gage_rows]), static=True)
         if self.rig is None:
             return
         self.rec.log("layout", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -329,6 +345,7 @@ class RerunView:
         time of its first sample. Rows go out every ``live_batch_s`` of stream, one ``send_columns``
         call per channel.
         """
+        self._send_look()
         counts, start = block.counts, block.first_sample
         if self._tail is not None:
             if self._tail_start + self._tail.shape[1] == start:
@@ -383,6 +400,7 @@ class RerunView:
         ``values`` (n_channels, n) are SI (m/s^2, N) in channel order, sampled at ``fs_hz`` Hz from
         stream sample ``first_sample``; ``k`` defaults to the last impact given to :meth:`log_impact`.
         """
+        self._send_look()
         values = np.asarray(values, dtype=np.float64)
         if values.ndim != 2 or values.shape[0] != self.info.n_channels:
             raise ValueError(f"values must be ({self.info.n_channels}, n), got {values.shape}")
@@ -398,6 +416,7 @@ class RerunView:
         """Mark impact ``k`` at ``onset_s`` s: a point on ``impacts/markers``, a TextLog line on
         ``impacts/log`` and its facts as AnyValues on ``impacts/<k>``. ``accepted`` None = pending;
         call again with the decision (the later call wins at the same time)."""
+        self._send_look()
         flags = {n: (v.item() if isinstance(v, np.generic) else v) for n, v in (flags or {}).items()}
         self._onsets[k], self._last_k = float(onset_s), k
         self._at(onset_s)
@@ -417,18 +436,27 @@ class RerunView:
                         decay: np.ndarray | None = None, envelope: np.ndarray | None = None) -> None:
         """Log one gage's estimate for impact ``k`` at time ``t_s`` s.
 
-        ``results/gXX/f_hz`` (Hz), ``results/gXX/delta`` (log decrement, -) and
-        ``results/gXX/amplitude`` (SI) get a point each (final results as large diamonds, and a
-        ``results/log`` line); a value that is not a finite number (a first look's amplitude) is
+        A final result (``final=True``) gets a point each on ``results/gXX/f_hz`` (Hz),
+        ``results/gXX/delta`` (log decrement, -) and ``results/gXX/amplitude`` (SI), drawn as
+        large diamonds, and a ``results/log`` line. A first look (``final=False``) of a gage
+        channel goes into the row of ``results/looks/f_hz`` and ``results/looks/delta`` at
+        ``t_s``, one column per gage (the gages a look does not give are NaN, not drawn); the row
+        is sent once a call for another time, or any other logging call, comes (at the latest
+        with the next block). A value that is not a finite number (a first look's amplitude) is
         not logged. With ``decay_t_s`` (s since stream start, shape (n,)) and ``decay``
         (SI, (n,)) the fitted signal goes to ``impacts/<k>/decay/gXX``; ``envelope`` ((n,) amplitude,
         drawn as +e and -e, or (n, 2)) to ``impacts/<k>/decay/gXX/envelope``.
         """
         g = _gage_name(gage)
+        look = not final and g in self._look_cols
+        if look:
+            self._add_look(g, t_s, f_hz, delta)
+        else:
+            self._send_look()
         style = rr.SeriesPoints(markers="diamond" if final else "circle", marker_sizes=6 if final else 2.5)
         self._at(t_s)
         for name, v in (("f_hz", f_hz), ("delta", delta), ("amplitude", amplitude)):
-            if math.isfinite(v):
+            if math.isfinite(v) and not (look and name != "amplitude"):
                 self.rec.log(f"results/{g}/{name}", rr.Scalars(float(v)), style)
         if final:
             self.rec.log("results/log", rr.TextLog(
@@ -447,6 +475,24 @@ class RerunView:
                          static=True)
             self._send_rows(f"impacts/{k}/decay/{g}/envelope", t, env)
 
+    def _add_look(self, g: str, t_s: float, f_hz: float, delta: float) -> None:
+        """Put gage ``g``'s first look into the look row at ``t_s`` (sending an older row)."""
+        if self._look is not None and self._look[0] != t_s:
+            self._send_look()
+        if self._look is None:
+            self._look = (t_s, np.full((2, len(self._look_cols)), np.nan))
+        self._look[1][:, self._look_cols[g]] = (f_hz, delta)
+
+    def _send_look(self) -> None:
+        """Send the gathered first-look row: one row on each of ``results/looks/{f_hz,delta}``."""
+        if self._look is None:
+            return
+        (t_s, row), self._look = self._look, None
+        self._at(t_s)
+        for q, values in zip(("f_hz", "delta"), row, strict=True):
+            self.rec.log(f"results/looks/{q}", rr.Scalars(values))
+        self.rec.reset_time()
+
     def log_mode_shape(self, k: int, f_hz: float, shape: Mapping[str | int, complex | float]) -> None:
         """Draw a mode shape on the gage layout: arrows from each gage along its sensing axis.
 
@@ -457,6 +503,7 @@ class RerunView:
         """
         if self.rig is None:
             raise ValueError("log_mode_shape needs the rig: the stream's rig_toml is empty")
+        self._send_look()
         by_name = {f"g{g.number:02d}": g for g in self.rig.gages}
         items = [(by_name[_gage_name(key)], complex(v)) for key, v in shape.items()]
         if not items:
@@ -479,7 +526,9 @@ class RerunView:
 
     # ----------------------------------------------------------------- lifetime
     def flush(self) -> None:
-        """Send the queued live rows now (e.g. when the stream pauses) and flush the sinks."""
+        """Send the queued live rows and first look now (e.g. when the stream pauses) and flush
+        the sinks."""
+        self._send_look()
         self._send_pending()
         self.rec.flush(timeout_sec=30.0)
 

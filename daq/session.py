@@ -396,6 +396,11 @@ class Session:
             self._look_cycles = max(self._look_cycles,
                                     int((now - start) / self._period_n + LOOK_EARLY)) + 1
             self._next_look = start + round(self._look_cycles * self._period_n)
+        if self._jobs.too_big_for_a_look(8 * len(self._gage_rows) * (end - start)):
+            self._next_look = float("inf")  # until the next blow rings (jobqueue's look bound)
+            self._look_skipped(onset, "its decay so far passes the queue's bound for a look: "
+                                      "no more looks at this blow")
+            return
         try:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
@@ -417,8 +422,8 @@ class Session:
         k = self._n_events - 1
         if job is not None and job.coarse is not None:
             self.finals_coarse += 1
-            self._say(f"hit {k}: the analyzer is behind ({job.coarse.why}); its final runs "
-                      f"on {job.coarse.decay_s:g} s of decay at about {job.coarse.rate_hz:g} Hz")
+            self._say(f"hit {k}: {job.coarse.why}; its final runs on at most "
+                      f"{job.coarse.decay_s:.3g} s of decay at about {job.coarse.rate_hz:g} Hz")
             if rec:
                 rec.event("final_coarse", ev.t_ns, index=k, why=job.coarse.why,
                           decay_s=job.coarse.decay_s, rate_hz=job.coarse.rate_hz)

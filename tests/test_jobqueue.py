@@ -2,11 +2,12 @@
 finals left unanalysed -- every one counted in the summary and written as an event."""
 
 import json
+import tracemalloc
 from collections import Counter
 
 import pytest
 
-from ramdaq.daq.analyzer import FinalJob, LookJob, analyze_event, decay_skip_s
+from ramdaq.daq.analyzer import FinalJob, LookJob, analyze_event, coarsen, decay_skip_s
 from ramdaq.daq.jobqueue import JobQueue, QueuePolicy, job_bytes
 from ramdaq.daq.session import SUMMARY_TOPIC, Session
 from ramdaq.daq.trigger import Trigger
@@ -71,6 +72,21 @@ def test_a_look_runs_beside_a_final(albacore, one_blow):
     assert q.get(LookJob) is look
 
 
+def test_a_look_past_its_bound_is_not_queued(albacore, one_blow):
+    """A first look is the decay so far at the full rate; past ``max_look_bytes`` it is not
+    queued, and the session can ask before copying the samples. The default bound holds a
+    30 s decay of 16 gages at 2048 Hz (nothing changes there) but not at 25.6 kHz."""
+    info, ev = one_blow
+    look = LookJob(ev.onset_sample, ev.record.values()[:, :2048])
+    q = JobQueue(QueuePolicy(max_look_bytes=look.x.nbytes - 1), info.fs_hz, 0)
+    assert q.too_big_for_a_look(look.x.nbytes) and not q.put_look(look)
+    assert q.looks_pending == 0
+    default = JobQueue(QueuePolicy(), info.fs_hz, 0)
+    assert not default.too_big_for_a_look(16 * 30 * 2048 * 8)
+    assert default.too_big_for_a_look(16 * 30 * 25600 * 8)
+    assert default.put_look(look)
+
+
 def test_a_record_past_the_bytes_bound_runs_coarse_alone(albacore, one_blow):
     info, ev = one_blow
     whole = ev.record.counts.nbytes
@@ -81,12 +97,49 @@ def test_a_record_past_the_bytes_bound_runs_coarse_alone(albacore, one_blow):
     assert q.peak_bytes == job_bytes(adm.job) < whole // 2
 
 
-def test_a_coarse_final_at_25600_hz_keeps_the_mode(albacore):
+@pytest.fixture(scope="module")
+def fast_blow(albacore):
+    """A real 16-gage record at 25.6 kHz: a blow at 3 s, 5 s of its decay."""
+    info, (ev,) = _events(albacore, 25600.0, [3.0], 8.0)
+    return info, ev
+
+
+def test_a_live_final_at_25600_hz_runs_whole_at_the_design_rate(albacore, fast_blow):
+    """Nothing ahead of it, yet a live 25.6 kHz final is decimated 12x with its whole decay.
+    The decimation goes row by row from the counts, so it never holds the gages' full-rate
+    decay in float64 (16 x 5 s x 25.6 kHz x 8 B = 16 MB): numpy's allocations, traced, peak
+    below a quarter of that (one row is a sixteenth, the decimated output a twelfth). A source
+    that can wait (replay) is analysed as recorded."""
+    water = albacore.with_medium("water")
+    info, ev = fast_blow
+    skip = round(decay_skip_s(water) * info.fs_hz)
+    job = JobQueue(QueuePolicy(), info.fs_hz, skip).put_final(FinalJob(0, ev), wait=False).job
+    assert job.coarse is not None and job.event.record is ev.record  # nothing cut or copied
+    rec, i0 = ev.record, ev.onset_sample + skip - ev.record.first_sample
+    tracemalloc.start()
+    try:
+        y, fs, _ = coarsen(rec.counts[:16, i0:], info.fs_hz, job.coarse, rec.scale[:16])
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    n = rec.counts.shape[1] - i0
+    assert (fs, y.shape) == (info.fs_hz / 12, (16, -(-n // 12)))
+    assert peak < 16 * n * 8 / 4
+    hit = analyze_event(0, job.event, info, water, job.coarse)
+    assert hit.accepted, hit.reason
+    decay = f"{n / info.fs_hz:.2f} s"
+    assert hit.coarse.startswith(f"coarse: {decay} of the {decay} decay, decimated 12x to "
+                                 "2133.33 Hz (the stream's 25600 Hz is more than twice")
+    replay = JobQueue(QueuePolicy(), info.fs_hz, skip).put_final(FinalJob(0, ev), wait=True).job
+    assert replay.coarse is None
+
+
+def test_a_coarse_final_at_25600_hz_keeps_the_mode(albacore, fast_blow):
     """12x decimation and 4 s of a 25.6 kHz decay: the same mode as the whole record at the
     design rate, within four of the two fits' combined standard errors (a 1-in-15 000 event
     for Gaussian errors), and said so in the result."""
     water = albacore.with_medium("water")
-    info, (ev,) = _events(albacore, 25600.0, [3.0], 8.0)
+    info, ev = fast_blow
     q = JobQueue(QueuePolicy(), info.fs_hz, round(decay_skip_s(water) * info.fs_hz))
     q.put_final(FinalJob(0, ev), wait=False)  # something ahead: the next one runs coarse
     job = q.put_final(FinalJob(1, ev), wait=False).job

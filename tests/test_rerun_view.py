@@ -98,8 +98,12 @@ def test_rrd_has_the_entity_layout(trial: tuple[Path, list[Block], float]) -> No
                    "/layout/mode"):
         assert entity in rows, entity
     assert {"/layout/gages", "/layout/axes", "/layout/rudder", "/layout/stock"} <= static
-    assert rows["/results/g04/delta"] == 4
-    _, chunks = _rows(path)
+    assert rows["/results/g04/delta"] == 1  # the final; the three first looks are rows of
+    _, chunks = _rows(path)  # results/looks: a column per gage (g04's the 4th), NaN where none
+    t_ns, looks = _series(chunks["/results/looks/delta"])
+    assert looks.shape == (3, 16)
+    np.testing.assert_array_equal(t_ns, [1.1e9, 1.2e9, 1.3e9])
+    assert np.all(looks[:, 3] == 0.06) and np.isnan(np.delete(looks, 3, axis=1)).all()
     assert _values(chunks["/impacts/0"], "status") == [["pending"], ["accepted"]]
     (vectors,) = _values(chunks["/layout/mode"], "Arrows3D:vectors")
     lengths = np.linalg.norm(np.array(vectors), axis=1)
