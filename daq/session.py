@@ -516,7 +516,7 @@ class Session:
             if ev.record is not None:  # full rate only around the blow
                 rec_, fs = ev.record, self.info.fs_hz
                 end = round((ev.onset_s + FULL_RATE_AFTER_S) * fs) - rec_.first_sample + 1
-                self.view.log_full_rate(rec_.first_sample, rec_.values()[:, :max(end, 1)], fs,
+                self.view.log_full_rate(rec_.first_sample, rec_.values(max(end, 1)), fs,
                                         k=hit.index)
             if a is not None:
                 self._log_decays(hit, a)

@@ -336,9 +336,10 @@ class ImpactRecord:
     def last_sample(self) -> int:
         return self.first_sample + self.counts.shape[1] - 1
 
-    def values(self) -> np.ndarray:
-        """Samples in SI units, float64, shape (n_channels, n_samples)."""
-        return self.counts * self.scale[:, None]
+    def values(self, stop: int | None = None) -> np.ndarray:
+        """Samples in SI units, float64, shape (n_channels, n_samples) — the first ``stop``
+        samples only when given (only those are converted)."""
+        return self.counts[:, :stop] * self.scale[:, None]
 
 
 @dataclass(frozen=True)
