@@ -3,7 +3,7 @@
 Every input -- a valid small file mutated (bytes cut, inserted, overwritten, duplicated, the file
 truncated), a CSV built from random cells, or random bytes -- must either import (and then give
 well-formed blocks) or raise the importers' :class:`ImportFormatError` with a one-line message
-naming the file; never another exception, and each within ``MAX_SECONDS``.
+naming the file; never another exception, and each within ``MAX_SECONDS`` of CPU time.
 
 The default run (CI) tries ``SHORT`` examples per importer, derandomised so it is repeatable. The
 long runs (``LONG`` = 100 000 inputs per importer) are marked ``slow``, out of the default run:
@@ -34,6 +34,8 @@ from tests.test_imports import RIG, write_csv, write_tdms, write_uff58
 SHORT = 200
 LONG = 100_000
 MAX_SECONDS = 5.0
+"""CPU seconds (this thread's) one input may take: a runaway loop, not a slow machine. Wall time
+failed a 1-byte input at 8 s on a machine at load 20 while its CPU time was small."""
 _COMMON = dict(deadline=None, database=None, suppress_health_check=list(HealthCheck))
 short = settings(max_examples=SHORT, derandomize=True, **_COMMON)
 long = settings(max_examples=LONG, **_COMMON)
@@ -63,7 +65,7 @@ def check(work, fmt: str, data: bytes, tally: Counter) -> None:
     d, rig, _ = work
     path = d / f"input.{fmt}"
     path.write_bytes(data)
-    t = time.perf_counter()
+    t = time.thread_time()
     try:
         with DEVICES[fmt](path, rig=rig, allow_gaps=True) as dev:  # the gap path fuzzed too
             info, prev = dev.info, None
@@ -78,7 +80,7 @@ def check(work, fmt: str, data: bytes, tally: Counter) -> None:
         msg = str(err)
         assert "\n" not in msg and str(path) in msg, msg
         tally["refused"] += 1
-    assert time.perf_counter() - t < MAX_SECONDS
+    assert time.thread_time() - t < MAX_SECONDS
 
 
 _TOKENS = [b",", b";", b"\t", b"\n", b"\r\n", b"nan", b"-", b"1e308", b"-1e-320", b"inf", b"",
