@@ -1,0 +1,125 @@
+"""Homogeneity across blows of different force (issue 17, data-only layer): a linear structure
+rings at the same frequencies with the same damping whatever the blow's force. Each impact's
+poles are refitted on its own decay (the free modal model's shared poles as the start), and
+each mode's frequency and logarithmic decrement are regressed on the blow's level (log of its
+amplitude): a slope beyond chance flags friction (decrement falling as the blow grows) or an
+amplitude-dependent stiffness (a crack, a rattle: frequency moving with the blow).
+
+Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate; :class:`~ramdaq.analysis.gap.datamodel.FreeModal`
+as made by :func:`~ramdaq.analysis.gap.datamodel.free_modal_model` on the same ``x``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.optimize
+import scipy.signal
+import scipy.stats
+
+from .datamodel import P_CHANCE, Finding, FreeModal, Layer
+
+F_FLOOR = 2e-4
+"""Relative frequency scatter accepted from blow to blow on top of each fit's standard error
+(coloured noise and the neighbouring modes' leakage make the Jacobian's error optimistic)."""
+D_FLOOR = 0.03
+"""Relative decrement scatter accepted likewise (decrements are known to a few per cent at best
+from a 2 s window)."""
+MIN_LEVEL_SPAN = math.log(1.5)
+"""Least spread of the blows' levels (log amplitude) the test needs: blows of one force say
+nothing about amplitude dependence."""
+MAX_GAGES = 4
+MIN_SNR = 30.0
+"""A mode is tested when even the weakest blow measures it this many standard errors at its best
+gage (its decrement then to a few per cent): a mode the small blows barely ring is not judged."""
+
+
+def _basis(t: np.ndarray, f: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Damped cosines and sines of each pole and a constant, (n, 2K+1); ``d`` decrements."""
+    env = np.exp(-np.outer(t, d * f))
+    ph = 2 * math.pi * np.outer(t, f)
+    return np.hstack([env * np.cos(ph), env * np.sin(ph), np.ones((t.size, 1))])
+
+
+def refit_poles(seg: np.ndarray, fs_hz: float, f0: np.ndarray,
+                d0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One impact's poles refitted on its decay ``seg`` (n_ch, n) by variable projection from
+    ``f0`` (Hz), ``d0`` (decrements); returns f, d and their standard errors, each (K,)."""
+    t = np.arange(seg.shape[1]) / fs_hz
+    K = f0.size
+    scale = np.concatenate([np.maximum(f0 * 1e-3, 1e-3), np.maximum(d0, 1e-3)])
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        B = _basis(t, f0 + p[:K] * scale[:K], d0 + p[K:] * scale[K:])
+        coef, *_ = np.linalg.lstsq(B, seg.T, rcond=None)
+        return (seg.T - B @ coef).ravel()
+
+    sol = scipy.optimize.least_squares(resid, np.zeros(2 * K), method="lm", x_scale=1.0, max_nfev=40 * K)
+    J = sol.jac
+    dof = max(1, J.shape[0] - 2 * K - seg.shape[0] * (2 * K + 1))
+    s2 = float(np.sum(sol.fun**2) / dof)
+    cov = np.linalg.pinv(J.T @ J) * s2
+    se = np.sqrt(np.maximum(np.diag(cov), 0)) * scale
+    p = sol.x
+    return f0 + p[:K] * scale[:K], d0 + p[K:] * scale[K:], se[:K], se[K:]
+
+
+def _slope(level: np.ndarray, y: np.ndarray, se: np.ndarray) -> tuple[float, float]:
+    """Weighted least-squares slope of ``y`` on ``level`` and its standard error."""
+    w = 1 / se**2
+    lm = np.sum(w * level) / w.sum()
+    sxx = np.sum(w * (level - lm) ** 2)
+    b = float(np.sum(w * (level - lm) * y) / sxx)
+    return b, float(1 / math.sqrt(sxx))
+
+
+def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
+                skip_rows: Sequence[int] = ()) -> list[Finding]:
+    """The homogeneity check: per excited mode, the slope of frequency and of decrement against
+    the blow's level (per doubling of the blow), as z = slope / its standard error; a finding
+    for the largest |z| beyond its chance level (two-sided normal, Bonferroni over the 2 K
+    slopes at ``P_CHANCE``). Empty when the blows' levels spread too little or fewer than three
+    impacts."""
+    snr = np.median(fm.snr(), axis=0)                                   # (n_g, K)
+    snr[list(skip_rows)] = 0
+    weakest = np.min(np.max(np.delete(fm.snr(), list(skip_rows), axis=1), axis=1), axis=0)
+    ks = np.flatnonzero(~fm.steady & (weakest >= MIN_SNR))
+    if fm.amp.shape[0] < 3 or ks.size == 0:
+        return []
+    rows = list(dict.fromkeys(int(np.argmax(snr[:, k])) for k in ks))[:MAX_GAGES]
+    kp = ks[int(np.argmax(snr[rows][:, ks].max(axis=0)))]               # the best-measured mode
+    gp = int(np.argmax(snr[:, kp]))
+    level = np.log(np.abs(fm.amp[:, gp, kp]))
+    if np.ptp(level) < MIN_LEVEL_SPAN:
+        return []
+    starts = np.rint(fm.t0_s * fm.fs_hz).astype(int)
+    q = int(np.clip(fm.fs_hz // (5 * fm.f_hz.max()), 1, 8))            # 5 samples per cycle kept
+    segs = [x[rows, a:a + fm.n_s] for a in starts]
+    if q > 1:   # zero-phase: the poles are kept, the fit costs 1/q
+        segs = [scipy.signal.decimate(s, q, ftype="fir", zero_phase=True) for s in segs]
+    fits = [refit_poles(s, fm.fs_hz / q, fm.f_hz[ks], fm.delta[ks]) for s in segs]
+    f, d, sf, sd = (np.array([r[i] for r in fits]) for i in range(4))   # each (n_imp, K')
+    sf = np.sqrt(sf**2 + (F_FLOOR * f) ** 2)
+    sd = np.sqrt(sd**2 + (D_FLOOR * np.abs(d)) ** 2)
+    level_db = level / math.log(2)                                       # in doublings
+    out = []
+    for i, k in enumerate(ks):
+        for what, y, s in (("frequency", f[:, i], sf[:, i]), ("decrement", d[:, i], sd[:, i])):
+            b, se = _slope(level_db, y, s)
+            out.append((abs(b) / se, what, float(fm.f_hz[k]), b / float(np.mean(y)), k))
+    z, what, f_k, rel, k = max(out)
+    chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(out))))
+    if z <= chance:
+        return []
+    g_snr = snr[:, k]
+    gages = tuple(numbers[g] for g in np.flatnonzero(g_snr >= 0.5 * g_snr.max()))
+    cause = ("friction or amplitude-dependent damping" if what == "decrement"
+             else "amplitude-dependent stiffness (a crack, a rattle, a stop)")
+    return [Finding("homogeneity", Layer.NONLINEARITY, gages, z, chance, rel, "per doubling of the blow",
+                    f"mode {f_k:.2f} Hz: {what} changes by {100 * rel:+.1f} % per doubling of the blow "
+                    f"({cause})", window="decay", mode_hz=(f_k,),
+                    null="slope z of a linear structure's poles on the blow level: standard normal, "
+                         f"Bonferroni over {len(out)} slopes",
+                    more=((f"{what}_per_doubling", rel, "1"),))]
