@@ -163,14 +163,18 @@ def draw_modes(rig: RigData, rudder_hz: Sequence[float], rng: np.random.Generato
     span = np.maximum(np.abs(pos[rud]).max(axis=0), 0.3)
     ram = np.array(rig.ram_m)
     top = pos[body == "stock"].max(axis=0) if (body == "stock").any() else np.array([0.0, 0.0, span[2]])
+    hull = body == "hull"
+    hull_span = np.maximum(np.abs(pos[hull]).max(axis=0), 1.0) if hull.any() else span
     f, z, sh, ar, at, kinds = [], [], [], [], [], []
     for k, f0 in enumerate(rudder_hz):
         kind = ("bending", "torsion", "mixed")[k % 3]
         c = _field(rng, kind)
         s = _eval(c, pos, span)
         s[body == "stock"] *= rng.uniform(0.3, 0.7)
-        hull = body == "hull"
-        s[hull] = rng.uniform(0.02, 0.1) * _eval(_field(rng, "mixed"), pos[hull], span)
+        # the hull feels the rudder's modes at 2-10 %, smoothly over its own extent
+        lin = rng.uniform(-0.3, 0.3, 2)
+        s[hull] = rng.uniform(0.02, 0.1) * (1 + lin[0] * pos[hull, 0] / hull_span[0]
+                                            + lin[1] * pos[hull, 2] / hull_span[2])
         s[vert] *= 0.2
         norm = np.abs(s[rud & ~vert]).max() if (rud & ~vert).any() else 1.0
         f.append(f0 * rng.uniform(0.93, 1.07))
@@ -179,7 +183,6 @@ def draw_modes(rig: RigData, rudder_hz: Sequence[float], rng: np.random.Generato
         ar.append(_eval(c, ram, span) / norm)
         at.append(0.5 * _eval(c, top, span) / norm)
         kinds.append(kind)
-    hull_span = np.maximum(np.abs(pos[body == "hull"]).max(axis=0), 1.0) if (body == "hull").any() else span
     for fh in np.sort(rng.uniform(4.0, 15.0, int(rng.integers(2, 4)))):
         lin = rng.standard_normal(3)
         own = 1.0 + lin[0] * pos[:, 0] / hull_span[0] + lin[1] * pos[:, 2] / hull_span[2]
