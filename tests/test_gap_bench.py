@@ -246,3 +246,19 @@ def test_a_data_only_finding_answers_when_the_model_names_nothing():
     assert decision(_rec(zdetect=2.0, data_findings=[hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
     fr = hom | {"more": {"decrement_per_doubling": {"value": -0.3}}}
     assert decision(_rec(zdetect=2.0, data_findings=[fr]), 8.0, 10.0, 0.0)["named"] == "friction"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", ["crack", "rattle", "mains_pickup", "sensor_resonance", "gain_drift"])
+def test_an_effect_outside_the_library_comes_out_unexplained(tmp_path, effect):
+    """Issue 17: a modal-family trial (perturbed rig, all of ramdaq gap's layers) with an effect
+    the library does not hold is answered "unexplained" with at least one of its gages -- never
+    the nearest library effect. Slow (a whole diagnosis each, ~1-3 min on a loaded machine)."""
+    from ramdaq.daq.commands.gap_bench import decision, run_one
+
+    sc = scenarios(1, "check", (effect,), 0.25, "modal")[0]
+    r = run_one(sc, str(tmp_path))
+    assert "error" not in r, r["error"]
+    d = decision(r, 8.0, 10.0, 0.0)
+    assert d["named"] == "unexplained", (d, r.get("headline"))
+    assert set(d["location"]["gages"]) & set(r["truth"]["gages"]), (d["location"], r["truth"])

@@ -12,8 +12,15 @@ verdict's own thresholds are tuned on the **development** seeds (``--seeds dev``
 ``daq/commands/gap_thresholds.json`` (package data), and only then applied to the other seed sets, which never
 feed back (:data:`SEED_SETS`).
 
+Two generator families (``--family truth|modal|all``, default all): the truth simulator above, and
+the ``modal`` family (:mod:`ramdaq.analysis.truth.modal_family`), a free modal superposition that
+shares nothing with the diagnosis's model, whose effects include five the library does not hold
+(the right answer "unexplained", with where). By default the diagnosis gets a rig perturbed by up
+to 25 % (``--perturb``) and runs every layer of ``ramdaq gap`` (model level, data-only checks,
+effect search); the answer scored combines them (:func:`decision`).
+
 Printed: confusion matrix, top-1 and top-3 identification over effects above their threshold (a
-pair of effects counts by its first, primary term),
+pair of effects counts by its first, primary term), figures per family and per layer,
 false alarms on no-effect trials, localisation (gages, mode band, window), the fraction of the
 gap closed on held-out impacts, and the cost.
 """
