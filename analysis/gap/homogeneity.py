@@ -3,7 +3,9 @@ rings at the same frequencies with the same damping whatever the blow's force. E
 poles are refitted on its own decay (the free modal model's shared poles as the start), and
 each mode's frequency and logarithmic decrement are regressed on the blow's level (log of its
 amplitude): a slope beyond chance flags friction (decrement falling as the blow grows) or an
-amplitude-dependent stiffness (a crack, a rattle: frequency moving with the blow).
+amplitude-dependent stiffness (a crack, a rattle: frequency moving with the blow). And every
+other mode's amplitude must grow as the blow (log-log slope 1): friction's linear decay, which the
+free model fits with an extra slow pole of the same size after every blow, fails that.
 
 Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate; :class:`~ramdaq.analysis.gap.datamodel.FreeModal`
 as made by :func:`~ramdaq.analysis.gap.datamodel.free_modal_model` on the same ``x``.
@@ -30,6 +32,9 @@ MIN_LEVEL_SPAN = math.log(1.5)
 """Least spread of the blows' levels (log amplitude) the test needs: blows of one force say
 nothing about amplitude dependence."""
 MAX_GAGES = 4
+AMP_FLOOR = 0.02
+"""Relative amplitude scatter accepted from blow to blow on top of each amplitude's standard
+error (the ram's contact time and place vary a little from blow to blow)."""
 MIN_SNR = 30.0
 """A mode is tested when even the weakest blow measures it this many standard errors at its best
 gage (its decrement then to a few per cent): a mode the small blows barely ring is not judged."""
@@ -109,17 +114,33 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
         for what, y, s in (("frequency", f[:, i], sf[:, i]), ("decrement", d[:, i], sd[:, i])):
             b, se = _slope(level_db, y, s)
             out.append((abs(b) / se, what, float(fm.f_hz[k]), b / float(np.mean(y)), k))
+    for k in ks:
+        if k == kp:
+            continue
+        # linearity: every mode's amplitude grows as the blow (log-log slope 1)
+        g = int(np.argmax(snr[:, k]))
+        a = np.abs(fm.amp[:, g, k])
+        sa = np.sqrt((fm.amp_se[:, g, k] / a) ** 2 + AMP_FLOOR**2)
+        b, se = _slope(level, np.log(a), sa)
+        out.append((abs(b - 1) / se, "amplitude", float(fm.f_hz[k]), b - 1, k))
     z, what, f_k, rel, k = max(out)
     chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(out))))
     if z <= chance:
         return []
     g_snr = snr[:, k]
     gages = tuple(numbers[g] for g in np.flatnonzero(g_snr >= 0.5 * g_snr.max()))
-    cause = ("friction or amplitude-dependent damping" if what == "decrement"
-             else "amplitude-dependent stiffness (a crack, a rattle, a stop)")
-    return [Finding("homogeneity", Layer.NONLINEARITY, gages, z, chance, rel, "per doubling of the blow",
-                    f"mode {f_k:.2f} Hz: {what} changes by {100 * rel:+.1f} % per doubling of the blow "
-                    f"({cause})", window="decay", mode_hz=(f_k,),
-                    null="slope z of a linear structure's poles on the blow level: standard normal, "
+    if what == "amplitude":
+        text = (f"mode {f_k:.2f} Hz: amplitude grows as the blow to the power {1 + rel:.2f}, not 1 "
+                "(friction or amplitude-dependent damping)")
+        unit = "exponent - 1"
+    else:
+        cause = ("friction or amplitude-dependent damping" if what == "decrement"
+                 else "amplitude-dependent stiffness (a crack, a rattle, a stop)")
+        text = f"mode {f_k:.2f} Hz: {what} changes by {100 * rel:+.1f} % per doubling of the blow ({cause})"
+        unit = "per doubling of the blow"
+    return [Finding("homogeneity", Layer.NONLINEARITY, gages, z, chance, rel, unit, text,
+                    window="decay", mode_hz=(f_k,),
+                    null="slope z of a linear structure's poles and amplitudes on the blow level: "
+                         "standard normal, "
                          f"Bonferroni over {len(out)} slopes",
                     more=((f"{what}_per_doubling", rel, "1"),))]

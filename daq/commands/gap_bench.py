@@ -321,7 +321,7 @@ LAYERS = ("sensor", "excitation", "nonlinearity", "structure", "model form", "un
 
 def _data_effect(f: dict) -> str | None:
     if f["check"] == "homogeneity":
-        return "friction" if "decrement_per_doubling" in f.get("more", {}) else "unexplained"
+        return "unexplained" if "frequency_per_doubling" in f.get("more", {}) else "friction"
     return DATA_EFFECT.get(f["check"])
 
 
