@@ -325,6 +325,12 @@ def _data_effect(f: dict) -> str | None:
     return DATA_EFFECT.get(f["check"])
 
 
+def _strength(f: dict) -> float:
+    """A stored finding's statistic over its chance level (JSON stores an infinite one as null)."""
+    stat = math.inf if f["statistic"] is None else f["statistic"]
+    return stat / max(f["chance_level"] or 1e-12, 1e-12)
+
+
 def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
     """The one report's answer, both layers: the model layer's choice (:func:`_decide`), which a
     data-only finding replaces when the model names no effect or blames a sensor (the data
@@ -342,7 +348,7 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
         return out
     if named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
         return out
-    f = max(finds, key=lambda f: f["statistic"] / max(f["chance_level"], 1e-12))
+    f = max(finds, key=_strength)
     eff = _data_effect(f)
     cd = next((c for c in r.get("candidates", []) if c["name"] == eff), None)
     return {"named": eff, "by": "data", "closed_held": cd["closed_held"] if cd else None,
