@@ -80,6 +80,17 @@ def _slope(level: np.ndarray, y: np.ndarray, se: np.ndarray) -> tuple[float, flo
     return b, float(1 / math.sqrt(sxx))
 
 
+def own_amplitudes(fm: FreeModal) -> np.ndarray:
+    """Each impact's complex amplitudes (n_imp, n_g, K) less what the previous impact's ringing
+    still contributes at its window's start (that impact's amplitudes carried forward by each
+    pole: exact for a linear structure). A lightly damped mode still ringing when the next blow
+    comes would otherwise not grow as the blow."""
+    amp = fm.amp.copy()
+    dt = np.diff(fm.t0_s)
+    amp[1:] -= fm.amp[:-1] * np.exp(np.multiply.outer(dt, fm.poles))[:, None, :]
+    return amp
+
+
 def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
                 skip_rows: Sequence[int] = ()) -> list[Finding]:
     """The homogeneity check: per excited mode, the slope of frequency and of decrement against
@@ -96,7 +107,8 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     rows = list(dict.fromkeys(int(np.argmax(snr[:, k])) for k in ks))[:MAX_GAGES]
     kp = ks[int(np.argmax(snr[rows][:, ks].max(axis=0)))]               # the best-measured mode
     gp = int(np.argmax(snr[:, kp]))
-    level = np.log(np.abs(fm.amp[:, gp, kp]))
+    own = own_amplitudes(fm)
+    level = np.log(np.abs(own[:, gp, kp]))
     if np.ptp(level) < MIN_LEVEL_SPAN:
         return []
     starts = np.rint(fm.t0_s * fm.fs_hz).astype(int)
@@ -119,7 +131,7 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
             continue
         # linearity: every mode's amplitude grows as the blow (log-log slope 1)
         g = int(np.argmax(snr[:, k]))
-        a = np.abs(fm.amp[:, g, k])
+        a = np.abs(own[:, g, k])
         sa = np.sqrt((fm.amp_se[:, g, k] / a) ** 2 + AMP_FLOOR**2)
         b, se = _slope(level, np.log(a), sa)
         out.append((abs(b - 1) / se, "amplitude", float(fm.f_hz[k]), b - 1, k))
