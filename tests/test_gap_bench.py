@@ -124,7 +124,8 @@ def test_benchmark_command_takes_one_seed_set(tmp_path, capsys):
         main(["gap", "benchmark", "--dev", "--seeds", "holdout", "--out", str(tmp_path)])
     # a re-score of results that were never stored names the file it looked for
     assert main(["gap", "benchmark", "--seeds", "holdout", "--rescore", "--out", str(tmp_path)]) == 1
-    assert "holdout_results.json: no stored results" in capsys.readouterr().err
+    # (the default run: both families, rigs perturbed by 25 %)
+    assert "holdout_perturb0.25_all_results.json: no stored results" in capsys.readouterr().err
 
 
 def test_perturbed_rig_is_seeded_and_within_its_fraction():
@@ -171,3 +172,101 @@ def test_an_effect_only_where_the_model_form_misses_is_not_named():
     # and an effect closing less than the raised floor is not named either
     low = r | {"candidates": [cand | {"closed_held": 0.3}], "form_gages": [13]}
     assert _decide(low, 8.0, 10.0, 0.0) == "none"
+
+
+def test_a_gap_the_best_library_effect_barely_closes_is_unexplained():
+    """Issue 17: a significant gap whose best library effect closes less than half of it on the
+    held-out impacts is "unexplained" -- never the nearest library effect."""
+    from ramdaq.analysis.gap.verdict import UNEXPLAINED_CLOSURE, choose
+
+    cand = {"name": "gage_sensitivity", "dbic": -500.0, "dbic_marginal": None, "closed_fit": 0.6}
+    assert choose([cand | {"closed_held": 0.9}], True, 10.0, 0.0) == "gage_sensitivity"
+    assert choose([cand | {"closed_held": UNEXPLAINED_CLOSURE - 0.1}], True, 10.0, 0.0) == "unexplained"
+    assert choose([cand | {"closed_held": 0.2}], False, 10.0, 0.0) is None
+
+
+def test_gap_where_names_the_gages_band_window_and_size():
+    from ramdaq.analysis.gap.evidence import GapMap, bands_for
+    from ramdaq.analysis.gap.verdict import gap_where, where_text
+
+    bands = bands_for(np.array([13.0, 45.0]), 100.0)
+    shape = (4, 3, 3)
+    exp = np.ones(shape)
+    obs = exp.copy()
+    obs[2, 1, 1] = 50.0        # gage 7, the 13 Hz band, early window
+    obs[3, 1, 1] = 30.0        # gage 9 the same, 0.6 of it
+    obs[0, 2, 2] = 5.0         # gage 1, a little elsewhere
+    z = (obs - exp) / 0.5
+    m = GapMap(z, obs, exp, np.full(shape, 0.5), bands, (1, 3, 7, 9))
+    w = gap_where(m, m)
+    assert w["gages"] == [7, 9] and w["band"] == "13.0 Hz" and w["window"] == "early"
+    assert w["excess"] == pytest.approx(49 + 29 + 4) and w["z"] == pytest.approx(98.0)
+    assert "gages 7, 9" in where_text(w)
+
+
+def _rec(**kw) -> dict:
+    base = {"family": "modal", "effect": "crack", "expect": "unexplained", "size": 1.0, "seconds": 1.0,
+            "zdetect": 30.0, "perturb": 0.25, "min_closure": 0.0, "signatures": ["friction"],
+            "candidates": [{"name": "friction", "dbic": -200.0, "dbic_marginal": None, "closed_held": 0.3,
+                            "closed_fit": 0.4, "location": {"gages": [1], "window": "late"}}],
+            "truth": {"gages": [1, 3], "mode_hz": 13.0, "window": "early"},
+            "band_edges_hz": [0.0, 8.0, 30.0, 100.0], "form_gages": [12],
+            "unexplained_where": {"gages": [3], "band": "13.0 Hz", "band_hz": 13.0, "window": "early",
+                                  "excess": 1e4, "z": 30.0}, "data_findings": []}
+    return base | kw
+
+
+def test_an_outside_effect_scores_as_unexplained_in_its_own_class():
+    from ramdaq.daq.commands.gap_bench import decision
+
+    r = _rec()
+    d = decision(r, 8.0, 10.0, 0.0)
+    assert d["named"] == "unexplained" and d["location"]["gages"] == [3]
+    # unexplained only where the calibrated rig still misses its modes is the model's form
+    assert decision(_rec(form_gages=[3, 12]), 8.0, 10.0, 0.0)["named"] == "none"
+    s = score([r, _rec(effect="none", expect="none", size=0.0, zdetect=2.0)], {}, 8.0, 10.0, 0.0)
+    lay = s["by_family"]["modal"]["layers"]
+    assert lay["unexplained"]["n"] == 1 and lay["unexplained"]["top1"] == 1.0
+    assert lay["unexplained"]["gages"] == 1.0
+    assert lay["model form"]["top1"] == 1.0 and s["by_family"]["modal"]["false_alarms"] == 0.0
+
+
+def test_a_data_only_finding_answers_when_the_model_names_nothing():
+    """Both layers in one report: the model sees no gap beyond noise, the data-only layer finds
+    a high-pass on gages 2 and 5 (issue 17: missed as "no gap"); a homogeneity finding in the
+    frequency is an amplitude-dependent stiffness the library does not hold."""
+    from ramdaq.daq.commands.gap_bench import decision
+
+    hp = {"check": "highpass", "gages": [2, 5], "window": "decay", "mode_hz": [13.0], "statistic": 40.0,
+          "chance_level": 5.0, "more": {}}
+    r = _rec(effect="highpass", expect="highpass", zdetect=2.0, data_findings=[hp])
+    d = decision(r, 8.0, 10.0, 0.0)
+    assert d["named"] == "highpass" and d["by"] == "data" and d["location"]["gages"] == [2, 5]
+    hom = hp | {"check": "homogeneity", "gages": [1], "more": {"frequency_per_doubling": {"value": -0.02}}}
+    assert decision(_rec(zdetect=2.0, data_findings=[hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    fr = hom | {"more": {"decrement_per_doubling": {"value": -0.3}}}
+    assert decision(_rec(zdetect=2.0, data_findings=[fr]), 8.0, 10.0, 0.0)["named"] == "friction"
+
+
+_MISSED = ("measured on this check seed (2026-11-27, branch gen): the unexplained gap is placed "
+           "on other gages, or a library effect is named")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", [
+    "crack", "rattle",
+    pytest.param("mains_pickup", marks=pytest.mark.xfail(reason=_MISSED + " (gage 1, not 7-9)")),
+    pytest.param("sensor_resonance", marks=pytest.mark.xfail(reason=_MISSED + " (tiller named)")),
+    pytest.param("gain_drift", marks=pytest.mark.xfail(reason=_MISSED + " (gages 10, 16, 12, not 4)"))])
+def test_an_effect_outside_the_library_comes_out_unexplained(tmp_path, effect):
+    """Issue 17: a modal-family trial (perturbed rig, all of ramdaq gap's layers) with an effect
+    the library does not hold is answered "unexplained" with at least one of its gages -- never
+    the nearest library effect. Slow (a whole diagnosis each, ~1-3 min on a loaded machine)."""
+    from ramdaq.daq.commands.gap_bench import decision, run_one
+
+    sc = scenarios(1, "check", (effect,), 0.25, "modal")[0]
+    r = run_one(sc, str(tmp_path))
+    assert "error" not in r, r["error"]
+    d = decision(r, 8.0, 10.0, 0.0)
+    assert d["named"] == "unexplained", (d, r.get("headline"))
+    assert set(d["location"]["gages"]) & set(r["truth"]["gages"]), (d["location"], r["truth"])

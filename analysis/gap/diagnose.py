@@ -65,7 +65,7 @@ from .rigfit import ModelLevel
 from .sensors import DataChecks
 from .terms import Placement, Term
 from .trialdata import TrialData
-from .verdict import choose, closed_share, closure, detection_score, location
+from .verdict import choose, closed_share, closure, detection_score, gap_where, location, where_text
 
 
 @dataclass(frozen=True)
@@ -211,13 +211,23 @@ class Diagnosis:
         """The verdict in one line: with a model level, "no effect; model form: ..." when no
         gap stands beyond the noise, else the verdict and the model's form error beside it."""
         if self.model_level is None:
-            return self.verdict
+            w = self.unexplained_where
+            return self.verdict if w is None else f"unexplained: {where_text(w)}"
         level = self.model_level
         head = {"no gap beyond noise": "no effect",
                 "unexplained": ("no effect named, the gap is the rig model's form"
                                 if level.fit is not None and level.fit.form else "unexplained")
                 }.get(self.verdict, self.verdict)
+        w = self.unexplained_where
+        if w is not None and not set(w["gages"]) <= level.form_gages():
+            head = f"unexplained: {where_text(w)}"
         return f"{head}; {level.statement()}"
+
+    @property
+    def unexplained_where(self) -> dict | None:
+        """Where the gap no library effect closes lies and how big (:func:`gap_where`); None
+        unless the verdict is "unexplained"."""
+        return gap_where(self.map_fit, self.map_held) if self.verdict == "unexplained" else None
 
     @functools.cached_property
     def features(self) -> FeatureMap | None:
@@ -241,6 +251,7 @@ class Diagnosis:
             "model_level": self.model_level.to_json() if self.model_level else None,
             "detection_z": round(self.z_detect, 2) if np.isfinite(self.z_detect) else None,
             "effect": self.best.name if self.best else None,
+            "unexplained": self.unexplained_where,
             "best": self.best.to_json() if self.best else None,
             "gap": {"fitted": round(self.gap_fit, 2), "held_out": round(self.gap_held, 2),
                     "unit": "residual energy beyond the noise expectation, in noise variances"},

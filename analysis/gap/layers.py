@@ -61,7 +61,8 @@ def precedence(findings: list[Finding], effect: str | None, gages: set[int]) -> 
 
 
 COUNTERPART = {"gage_sensitivity": "gain", "time_skew": "time_skew", "highpass": "highpass",
-               "clipping": "clipping", "ambient_tone": "ambient_tone", "double_hit": "double_hit"}
+               "clipping": "clipping", "ambient_tone": "ambient_tone", "double_hit": "double_hit",
+               "friction": "homogeneity"}
 """The data-only check that looks for what each model effect would leave in the data."""
 
 

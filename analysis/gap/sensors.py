@@ -17,7 +17,9 @@ objects, each with its statistic and the level the statistic exceeds by chance w
 - :func:`pre_trigger_lines` -- lines before the blows (an ambient tone), after the previous
   blow's decay is taken out with the free modal model;
 - :func:`double_hits` -- the early window at full rate: a second blow of the ram, its delay and
-  size relative to the first.
+  size relative to the first;
+- :func:`~ramdaq.analysis.gap.homogeneity.homogeneity` -- the same modes, frequencies and damping
+  at blows of different force: friction, amplitude-dependent damping or stiffness.
 
 Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate, gages in DAQ channel order; ``gages`` the
 rig's :class:`~ramdaq.analysis.model.rig.Gage` per row.
@@ -36,6 +38,7 @@ import scipy.stats
 from ..model.rig import Gage
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer, free_modal_model
 from .features import rigid_projector
+from .homogeneity import homogeneity
 from .signal_checks import dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
 
 PHASE_FLOOR_RAD = 0.02
@@ -93,9 +96,10 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s)
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(x[keep], fs_hz, onsets_s, [numbers[i] for i in keep], fm)
+    found += homogeneity(x, fm, numbers, skip_rows=rows)
     return DataChecks(modal=fm, findings=found,
                       looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
-                              "ambient_tone", "double_hit"))
+                              "ambient_tone", "double_hit", "homogeneity"))
 
 
 # ---------------------------------------------------------------- channel timing and chain

@@ -12,8 +12,15 @@ verdict's own thresholds are tuned on the **development** seeds (``--seeds dev``
 ``daq/commands/gap_thresholds.json`` (package data), and only then applied to the other seed sets, which never
 feed back (:data:`SEED_SETS`).
 
+Two generator families (``--family truth|modal|all``, default all): the truth simulator above, and
+the ``modal`` family (:mod:`ramdaq.analysis.truth.modal_family`), a free modal superposition that
+shares nothing with the diagnosis's model, whose effects include five the library does not hold
+(the right answer "unexplained", with where). By default the diagnosis gets a rig perturbed by up
+to 25 % (``--perturb``) and runs every layer of ``ramdaq gap`` (model level, data-only checks,
+effect search); the answer scored combines them (:func:`decision`).
+
 Printed: confusion matrix, top-1 and top-3 identification over effects above their threshold (a
-pair of effects counts by its first, primary term),
+pair of effects counts by its first, primary term), figures per family and per layer,
 false alarms on no-effect trials, localisation (gages, mode band, window), the fraction of the
 gap closed on held-out impacts, and the cost.
 """
@@ -67,14 +74,34 @@ def false_alarm_bound(n_alarms: int, n_trials: int, confidence: float = 0.95) ->
     return 1.0 if n_alarms >= n_trials else float(beta.ppf(confidence, n_alarms + 1, n_trials - n_alarms))
 
 
+FAMILIES = ("truth", "modal")
+"""Generator families: ``truth`` the richer simulator (:mod:`ramdaq.analysis.truth.trial`),
+``modal`` the free modal superposition that shares nothing with the diagnosis's model
+(:mod:`ramdaq.analysis.truth.modal_family`)."""
+MODAL_SEED_OFFSET = 50_000
+"""The modal family's scenario seeds are its seed set's first + this + 1000 x class + i (the
+truth family's stay below first + 13 000)."""
+MODAL_SIZES = (0.5, 2.0)
+"""The modal family's sizes: plain on an oscillogram (0.5) to strong (2). No detection threshold
+(a90) is tuned for this family (tuning is on the truth family's development seeds only), so
+every modal trial with an effect counts as above threshold."""
+
+
 def scenarios(per_class: int, seeds: str = "benchmark",
-              effects: tuple[str, ...] | None = None, perturb: float = 0.0) -> list[dict]:
+              effects: tuple[str, ...] | None = None, perturb: float = 0.0,
+              family: str = "truth") -> list[dict]:
     """The fixed scenario list: every effect class x ``per_class`` sizes, rigs in turn, from the
-    seed set named ``seeds`` (a key of :data:`SEED_SETS`). With ``perturb`` the diagnosis is
-    handed a rig whose constants are off the generator's by up to that fraction
-    (:func:`perturbed_rig`)."""
+    seed set named ``seeds`` (a key of :data:`SEED_SETS`), of the generator ``family``
+    (:data:`FAMILIES`, or ``"all"``). With ``perturb`` the diagnosis is handed a rig whose
+    constants are off the generator's by up to that fraction (:func:`perturbed_rig`)."""
     if not 0 <= perturb < 1:
         raise ValueError(f"--perturb {perturb}: a fraction from 0 to below 1 (0.25 is +-25 %)")
+    if family == "all":
+        return [sc for fam in FAMILIES for sc in scenarios(per_class, seeds, effects, perturb, fam)]
+    if family == "modal":
+        return _modal_scenarios(per_class, seeds, effects, perturb)
+    if family != "truth":
+        raise ValueError(f"--family {family!r}: one of {', '.join(FAMILIES)}, all")
     from ...analysis.truth.trial import EFFECTS
 
     if seeds not in SEED_SETS:
@@ -83,7 +110,7 @@ def scenarios(per_class: int, seeds: str = "benchmark",
         raise ValueError(f"--per-class {per_class}: from 1 to 100 (seed sets are 1000 apart per class)")
     base = SEED_SETS[seeds][0]
     out = []
-    for k, eff in enumerate(effects or EFFECTS):
+    for k, eff in enumerate(tuple(e for e in (effects or EFFECTS) if e in EFFECTS)):
         rigs = [r for r in RIGS if r[1] == "water"] if eff == "added_mass" else list(RIGS)
         # the false-alarm threshold is a tail quantile: tune it on at least N_NONE_DEV trials
         n = max(per_class, N_NONE_DEV) if (seeds == "dev" and eff == "none") else per_class
@@ -92,7 +119,30 @@ def scenarios(per_class: int, seeds: str = "benchmark",
             # sizes in a seeded order so rigs and sizes are not locked together
             j = int(np.random.default_rng(base + k).permutation(n)[i])
             name, medium = rigs[i % len(rigs)]
-            out.append({"effect": eff, "size": 0.0 if eff == "none" else float(sizes[j]),
+            out.append({"family": "truth", "effect": eff, "size": 0.0 if eff == "none" else float(sizes[j]),
+                        "rig": name, "medium": medium, "seed": base + 1000 * k + i}
+                       | ({"perturb": perturb} if perturb else {}))
+    return out
+
+
+def _modal_scenarios(per_class: int, seeds: str, effects: tuple[str, ...] | None,
+                     perturb: float) -> list[dict]:
+    """The modal family's scenarios (:data:`MODAL_SIZES`, :data:`MODAL_SEED_OFFSET`)."""
+    from ...analysis.truth.modal_family import EFFECTS
+
+    if seeds not in SEED_SETS:
+        raise ValueError(f"seed set {seeds!r}: not one of {', '.join(SEED_SETS)}")
+    if not 0 < per_class <= 100:
+        raise ValueError(f"--per-class {per_class}: from 1 to 100 (seed sets are 1000 apart per class)")
+    base = SEED_SETS[seeds][0] + MODAL_SEED_OFFSET
+    out = []
+    for k, eff in enumerate(EFFECTS):
+        if effects and eff not in effects:
+            continue
+        sizes = np.geomspace(*MODAL_SIZES, per_class)
+        for i in range(per_class):
+            name, medium = RIGS[(i + k) % len(RIGS)]
+            out.append({"family": "modal", "effect": eff, "size": 0.0 if eff == "none" else float(sizes[i]),
                         "rig": name, "medium": medium, "seed": base + 1000 * k + i}
                        | ({"perturb": perturb} if perturb else {}))
     return out
@@ -118,40 +168,36 @@ def perturbed_rig(rig: Rig, fraction: float, seed: int) -> Rig:
 
 
 def run_one(sc: dict, workdir: str) -> dict:
-    """Generate, record, diagnose one scenario; the result as plain JSON."""
-    from ...analysis.gap.diagnose import Settings
-    from ...analysis.model.rig import load_rig
-    from ...analysis.truth.trial import generate_trial
+    """Generate, record, diagnose one scenario (all of ``ramdaq gap``'s layers: with a perturbed
+    rig the model level, then the data-only checks and the effect search); the result as plain
+    JSON."""
     from ...drivers.array_device import ArrayDevice
     from ..record import record
     from .gap import run_gap
 
     t0 = time.perf_counter()
-    rig = load_rig(sc["rig"]).with_medium(sc["medium"])
-    tt = generate_trial(rig, sc["effect"], sc["size"], sc["seed"])
+    gen = _generate_modal(sc) if sc.get("family") == "modal" else _generate_truth(sc)
     t_gen = time.perf_counter() - t0
-    path = Path(workdir) / f"{sc['effect']}-{sc['seed']}.mcap"
-    gages = tuple(g.number for g in tt.rig.gages_by_channel())
-    dev = ArrayDevice(tt.counts, tt.scale, tt.fs_hz, gages=gages, rig_toml=tt.rig.text,
-                      extra={"medium": tt.rig.medium, "adc_bits": tt.rig.daq.adc_bits})
+    path = Path(workdir) / f"{sc.get('family', 'truth')}-{sc['effect']}-{sc['seed']}.mcap"
+    dev = ArrayDevice(gen["counts"], gen["scale"], gen["fs_hz"], gages=gen["gages"], rig_toml=gen["rig"].text,
+                      extra={"medium": sc["medium"], "adc_bits": gen["adc_bits"]})
     record(dev, path, readout=False, overwrite=True)
     t1 = time.perf_counter()
     perturb = sc.get("perturb", 0.0)
     try:
         # with the generator's own rig the figures are of the effect search alone; a perturbed
         # rig is first calibrated to the trial's modes, as ramdaq gap does
-        given = perturbed_rig(tt.rig, perturb, sc["seed"]) if perturb else None
-        lt, td, d = run_gap(path, rig=given, settings=Settings(), data_checks=False,
-                            model_level=bool(perturb))
+        given = perturbed_rig(gen["rig"], perturb, sc["seed"]) if perturb else None
+        lt, td, d = run_gap(path, rig=given, data_checks=True, model_level=bool(perturb))
     except Exception as exc:  # a scenario that breaks the diagnosis is a result, not a crash
-        return sc | {"error": f"{type(exc).__name__}: {exc}", "seconds": time.perf_counter() - t1}
+        return sc | {"error": f"{type(exc).__name__}: {exc}", "seconds": time.perf_counter() - t1,
+                     "expect": gen["expect"], "truth": gen["truth"]}
     finally:
         path.unlink(missing_ok=True)
     t_diag = time.perf_counter() - t1
-    te = tt.effect
     return sc | {
-        "truth": {"gages": list(te.gages), "mode_hz": te.mode_hz, "window": te.window},
-        "n_impacts_found": int(len(lt.onsets_s)), "n_impacts_true": int(len(tt.onsets_s)),
+        "truth": gen["truth"], "expect": gen["expect"],
+        "n_impacts_found": int(len(lt.onsets_s)), "n_impacts_true": gen["n_impacts"],
         "verdict": d.verdict, "named": d.best.name if d.best else None,
         "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
         "zdetect": float(d.z_detect),
@@ -159,10 +205,66 @@ def run_one(sc: dict, workdir: str) -> dict:
         "signatures": [s.effect.name for s in d.signatures],
         "closed_held": d.best.closed_held if d.best else None,
         "location": d.best.location if d.best else None,
+        "unexplained_where": d.unexplained_where,
+        "data_findings": [f.to_json() for f in d.data.findings] if d.data else None,
         "band_edges_hz": d.map_fit.bands.edges_hz.tolist(),
         "seconds": t_diag, "seconds_generate": t_gen,
     } | ({"headline": d.headline, "min_closure": _min_closure(d),
           "form_gages": sorted(d.model_level.form_gages()) if d.model_level else []} if perturb else {})
+
+
+def _generate_truth(sc: dict) -> dict:
+    """A truth-simulator trial of the scenario, as :func:`run_one` records it."""
+    from ...analysis.model.rig import load_rig
+    from ...analysis.truth.trial import generate_trial
+
+    rig = load_rig(sc["rig"]).with_medium(sc["medium"])
+    tt = generate_trial(rig, sc["effect"], sc["size"], sc["seed"])
+    te = tt.effect
+    return {"rig": tt.rig, "counts": tt.counts, "scale": tt.scale, "fs_hz": tt.fs_hz,
+            "gages": tuple(g.number for g in tt.rig.gages_by_channel()), "adc_bits": tt.rig.daq.adc_bits,
+            "n_impacts": int(len(tt.onsets_s)), "expect": sc["effect"],
+            "truth": {"gages": list(te.gages), "mode_hz": te.mode_hz, "window": te.window}}
+
+
+RUDDER_OVER_HULL = 5.0
+"""A rig model's mode is the rudder's when its largest amplitude on the rudder and stock gages
+is this many times its largest on the hull's (the hull modes ride the rudder along at 1.2-1.7x
+their hull amplitude; the rudder's own modes are 30-3000x)."""
+
+
+def rudder_modes_hz(rig: Rig, n: int = 3) -> list[float]:
+    """The rig model's first ``n`` modes that move the rudder more than the hull (Hz): the
+    frequencies the modal family's rudder modes are drawn near (plain numbers; the family sees
+    nothing else of the model)."""
+    from ...analysis.model.response import modal_form, model_modes
+    from ...analysis.model.structure import build_model
+
+    mm = model_modes(modal_form(build_model(rig)))
+    body = np.array([g.body for g in rig.gages])
+    rows = {g.number: i for i, g in enumerate(rig.gages)}
+    idx = np.array([rows[k] for k in mm.gage_numbers])
+    amp = np.abs(mm.gage_shapes)
+    rud = amp[body[idx] != "hull"].max(axis=0)
+    hull = amp[body[idx] == "hull"].max(axis=0) if (body == "hull").any() else np.zeros_like(rud)
+    f = [float(x) for x, r, h in sorted(zip(mm.frequency_hz, rud, hull, strict=True))
+         if x > 0 and r > RUDDER_OVER_HULL * h]
+    return f[:n]
+
+
+def _generate_modal(sc: dict) -> dict:
+    """A modal-family trial of the scenario: the rig file's gages, DAQ and ram as data, rudder
+    modes near the rig model's (:func:`rudder_modes_hz`)."""
+    from ...analysis.model.rig import load_rig
+    from ...analysis.truth.modal_family import generate
+
+    rig = load_rig(sc["rig"]).with_medium(sc["medium"])
+    tr = generate(rig.text, rudder_modes_hz(rig), sc["effect"], sc["size"], sc["seed"])
+    te = tr.effect
+    return {"rig": rig, "counts": tr.counts, "scale": tr.scale, "fs_hz": tr.fs_hz, "gages": tr.gage_numbers,
+            "adc_bits": tr.adc_bits, "n_impacts": int(len(tr.onsets_s)), "expect": te.expect,
+            "truth": {"gages": list(te.gages), "mode_hz": te.mode_hz, "window": te.window,
+                      "params": te.params}}
 
 
 def _min_closure(d) -> float:
@@ -189,10 +291,69 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
     form = set(r.get("form_gages", []))
     if form:
         c = next((c for c in r["candidates"] if c["name"] == named), None)
-        if named == "unexplained" or (c is not None and c["location"]["gages"]
-                                      and set(c["location"]["gages"]) <= form):
+        if named == "unexplained":
+            # unexplained where the calibrated rig still misses its modes is the model's form;
+            # unexplained elsewhere stands (issue 17: an effect outside the library)
+            w = r.get("unexplained_where")
+            if w is None or not w["gages"] or set(w["gages"]) <= form:
+                return "none"
+        elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= form:
             return "none"
     return named or "none"
+
+
+DATA_EFFECT = {"gain": "gage_sensitivity", "dead": "gage_sensitivity", "rigid_body": "gage_alignment",
+               "time_skew": "time_skew", "highpass": "highpass", "clipping": "clipping",
+               "ambient_tone": "ambient_tone", "double_hit": "double_hit"}
+"""The library effect each data-only check's finding names (a homogeneity finding: friction when
+the decrement moves with the blow, "unexplained" when the frequency does -- an amplitude-
+dependent stiffness the library does not hold)."""
+DATA_WINDOW = {"pre": "pre", "early": "early", "peaks": "early", "decay": "late"}
+LAYER_OF = {"gage_sensitivity": "sensor", "gage_alignment": "sensor", "time_skew": "sensor",
+            "clipping": "sensor", "highpass": "sensor", "ambient_tone": "excitation",
+            "double_hit": "excitation", "friction": "nonlinearity", "hull_coupling": "structure",
+            "tiller": "structure", "added_mass": "structure", "split_mode": "structure",
+            "none": "model form", "unexplained": "unexplained"}
+"""Issue 17's layers, by the class a trial's right answer names ("model form": a no-effect trial,
+whose right answer with a perturbed rig is "no effect; model form: ...")."""
+LAYERS = ("sensor", "excitation", "nonlinearity", "structure", "model form", "unexplained")
+
+
+def _data_effect(f: dict) -> str | None:
+    if f["check"] == "homogeneity":
+        return "unexplained" if "frequency_per_doubling" in f.get("more", {}) else "friction"
+    return DATA_EFFECT.get(f["check"])
+
+
+def _strength(f: dict) -> float:
+    """A stored finding's statistic over its chance level (JSON stores an infinite one as null)."""
+    stat = math.inf if f["statistic"] is None else f["statistic"]
+    return stat / max(f["chance_level"] or 1e-12, 1e-12)
+
+
+def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
+    """The one report's answer, both layers: the model layer's choice (:func:`_decide`), which a
+    data-only finding replaces when the model names no effect or blames a sensor (the data
+    layer rests on the recorded values and the gages' positions alone: its finding takes
+    precedence, :mod:`ramdaq.analysis.gap.layers`). Keys: ``named``, ``by`` ("model"/"data"),
+    ``location`` (as a candidate's, or None), ``closed_held`` (None when not measured)."""
+    from ...analysis.gap.layers import SENSOR_EFFECTS
+
+    named = _decide(r, z_gap, bic_min, min_closure)
+    c = next((c for c in r.get("candidates", []) if c["name"] == named), None)
+    loc = c["location"] if c else (r.get("unexplained_where") if named == "unexplained" else None)
+    out = {"named": named, "by": "model", "location": loc, "closed_held": c["closed_held"] if c else None}
+    finds = [f for f in r.get("data_findings") or [] if _data_effect(f)]
+    if not finds or named in {_data_effect(f) for f in finds}:
+        return out
+    if named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
+        return out
+    f = max(finds, key=_strength)
+    eff = _data_effect(f)
+    cd = next((c for c in r.get("candidates", []) if c["name"] == eff), None)
+    return {"named": eff, "by": "data", "closed_held": cd["closed_held"] if cd else None,
+            "location": {"gages": f["gages"], "window": DATA_WINDOW.get(f["window"], f["window"]),
+                         "band_hz": None, "effect_mode_hz": f["mode_hz"][0] if f["mode_hz"] else None}}
 
 
 def _z(r: dict) -> float:
@@ -287,29 +448,44 @@ def size_thresholds(results: list[dict], z_gap: float, pod: float = POD,
     return out
 
 
+def _expect(r: dict) -> str:
+    """The class a right diagnosis names: the effect, or "unexplained" for one outside the library."""
+    return r.get("expect", r["effect"])
+
+
+def _is_above(r: dict, thresholds: dict[str, float]) -> bool:
+    """An effect trial that counts for identification: at or above its a90 (truth family), any
+    size (modal family: :data:`MODAL_SIZES`)."""
+    if r["effect"] == "none":
+        return False
+    return r.get("family") == "modal" or r["size"] >= thresholds.get(r["effect"], math.inf)
+
+
 def score(results: list[dict], thresholds: dict[str, float], z_gap: float, bic_min: float,
           min_closure: float) -> dict:
-    """Identification, false alarms, localisation, closure of a results list."""
+    """Identification, false alarms, localisation, closure of a results list; per family and
+    per layer under ``by_family``."""
     ok = [r for r in results if "error" not in r]
     none = [r for r in ok if r["effect"] == "none"]
-    above = [r for r in ok if r["effect"] != "none" and r["size"] >= thresholds.get(r["effect"], math.inf)]
-    pred = {id(r): _decide(r, z_gap, bic_min, min_closure) for r in ok}
+    above = [r for r in ok if _is_above(r, thresholds)]
+    dec = {id(r): decision(r, z_gap, bic_min, min_closure) for r in ok}
+    pred = {k: v["named"] for k, v in dec.items()}
     # a pair counts as naming its first (primary) term
     primary = {k: v.split("+")[0] for k, v in pred.items()}
-    top1 = [primary[id(r)] == r["effect"] for r in above]
+    top1 = [primary[id(r)] == _expect(r) for r in above]
     ranked = {id(r): [c["name"].split("+")[0] for c in sorted(r["candidates"], key=lambda c: c["dbic"])]
               for r in above}
-    top3 = [r["effect"] in ranked[id(r)][:3] or r["effect"] in r["signatures"][:3] for r in above]
+    top3 = [_expect(r) in ranked[id(r)][:3] or _expect(r) in r["signatures"][:3] or top1[i]
+            for i, r in enumerate(above)]
     alarms = [pred[id(r)] != "none" for r in none]
-    chosen = {id(r): next((c for c in r["candidates"] if c["name"] == pred[id(r)]), None) for r in ok}
-    hits = [r for r in above if primary[id(r)] == r["effect"] and chosen[id(r)]]
-    loc = [_located(r, chosen[id(r)]["location"]) for r in hits]
-    closed = [c for r in hits if (c := chosen[id(r)]["closed_held"]) is not None and np.isfinite(c)]
-    labels = sorted({r["effect"] for r in ok}) + ["unexplained"]
-    conf = {t: {p: 0 for p in labels} for t in labels[:-1]}
+    hits = [r for r in above if primary[id(r)] == _expect(r) and dec[id(r)]["location"]]
+    loc = [_located(r, dec[id(r)]["location"]) for r in hits]
+    closed = [c for r in hits if (c := dec[id(r)]["closed_held"]) is not None and np.isfinite(c)]
+    labels = sorted({_expect(r) for r in ok} | {"unexplained"})
+    conf = {t: {p: 0 for p in labels} for t in sorted({_expect(r) for r in ok})}
     for r in ok:
-        p = pred[id(r)]
-        conf[r["effect"]][p if p in conf[r["effect"]] else "unexplained"] += 1
+        p = primary[id(r)]
+        conf[_expect(r)][p if p in conf[_expect(r)] else "unexplained"] += 1
     return {
         "n": len(results), "errors": len(results) - len(ok), "n_above": len(above),
         "top1": float(np.mean(top1)) if top1 else float("nan"),
@@ -318,13 +494,44 @@ def score(results: list[dict], thresholds: dict[str, float], z_gap: float, bic_m
         "localisation": {k: float(np.mean(v)) if (v := [x[k] for x in loc if k in x]) else float("nan")
                          for k in ("gages", "mode", "window")},
         "closed_held_median": float(np.median(closed)) if closed else float("nan"),
-        "per_class_top1": {e: float(np.mean([pred[id(r)] == e for r in above if r["effect"] == e]))
+        "per_class_top1": {e: float(np.mean([primary[id(r)] == _expect(r) for r in above
+                                             if r["effect"] == e]))
                            for e in sorted({r["effect"] for r in above})},
         "confusion": conf,
         "perturbed_none": _perturbed_none(none, pred),
+        "by_family": _by_family(ok, above, dec),
+        "by_data_layer": sum(d["by"] == "data" for d in dec.values()),
         "seconds_median": float(np.median([r["seconds"] for r in results])) if results else 0.0,
         "seconds_max": float(np.max([r["seconds"] for r in results])) if results else 0.0,
     }
+
+
+def _by_family(ok: list[dict], above: list[dict], dec: dict[int, dict]) -> dict:
+    """Per generator family and per layer (:data:`LAYER_OF` of the right answer): trials, top-1
+    (for "model form", the no-effect trials that said no effect), right gages and median gap
+    closed on held-out impacts among the right ones; and the family's false alarms."""
+    out: dict = {}
+    ids = {id(r) for r in above}
+    for fam in sorted({r.get("family", "truth") for r in ok}):
+        rs = [r for r in ok if r.get("family", "truth") == fam]
+        none = [r for r in rs if r["effect"] == "none"]
+        fam_out = {"false_alarms": float(np.mean([dec[id(r)]["named"] != "none" for r in none]))
+                   if none else float("nan"), "n": len(rs), "layers": {}}
+        for layer in LAYERS:
+            sel = [r for r in rs if LAYER_OF.get(_expect(r)) == layer
+                   and (id(r) in ids or r["effect"] == "none")]
+            if not sel:
+                continue
+            right = [r for r in sel if dec[id(r)]["named"].split("+")[0] == _expect(r)]
+            gages = [_located(r, dec[id(r)]["location"])["gages"] for r in right
+                     if dec[id(r)]["location"] and r["effect"] != "none"]
+            closed = [c for r in right if (c := dec[id(r)]["closed_held"]) is not None and np.isfinite(c)]
+            fam_out["layers"][layer] = {
+                "n": len(sel), "top1": float(np.mean([r in right for r in sel])),
+                "gages": float(np.mean(gages)) if gages else float("nan"),
+                "closed_held_median": float(np.median(closed)) if closed else float("nan")}
+        out[fam] = fam_out
+    return out
 
 
 def _perturbed_none(none: list[dict], pred: dict[int, str]) -> dict | None:
@@ -367,12 +574,39 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
                f"{k} {v:.2f}" for k, v in sorted(thresholds.items())),
            "per-class top-1: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in s["per_class_top1"].items()),
            *_perturbed_lines(s),
+           *family_lines(s),
+           "named by the data-only layer (over the model's none or sensor attribution): "
+           f"{s.get('by_data_layer', 0)} trials",
            "confusion matrix (rows: hidden effect, columns: named):"]
     labels = list(next(iter(s["confusion"].values())).keys()) if s["confusion"] else []
     short = [lab[:6] for lab in labels]
     out.append(" " * 18 + " ".join(f"{x:>6s}" for x in short))
     for t, row in s["confusion"].items():
         out.append(f"{t:17s} " + " ".join(f"{row[p]:6d}" for p in labels))
+    return out
+
+
+TARGETS = {"top1": (0.85, ">="), "gages": (0.85, ">="), "closed_held_median": (0.70, ">="),
+           "false_alarms": (0.05, "<="), "unexplained": (0.80, ">=")}
+"""Issue 17's targets, printed next to each figure."""
+
+
+def _pc(v: float) -> str:
+    return "   n/a" if not np.isfinite(v) else f"{100 * v:5.0f}%"
+
+
+def family_lines(s: dict) -> list[str]:
+    """Per family and per layer: trials, top-1, right gages, median gap closed (held out)."""
+    out = ["per family and layer (all of ramdaq gap's layers ran: model level with a perturbed rig, "
+           "data-only checks, effect search; top-1 over trials above threshold; targets: top-1 >= 85 %, "
+           "right gages >= 85 %, closed >= 70 %, false alarms <= 5 %, unexplained >= 80 %):",
+           f"  {'family':7s} {'layer':13s} {'n':>4s} {'top-1':>6s} {'gages':>6s} {'closed':>6s}"]
+    for fam, f in s.get("by_family", {}).items():
+        for layer, v in f["layers"].items():
+            out.append(f"  {fam:7s} {layer:13s} {v['n']:4d} {_pc(v['top1'])} {_pc(v['gages'])} "
+                       f"{_pc(v['closed_held_median'])}")
+        out.append(f"  {fam:7s} false alarms on no-effect trials: {_pc(f['false_alarms']).strip()}"
+                   "   (target <= 5 %)")
     return out
 
 
@@ -409,8 +643,9 @@ def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str],
             advance()
             r = results[futs[f]] = f.result()
             tag = r.get("named") or r.get("verdict") or r.get("error")
-            say(f"[{n + 1}/{len(scs)}] {r['effect']:16s} size {r['size']:.2f} {r['rig']}/{r['medium']}: "
-                f"{tag} ({r['seconds']:.1f} s)")
+            fam = r.get("family", "truth")
+            say(f"[{n + 1}/{len(scs)}] {fam:5s} {r['effect']:16s} size {r['size']:.2f} "
+                f"{r['rig']}/{r['medium']}: {tag} ({r['seconds']:.1f} s)")
     return results
 
 
@@ -419,7 +654,7 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
                   thresholds: Path | None = None, progress: Callable[[str], None] | None = None,
                   client: Client | None = None,
                   bar: Callable[[int], AbstractContextManager[Callable[[], None]]] | None = None,
-                  perturb: float = 0.0) -> int:
+                  perturb: float = 0.0, family: str = "truth") -> int:
     """Run the benchmark on the seed set ``seeds`` (:data:`SEED_SETS`) and print its figures; 0
     when done. The scenarios run on ``jobs`` processes, or on the dask cluster of ``client`` (a
     ``distributed.Client``) when given. ``dev`` writes the thresholds to
@@ -429,14 +664,19 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
     the development seeds) instead of running the scenarios. ``bar(n)``: a progress bar over
     the ``n`` scenarios (a context manager yielding the step to call after each). ``perturb``:
     hand the diagnosis rigs perturbed by up to that fraction (:func:`perturbed_rig`); its
-    results are stored apart (``SEEDS_perturbP_results.json``)."""
+    results are stored apart (``SEEDS_perturbP_results.json``). ``family``: the generator family
+    (:data:`FAMILIES` or "all"; the development seeds tune on the truth family only); a family
+    other than ``truth`` tags the stored files (``..._FAMILY_results.json``)."""
     from ...analysis.gap.diagnose import Settings
 
     say = progress or (lambda s: None)
     out.mkdir(parents=True, exist_ok=True)
     if perturb and seeds == "dev":
         raise ValueError("--perturb with --dev: the thresholds are tuned with the generator's own rigs")
-    tag = f"{seeds}_perturb{perturb:g}" if perturb else seeds
+    if seeds == "dev" and family != "truth":
+        say(f"--dev tunes on the truth family only (not {family})")
+        family = "truth"
+    tag = (f"{seeds}_perturb{perturb:g}" if perturb else seeds) + ("" if family == "truth" else f"_{family}")
     stored = out / f"{tag}_results.json"
     t0 = time.perf_counter()
     if rescore:
@@ -445,7 +685,8 @@ def run_benchmark(out: Path, *, per_class: int = 20, seeds: str = "benchmark", j
         results = json.loads(stored.read_text())
         say(f"re-scoring {len(results)} stored {seeds} scenarios from {out}")
     else:
-        results = _run(scenarios(per_class, seeds, effects, perturb), out, seeds, jobs, say, client, bar)
+        scs = scenarios(per_class, seeds, effects, perturb, family)
+        results = _run(scs, out, seeds, jobs, say, client, bar)
         stored.write_text(json.dumps(results, indent=1, default=float))
     wall = time.perf_counter() - t0
     st = Settings()
