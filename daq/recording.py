@@ -178,10 +178,11 @@ def _join(blocks: list[Block], n_channels: int) -> tuple[np.ndarray, int]:
     return x, first
 
 
-def _trigger_offline(trig: Trigger, blocks: list[Block], n_channels: int) -> list[ImpactEvent]:
-    """The impacts in a whole recording: the trigger armed on all of it (a blow at its first
-    sample is found and analysable, :meth:`Trigger.arm_on_record`), then fed its blocks."""
-    trig.arm_on_record(_join(blocks, n_channels)[0])
+def _trigger_offline(trig: Trigger, blocks: list[Block], values: np.ndarray) -> list[ImpactEvent]:
+    """The impacts in a whole recording (``values``: its blocks joined, :func:`_join`): the
+    trigger armed on all of it (a blow at its first sample is found and analysable,
+    :meth:`Trigger.arm_on_record`), then fed its blocks."""
+    trig.arm_on_record(values)
     impacts = [e for b in blocks for e in trig.process(b)]
     return impacts + trig.flush()
 
@@ -220,11 +221,11 @@ def read_recording(path: str | PathLike, *, rig: Rig | str | Path | None = None,
             blocks.append(b)
             if progress:
                 progress(dev.bytes_read, total)
-        impacts = _trigger_offline(trig, blocks, info.n_channels) if trig is not None else []
+        values, first = _join(blocks, info.n_channels)
+        impacts = _trigger_offline(trig, blocks, values) if trig is not None else []
         events = tuple(RecordedEvent(e["kind"], e["t_ns"] / 1e9, e.get("detail", {}))
                        for e in dev.events())
         created = dev.metadata.get("created_utc", "")
-    values, first = _join(blocks, info.n_channels)
     scale = blocks[0].scale.copy() if blocks else np.full(info.n_channels, np.nan)
     return Recording(str(path), info, values, first, scale, created, the_rig, events, tuple(impacts))
 

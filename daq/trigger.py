@@ -52,7 +52,8 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
   averaged over half a period is its mean; 0.5 s covers tones down to 1 Hz). Until ``lta_s``
   it is *arming*: it detects against the LTA so far, and a blow it sees is reported as
   ``not_analysable`` ("trigger still arming"): its pre-event level, which ends its record,
-  rests on less than the LTA window.
+  rests on less than the LTA window. With a load cell the force is watched while the LTA
+  settles too (it needs no background): a blow then is reported the same way, not lost.
 * **Offline** (a whole file: ``ramdaq import``/``analyze``, :func:`ramdaq.daq.recording.read_recording`):
   :meth:`Trigger.arm_on_record` arms the trigger on the whole record before its first block:
   the LTA starts from the record's background (the post-decay tail's power or the robust power
@@ -517,6 +518,8 @@ class _Levels:
 
     def pre_power(self, nlta: int, floor: np.ndarray) -> np.ndarray:
         """The unbiased LTA now, at least ``floor``: the pre-event level of a blow detected here."""
+        if self.n == 0:  # nothing averaged yet (a blow at the stream's first sample)
+            return floor.copy()
         bias = -math.expm1(self.n * math.log1p(-1 / nlta))
         return np.maximum(self.lta / bias, floor)
 
@@ -608,6 +611,9 @@ def record_background(x: np.ndarray, voters: np.ndarray, force: int | None,
     blows' few samples barely move). With a force channel (row ``force``), its median and robust
     rms (MAD) and a level of 20 noise rms and a tenth of the largest blow, at most
     ``settings.level_N``: a hammer's record (a few N to a few hundred) triggers as a ram's does."""
+    if x.shape[-1] == 0:  # an empty record: nothing to arm on
+        return RecordBackground(np.zeros(len(voters)),
+                                level_N=None if force is None else settings.level_N)
     v = x[voters]
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN channel: no background
@@ -836,8 +842,14 @@ class Trigger:
                 if pos >= end:
                     return
                 stop = min(end, pos + max(0, self._len.settle - self._levels.n))
-                self._levels.advance_lta(x2[:, pos - b0:stop - b0], nlta)
-                self._tally.blind += stop - pos
+                d = self._settling_blow(pos, stop)
+                self._levels.advance_lta(x2[:, pos - b0:(stop if d is None else d) - b0], nlta)
+                self._tally.blind += (stop if d is None else d) - pos
+                if d is not None:
+                    self._ev = _Event(detect=d, pre=self._levels.pre_power(
+                        nlta, self._scale[self._vidx] ** 2 / 12), not_analysable=self._arming_note())
+                    self._state, pos = ACTIVE, d
+                    continue
                 pos = stop
                 if self._levels.n >= self._len.settle:
                     self._state = ARMED
@@ -864,6 +876,15 @@ class Trigger:
                 if r is None:
                     return
                 self._state, pos = ARMED, r
+
+    def _settling_blow(self, pos: int, stop: int) -> int | None:
+        """With a load cell, a blow while the LTA settles (``pos .. stop-1``): the force needs
+        no background to be seen, so the blow is reported (not analysable: its pre-event level
+        rests on too little), not lost. None without a force channel or a blow."""
+        if self._fidx is None or stop <= pos:
+            return None
+        hit = np.flatnonzero(self._force_hits(pos, stop))
+        return pos + int(hit[0]) if hit.size else None
 
     def _arming_note(self) -> str | None:
         """Why a blow detected now cannot be analysed, if the trigger is still arming."""

@@ -89,3 +89,21 @@ def test_record_that_starts_with_the_blow_is_found_offline(albacore, start):
     (event,) = events_of(info, cut, trig)
     assert event.not_analysable is None and not event.double_hit
     assert abs(event.onset_s * fs - start) <= 2, event.onset_s * fs
+
+
+@pytest.mark.parametrize("blow_s", [0.0, 0.1, 1.2])
+def test_live_force_mode_reports_a_blow_while_settling_or_arming(albacore, blow_s):
+    """Live, with the ram's load cell: a blow at the first sample, 0.1 s in (the LTA still
+    settling: blind in STA/LTA mode) or 1.2 s in (arming) is seen from its force and reported
+    "not analysable (trigger still arming ...)", not lost; the next blow is analysable."""
+    from ramdaq.analysis.model.rig import parse_rig
+    from tests.conftest import RIGS
+
+    rig = parse_rig((RIGS / "albacore.toml").read_text() + '\n[[forces]]\nname = "ram"\n'
+                    'channel = 16\n', "force.toml")
+    with SimDevice(rig, seed=6, duration_s=8.0, impacts=[blow_s, 5.0]) as dev:
+        info, blocks = dev.info, list(dev)
+    events = events_of(info, blocks)
+    assert [round(e.onset_s, 2) for e in events] == [blow_s, 5.0]
+    assert events[0].not_analysable.startswith("trigger still arming (")
+    assert events[1].not_analysable is None and events[1].mode == "force"
