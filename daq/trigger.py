@@ -56,8 +56,8 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
   settles too (it needs no background): a blow then is reported the same way, not lost.
 * **Offline** (a whole file: ``ramdaq import``/``analyze``, :func:`ramdaq.daq.recording.read_recording`):
   :meth:`Trigger.arm_on_record` arms the trigger on the whole record before its first block:
-  the LTA starts from the record's background (the post-decay tail's power or the robust power
-  of the whole record, whichever is lower), armed from the first sample; a force channel's
+  the LTA starts from the record's background (the mean power of the quietest ``lta_s / 4``
+  in its first ``4 lta_s``), armed from the first sample; a force channel's
   baseline (its median: a load cell's offset) is taken off and its level is the record's (20
   noise rms and a tenth of its largest blow, at most ``level_N``: a hammer's record triggers as
   a ram's does). A record that starts with the blow (no pre-trigger) has its onset where the
@@ -116,8 +116,8 @@ _STAT_N = 5                                  # fewest samples of an average set 
 _REF_STA = 20                                # innovation reference: >= 20 innovation STAs
 _DESIGN_VOTES = 3                            # gages the second-contact threshold is set for
 _AR_MODES_TAPS = 10                          # fewest AR taps by default: five ringing modes
-_GAUSS_MEDIAN_X2 = 0.454936                   # median of a standard normal's square (chi^2, 1 dof)
 _MAD_SIGMA = 1.4826                          # rms of Gaussian noise per median absolute deviation
+_START_LTAS = 4                              # offline background: the record's first 4 LTAs
 _FORCE_NOISE_LEVELS = 20.0                   # an offline force level: at least 20 noise rms ...
 _FORCE_PEAK_FRACTION = 0.1                   # ... and a tenth of the record's largest blow
 NOT_READY, ARMING, ARMED, ACTIVE = "not ready", "arming", "armed", "active"
@@ -606,20 +606,26 @@ class RecordBackground:
 def record_background(x: np.ndarray, voters: np.ndarray, force: int | None,
                       settings: TriggerSettings, lta_n: int) -> RecordBackground:
     """The background of the whole record ``x`` (SI, (n_channels, n), NaN where a gap is):
-    per voter the smaller of the post-decay tail's power (the last ``lta_n`` samples) and the
-    robust power of the whole record (median of x**2 over that of Gaussian noise, which the
-    blows' few samples barely move). With a force channel (row ``force``), its median and robust
-    rms (MAD) and a level of 20 noise rms and a tenth of the largest blow, at most
-    ``settings.level_N``: a hammer's record (a few N to a few hundred) triggers as a ram's does."""
+    per voter the mean power of the quietest stretch of ``lta_n / 4`` samples in its first
+    :data:`_START_LTAS` LTA windows, where the arming matters (after it the LTA follows the
+    record as live; a background that changes over a record, a fading tone, stays right). The
+    stretch is the settling
+    window: half a period of a 1 Hz tone, so a steady tone counts as background, as the live
+    LTA has it; the quietest, because a trial's blows may ring through most of it: the median
+    power of a trial with a blow every 4 s is its ringing's, ten times its background). With a
+    force channel (row ``force``), its median and robust rms (MAD) and a level of 20 noise rms
+    and a tenth of the largest blow, at most ``settings.level_N``: a hammer's record (a few N
+    to a few hundred) triggers as a ram's does."""
     if x.shape[-1] == 0:  # an empty record: nothing to arm on
         return RecordBackground(np.zeros(len(voters)),
                                 level_N=None if force is None else settings.level_N)
     v = x[voters]
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN channel: no background
-        robust = np.nanmedian(v * v, axis=1) / _GAUSS_MEDIAN_X2 if v.size else np.zeros(0)
-        tail = np.nanmean(v[:, -lta_n:] ** 2, axis=1) if v.size else np.zeros(0)
-        power = np.nan_to_num(np.fmin(robust, tail), nan=0.0)
+        w = max(1, min(lta_n // 4, x.shape[1]))
+        m = max(1, min(x.shape[1], _START_LTAS * lta_n) // w)  # near the start: it is armed
+        windows = (v[:, :m * w] ** 2).reshape(len(voters), m, w)
+        power = np.nan_to_num(np.nanmin(np.nanmean(windows, axis=2), axis=1), nan=0.0)
         if force is None:
             return RecordBackground(power)
         f = x[force]
