@@ -178,6 +178,15 @@ def _join(blocks: list[Block], n_channels: int) -> tuple[np.ndarray, int]:
     return x, first
 
 
+def _trigger_offline(trig: Trigger, blocks: list[Block], values: np.ndarray) -> list[ImpactEvent]:
+    """The impacts in a whole recording (``values``: its blocks joined, :func:`_join`): the
+    trigger armed on all of it (a blow at its first sample is found and analysable,
+    :meth:`Trigger.arm_on_record`), then fed its blocks."""
+    trig.arm_on_record(values)
+    impacts = [e for b in blocks for e in trig.process(b)]
+    return impacts + trig.flush()
+
+
 def read_recording(path: str | PathLike, *, rig: Rig | str | Path | None = None,
                    trigger: bool = True,
                    progress: Callable[[int, int], None] | None = None) -> Recording:
@@ -190,7 +199,8 @@ def read_recording(path: str | PathLike, *, rig: Rig | str | Path | None = None,
     rig : Rig, str or Path, optional
         The rig to describe it with, instead of the one recorded with it.
     trigger : bool
-        Find the impacts (the trigger of a live trial, run over the blocks as they are read).
+        Find the impacts: the trigger of a live trial, armed on the whole recording (offline:
+        a blow at its first sample is found) and run over its blocks.
     progress : callable, optional
         Called as ``progress(bytes_read, total_bytes)`` after each block.
 
@@ -206,20 +216,16 @@ def read_recording(path: str | PathLike, *, rig: Rig | str | Path | None = None,
         the_rig = rig_of(path, info, rig)
         trig = Trigger(info) if trigger else None
         blocks: list[Block] = []
-        impacts: list[ImpactEvent] = []
         total = Path(path).stat().st_size
         for b in dev:
             blocks.append(b)
-            if trig is not None:
-                impacts += trig.process(b)
             if progress:
                 progress(dev.bytes_read, total)
-        if trig is not None:
-            impacts += trig.flush()
+        values, first = _join(blocks, info.n_channels)
+        impacts = _trigger_offline(trig, blocks, values) if trig is not None else []
         events = tuple(RecordedEvent(e["kind"], e["t_ns"] / 1e9, e.get("detail", {}))
                        for e in dev.events())
         created = dev.metadata.get("created_utc", "")
-    values, first = _join(blocks, info.n_channels)
     scale = blocks[0].scale.copy() if blocks else np.full(info.n_channels, np.nan)
     return Recording(str(path), info, values, first, scale, created, the_rig, events, tuple(impacts))
 

@@ -66,11 +66,11 @@ import can
 import numpy as np
 
 from ..analysis.model.rig import Rig, load_rig, parse_rig
-from ..analysis.model.sensor import channel_scales
 from .base import TIMED_OUT, Device
 from .block import Block, StreamInfo, sample_time_ns
 from .can_frames import UNRELATED, CycleAssembler, FrameCodec
 from .errors import DeviceNotFound
+from .rig_channels import rig_channels
 from .slcan_reader import SlcanFrame, SlcanReader
 
 __all__ = ["CanDevice", "parse_address"]
@@ -174,7 +174,7 @@ class CanDevice(Device):
         if isinstance(rig, str) and "\n" in rig:
             rig = parse_rig(rig, source=f"can://{address}:rig")
         self.rig = rig if rig is None or isinstance(rig, Rig) else load_rig(rig)
-        n_rig = len(self.rig.gages_by_channel()) if self.rig else None
+        n_rig = self.rig.n_channels if self.rig else None  # gages and forces
         n = int(channels if channels is not None else q.get("channels", n_rig or len(self.codec.channels)))
         self.fs_hz = float(fs_hz or q.get("fs_hz") or (self.rig.daq.sample_rate_hz if self.rig else 2048.0))
         tol = clock_tolerance_s if clock_tolerance_s is not None else q.get("clock_tolerance_s", 0.1)
@@ -246,9 +246,10 @@ class CanDevice(Device):
         return groups
 
     def _scales(self, scale: float | str | list[float], n: int) -> np.ndarray:
-        """Counts -> m/s^2 per channel, shape (n,): the rig's, else ``scale`` (one or n values)."""
+        """Counts -> SI per channel, shape (n,): the rig's (m/s^2, a force channel's N), else
+        ``scale`` (one or n values)."""
         if self.rig:
-            return channel_scales(self.rig)[:n]
+            return rig_channels(self.rig).scales[:n]
         return np.broadcast_to(np.asarray(
             [float(x) for x in scale.split(",")] if isinstance(scale, str) else scale, float), (n,)).copy()
 
@@ -274,10 +275,15 @@ class CanDevice(Device):
             self._names.append(f"{interface}/{channel}")
             self._stateful.append(getattr(type(bus), "state", can.BusABC.state) is not can.BusABC.state)
         n = len(self.scale)
-        numbers = [g.number for g in self.rig.gages_by_channel()[:n]] if self.rig else range(1, n + 1)
+        if self.rig:  # its gages and force channels (N: the trigger's force mode)
+            ch = rig_channels(self.rig)
+            names, units, numbers = ch.names[:n], ch.units[:n], ch.gages[:n]
+        else:
+            numbers = tuple(range(1, n + 1))
+            names, units = tuple(f"g{k:02d}" for k in numbers), (self.units,) * n
         return StreamInfo(
             device="can://" + "+".join(self._names), fs_hz=self.fs_hz,
-            channels=tuple(f"g{k:02d}" for k in numbers), units=(self.units,) * n, gages=tuple(numbers),
+            channels=names, units=units, gages=numbers,
             rig_toml=self.rig.text if self.rig else "",
             extra={"dbc": self.codec.name,
                    "dbc_sha256": hashlib.sha256(self.codec.path.read_bytes()).hexdigest(),

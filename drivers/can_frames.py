@@ -11,6 +11,11 @@ fd24     ramdaq_fd24.dbc     64 B: SEQ u16, 20 x int24, CRC-16/CCITT     1 x 16 
 fd16     ramdaq_fd16.dbc     64 B: SEQ u16, 30 x int16, CRC-16/CCITT     1 x 16 ch
 =======  ==================  ==========================================  =========
 
+``fd24_force`` (``ramdaq_fd24_force.dbc``) is fd24 with a second group: channel 17, a rig's
+force channel (``[[forces]]``: a ram's load cell or an instrumented hammer, in counts of the
+rig's force scale, :func:`ramdaq.drivers.rig_channels.force_scale_N`), one frame per cycle; a
+rig of 16 channels reads its first group only.
+
 The rules the codec reads from a DBC: a message with a ``RamdaqGroup`` attribute > 0 belongs to
 that channel group; any other identifier is another node's (``unrelated_frame``). A group's
 messages form a *cycle*: their sample signals ``CHnn_Skk`` (channel ``nn``, sample ``k`` of the
@@ -68,7 +73,8 @@ __all__ = ["FrameCodec", "FrameLayout", "GroupLayout", "Decoded", "CycleAssemble
            "crc", "frame_bits", "frame_time_s", "capacity_table", "capacity_rst", "REJECTIONS", "SHIPPED_DBC"]
 
 DBC_DIR = Path(__file__).resolve().parent / "dbc"
-SHIPPED_DBC = {"classic": "ramdaq_classic.dbc", "fd24": "ramdaq_fd24.dbc", "fd16": "ramdaq_fd16.dbc"}
+SHIPPED_DBC = {"classic": "ramdaq_classic.dbc", "fd24": "ramdaq_fd24.dbc", "fd16": "ramdaq_fd16.dbc",
+               "fd24_force": "ramdaq_fd24_force.dbc"}
 UNRELATED, WRONG_DLC, BAD_CRC, BAD_FRAME = "unrelated_frame", "wrong_dlc", "bad_crc", "bad_frame"
 REJECTIONS = (UNRELATED, WRONG_DLC, BAD_CRC, BAD_FRAME)
 _SAMPLE = re.compile(r"CH(\d+)_S(\d+)$")

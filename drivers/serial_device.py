@@ -64,10 +64,10 @@ import numpy as np
 import serial
 
 from ..analysis.model.rig import Rig, load_rig, parse_rig
-from ..analysis.model.sensor import channel_scales
 from .base import TIMED_OUT, Device
 from .block import Block, StreamInfo, sample_time_ns
 from .errors import DeviceClosed, DeviceNotFound
+from .rig_channels import rig_channels
 from .serial_frames import Frame, FrameParser
 
 __all__ = ["SerialDevice", "split_url"]
@@ -154,7 +154,7 @@ class SerialDevice(Device):
                                  f"{_QUERY_KEYS[key].__name__}") from None
         self.rig = None if opts["rig"] is None else _load_rig(opts["rig"])
         rig_fs = self.rig.daq.sample_rate_hz if self.rig else 2048.0
-        rig_ch = len(self.rig.gages_by_channel()) if self.rig else 16
+        rig_ch = self.rig.n_channels if self.rig else 16  # gages and forces
         self.fs_hz = float(opts["fs_hz"] or rig_fs)
         self.n_channels = int(opts["channels"] or rig_ch)
         self.baudrate = int(opts["baudrate"] or 2_000_000)
@@ -200,10 +200,9 @@ class SerialDevice(Device):
         except _PORT_ERRORS as err:
             raise DeviceNotFound(f"serial: cannot open {self.url}: {_one_line(err)}") from err
         if self.rig is not None:
-            gages = self.rig.gages_by_channel()
-            names = tuple(f"g{g.number:02d}" for g in gages)
-            units, numbers = ("m/s^2",) * len(gages), tuple(g.number for g in gages)
-            self.scale = channel_scales(self.rig).astype(np.float64)
+            ch = rig_channels(self.rig)  # its gages and force channels (N: the force mode)
+            names, units, numbers = ch.names, ch.units, ch.gages
+            self.scale = ch.scales.astype(np.float64)
             extra = {"adc_bits": self.rig.daq.adc_bits, "medium": self.rig.medium,
                      "rig_name": self.rig.name}
         else:

@@ -1,6 +1,8 @@
 """The serial wire format: framed ADC samples with a sync word, a checked header and a CRC.
 
-One frame carries ``samples`` consecutive sample instants of all ``channels`` channels. Every
+One frame carries ``samples`` consecutive sample instants of all ``channels`` channels: a rig's
+gages and then its force channels (``[[forces]]``, counts of the rig's force scale,
+:func:`ramdaq.drivers.rig_channels.rig_channels` gives names, units and scales). Every
 integer is little-endian::
 
     offset  size  field

@@ -28,6 +28,7 @@ from ..analysis.model.sensor import SensorChain
 from ..analysis.model.structure import build_model
 from .base import TIMED_OUT, Device
 from .block import Block, StreamInfo, sample_time_ns
+from .rig_channels import force_scale_N
 
 
 @dataclass(frozen=True)
@@ -131,8 +132,8 @@ class SimDevice(Device):
         self._t_start = time.monotonic()
         gages = self.rig.gages_by_channel()
         forces = tuple(sorted(self.rig.forces, key=lambda f: f.channel))
-        # a force channel: the blows' half-sines, 24-bit with 4x headroom over the rig's blow
-        self._force_scale = np.full(len(forces), 4 * self.rig.impact.peak_force_N / (2**23 - 1))
+        # a force channel: the blows' half-sines, with 4x headroom over the rig's blow
+        self._force_scale = np.full(len(forces), force_scale_N(self.rig) if forces else 0.0)
         return StreamInfo(
             device="sim", fs_hz=self.fs_hz,
             channels=tuple(f"g{g.number:02d}" for g in gages) + tuple(f.name for f in forces),

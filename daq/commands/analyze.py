@@ -24,6 +24,7 @@ from ...analysis.model.units import from_si
 from ..analyzer import HitResult, analysis_to_json, finite_json, trial_summary
 from ..api import analyze_hits, decay_samples
 from ..recording import read_recording, rig_or_fail
+from ..reports.frf_report import frf_section, plot_frf
 from .progress import bytes_bar, progress_bar
 
 MODEL_MOTIONS = ("v", "gamma", "alpha")
@@ -94,6 +95,7 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                     for h in hits],
         "summary": surface.relabel(summary),
         "virtual_inertias": vi,
+        "frf": frf_section(rig, hits),  # driving-point H1 where the rig has a force channel
     })
 
 
@@ -251,7 +253,8 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
     os.replace(tmp, out / "report.json")
     files = [out / "report.json"]
     kinds = DEFAULT_PLOTS if plots is True else () if plots is False else tuple(plots)
-    if kinds:
+    if kinds:  # the driving-point FRFs (one figure a trial, none without a force channel) too
+        files += plot_frf(report["frf"], out)
         from ..reports.impact_plots import plot_impact
 
         for h in hits:

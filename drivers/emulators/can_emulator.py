@@ -181,6 +181,8 @@ class CanEmulator:
             self.fs_hz = block.fs_hz
             out = []
             for g, lay in groups.items():
+                if max(rows[g]) >= block.n_channels:  # a group the rig has no channels for
+                    continue                           # (fd24_force's force group, 16 gages)
                 pending[g].append(block.counts[rows[g]])
                 have = np.concatenate(pending[g], axis=1)
                 n = have.shape[1] // lay.samples_per_cycle

@@ -1,0 +1,116 @@
+"""The driving-point FRFs of a trial whose rig has a force channel: ``report.json``'s ``frf``
+section and its plot (``frf.png``), from the accepted hits' records
+(:func:`ramdaq.analysis.modal.frf.h1_estimate`).
+
+Each blow is taken from :data:`PRE_S` before its onset (the force's rising edge) for the length
+of the shortest record among them, at most :data:`MAX_SAMPLES`; the section says how many
+samples and blows it used, in SI units: H1 in (m/s^2)/N, frequencies in Hz, phase in rad.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...analysis.modal.frf import FrfEstimate, h1_estimate
+from ...analysis.model.rig import Rig
+from ..analyzer import HitResult
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn, not with the report
+    from matplotlib.figure import Figure
+
+__all__ = ["MAX_SAMPLES", "PRE_S", "frf_figure", "frf_section", "plot_frf"]
+
+PRE_S = 0.002
+"""Taken before each onset, s: the onset is the force's rise less the anti-alias delay."""
+MAX_SAMPLES = 8192
+"""Longest FRF window, samples: its resolution is fs / 8192 (0.25 Hz at 2048 Hz); the report
+holds every bin of every gage."""
+
+
+def _blows(rig: Rig, hits: list[HitResult]) -> tuple[np.ndarray, np.ndarray, list[int], float]:
+    """(force (n_blows, n), acceleration (n_blows, n_gages, n), hit indices, fs) of the
+    accepted hits that kept their records."""
+    f_row = rig.forces[0].channel
+    g_rows = [g.channel for g in rig.gages_by_channel()]
+    use = [h for h in hits if h.accepted and h.event.record is not None]
+    if not use:
+        return np.zeros((0, 0)), np.zeros((0, len(g_rows), 0)), [], 0.0
+    fs = use[0].event.record.fs_hz
+    cuts = []
+    for h in use:
+        rec = h.event.record
+        a = max(0, h.event.onset_sample - round(PRE_S * fs) - rec.first_sample)
+        cuts.append((rec, a))
+    n = min(MAX_SAMPLES, *(rec.counts.shape[1] - a for rec, a in cuts))
+    f = np.stack([rec.counts[f_row, a:a + n] * rec.scale[f_row] for rec, a in cuts])
+    x = np.stack([rec.counts[g_rows, a:a + n] * rec.scale[g_rows, None] for rec, a in cuts])
+    return f, x, [h.index for h in use], fs
+
+
+def frf_section(rig: Rig, hits: list[HitResult]) -> dict | None:
+    """``report.json``'s ``frf``: per gage the H1 (magnitude, phase) and coherence against the
+    rig's first force channel over the accepted hits, with the frequency of its largest
+    ``|H1|`` above 1 Hz; ``None`` for a rig without a force channel, ``{"not_computed": why}``
+    where there is nothing to compute it from."""
+    if not rig.forces:
+        return None
+    force, accel, used, fs = _blows(rig, hits)
+    if not used:
+        return {"not_computed": "no accepted hit with its record"}
+    try:
+        est = h1_estimate(force, accel, fs)
+    except ValueError as err:
+        return {"not_computed": str(err)}
+    return _to_json(rig, est, used, force.shape[1], fs)
+
+
+def _to_json(rig: Rig, est: FrfEstimate, used: list[int], n: int, fs: float) -> dict:
+    names = [f"g{g.number:02d}" for g in rig.gages_by_channel()]
+    peaks = est.peak_hz(1.0)
+    return {
+        "force_channel": rig.forces[0].name, "units": {"h1": "(m/s^2)/N", "f_hz": "Hz",
+                                                       "phase": "rad", "coherence": "1"},
+        "estimator": "H1", "hits": used, "n_blows": est.n_blows, "samples": n,
+        "window_s": n / fs, "pre_s": PRE_S, "exp_tau_s": est.exp_tau_s,
+        "notes": list(est.notes), "f_hz": est.f_hz.tolist(),
+        "gages": {g: {"peak_hz": float(peaks[i]), "magnitude": np.abs(est.h1[i]).tolist(),
+                      "phase_rad": np.angle(est.h1[i]).tolist(),
+                      "coherence": est.coherence[i].tolist()}
+                  for i, g in enumerate(names)},
+    }
+
+
+def frf_figure(section: dict) -> Figure:
+    """|H1| (log) and coherence of every gage against frequency."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 6.5), layout="constrained")
+    ax_h, ax_c = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
+    f = np.asarray(section["f_hz"])
+    for g, d in section["gages"].items():
+        mag = np.asarray(d["magnitude"], dtype=float)
+        ax_h.semilogy(f[1:], mag[1:], lw=0.8, label=f"{g} (peak {d['peak_hz']:.2f} Hz)")
+        ax_c.plot(f[1:], np.asarray(d["coherence"], dtype=float)[1:], lw=0.8)
+    ax_h.set_ylabel("|H1|, (m/s^2)/N")
+    ax_h.set_title(f"driving-point FRF against {section['force_channel']}: H1 over "
+                   f"{section['n_blows']} blow(s), {section['window_s']:.2f} s each")
+    ax_h.legend(fontsize="small", ncols=2)
+    ax_c.set_ylim(0, 1.05)
+    ax_c.set_ylabel("coherence")
+    ax_c.set_xlabel("frequency, Hz")
+    if section["notes"]:
+        ax_c.set_title("; ".join(section["notes"]), fontsize="small")
+    return fig
+
+
+def plot_frf(section: dict | None, out_dir: Path, dpi: int = 150) -> list[Path]:
+    """Write ``frf.png`` for a computed section; the files written (none without one)."""
+    if not section or "gages" not in section:
+        return []
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "frf.png"
+    frf_figure(section).savefig(path, dpi=dpi)
+    return [path]
