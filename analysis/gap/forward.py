@@ -378,27 +378,34 @@ class Forward:
         G = np.zeros((2 * n + e, 2 * n + e))
         b = np.zeros(2 * n + e)
         w2 = self._w2.reshape(self.td.n_seg, -1)
-        alive = []
         for s in range(self.td.n_seg):
-            a = min(s + 1, n)                  # the impacts alive in segment s: 0 .. s
-            live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
-            idx = list(range(a)) + list(range(n, n + a)) + [2 * n + i for i in live_e]
-            X = np.empty((len(idx), w2.shape[1]))
-            X[:a] = U[:a, s].reshape(a, -1)
-            X[a:2 * a] = dU[:a, s].reshape(a, -1)
-            if live_e:
-                X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
+            idx, X = self._alive(U, dU, extra, s)
             Xw = X * w2[s]
             G[np.ix_(idx, idx)] += Xw @ X.T
             b[idx] += Xw @ data[s].ravel()
-            alive.append((idx, X))
         scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
         Gs = G / scale[:, None] / scale[None, :]
         coef = np.linalg.lstsq(Gs, b / scale, rcond=1e-10)[0] / scale
         pred = np.empty_like(data)
-        for s, (idx, X) in enumerate(alive):
+        for s in range(self.td.n_seg):      # the columns made again: one segment's at a time
+            idx, X = self._alive(U, dU, extra, s)
             pred[s] = (coef[idx] @ X).reshape(data.shape[1:])
         return coef, pred
+
+    def _alive(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
+        """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
+        terms' columns not zero there -- as their indices and rows (k, n_gages * n_s)."""
+        n = U.shape[0]
+        e = 0 if extra is None else extra.shape[0]
+        a = min(s + 1, n)                  # the impacts alive in segment s: 0 .. s
+        live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
+        idx = list(range(a)) + list(range(n, n + a)) + [2 * n + i for i in live_e]
+        X = np.empty((len(idx), U.shape[2] * U.shape[3]))
+        X[:a] = U[:a, s].reshape(a, -1)
+        X[a:2 * a] = dU[:a, s].reshape(a, -1)
+        if live_e:
+            X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
+        return idx, X
 
     def whitened(self, fit: Fit, segments: np.ndarray | None = None) -> np.ndarray:
         """Residual divided by each gage's sigma, flattened, over ``segments`` (default all);
