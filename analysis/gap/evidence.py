@@ -159,7 +159,10 @@ def bands_for(f_modes: np.ndarray, top_hz: float) -> Bands:
 
 def cell_energies(fw: Forward, resid: np.ndarray, bands: Bands) -> np.ndarray:
     """Whitened residual energy per segment x gage x band x window,
-    (..., n_seg, n_g, n_bands, 3); ``resid`` may carry leading replicate axes."""
+    (..., n_seg, n_g, n_bands, 3); ``resid`` may carry leading replicate axes (read one
+    replicate at a time: the spectra of all at once were 3x the replicates' own memory)."""
+    if resid.ndim > 3:
+        return np.stack([cell_energies(fw, r, bands) for r in resid])
     td = fw.td
     out = []
     for name in WINDOWS:
