@@ -322,7 +322,9 @@ class ScoreBasis:
         self.fitted = np.flatnonzero(fw.td.fitted)
         self.Q = _orthonormal_columns(fw, cal, self.fitted)   # (N, n_basis)
         self.r = self._white(cal.fit.resid[self.fitted])
-        self.reps = np.stack([self._white(rr[self.fitted]) for rr in reps])
+        self.reps = np.empty((len(reps), self.r.size))     # filled in place: no list to stack
+        for i, rr in enumerate(reps):
+            self.reps[i] = self._white(rr[self.fitted])
 
     def _white(self, resid: np.ndarray) -> np.ndarray:
         return np.nan_to_num(resid * self.fw.W[self.fitted]).ravel()
