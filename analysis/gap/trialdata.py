@@ -249,9 +249,10 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
     Parameters
     ----------
     x_full : ndarray (n_gages, n) or ScaledCounts
-        The trial at its recorded rate, m/s^2, DAQ channel order; NaN in gaps. Only each
-        segment's samples and the low-pass's reach either side (:func:`filter_reach`) are read
-        and filtered: memory and time go with the impacts, not the recording's length.
+        The trial at its recorded rate, m/s^2, DAQ channel order; NaN in gaps. Of
+        :class:`ScaledCounts` (what ``ramdaq gap`` reads) only each segment's samples and the
+        low-pass's reach either side (:func:`filter_reach`) are read and filtered: memory and
+        time go with the impacts, not the recording's length. An array is filtered whole.
     fs_hz : float
         Its sample rate, Hz.
     onsets_s : ndarray (n_impacts,)
@@ -296,7 +297,10 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
     n_s = n_pre + int(round(post_s * fs_d))
     starts = np.rint((onsets - pre_s) * fs_hz).astype(int)
     starts = np.maximum(starts, 0) // q * q  # on the decimation grid
-    x = np.stack([_segment(src, int(a), q, n_s, corner, fs_hz) for a in starts])
+    if isinstance(src, ScaledCounts):
+        x = np.stack([_segment(src, int(a), q, n_s, corner, fs_hz) for a in starts])
+    else:    # a trial the caller holds whole already: filtered whole, as ever (to the last bit)
+        x = _cut_whole(src.x, starts, q, n_s, corner, fs_hz)
     seg_t0 = starts / fs_hz
     k_on = np.rint((onsets - seg_t0) * fs_d).astype(int)
     n_skip = int(math.ceil(skip_s * fs_d))
@@ -338,6 +342,23 @@ def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner
     out = xf[:, np.minimum(idx, hi - lo - 1)]
     out[:, idx >= n - lo] = np.nan                  # past the stream's end
     return out
+
+
+def _cut_whole(x_full: np.ndarray, starts: np.ndarray, q: int, n_s: int, corner: float,
+               fs_hz: float) -> np.ndarray:
+    """The segments (n_seg, n_gages, n_s) of a trial held whole (n_gages, n), low-passed whole
+    (:func:`_segment` does the same a window at a time, to 1e-14 of the signal)."""
+    n = x_full.shape[1]
+    gaps = ~np.isfinite(x_full)
+    xf = np.where(gaps, 0.0, x_full)
+    if q > 1:
+        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
+        if gaps.any():
+            xf[_dilate(gaps, int(math.ceil(3 * fs_hz / corner)))] = np.nan
+    idx = starts[:, None] + q * np.arange(n_s)[None, :]
+    x = xf[:, np.clip(idx, 0, n - 1)].transpose(1, 0, 2).copy()
+    x[np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan   # past the stream's end
+    return x
 
 
 def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
