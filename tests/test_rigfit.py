@@ -254,3 +254,20 @@ def test_gap_with_a_crude_rig_states_its_form_error(perturbed_trial, capsys):
     doc = json.loads((out / "gap.json").read_text())
     assert doc["effect"] is None
     assert doc["model_level"]["form_errors"]
+
+
+def test_apply_is_set_value_of_each_constant_in_turn():
+    """``apply`` copies each part of the rig once; the rig it gives is the one setting every
+    constant in turn gives, value for value (the fit's numbers must not move)."""
+    from ramdaq.analysis.gap.rigfit import apply, fit_params, set_value
+
+    rng = np.random.default_rng(0)
+    for name, medium in (("sampson", "water"), ("albacore", "air")):
+        rig = load_rig(name).with_medium(medium)
+        params = fit_params(rig)
+        for _ in range(5):
+            theta = rng.normal(0, 0.2, len(params))
+            one_by_one = rig
+            for p, t in zip(params, theta, strict=True):
+                one_by_one = set_value(one_by_one, p.name, p.start * math.exp(t))
+            assert apply(rig, params, theta) == one_by_one

@@ -67,13 +67,13 @@ class Calibration:
 
     def columns(self, fw: Forward) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The linear columns of this calibration's prediction -- every impact's unit response,
-        its time derivative, the terms' own columns (see :meth:`Forward.fit`); computed once."""
-        if "columns" not in self.cache:
-            needs_force = any(t.effect.needs_force for t in self.terms)
-            U, dU = fw.unit_responses(self.fit.modes, self.terms,
-                                      force=self.fit.force if needs_force else None)
-            self.cache["columns"] = (U, dU, fw.columns(self.terms))
-        return self.cache["columns"]
+        its time derivative, the terms' own columns (see :meth:`Forward.fit`). Computed anew at
+        each call, not kept: they are (n_seg, n_seg, n_g, n_s) each, 150 MB for 20 impacts, and
+        every candidate of a search holds its calibration (one prediction's work to remake)."""
+        needs_force = any(t.effect.needs_force for t in self.terms)
+        U, dU = fw.unit_responses(self.fit.modes, self.terms,
+                                  force=self.fit.force if needs_force else None)
+        return U, dU, fw.columns(self.terms)
 
     def pred_rate(self, fw: Forward) -> np.ndarray:
         """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached)."""

@@ -441,6 +441,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     names = settings.effects or tuple(EFFECTS)
     say(f"scoring {len(names)} candidate effects")
     sigs = _by_z(signature_scores(fw, base, basis, EFFECTS[n]) for n in names)
+    del basis      # (N, k) and the replicates whitened: a second effect's basis is made anew
     cands = sorted(_candidates(search, sigs, significant), key=lambda c: c.dbic)
     pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
     best = next((c for c in cands if c.name == pick), None)

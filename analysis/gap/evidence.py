@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 import scipy.ndimage
 import scipy.signal
 import scipy.special
@@ -128,8 +129,11 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
             # constants are shared by all modes, so their per-mode rates are the loosest part
             rel = DECAY_TOL_PER_FORM_TOL * form_tol * rng.standard_normal(ms.lam.shape)
             ms.lam = ms.lam + ms.lam.real * rel
-            Ur, _ = fw.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)
-            x = x + np.tensordot(cal.fit.force, Ur - U, axes=1)
+            # the derivative is not wanted: dropped at once; the difference made in place
+            Ur = fw.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)[0]
+            Ur -= U
+            x = x + np.tensordot(cal.fit.force, Ur, axes=1)
+            del Ur
         _, pred = fw._solve(U, dU, extra, x)
         out[r] = np.where(fw.mask, x - pred, np.nan)
     return out
@@ -155,7 +159,10 @@ def bands_for(f_modes: np.ndarray, top_hz: float) -> Bands:
 
 def cell_energies(fw: Forward, resid: np.ndarray, bands: Bands) -> np.ndarray:
     """Whitened residual energy per segment x gage x band x window,
-    (..., n_seg, n_g, n_bands, 3); ``resid`` may carry leading replicate axes."""
+    (..., n_seg, n_g, n_bands, 3); ``resid`` may carry leading replicate axes (read one
+    replicate at a time: the spectra of all at once were 3x the replicates' own memory)."""
+    if resid.ndim > 3:
+        return np.stack([cell_energies(fw, r, bands) for r in resid])
     td = fw.td
     out = []
     for name in WINDOWS:
@@ -313,16 +320,11 @@ class ScoreBasis:
     def __init__(self, fw: Forward, cal: Calibration, reps: np.ndarray) -> None:
         self.fw = fw
         self.fitted = np.flatnonzero(fw.td.fitted)
-        X = fw.design(*cal.columns(fw))[:, self.fitted]
-        w = (fw.mask[self.fitted] * fw.W[self.fitted]).ravel()
-        cols = [X.reshape(X.shape[0], -1) * w[None, :]]
-        if cal.jac.shape[1]:
-            cols.append(cal.jac.T)
-        B = np.concatenate(cols)
-        q, _ = np.linalg.qr(B.T)
-        self.Q = q                                      # (N, n_basis) orthonormal
+        self.Q = _orthonormal_columns(fw, cal, self.fitted)   # (N, n_basis)
         self.r = self._white(cal.fit.resid[self.fitted])
-        self.reps = np.stack([self._white(rr[self.fitted]) for rr in reps])
+        self.reps = np.empty((len(reps), self.r.size))     # filled in place: no list to stack
+        for i, rr in enumerate(reps):
+            self.reps[i] = self._white(rr[self.fitted])
 
     def _white(self, resid: np.ndarray) -> np.ndarray:
         return np.nan_to_num(resid * self.fw.W[self.fitted]).ravel()
@@ -353,6 +355,27 @@ class ScoreBasis:
         br = self.reps @ Dp.T
         chi2_rep = np.einsum("ri,ij,rj->r", br, Gi, br)
         return chi2, float(np.mean(chi2_rep)), Gi @ b
+
+
+def _orthonormal_columns(fw: Forward, cal: Calibration, fitted: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (N, k) of the calibration's directions in the fitted segments'
+    whitened sample space: the linear columns (:meth:`Forward.design`'s order) and the
+    Jacobian's. Written column by column into one Fortran array that the QR overwrites, so no
+    stacked copy of the design is ever made (the same numbers as ``numpy.linalg.qr`` of it)."""
+    U, dU, extra = cal.columns(fw)
+    w = fw.mask[fitted] * fw.W[fitted]
+    blocks = [U, dU] + ([extra] if extra is not None else [])
+    k = sum(b.shape[0] for b in blocks) + cal.jac.shape[1]
+    BT = np.empty((w.size, k), order="F")
+    c = 0
+    for b in blocks:
+        for j in range(b.shape[0]):
+            BT[:, c] = (b[j][fitted] * w).ravel()
+            c += 1
+    del U, dU, extra, blocks
+    BT[:, c:] = cal.jac
+    q, _ = scipy.linalg.qr(BT, mode="economic", overwrite_a=True, check_finite=False)
+    return q
 
 
 def template(fw: Forward, cal: Calibration, term: Term) -> np.ndarray:

@@ -123,6 +123,25 @@ class ModeSet:
                        feed=self.feed.copy(), exp_only=self.exp_only.copy())
 
 
+RUNG_OUT = 1e-13
+"""A blow's free decay is left out of a later segment (zeros there) when every gage's
+acceleration and its rate at that segment's start are bounded by this fraction of the same
+bound just after the blow (each mode's term bounded by its modulus; the decay only shrinks it):
+at a ram blow's signal-to-noise of 1e4-1e6 that is below 1e-7 of the noise -- the rounding of the
+least squares, not data. Blows 30 s apart then cost one segment or two each, not every later one
+(time and memory linear in the impacts, not quadratic)."""
+
+
+def _rung_out(ms: ModeSet, c: np.ndarray, JT: np.ndarray) -> bool:
+    """Whether a free decay of modal factors ``c`` (m,) is below :data:`RUNG_OUT` of the blow
+    whose factors just after contact are ``JT`` (m,), for the response and its rate."""
+    A = np.abs(ms.A)
+    lam = np.abs(ms.lam)
+    now = [(A @ np.abs(c)).max(), (A @ (np.abs(c) * lam)).max()]
+    ref = [(A @ np.abs(JT)).max(), (A @ (np.abs(JT) * lam)).max()]
+    return all(v <= RUNG_OUT * r for v, r in zip(now, ref, strict=True))
+
+
 @dataclass
 class Fit:
     """A prediction and how it matches the data.
@@ -243,7 +262,10 @@ class Forward:
                         continue
                     if tau0 >= T:
                         lag = np.where(ms.exp_only, tau0, tau0 - T)
-                        free.append((j, s_, ratio * JT * np.exp(ms.lam * lag)))
+                        c = ratio * JT * np.exp(ms.lam * lag)
+                        if s_ > j and _rung_out(ms, c, JT):
+                            continue       # a blow rung out before a later segment: exact zeros
+                        free.append((j, s_, c))
                         continue
                     u, du = self.pulse_response(ms, tau0, basis)
                     U[j, s_] += ratio * u
@@ -378,27 +400,36 @@ class Forward:
         G = np.zeros((2 * n + e, 2 * n + e))
         b = np.zeros(2 * n + e)
         w2 = self._w2.reshape(self.td.n_seg, -1)
-        alive = []
         for s in range(self.td.n_seg):
-            a = min(s + 1, n)                  # the impacts alive in segment s: 0 .. s
-            live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
-            idx = list(range(a)) + list(range(n, n + a)) + [2 * n + i for i in live_e]
-            X = np.empty((len(idx), w2.shape[1]))
-            X[:a] = U[:a, s].reshape(a, -1)
-            X[a:2 * a] = dU[:a, s].reshape(a, -1)
-            if live_e:
-                X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
+            idx, X = self._alive(U, dU, extra, s)
             Xw = X * w2[s]
             G[np.ix_(idx, idx)] += Xw @ X.T
             b[idx] += Xw @ data[s].ravel()
-            alive.append((idx, X))
         scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
         Gs = G / scale[:, None] / scale[None, :]
         coef = np.linalg.lstsq(Gs, b / scale, rcond=1e-10)[0] / scale
         pred = np.empty_like(data)
-        for s, (idx, X) in enumerate(alive):
+        for s in range(self.td.n_seg):      # the columns made again: one segment's at a time
+            idx, X = self._alive(U, dU, extra, s)
             pred[s] = (coef[idx] @ X).reshape(data.shape[1:])
         return coef, pred
+
+    def _alive(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
+        """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
+        terms' columns not zero there -- as their indices and rows (k, n_gages * n_s)."""
+        n = U.shape[0]
+        e = 0 if extra is None else extra.shape[0]
+        # the impacts alive in segment s: 0 .. s, but for those rung out before it (all zero)
+        live = [j for j in range(min(s + 1, n)) if j == s or U[j, s].any() or dU[j, s].any()]
+        a = len(live)
+        live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
+        idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
+        X = np.empty((len(idx), U.shape[2] * U.shape[3]))
+        X[:a] = U[live, s].reshape(a, -1)
+        X[a:2 * a] = dU[live, s].reshape(a, -1)
+        if live_e:
+            X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
+        return idx, X
 
     def whitened(self, fit: Fit, segments: np.ndarray | None = None) -> np.ndarray:
         """Residual divided by each gage's sigma, flattened, over ``segments`` (default all);

@@ -248,10 +248,29 @@ def fit_params(rig: Rig, bounds: dict[str, tuple[float, float]] | None = None) -
 
 
 def apply(rig: Rig, params: list[FitParam], theta: np.ndarray) -> Rig:
-    """``rig`` with each constant at ``start * exp(theta)``."""
+    """``rig`` with each constant at ``start * exp(theta)``: what :func:`set_value` of each in
+    turn gives, with one copy of each part changed and of the rig (the fit asks thousands of
+    times, and a rig copied once per constant was a quarter of the model level's time)."""
+    parts: dict[str, dict[str, float]] = {}
+    hull: dict[int, dict[str, float]] = {}
+    damping: dict[str, dict[str, float]] = {}
     for p, t in zip(params, theta, strict=True):
-        rig = set_value(rig, p.name, p.start * math.exp(t))
-    return rig
+        v = p.start * math.exp(t)
+        if (m := _HULL.match(p.name)) is not None:
+            hull.setdefault(int(m[1]), {})[m[2]] = v
+            continue
+        part = p.name.split(".")
+        if part[0] == "damping":
+            damping.setdefault(part[1], {})[part[2]] = v
+        else:
+            parts.setdefault(part[0], {})[part[1]] = v
+    new = {k: replace(getattr(rig, k), **kv) for k, kv in parts.items()}
+    if hull:
+        new["hull_modes"] = tuple(replace(h, **hull[k]) if k in hull else h
+                                  for k, h in enumerate(rig.hull_modes))
+    if damping:
+        new["damping"] = {**rig.damping, **{k: replace(rig.damping[k], **kv) for k, kv in damping.items()}}
+    return replace(rig, **new) if new else rig
 
 
 # -- the fit -------------------------------------------------------------------------------------

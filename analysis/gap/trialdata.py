@@ -186,15 +186,73 @@ def analysis_band(rig: Rig, fs_hz: float, *, max_hz: float | None = None) -> tup
     return corner, [float(f[i]) for i in keep]
 
 
-def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
+@dataclass(frozen=True)
+class ScaledCounts:
+    """A trial kept as its converter's counts, read a window at a time: ``counts`` (n_gages, n)
+    integers (int16 when they fit: a quarter of float64's memory), ``scale`` (n_gages,) SI per
+    count, ``missing`` (k, 2) column ranges ``[a, b)`` the stream never delivered (NaN when read).
+    The values are exactly ``counts * scale`` (as :meth:`ramdaq.drivers.block.Block.values`)."""
+
+    counts: np.ndarray
+    scale: np.ndarray
+    missing: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.counts.shape
+
+    def window(self, a: int, b: int) -> np.ndarray:
+        """Columns ``a:b`` in SI units (m/s^2), float64 (n_gages, b - a), NaN where missing."""
+        x = self.counts[:, a:b] * self.scale[:, None]
+        m = self.missing
+        for m0, m1 in m[(m[:, 0] < b) & (m[:, 1] > a)] if len(m) else ():
+            x[:, max(m0, a) - a: min(m1, b) - a] = np.nan
+        return x
+
+    def full(self) -> np.ndarray:
+        """The whole trial in SI units, float64 (n_gages, n), NaN where missing."""
+        return self.window(0, self.shape[1])
+
+
+class _ArrayWindows:
+    """An in-memory trial (n_gages, n) read as :class:`ScaledCounts` is (views, not copies)."""
+
+    def __init__(self, x: np.ndarray) -> None:
+        self.x = np.asarray(x, dtype=float)
+        self.shape = self.x.shape
+
+    def window(self, a: int, b: int) -> np.ndarray:
+        return self.x[:, a:b]
+
+
+@functools.lru_cache(maxsize=16)
+def filter_reach(corner_hz: float, fs_hz: float, rel: float = 1e-14) -> int:
+    """Samples after which the decimation low-pass's impulse response (one pass) has fallen below
+    ``rel`` of its peak for good, plus the zero-phase filter's edge padding: filtering a window
+    this much wider than the samples kept on each side gives them as filtering the whole trial
+    would, to ``rel`` of the signal (the edges' transients die out within it)."""
+    sos = _lowpass(corner_hz, fs_hz)
+    n = int(64 * fs_hz / corner_hz) + 64
+    imp = np.zeros(n)
+    imp[0] = 1.0
+    h = np.abs(scipy.signal.sosfilt(sos, imp))
+    above = np.flatnonzero(h > rel * h.max())
+    pad = 3 * (2 * len(sos) + 1)
+    return int(above[-1]) + 1 + pad
+
+
+def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
             pre_s: float = 1.0, post_max_s: float = 4.0, held_out_every: int = 3,
             rails: tuple[float, float] | None = None, max_hz: float | None = None) -> TrialData:
-    """Cut, filter and decimate a whole trial.
+    """Cut, filter and decimate a trial, reading only the windows compared.
 
     Parameters
     ----------
-    x_full : ndarray (n_gages, n)
-        The trial at its recorded rate, m/s^2, DAQ channel order; NaN in gaps.
+    x_full : ndarray (n_gages, n) or ScaledCounts
+        The trial at its recorded rate, m/s^2, DAQ channel order; NaN in gaps. Of
+        :class:`ScaledCounts` (what ``ramdaq gap`` reads) only each segment's samples and the
+        low-pass's reach either side (:func:`filter_reach`) are read and filtered: memory and
+        time go with the impacts, not the recording's length. An array is filtered whole.
     fs_hz : float
         Its sample rate, Hz.
     onsets_s : ndarray (n_impacts,)
@@ -212,10 +270,11 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
         Compare no mode above this frequency.
     """
     rig = strip_ambient(rig)
+    src = x_full if isinstance(x_full, ScaledCounts) else _ArrayWindows(x_full)
     onsets = np.sort(np.asarray(onsets_s, dtype=float))
     if len(onsets) == 0:
         raise ValueError("no impacts to compare: the gap diagnosis needs at least one ram blow")
-    n_g, n = x_full.shape
+    n_g, n = src.shape
     corner, _ = analysis_band(rig, fs_hz, max_hz=max_hz)
     # an event too close after the previous one to leave a decay (a re-trigger on a tone, a
     # bounce the trigger split off) is not compared; its ringing stays in the data
@@ -228,15 +287,6 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
     onsets = onsets[keep]
     q = max(1, int(fs_hz // (2.5 * corner)))
     fs_d = fs_hz / q
-    gaps = ~np.isfinite(x_full)
-    xf = np.where(gaps, 0.0, x_full)
-    if q > 1:
-        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
-        # a gap's samples and the filter's reach around them carry no data
-        if gaps.any():
-            reach = int(math.ceil(3 * fs_hz / corner))
-            bad = _dilate(gaps, reach)
-            xf[bad] = np.nan
     skip_s = rig.impact.duration_s + SMEAR_CYCLES / corner
     gaps_next = np.diff(np.append(onsets, n / fs_hz + pre_s))
     post_s = float(min(post_max_s, np.min(gaps_next) - pre_s))
@@ -247,10 +297,10 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
     n_s = n_pre + int(round(post_s * fs_d))
     starts = np.rint((onsets - pre_s) * fs_hz).astype(int)
     starts = np.maximum(starts, 0) // q * q  # on the decimation grid
-    idx = starts[:, None] + q * np.arange(n_s)[None, :]
-    idx_c = np.clip(idx, 0, n - 1)
-    x = xf[:, idx_c].transpose(1, 0, 2).copy()
-    x[np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan   # past the stream's end
+    if isinstance(src, ScaledCounts):
+        x = np.stack([_segment(src, int(a), q, n_s, corner, fs_hz) for a in starts])
+    else:    # a trial the caller holds whole already: filtered whole, as ever (to the last bit)
+        x = _cut_whole(src.x, starts, q, n_s, corner, fs_hz)
     seg_t0 = starts / fs_hz
     k_on = np.rint((onsets - seg_t0) * fs_d).astype(int)
     n_skip = int(math.ceil(skip_s * fs_d))
@@ -262,12 +312,53 @@ def prepare(x_full: np.ndarray, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
     fitted = np.array([(j + 1) % held_out_every != 0 for j in range(len(onsets))])
     if fitted.all() and len(onsets) > 1:
         fitted[-1] = False
-    clip, flat, peak = _full_rate_stats(x_full, fs_hz, onsets, pre_s, post_s, rails)
+    clip, flat, peak = _full_rate_stats(src, fs_hz, onsets, pre_s, post_s, rails)
     return TrialData(rig=rig, x=x, fs_hz=fs_d, fs_full_hz=fs_hz, seg_t0_s=seg_t0, onsets_s=onsets,
                      windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
                      clip=clip, flat=flat, peak_full=peak,
                      gage_numbers=tuple(g.number for g in rig.gages_by_channel()),
                      dropped_onsets_s=dropped)
+
+
+def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner: float,
+             fs_hz: float) -> np.ndarray:
+    """One segment, (n_gages, n_s): every ``q``-th sample from column ``a`` of the trial
+    low-passed at ``corner`` (zero-phase, when ``q > 1``), NaN past the stream's end and where
+    a gap or the filter's reach around it leaves no data. The low-pass runs over the segment
+    and :func:`filter_reach` either side only."""
+    n = src.shape[1]
+    b = a + q * (n_s - 1) + 1                       # one past the last sample kept
+    m = filter_reach(corner, fs_hz) if q > 1 else 0
+    lo, hi = max(0, a - m), min(n, b + m)
+    w = src.window(lo, hi)
+    gaps = ~np.isfinite(w)
+    xf = np.where(gaps, 0.0, w)
+    if q > 1:
+        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
+        # a gap's samples and the filter's reach around them carry no data
+        if gaps.any():
+            xf[_dilate(gaps, int(math.ceil(3 * fs_hz / corner)))] = np.nan
+    idx = a - lo + q * np.arange(n_s)
+    out = xf[:, np.minimum(idx, hi - lo - 1)]
+    out[:, idx >= n - lo] = np.nan                  # past the stream's end
+    return out
+
+
+def _cut_whole(x_full: np.ndarray, starts: np.ndarray, q: int, n_s: int, corner: float,
+               fs_hz: float) -> np.ndarray:
+    """The segments (n_seg, n_gages, n_s) of a trial held whole (n_gages, n), low-passed whole
+    (:func:`_segment` does the same a window at a time, to 1e-14 of the signal)."""
+    n = x_full.shape[1]
+    gaps = ~np.isfinite(x_full)
+    xf = np.where(gaps, 0.0, x_full)
+    if q > 1:
+        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
+        if gaps.any():
+            xf[_dilate(gaps, int(math.ceil(3 * fs_hz / corner)))] = np.nan
+    idx = starts[:, None] + q * np.arange(n_s)[None, :]
+    x = xf[:, np.clip(idx, 0, n - 1)].transpose(1, 0, 2).copy()
+    x[np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan   # past the stream's end
+    return x
 
 
 def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
@@ -276,16 +367,16 @@ def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
     return (c[:, 2 * reach + 1:] - c[:, : -2 * reach - 1]) > 0
 
 
-def _full_rate_stats(x: np.ndarray, fs_hz: float, onsets: np.ndarray, pre_s: float,
-                     post_s: float, rails) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    n_seg, n_g = len(onsets), x.shape[0]
+def _full_rate_stats(src: ScaledCounts | _ArrayWindows, fs_hz: float, onsets: np.ndarray,
+                     pre_s: float, post_s: float, rails) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n_seg, n_g = len(onsets), src.shape[0]
     clip = np.zeros((n_seg, n_g), dtype=int)
     flat = np.zeros((n_seg, n_g), dtype=int)
     peak = np.zeros((n_seg, n_g))
     for j, t in enumerate(onsets):
         a = max(0, int((t - pre_s) * fs_hz))
-        b = min(x.shape[1], int((t + post_s) * fs_hz))
-        seg = x[:, a:b]
+        b = min(src.shape[1], int((t + post_s) * fs_hz))
+        seg = src.window(a, b)
         ok = np.isfinite(seg)
         s = np.where(ok, seg, 0.0)
         peak[j] = np.abs(s).max(axis=1) if s.shape[1] else 0.0

@@ -1,0 +1,56 @@
+"""The forward model leaves a blow out of a later segment only where it has rung out: below
+``RUNG_OUT`` of its size, so the prediction is the full one to rounding."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+import ramdaq.analysis.gap.forward as forward
+from ramdaq.analysis.gap.forward import RUNG_OUT, Forward, _rung_out
+from ramdaq.daq.commands.gap import load_trial, trial_data
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_blow_is_rung_out_only_when_its_decay_is_below_the_bound():
+    td = trial_data(load_trial(ROOT / "recordings" / "albacore-water.mcap"))
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    ms = fw.modes(np.zeros(len(fw.params)))
+    _, JT = fw.pulse_basis(ms)
+    # the slowest mode's decay time: after 1 s it has lost little, after 60 of its time
+    # constants (e^-60 ~ 1e-26) every mode is far below 1e-13
+    tau = 1 / np.min(-ms.lam.real)
+    assert not _rung_out(ms, JT * np.exp(ms.lam * 1.0), JT)
+    assert _rung_out(ms, JT * np.exp(ms.lam * 60 * tau), JT)
+    # in between, the answer is the bound's: every gage's sum of mode moduli (and rates)
+    # against the same just after the blow
+    A, lam = np.abs(ms.A), np.abs(ms.lam)
+    for t in np.linspace(0, 60 * tau, 25):
+        c = np.abs(JT * np.exp(ms.lam * t))
+        ratio = max((A @ c).max() / (A @ np.abs(JT)).max(),
+                    (A @ (c * lam)).max() / (A @ (np.abs(JT) * lam)).max())
+        assert _rung_out(ms, JT * np.exp(ms.lam * t), JT) == (ratio <= RUNG_OUT)
+    assert RUNG_OUT < 1e-12
+
+
+def test_the_prediction_with_rung_out_blows_left_out_is_the_full_one(monkeypatch):
+    """The sample trial with its blows' decays cut wherever they fall below the bound, against
+    the same with nothing cut: the same forces and prediction to 1e-12 (rounding of the least
+    squares is ~1e-15; what is cut is below 1e-13 of a blow)."""
+    td = trial_data(load_trial(ROOT / "recordings" / "albacore-water.mcap"))
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    th = np.zeros(len(fw.params))
+    ms = fw.modes(th)
+    # a small bound makes the second and later segments cut nothing; a large one cuts every
+    # later segment -- the first must be exact, the second must differ (the test can fail)
+    cut = fw.fit(th, modes=ms)
+    monkeypatch.setattr(forward, "RUNG_OUT", -1.0)
+    full = fw.fit(th, modes=ms)
+    scale = np.max(np.abs(full.pred))
+    assert np.max(np.abs(cut.pred - full.pred)) < 1e-12 * scale
+    np.testing.assert_allclose(cut.force, full.force, rtol=1e-12)
+    monkeypatch.setattr(forward, "RUNG_OUT", 1.0)
+    crude = fw.fit(th, modes=ms)
+    assert np.max(np.abs(crude.pred - full.pred)) > 1e-9 * scale

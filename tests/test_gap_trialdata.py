@@ -1,0 +1,108 @@
+"""The gap diagnosis reads only the windows it compares: a trial cut and low-passed window by
+window is the trial low-passed whole and cut, to rounding; a recording read block by block keeps
+the gages' counts and gives the same samples as reading it whole, gaps included."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import scipy.signal
+
+from ramdaq.analysis.gap.trialdata import ScaledCounts, _lowpass, analysis_band, prepare
+from ramdaq.analysis.model.rig import load_rig
+from ramdaq.daq.commands.gap import _joined, load_trial
+from ramdaq.daq.recording import read_recording
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _whole_trial_reference(x, fs, onsets, rig, pre_s=1.0, post_s=4.0):
+    """The segments as filtering the whole trial gives them (the pre-windowed algorithm)."""
+    corner, _ = analysis_band(rig, fs)
+    q = max(1, int(fs // (2.5 * corner)))
+    gaps = ~np.isfinite(x)
+    xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs), np.where(gaps, 0.0, x), axis=1)
+    reach = int(math.ceil(3 * fs / corner))
+    c = np.cumsum(np.pad(gaps, ((0, 0), (reach + 1, reach))), axis=1)
+    xf[(c[:, 2 * reach + 1:] - c[:, : -2 * reach - 1]) > 0] = np.nan
+    n_s = int(round(pre_s * fs / q)) + int(round(post_s * fs / q))
+    starts = np.maximum(np.rint((np.asarray(onsets) - pre_s) * fs).astype(int), 0) // q * q
+    idx = starts[:, None] + q * np.arange(n_s)[None, :]
+    out = xf[:, np.clip(idx, 0, x.shape[1] - 1)].transpose(1, 0, 2)
+    out[np.broadcast_to((idx >= x.shape[1])[:, None, :], out.shape)] = np.nan
+    return out
+
+
+def test_windowed_segments_are_the_whole_trial_filtered():
+    """Filtering each segment with the low-pass's reach either side gives what filtering the
+    whole trial gives, to 1e-12 of the signal (float64 rounding through a 16th-order filter is
+    ~1e-15; the reach is where the edge transient has fallen to 1e-14), and a gap's NaN in the
+    same places."""
+    rig = load_rig(ROOT / "recordings" / "rigs" / "albacore.toml").with_medium("water")
+    rng = np.random.default_rng(0)
+    fs, n = 2048.0, int(2048 * 29.5)
+    t = np.arange(n) / fs
+    x = np.stack([np.sin(2 * math.pi * (13 + g) * t) * np.exp(-0.1 * (t % 7))
+                  + 0.01 * rng.standard_normal(n) for g in range(4)])
+    x[:, int(9.3 * fs): int(9.3 * fs) + 40] = np.nan        # a gap in the second decay
+    onsets = np.array([2.0, 9.0, 16.0, 26.0])
+    # the last decay runs to the end: 3.5 s
+    scale = np.full(4, 1e-6)
+    counts = np.round(np.nan_to_num(x) / scale[:, None]).astype(np.int32)
+    x = counts * scale[:, None]
+    x[:, int(9.3 * fs): int(9.3 * fs) + 40] = np.nan
+    sc = ScaledCounts(counts, scale, np.array([[int(9.3 * fs), int(9.3 * fs) + 40]]))
+    ref = _whole_trial_reference(x, fs, onsets, rig, post_s=3.5)
+    np.testing.assert_array_equal(prepare(x, fs, onsets, rig).x, ref)   # an array: filtered whole
+    td = prepare(sc, fs, onsets, rig, post_max_s=4.0)
+    assert td.x.shape == ref.shape
+    np.testing.assert_array_equal(np.isnan(td.x), np.isnan(ref))
+    assert np.isnan(td.x[1]).any() and not np.isnan(td.x[[0, 2, 3]]).any()
+    ok = np.isfinite(ref)
+    assert np.max(np.abs(td.x[ok] - ref[ok])) < 1e-12 * np.max(np.abs(ref[ok]))
+
+
+def test_scaled_counts_read_as_the_array_they_stand_for():
+    """Counts and a scale with a missing stretch read back, window by window, as the float
+    array with NaN there, and the same segments come out of either."""
+    rig = load_rig(ROOT / "recordings" / "rigs" / "albacore.toml").with_medium("water")
+    rng = np.random.default_rng(1)
+    counts = rng.integers(-3000, 3000, size=(3, 2048 * 14)).astype(np.int16)
+    scale = np.array([1e-3, 2e-3, 5e-4])
+    sc = ScaledCounts(counts, scale, np.array([[5000, 5100]]))
+    x = counts * scale[:, None]
+    x[:, 5000:5100] = np.nan
+    np.testing.assert_array_equal(sc.full(), x)
+    np.testing.assert_array_equal(sc.window(4990, 5010), x[:, 4990:5010])
+    a = prepare(sc, 2048.0, np.array([2.0, 8.0]), rig)
+    b = prepare(x, 2048.0, np.array([2.0, 8.0]), rig)
+    np.testing.assert_array_equal(np.isnan(a.x), np.isnan(b.x))
+    ok = np.isfinite(b.x)     # window by window against whole: rounding (see the test above)
+    assert np.max(np.abs(a.x[ok] - b.x[ok])) < 1e-12 * np.max(np.abs(b.x[ok]))
+    np.testing.assert_array_equal(a.peak_full, b.peak_full)
+
+
+def test_blocks_joined_with_a_gap():
+    """Blocks with a hole between them join at their stream index, the hole missing."""
+    parts = [(100, np.full((2, 10), 3, np.int16)), (110, np.full((2, 5), -2, np.int16)),
+             (120, np.full((2, 10), 7, np.int16))]
+    sc = _joined(parts, True, np.array([0.5, 2.0]), -2, 7)
+    assert isinstance(sc, ScaledCounts) and sc.counts.dtype == np.int16
+    np.testing.assert_array_equal(sc.missing, [[15, 20]])
+    x = sc.full()
+    assert np.isnan(x[:, 15:20]).all() and np.isfinite(x[:, :15]).all() and np.isfinite(x[:, 20:]).all()
+    np.testing.assert_array_equal(x[:, 25], [3.5, 14.0])
+
+
+def test_a_recording_read_block_by_block_is_the_recording_read_whole():
+    """``load_trial`` keeps the gages' counts; the samples and impacts are those of
+    ``read_recording``."""
+    path = ROOT / "recordings" / "albacore-water.mcap"
+    lt = load_trial(path)
+    rec = read_recording(path)
+    assert isinstance(lt.data, ScaledCounts)
+    np.testing.assert_array_equal(lt.x, rec.gage_values([g.number for g in lt.rig.gages_by_channel()]))
+    np.testing.assert_array_equal(lt.onsets_s, [ev.onset_s - rec.first_sample / rec.info.fs_hz
+                                                for ev in rec.impacts])
