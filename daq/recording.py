@@ -187,6 +187,48 @@ def _trigger_offline(trig: Trigger, blocks: list[Block], values: np.ndarray) -> 
     return impacts + trig.flush()
 
 
+class BlockwiseOfflineTrigger:
+    """The offline trigger of :func:`read_recording` over a recording read block by block
+    (``ramdaq gap`` keeps only counts): the blocks are held until they cover the trigger's
+    :attr:`~ramdaq.daq.trigger.Trigger.head_samples`, the trigger is armed on them (and on the
+    force channel's every sample, ``force_row``, read by :func:`force_row` beforehand), then
+    they and every later block go through it. The impacts are those :func:`read_recording`
+    finds."""
+
+    def __init__(self, trig: Trigger, force_row: np.ndarray | None = None):
+        self._trig, self._force_row = trig, force_row
+        self._held: list[Block] | None = []
+
+    def process(self, block: Block) -> list[ImpactEvent]:
+        """Feed the next block; the impacts whose records completed."""
+        if self._held is None:
+            return self._trig.process(block)
+        self._held.append(block)
+        if block.next_sample - self._held[0].first_sample < self._trig.head_samples:
+            return []
+        return self._arm()
+
+    def flush(self) -> list[ImpactEvent]:
+        """At the recording's end: the impacts still open."""
+        return (self._arm() if self._held is not None else []) + self._trig.flush()
+
+    def _arm(self) -> list[ImpactEvent]:
+        held, self._held = self._held or [], None
+        head, _ = _join(held, self._trig.info.n_channels)
+        self._trig.arm_on_record(head, self._force_row)
+        return [e for b in held for e in self._trig.process(b)]
+
+
+def force_row(path: str | PathLike, row: int | None) -> np.ndarray | None:
+    """Every sample of channel ``row`` of a recording, SI, in stream order (a first pass for
+    :class:`BlockwiseOfflineTrigger`); None when ``row`` is None."""
+    if row is None:
+        return None
+    with McapReplayDevice(path) as dev:
+        parts = [b.counts[row] * b.scale[row] for b in dev]
+    return np.concatenate(parts) if parts else np.empty(0)
+
+
 def read_recording(path: str | PathLike, *, rig: Rig | str | Path | None = None,
                    trigger: bool = True,
                    progress: Callable[[int, int], None] | None = None) -> Recording:

@@ -611,7 +611,8 @@ class RecordBackground:
 
 
 def record_background(x: np.ndarray, voters: np.ndarray, force: int | None,
-                      settings: TriggerSettings, lta_n: int) -> RecordBackground:
+                      settings: TriggerSettings, lta_n: int,
+                      force_row: np.ndarray | None = None) -> RecordBackground:
     """The background of the whole record ``x`` (SI, (n_channels, n), NaN where a gap is):
     per voter the mean power of the quietest stretch of ``lta_n / 4`` samples in its first
     :data:`_START_LTAS` LTA windows, where the arming matters (after it the LTA follows the
@@ -622,7 +623,9 @@ def record_background(x: np.ndarray, voters: np.ndarray, force: int | None,
     power of a trial with a blow every 4 s is its ringing's, ten times its background). With a
     force channel (row ``force``), its median and robust rms (MAD) and a level of 20 noise rms
     and a tenth of the largest blow, at most ``settings.level_N``: a hammer's record (a few N
-    to a few hundred) triggers as a ram's does."""
+    to a few hundred) triggers as a ram's does. Only the record's first ``_START_LTAS`` LTAs
+    of the voters are read, and the force row whole: ``force_row``, when given, is that row
+    (every sample of the record, in any order) and ``x`` may then be the record's head."""
     if x.shape[-1] == 0:  # an empty record: nothing to arm on
         return RecordBackground(np.zeros(len(voters)),
                                 level_N=None if force is None else settings.level_N)
@@ -635,7 +638,7 @@ def record_background(x: np.ndarray, voters: np.ndarray, force: int | None,
         power = np.nan_to_num(np.nanmin(np.nanmean(windows, axis=2), axis=1), nan=0.0)
         if force is None:
             return RecordBackground(power)
-        f = x[force]
+        f = x[force] if force_row is None else np.asarray(force_row, dtype=np.float64)
         base = float(np.nan_to_num(np.nanmedian(f)))
         noise = float(np.nan_to_num(_MAD_SIGMA * np.nanmedian(np.abs(f - base))))
         peak = float(np.nan_to_num(np.nanmax(np.abs(f - base))))
@@ -718,7 +721,19 @@ class Trigger:
         shape (n_channels, end - first). Raises IndexError if they are no longer held."""
         return self._values(first, end, slice(None))
 
-    def arm_on_record(self, values: np.ndarray) -> RecordBackground:
+    @property
+    def head_samples(self) -> int:
+        """Samples of a record's start that :meth:`arm_on_record` reads of the gages (the rest
+        of the record only through its force channel)."""
+        return _START_LTAS * self._len.lta
+
+    @property
+    def force_channel(self) -> int | None:
+        """The row of the force channel the trigger uses, or None (acceleration alone)."""
+        return self._fidx
+
+    def arm_on_record(self, values: np.ndarray,
+                      force_row: np.ndarray | None = None) -> RecordBackground:
         """Offline (a whole file: import, analyze): arm on the whole record before its first
         block, so that a blow at its first sample is found and analysable. The LTA starts from
         the record's background (:func:`record_background`) and the trigger is armed from the
@@ -726,13 +741,16 @@ class Trigger:
         and the level is the record's (at most ``level_N``); a blow that begins before the
         record's first samples has its onset where its force (or, without one, its power)
         rises from the baseline, at the first sample at the latest. ``values``: the record in
-        SI units, shape (n_channels, n_samples), NaN in gaps. What it armed on is returned."""
+        SI units, shape (n_channels, n_samples), NaN in gaps -- or its first
+        :attr:`head_samples` when ``force_row`` gives the force channel's every sample (a
+        record read block by block). What it armed on is returned."""
         values = np.asarray(values, dtype=np.float64)
         if values.ndim != 2 or values.shape[0] != self.info.n_channels:
             raise ValueError(f"record of shape {values.shape} is not ({self.info.n_channels}, n)")
         if self._expected is not None:
             raise ValueError("arm_on_record must come before the first block")
-        bg = record_background(values, self._vidx, self._fidx, self.settings, self._len.lta)
+        bg = record_background(values, self._vidx, self._fidx, self.settings, self._len.lta,
+                               force_row)
         self._background = bg
         if self._fidx is not None:
             self._f_base, self._f_level = bg.force_base_N, float(bg.level_N)

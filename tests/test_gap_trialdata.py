@@ -106,3 +106,20 @@ def test_a_recording_read_block_by_block_is_the_recording_read_whole():
     np.testing.assert_array_equal(lt.x, rec.gage_values([g.number for g in lt.rig.gages_by_channel()]))
     np.testing.assert_array_equal(lt.onsets_s, [ev.onset_s - rec.first_sample / rec.info.fs_hz
                                                 for ev in rec.impacts])
+
+
+def test_a_blow_in_the_first_second_is_found_by_gap_as_by_analyze(tmp_path):
+    """``ramdaq analyze`` (``read_recording``) arms the trigger offline on the whole record, so
+    a blow inside the live arming time is found; ``ramdaq gap`` reads block by block and must
+    find the same impacts (it armed live before, and lost that blow)."""
+    from ramdaq.daq.commands.cli import main
+
+    out = tmp_path / "early.mcap"
+    assert main(["record", "--rig", str(ROOT / "recordings" / "rigs" / "albacore.toml"),
+                 "--medium", "water", "--duration", "8", "--impacts", "0.3,4.5", "--fast",
+                 "--quiet", "--out", str(out)]) == 0
+    rec = read_recording(out)
+    lt = load_trial(out)
+    onsets = [ev.onset_s - rec.first_sample / rec.info.fs_hz for ev in rec.impacts]
+    assert len(onsets) == 2 and abs(onsets[0] - 0.3) < 0.01  # 0.01 s: the trigger's onset pick
+    np.testing.assert_array_equal(lt.onsets_s, onsets)

@@ -25,7 +25,7 @@ from ...analysis.gap.trialdata import ScaledCounts, TrialData, prepare
 from ...analysis.model.rig import Gage, Rig, RigError
 from ...drivers.block import StreamInfo
 from ...drivers.mcap_replay import McapReplayDevice
-from ..recording import Recording, rig_of, rig_or_fail
+from ..recording import BlockwiseOfflineTrigger, Recording, force_row, rig_of, rig_or_fail
 from ..trigger import ImpactEvent, Trigger
 
 
@@ -102,7 +102,8 @@ def _read_gages(path: str | Path, rig: Rig | str | Path | None):
         have = _gages_present(path, info, the_rig)
         row = {g: i for i, g in enumerate(info.gages) if g}
         rows = [row[g.number] for g in have]
-        trig = Trigger(info)
+        live = Trigger(info)  # armed as read_recording arms it: offline, on the record
+        trig = BlockwiseOfflineTrigger(live, force_row(path, live.force_channel))
         impacts: list[ImpactEvent] = []
         parts: list[tuple[int, np.ndarray]] = []
         scale, same_scale, lo, hi = None, True, 0, 0
