@@ -252,7 +252,8 @@ def test_import_without_a_rig_makes_one_and_analyze_reports_each_gage(forced, tm
     assert len(steps) == 6 and "virtual inertias (Eq 18-21)" in steps
     assert rep["virtual_inertias"] is None and rep["geometry_m"] is None
     assert "g01: f = 24." in out and "skipped: rudder motions (Eq 1-6b)" in out
-    assert (tmp_path / "an" / "impact0_spectrum.png").exists()
+    assert (tmp_path / "an" / "impact0_decay.png").exists()  # the default plot kind
+    assert (tmp_path / "an" / "frf.png").exists()  # a force channel: its driving-point FRF
 
 
 def test_part_of_the_layout_runs_the_steps_its_gages_allow(decay, tmp_path, capsys):
