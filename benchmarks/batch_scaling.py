@@ -44,8 +44,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from ramdaq.daq.batch_tasks import TaskResult, TaskSpec  # noqa: E402
 from ramdaq.daq.commands.batch import finish, open_client, plan_batch, run_tasks  # noqa: E402
+from ramdaq.daq.commands.batch_tasks import TaskResult, TaskSpec  # noqa: E402
 
 RIGS = Path(__file__).resolve().parent.parent / "recordings" / "rigs"
 KINDS = (("albacore", "air", 6.0), ("albacore", "water", 6.0), ("sampson", "water", 8.0))

@@ -66,7 +66,8 @@ def child(path: str, layer: str) -> dict:
 
     from ramdaq.analysis.gap.diagnose import diagnose
     from ramdaq.analysis.gap.rigfit import model_level
-    from ramdaq.daq.commands.gap import data_only, load_trial, run_gap, trial_data
+    from ramdaq.daq.commands.gap import data_only, run_gap
+    from ramdaq.daq.gap_trial import load_trial, trial_data
 
     def timed(fn):
         c0, w0 = time.process_time(), time.perf_counter()

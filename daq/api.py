@@ -171,7 +171,7 @@ class TrialDiagnosis:
     recording: Recording
     diagnosis: Diagnosis
     trial: Any = field(repr=False)
-    """The :class:`~ramdaq.daq.commands.gap.LoadedTrial` the diagnosis read."""
+    """The :class:`~ramdaq.daq.gap_trial.LoadedTrial` the diagnosis read."""
 
     @property
     def verdict(self) -> str:
@@ -206,7 +206,7 @@ def diagnose(src: Source, *, rig: Rig | str | Path | None = None, settings: Sett
              progress: Callable[[str], None] | None = None) -> TrialDiagnosis:
     """Hold a recording against its rig's model as ``ramdaq gap`` does (minutes on two cores)."""
     from ..analysis.gap.diagnose import diagnose as run
-    from .commands.gap import load_trial, trial_data
+    from .gap_trial import load_trial, trial_data
 
     _check_blas_threads()
     rec = as_recording(src, rig)

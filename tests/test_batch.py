@@ -23,14 +23,6 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from ramdaq.daq.batch_tasks import (
-    TaskResult,
-    TaskSpec,
-    analyze_task,
-    file_sha256,
-    gap_task,
-    method_digest,
-)
 from ramdaq.daq.commands.batch import (
     BatchOutcome,
     expand_paths,
@@ -39,6 +31,14 @@ from ramdaq.daq.commands.batch import (
     plan_batch,
     report_folders,
     run_batch,
+)
+from ramdaq.daq.commands.batch_tasks import (
+    TaskResult,
+    TaskSpec,
+    analyze_task,
+    file_sha256,
+    gap_task,
+    method_digest,
 )
 from ramdaq.daq.mode_table import ModeEstimate
 

@@ -9,7 +9,7 @@ import numpy as np
 
 import ramdaq.analysis.gap.forward as forward
 from ramdaq.analysis.gap.forward import RUNG_OUT, Forward, _rung_out
-from ramdaq.daq.commands.gap import load_trial, trial_data
+from ramdaq.daq.gap_trial import load_trial, trial_data
 
 ROOT = Path(__file__).resolve().parents[1]
 

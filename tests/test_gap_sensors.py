@@ -20,7 +20,7 @@ from ramdaq.analysis.gap.datamodel import P_CHANCE, Finding, Layer, free_modal_m
 from ramdaq.analysis.gap.layers import model_gages, precedence, unconfirmed
 from ramdaq.analysis.gap.sensors import check_trial
 from ramdaq.daq.commands.cli import main
-from ramdaq.daq.commands.gap import load_trial
+from ramdaq.daq.gap_trial import load_trial
 from tests.sensor_injection import HULL, injected_recording
 
 

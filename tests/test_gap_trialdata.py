@@ -12,7 +12,7 @@ import scipy.signal
 
 from ramdaq.analysis.gap.trialdata import ScaledCounts, _lowpass, analysis_band, prepare
 from ramdaq.analysis.model.rig import load_rig
-from ramdaq.daq.commands.gap import _joined, load_trial
+from ramdaq.daq.gap_trial import _joined, load_trial
 from ramdaq.daq.recording import read_recording
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,7 +18,7 @@ from ramdaq.analysis.gap.rigfit import calibrate_to_modes, fit_params, get_value
 from ramdaq.analysis.gap.trialdata import prepare
 from ramdaq.analysis.model.rig import RigError, load_rig, parse_rig
 from ramdaq.daq.commands.cli import main
-from ramdaq.daq.commands.gap import load_trial, trial_data
+from ramdaq.daq.gap_trial import load_trial, trial_data
 from ramdaq.drivers.sim import SimDevice
 
 IMPACTS = [3.0 + 5.0 * i for i in range(6)]

@@ -4,7 +4,7 @@ cluster, one task per recording, gathered into one Parquet table.
 The cluster is, by default, a local one of ``--workers`` single-threaded processes started and
 stopped by the command (:func:`open_client`); ``--scheduler tcp://HOST:8786`` uses a running
 cluster instead, whose workers must see the recordings and the output folder at the same
-absolute paths (a shared file system). Each task (:mod:`ramdaq.daq.batch_tasks`) writes its
+absolute paths (a shared file system). Each task (:mod:`ramdaq.daq.commands.batch_tasks`) writes its
 recording's report folder as ``ramdaq analyze`` / ``ramdaq gap`` would and returns typed rows;
 the table (``OUT/analyze.parquet`` or ``OUT/gap.parquet``) is written once, at the end, from the
 results gathered here and keyed by recording (and hit, gage, mode), so a task that ran twice --
@@ -15,7 +15,7 @@ a task whose workers died ``distributed.scheduler.allowed-failures`` times (3 by
 ``lost`` row; Ctrl-C cancels what is left, writes the table of what finished with the rest as
 ``interrupted`` rows, and marks the table partial (its schema metadata ``ramdaq.partial``).
 A re-run skips every recording whose row is current -- same content (sha256), same code
-(:func:`~ramdaq.daq.batch_tasks.method_digest`), same plots option, its report folder still
+(:func:`~ramdaq.daq.commands.batch_tasks.method_digest`), same plots option, its report folder still
 there -- and carries its rows over, unless ``force``.
 """
 
@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, get_args, get_type_hints
 
-from ..batch_tasks import (
+from .batch_tasks import (
     ROWS,
     TASKS,
     TaskResult,

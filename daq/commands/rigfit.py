@@ -12,7 +12,7 @@ from pathlib import Path
 from ...analysis.gap.modal_level import ModalComparison, trial_modes
 from ...analysis.gap.rigfit import ModeFit, calibrate_to_modes, fitted_rig_text
 from ...analysis.model.rig import RigError
-from .gap import load_trial, trial_data
+from ..gap_trial import load_trial, trial_data
 
 
 def parse_bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:

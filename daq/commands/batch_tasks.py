@@ -20,10 +20,10 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .mode_table import ModeEstimate, mode_rows
+from ..mode_table import ModeEstimate, mode_rows
 
 if TYPE_CHECKING:
-    from ..analysis.gap.diagnose import Diagnosis
+    from ...analysis.gap.diagnose import Diagnosis
 
 STATUSES = ("ok", "failed", "lost", "interrupted")
 """A recording's status in the table: analysed (``ok``); its task ran and the recording could
@@ -137,7 +137,7 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq analyze`` of one recording: its report folder written, its rows returned (one
     per hit x gage x mode, :class:`~ramdaq.daq.mode_table.ModeEstimate`). A recording that
     cannot be analysed is a ``failed`` result naming why."""
-    from .commands.analyze import run_analysis, write_analysis
+    from .analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
     try:
@@ -154,7 +154,7 @@ def gap_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq gap`` of one recording with the default settings: its report folder (gap.json,
     plots) written, its :class:`GapRow` returned. A recording that cannot be diagnosed is a
     ``failed`` result naming why."""
-    from .commands.gap import run_gap, write_report
+    from .gap import run_gap, write_report
 
     t0 = time.perf_counter()
     try:
