@@ -251,7 +251,7 @@ class Forward:
         E, JT = basis
         T = ms.duration_s
         U = np.zeros((td.n_seg, td.n_seg, td.n_gages, td.n_s))
-        dU = np.zeros_like(U)
+        dU = np.zeros(U.shape)   # calloc: pages no pulse writes stay unmapped (zeros_like fills all)
         free = []      # (impact, segment, modal factors) of pulses over before the segment began
         for j in range(td.n_seg):
             for s_ in range(j, td.n_seg):
