@@ -338,9 +338,9 @@ def _trial_point(J: np.ndarray, r: np.ndarray, x: np.ndarray, scale: np.ndarray,
                  lo: np.ndarray, hi: np.ndarray, max_step: float) -> np.ndarray:
     """The damped Gauss-Newton step from ``x`` (damping ``mu`` on the scaled normal equations'
     diagonal), at most ``max_step`` scales long, clipped to the bounds."""
-    # the scaled normal equations without a scaled copy of J (n_data x n_params)
-    A = (J.T @ J) * scale[:, None] * scale[None, :]
-    g = (J.T @ r) * scale
+    Js = J * scale[None, :]
+    A = Js.T @ Js
+    g = Js.T @ r
     d = np.sqrt(np.maximum(np.diag(A), 1e-30))
     step = -np.linalg.solve(A + mu * np.diag(d**2) + 1e-12 * np.eye(len(x)), g) * scale
     # a trust region: no step longer than ``max_step`` scales (a Gauss-Newton step across a
