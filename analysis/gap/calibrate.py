@@ -243,7 +243,8 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
     """Bounded Levenberg-Marquardt on ``sum(fun(x)^2)`` with Broyden updates of the Jacobian.
 
     The Jacobian is differenced once (forward, step ``rel_step * scale``; columns given in
-    ``J0`` are taken as they are -- non-zero columns only), then corrected by Broyden's rank-one
+    ``J0`` are taken as they are -- non-zero columns only; ``J0`` itself is filled and updated in
+    place, not copied), then corrected by Broyden's rank-one
     update after every step, and differenced afresh when steps fail or stall. No step is longer
     than ``max_step`` in units of ``scale`` (for the base constants their prior's sd, for an
     effect's parameters a tenth of their range). Each iteration
@@ -276,9 +277,12 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
         nfev += 1
         c_new = float(r_new @ r_new) if r_new is not None else math.inf
         if r_new is not None:
-            dJ = np.outer(r_new - r - J @ step, step)
-            dJ /= float(step @ step)
-            J += dJ        # in place: J is n_data x n_params, no fresh copy of it each step
+            # Broyden's rank-one update, column by column in place: J is n_data x n_params,
+            # and neither it nor the outer product is copied whole (the same numbers as
+            # ``J += outer(v, step) / |step|^2``)
+            v, ss = r_new - r - J @ step, float(step @ step)
+            for j in np.flatnonzero(step):
+                J[:, j] += v * step[j] / ss
         if c_new < cost:
             small = (cost - c_new) < tol * cost
             x, r, cost = x_new, r_new, c_new
@@ -287,6 +291,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
             if small:
                 if fresh:
                     return LMResult(x, J, nfev, Stop.CONVERGED)   # on a true Jacobian
+                J = None      # the stale Jacobian is let go before the fresh one is made
                 (J, n), fresh = difference(None, x, r), True
                 nfev += n
                 continue
@@ -295,6 +300,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
             mu *= 4
             fails += 1
             if fails >= 2 and not fresh:
+                J = None
                 (J, n), fresh, fails = difference(None, x, r), True, 0
                 nfev += n
             elif fails >= 6 or mu > 1e8:
@@ -307,8 +313,9 @@ def _difference(fun: Callable[[np.ndarray], np.ndarray], J: np.ndarray | None, x
                 h: np.ndarray) -> tuple[np.ndarray, int]:
     """The Jacobian of ``fun`` at ``x`` (where it is ``r``) by forward differences of step ``h``
     (backward where the forward one leaves the bounds ``lo``, ``hi`` or fails), keeping the
-    non-zero columns of ``J``; and the number of columns differenced."""
-    out = np.zeros((len(r), len(x))) if J is None else J.copy()
+    non-zero columns of ``J`` (filled in place: ``J`` is overwritten, not copied); and the
+    number of columns differenced."""
+    out = np.zeros((len(r), len(x))) if J is None else J
     n = 0
     for i in range(len(x)):
         if J is not None and np.any(J[:, i] != 0):

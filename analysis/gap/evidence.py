@@ -315,33 +315,81 @@ def chi2_logsf(x: float, k: int) -> float:
 
 class ScoreBasis:
     """The calibration's own directions in the fitted segments' whitened sample space, to be
-    projected out of every signature; and the replicates' residuals in the same space."""
+    projected out of every signature; and the replicates' residuals in the same space.
+
+    The directions are the design ``B`` (N, k): every impact's unit response and its derivative
+    (alive only in the segments its blow still rings in), the terms' own columns, and the
+    calibration's Jacobian (dense, but held by the calibration anyway). ``B`` is kept block by
+    block -- per fitted segment only the columns alive there -- and the projection is
+    ``D - B G^-1 B^T D`` with ``G = B^T B`` (k, k) accumulated segment by segment, applied twice
+    (the second pass removes what the first left through rounding: the same projection as an
+    orthonormal basis's to ~1e-12). No dense (N, k) basis, which grew with the impacts squared,
+    and no whitened copy of the replicates: they are whitened segment by segment when scored.
+    """
 
     def __init__(self, fw: Forward, cal: Calibration, reps: np.ndarray) -> None:
         self.fw = fw
         self.fitted = np.flatnonzero(fw.td.fitted)
-        self.Q = _orthonormal_columns(fw, cal, self.fitted)   # (N, n_basis)
+        self.W = fw.W[self.fitted]                 # the weights now (a later reweighting aside)
+        self.L = fw.td.n_gages * fw.td.n_s         # rows per fitted segment
+        self.jac = cal.jac                         # (N, p): the calibration's own, not copied
+        self.blocks, self.n_lin = _design_blocks(fw, cal, self.fitted)
+        self._ginv = _gram_inverse(self._gram())
         self.r = self._white(cal.fit.resid[self.fitted])
-        self.reps = np.empty((len(reps), self.r.size))     # filled in place: no list to stack
-        for i, rr in enumerate(reps):
-            self.reps[i] = self._white(rr[self.fitted])
+        self.reps = reps                           # (n_rep, n_seg, n_g, n_s), not whitened
 
     def _white(self, resid: np.ndarray) -> np.ndarray:
-        return np.nan_to_num(resid * self.fw.W[self.fitted]).ravel()
+        return np.nan_to_num(resid * self.W).ravel()
+
+    def _rows(self, i: int) -> slice:
+        return slice(i * self.L, (i + 1) * self.L)
+
+    def _gram(self) -> np.ndarray:
+        """``B^T B`` (k, k), segment by segment."""
+        n, p = self.n_lin, self.jac.shape[1]
+        G = np.zeros((n + p, n + p))
+        for i, (idx, X) in enumerate(self.blocks):
+            G[np.ix_(idx, idx)] += X @ X.T
+            C = X @ self.jac[self._rows(i)]
+            G[idx, n:] += C
+            G[n:, idx] += C.T
+        G[n:, n:] = self.jac.T @ self.jac
+        return G
+
+    def _project_once(self, D: np.ndarray) -> np.ndarray:
+        n = self.n_lin
+        C = np.zeros((n + self.jac.shape[1], D.shape[0]))     # B^T D^T
+        for i, (idx, X) in enumerate(self.blocks):
+            C[idx] += X @ D[:, self._rows(i)].T
+        C[n:] = self.jac.T @ D.T
+        Y = self._ginv(C)
+        out = D - (self.jac @ Y[n:]).T
+        for i, (idx, X) in enumerate(self.blocks):
+            out[:, self._rows(i)] -= Y[idx].T @ X
+        return out
+
+    def reps_dot(self, Dp: np.ndarray) -> np.ndarray:
+        """The whitened replicates' products with templates ``Dp`` (k, N), (n_rep, k)."""
+        out = np.zeros((len(self.reps), Dp.shape[0]))
+        for i, s in enumerate(self.fitted):
+            Rw = np.nan_to_num(self.reps[:, s] * self.W[i]).reshape(len(self.reps), -1)
+            out += Rw @ Dp[:, self._rows(i)].T
+        return out
 
     def null_inflation(self, d: np.ndarray) -> float:
         """How much more the replicates' residuals carry along the direction ``d`` (N,) than
         white noise of unit variance would (>= 1): the factor a chi-square gain along ``d`` is
         deflated by, for coloured noise and the model-form tolerance."""
-        dp = self.project(d[None, :])[0]
-        nrm = float(dp @ dp)
+        dp = self.project(d[None, :])
+        nrm = float(dp[0] @ dp[0])
         if not np.isfinite(nrm) or nrm <= 0:
             return 1.0
-        return max(1.0, float(np.mean((self.reps @ dp) ** 2)) / nrm)
+        return max(1.0, float(np.mean(self.reps_dot(dp)[:, 0] ** 2)) / nrm)
 
     def project(self, D: np.ndarray) -> np.ndarray:
         """Templates (k, N) with the calibration's directions removed."""
-        return D - (D @ self.Q) @ self.Q.T
+        D = np.asarray(D, dtype=float)
+        return self._project_once(self._project_once(D))
 
     def score(self, D: np.ndarray) -> tuple[float, float, np.ndarray]:
         """(chi2 of the residual on span(D), its replicates' mean, coefficients)."""
@@ -352,30 +400,46 @@ class ScoreBasis:
         Gi = np.linalg.pinv(G, rcond=1e-10)
         b = Dp @ self.r
         chi2 = float(b @ Gi @ b)
-        br = self.reps @ Dp.T
+        br = self.reps_dot(Dp)
         chi2_rep = np.einsum("ri,ij,rj->r", br, Gi, br)
         return chi2, float(np.mean(chi2_rep)), Gi @ b
 
 
-def _orthonormal_columns(fw: Forward, cal: Calibration, fitted: np.ndarray) -> np.ndarray:
-    """An orthonormal basis (N, k) of the calibration's directions in the fitted segments'
-    whitened sample space: the linear columns (:meth:`Forward.design`'s order) and the
-    Jacobian's. Written column by column into one Fortran array that the QR overwrites, so no
-    stacked copy of the design is ever made (the same numbers as ``numpy.linalg.qr`` of it)."""
+def _design_blocks(fw: Forward, cal: Calibration, fitted: np.ndarray
+                   ) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+    """The calibration's linear columns (:meth:`Forward.design`'s order) in the fitted segments'
+    whitened sample space, block by block: per fitted segment the indices of the columns alive
+    there and their rows (a, n_g * n_s); and the number of linear columns. A column alive in no
+    fitted segment (a held-out blow rung out before the next) is no direction at all."""
     U, dU, extra = cal.columns(fw)
-    w = fw.mask[fitted] * fw.W[fitted]
-    blocks = [U, dU] + ([extra] if extra is not None else [])
-    k = sum(b.shape[0] for b in blocks) + cal.jac.shape[1]
-    BT = np.empty((w.size, k), order="F")
-    c = 0
-    for b in blocks:
-        for j in range(b.shape[0]):
-            BT[:, c] = (b[j][fitted] * w).ravel()
-            c += 1
-    del U, dU, extra, blocks
-    BT[:, c:] = cal.jac
-    q, _ = scipy.linalg.qr(BT, mode="economic", overwrite_a=True, check_finite=False)
-    return q
+    blocks = []
+    for s in fitted:
+        idx, X = fw.alive_columns(U, dU, extra, s)
+        X *= (fw.mask[s] * fw.W[s]).ravel()[None, :]
+        blocks.append((np.asarray(idx, dtype=int), X))
+    n_lin = 2 * U.shape[0] + (0 if extra is None else extra.shape[0])
+    return blocks, n_lin
+
+
+def _gram_inverse(G: np.ndarray):
+    """``C -> G^-1 C`` for a Gram matrix (k, k): Cholesky of its unit-diagonal scaling over the
+    columns that are not zero, a pseudo-inverse if that fails (dependent columns)."""
+    d = np.diag(G).copy()
+    on = d > 0
+    s = np.sqrt(d[on])
+    Gs = G[np.ix_(on, on)] / s[:, None] / s[None, :]
+    try:
+        cf = scipy.linalg.cho_factor(Gs, check_finite=False)
+        inv = lambda C: scipy.linalg.cho_solve(cf, C, check_finite=False)   # noqa: E731
+    except np.linalg.LinAlgError:
+        P = np.linalg.pinv(Gs, rcond=1e-13, hermitian=True)
+        inv = lambda C: P @ C   # noqa: E731
+
+    def solve(C: np.ndarray) -> np.ndarray:
+        Y = np.zeros_like(C)
+        Y[on] = inv(C[on] / s[:, None]) / s[:, None]
+        return Y
+    return solve
 
 
 def template(fw: Forward, cal: Calibration, term: Term) -> np.ndarray:

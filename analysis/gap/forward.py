@@ -251,7 +251,7 @@ class Forward:
         E, JT = basis
         T = ms.duration_s
         U = np.zeros((td.n_seg, td.n_seg, td.n_gages, td.n_s))
-        dU = np.zeros_like(U)
+        dU = np.zeros(U.shape)   # calloc: pages no pulse writes stay unmapped (zeros_like fills all)
         free = []      # (impact, segment, modal factors) of pulses over before the segment began
         for j in range(td.n_seg):
             for s_ in range(j, td.n_seg):
@@ -401,7 +401,7 @@ class Forward:
         b = np.zeros(2 * n + e)
         w2 = self._w2.reshape(self.td.n_seg, -1)
         for s in range(self.td.n_seg):
-            idx, X = self._alive(U, dU, extra, s)
+            idx, X = self.alive_columns(U, dU, extra, s)
             Xw = X * w2[s]
             G[np.ix_(idx, idx)] += Xw @ X.T
             b[idx] += Xw @ data[s].ravel()
@@ -410,11 +410,11 @@ class Forward:
         coef = np.linalg.lstsq(Gs, b / scale, rcond=1e-10)[0] / scale
         pred = np.empty_like(data)
         for s in range(self.td.n_seg):      # the columns made again: one segment's at a time
-            idx, X = self._alive(U, dU, extra, s)
+            idx, X = self.alive_columns(U, dU, extra, s)
             pred[s] = (coef[idx] @ X).reshape(data.shape[1:])
         return coef, pred
 
-    def _alive(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
+    def alive_columns(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
         """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
         terms' columns not zero there -- as their indices and rows (k, n_gages * n_s)."""
         n = U.shape[0]
