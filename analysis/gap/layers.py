@@ -100,6 +100,7 @@ def overriding_unexplained(findings: list[dict]) -> list[dict]:
     the model layer's "unexplained" (:func:`overrides_unexplained`); none when the data layer
     also found the trial not homogeneous across blows (a nonlinearity): the sensor checks read
     the free *linear* modal model's shapes, which an amplitude-dependent structure bends."""
-    if any(f["layer"] == Layer.NONLINEARITY for f in findings):
+    if any(f.get("layer") == Layer.NONLINEARITY for f in findings):
         return []
-    return [f for f in findings if overrides_unexplained(f["layer"], f["statistic"], f["chance_level"])]
+    return [f for f in findings if f.get("layer") in set(Layer)
+            and overrides_unexplained(f["layer"], f["statistic"], f["chance_level"])]
