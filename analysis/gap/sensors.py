@@ -268,11 +268,15 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
 def _spread_without(a: np.ndarray, se: np.ndarray, G: dict, live: list[int], c: int,
                     steady: np.ndarray) -> float:
     """The largest gain z among the gages ``live`` other than ``c``, each predicted from the
-    rest without ``c``: how inconsistent the body stays if ``c`` is the faulty one."""
+    rest without ``c``: how inconsistent the body stays if ``c`` is the faulty one; infinite
+    when one of them is no longer predicted without ``c``."""
     rest = [r for r in live if r != c]
-    zs = [abs(e[0] - 1) / e[1] for i in rest
-          if (e := _gain_of(a, se, G, i, [r for r in rest if r != i], steady))]
-    return max(zs, default=0.0)
+    es = [_gain_of(a, se, G, i, [r for r in rest if r != i], steady) for i in rest]
+    if any(e is None for e in es):
+        # a gage only ``c`` checked (the hull's two vertical gages check each other alone):
+        # the fault is not told between them, ``c`` is not singled out
+        return math.inf
+    return max((abs(e[0] - 1) / e[1] for e in es), default=0.0)
 
 
 def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
