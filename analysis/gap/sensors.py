@@ -247,7 +247,10 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
         if rest[i] > level:
             # no one gage's removal leaves the others rigid: the body itself deforms (a flexible
             # rudder's shapes, issue 17's modal family) -- the rig's form, blamed on no gage
-            return out + [_flex_finding(fm, gages, live, rest[i], level)]
+            # (its statistic the others' largest gain z, else -- a pair only each other checks --
+            # the suspect's own)
+            stat = rest[i] if math.isfinite(rest[i]) else z
+            return out + [_flex_finding(fm, gages, live, stat, level)]
         num = gages[i].number
         live.remove(i)
         spread, spread_level = _mode_spread(a, se, G, i, live, fm.steady)
@@ -338,8 +341,8 @@ def _flex_finding(fm: FreeModal, gages: Sequence[Gage], rows: list[int], stat: f
                   level: float) -> Finding:
     """A body whose gages no rigid-body motion fits with one faulty gage taken out (or, with one
     measured mode, whose misfit no gain is told from): its shapes bend, the rig's rigid body is
-    the model's form there, not a sensor fault. ``stat`` the largest gain z left among the
-    others (normal, chance level ``level``)."""
+    the model's form there, not a sensor fault. ``stat`` a gain z beyond the normal's chance
+    level ``level``: the largest left among the others, or the suspect's own."""
     body = gages[rows[0]].body
     nums = tuple(sorted(gages[r].number for r in rows))
     return Finding(check="flex", layer=Layer.MODEL_FORM, gages=nums, statistic=float(stat),
