@@ -248,6 +248,26 @@ def test_a_data_only_finding_answers_when_the_model_names_nothing():
     assert decision(_rec(zdetect=2.0, data_findings=[fr]), 8.0, 10.0, 0.0)["named"] == "friction"
 
 
+def test_a_strong_data_sensor_finding_outranks_the_models_unexplained():
+    """Issue 17: on the modal family's high-pass trial the data-only layer found the high-pass
+    on gages 2, 8, 10, 14 (statistics 5-14x chance) and the model layer's "unexplained" was
+    kept. A sensor finding at >= 2x its chance level now answers; one barely past chance, or one
+    on a trial the data layer finds not homogeneous across blows, does not."""
+    from ramdaq.daq.commands.gap_bench import decision
+
+    hp = {"check": "highpass", "layer": "sensor", "gages": [14], "window": "decay", "mode_hz": [13.0],
+          "statistic": 239.0, "chance_level": 17.3, "more": {}}
+    r = _rec(effect="highpass", expect="highpass", candidates=[], data_findings=[hp])
+    d = decision(r, 8.0, 10.0, 0.0)
+    assert d["named"] == "highpass" and d["by"] == "data" and d["location"]["gages"] == [14]
+    weak = hp | {"statistic": 20.0}
+    assert decision(_rec(candidates=[], data_findings=[weak]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    hom = {"check": "homogeneity", "layer": "nonlinearity", "gages": [1], "window": "decay",
+           "mode_hz": [13.0], "statistic": 46.0, "chance_level": 4.0,
+           "more": {"decrement_per_doubling": {"value": -0.3}}}
+    assert decision(_rec(candidates=[], data_findings=[hp, hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+
+
 _MISSED = ("measured on this check seed (2026-11-27, branch gen): the unexplained gap is placed "
            "on other gages, or a library effect is named")
 

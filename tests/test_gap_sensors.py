@@ -16,9 +16,10 @@ import math
 import numpy as np
 import pytest
 
-from ramdaq.analysis.gap.datamodel import P_CHANCE, Finding, Layer, free_modal_model
-from ramdaq.analysis.gap.layers import model_gages, precedence, unconfirmed
-from ramdaq.analysis.gap.sensors import check_trial
+from ramdaq.analysis.gap.datamodel import P_CHANCE, Finding, FreeModal, Layer, free_modal_model
+from ramdaq.analysis.gap.layers import model_gages, overriding_unexplained, precedence, unconfirmed
+from ramdaq.analysis.gap.sensors import check_trial, rigid_gain
+from ramdaq.analysis.model.rig import load_rig
 from ramdaq.daq.commands.cli import main
 from ramdaq.daq.gap_trial import load_trial
 from tests.sensor_injection import HULL, injected_recording
@@ -207,3 +208,56 @@ def test_gap_reports_the_data_only_layer_first_and_it_takes_precedence(trials, c
         (p,) = doc["precedence"]
         assert p["gages"] == [3] and p["kept"] == "data_only"
         assert "set aside: the data-only gain on gage(s) 3" in text
+
+
+def _rudder_modal(bend: float, gain: float = 1.0) -> tuple[FreeModal, list]:
+    """A free modal model of ALBACORE's six rudder gages (all along y): three modes, four
+    impacts, each mode's shape a rigid-body motion (y translation, rotations about x and z)
+    plus ``bend`` x a quadratic in position that differs from mode to mode (a flexible rudder,
+    issue 17's modal family); gage 3's entries times ``gain``. Standard errors 1e-4 of unit
+    shapes (SNR ~10^4: far past the checks' MIN_ENTRY_SNR)."""
+    gages = [g for g in load_rig("albacore").gages_by_channel() if g.body == "rudder"]
+    x = np.array([g.position_m[0] for g in gages])
+    z = np.array([g.position_m[2] for g in gages])
+    rng = np.random.default_rng(3)
+    shapes = []
+    for _ in range(3):
+        rigid = rng.normal(size=3) @ np.vstack([np.ones_like(x), z, x])      # y, rot x, rot z
+        quad = rng.normal(size=3) @ np.vstack([x**2, z**2, x * z])
+        shapes.append(rigid + bend * quad)
+    amp = np.repeat(np.array(shapes).T[None].astype(complex), 4, axis=0)     # (4, 6, 3)
+    amp[:, [g.number for g in gages].index(3), :] *= gain
+    n = amp.shape
+    fm = FreeModal(f_hz=np.array([13.0, 45.0, 80.0]), delta=np.full(3, 0.1), f_se_hz=np.zeros(3),
+                   delta_se=np.zeros(3), amp=amp, amp_se=np.full(n, 1e-4), noise=np.full(n[:2], 1e-4),
+                   t0_s=np.arange(4.0), n_s=1000, fs_hz=2048.0, steady=np.zeros(3, bool))
+    return fm, gages
+
+
+def test_a_flexible_rudder_is_model_form_not_a_gage_fault():
+    # issue 17: the modal family's rudder bends (quadratic terms in its shapes); the rigid-body
+    # check named gages 1, 2, 6, 15 on every trial. Bent by 0.3 of its rigid motion per m^2
+    # (well past the 0.5 % gain floor), no single gage's removal makes the rest rigid: one
+    # model-form finding for the body, no gain and no per-gage rigid-body finding
+    fm, gages = _rudder_modal(bend=0.3)
+    (f,) = rigid_gain(fm, gages)
+    assert f.check == "flex" and f.layer is Layer.MODEL_FORM and len(f.gages) >= 5
+    assert f.statistic > f.chance_level
+    # a rigid rudder with gage 3 reading 20 % high in every mode: that gage's gain, nothing else
+    fm, gages = _rudder_modal(bend=0.0, gain=1.2)
+    (f,) = rigid_gain(fm, gages)
+    assert f.check == "gain" and f.gages == (3,) and f.size == pytest.approx(1.2, rel=1e-3)
+    # rigid and healthy: nothing
+    assert rigid_gain(*_rudder_modal(bend=0.0)) == []
+
+
+def test_a_sensor_finding_well_above_chance_outranks_unexplained():
+    # issue 17: a high-pass the phases found on four gages lost to the model's "unexplained"
+    hp = _finding("highpass", Layer.SENSOR, (2,)).to_json()            # statistic 10x chance
+    weak = Finding(check="gain", layer=Layer.SENSOR, gages=(4,), statistic=15.0, chance_level=10.0,
+                   size=1.1, unit="ratio", text="gain").to_json()     # 1.5x: not well above
+    form = _finding("flex", Layer.MODEL_FORM, (1, 2)).to_json()
+    assert overriding_unexplained([hp, weak, form]) == [hp]
+    # the trial is not homogeneous across blows: the linear shapes the sensor checks read bend
+    nonlin = _finding("homogeneity", Layer.NONLINEARITY, (1, 2)).to_json()
+    assert overriding_unexplained([hp, nonlin]) == []

@@ -238,14 +238,24 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
         level = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(res))))
         if max(abs(g - 1) / s for g, s in res.values()) <= level:
             return out
-        i = min(res, key=lambda c: _spread_without(a, se, G, live, c, fm.steady))
+        rest = {c: _spread_without(a, se, G, live, c, fm.steady) for c in res}
+        i = min(rest, key=rest.get)
         g, s = res[i]
         z = abs(g - 1) / s
         if z <= level:
             return out
+        if rest[i] > level:
+            # no one gage's removal leaves the others rigid: the body itself deforms (a flexible
+            # rudder's shapes, issue 17's modal family) -- the rig's form, blamed on no gage
+            # (its statistic the others' largest gain z, else -- a pair only each other checks --
+            # the suspect's own)
+            stat = rest[i] if math.isfinite(rest[i]) else z
+            return out + [_flex_finding(fm, gages, live, stat, level)]
         num = gages[i].number
         live.remove(i)
         spread, spread_level = _mode_spread(a, se, G, i, live, fm.steady)
+        if not math.isfinite(spread):  # one mode: a gain is not told from the body's shape
+            return out + [_flex_finding(fm, gages, live + [i], z, level)]
         if spread > spread_level:      # a gain is one ratio at every mode; this is the body's shape
             out.append(_rigid_finding(fm, gages[i], spread, spread_level))
             continue
@@ -261,11 +271,15 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
 def _spread_without(a: np.ndarray, se: np.ndarray, G: dict, live: list[int], c: int,
                     steady: np.ndarray) -> float:
     """The largest gain z among the gages ``live`` other than ``c``, each predicted from the
-    rest without ``c``: how inconsistent the body stays if ``c`` is the faulty one."""
+    rest without ``c``: how inconsistent the body stays if ``c`` is the faulty one; infinite
+    when one of them is no longer predicted without ``c``."""
     rest = [r for r in live if r != c]
-    zs = [abs(e[0] - 1) / e[1] for i in rest
-          if (e := _gain_of(a, se, G, i, [r for r in rest if r != i], steady))]
-    return max(zs, default=0.0)
+    es = [_gain_of(a, se, G, i, [r for r in rest if r != i], steady) for i in rest]
+    if any(e is None for e in es):
+        # a gage only ``c`` checked (the hull's two vertical gages check each other alone):
+        # the fault is not told between them, ``c`` is not singled out
+        return math.inf
+    return max((abs(e[0] - 1) / e[1] for e in es), default=0.0)
 
 
 def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
@@ -321,6 +335,23 @@ def _rigid_finding(fm: FreeModal, gage: Gage, stat: float, level: float) -> Find
                         "rigid body, and not by one gain at every mode (a flexible part, or its "
                         "position or body in the rig)",
                    null="chi-square of per-mode gains about their mean, K-1 dof")
+
+
+def _flex_finding(fm: FreeModal, gages: Sequence[Gage], rows: list[int], stat: float,
+                  level: float) -> Finding:
+    """A body whose gages no rigid-body motion fits with one faulty gage taken out (or, with one
+    measured mode, whose misfit no gain is told from): its shapes bend, the rig's rigid body is
+    the model's form there, not a sensor fault. ``stat`` a gain z beyond the normal's chance
+    level ``level``: the largest left among the others, or the suspect's own."""
+    body = gages[rows[0]].body
+    nums = tuple(sorted(gages[r].number for r in rows))
+    return Finding(check="flex", layer=Layer.MODEL_FORM, gages=nums, statistic=float(stat),
+                   chance_level=level, size=float("nan"), unit="", window="decay",
+                   mode_hz=tuple(float(f) for f in fm.f_hz[~fm.steady]),
+                   text=f"the {body}'s gages {', '.join(map(str, nums))} do not move as one rigid body "
+                        "and no single gage's removal makes them: the body deforms in its modes "
+                        "(model form of the rigid-body assumption, not a sensor fault)",
+                   null="normal (largest gain z of the others, one gage left out)")
 
 
 def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str) -> Finding:

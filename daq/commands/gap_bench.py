@@ -337,7 +337,7 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
     layer rests on the recorded values and the gages' positions alone: its finding takes
     precedence, :mod:`ramdaq.analysis.gap.layers`). Keys: ``named``, ``by`` ("model"/"data"),
     ``location`` (as a candidate's, or None), ``closed_held`` (None when not measured)."""
-    from ...analysis.gap.layers import SENSOR_EFFECTS
+    from ...analysis.gap.layers import SENSOR_EFFECTS, overriding_unexplained
 
     named = _decide(r, z_gap, bic_min, min_closure)
     c = next((c for c in r.get("candidates", []) if c["name"] == named), None)
@@ -346,7 +346,12 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
     finds = [f for f in r.get("data_findings") or [] if _data_effect(f)]
     if not finds or named in {_data_effect(f) for f in finds}:
         return out
-    if named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
+    if named == "unexplained":
+        # a sensor finding well above chance outranks the model's unexplained (issue 17)
+        finds = [f for f in overriding_unexplained(r.get("data_findings") or []) if _data_effect(f)]
+        if not finds:
+            return out
+    elif named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
         return out
     f = max(finds, key=_strength)
     eff = _data_effect(f)
