@@ -13,8 +13,6 @@ registry the test skips and says why.
 from __future__ import annotations
 
 import gzip
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from scipy import signal
 
 from ramdaq.daq.trigger import Trigger, TriggerSettings
 from ramdaq.drivers.block import Block, StreamInfo
+from tests.registry import fetch_wheel
 
 OBSPY = "obspy==1.5.1"
 STATIONS = ("UH1._.SHZ", "UH2._.SHZ", "UH3._.SHZ", "UH4._.EHZ")
@@ -36,17 +35,7 @@ EVENTS_S = [16 * 3600 + 24 * 60 + 33.19, 16 * 3600 + 27 * 60 + 1.26, 16 * 3600 +
 def obspy_wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The ObsPy wheel, downloaded from the package registry (skips when it cannot be)."""
     d = tmp_path_factory.mktemp("obspy")
-    try:
-        subprocess.run([sys.executable, "-m", "pip", "download", OBSPY, "--no-deps",
-                        "--only-binary", ":all:", "-d", str(d), "-q"],
-                       check=True, capture_output=True, timeout=600)
-    except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as err:
-        pytest.skip(f"the package registry is unreachable (pip download {OBSPY}: "
-                    f"{' '.join(str(getattr(err, 'stderr', b'') or err).split())[:200]})")
-    wheels = sorted(d.glob("obspy-*.whl"))
-    if not wheels:
-        pytest.skip(f"pip download {OBSPY} gave no wheel for this platform")
-    return wheels[0]
+    return fetch_wheel(OBSPY, d)
 
 
 def read_slist(wheel: Path, station: str) -> tuple[float, np.ndarray]:

@@ -20,8 +20,6 @@ file read with scipy; without the registry the test skips and says why.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import zipfile
 
 import numpy as np
@@ -29,6 +27,7 @@ import pytest
 from scipy import io as sio
 
 from ramdaq.daq.commands.cli import main
+from tests.registry import fetch_wheel
 from tests.test_imports import write_csv
 
 VIBRATIONTESTING = "vibrationtesting==0.24"
@@ -41,17 +40,8 @@ F2_HZ, ZETA2 = (212.0925, (0.09e-2, 0.10e-2))  # sdof_cf's example; zeta 0.09-0.
 def hammer_record(tmp_path_factory: pytest.TempPathFactory) -> tuple[np.ndarray, np.ndarray]:
     """(force, acceleration) of ``case1.mat`` from the wheel (skips when it cannot be had)."""
     d = tmp_path_factory.mktemp("vibrationtesting")
-    try:
-        subprocess.run([sys.executable, "-m", "pip", "download", VIBRATIONTESTING, "--no-deps",
-                        "--only-binary", ":all:", "-d", str(d), "-q"],
-                       check=True, capture_output=True, timeout=300)
-    except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as err:
-        pytest.skip(f"the package registry is unreachable (pip download {VIBRATIONTESTING}: "
-                    f"{' '.join(str(getattr(err, 'stderr', b'') or err).split())[:200]})")
-    wheels = sorted(d.glob("vibrationtesting-*.whl"))
-    if not wheels:
-        pytest.skip(f"pip download {VIBRATIONTESTING} gave no wheel")
-    with zipfile.ZipFile(wheels[0]) as z:
+    wheel = fetch_wheel(VIBRATIONTESTING, d, timeout_s=300)
+    with zipfile.ZipFile(wheel) as z:
         z.extract("vibrationtesting/data/case1.mat", d)
     m = sio.loadmat(d / "vibrationtesting" / "data" / "case1.mat")
     assert float(m["Time_Sample_Rate"][0, 0]) == FS
