@@ -330,18 +330,24 @@ def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner
     b = a + q * (n_s - 1) + 1                       # one past the last sample kept
     m = filter_reach(corner, fs_hz) if q > 1 else 0
     lo, hi = max(0, a - m), min(n, b + m)
-    w = src.window(lo, hi)
-    gaps = ~np.isfinite(w)
-    xf = np.where(gaps, 0.0, w)
-    if q > 1:
-        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
-        # a gap's samples and the filter's reach around them carry no data
-        if gaps.any():
-            xf[_dilate(gaps, int(math.ceil(3 * fs_hz / corner)))] = np.nan
+    xf = _lowpassed(src.window(lo, hi), q, corner, fs_hz)
     idx = a - lo + q * np.arange(n_s)
     out = xf[:, np.minimum(idx, hi - lo - 1)]
     out[:, idx >= n - lo] = np.nan                  # past the stream's end
     return out
+
+
+def _lowpassed(w: np.ndarray, q: int, corner: float, fs_hz: float) -> np.ndarray:
+    """``w`` (n_gages, n) low-passed at ``corner`` along its samples (zero-phase; when ``q > 1``
+    only, as decimating by ``q`` needs), gaps as 0 while filtering: a gap's samples and the
+    filter's reach around them are NaN in the result, which carry no data."""
+    gaps = ~np.isfinite(w)
+    xf = np.where(gaps, 0.0, w)
+    if q > 1:
+        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
+        if gaps.any():
+            xf[_dilate(gaps, int(math.ceil(3 * fs_hz / corner)))] = np.nan
+    return xf
 
 
 def _cut_whole(x_full: np.ndarray, starts: np.ndarray, q: int, n_s: int, corner: float,
@@ -349,12 +355,7 @@ def _cut_whole(x_full: np.ndarray, starts: np.ndarray, q: int, n_s: int, corner:
     """The segments (n_seg, n_gages, n_s) of a trial held whole (n_gages, n), low-passed whole
     (:func:`_segment` does the same a window at a time, to 1e-14 of the signal)."""
     n = x_full.shape[1]
-    gaps = ~np.isfinite(x_full)
-    xf = np.where(gaps, 0.0, x_full)
-    if q > 1:
-        xf = scipy.signal.sosfiltfilt(_lowpass(corner, fs_hz), xf, axis=1)
-        if gaps.any():
-            xf[_dilate(gaps, int(math.ceil(3 * fs_hz / corner)))] = np.nan
+    xf = _lowpassed(x_full, q, corner, fs_hz)
     idx = starts[:, None] + q * np.arange(n_s)[None, :]
     x = xf[:, np.clip(idx, 0, n - 1)].transpose(1, 0, 2).copy()
     x[np.broadcast_to((idx >= n)[:, None, :], x.shape)] = np.nan   # past the stream's end
