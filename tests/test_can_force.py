@@ -6,8 +6,6 @@ recorded bit for bit as the simulator made it, and the trigger's force mode runs
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import threading
 import uuid
 from pathlib import Path
@@ -23,6 +21,7 @@ from ramdaq.drivers.emulators.can_emulator import CanEmulator, send_frames
 from ramdaq.drivers.registry import open_device
 from ramdaq.drivers.rig_channels import force_scale_N, rig_channels
 from ramdaq.drivers.sim import SimDevice
+from tests.test_serial_device import emulator
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -116,20 +115,8 @@ def test_sixteen_gage_rig_reads_only_the_gage_group(tmp_path):
 def test_force_channel_over_serial_pty(force_rig, tmp_path):
     """The serial emulator on a real pty sends the rig's 17 channels; the device names the
     ram's in N from the rig."""
-    cmd = [sys.executable, "-m", "ramdaq.drivers.emulators.serial_emulator", "--pty", "--link",
-           str(tmp_path / "tty"), "--rig", str(force_rig), "--duration", str(DURATION_S),
-           "--impacts", str(BLOW_S), "--seed", str(SEED), "--pace", "fast", "--linger", "5"]
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        address = proc.stdout.readline().strip()
-        assert address, f"emulator did not start: {proc.stderr.read()}"
+    with emulator(tmp_path, "pty", duration=DURATION_S, impacts=[BLOW_S], rig=force_rig,
+                  seed=SEED) as (_, address):
         with open_device(f"serial://{address}?rig={force_rig}") as dev:
             info, blocks = dev.info, list(dev)
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-        proc.wait(10)
-        proc.stdout.close()
-        proc.stderr.close()
     _check_stream(info, blocks, _truth(force_rig))

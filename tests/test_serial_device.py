@@ -44,14 +44,14 @@ SEED, DURATION, IMPACTS = 11, 3.0, [1.2]
 
 @contextmanager
 def emulator(tmp_path: Path, transport: str, *args: str, duration: float = DURATION,
-             impacts: list[float] = IMPACTS):
+             impacts: list[float] = IMPACTS, rig: Path = RIG, seed: int = SEED):
     """Start the emulator; yield ``(process, address)``; make sure it is gone afterwards."""
     where = ["--pty", "--link", str(tmp_path / "tty")] if transport == "pty" else [
         "--tcp", "127.0.0.1:0"]
     cmd = [sys.executable, "-m", "ramdaq.drivers.emulators.serial_emulator",
-           *where, "--rig", str(RIG),
+           *where, "--rig", str(rig),
            "--duration", str(duration), "--impacts", ",".join(map(str, impacts)), "--seed",
-           str(SEED), "--pace", "fast", "--linger", "5", *args]
+           str(seed), "--pace", "fast", "--linger", "5", *args]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     try:
