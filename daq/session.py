@@ -194,7 +194,6 @@ class Session:
         self.readout = (LiveReadout(self.info, adc_bits=self.info.extra.get("adc_bits"))
                         if readout is None else (readout or None))
         self.update_n = round(update_s * self.info.fs_hz)
-        self.first_n = max(1, round(first_look_s * self.info.fs_hz))
         period = _model_period_s(self.rig)
         # samples per period of the predominant mode (first_look_s without a model), and the
         # periods of free decay the next blow's first look is tried at
