@@ -112,7 +112,7 @@ class ModeSelector:
         """Fitter with the current fit's poles held, for the current weights (cached)."""
         if self._held is None or self._held[0] is not self.fit or self._held[1] is not self.w:
             fitter = HeldPoleFitter(self.t, self.Y, self.fit.f_hz, self.fit.delta,
-                                     weights=self.w, fit_offset=self.fit_offset)
+                                     weights=self.w, fit_offset=self.fit_offset, grams=True)
             self._held = (self.fit, self.w, fitter)
         return self._held[2]
 

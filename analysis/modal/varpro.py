@@ -246,6 +246,28 @@ class Projector:
         return blas.dtrsm(1.0, self.cho[0], PhiT_M * self.inv_norm[:, None], lower=1)
 
 
+_GRAM_MIN_FRACTION = 1e-4  # Grams only while Σr² ≥ 10⁻⁴ Σy² (≲ 4 of 16 digits lost)
+
+
+class _GramResidual:
+    """A residual known by its Σr² per channel (``ss``, (n_channels,)) alone.
+
+    Σr²_c = Σy²_c − yᵀΦ(ΦᵀΦ)⁻¹Φᵀy (from ΦᵀY and the coefficients B) and Tᵀr = TᵀY − (ΦᵀT)ᵀB
+    need no (n_samples × n_channels) residual: an evaluation touches the data once, in one
+    product, instead of forming, squaring and summing a residual as large as the data (twice
+    as dear for the order search's trial fits). The subtraction loses the digits of Σy²/Σr²:
+    used only while Σr² ≥ ``_GRAM_MIN_FRACTION`` Σy² per channel (relative error ≲ 10⁻¹¹ with
+    the products' own rounding, against the trial fits' 10⁻³ of the residual variance per
+    degree of freedom, ≥ 10⁻⁹ of Σr² on 16 channels × 12k samples), otherwise the residual is
+    formed as before.
+    """
+
+    __slots__ = ("ss",)
+
+    def __init__(self, ss: np.ndarray) -> None:
+        self.ss = ss
+
+
 class _Problem:
     """Residual, gradient and Gauss–Newton matrix of the weighted variable-projection functional.
 
@@ -273,6 +295,7 @@ class _Problem:
         self.grid = uniform_grid(t)
         self.scratch: dict = {}
         self._pool: list[np.ndarray] = []  # Φᵀ buffers of projectors the caller released
+        self._rpool: list[np.ndarray] = []  # residual buffers of points the caller released
         self.QfT = None
         if fixed is not None and fixed.shape[1]:
             Q, R = linalg.qr(fixed, mode="economic", check_finite=False)
@@ -282,6 +305,12 @@ class _Problem:
             self.Yc = self.Yc - (self.Yc @ self.QfT.T) @ self.QfT
             self.offset = False  # a fitted constant, if any, is among the fixed columns
         self.Yw = self.Yc.T  # (n_samples, n_channels)
+        self._yy: np.ndarray | None = None  # Σy² per channel once Grams are used (use_grams)
+
+    def use_grams(self) -> None:
+        """From now on, Σr² per channel from Grams where they keep enough digits (see
+        :class:`_GramResidual`): for trial fits, whose tolerance is far above the digits lost."""
+        self._yy = np.einsum("ij,ij->i", self.Yc, self.Yc)
 
     def _perp(self, A: np.ndarray) -> np.ndarray:
         """P⊥_F A for A of shape (n_samples, k) (A itself without fixed columns)."""
@@ -298,12 +327,47 @@ class _Problem:
                      out=buf)
         proj = Projector(self._perp(raw))
         proj.raw = raw
-        B = proj.coef(self.Yw)
-        return (self.Yc - B.T @ proj.Phi.T).T, proj, B
+        if self._yy is not None and proj.cho is not None:
+            PtY = proj.Phi.T @ self.Yw
+            B = proj.coef_from(PtY)  # = proj.coef(self.Yw)
+            ss = self._yy - np.sum(PtY * B, axis=0)  # Σy² − yᵀΦ(ΦᵀΦ)⁻¹Φᵀy per channel
+            if np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
+                return _GramResidual(ss), proj, B
+        else:
+            B = proj.coef(self.Yw)
+        # r = Yc − Bᵀ Φᵀ into a reused (n_channels, n_samples) buffer: a fresh one per call cost
+        # more in page faults than the product itself (same operations, same bits).
+        rbuf = self._rpool.pop() if self._rpool else np.empty_like(self.Yc)
+        np.matmul(B.T, proj.Phi.T, out=rbuf)
+        np.subtract(self.Yc, rbuf, out=rbuf)
+        proj.resid_buf = rbuf
+        return rbuf.T, proj, B
 
-    def release(self, proj: Projector) -> None:
+    def sumsq(self, resid: np.ndarray) -> float:
+        """Σr² of a residual from :meth:`residual` (as ``np.sum(resid**2)``, without allocating)."""
+        if isinstance(resid, _GramResidual):
+            return float(np.sum(resid.ss))
+        sq = self.scratch.get("sq")
+        if sq is None or sq.shape != self.Yc.shape:
+            sq = self.scratch["sq"] = np.empty_like(self.Yc)
+        np.square(resid, out=sq.T)
+        return float(np.sum(sq))
+
+    @staticmethod
+    def channel_ss(resid: np.ndarray) -> np.ndarray:
+        """Σr² per channel of a residual from :meth:`residual`, shape (n_channels,)."""
+        if isinstance(resid, _GramResidual):
+            return resid.ss
+        return np.sum(resid**2, axis=0)
+
+    def release(self, proj: Projector, keep_residual: bool = False) -> None:
         """Hand back a projector from :meth:`residual` that will not be used again (its Φᵀ
-        buffer is reused by a later call; without release every call allocates)."""
+        buffer, and unless ``keep_residual`` the residual computed with it, are reused by a
+        later call; without release every call allocates)."""
+        rbuf = getattr(proj, "resid_buf", None)
+        if rbuf is not None and not keep_residual and len(self._rpool) < 4:
+            self._rpool.append(rbuf)
+        proj.resid_buf = None
         buf = proj.raw.base  # Φ is the transposed view of the (2K [+1], n_samples) array
         if (buf is not None and buf.flags.owndata and buf.flags.c_contiguous and buf.ndim == 2
                 and buf.shape[1] == self.t.size and len(self._pool) < 4):
@@ -323,15 +387,19 @@ class _Problem:
         T = self._perp(work.T)  # t·e·cos, t·e·sin per mode (a scratch array: not kept)
         TT = T.T @ T
         M = None
+        PtT = Phi.T @ T if proj.cho is not None or isinstance(resid, _GramResidual) else None
         if proj.cho is not None:
-            V = proj.whitened(Phi.T @ T)
+            V = proj.whitened(PtT)
             M = TT - V.T @ V
             if not np.all(M.diagonal() > 1e-8 * TT.diagonal()):
                 M = None
         if M is None:
             Tp = T - Phi @ proj.coef(T)
             M = Tp.T @ Tp
-        Tr = T.T @ resid  # (2K, n_channels); P⊥ r = r
+        if isinstance(resid, _GramResidual):  # Tᵀr = TᵀY − (ΦᵀT)ᵀ B
+            Tr = T.T @ self.Yw - PtT.T @ B
+        else:
+            Tr = T.T @ resid  # (2K, n_channels); P⊥ r = r
         # H[k, p, a, c]: weight of T column (k, a) (a: t·c, t·s) in ∂Φ/∂θ_(k,p) B_c (p: f, δ).
         # With (b, b') = B[2k:2k+2]: ∂/∂f: t·c (−δ b + 2π b') + t·s (−2π b − δ b');
         # ∂/∂δ: −f (t·c b + t·s b'). Then JᵀJ = Σ_c Hᵀ M H blockwise and Jᵀr = −Σ_c Hᵀ Tᵀr.
@@ -410,7 +478,7 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     down in δ along f = f_min; the plain clipped step kept pointing out of the corner.)
     """
     resid, proj, B = prob.residual(theta) if first is None else first
-    cost = float(np.sum(resid**2))
+    cost = prob.sumsq(resid)
     JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
     lam, n_eval, stop = 1e-4, 1, LMStop.ITERATION_LIMIT
     for _ in range(max_iter):
@@ -424,7 +492,7 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
         new = np.clip(theta + u * sc, lo, hi)
         r_new, p_new, B_new = prob.residual(new)
         n_eval += 1
-        cost_new = float(np.sum(r_new**2))
+        cost_new = prob.sumsq(r_new)
         if cost_new <= cost:
             small = np.all(np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc))
             rel = (cost - cost_new) / max(cost, 1e-300)
@@ -463,7 +531,7 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
             if lam > 1e10:  # damped to nothing and still no descent
                 stop = LMStop.GAVE_UP
                 break
-    prob.release(proj)
+    prob.release(proj, keep_residual=True)
     return theta, resid, B, JtJ, n_eval, stop
 
 
@@ -503,7 +571,7 @@ def _extrapolate(prob, theta: np.ndarray, trial: tuple, lo: np.ndarray,
         far = np.clip(theta + step, lo, hi)
         r_far, p_far, B_far = prob.residual(far)
         n += 1
-        cost_far = float(np.sum(r_far**2))
+        cost_far = prob.sumsq(r_far)
         if not cost_far < cost_new:
             prob.release(p_far)
             break
@@ -596,24 +664,28 @@ class HeldPoleFitter:
 
     All amplitudes (and the offset) are fitted; the held modes' columns are projected out once
     here (:class:`_Problem` ``fixed``) and reused for every candidate tried against them.
+    ``grams``: Σr² from Grams wherever they keep the digits a trial fit needs
+    (:class:`_GramResidual`; for fits with ``chi2_tol`` > 0 and screens only).
     """
 
     def __init__(
         self, t: np.ndarray, y: np.ndarray, f_fixed: np.ndarray, d_fixed: np.ndarray, *,
-        weights: np.ndarray, fit_offset: bool,
+        weights: np.ndarray, fit_offset: bool, grams: bool = False,
     ) -> None:
         Y = np.atleast_2d(y)
         self.C, self.N = Y.shape
         self.K_fixed, self.fit_offset, self.weights = f_fixed.size, fit_offset, weights
         fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, uniform_grid(t))
         self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed)
+        if grams:  # trial fits and screens only: Σr² from Grams (see _GramResidual)
+            self.prob.use_grams()
 
     def weighted_rss(self, f: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Σ (w r)² per channel of the linear fit with the new poles (f, δ) fixed too."""
         theta = np.empty(2 * f.size)
         theta[0::2], theta[1::2] = f, d
         self._last = (theta, self.prob.residual(theta))  # the first step of a fit from there
-        return np.sum(self._last[1][0] ** 2, axis=0)
+        return self.prob.channel_ss(self._last[1][0])
 
     def fit(
         self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
@@ -636,7 +708,7 @@ class HeldPoleFitter:
         first = last[1] if last is not None and np.array_equal(last[0], theta0) else None
         theta, resid_w, _, _, n_eval, _ = _levenberg_marquardt(
             self.prob, theta0, lo, hi, max_iter, chi2_tol, dof, first)
-        rss = np.sum((resid_w / self.weights[None, :]) ** 2, axis=0)
+        rss = self.prob.channel_ss(resid_w) / self.weights**2
         noise_std = np.sqrt(rss / max(N - P - 2 * K / C, 1))
         return theta[0::2].copy(), theta[1::2].copy(), rss, noise_std, int(n_eval)
 
