@@ -533,3 +533,22 @@ def test_explicit_n_modes_that_finds_fewer_says_so():
     table = identify_modes(x, fs, n_modes=8)
     assert 1 <= len(table) < 8
     assert table.info["fewer_modes"].startswith(f"n_modes=8 asked, {len(table)} found")
+
+
+def test_gauss_newton_gain_from_grams_matches_formed_residual():
+    from ramdaq.analysis.modal import varpro as modal_varpro
+
+    rng = np.random.default_rng(22)
+    t = np.arange(6000) / FS_HZ
+    y = damped_sinusoids(FS_HZ, 6000, [24.5, 90.0], [0.06, 0.01], rng.normal(size=(3, 2))) \
+        + 0.01 * rng.standard_normal((3, 6000))
+    w = np.full(3, 100.0)
+    f, d = np.array([24.45, 90.1, 300.0]), np.array([0.055, 0.011, 0.02])  # off the optimum
+    gain = modal_varpro.gauss_newton_gain(t, y, f, d, weights=w, fit_offset=True)
+    prob = modal_varpro._Problem(t, (y * w[:, None]).T, True)
+    theta = np.ravel(np.column_stack([f, d]))
+    resid, proj, B = prob.residual(theta)
+    ref = modal_varpro._gauss_newton_decrease(*prob.normal_equations(theta, resid, proj, B))
+    # Tᵀr = TᵀY − (ΦᵀT)ᵀB rounds relative to ‖Y‖/‖r‖ (~10³ here): ~10⁻¹² of the gain.
+    assert gain > 0
+    np.testing.assert_allclose(gain, ref, rtol=1e-9)
