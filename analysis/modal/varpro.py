@@ -217,9 +217,9 @@ class Projector:
     11 × 11 solves (its thread pool is woken whatever the size), trsm at most 0.2 ms.
     """
 
-    def __init__(self, Phi: np.ndarray) -> None:
+    def __init__(self, Phi: np.ndarray | None, gram: np.ndarray | None = None) -> None:
         self.Phi = self.raw = Phi  # raw: Φ before any projection (see _Problem)
-        G = Phi.T @ Phi
+        G = Phi.T @ Phi if gram is None else gram  # Phi None: from the Gram alone (no QR path)
         norm = np.sqrt(G.diagonal())
         self.inv_norm = 1.0 / np.where(norm > 0, norm, 1.0)
         G = G * self.inv_norm[:, None] * self.inv_norm[None, :]
@@ -227,7 +227,7 @@ class Projector:
         c, info = lapack.dpotrf(G, lower=1)
         if info == 0 and np.min(np.abs(c.diagonal())) ** 2 > 1e-10:  # cond(Φ) below ~1e5
             self.cho = (c, True)
-        if self.cho is None:
+        if self.cho is None and Phi is not None:
             self.Q, self.R = linalg.qr(Phi, mode="economic", check_finite=False)
 
     def coef(self, M: np.ndarray) -> np.ndarray:
@@ -320,22 +320,55 @@ class _Problem:
         AT = A.T
         return (AT - (AT @ self.QfT.T) @ self.QfT).T
 
+    def _gram_point(self, theta: np.ndarray) -> tuple[_GramResidual, Projector, np.ndarray] | None:
+        """:meth:`residual` from Grams alone (after :meth:`use_grams`), or None where they would
+        lose digits. The rows W = [Φᵀ; (t·Φ_modes)ᵀ] of the unprojected basis and its time
+        derivative columns meet the data once (W Yw: Yw ⊥ F, so (P⊥Φ)ᵀYw = ΦᵀYw), the fixed
+        columns once (W Q_F) and themselves once (W Wᵀ): P⊥_F Φ and P⊥_F T are never formed;
+        their Grams are W Wᵀ − (W Q_F)(W Q_F)ᵀ, used while no diagonal entry falls below 10⁻⁶ of
+        its unprojected value (else None: the explicit path)."""
+        K, n = theta.size // 2, self.t.size
+        P = 2 * K + int(self.offset)
+        shape = (P + 2 * K, n)
+        W = self._pool.pop() if self._pool and self._pool[-1].shape == shape else np.empty(shape)
+        damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
+                     out=W[:P])
+        np.multiply(W[: 2 * K], self.t[None, :], out=W[P:])
+        G0 = W @ W.T
+        G = G0
+        if self.QfT is not None:
+            WQ = W @ self.QfT.T
+            G = G0 - WQ @ WQ.T
+        if not np.all(G.diagonal() >= 1e-6 * G0.diagonal()):
+            if len(self._pool) < 4:
+                self._pool.append(W)
+            return None
+        proj = Projector(None, gram=G[:P, :P])
+        proj.raw = W[:P].T
+        if proj.cho is None:
+            self.release(proj)
+            return None
+        WY = W @ self.Yw
+        B = proj.coef_from(WY[:P])
+        ss = self._yy - np.sum(WY[:P] * B, axis=0)
+        if not np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
+            self.release(proj)
+            return None
+        proj.grams = (G[:P, P:], G[P:, P:], WY[P:])  # ΦᵀP⊥T, TᵀP⊥T, TᵀY
+        return _GramResidual(ss), proj, B
+
     def residual(self, theta: np.ndarray) -> tuple[np.ndarray, Projector, np.ndarray]:
-        """(r, projector, B): r = Yw − Φ B, shape (n_samples, n_channels) (a transposed view)."""
+        """(r, projector, B): r = Yw − Φ B, shape (n_samples, n_channels) (a transposed view);
+        after :meth:`use_grams`, a :class:`_GramResidual` where it keeps the digits."""
+        if self._yy is not None and (got := self._gram_point(theta)) is not None:
+            return got
         shape = (theta.size + int(self.offset), self.t.size)
         buf = self._pool.pop() if self._pool and self._pool[-1].shape == shape else None
         raw = damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
                      out=buf)
         proj = Projector(self._perp(raw))
         proj.raw = raw
-        if self._yy is not None and proj.cho is not None:
-            PtY = proj.Phi.T @ self.Yw
-            B = proj.coef_from(PtY)  # = proj.coef(self.Yw)
-            ss = self._yy - np.sum(PtY * B, axis=0)  # Σy² − yᵀΦ(ΦᵀΦ)⁻¹Φᵀy per channel
-            if np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
-                return _GramResidual(ss), proj, B
-        else:
-            B = proj.coef(self.Yw)
+        B = proj.coef(self.Yw)
         # r = Yc − Bᵀ Φᵀ into a reused (n_channels, n_samples) buffer: a fresh one per call cost
         # more in page faults than the product itself (same operations, same bits).
         rbuf = self._rpool.pop() if self._rpool else np.empty_like(self.Yc)
@@ -380,6 +413,16 @@ class _Problem:
         """(JᵀJ, Jᵀr) at θ for the residual computed there."""
         f, d = theta[0::2], theta[1::2]
         K = f.size
+        grams = getattr(proj, "grams", None)
+        if grams is not None:
+            PtT, TT, TtY = grams
+            V = proj.whitened(PtT)
+            M = TT - V.T @ V
+            if np.all(M.diagonal() > 1e-8 * TT.diagonal()):
+                return self._jtj_jtr(f, d, B, M, TtY - PtT.T @ B)
+            raw = proj.raw  # the Schur complement lost digits: the explicit path
+            proj = Projector(self._perp(raw))
+            proj.raw = raw
         Phi = proj.Phi
         work = self.scratch.get("T")
         if work is None or work.shape != (2 * K, self.t.size):
@@ -401,6 +444,13 @@ class _Problem:
             Tr = T.T @ self.Yw - PtT.T @ B
         else:
             Tr = T.T @ resid  # (2K, n_channels); P⊥ r = r
+        return self._jtj_jtr(f, d, B, M, Tr)
+
+    @staticmethod
+    def _jtj_jtr(f: np.ndarray, d: np.ndarray, B: np.ndarray, M: np.ndarray,
+                 Tr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(JᵀJ, Jᵀr) from the Schur complement M = Tᵀ P⊥ T (2K × 2K) and Tᵀr (2K × C)."""
+        K = f.size
         # H[k, p, a, c]: weight of T column (k, a) (a: t·c, t·s) in ∂Φ/∂θ_(k,p) B_c (p: f, δ).
         # With (b, b') = B[2k:2k+2]: ∂/∂f: t·c (−δ b + 2π b') + t·s (−2π b − δ b');
         # ∂/∂δ: −f (t·c b + t·s b'). Then JᵀJ = Σ_c Hᵀ M H blockwise and Jᵀr = −Σ_c Hᵀ Tᵀr.
