@@ -251,7 +251,7 @@ _GRAM_MIN_FRACTION = 1e-4  # Grams only while Σr² ≥ 10⁻⁴ Σy² (≲ 4 of
 
 class _GramResidual:
     """A residual known by its Σr² per channel (``ss``, (n_channels,); None where only Tᵀr is
-    wanted, :func:`gauss_newton_gain`) alone.
+    wanted, :class:`GaussNewtonGain`) alone.
 
     Σr²_c = Σy²_c − yᵀΦ(ΦᵀΦ)⁻¹Φᵀy (from ΦᵀY and the coefficients B) and Tᵀr = TᵀY − (ΦᵀT)ᵀB
     need no (n_samples × n_channels) residual: an evaluation touches the data once, in one
@@ -320,13 +320,15 @@ class _Problem:
         AT = A.T
         return (AT - (AT @ self.QfT.T) @ self.QfT).T
 
-    def _gram_point(self, theta: np.ndarray) -> tuple[_GramResidual, Projector, np.ndarray] | None:
+    def _gram_point(self, theta: np.ndarray, need_ss: bool = True
+                    ) -> tuple[_GramResidual, Projector, np.ndarray] | None:
         """:meth:`residual` from Grams alone (after :meth:`use_grams`), or None where they would
         lose digits. The rows W = [Φᵀ; (t·Φ_modes)ᵀ] of the unprojected basis and its time
         derivative columns meet the data once (W Yw: Yw ⊥ F, so (P⊥Φ)ᵀYw = ΦᵀYw), the fixed
         columns once (W Q_F) and themselves once (W Wᵀ): P⊥_F Φ and P⊥_F T are never formed;
         their Grams are W Wᵀ − (W Q_F)(W Q_F)ᵀ, used while no diagonal entry falls below 10⁻⁶ of
-        its unprojected value (else None: the explicit path)."""
+        its unprojected value (else None: the explicit path). ``need_ss`` False: for Jᵀr and JᵀJ
+        alone (:class:`GaussNewtonGain`), Σr² not computed (``ss`` None), no Σr² test."""
         K, n = theta.size // 2, self.t.size
         P = 2 * K + int(self.offset)
         shape = (P + 2 * K, n)
@@ -350,10 +352,12 @@ class _Problem:
             return None
         WY = W @ self.Yw
         B = proj.coef_from(WY[:P])
-        ss = self._yy - np.sum(WY[:P] * B, axis=0)
-        if not np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
-            self.release(proj)
-            return None
+        ss = None
+        if need_ss:
+            ss = self._yy - np.sum(WY[:P] * B, axis=0)
+            if not np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
+                self.release(proj)
+                return None
         proj.grams = (G[:P, P:], G[P:, P:], WY[P:])  # ΦᵀP⊥T, TᵀP⊥T, TᵀY
         return _GramResidual(ss), proj, B
 
@@ -764,27 +768,37 @@ class HeldPoleFitter:
         return theta[0::2].copy(), theta[1::2].copy(), rss, noise_std, int(n_eval)
 
 
+class GaussNewtonGain:
+    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises,
+    for weighted data (n_channels, n_samples) set up once and poles given per call.
+
+    Only Jᵀr and JᵀJ are needed: from Grams (:meth:`_Problem._gram_point`, Tᵀr = TᵀY − (ΦᵀT)ᵀB),
+    no residual as large as the data is formed. Their rounding is relative to ‖Y‖/‖r‖ (the
+    square root of the ratio Σr² would lose), ≲ 10⁻¹¹ of the gain, which enters the order
+    search's test multiplied by 4 plus 1. Where the Grams lose digits, the residual is formed.
+    """
+
+    def __init__(self, t: np.ndarray, y: np.ndarray, *, weights: np.ndarray,
+                 fit_offset: bool) -> None:
+        self.prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset)
+
+    def __call__(self, f: np.ndarray, d: np.ndarray) -> float:
+        theta = np.empty(2 * f.size)
+        theta[0::2], theta[1::2] = f, d
+        got = self.prob._gram_point(theta, need_ss=False)
+        resid, proj, B = self.prob.residual(theta) if got is None else got
+        gain = _gauss_newton_decrease(*self.prob.normal_equations(theta, resid, proj, B))
+        self.prob.release(proj)
+        return gain
+
+
 def gauss_newton_gain(
     t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray, *, weights: np.ndarray,
     fit_offset: bool,
 ) -> float:
-    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises.
-
-    Only Jᵀr and JᵀJ are needed: Tᵀr = TᵀY − (ΦᵀT)ᵀB (:class:`_GramResidual`) spares forming a
-    residual as large as the data. Its rounding is relative to ‖Y‖/‖r‖ (the square root of the
-    ratio Σr² would lose), ≲ 10⁻¹¹ of the gain, which enters the test multiplied by 4 plus 1.
-    """
-    prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset)
-    theta = np.empty(2 * f.size)
-    theta[0::2], theta[1::2] = f, d
-    raw = damped_basis(t, f, d, fit_offset, prob.grid, prob.scratch)
-    proj = Projector(raw)
-    proj.raw = raw
-    if proj.cho is None:  # ill-conditioned: the residual itself (QR path)
-        resid, proj, B = prob.residual(theta)
-    else:
-        B, resid = proj.coef(prob.Yw), _GramResidual(None)
-    return _gauss_newton_decrease(*prob.normal_equations(theta, resid, proj, B))
+    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises
+    (:class:`GaussNewtonGain` for one set of poles)."""
+    return GaussNewtonGain(t, y, weights=weights, fit_offset=fit_offset)(f, d)
 
 
 def drop_one_rss_increase(
