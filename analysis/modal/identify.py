@@ -216,7 +216,8 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    band = _band(Xa, fs_hz, false_alarm)
+    P0 = kaiser_periodogram(Xa)  # the band test's, and the noise estimate's when not decimated
+    band = _band(Xa, fs_hz, false_alarm, P0)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -225,7 +226,8 @@ def identify_modes(
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
-    full = _Data(Y, t, fs_nls, false_alarm)
+    full = _Data(Y, t, fs_nls, false_alarm,
+                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None)
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
     # refitted on the data themselves, so the estimates are those of the full record.
@@ -253,8 +255,8 @@ def identify_modes(
                 _select_order(sel, fc, dc, ranked_candidates, n_modes)
         else:
             _select_order(sel, fc, dc, ranked_candidates, max_modes)
-        if sel.fit is not None:  # refit with weights from its own residual
-            _reweighted(sel)
+        if sel.fit is not None and D is full:  # refit with weights from its own residual (on
+            _reweighted(sel)  # a decimated copy _refined does it on the data themselves)
         return sel, int(fc.size)
 
     def search(D: _Data) -> tuple[ModeSelector, int]:
@@ -296,9 +298,11 @@ class _Data:
     fs: float
     false_alarm: float
     decimation: int = 1
+    noise_std: np.ndarray | None = None  # of Y's rows when known (= estimate_noise_std(Y))
 
     def __post_init__(self) -> None:
-        self.w0 = 1.0 / floor_noise(estimate_noise_std(self.Y), self.Y)
+        sig = estimate_noise_std(self.Y) if self.noise_std is None else self.noise_std
+        self.w0 = 1.0 / floor_noise(sig, self.Y)
         self.threshold = float(chdtri(2 * self.Y.shape[0],
                                       self.false_alarm / (2.0 * self.Y.shape[-1])))
 
