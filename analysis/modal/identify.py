@@ -247,15 +247,21 @@ def identify_modes(
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
                   else _rank(D.Y, D.t, D.w0, *start_fd, trend))
         sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0)
+        # One channel: its weight scales the cost, not the optimum, so the reweighted refit
+        # would restart at the point reached; the fit of the n modes is converged at once.
+        final = n_modes is not None and D.Y.shape[0] == 1 and D is full
         if n_modes is not None:
-            sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
+            sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=not final) if fc.size else None
             if sel.fit is None and fc.size:  # the n strongest do not fit together: select up to n
+                final = False
                 info["n_modes_fit"] = (f"the {min(n_modes, fc.size)} strongest candidates did not "
                                        f"fit together; the order was selected (at most {n_modes})")
                 _select_order(sel, fc, dc, ranked_candidates, n_modes)
         else:
             _select_order(sel, fc, dc, ranked_candidates, max_modes)
-        if sel.fit is not None and D is full:  # refit with weights from its own residual (on
+        if final and sel.fit is not None:
+            sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)  # as _reweighted, without a refit
+        elif sel.fit is not None and D is full:  # refit with weights from its own residual (on
             _reweighted(sel)  # a decimated copy _refined does it on the data themselves)
         return sel, int(fc.size)
 
