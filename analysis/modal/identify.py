@@ -441,29 +441,42 @@ def _trend_order(sel: ModeSelector, false_alarm: float, max_terms: int) -> int:
     middle), the modes' poles held (linear least squares: cheap, and Λ with the poles held is
     at most Λ with them refitted, so the test errs towards fewer columns), and the fewest taken
     whose likelihood ratio Λ = Σ_c ΔRSS_c / σ̂²_c exceeds the χ²(step · n_channels) quantile at
-    ``false_alarm``; until neither does."""
+    ``false_alarm``; until neither does. The nested fits come from one (:func:`_nested_rss`)."""
     f = sel.fit.f_hz if sel.fit is not None else np.empty(0)
     d = sel.fit.delta if sel.fit is not None else np.empty(0)
     p = int(sel.fit_offset)
     n_ch, n = sel.Y.shape
-
-    def rss_with(terms: int) -> np.ndarray:
-        return linear_amplitudes(sel.t, sel.Y, f, d, fit_offset=terms)[2]
-
-    rss = rss_with(p)
     while p < max_terms:
+        top = min(p + 2, max_terms)
+        rss = _nested_rss(sel.t, sel.Y, f, d, p, top)  # rss[j]: with p + j trend columns
         for step in (1, 2):
             if p + step > max_terms:
                 return p
-            rss_new = rss_with(p + step)
-            var = rss_new / max(n - 2 * f.size - p - step, 1)
-            lam = float(np.sum((rss - rss_new) / np.maximum(var, 1e-300)))
+            var = rss[step] / max(n - 2 * f.size - p - step, 1)
+            lam = float(np.sum((rss[0] - rss[step]) / np.maximum(var, 1e-300)))
             if lam > chdtri(step * n_ch, false_alarm):
-                p, rss = p + step, rss_new
+                p += step
                 break
         else:
             return p
     return p
+
+
+def _nested_rss(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, p: int,
+                top: int) -> list[np.ndarray]:
+    """RSS per channel of the least-squares fits of the modes (f, δ) with p, p + 1, …, ``top``
+    trend columns (a list, entry j for p + j): one fit with ``top`` columns, whose Cholesky
+    factor gives the others, RSS_k = RSS_top + Σ_(k ≤ i < top) V_i² (V = L⁻¹ Φᵀy, row i the
+    gain of column i over the columns before it: sums of squares, no cancellation); each
+    fitted on its own where Φ needs the QR path."""
+    proj = Projector(damped_basis(t, f, d, top, uniform_grid(t)))
+    if proj.cho is None:
+        return [linear_amplitudes(t, Y, f, d, fit_offset=k)[2] for k in range(p, top + 1)]
+    PtY = proj.Phi.T @ Y.T
+    rss_top = np.sum((Y.T - proj.Phi @ proj.coef_from(PtY)) ** 2, axis=0)
+    V2 = proj.whitened(PtY) ** 2  # (2K + top, n_channels)
+    k0 = 2 * f.size
+    return [rss_top + np.sum(V2[k0 + k : k0 + top], axis=0) for k in range(p, top + 1)]
 
 
 def _sum_exp(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
