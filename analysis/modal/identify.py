@@ -93,7 +93,13 @@ from .subspace import (
     poles_to_modes,
 )
 from .table import ModeTable
-from .varpro import Projector, damped_basis, fit_modes_varpro, linear_amplitudes, uniform_grid
+from .varpro import (
+    Projector,
+    damped_basis,
+    fit_channels_varpro,
+    linear_amplitudes,
+    uniform_grid,
+)
 
 __all__ = ["ModeTable", "identify_modes", "peak_above_noise"]
 
@@ -506,6 +512,29 @@ def _empty(n_ch, fs_hz, n, method, info) -> ModeTable:
                      f"{method}+varpro", info)
 
 
+def _channel_fits(sel: ModeSelector, channels: np.ndarray):
+    """Each channel's own fit (step 6) of the modes significant in it (energy of its joint
+    amplitude over its noise above χ²₂ at 10⁻³), started at the joint poles: yields (channel,
+    mode indices, VarProFit) where the fit succeeded. Channels with the same modes share the
+    first evaluation (:func:`~ramdaq.analysis.modal.varpro.fit_channels_varpro`)."""
+    fit = sel.fit
+    f, d = fit.f_hz, fit.delta
+    env2 = _sum_exp(sel.t, -2.0 * d * f) / 2.0
+    snr = np.abs(fit.amplitude) ** 2 * env2 / np.maximum(fit.noise_std[:, None] ** 2, 1e-300)
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for j in range(len(channels)):
+        ks = tuple(np.flatnonzero(snr[j] > chdtri(2, 1e-3)))
+        if ks:
+            groups.setdefault(ks, []).append(j)
+    for ks, rows in groups.items():
+        k = np.array(ks)
+        fits = fit_channels_varpro(sel.t, sel.Y[rows], f[k], d[k], fit_offset=sel.fit_offset,
+                                   f_bounds_hz=sel.f_lim, delta_bounds=(-3.0, 3.0))
+        for j, fc in zip(rows, fits, strict=True):
+            if fc is not None:
+                yield int(channels[j]), k, fc
+
+
 def _table(sel, X, active, fs_hz, d_nls, taps, f_range, per_channel, method, info) -> ModeTable:
     fit = sel.fit
     n_ch, n = X.shape
@@ -520,19 +549,7 @@ def _table(sel, X, active, fs_hz, d_nls, taps, f_range, per_channel, method, inf
     K = f.size
     ch_f, ch_fse, ch_d, ch_dse = (np.full((n_ch, K), np.nan) for _ in range(4))
     if per_channel:
-        thr_c = chdtri(2, 1e-3)
-        env2 = _sum_exp(sel.t, -2.0 * d * f) / 2.0
-        for j, c in enumerate(np.flatnonzero(active)):
-            snr = np.abs(fit.amplitude[j]) ** 2 * env2 / max(fit.noise_std[j] ** 2, 1e-300)
-            ks = np.flatnonzero(snr > thr_c)
-            if ks.size == 0:
-                continue
-            try:
-                fc = fit_modes_varpro(sel.t, sel.Y[j : j + 1], f[ks], d[ks],
-                                      fit_offset=sel.fit_offset, f_bounds_hz=sel.f_lim,
-                                      delta_bounds=(-3.0, 3.0))
-            except (ValueError, linalg.LinAlgError):
-                continue
+        for c, ks, fc in _channel_fits(sel, np.flatnonzero(active)):
             cse = np.sqrt(np.abs(np.diag(fc.covariance))).reshape(-1, 2) * vfac[ks, None]
             ch_f[c, ks], ch_d[c, ks] = fc.f_hz, fc.delta
             ch_fse[c, ks], ch_dse[c, ks] = cse[:, 0], cse[:, 1]

@@ -33,6 +33,7 @@ Their measured effect is in ``docs/estimators.md`` ("Speed").
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -41,7 +42,7 @@ from numpy.typing import ArrayLike
 from scipy import linalg
 from scipy.linalg import blas, lapack
 
-__all__ = ["VarProFit", "fit_modes_varpro", "linear_amplitudes"]
+__all__ = ["VarProFit", "fit_channels_varpro", "fit_modes_varpro", "linear_amplitudes"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -358,7 +359,7 @@ class _Problem:
             if not np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
                 self.release(proj)
                 return None
-        proj.grams = (G[:P, P:], G[P:, P:], WY[P:])  # ΦᵀP⊥T, TᵀP⊥T, TᵀY
+        proj.grams = (G[:P, P:], G[P:, P:], WY[P:], None)  # ΦᵀP⊥T, TᵀP⊥T, TᵀY, (Tᵀr)
         return _GramResidual(ss), proj, B
 
     def residual(self, theta: np.ndarray) -> tuple[np.ndarray, Projector, np.ndarray]:
@@ -419,11 +420,11 @@ class _Problem:
         K = f.size
         grams = getattr(proj, "grams", None)
         if grams is not None:
-            PtT, TT, TtY = grams
+            PtT, TT, TtY, Tr = grams  # Tᵀr itself when known, else from TᵀY
             V = proj.whitened(PtT)
             M = TT - V.T @ V
             if np.all(M.diagonal() > 1e-8 * TT.diagonal()):
-                return self._jtj_jtr(f, d, B, M, TtY - PtT.T @ B)
+                return self._jtj_jtr(f, d, B, M, TtY - PtT.T @ B if Tr is None else Tr)
             raw = proj.raw  # the Schur complement lost digits: the explicit path
             proj = Projector(self._perp(raw))
             proj.raw = raw
@@ -681,19 +682,36 @@ def fit_modes_varpro(
     f0 = np.atleast_1d(np.asarray(f0_hz, dtype=float))
     d0 = np.broadcast_to(np.asarray(delta0, dtype=float), f0.shape)
     w = np.ones(Y.shape[0]) if weights is None else np.asarray(weights, dtype=float)
-    K, (C, N) = f0.size, Y.shape
+    K, N = f0.size, Y.shape[1]
     P = 2 * K + int(fit_offset)
     if N <= P + 2 * K:
         raise ValueError(f"n_samples ({N}) too small for {K} modes")
     prob = _Problem(t, (Y * w[:, None]).T, fit_offset)
+    lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
+    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol)
+
+
+def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
+               delta_bounds: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bounds (lo, hi) on θ = [f₁, δ₁, …] and the start θ₀ clipped into them."""
+    K = f0.size
     lo = np.tile([f_bounds_hz[0], delta_bounds[0]], K)
     hi = np.tile([f_bounds_hz[1], delta_bounds[1]], K)
     theta0 = np.empty(2 * K)
     theta0[0::2], theta0[1::2] = f0, d0
-    theta0 = np.clip(theta0, lo, hi)
+    return lo, hi, np.clip(theta0, lo, hi)
+
+
+def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: np.ndarray,
+            max_iter: int, chi2_tol: float, first: tuple | None = None) -> VarProFit:
+    """:func:`fit_modes_varpro`'s fit and result on ``prob`` (weights ``w``) from θ₀ (``first``:
+    ``prob.residual(theta0)`` when known)."""
+    fit_offset = prob.offset
+    K, C, N = theta0.size // 2, prob.Yc.shape[0], prob.Yc.shape[1]
+    P = 2 * K + int(fit_offset)
     dof = C * N - C * P - 2 * K
     theta, resid_w, B, JtJ, n_eval, stop = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
-                                                                chi2_tol, dof)
+                                                                chi2_tol, dof, first)
     B = B / w[None, :]
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
@@ -712,6 +730,47 @@ def fit_modes_varpro(
         success=stop is LMStop.CONVERGED,
         stop=stop,
     )
+
+
+def fit_channels_varpro(
+    t_s: np.ndarray, y: np.ndarray, f0_hz: np.ndarray, delta0: np.ndarray, *,
+    fit_offset: bool | int, f_bounds_hz: tuple[float, float],
+    delta_bounds: tuple[float, float], max_iter: int = 100,
+) -> list[VarProFit | None]:
+    """Each channel (row of ``y``, (n_channels, n_samples)) fitted on its own from the same
+    start: ``fit_modes_varpro(t_s, y[c:c+1], f0_hz, delta0, ...)`` for every c (None where
+    that raises ValueError or LinAlgError), the first evaluation at the common start (basis,
+    its factorisation and the Grams of the derivative columns: all but each channel's
+    coefficients, residual and Tᵀr) computed once for all channels."""
+    t = np.asarray(t_s, dtype=float)
+    Y = np.atleast_2d(np.asarray(y, dtype=float))
+    f0, d0 = np.asarray(f0_hz, dtype=float), np.asarray(delta0, dtype=float)
+    K, (C, N) = f0.size, Y.shape
+    if N <= 4 * K + int(fit_offset):
+        return [None] * C
+    lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
+    raw = damped_basis(t, theta0[0::2], theta0[1::2], fit_offset, uniform_grid(t)).copy()
+    proj = Projector(raw)
+    shared = None
+    if proj.cho is not None:  # else each channel's own first evaluation (QR path)
+        PtY = raw.T @ Y.T
+        B = proj.coef_from(PtY)
+        R = Y.T - raw @ B  # (n_samples, n_channels)
+        T = raw[:, : 2 * K] * t[:, None]
+        shared = (raw.T @ T, T.T @ T, T.T @ R)  # ΦᵀT, TᵀT, Tᵀr
+    out: list[VarProFit | None] = []
+    for c in range(C):
+        prob = _Problem(t, Y[c : c + 1].T, fit_offset)
+        first = None
+        if shared is not None:
+            pc = copy.copy(proj)  # its Φ is not a pooled buffer: never handed to a channel's pool
+            pc.grams = (shared[0], shared[1], None, shared[2][:, c : c + 1])
+            first = (np.ascontiguousarray(R[:, c : c + 1]), pc, B[:, c : c + 1])
+        try:
+            out.append(_fitted(prob, theta0, lo, hi, np.ones(1), max_iter, 0.0, first))
+        except (ValueError, linalg.LinAlgError):
+            out.append(None)
+    return out
 
 
 class HeldPoleFitter:
