@@ -17,7 +17,9 @@ Pipeline
 --------
 1. Constant (dead) channels are left out. Noise per channel: median of the Hann periodogram.
 2. Analysis band: highest frequency whose channel-summed whitened spectrum is significant
-   (Bonferroni over bins at ``false_alarm``); none and ``n_modes=None`` → no modes.
+   (Bonferroni over bins at ``false_alarm``), against the noise's own level where it is
+   coloured (a converter's roll-off; :func:`~ramdaq.analysis.modal.signal.significant_band_hz`);
+   none and ``n_modes=None`` → no modes.
 3. Records over ``max_samples`` (channels × samples) are FIR-decimated, keeping only outputs whose
    filter window lies inside the record (no edge transient; amplitudes are corrected by the
    filter's complex gain at each pole, standard errors by the noise-density ratio).

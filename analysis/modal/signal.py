@@ -126,7 +126,9 @@ def significant_band_hz(
     """Highest frequency whose channel-summed, whitened spectrum is significantly above noise.
 
     Kaiser-windowed periodograms of the whole record and of its first quarter, sixteenth and 1/64 are
-    tested, so that lightly and heavily damped modes are both seen.
+    tested, so that lightly and heavily damped modes are both seen. Where the noise is coloured,
+    each bin is judged against the noise's level around it (block medians of the whole record's
+    spectrum, never below the white level; :func:`_noise_floor`).
 
     Parameters
     ----------

@@ -27,7 +27,11 @@ How one evaluation is kept cheap (same results to rounding; see the functions fo
   n_samples × 4K derivative matrix projected explicitly (:class:`_Problem`).
 - Small factorisations call LAPACK/BLAS directly (potrf/potrs/posv/trsm, as scipy's wrappers).
 - Modes whose poles are held (the order search's trial fits) are projected out once
-  (:class:`HeldPoleFitter`).
+  (:class:`HeldPoleFitter`); those trial fits take Σr² and Tᵀr from Grams, never forming a
+  residual as large as the data, where that keeps the digits they need (:class:`_GramResidual`).
+- Residuals are written into reused buffers (a fresh one per evaluation cost more in page
+  faults than the product itself); channels fitted one by one from the same start share the
+  first evaluation (:func:`fit_channels_varpro`).
 Their measured effect is in ``docs/estimators.md`` ("Speed").
 """
 
