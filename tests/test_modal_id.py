@@ -79,6 +79,25 @@ def test_no_modes_are_invented_in_noise(n_channels):
         assert len(identify_modes(x, FS_HZ)) == 0
 
 
+def test_coloured_noise_does_not_widen_the_band():
+    from scipy import signal as sp_signal
+
+    from ramdaq.analysis.modal.signal import estimate_noise_std, significant_band_hz
+
+    # Noise ~1.6 times the median-based white level below 700 Hz and ~0.3 above (a converter's
+    # anti-alias roll-off): a white-noise threshold crosses it in every record.
+    b, a = sp_signal.butter(4, 700.0, fs=FS_HZ)
+    rng = np.random.default_rng(31)
+    hits = 0
+    for _ in range(20):
+        w = rng.standard_normal((16, 12488))
+        x = (sp_signal.lfilter(b, a, w, axis=-1) + 0.3 * w)[:, 200:]
+        hits += significant_band_hz(x, FS_HZ, estimate_noise_std(x), false_alarm=0.05) is not None
+    # At false_alarm 0.05, 20 records: 5 or more with probability 1.6 % (binomial); the
+    # white-noise threshold alone gave 20 of 20.
+    assert hits <= 4
+
+
 def test_order_selection_on_albacore_like_record():
     rng = np.random.default_rng(7)
     f, d = [20.1, 24.5, 123.0], [0.07, 0.06, 0.05]
@@ -318,10 +337,37 @@ def test_buffer_reuse_does_not_change_fits(monkeypatch):
                          rng.normal(size=(2, 3))) + 0.01 * rng.standard_normal((2, 5000))
     kwargs = {"f0_hz": [24.4, 25.3, 90.2], "delta0": [0.05, 0.08, 0.012]}
     a = modal_varpro.fit_modes_varpro(t, y, **kwargs)
-    monkeypatch.setattr(modal_varpro._Problem, "release", lambda self, proj: None)
+    monkeypatch.setattr(modal_varpro._Problem, "release",
+                        lambda self, proj, keep_residual=False: None)
     b = modal_varpro.fit_modes_varpro(t, y, **kwargs)
     for name in ("f_hz", "delta", "covariance", "amplitude", "rss"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+@pytest.mark.parametrize("noise", [1e-2, 1e-5])  # at 1e-5 the strong mode leaves Σr² < 1e-4 Σy²
+def test_held_pole_fits_from_grams_match_formed_residuals(noise):
+    from ramdaq.analysis.modal.varpro import HeldPoleFitter
+
+    rng = np.random.default_rng(21)
+    t = np.arange(6000) / FS_HZ
+    f, d = np.array([24.5, 90.0]), np.array([0.06, 0.01])
+    y = damped_sinusoids(FS_HZ, 6000, f, d, rng.normal(size=(4, 2))) \
+        + noise * rng.standard_normal((4, 6000))
+    w = np.full(4, 1.0 / noise)
+    fits = []
+    for grams in (False, True):
+        held = HeldPoleFitter(t, y, f[1:], d[1:], weights=w, fit_offset=True, grams=grams)
+        # a strong mode (Σr² ≪ Σy²: formed residuals), a noise candidate (Grams) and one
+        # beside the held 90 Hz mode (its projected columns lose digits: formed again)
+        fits.append([held.fit(np.r_[fc], np.r_[dc], f_bounds_hz=(0.1, 900.0),
+                              delta_bounds=(-3.0, 3.0), chi2_tol=1e-3)
+                     for fc, dc in ((24.4, 0.05), (300.0, 0.02), (90.02, 0.01))])
+    for (f0, d0, rss0, _, _), (f1, d1, rss1, _, _) in zip(*fits, strict=True):
+        # Both converge to 10⁻³ of the residual variance per degree of freedom: the poles
+        # agree far inside their standard errors (≥ 10⁻⁵ Hz here), Σr² to ~10⁻⁹ of itself.
+        np.testing.assert_allclose(f1, f0, rtol=1e-7)
+        np.testing.assert_allclose(d1, d0, rtol=1e-4, atol=1e-6)
+        np.testing.assert_allclose(rss1, rss0, rtol=1e-8)
 
 
 def test_one_factorisation_significance_matches_drop_one_refits():
@@ -508,3 +554,59 @@ def test_explicit_n_modes_that_finds_fewer_says_so():
     table = identify_modes(x, fs, n_modes=8)
     assert 1 <= len(table) < 8
     assert table.info["fewer_modes"].startswith(f"n_modes=8 asked, {len(table)} found")
+
+
+def test_gauss_newton_gain_from_grams_matches_formed_residual():
+    from ramdaq.analysis.modal import varpro as modal_varpro
+
+    rng = np.random.default_rng(22)
+    t = np.arange(6000) / FS_HZ
+    y = damped_sinusoids(FS_HZ, 6000, [24.5, 90.0], [0.06, 0.01], rng.normal(size=(3, 2))) \
+        + 0.01 * rng.standard_normal((3, 6000))
+    w = np.full(3, 100.0)
+    f, d = np.array([24.45, 90.1, 300.0]), np.array([0.055, 0.011, 0.02])  # off the optimum
+    gain = modal_varpro.gauss_newton_gain(t, y, f, d, weights=w, fit_offset=True)
+    prob = modal_varpro._Problem(t, (y * w[:, None]).T, True)
+    theta = np.ravel(np.column_stack([f, d]))
+    resid, proj, B = prob.residual(theta)
+    ref = modal_varpro._gauss_newton_decrease(*prob.normal_equations(theta, resid, proj, B))
+    # Tᵀr = TᵀY − (ΦᵀT)ᵀB rounds relative to ‖Y‖/‖r‖ (~10³ here): ~10⁻¹² of the gain.
+    assert gain > 0
+    np.testing.assert_allclose(gain, ref, rtol=1e-9)
+
+
+def test_nested_trend_fits_from_one_factorisation_match_separate_fits():
+    from ramdaq.analysis.modal.identify import _nested_rss
+    from ramdaq.analysis.modal.varpro import linear_amplitudes
+
+    rng = np.random.default_rng(23)
+    t = np.arange(4000) / FS_HZ
+    f, d = np.array([24.5, 90.0]), np.array([0.06, 0.01])
+    y = damped_sinusoids(FS_HZ, 4000, f, d, rng.normal(size=(3, 2))) \
+        + 0.2 * (t / t[-1]) ** 2 + 0.01 * rng.standard_normal((3, 4000))  # a drift
+    rss = _nested_rss(t, y, f, d, 1, 3)
+    ref = [linear_amplitudes(t, y, f, d, fit_offset=k)[2] for k in (1, 2, 3)]
+    # The same least-squares fits, summed differently: equal to rounding (Σr² ~ 0.4 of Σy²
+    # here after the drift, ~1e-4 without it: no digits lost either way).
+    np.testing.assert_allclose(rss, ref, rtol=1e-9)
+    assert np.all(rss[0] > rss[2])  # the drift is taken up
+
+
+def test_channels_fitted_together_from_one_start_equal_their_own_fits():
+    from ramdaq.analysis.modal.varpro import fit_channels_varpro, fit_modes_varpro
+
+    rng = np.random.default_rng(24)
+    t = np.arange(5000) / FS_HZ
+    y = damped_sinusoids(FS_HZ, 5000, [24.5, 90.0], [0.06, 0.01], rng.normal(size=(3, 2))) \
+        + 0.01 * rng.standard_normal((3, 5000))
+    kw = {"fit_offset": True, "f_bounds_hz": (0.5, 1000.0), "delta_bounds": (-3.0, 3.0)}
+    start = (np.array([24.4, 90.1]), np.array([0.05, 0.012]))
+    got = fit_channels_varpro(t, y, *start, **kw)
+    for c, fc in enumerate(got):
+        ref = fit_modes_varpro(t, y[c : c + 1], *start, **kw)
+        # Both converged to rounding from the same start (the first evaluation computed for
+        # all channels at once, summed in another order): equal far inside a standard error.
+        np.testing.assert_allclose(fc.f_hz, ref.f_hz, rtol=1e-10)
+        np.testing.assert_allclose(fc.delta, ref.delta, rtol=1e-7)
+        np.testing.assert_allclose(fc.covariance, ref.covariance, rtol=1e-6)
+        np.testing.assert_allclose(fc.rss, ref.rss, rtol=1e-10)

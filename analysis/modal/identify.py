@@ -17,7 +17,9 @@ Pipeline
 --------
 1. Constant (dead) channels are left out. Noise per channel: median of the Hann periodogram.
 2. Analysis band: highest frequency whose channel-summed whitened spectrum is significant
-   (Bonferroni over bins at ``false_alarm``); none and ``n_modes=None`` → no modes.
+   (Bonferroni over bins at ``false_alarm``), against the noise's own level where it is
+   coloured (a converter's roll-off; :func:`~ramdaq.analysis.modal.signal.significant_band_hz`);
+   none and ``n_modes=None`` → no modes.
 3. Records over ``max_samples`` (channels × samples) are FIR-decimated, keeping only outputs whose
    filter window lies inside the record (no edge transient; amplitudes are corrected by the
    filter's complex gain at each pole, standard errors by the noise-density ratio).
@@ -93,7 +95,13 @@ from .subspace import (
     poles_to_modes,
 )
 from .table import ModeTable
-from .varpro import Projector, damped_basis, fit_modes_varpro, linear_amplitudes, uniform_grid
+from .varpro import (
+    Projector,
+    damped_basis,
+    fit_channels_varpro,
+    linear_amplitudes,
+    uniform_grid,
+)
 
 __all__ = ["ModeTable", "identify_modes", "peak_above_noise"]
 
@@ -216,7 +224,8 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    band = _band(Xa, fs_hz, false_alarm)
+    P0 = kaiser_periodogram(Xa)  # the band test's, and the noise estimate's when not decimated
+    band = _band(Xa, fs_hz, false_alarm, P0)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -225,7 +234,8 @@ def identify_modes(
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
-    full = _Data(Y, t, fs_nls, false_alarm)
+    full = _Data(Y, t, fs_nls, false_alarm,
+                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None)
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
     # refitted on the data themselves, so the estimates are those of the full record.
@@ -245,16 +255,22 @@ def identify_modes(
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
                   else _rank(D.Y, D.t, D.w0, *start_fd, trend))
         sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0)
+        # One channel: its weight scales the cost, not the optimum, so the reweighted refit
+        # would restart at the point reached; the fit of the n modes is converged at once.
+        final = n_modes is not None and D.Y.shape[0] == 1 and D is full
         if n_modes is not None:
-            sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=True) if fc.size else None
+            sel.fit = sel.refit(fc[:n_modes], dc[:n_modes], trial=not final) if fc.size else None
             if sel.fit is None and fc.size:  # the n strongest do not fit together: select up to n
+                final = False
                 info["n_modes_fit"] = (f"the {min(n_modes, fc.size)} strongest candidates did not "
                                        f"fit together; the order was selected (at most {n_modes})")
                 _select_order(sel, fc, dc, ranked_candidates, n_modes)
         else:
             _select_order(sel, fc, dc, ranked_candidates, max_modes)
-        if sel.fit is not None:  # refit with weights from its own residual
-            _reweighted(sel)
+        if final and sel.fit is not None:
+            sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)  # as _reweighted, without a refit
+        elif sel.fit is not None and D is full:  # refit with weights from its own residual (on
+            _reweighted(sel)  # a decimated copy _refined does it on the data themselves)
         return sel, int(fc.size)
 
     def search(D: _Data) -> tuple[ModeSelector, int]:
@@ -296,9 +312,11 @@ class _Data:
     fs: float
     false_alarm: float
     decimation: int = 1
+    noise_std: np.ndarray | None = None  # of Y's rows when known (= estimate_noise_std(Y))
 
     def __post_init__(self) -> None:
-        self.w0 = 1.0 / floor_noise(estimate_noise_std(self.Y), self.Y)
+        sig = estimate_noise_std(self.Y) if self.noise_std is None else self.noise_std
+        self.w0 = 1.0 / floor_noise(sig, self.Y)
         self.threshold = float(chdtri(2 * self.Y.shape[0],
                                       self.false_alarm / (2.0 * self.Y.shape[-1])))
 
@@ -431,29 +449,42 @@ def _trend_order(sel: ModeSelector, false_alarm: float, max_terms: int) -> int:
     middle), the modes' poles held (linear least squares: cheap, and Λ with the poles held is
     at most Λ with them refitted, so the test errs towards fewer columns), and the fewest taken
     whose likelihood ratio Λ = Σ_c ΔRSS_c / σ̂²_c exceeds the χ²(step · n_channels) quantile at
-    ``false_alarm``; until neither does."""
+    ``false_alarm``; until neither does. The nested fits come from one (:func:`_nested_rss`)."""
     f = sel.fit.f_hz if sel.fit is not None else np.empty(0)
     d = sel.fit.delta if sel.fit is not None else np.empty(0)
     p = int(sel.fit_offset)
     n_ch, n = sel.Y.shape
-
-    def rss_with(terms: int) -> np.ndarray:
-        return linear_amplitudes(sel.t, sel.Y, f, d, fit_offset=terms)[2]
-
-    rss = rss_with(p)
     while p < max_terms:
+        top = min(p + 2, max_terms)
+        rss = _nested_rss(sel.t, sel.Y, f, d, p, top)  # rss[j]: with p + j trend columns
         for step in (1, 2):
             if p + step > max_terms:
                 return p
-            rss_new = rss_with(p + step)
-            var = rss_new / max(n - 2 * f.size - p - step, 1)
-            lam = float(np.sum((rss - rss_new) / np.maximum(var, 1e-300)))
+            var = rss[step] / max(n - 2 * f.size - p - step, 1)
+            lam = float(np.sum((rss[0] - rss[step]) / np.maximum(var, 1e-300)))
             if lam > chdtri(step * n_ch, false_alarm):
-                p, rss = p + step, rss_new
+                p += step
                 break
         else:
             return p
     return p
+
+
+def _nested_rss(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, p: int,
+                top: int) -> list[np.ndarray]:
+    """RSS per channel of the least-squares fits of the modes (f, δ) with p, p + 1, …, ``top``
+    trend columns (a list, entry j for p + j): one fit with ``top`` columns, whose Cholesky
+    factor gives the others, RSS_k = RSS_top + Σ_(k ≤ i < top) V_i² (V = L⁻¹ Φᵀy, row i the
+    gain of column i over the columns before it: sums of squares, no cancellation); each
+    fitted on its own where Φ needs the QR path."""
+    proj = Projector(damped_basis(t, f, d, top, uniform_grid(t)))
+    if proj.cho is None:
+        return [linear_amplitudes(t, Y, f, d, fit_offset=k)[2] for k in range(p, top + 1)]
+    PtY = proj.Phi.T @ Y.T
+    rss_top = np.sum((Y.T - proj.Phi @ proj.coef_from(PtY)) ** 2, axis=0)
+    V2 = proj.whitened(PtY) ** 2  # (2K + top, n_channels)
+    k0 = 2 * f.size
+    return [rss_top + np.sum(V2[k0 + k : k0 + top], axis=0) for k in range(p, top + 1)]
 
 
 def _sum_exp(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
@@ -483,6 +514,29 @@ def _empty(n_ch, fs_hz, n, method, info) -> ModeTable:
                      f"{method}+varpro", info)
 
 
+def _channel_fits(sel: ModeSelector, channels: np.ndarray):
+    """Each channel's own fit (step 6) of the modes significant in it (energy of its joint
+    amplitude over its noise above χ²₂ at 10⁻³), started at the joint poles: yields (channel,
+    mode indices, VarProFit) where the fit succeeded. Channels with the same modes share the
+    first evaluation (:func:`~ramdaq.analysis.modal.varpro.fit_channels_varpro`)."""
+    fit = sel.fit
+    f, d = fit.f_hz, fit.delta
+    env2 = _sum_exp(sel.t, -2.0 * d * f) / 2.0
+    snr = np.abs(fit.amplitude) ** 2 * env2 / np.maximum(fit.noise_std[:, None] ** 2, 1e-300)
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for j in range(len(channels)):
+        ks = tuple(np.flatnonzero(snr[j] > chdtri(2, 1e-3)))
+        if ks:
+            groups.setdefault(ks, []).append(j)
+    for ks, rows in groups.items():
+        k = np.array(ks)
+        fits = fit_channels_varpro(sel.t, sel.Y[rows], f[k], d[k], fit_offset=sel.fit_offset,
+                                   f_bounds_hz=sel.f_lim, delta_bounds=(-3.0, 3.0))
+        for j, fc in zip(rows, fits, strict=True):
+            if fc is not None:
+                yield int(channels[j]), k, fc
+
+
 def _table(sel, X, active, fs_hz, d_nls, taps, f_range, per_channel, method, info) -> ModeTable:
     fit = sel.fit
     n_ch, n = X.shape
@@ -497,19 +551,7 @@ def _table(sel, X, active, fs_hz, d_nls, taps, f_range, per_channel, method, inf
     K = f.size
     ch_f, ch_fse, ch_d, ch_dse = (np.full((n_ch, K), np.nan) for _ in range(4))
     if per_channel:
-        thr_c = chdtri(2, 1e-3)
-        env2 = _sum_exp(sel.t, -2.0 * d * f) / 2.0
-        for j, c in enumerate(np.flatnonzero(active)):
-            snr = np.abs(fit.amplitude[j]) ** 2 * env2 / max(fit.noise_std[j] ** 2, 1e-300)
-            ks = np.flatnonzero(snr > thr_c)
-            if ks.size == 0:
-                continue
-            try:
-                fc = fit_modes_varpro(sel.t, sel.Y[j : j + 1], f[ks], d[ks],
-                                      fit_offset=sel.fit_offset, f_bounds_hz=sel.f_lim,
-                                      delta_bounds=(-3.0, 3.0))
-            except (ValueError, linalg.LinAlgError):
-                continue
+        for c, ks, fc in _channel_fits(sel, np.flatnonzero(active)):
             cse = np.sqrt(np.abs(np.diag(fc.covariance))).reshape(-1, 2) * vfac[ks, None]
             ch_f[c, ks], ch_d[c, ks] = fc.f_hz, fc.delta
             ch_fse[c, ks], ch_dse[c, ks] = cse[:, 0], cse[:, 1]

@@ -31,11 +31,11 @@ from scipy import linalg
 
 from .crb import damping_ratio_from_decrement
 from .varpro import (
+    GaussNewtonGain,
     HeldPoleFitter,
     VarProFit,
     drop_one_rss_increase,
     fit_modes_varpro,
-    gauss_newton_gain,
     linear_amplitudes,
     trend_basis,
 )
@@ -80,6 +80,7 @@ class ModeSelector:
         self.w = w0
         self.fit: VarProFit | None = None
         self._held: tuple[VarProFit, np.ndarray, HeldPoleFitter] | None = None
+        self._gain_cache: tuple[np.ndarray, GaussNewtonGain] | None = None
         if int(fit_offset) > 1:  # the trend alone: least squares on its columns
             T = trend_basis(t, int(fit_offset))
             resid = Y - linalg.lstsq(T.T, Y.T)[0].T @ T
@@ -112,9 +113,16 @@ class ModeSelector:
         """Fitter with the current fit's poles held, for the current weights (cached)."""
         if self._held is None or self._held[0] is not self.fit or self._held[1] is not self.w:
             fitter = HeldPoleFitter(self.t, self.Y, self.fit.f_hz, self.fit.delta,
-                                     weights=self.w, fit_offset=self.fit_offset)
+                                     weights=self.w, fit_offset=self.fit_offset, grams=True)
             self._held = (self.fit, self.w, fitter)
         return self._held[2]
+
+    def _gain(self) -> GaussNewtonGain:
+        """Gauss–Newton gain on the data weighted by the current weights (cached)."""
+        if self._gain_cache is None or self._gain_cache[0] is not self.w:
+            self._gain_cache = (self.w, GaussNewtonGain(self.t, self.Y, weights=self.w,
+                                                         fit_offset=self.fit_offset))
+        return self._gain_cache[1]
 
     def try_add(self, fc: float, dc: float) -> bool:
         """Refit with one more mode started at (fc, δc); keep it if Λ exceeds the threshold."""
@@ -139,8 +147,7 @@ class ModeSelector:
             lam_p = float(np.sum((self.rss - rss_p) / np.maximum(noise_p**2, 1e-300)))
             if lam_p <= self.threshold:
                 try:
-                    gain_w = gauss_newton_gain(self.t, self.Y, f0, d0, weights=self.w,
-                                                fit_offset=self.fit_offset)
+                    gain_w = self._gain()(f0, d0)
                 except (ValueError, linalg.LinAlgError):
                     gain_w = np.inf
                 # weighted Σr² → Λ units (Λ divides by each channel's own residual variance)

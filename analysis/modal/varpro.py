@@ -27,12 +27,17 @@ How one evaluation is kept cheap (same results to rounding; see the functions fo
   n_samples × 4K derivative matrix projected explicitly (:class:`_Problem`).
 - Small factorisations call LAPACK/BLAS directly (potrf/potrs/posv/trsm, as scipy's wrappers).
 - Modes whose poles are held (the order search's trial fits) are projected out once
-  (:class:`HeldPoleFitter`).
+  (:class:`HeldPoleFitter`); those trial fits take Σr² and Tᵀr from Grams, never forming a
+  residual as large as the data, where that keeps the digits they need (:class:`_GramResidual`).
+- Residuals are written into reused buffers (a fresh one per evaluation cost more in page
+  faults than the product itself); channels fitted one by one from the same start share the
+  first evaluation (:func:`fit_channels_varpro`).
 Their measured effect is in ``docs/estimators.md`` ("Speed").
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -41,7 +46,7 @@ from numpy.typing import ArrayLike
 from scipy import linalg
 from scipy.linalg import blas, lapack
 
-__all__ = ["VarProFit", "fit_modes_varpro", "linear_amplitudes"]
+__all__ = ["VarProFit", "fit_channels_varpro", "fit_modes_varpro", "linear_amplitudes"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -217,9 +222,9 @@ class Projector:
     11 × 11 solves (its thread pool is woken whatever the size), trsm at most 0.2 ms.
     """
 
-    def __init__(self, Phi: np.ndarray) -> None:
+    def __init__(self, Phi: np.ndarray | None, gram: np.ndarray | None = None) -> None:
         self.Phi = self.raw = Phi  # raw: Φ before any projection (see _Problem)
-        G = Phi.T @ Phi
+        G = Phi.T @ Phi if gram is None else gram  # Phi None: from the Gram alone (no QR path)
         norm = np.sqrt(G.diagonal())
         self.inv_norm = 1.0 / np.where(norm > 0, norm, 1.0)
         G = G * self.inv_norm[:, None] * self.inv_norm[None, :]
@@ -227,7 +232,7 @@ class Projector:
         c, info = lapack.dpotrf(G, lower=1)
         if info == 0 and np.min(np.abs(c.diagonal())) ** 2 > 1e-10:  # cond(Φ) below ~1e5
             self.cho = (c, True)
-        if self.cho is None:
+        if self.cho is None and Phi is not None:
             self.Q, self.R = linalg.qr(Phi, mode="economic", check_finite=False)
 
     def coef(self, M: np.ndarray) -> np.ndarray:
@@ -244,6 +249,29 @@ class Projector:
     def whitened(self, PhiT_M: np.ndarray) -> np.ndarray:
         """L⁻¹ (scaled Φᵀ M): (Φᵀ M)ᵀ (ΦᵀΦ)⁻¹ (Φᵀ M) = Vᵀ V for the returned V (Cholesky path)."""
         return blas.dtrsm(1.0, self.cho[0], PhiT_M * self.inv_norm[:, None], lower=1)
+
+
+_GRAM_MIN_FRACTION = 1e-4  # Grams only while Σr² ≥ 10⁻⁴ Σy² (≲ 4 of 16 digits lost)
+
+
+class _GramResidual:
+    """A residual known by its Σr² per channel (``ss``, (n_channels,); None where only Tᵀr is
+    wanted, :class:`GaussNewtonGain`) alone.
+
+    Σr²_c = Σy²_c − yᵀΦ(ΦᵀΦ)⁻¹Φᵀy (from ΦᵀY and the coefficients B) and Tᵀr = TᵀY − (ΦᵀT)ᵀB
+    need no (n_samples × n_channels) residual: an evaluation touches the data once, in one
+    product, instead of forming, squaring and summing a residual as large as the data (twice
+    as dear for the order search's trial fits). The subtraction loses the digits of Σy²/Σr²:
+    used only while Σr² ≥ ``_GRAM_MIN_FRACTION`` Σy² per channel (relative error ≲ 10⁻¹¹ with
+    the products' own rounding, against the trial fits' 10⁻³ of the residual variance per
+    degree of freedom, ≥ 10⁻⁹ of Σr² on 16 channels × 12k samples), otherwise the residual is
+    formed as before.
+    """
+
+    __slots__ = ("ss",)
+
+    def __init__(self, ss: np.ndarray) -> None:
+        self.ss = ss
 
 
 class _Problem:
@@ -273,6 +301,7 @@ class _Problem:
         self.grid = uniform_grid(t)
         self.scratch: dict = {}
         self._pool: list[np.ndarray] = []  # Φᵀ buffers of projectors the caller released
+        self._rpool: list[np.ndarray] = []  # residual buffers of points the caller released
         self.QfT = None
         if fixed is not None and fixed.shape[1]:
             Q, R = linalg.qr(fixed, mode="economic", check_finite=False)
@@ -282,6 +311,12 @@ class _Problem:
             self.Yc = self.Yc - (self.Yc @ self.QfT.T) @ self.QfT
             self.offset = False  # a fitted constant, if any, is among the fixed columns
         self.Yw = self.Yc.T  # (n_samples, n_channels)
+        self._yy: np.ndarray | None = None  # Σy² per channel once Grams are used (use_grams)
+
+    def use_grams(self) -> None:
+        """From now on, Σr² per channel from Grams where they keep enough digits (see
+        :class:`_GramResidual`): for trial fits, whose tolerance is far above the digits lost."""
+        self._yy = np.einsum("ij,ij->i", self.Yc, self.Yc)
 
     def _perp(self, A: np.ndarray) -> np.ndarray:
         """P⊥_F A for A of shape (n_samples, k) (A itself without fixed columns)."""
@@ -290,8 +325,52 @@ class _Problem:
         AT = A.T
         return (AT - (AT @ self.QfT.T) @ self.QfT).T
 
+    def _gram_point(self, theta: np.ndarray, need_ss: bool = True
+                    ) -> tuple[_GramResidual, Projector, np.ndarray] | None:
+        """:meth:`residual` from Grams alone (after :meth:`use_grams`), or None where they would
+        lose digits. The rows W = [Φᵀ; (t·Φ_modes)ᵀ] of the unprojected basis and its time
+        derivative columns meet the data once (W Yw: Yw ⊥ F, so (P⊥Φ)ᵀYw = ΦᵀYw), the fixed
+        columns once (W Q_F) and themselves once (W Wᵀ): P⊥_F Φ and P⊥_F T are never formed;
+        their Grams are W Wᵀ − (W Q_F)(W Q_F)ᵀ, used while no diagonal entry falls below 10⁻⁶ of
+        its unprojected value (else None: the explicit path). ``need_ss`` False: for Jᵀr and JᵀJ
+        alone (:class:`GaussNewtonGain`), Σr² not computed (``ss`` None), no Σr² test."""
+        K, n = theta.size // 2, self.t.size
+        P = 2 * K + int(self.offset)
+        shape = (P + 2 * K, n)
+        W = self._pool.pop() if self._pool and self._pool[-1].shape == shape else np.empty(shape)
+        damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
+                     out=W[:P])
+        np.multiply(W[: 2 * K], self.t[None, :], out=W[P:])
+        G0 = W @ W.T
+        G = G0
+        if self.QfT is not None:
+            WQ = W @ self.QfT.T
+            G = G0 - WQ @ WQ.T
+        if not np.all(G.diagonal() >= 1e-6 * G0.diagonal()):
+            if len(self._pool) < 4:
+                self._pool.append(W)
+            return None
+        proj = Projector(None, gram=G[:P, :P])
+        proj.raw = W[:P].T
+        if proj.cho is None:
+            self.release(proj)
+            return None
+        WY = W @ self.Yw
+        B = proj.coef_from(WY[:P])
+        ss = None
+        if need_ss:
+            ss = self._yy - np.sum(WY[:P] * B, axis=0)
+            if not np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
+                self.release(proj)
+                return None
+        proj.grams = (G[:P, P:], G[P:, P:], WY[P:], None)  # ΦᵀP⊥T, TᵀP⊥T, TᵀY, (Tᵀr)
+        return _GramResidual(ss), proj, B
+
     def residual(self, theta: np.ndarray) -> tuple[np.ndarray, Projector, np.ndarray]:
-        """(r, projector, B): r = Yw − Φ B, shape (n_samples, n_channels) (a transposed view)."""
+        """(r, projector, B): r = Yw − Φ B, shape (n_samples, n_channels) (a transposed view);
+        after :meth:`use_grams`, a :class:`_GramResidual` where it keeps the digits."""
+        if self._yy is not None and (got := self._gram_point(theta)) is not None:
+            return got
         shape = (theta.size + int(self.offset), self.t.size)
         buf = self._pool.pop() if self._pool and self._pool[-1].shape == shape else None
         raw = damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
@@ -299,11 +378,39 @@ class _Problem:
         proj = Projector(self._perp(raw))
         proj.raw = raw
         B = proj.coef(self.Yw)
-        return (self.Yc - B.T @ proj.Phi.T).T, proj, B
+        # r = Yc − Bᵀ Φᵀ into a reused (n_channels, n_samples) buffer: a fresh one per call cost
+        # more in page faults than the product itself (same operations, same bits).
+        rbuf = self._rpool.pop() if self._rpool else np.empty_like(self.Yc)
+        np.matmul(B.T, proj.Phi.T, out=rbuf)
+        np.subtract(self.Yc, rbuf, out=rbuf)
+        proj.resid_buf = rbuf
+        return rbuf.T, proj, B
 
-    def release(self, proj: Projector) -> None:
+    def sumsq(self, resid: np.ndarray) -> float:
+        """Σr² of a residual from :meth:`residual` (as ``np.sum(resid**2)``, without allocating)."""
+        if isinstance(resid, _GramResidual):
+            return float(np.sum(resid.ss))
+        sq = self.scratch.get("sq")
+        if sq is None or sq.shape != self.Yc.shape:
+            sq = self.scratch["sq"] = np.empty_like(self.Yc)
+        np.square(resid, out=sq.T)
+        return float(np.sum(sq))
+
+    @staticmethod
+    def channel_ss(resid: np.ndarray) -> np.ndarray:
+        """Σr² per channel of a residual from :meth:`residual`, shape (n_channels,)."""
+        if isinstance(resid, _GramResidual):
+            return resid.ss
+        return np.sum(resid**2, axis=0)
+
+    def release(self, proj: Projector, keep_residual: bool = False) -> None:
         """Hand back a projector from :meth:`residual` that will not be used again (its Φᵀ
-        buffer is reused by a later call; without release every call allocates)."""
+        buffer, and unless ``keep_residual`` the residual computed with it, are reused by a
+        later call; without release every call allocates)."""
+        rbuf = getattr(proj, "resid_buf", None)
+        if rbuf is not None and not keep_residual and len(self._rpool) < 4:
+            self._rpool.append(rbuf)
+        proj.resid_buf = None
         buf = proj.raw.base  # Φ is the transposed view of the (2K [+1], n_samples) array
         if (buf is not None and buf.flags.owndata and buf.flags.c_contiguous and buf.ndim == 2
                 and buf.shape[1] == self.t.size and len(self._pool) < 4):
@@ -315,6 +422,16 @@ class _Problem:
         """(JᵀJ, Jᵀr) at θ for the residual computed there."""
         f, d = theta[0::2], theta[1::2]
         K = f.size
+        grams = getattr(proj, "grams", None)
+        if grams is not None:
+            PtT, TT, TtY, Tr = grams  # Tᵀr itself when known, else from TᵀY
+            V = proj.whitened(PtT)
+            M = TT - V.T @ V
+            if np.all(M.diagonal() > 1e-8 * TT.diagonal()):
+                return self._jtj_jtr(f, d, B, M, TtY - PtT.T @ B if Tr is None else Tr)
+            raw = proj.raw  # the Schur complement lost digits: the explicit path
+            proj = Projector(self._perp(raw))
+            proj.raw = raw
         Phi = proj.Phi
         work = self.scratch.get("T")
         if work is None or work.shape != (2 * K, self.t.size):
@@ -323,15 +440,26 @@ class _Problem:
         T = self._perp(work.T)  # t·e·cos, t·e·sin per mode (a scratch array: not kept)
         TT = T.T @ T
         M = None
+        PtT = Phi.T @ T if proj.cho is not None or isinstance(resid, _GramResidual) else None
         if proj.cho is not None:
-            V = proj.whitened(Phi.T @ T)
+            V = proj.whitened(PtT)
             M = TT - V.T @ V
             if not np.all(M.diagonal() > 1e-8 * TT.diagonal()):
                 M = None
         if M is None:
             Tp = T - Phi @ proj.coef(T)
             M = Tp.T @ Tp
-        Tr = T.T @ resid  # (2K, n_channels); P⊥ r = r
+        if isinstance(resid, _GramResidual):  # Tᵀr = TᵀY − (ΦᵀT)ᵀ B
+            Tr = T.T @ self.Yw - PtT.T @ B
+        else:
+            Tr = T.T @ resid  # (2K, n_channels); P⊥ r = r
+        return self._jtj_jtr(f, d, B, M, Tr)
+
+    @staticmethod
+    def _jtj_jtr(f: np.ndarray, d: np.ndarray, B: np.ndarray, M: np.ndarray,
+                 Tr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(JᵀJ, Jᵀr) from the Schur complement M = Tᵀ P⊥ T (2K × 2K) and Tᵀr (2K × C)."""
+        K = f.size
         # H[k, p, a, c]: weight of T column (k, a) (a: t·c, t·s) in ∂Φ/∂θ_(k,p) B_c (p: f, δ).
         # With (b, b') = B[2k:2k+2]: ∂/∂f: t·c (−δ b + 2π b') + t·s (−2π b − δ b');
         # ∂/∂δ: −f (t·c b + t·s b'). Then JᵀJ = Σ_c Hᵀ M H blockwise and Jᵀr = −Σ_c Hᵀ Tᵀr.
@@ -410,7 +538,7 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     down in δ along f = f_min; the plain clipped step kept pointing out of the corner.)
     """
     resid, proj, B = prob.residual(theta) if first is None else first
-    cost = float(np.sum(resid**2))
+    cost = prob.sumsq(resid)
     JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
     lam, n_eval, stop = 1e-4, 1, LMStop.ITERATION_LIMIT
     for _ in range(max_iter):
@@ -424,7 +552,7 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
         new = np.clip(theta + u * sc, lo, hi)
         r_new, p_new, B_new = prob.residual(new)
         n_eval += 1
-        cost_new = float(np.sum(r_new**2))
+        cost_new = prob.sumsq(r_new)
         if cost_new <= cost:
             small = np.all(np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc))
             rel = (cost - cost_new) / max(cost, 1e-300)
@@ -463,7 +591,7 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
             if lam > 1e10:  # damped to nothing and still no descent
                 stop = LMStop.GAVE_UP
                 break
-    prob.release(proj)
+    prob.release(proj, keep_residual=True)
     return theta, resid, B, JtJ, n_eval, stop
 
 
@@ -503,7 +631,7 @@ def _extrapolate(prob, theta: np.ndarray, trial: tuple, lo: np.ndarray,
         far = np.clip(theta + step, lo, hi)
         r_far, p_far, B_far = prob.residual(far)
         n += 1
-        cost_far = float(np.sum(r_far**2))
+        cost_far = prob.sumsq(r_far)
         if not cost_far < cost_new:
             prob.release(p_far)
             break
@@ -558,19 +686,36 @@ def fit_modes_varpro(
     f0 = np.atleast_1d(np.asarray(f0_hz, dtype=float))
     d0 = np.broadcast_to(np.asarray(delta0, dtype=float), f0.shape)
     w = np.ones(Y.shape[0]) if weights is None else np.asarray(weights, dtype=float)
-    K, (C, N) = f0.size, Y.shape
+    K, N = f0.size, Y.shape[1]
     P = 2 * K + int(fit_offset)
     if N <= P + 2 * K:
         raise ValueError(f"n_samples ({N}) too small for {K} modes")
     prob = _Problem(t, (Y * w[:, None]).T, fit_offset)
+    lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
+    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol)
+
+
+def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
+               delta_bounds: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bounds (lo, hi) on θ = [f₁, δ₁, …] and the start θ₀ clipped into them."""
+    K = f0.size
     lo = np.tile([f_bounds_hz[0], delta_bounds[0]], K)
     hi = np.tile([f_bounds_hz[1], delta_bounds[1]], K)
     theta0 = np.empty(2 * K)
     theta0[0::2], theta0[1::2] = f0, d0
-    theta0 = np.clip(theta0, lo, hi)
+    return lo, hi, np.clip(theta0, lo, hi)
+
+
+def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: np.ndarray,
+            max_iter: int, chi2_tol: float, first: tuple | None = None) -> VarProFit:
+    """:func:`fit_modes_varpro`'s fit and result on ``prob`` (weights ``w``) from θ₀ (``first``:
+    ``prob.residual(theta0)`` when known)."""
+    fit_offset = prob.offset
+    K, C, N = theta0.size // 2, prob.Yc.shape[0], prob.Yc.shape[1]
+    P = 2 * K + int(fit_offset)
     dof = C * N - C * P - 2 * K
     theta, resid_w, B, JtJ, n_eval, stop = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
-                                                                chi2_tol, dof)
+                                                                chi2_tol, dof, first)
     B = B / w[None, :]
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
@@ -591,29 +736,74 @@ def fit_modes_varpro(
     )
 
 
+def fit_channels_varpro(
+    t_s: np.ndarray, y: np.ndarray, f0_hz: np.ndarray, delta0: np.ndarray, *,
+    fit_offset: bool | int, f_bounds_hz: tuple[float, float],
+    delta_bounds: tuple[float, float], max_iter: int = 100,
+) -> list[VarProFit | None]:
+    """Each channel (row of ``y``, (n_channels, n_samples)) fitted on its own from the same
+    start: ``fit_modes_varpro(t_s, y[c:c+1], f0_hz, delta0, ...)`` for every c (None where
+    that raises ValueError or LinAlgError), the first evaluation at the common start (basis,
+    its factorisation and the Grams of the derivative columns: all but each channel's
+    coefficients, residual and Tᵀr) computed once for all channels."""
+    t = np.asarray(t_s, dtype=float)
+    Y = np.atleast_2d(np.asarray(y, dtype=float))
+    f0, d0 = np.asarray(f0_hz, dtype=float), np.asarray(delta0, dtype=float)
+    K, (C, N) = f0.size, Y.shape
+    if N <= 4 * K + int(fit_offset):
+        return [None] * C
+    lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
+    raw = damped_basis(t, theta0[0::2], theta0[1::2], fit_offset, uniform_grid(t)).copy()
+    proj = Projector(raw)
+    shared = None
+    if proj.cho is not None:  # else each channel's own first evaluation (QR path)
+        PtY = raw.T @ Y.T
+        B = proj.coef_from(PtY)
+        R = Y.T - raw @ B  # (n_samples, n_channels)
+        T = raw[:, : 2 * K] * t[:, None]
+        shared = (raw.T @ T, T.T @ T, T.T @ R)  # ΦᵀT, TᵀT, Tᵀr
+    out: list[VarProFit | None] = []
+    for c in range(C):
+        prob = _Problem(t, Y[c : c + 1].T, fit_offset)
+        first = None
+        if shared is not None:
+            pc = copy.copy(proj)  # its Φ is not a pooled buffer: never handed to a channel's pool
+            pc.grams = (shared[0], shared[1], None, shared[2][:, c : c + 1])
+            first = (np.ascontiguousarray(R[:, c : c + 1]), pc, B[:, c : c + 1])
+        try:
+            out.append(_fitted(prob, theta0, lo, hi, np.ones(1), max_iter, 0.0, first))
+        except (ValueError, linalg.LinAlgError):
+            out.append(None)
+    return out
+
+
 class HeldPoleFitter:
     """Fits of further modes to weighted data with the poles (f_fixed, d_fixed) held.
 
     All amplitudes (and the offset) are fitted; the held modes' columns are projected out once
     here (:class:`_Problem` ``fixed``) and reused for every candidate tried against them.
+    ``grams``: Σr² from Grams wherever they keep the digits a trial fit needs
+    (:class:`_GramResidual`; for fits with ``chi2_tol`` > 0 and screens only).
     """
 
     def __init__(
         self, t: np.ndarray, y: np.ndarray, f_fixed: np.ndarray, d_fixed: np.ndarray, *,
-        weights: np.ndarray, fit_offset: bool,
+        weights: np.ndarray, fit_offset: bool, grams: bool = False,
     ) -> None:
         Y = np.atleast_2d(y)
         self.C, self.N = Y.shape
         self.K_fixed, self.fit_offset, self.weights = f_fixed.size, fit_offset, weights
         fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, uniform_grid(t))
         self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed)
+        if grams:  # trial fits and screens only: Σr² from Grams (see _GramResidual)
+            self.prob.use_grams()
 
     def weighted_rss(self, f: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Σ (w r)² per channel of the linear fit with the new poles (f, δ) fixed too."""
         theta = np.empty(2 * f.size)
         theta[0::2], theta[1::2] = f, d
         self._last = (theta, self.prob.residual(theta))  # the first step of a fit from there
-        return np.sum(self._last[1][0] ** 2, axis=0)
+        return self.prob.channel_ss(self._last[1][0])
 
     def fit(
         self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
@@ -636,21 +826,42 @@ class HeldPoleFitter:
         first = last[1] if last is not None and np.array_equal(last[0], theta0) else None
         theta, resid_w, _, _, n_eval, _ = _levenberg_marquardt(
             self.prob, theta0, lo, hi, max_iter, chi2_tol, dof, first)
-        rss = np.sum((resid_w / self.weights[None, :]) ** 2, axis=0)
+        rss = self.prob.channel_ss(resid_w) / self.weights**2
         noise_std = np.sqrt(rss / max(N - P - 2 * K / C, 1))
         return theta[0::2].copy(), theta[1::2].copy(), rss, noise_std, int(n_eval)
+
+
+class GaussNewtonGain:
+    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises,
+    for weighted data (n_channels, n_samples) set up once and poles given per call.
+
+    Only Jᵀr and JᵀJ are needed: from Grams (:meth:`_Problem._gram_point`, Tᵀr = TᵀY − (ΦᵀT)ᵀB),
+    no residual as large as the data is formed. Their rounding is relative to ‖Y‖/‖r‖ (the
+    square root of the ratio Σr² would lose), ≲ 10⁻¹¹ of the gain, which enters the order
+    search's test multiplied by 4 plus 1. Where the Grams lose digits, the residual is formed.
+    """
+
+    def __init__(self, t: np.ndarray, y: np.ndarray, *, weights: np.ndarray,
+                 fit_offset: bool) -> None:
+        self.prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset)
+
+    def __call__(self, f: np.ndarray, d: np.ndarray) -> float:
+        theta = np.empty(2 * f.size)
+        theta[0::2], theta[1::2] = f, d
+        got = self.prob._gram_point(theta, need_ss=False)
+        resid, proj, B = self.prob.residual(theta) if got is None else got
+        gain = _gauss_newton_decrease(*self.prob.normal_equations(theta, resid, proj, B))
+        self.prob.release(proj)
+        return gain
 
 
 def gauss_newton_gain(
     t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray, *, weights: np.ndarray,
     fit_offset: bool,
 ) -> float:
-    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises."""
-    prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset)
-    theta = np.empty(2 * f.size)
-    theta[0::2], theta[1::2] = f, d
-    resid, proj, B = prob.residual(theta)
-    return _gauss_newton_decrease(*prob.normal_equations(theta, resid, proj, B))
+    """Decrease of the weighted Σr² that one undamped Gauss–Newton step on all poles promises
+    (:class:`GaussNewtonGain` for one set of poles)."""
+    return GaussNewtonGain(t, y, weights=weights, fit_offset=fit_offset)(f, d)
 
 
 def drop_one_rss_increase(
