@@ -359,7 +359,8 @@ def cmd_import(args: argparse.Namespace) -> int:
         info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
     exact = sum(c["method"] != "requantised" for c in chans)
-    worst = max((c["max_error_m_s2"] for c in chans), default=0.0)
+    worst = {u: max(c["max_error_si"] for c in chans if c["si_unit"] == u)
+             for u in sorted({c["si_unit"] for c in chans}, reverse=True)}
     with progress_bar(f"writing {out.name}", imp.get("rows"), unit="samples") as advance:
         s = record(device, out, readout=False, overwrite=args.overwrite,
                    progress=lambda b: advance(b.n_samples))
@@ -367,7 +368,8 @@ def cmd_import(args: argparse.Namespace) -> int:
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
     print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
-          f"requantised to 24 bits; largest error {worst:.3g} m/s^2")
+          f"requantised to 24 bits; largest error "
+          + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
