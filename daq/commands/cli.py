@@ -41,6 +41,7 @@ import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import re  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
@@ -83,6 +84,17 @@ def _parse_impacts(text: str) -> list[float]:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--impacts {text!r}: expected seconds separated by commas, e.g. 1,4.5,8") from None
+
+
+def _positive(text: str) -> float:
+    """An argparse type: a finite number above zero (seconds, Hz)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a number above 0")
+    return value
 
 
 def cmd_record(args: argparse.Namespace) -> int:
@@ -560,11 +572,11 @@ def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
     r.add_argument("--rig", help="rig file (TOML), required for the simulator")
     r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
-    r.add_argument("--duration", type=float, default=10.0, help="seconds to record (sim)")
+    r.add_argument("--duration", type=_positive, default=10.0, help="seconds to record (sim)")
     r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
-    r.add_argument("--impact-every", type=float, help="a ram blow every S seconds")
+    r.add_argument("--impact-every", type=_positive, help="a ram blow every S seconds")
     r.add_argument("--seed", type=int, default=0, help="noise seed (sim)")
-    r.add_argument("--fs", type=float, help="override the rig's sample rate, Hz")
+    r.add_argument("--fs", type=_positive, help="override the rig's sample rate, Hz")
     r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
     r.add_argument("--name", help="recording name: writes recordings/NAME.mcap (a name, not a "
                    "path: it cannot leave recordings/; default: the rig's name and medium)")
@@ -666,7 +678,7 @@ def build_parser() -> argparse.ArgumentParser:
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
     m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
-    m.add_argument("--fs", type=float, help="the file's sample rate, Hz, when it differs from the "
+    m.add_argument("--fs", type=_positive, help="the file's sample rate, Hz, when it differs from the "
                    "rig's (the file's own rate must agree with it)")
     m.add_argument("--time-unit", choices=("s", "ms", "us"), help="CSV: the time column's unit, "
                    "when its header does not say it (time_s, 't [ms]', 'time (us)')")
