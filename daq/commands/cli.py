@@ -570,7 +570,8 @@ def _batch_parsers(sub: argparse._SubParsersAction) -> None:
 
 def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
-    r.add_argument("--rig", help="rig file (TOML), required for the simulator")
+    r.add_argument("--rig", help="rig file (TOML) or a shipped rig's name (albacore, sampson, "
+                   "stern_plane), required for the simulator")
     r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
     r.add_argument("--duration", type=_positive, default=10.0, help="seconds to record (sim)")
     r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
