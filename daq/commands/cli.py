@@ -299,7 +299,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from .analyze import format_summary, plot_kinds, run_analysis, write_analysis
+    from .analyze import check_air_twin, format_summary, plot_kinds, run_analysis, write_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
@@ -310,6 +310,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     plots = plot_kinds(args.plots, off=args.no_plots)  # checked before the analysis
     rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None)
     air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
+    if air is not None:
+        check_air_twin(rig, air[0], args.air)
     report, files = write_analysis(src, rig, hits, out, plots=plots, air=air)
     print(format_summary(report, args.units))
     print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
