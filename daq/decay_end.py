@@ -27,7 +27,6 @@ trigger ends every record at the same sample as the live trial did.
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -45,22 +44,14 @@ PREDOMINANT_DB = 10.0
 """Gages whose ringing power is within this of the loudest's (dB) are watched."""
 
 
-def noise_bandwidth_fraction(rig_toml: str, fs_hz: float) -> float:
-    """Equivalent noise bandwidth of the rig's anti-alias Butterworth over Nyquist, in (0, 1]:
-    ``f_c * (pi / 2n) / sin(pi / 2n) / (fs / 2)`` for order ``n`` and corner ``f_c`` read from
-    ``[daq]`` of ``rig_toml``; 1 (white noise to Nyquist) for a rig that names no filter or for
-    text that is not TOML (the trigger itself refuses a rig whose filter it cannot read)."""
-    try:
-        daq = tomllib.loads(rig_toml).get("daq") if rig_toml.strip() else None
-    except tomllib.TOMLDecodeError:
+def noise_bandwidth_fraction(anti_alias: tuple[int, float] | None, fs_hz: float) -> float:
+    """Equivalent noise bandwidth of the anti-alias Butterworth ``(order n, corner f_c Hz)`` over
+    Nyquist, in (0, 1]: ``f_c * (pi / 2n) / sin(pi / 2n) / (fs / 2)``; 1 (white noise to Nyquist)
+    for ``None``, a stream whose rig names no filter."""
+    if anti_alias is None:
         return 1.0
-    if not isinstance(daq, dict):
-        return 1.0
-    order, corner = daq.get("anti_alias_order"), daq.get("anti_alias_hz")
-    if not isinstance(corner, int | float) or isinstance(corner, bool) or not corner > 0:
-        return 1.0
-    n = order if isinstance(order, int | float) and not isinstance(order, bool) and order >= 1 else 1
-    a = math.pi / (2 * n)
+    order, corner = anti_alias
+    a = math.pi / (2 * order)
     return float(min(1.0, corner * (a / math.sin(a)) / (fs_hz / 2)))
 
 

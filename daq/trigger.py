@@ -672,9 +672,11 @@ class Trigger:
         self._vidx, self._k = _voting_rows(info, s)
         self._fidx = _force_row(info, s)
         self.mode = "sta_lta" if self._fidx is None else "force"
-        self.delay_s = _rig_delay_s(info) if s.delay_s is None else float(s.delay_s)
+        anti_alias = _anti_alias_or_none(info) if s.delay_s is not None else _rig_anti_alias(info)
+        self.delay_s = float(s.delay_s) if s.delay_s is not None else (
+            0.0 if anti_alias is None else ons.butterworth_delay_s(*anti_alias, self.fs_hz))
         self._delay_n = self.delay_s * self.fs_hz
-        self._noise_bw = noise_bandwidth_fraction(info.rig_toml, self.fs_hz)
+        self._noise_bw = noise_bandwidth_fraction(anti_alias, self.fs_hz)
         bits = info.extra.get("adc_bits")
         self._rails = None if bits is None else (-(2 ** (int(bits) - 1)), 2 ** (int(bits) - 1) - 1)
         n = self._len
@@ -1295,13 +1297,13 @@ def _force_row(info: StreamInfo, s: TriggerSettings) -> int | None:
     return fidx if s.mode in ("auto", "force") else None
 
 
-def _rig_delay_s(info: StreamInfo) -> float:
-    """Group delay of the anti-alias filter the stream's rig describes (``[daq]``
-    ``anti_alias_order`` and ``anti_alias_hz`` in ``info.rig_toml``), s; 0 for a stream that
+def _rig_anti_alias(info: StreamInfo) -> tuple[int, float] | None:
+    """The anti-alias filter the stream's rig describes, ``(order, corner Hz)`` from ``[daq]``
+    ``anti_alias_order`` and ``anti_alias_hz`` in ``info.rig_toml``; ``None`` for a stream that
     carries no rig, or a channels-only rig that names no filter (an imported record's).
     ValueError naming the problem for a rig that does not say it usably."""
     if not info.rig_toml.strip():
-        return 0.0
+        return None
     where = f"{info.device}: the stream's rig"
     fix = "fix the rig, or give the trigger delay_s"
     try:
@@ -1313,7 +1315,7 @@ def _rig_delay_s(info: StreamInfo) -> float:
         raise ValueError(f"{where} has no [daq] table to say its anti-alias filter; {fix}")
     order, corner = daq.get("anti_alias_order"), daq.get("anti_alias_hz")
     if order is None and corner is None and not any(t in doc for t in STRUCTURE_TABLES):
-        return 0.0  # a channels-only rig (an imported record's) names no filter: none to remove
+        return None  # a channels-only rig (an imported record's) names no filter: none to remove
     if isinstance(order, float) and order.is_integer():
         order = int(order)
     if isinstance(order, bool) or not isinstance(order, int) or order < 1:
@@ -1324,4 +1326,13 @@ def _rig_delay_s(info: StreamInfo) -> float:
     if not 0 < corner < info.fs_hz / 2:
         raise ValueError(f"{where}: daq.anti_alias_hz ({corner}) is not between 0 and the "
                          f"stream's Nyquist frequency ({info.fs_hz / 2:g} Hz); {fix}")
-    return ons.butterworth_delay_s(order, float(corner), info.fs_hz)
+    return order, float(corner)
+
+
+def _anti_alias_or_none(info: StreamInfo) -> tuple[int, float] | None:
+    """:func:`_rig_anti_alias` where the caller gave the delay itself: a rig that does not say its
+    filter usably then only costs the decay-end test its noise bandwidth (white to Nyquist)."""
+    try:
+        return _rig_anti_alias(info)
+    except ValueError:
+        return None

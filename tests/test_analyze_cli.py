@@ -62,3 +62,35 @@ def test_plot_kinds_default_all_named_and_unknown():
     assert plot_kinds("all", off=True) is False
     with pytest.raises(ValueError, match="known: decay, spectrum, modeshape, stock"):
         plot_kinds("decay,spectra")
+
+
+def test_a_second_run_leaves_no_plots_of_the_first(air_report, tmp_path, capsys):
+    """The report folder holds one run: ``--no-plots`` into a folder of an earlier run with
+    plots removes them (they would sit beside a report.json they do not belong to)."""
+    out, _ = air_report
+    again = tmp_path / "again"
+    again.mkdir()
+    for p in out.glob("*.png"):
+        (again / p.name).write_bytes(p.read_bytes())
+    (again / "notes.png").write_bytes(b"the user's own")  # not a name analyze writes: kept
+    assert main(["analyze", str(SAMPLES / "albacore-air.mcap"), "--impact", "0", "--out",
+                 str(again), "--no-plots"]) == 0
+    assert sorted(p.name for p in again.glob("*.png")) == ["notes.png"]
+
+
+def test_air_twin_must_be_the_same_rig_in_air(tmp_path, capsys):
+    """Eq 18 compares one surface in air and in water: another rig's trial, or a water trial
+    given as --air, is a one-line refusal (it printed a virtual mass of -2790 kg, rc 0)."""
+    from ramdaq.analysis.model.rig import load_rig
+    from ramdaq.daq.commands.analyze import check_air_twin
+
+    water = load_rig(RIGS / "albacore.toml").with_medium("water")
+    check_air_twin(water, water.with_medium("air"), "a.mcap")  # the twin: no complaint
+    with pytest.raises(ValueError, match="its rig is 'sampson-like', not the water trial's 'albacore-like'"):
+        check_air_twin(water, load_rig(RIGS / "sampson.toml").with_medium("air"), "s.mcap")
+    with pytest.raises(ValueError, match="that trial is in water, not air"):
+        check_air_twin(water, water, "w.mcap")
+    assert main(["analyze", str(SAMPLES / "albacore-water.mcap"), "--impact", "0", "--air",
+                 str(SAMPLES / "sampson-water.mcap"), "--out", str(tmp_path), "--no-plots"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sampson-water.mcap" in err[0] and "not air" in err[0]

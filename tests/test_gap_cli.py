@@ -37,6 +37,10 @@ def csv_trial(tmp_path_factory):
     return tmp, path, rig_path, tt
 
 
+def _not_json(constant: str) -> None:
+    raise AssertionError(f"gap.json holds {constant}: not valid JSON (jq, JavaScript refuse it)")
+
+
 def test_imported_csv_trial_is_diagnosed(csv_trial, capsys):
     tmp, csv, rig, tt = csv_trial
     mcap = tmp / "other_daq.mcap"
@@ -45,7 +49,7 @@ def test_imported_csv_trial_is_diagnosed(csv_trial, capsys):
     assert main(["gap", str(mcap), "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "verdict: EXPLAINED" in text and "persistent ambient tone" in text
-    doc = json.loads((out / "gap.json").read_text())
+    doc = json.loads((out / "gap.json").read_text(), parse_constant=_not_json)
     assert len(doc["impacts"]["onsets_s"]) == len(tt.onsets_s)
     # onsets found by the trigger on the imported file: the generator's anti-alias filter runs
     # 0.27 ms later than the rig's nominal one the trigger corrects for, and the trigger's own

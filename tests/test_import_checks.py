@@ -4,6 +4,8 @@ channels-only rig that ``ramdaq import --fs --units`` makes for a record without
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -228,6 +230,8 @@ def test_import_without_a_rig_makes_one_and_analyze_reports_each_gage(forced, tm
     rc, out, err = _run(["import", str(p), "--fs", "2048", "--units", "m/s^2", "--force-channel",
                          "Load"], capsys)
     assert rc == 0, err
+    # each kind's requantisation error in its own unit (a force's is in N, not m/s^2)
+    assert re.search(r"largest error \S+ m/s\^2, \S+ N$", out.splitlines()[1]), out
     rig_file = tmp_path / "hammer.rig.toml"
     assert f"to {rig_file}" in out
     from ramdaq.analysis.model.rig import load_rig

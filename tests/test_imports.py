@@ -179,7 +179,8 @@ def test_float_data_is_requantised_within_the_bound(sim, tmp_path, fmt):
     assert np.abs(got).max() == 2**23 - 1
     for i, name in enumerate(names):
         c = extra["channels"][name]
-        assert c["method"] == "requantised" and c["max_error_m_s2"] == pytest.approx(err[i])
+        assert c["method"] == "requantised" and c["max_error_si"] == pytest.approx(err[i])
+        assert c["si_unit"] == "m/s^2"
 
 
 # -- gaps --------------------------------------------------------------------------------------

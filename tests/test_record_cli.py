@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from ramdaq.analysis.model.rig_modes import eq18_check
 from ramdaq.daq.record import record
@@ -72,3 +73,14 @@ def test_cli_rig_prints_eq18_beside_model_added_mass(albacore, tmp_path):
     report_gap = 0.2240 / 0.2735 - 1
     assert abs(c.difference - report_gap) < 0.05
     assert np.isfinite(c.difference)
+
+
+@pytest.mark.parametrize(("option", "value"), [("--duration", "-5"), ("--impact-every", "0"),
+                                               ("--fs", "nan"), ("--duration", "ten")])
+def test_cli_refuses_a_time_or_rate_that_is_not_above_zero(option, value, tmp_path):
+    """A negative duration used to write an empty recording and exit 0; a blow every 0 s gave none."""
+    out = tmp_path / "x.mcap"
+    r = _ramdaq("trial", "--rig", str(RIGS / "albacore.toml"), option, value, "--fast", "--out",
+                str(out), "--no-rerun", cwd=tmp_path)
+    assert r.returncode == 2, r.stderr  # argparse's usage error
+    assert f"argument {option}: {value!r}" in r.stderr and not out.exists()

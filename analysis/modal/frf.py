@@ -13,6 +13,12 @@ record: a load cell's offset) is taken off, so the noise of the force channel be
 not enter ``F``. An exponential window on both signals (time constant ``exp_tau_s``) can force a
 ringing that outlasts the record to decay in it; it adds ``1 / (2 pi f tau)`` to every mode's
 damping ratio, which :class:`FrfEstimate` records.
+
+Where the blows put almost no force (a half-sine of contact ``T`` has none at ``1.5/T``, ``2.5/T``,
+...; a hard hammer tip above its band) ``|F|`` is the force channel's noise and ``A / F`` is noise
+over noise: H1 and coherence are NaN at every frequency whose force power is more than
+:data:`FORCE_RANGE_DB` below its largest, and a note says from where (the usable band of an impact
+test ends where the force spectrum has fallen 10-20 dB: Ewins, *Modal testing*, 2nd ed., 3.9).
 """
 
 from __future__ import annotations
@@ -21,10 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CONTACT_FRACTION", "FrfEstimate", "force_window", "h1_estimate"]
+__all__ = ["CONTACT_FRACTION", "FORCE_RANGE_DB", "FrfEstimate", "force_window", "h1_estimate"]
 
 CONTACT_FRACTION = 0.05
 """A blow's contact: where its force is at least this fraction of its peak (as the analyzer's)."""
+FORCE_RANGE_DB = 20.0
+"""H1 is given where the blows' force power is within this many dB of its largest (module
+docstring); elsewhere NaN."""
 
 
 @dataclass(frozen=True)
@@ -43,7 +52,7 @@ class FrfEstimate:
     def peak_hz(self, f_min_hz: float = 0.0) -> np.ndarray:
         """Frequency of each gage's largest ``|H1|`` at or above ``f_min_hz``, Hz, (n_gages,)."""
         keep = self.f_hz >= f_min_hz
-        i = np.argmax(np.abs(self.h1[:, keep]), axis=1)
+        i = np.argmax(np.nan_to_num(np.abs(self.h1[:, keep]), nan=-1.0), axis=1)
         return self.f_hz[keep][i]
 
 
@@ -102,10 +111,15 @@ def h1_estimate(force: np.ndarray, accel: np.ndarray, fs_hz: float, *,
         raise ValueError("h1_estimate: the force is zero in every blow")
     gfa = np.sum(np.conj(F)[:, None, :] * A, axis=0)  # (n_gages, n_f)
     gaa = np.sum(np.abs(A) ** 2, axis=0)
+    excited = gff >= gff.max() * 10 ** (-FORCE_RANGE_DB / 10)
     with np.errstate(invalid="ignore", divide="ignore"):
-        h1 = np.where(gff > 0, gfa / gff, np.nan)
-        coh = np.where((gff > 0) & (gaa > 0), np.abs(gfa) ** 2 / (gff * gaa), np.nan)
+        h1 = np.where(excited, gfa / gff, np.nan)
+        coh = np.where(excited & (gaa > 0), np.abs(gfa) ** 2 / (gff * gaa), np.nan)
+    f_hz = np.fft.rfftfreq(n, 1 / fs_hz)
     notes = ("one blow: its coherence is 1 at every frequency and says nothing",) \
         if n_blows == 1 else ()
-    return FrfEstimate(np.fft.rfftfreq(n, 1 / fs_hz), h1, np.clip(coh, 0.0, 1.0), n_blows,
-                       exp_tau_s, notes)
+    if not excited.all():
+        notes += (f"H1 not given at {int(np.sum(~excited))} of {excited.size} frequencies, the "
+                  f"first at {f_hz[np.argmin(excited)]:.1f} Hz: the force there is more than "
+                  f"{FORCE_RANGE_DB:g} dB below its largest",)
+    return FrfEstimate(f_hz, h1, np.clip(coh, 0.0, 1.0), n_blows, exp_tau_s, notes)

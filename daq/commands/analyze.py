@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Callable, Collection
 from pathlib import Path
 
@@ -66,6 +67,27 @@ def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
         out |= {"m_vir_eq18_kg": eq18, "f_air_hz": f_air_hz, "f_water_hz": f_water_hz,
                 "eq18_vs_eq19_pct": 100 * (eq18 / add["m_vir"] - 1)}
     return out
+
+
+def _earlier_plots(out: Path) -> list[Path]:
+    """The PNGs ``write_analysis`` writes (``impact{k}_{kind}.png``, ``frf.png``) already in
+    ``out``."""
+    return sorted(p for p in out.glob("*.png") if p.name == "frf.png"
+                  or re.fullmatch(r"impact\d+_[a-z]+\.png", p.name))
+
+
+def check_air_twin(rig: Rig, air_rig: Rig, air_path: str | Path) -> None:
+    """Eq 18 needs the same surface in air and in water: ValueError naming what does not fit
+    when ``rig`` (the analysed trial's) is not in water, ``air_rig`` (``--air``'s) not in air,
+    or they are not the same rig."""
+    if rig.medium != "water":
+        raise ValueError(f"--air {air_path}: the analysed trial is in {rig.medium}, and Eq 18 "
+                         f"wants a water trial with its in-air twin")
+    if air_rig.medium != "air":
+        raise ValueError(f"--air {air_path}: that trial is in {air_rig.medium}, not air")
+    if air_rig.name != rig.name:
+        raise ValueError(f"--air {air_path}: its rig is {air_rig.name!r}, not the water trial's "
+                         f"{rig.name!r}; Eq 18 compares one surface in air and in water")
 
 
 def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
@@ -248,6 +270,8 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
     written."""
     report = build_report(path, rig, hits, air)
     out.mkdir(parents=True, exist_ok=True)
+    for old in _earlier_plots(out):  # a report folder holds one run: no plots of an earlier one
+        old.unlink()
     tmp = out / f".report.json.{os.getpid()}"
     tmp.write_text(json.dumps(report, indent=1, default=json_default))
     os.replace(tmp, out / "report.json")

@@ -41,6 +41,7 @@ import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import re  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
@@ -83,6 +84,17 @@ def _parse_impacts(text: str) -> list[float]:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--impacts {text!r}: expected seconds separated by commas, e.g. 1,4.5,8") from None
+
+
+def _positive(text: str) -> float:
+    """An argparse type: a finite number above zero (seconds, Hz)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a number above 0")
+    return value
 
 
 def cmd_record(args: argparse.Namespace) -> int:
@@ -287,7 +299,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from .analyze import format_summary, plot_kinds, run_analysis, write_analysis
+    from .analyze import check_air_twin, format_summary, plot_kinds, run_analysis, write_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
@@ -298,6 +310,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     plots = plot_kinds(args.plots, off=args.no_plots)  # checked before the analysis
     rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None)
     air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
+    if air is not None:
+        check_air_twin(rig, air[0], args.air)
     report, files = write_analysis(src, rig, hits, out, plots=plots, air=air)
     print(format_summary(report, args.units))
     print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
@@ -359,7 +373,8 @@ def cmd_import(args: argparse.Namespace) -> int:
         info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
     exact = sum(c["method"] != "requantised" for c in chans)
-    worst = max((c["max_error_m_s2"] for c in chans), default=0.0)
+    worst = {u: max(c["max_error_si"] for c in chans if c["si_unit"] == u)
+             for u in sorted({c["si_unit"] for c in chans}, reverse=True)}
     with progress_bar(f"writing {out.name}", imp.get("rows"), unit="samples") as advance:
         s = record(device, out, readout=False, overwrite=args.overwrite,
                    progress=lambda b: advance(b.n_samples))
@@ -367,7 +382,8 @@ def cmd_import(args: argparse.Namespace) -> int:
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
     print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
-          f"requantised to 24 bits; largest error {worst:.3g} m/s^2")
+          f"requantised to 24 bits; largest error "
+          + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
@@ -556,13 +572,14 @@ def _batch_parsers(sub: argparse._SubParsersAction) -> None:
 
 def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--device", default="sim", help="sim, FILE.mcap, can://..., serial://...")
-    r.add_argument("--rig", help="rig file (TOML), required for the simulator")
+    r.add_argument("--rig", help="rig file (TOML) or a shipped rig's name (albacore, sampson, "
+                   "stern_plane), required for the simulator")
     r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
-    r.add_argument("--duration", type=float, default=10.0, help="seconds to record (sim)")
+    r.add_argument("--duration", type=_positive, default=10.0, help="seconds to record (sim)")
     r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
-    r.add_argument("--impact-every", type=float, help="a ram blow every S seconds")
+    r.add_argument("--impact-every", type=_positive, help="a ram blow every S seconds")
     r.add_argument("--seed", type=int, default=0, help="noise seed (sim)")
-    r.add_argument("--fs", type=float, help="override the rig's sample rate, Hz")
+    r.add_argument("--fs", type=_positive, help="override the rig's sample rate, Hz")
     r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
     r.add_argument("--name", help="recording name: writes recordings/NAME.mcap (a name, not a "
                    "path: it cannot leave recordings/; default: the rig's name and medium)")
@@ -664,7 +681,7 @@ def build_parser() -> argparse.ArgumentParser:
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
     m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
-    m.add_argument("--fs", type=float, help="the file's sample rate, Hz, when it differs from the "
+    m.add_argument("--fs", type=_positive, help="the file's sample rate, Hz, when it differs from the "
                    "rig's (the file's own rate must agree with it)")
     m.add_argument("--time-unit", choices=("s", "ms", "us"), help="CSV: the time column's unit, "
                    "when its header does not say it (time_s, 't [ms]', 'time (us)')")

@@ -22,6 +22,7 @@ from ...analysis.gap.diagnose import Diagnosis, Settings, diagnose
 from ...analysis.gap.rigfit import model_level as rig_to_modes
 from ...analysis.gap.sensors import DataChecks, check_trial
 from ...analysis.gap.trialdata import TrialData
+from ..analyzer import finite_json
 from ..gap_trial import LoadedTrial, load_trial, trial_data
 
 FORM_MIN_CLOSURE = 0.5
@@ -201,7 +202,7 @@ def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "
     out.mkdir(parents=True, exist_ok=True)
     doc = d.to_json() | {"source": source}
     files = [out / "gap.json"]
-    files[0].write_text(json.dumps(doc, indent=1))
+    files[0].write_text(json.dumps(finite_json(doc), indent=1, allow_nan=False))  # NaN: null
     if plots:
         from ..reports.gap_plots import plot_diagnosis
         files += plot_diagnosis(d, out)

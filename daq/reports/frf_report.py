@@ -16,7 +16,7 @@ import numpy as np
 
 from ...analysis.modal.frf import FrfEstimate, h1_estimate
 from ...analysis.model.rig import Rig
-from ..analyzer import HitResult
+from ..analyzer import HitResult, finite_json
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn, not with the report
     from matplotlib.figure import Figure
@@ -76,9 +76,9 @@ def _to_json(rig: Rig, est: FrfEstimate, used: list[int], n: int, fs: float) -> 
         "estimator": "H1", "hits": used, "n_blows": est.n_blows, "samples": n,
         "window_s": n / fs, "pre_s": PRE_S, "exp_tau_s": est.exp_tau_s,
         "notes": list(est.notes), "f_hz": est.f_hz.tolist(),
-        "gages": {g: {"peak_hz": float(peaks[i]), "magnitude": np.abs(est.h1[i]).tolist(),
-                      "phase_rad": np.angle(est.h1[i]).tolist(),
-                      "coherence": est.coherence[i].tolist()}
+        "gages": {g: {"peak_hz": float(peaks[i]), "magnitude": finite_json(np.abs(est.h1[i]).tolist()),
+                      "phase_rad": finite_json(np.angle(est.h1[i]).tolist()),
+                      "coherence": finite_json(est.coherence[i].tolist())}
                   for i, g in enumerate(names)},
     }
 
@@ -95,7 +95,7 @@ def frf_figure(section: dict) -> Figure:
         ax_h.semilogy(f[1:], mag[1:], lw=0.8, label=f"{g} (peak {d['peak_hz']:.2f} Hz)")
         ax_c.plot(f[1:], np.asarray(d["coherence"], dtype=float)[1:], lw=0.8)
     ax_h.set_ylabel("|H1|, (m/s^2)/N")
-    ax_h.set_title(f"driving-point FRF against {section['force_channel']}: H1 over "
+    ax_h.set_title(f"accelerance against {section['force_channel']}: H1 over "
                    f"{section['n_blows']} blow(s), {section['window_s']:.2f} s each")
     ax_h.legend(fontsize="small", ncols=2)
     ax_c.set_ylim(0, 1.05)

@@ -21,14 +21,13 @@ Counts and scale, per channel, in the file's own unit:
   far below any accelerometer's noise.
 
 ``StreamInfo.extra["import"]["channels"]["g01"]`` says which, with the step, the scale, the
-measured largest error and the guaranteed bound (m/s^2). A missing value (NaN, empty) is an
-error naming where it is, unless ``allow_gaps``: then its row is not streamed, the blocks split
-there, a gap the recording keeps, never interpolated. Units: m/s^2 and g (9.80665 m/s^2) for a
-gage; N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in the stream by its rig
-name, unit ``"N"``, gage 0); anything else is refused naming the channel. The file's sample
-rate must be the rig's unless ``fs_hz`` states it. Every problem with a file is an
-:class:`ImportFormatError`: one line naming the file and what.
-"""
+measured largest error and the guaranteed bound (in the channel's SI unit, ``si_unit``). A missing
+value (NaN, empty) is an error naming where it is, unless ``allow_gaps``: then its row is not
+streamed, the blocks split there, a gap the recording keeps, never interpolated. Units: m/s^2 and
+g (9.80665 m/s^2) for a gage; N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
+the stream by its rig name, unit ``"N"``, gage 0); anything else is refused naming the channel.
+The file's sample rate must be the rig's unless ``fs_hz`` states it. Every problem with a file is
+an :class:`ImportFormatError`: one line naming the file and what."""
 
 from __future__ import annotations
 
@@ -257,11 +256,11 @@ class Quantisation:
     step : float
         The step in the file's unit (``nan`` when requantised).
     scale : float
-        SI units per count (m/s^2).
+        SI units per count (m/s^2 for a gage, N for a force).
     max_error : float
-        Largest ``|counts*scale - x|`` over the channel, m/s^2 (measured).
+        Largest ``|counts*scale - x|`` over the channel, in the channel's SI unit (measured).
     bound : float
-        Guaranteed bound on that error, m/s^2.
+        Guaranteed bound on that error, in the channel's SI unit.
     exact : bool
         Every value was reproduced bit for bit (before the unit factor).
     """
@@ -275,7 +274,7 @@ class Quantisation:
 
     def to_json(self) -> dict:
         return {"method": self.method, "step": _finite(self.step), "scale": self.scale,
-                "max_error_m_s2": self.max_error, "error_bound_m_s2": self.bound,
+                "max_error_si": self.max_error, "error_bound_si": self.bound,
                 "exact": self.exact}
 
 
@@ -526,7 +525,7 @@ class FileImportDevice(Device):
             assumed = self.rig.force(pick.name).unit if pick.is_force else \
                 self.rig.gage(pick.gage).unit
             notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
-                                **q.to_json()}
+                                "si_unit": "N" if pick.is_force else "m/s^2", **q.to_json()}
         if missing.all():
             raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
         # samples count from the file's time zero, so times in ramdaq are the file's times
