@@ -65,6 +65,7 @@ class _FreeCoreLooks:
 
     def __init__(self, session: Session) -> None:
         self.session, self.busy_until, self.fs = session, 0.0, session.info.fs_hz
+        self.policy = session._jobs.policy  # the session's own bound on a look's samples
         self.first_sure: dict[int, float] = {}  # onset sample -> stream s its first sure look showed
 
     @property
@@ -86,6 +87,9 @@ class _FreeCoreLooks:
 
     def put_final(self, job: FinalJob, wait: bool = False) -> Admission:
         return Admission((), None, "not analysed in the free-core estimate of the looks")
+
+    def too_big_for_a_look(self, n_bytes: int) -> bool:
+        return n_bytes > self.policy.max_look_bytes
 
 
 def free_core_looks(args: argparse.Namespace) -> dict[float, float]:

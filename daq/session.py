@@ -170,6 +170,11 @@ class Session:
     shed : bool, optional
         Shed work when the analyzer falls behind (:mod:`ramdaq.daq.jobqueue`) rather than wait
         for it; default: shed unless the device can wait (``device.pace == "fast"``).
+    looks : bool, optional
+        Take first looks at each ringing decay; default: yes, except for a recording replayed
+        flat out with no live view (``ramdaq replay`` without ``--realtime`` or a view), where
+        nobody can watch a look before its final comes and the finals are what a replay
+        reproduces (the looks cost ~10 % of such a replay's CPU).
 
     Held for the summary per hit: its numbers and its trigger event, without the samples (the
     recording has them), so that memory stays flat however long the trial.
@@ -180,7 +185,8 @@ class Session:
                  update_s: float = 0.5, first_look_s: float = 0.1,
                  trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None,
-                 queue_policy: QueuePolicy | None = None, shed: bool | None = None) -> None:
+                 queue_policy: QueuePolicy | None = None, shed: bool | None = None,
+                 looks: bool | None = None) -> None:
         self.device = device
         self.info = device.open()
         if not self.info.rig_toml:
@@ -209,6 +215,8 @@ class Session:
         self._jobs = JobQueue(queue_policy or QueuePolicy(), self.info.fs_hz,
                               round(decay_skip_s(self.rig) * self.info.fs_hz))
         self.shed = getattr(device, "pace", "realtime") != "fast" if shed is None else shed
+        self.looks = (view is not None or getattr(device, "kind", "") != "mcap"
+                      or getattr(device, "pace", "realtime") != "fast") if looks is None else looks
         self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
@@ -386,6 +394,8 @@ class Session:
         # the detection sample until the trigger has refined the onset, which the looks carry
         self._ringing_onset = onset
         self._onsets[self._ringing_hit] = onset / self.info.fs_hz
+        if not self.looks:
+            return
         early = round(LOOK_EARLY * self._period_n)
         if now + early < self._next_look or self._jobs.looks_pending:  # or still running
             return

@@ -39,6 +39,20 @@ def test_replay_gives_identical_impacts_and_numbers(live):
     assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
 
 
+def test_a_replay_flat_out_takes_no_first_looks_unless_asked(live):
+    """``ramdaq replay`` flat out has nobody to show a first look to before the final: it takes
+    none (every hit still gets its final); asked (``looks=True``) it takes them as live."""
+    tmp, outcome = live
+    quiet = Session(McapReplayDevice(tmp / "trial.mcap"), readout=False)
+    replayed = quiet.run()
+    assert not quiet.looks and replayed.first_looks == 0 and quiet.skipped_updates == 0
+    assert not [j for j in quiet.job_times if j.kind == "look"]
+    assert [h.index for h in replayed.hits] == [0, 1]
+    asked = Session(McapReplayDevice(tmp / "trial.mcap"), readout=False, looks=True)
+    asked.run()
+    assert [j for j in asked.job_times if j.kind == "look"]
+
+
 def test_results_and_detections_are_in_the_recording(live):
     tmp, outcome = live
     with McapReplayDevice(tmp / "trial.mcap") as dev:
