@@ -147,10 +147,11 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
         for k, c in enumerate(colours):
             amp = abs(m.complex_amplitude[j, k])
             d, f = m.channel_delta[j, k], m.channel_frequency_hz[j, k]
-            ax.semilogy(*thinned(t, np.maximum(env[j, k], floor)), color=c, lw=0.8)
+            # plot, not semilogy: the panel is log already, and semilogy resets its locators
+            ax.plot(*thinned(t, np.maximum(env[j, k], floor)), color=c, lw=0.8)
             if np.isfinite(d) and amp > 0:  # a straight line on log axes: two points draw it
                 ends = t[[0, -1]]
-                ax.semilogy(ends, amp * np.exp(-d * f * ends), color=c, lw=1.2, ls="--")
+                ax.plot(ends, amp * np.exp(-d * f * ends), color=c, lw=1.2, ls="--")
         g = a.gages.get(n)
         title = f"gage {n}"
         if g is not None and np.isfinite(g.delta):
