@@ -21,7 +21,7 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogLocator, MaxNLocator, NullLocator
+from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullLocator
 
 from ...analysis.impact import ImpactAnalysis
 from ...analysis.modal.peaks import bandpass_mode
@@ -215,6 +215,7 @@ def _decay_panels(a: ImpactAnalysis, reuse: dict | None) -> tuple[Figure, np.nda
         # few ticks: each is three lines and a label built on the first draw, and the ticks of
         # the 16 panels were most of the figure's drawing
         ax.yaxis.set_major_locator(LogLocator(numticks=4))
+        ax.yaxis.set_major_formatter(FuncFormatter(_decade))
         ax.xaxis.set_major_locator(MaxNLocator(4))
     for ax in axes[len(a.gage_numbers):]:
         ax.set_visible(False)
@@ -228,6 +229,18 @@ def _decay_panels(a: ImpactAnalysis, reuse: dict | None) -> tuple[Figure, np.nda
     if reuse is not None:
         reuse["decay"] = (key, fig, axes)
     return fig, axes
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _decade(v: float, _pos: int | None = None) -> str:
+    """A log axis's tick label ``v`` as plain text, ``10⁻³`` (a decade; "" between): the
+    default's mathtext ``$10^{-3}$`` built a TeX parser on the first figure, ~0.2 s CPU."""
+    if not v > 0:
+        return ""
+    e = round(float(np.log10(v)))
+    return f"10{str(e).translate(_SUPERSCRIPT)}" if np.isclose(v, 10.0 ** e) else ""
 
 
 def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> Figure:
