@@ -12,7 +12,8 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
   rig has no model), on the first block that ends by then; then one period more each until
-  one is sure enough to show (:data:`LOOK_REL_SE`), then every ``update_s``. A later blow
+  one is sure enough to show (:data:`LOOK_REL_SE`), then each time the decay has grown by
+  :data:`LOOK_GROWTH` (and ``update_s`` at least). A later blow
   starts a period past the last blow's longest look that was not sure (its own standard error
   said how many were worth waiting for), so a look that cannot be sure does not hold the look thread
   when the one that can is due. When the analyzer falls behind a live device,
@@ -87,6 +88,12 @@ early (a block's end rarely falls on a period's)."""
 LOOK_CYCLES = 2
 """Periods of the predominant mode of free decay before a blow's first look is tried: two
 periods are the least from which a decrement (the ratio of successive peaks) can come at all."""
+LOOK_GROWTH = 0.5
+"""Once a blow's look has been shown, the next is taken when its decay has grown by this
+fraction (and by ``update_s`` at least): a look's numbers change only as its decay grows by a
+fair part of itself (and not at all once the ringing is under the noise), and a look every
+``update_s`` on a 14 s decay was 28 looks a blow at ~0.1 s CPU each -- most of a live trial's
+CPU, taken from the finals and the next blow's first looks -- where 1.5x makes about 8."""
 SUMMARY_TOPIC = "/ramdaq/summary"
 """The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 
@@ -159,7 +166,8 @@ class Session:
     readout : LiveReadout or False or None
         Terminal table; ``None`` makes one, ``False`` shows nothing.
     update_s : float
-        Stream seconds between first looks at a ringing decay once one has been shown.
+        Least stream seconds between looks at a ringing decay once one has been shown (they
+        come as the decay grows by :data:`LOOK_GROWTH`).
     first_look_s : float
         Where the rig has no model to give the predominant mode's period: the seconds of free
         decay that stand in for one period (:data:`LOOK_CYCLES`).
@@ -170,6 +178,11 @@ class Session:
     shed : bool, optional
         Shed work when the analyzer falls behind (:mod:`ramdaq.daq.jobqueue`) rather than wait
         for it; default: shed unless the device can wait (``device.pace == "fast"``).
+    looks : bool, optional
+        Take first looks at each ringing decay; default: yes, except for a recording replayed
+        flat out with no live view (``ramdaq replay`` without ``--realtime`` or a view), where
+        nobody can watch a look before its final comes and the finals are what a replay
+        reproduces (the looks cost ~10 % of such a replay's CPU).
 
     Held for the summary per hit: its numbers and its trigger event, without the samples (the
     recording has them), so that memory stays flat however long the trial.
@@ -180,7 +193,8 @@ class Session:
                  update_s: float = 0.5, first_look_s: float = 0.1,
                  trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None,
-                 queue_policy: QueuePolicy | None = None, shed: bool | None = None) -> None:
+                 queue_policy: QueuePolicy | None = None, shed: bool | None = None,
+                 looks: bool | None = None) -> None:
         self.device = device
         self.info = device.open()
         if not self.info.rig_toml:
@@ -209,6 +223,8 @@ class Session:
         self._jobs = JobQueue(queue_policy or QueuePolicy(), self.info.fs_hz,
                               round(decay_skip_s(self.rig) * self.info.fs_hz))
         self.shed = getattr(device, "pace", "realtime") != "fast" if shed is None else shed
+        self.looks = (view is not None or getattr(device, "kind", "") != "mcap"
+                      or getattr(device, "pace", "realtime") != "fast") if looks is None else looks
         self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
@@ -386,11 +402,13 @@ class Session:
         # the detection sample until the trigger has refined the onset, which the looks carry
         self._ringing_onset = onset
         self._onsets[self._ringing_hit] = onset / self.info.fs_hz
+        if not self.looks:
+            return
         early = round(LOOK_EARLY * self._period_n)
         if now + early < self._next_look or self._jobs.looks_pending:  # or still running
             return
-        if self._look_sure:
-            self._next_look = now + self.update_n
+        if self._look_sure:  # the decay half as long again, and update_s at least
+            self._next_look = now + max(self.update_n, round(LOOK_GROWTH * (now - start)))
         else:  # one period more than this look has, at least
             self._look_cycles = max(self._look_cycles,
                                     int((now - start) / self._period_n + LOOK_EARLY)) + 1

@@ -77,3 +77,24 @@ def test_pngs_at_150_dpi(hit0: ramdaq.TrialAnalysis, tmp_path: Path) -> None:
     for f in files:
         fig_in = {"decay": 16, "spectrum": 11, "modeshape": 13, "stock": 11}[f.stem.split("_")[1]]
         assert matplotlib.image.imread(f).shape[1] == fig_in * DPI  # width px = inches x dpi
+
+
+def test_a_decay_figure_redrawn_for_the_next_hit_is_the_one_drawn_anew(
+        hit0: ramdaq.TrialAnalysis, tmp_path: Path) -> None:
+    """``ramdaq analyze`` redraws one decay figure hit after hit (``reuse``): hit 1 drawn on the
+    figure of hit 0 (its curves, legend and limits cleared) is, pixel for pixel, hit 1 drawn
+    on a new figure -- nothing of hit 0 is left in it."""
+    import matplotlib.image
+
+    hit1 = ramdaq.analyze(WATER, impact=1)
+    fs = hit0.recording.fs_hz
+    h0, h1 = hit0.hits[0], next(h for h in hit1.hits if h.index == 1)
+    fresh = plot_impact(h1.analysis, decay_samples(h1, hit1.rig), fs, hit1.rig, tmp_path / "new",
+                        1, ("decay",))
+    reuse: dict = {}
+    plot_impact(h0.analysis, decay_samples(h0, hit0.rig), fs, hit0.rig, tmp_path / "re", 0,
+                ("decay",), reuse=reuse)
+    redrawn = plot_impact(h1.analysis, decay_samples(h1, hit1.rig), fs, hit1.rig,
+                          tmp_path / "re", 1, ("decay",), reuse=reuse)
+    assert "decay" in reuse
+    assert np.array_equal(matplotlib.image.imread(fresh[0]), matplotlib.image.imread(redrawn[0]))

@@ -39,6 +39,20 @@ def test_replay_gives_identical_impacts_and_numbers(live):
     assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
 
 
+def test_a_replay_flat_out_takes_no_first_looks_unless_asked(live):
+    """``ramdaq replay`` flat out has nobody to show a first look to before the final: it takes
+    none (every hit still gets its final); asked (``looks=True``) it takes them as live."""
+    tmp, outcome = live
+    quiet = Session(McapReplayDevice(tmp / "trial.mcap"), readout=False)
+    replayed = quiet.run()
+    assert not quiet.looks and replayed.first_looks == 0 and quiet.skipped_updates == 0
+    assert not [j for j in quiet.job_times if j.kind == "look"]
+    assert [h.index for h in replayed.hits] == [0, 1]
+    asked = Session(McapReplayDevice(tmp / "trial.mcap"), readout=False, looks=True)
+    asked.run()
+    assert [j for j in asked.job_times if j.kind == "look"]
+
+
 def test_results_and_detections_are_in_the_recording(live):
     tmp, outcome = live
     with McapReplayDevice(tmp / "trial.mcap") as dev:
@@ -105,6 +119,41 @@ def test_first_looks_are_tried_at_two_then_three_periods_of_the_predominant_mode
     block = dev.block_n / fs
     for got, periods in zip(decay, (2, 3), strict=False):
         assert (periods - 0.1) * period - 1 / fs <= got < periods * period + block + 1 / fs, got
+
+
+def test_once_a_look_is_shown_the_next_comes_as_the_decay_grows_by_half(albacore):
+    """After a blow's first sure look, each next look is asked for when the decay has grown by
+    LOOK_GROWTH (0.5) of itself and by update_s (0.5 s) at least -- on the first block (0.05 s)
+    that ends by then, less a tenth of a period -- not every update_s to the ringing's end.
+    Looks run at once here, in the main thread (the look after the first sure one was asked for
+    a period on, before that one was known to be sure)."""
+    from ramdaq.daq.analyzer import run_job
+    from ramdaq.daq.session import LOOK_EARLY, LOOK_GROWTH
+
+    water = albacore.with_medium("water")
+    dev = SimDevice(water, duration_s=12.0, impacts=[3.0], seed=4)
+    session = Session(dev, readout=False)
+    lengths, sure_at = [], []
+
+    def look_now(job):
+        shown = session.first_looks
+        lengths.append(job.x.shape[1])
+        session._done.put(run_job(job, session.info, session.rig, session._gages))
+        session._drain(None)
+        if session.first_looks > shown and not sure_at:
+            sure_at.append(len(lengths) - 1)
+        return True
+
+    session._jobs.put_look = look_now
+    for block in dev:
+        session._take(block, None)
+    fs = dev.info.fs_hz
+    early, block_n = LOOK_EARLY * session._period_n, dev.block_n
+    after = lengths[sure_at[0] + 1:]  # the look after it was asked for before it was known sure
+    assert len(after) >= 4  # 0.4 s .. ~9 s of decay: about 0.9, 1.4, 2.1, 3.2, 4.7, 7.1 s
+    for a, b in zip(after, after[1:], strict=False):
+        due = a + max(session.update_n, round(LOOK_GROWTH * a))
+        assert due - early - 1 <= b < due + block_n + 1, (a / fs, b / fs)
 
 
 def test_a_look_is_shown_when_the_blow_was_first_seen_before_its_onset_was_refined(albacore):

@@ -281,8 +281,9 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
         files += plot_frf(report["frf"], out)
         from ..reports.impact_plots import plot_impact
 
+        reuse: dict = {}  # one decay figure redrawn hit after hit (its panels: half its cost)
         for h in hits:
             if h.accepted and h.analysis is not None and h.event.record is not None:
                 files += plot_impact(h.analysis, decay_samples(h, rig), h.event.record.fs_hz, rig,
-                                     out, h.index, kinds)
+                                     out, h.index, kinds, reuse=reuse)
     return report, files
