@@ -73,6 +73,8 @@ def test_real_hammer_record_in_two_commands(hammer_record, tmp_path, capsys):
     # onset: the force is already up at sample 0, so the blow began at the record's start
     assert hit["onset_s"] == 0.0
     modes = hit["analysis"]["modes"]
+    # the terminal lists every mode, not only the predominant one the gage rows give
+    assert sum(line.lstrip().startswith("mode ") for line in out.splitlines()) == len(modes) >= 2
     m1, m2 = _mode_near(modes, F1_HZ), _mode_near(modes, F2_HZ)
     # frequencies: the published figure's last digit (+-0.005 Hz, +-0.05 Hz for "212.1";
     # sdof_cf's 212.0925 is read off a 0.3125 Hz FRF grid) plus 3 standard errors

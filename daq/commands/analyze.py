@@ -143,7 +143,8 @@ def _skipped(rig: Rig, hits: list[HitResult]) -> list[dict]:
 
 def format_summary(report: dict, units: str = "si") -> str:
     """A readable table: each hit, then per gage and motion the mean decrement and scatter."""
-    kind = report.get("surface", {}).get("kind", "rudder").replace("_", " ")
+    kind = report.get("surface", {}).get("kind", "rudder").replace("_", " ") \
+        if report.get("geometry_m") else "channels only"
     lines = [f"{report['recording']}: rig {report['rig']} ({kind}) in {report['medium']}"]
     for imp in report["impacts"]:
         a = imp["analysis"]
@@ -152,8 +153,14 @@ def format_summary(report: dict, units: str = "si") -> str:
                          f"f = {a['f_hz']:.3f} Hz  delta_modal = {_fmt(a['damping']['delta_modal'])}")
             lines += [f"    {g}: f = {_fmt(d['f_hz'], '.4f')} +- {_fmt(d['f_se_hz'], '.2g')} Hz, "
                       f"delta = {_fmt(d['delta'])} +- {_fmt(d['delta_se'], '.2g')}, zeta = "
-                      f"{_fmt(d['zeta'], '.4%')} +- {_fmt(d['zeta_se'], '.2%')}"
+                      f"{_fmt(d['zeta'], '.4%')} +- {_pct(d['zeta_se'])}"
                       for g, d in a["gages"].items()]
+            if len(a["modes"]) > 1:  # the gage rows are the predominant mode's: list every mode
+                lines += [f"    mode {i + 1}{' (predominant)' if i == a['predominant_mode'] else ''}"
+                          f", all gages: f = {_fmt(m['f_hz'], '.4f')} +- {_fmt(m['f_se_hz'], '.2g')}"
+                          f" Hz, delta = {_fmt(m['delta'])} +- {_fmt(m['delta_se'], '.2g')}, zeta = "
+                          f"{_fmt(m['zeta'], '.4%')} +- {_pct(m['zeta_se'])}"
+                          for i, m in enumerate(a["modes"])]
         else:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
                          f"{imp['reason']}")
@@ -183,6 +190,12 @@ def format_summary(report: dict, units: str = "si") -> str:
 def _fmt(v: float | None, spec: str = ".4f") -> str:
     """A report number as text; ``None`` (not measured) as ``-``."""
     return "-" if v is None else format(v, spec)
+
+
+def _pct(v: float | None) -> str:
+    """A standard error of a ratio in percent to two significant digits (``.2%`` printed a
+    0.0025 % one as 0.00 %); ``None`` as ``-``."""
+    return "-" if v is None else f"{100 * v:.2g}%"
 
 
 def summary_table(s: dict, units: str = "si") -> list[str]:
