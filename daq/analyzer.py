@@ -19,7 +19,7 @@ stream's health is known, its gaps and the time the trigger was blind.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import signal
@@ -205,6 +205,10 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
                                adc_full_scale=_full_scale(info, scale))
     except ValueError as err:
         return HitResult(index, event, False, f"no usable decay: {err}", None, text)
+    if event.end_reason == "gap":  # the record, not the ringing, ended: say where and why
+        result = replace(result, notes=(*result.notes, (
+            f"decay cut by a gap in the stream at {(event.last_sample + 1) / info.fs_hz:.3f} s: "
+            f"{n / info.fs_hz:.2f} s of it analysed")))
     return HitResult(index, event, True, "", result, text)
 
 

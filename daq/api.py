@@ -109,8 +109,10 @@ def analyze_hits(rec: Recording, *, impact: int | None = None,
             hits.append(HitResult(k, ev, False, "not requested", None))
             continue
         if progress:
+            cut = f" (cut by a gap in the stream at {(ev.last_sample + 1) / rec.fs_hz:.3f} s)" \
+                if ev.end_reason == "gap" else ""
             progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
-                     f"{(ev.last_sample - ev.onset_sample) / rec.fs_hz:.1f} s of decay")
+                     f"{(ev.last_sample - ev.onset_sample) / rec.fs_hz:.1f} s of decay{cut}")
         hits.append(judge_event(k, ev, rec.info, rig))
         if done:
             done(hits[-1])

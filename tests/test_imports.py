@@ -208,6 +208,22 @@ def test_missing_values_and_rows_are_gaps_not_interpolated(sim, tmp_path):
     assert extra["time_gaps"] == 1
 
 
+def test_a_decay_cut_by_a_gap_says_so(sim, tmp_path):
+    """One missing value 2 s after the blow (3 s): the hit is analysed on the 2 s before the
+    gap, and its notes say the gap, not the ringing, ended the decay (it said nothing)."""
+    from ramdaq.daq.api import analyze
+
+    counts, scale, gages = sim
+    x = counts * scale[:, None]
+    x[2, round(5.0 * FS)] = np.nan
+    path = write_csv(tmp_path / "gap.csv", _t(x.shape[1]), x, _names(gages))
+    out = tmp_path / "gap.mcap"
+    assert main(["import", str(path), "--rig", str(RIG), "--out", str(out), "--allow-gaps"]) == 0
+    hit = analyze(out).hits[0]
+    assert hit.accepted and hit.event.end_reason == "gap"
+    assert "decay cut by a gap in the stream at 5.000 s" in " ".join(hit.analysis.notes)
+
+
 def test_uff_records_at_different_starts_are_segments(sim, tmp_path):
     counts, scale, gages = sim
     x = counts[:2] * scale[:2, None]
