@@ -643,7 +643,9 @@ class ModelLevel:
             "fitted": True, "identification_failed": skipped, "statement": self.statement(),
             "stop": f.stop.value, "message": f.message,
             "constants": {p.name: {"start": p.start, "value": p.value, "factor": round(p.factor, 5),
-                                   "bounds": [p.lo, p.hi], "at_bound": p.at_bound} for p in f.params},
+                                   "bounds": [p.lo, p.hi], "at_bound": p.at_bound,
+                                   "sd_rel": p.sd if math.isfinite(p.sd) else None,
+                                   "pinned": p.pinned} for p in f.params},
             "modes": [{"f_id_hz": p.f_id_hz, "f_id_se_hz": p.f_id_se_hz, "f_start_hz": b.f_model_hz,
                        "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
                        "mac_start": b.mac, "mac_fitted": p.mac}
