@@ -14,8 +14,14 @@ says how closely a model is expected to match at all (:data:`FORM_F`, :data:`FOR
 frequency, and without the floors the fit would trade every shape for the last digit of one
 frequency.
 
+A few modes fix fewer numbers than there are constants: each constant is pulled towards its
+start by a prior (:func:`prior_sd`, from its bounds), its posterior sd comes from the whitened
+Jacobian (widened by the misfit left), and the constants the modes do not pin (:data:`PINNED`)
+are held at their start, so a fit started from the right rig stays there.
+
 When the fit leaves nothing beyond the floors it is polished with the identification's errors
-alone as weights, so that a rig of the right form ends within the identification's uncertainty.
+alone as weights, so that a rig of the right form ends within the identification's uncertainty;
+the polish is kept only within :data:`POLISH_SD` posterior sds (further, it fits biases).
 
 Whatever the fit leaves beyond both is the model's form error (:class:`FormError`, judged by
 :func:`significant`): per paired mode the frequency difference and 1 - MAC with the gages that
