@@ -14,8 +14,14 @@ says how closely a model is expected to match at all (:data:`FORM_F`, :data:`FOR
 frequency, and without the floors the fit would trade every shape for the last digit of one
 frequency.
 
+A few modes fix fewer numbers than there are constants: each constant is pulled towards its
+start by a prior (:func:`prior_sd`, from its bounds), its posterior sd comes from the whitened
+Jacobian (widened by the misfit left), and the constants the modes do not pin (:data:`PINNED`)
+are held at their start, so a fit started from the right rig stays there.
+
 When the fit leaves nothing beyond the floors it is polished with the identification's errors
-alone as weights, so that a rig of the right form ends within the identification's uncertainty.
+alone as weights, so that a rig of the right form ends within the identification's uncertainty;
+the polish is kept only within :data:`POLISH_SD` posterior sds (further, it fits biases).
 
 Whatever the fit leaves beyond both is the model's form error (:class:`FormError`, judged by
 :func:`significant`): per paired mode the frequency difference and 1 - MAC with the gages that
@@ -51,12 +57,29 @@ FORM_SHAPE = 0.01
 gage's sensitivity is calibrated to about 1 %). Relative, not of the shape's norm: a hull gage
 that sees a rudder mode at a thousandth of the rudder's gages still sees it hundreds of times
 above its noise, and the time-domain comparison holds every gage to its noise."""
-PRIOR_SD = math.log(4.0)
-"""A weak pull of each damping constant towards its start value (log sd: a factor 4): three
-viscous constants and a hull mode's damping ratio meet in a few modes' damping ratios, and a
-combination the modes cannot see stays where the rig's author put it. Masses, inertias and
-stiffnesses are not pulled: the shapes and frequencies fix them, and a pull would hold the
-frequencies off the data's by ~1e-6, several of their standard errors."""
+PINNED = 0.5
+"""A constant is pinned by the trial's modes when they take away at least this share of its
+prior variance (posterior variance <= half the prior's: the data say more about it than the
+bounds did). Constants the modes do not pin are held at their start value (a combination of
+them the modes cannot see would otherwise wander within its bounds on the identification's
+noise and biases)."""
+
+
+POLISH_SD = 3.0
+"""How far (posterior sds of the fit with the floors) the polish on the identification's own
+standard errors may move a constant: further, it is fitting what the floors say a model is not
+expected to match (3 impacts' spread understates a shape's error, and an identified shape's
+phase leans on the damping constants); 3 sd is a 1-in-370 chance for a Gaussian."""
+
+
+def prior_sd(p: FitParam) -> float:
+    """The prior standard deviation of a constant's log multiplier: half the log width of its
+    bounds (a +-25 % bound, [0.8, 1.25], is a 1-sigma prior of 0.22; the default factor 2 is
+    0.69). Every constant is pulled towards its start by ``theta / prior_sd`` (Tikhonov: the
+    fit moves a constant only as far as the modes ask, and not at all where they are silent)."""
+    return max(0.5 * math.log(p.hi / p.lo), 1e-6)
+
+
 FORM_FALSE_ALARM = 0.01
 """The chance that a model of the right form is reported with a form error: each difference
 is judged against Student's t (the standard errors come from a few impacts' spread: n - 1
@@ -84,13 +107,18 @@ class FitParam:
 @dataclass(frozen=True)
 class FittedParam:
     """A constant after the fit: its start and fitted value, its bounds (multipliers) and
-    whether it ended at one of them (within 0.1 %)."""
+    whether it ended at one of them (within 0.1 %); ``sd`` the posterior standard deviation of
+    its log multiplier (the relative uncertainty of the fitted value, from the weighted
+    Jacobian, the prior and the misfit left); ``pinned`` whether the trial's modes pin it
+    (:data:`PINNED`): a constant they do not pin is held at its start value."""
 
     name: str
     start: float
     value: float
     lo: float
     hi: float
+    sd: float = float("nan")
+    pinned: bool = True
 
     @property
     def factor(self) -> float:
@@ -150,6 +178,14 @@ class ModeFit:
     form: tuple[FormError, ...]
     cost_before: float
     cost_after: float
+    misfit_scale: float = 1.0
+    """sqrt(chi2 / degrees of freedom) of the data left by the fit, when above 1: how much
+    larger than the identification's standard errors the model-vs-data differences are (the
+    posterior sds are widened by it; 3 impacts' spread understates a shape's error)."""
+
+    def held(self) -> list[FittedParam]:
+        """The constants the trial's modes do not pin, held at their start value."""
+        return [p for p in self.params if not p.pinned]
 
     def at_bounds(self) -> list[FittedParam]:
         return [p for p in self.params if p.at_bound]
@@ -168,6 +204,10 @@ class ModeFit:
         b = self.at_bounds()
         if b:
             s += "; at their bounds: " + ", ".join(f"{p.name} x{p.factor:.3g}" for p in b)
+        h = self.held()
+        if h:
+            s += ("; held at their start, not pinned by these modes: "
+                  + ", ".join(p.name for p in h))
         return s
 
 
@@ -316,26 +356,64 @@ def _differences(tm: TrialModes, rig: Rig, pr: _Pairs) -> tuple[np.ndarray, np.n
     return f, z, (a * phi_m - phi) / pr.s_shape
 
 
+def _data_residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+                   theta: np.ndarray) -> np.ndarray:
+    f, z, d = _differences(tm, apply(start, params, theta), pr)
+    return np.concatenate([f, z, d.real.ravel(), d.imag.ravel()])
+
+
 def _residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
               theta: np.ndarray) -> np.ndarray:
-    f, z, d = _differences(tm, apply(start, params, theta), pr)
-    return np.concatenate([f, z, d.real.ravel(), d.imag.ravel(), theta * _pull(params)])
+    return np.concatenate([_data_residual(tm, start, params, pr, theta), theta * _pull(params)])
 
 
 def _pull(params: list[FitParam]) -> np.ndarray:
-    """1 / prior sd of each constant: :data:`PRIOR_SD` for damping, none for the rest."""
-    return np.array([1 / PRIOR_SD if p.name.startswith("damping.") or p.name.endswith("damping_ratio")
-                     else 0.0 for p in params])
+    """1 / :func:`prior_sd` of each constant."""
+    return np.array([1 / prior_sd(p) for p in params])
+
+
+def _posterior(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+               theta: np.ndarray) -> tuple[np.ndarray, float]:
+    """The posterior sd of each constant's log multiplier at ``theta`` (linearised: the data
+    Jacobian by central differences, each residual whitened by its standard error, the
+    Gauss-Newton precision J'J / s2 plus the prior's), and s = sqrt(s2), the misfit scale:
+    chi2 per degree of freedom of the data left, when above 1 (the standard errors were too
+    small for what the data and model differ by; their covariance is widened by it)."""
+    h = 1e-4
+    n = len(params)
+    r0 = _data_residual(tm, start, params, pr, theta)
+    jac = np.empty((len(r0), n))
+    for k in range(n):
+        e = np.zeros(n)
+        e[k] = h
+        try:
+            jac[:, k] = (_data_residual(tm, start, params, pr, theta + e)
+                         - _data_residual(tm, start, params, pr, theta - e)) / (2 * h)
+        except (ValueError, np.linalg.LinAlgError):
+            jac[:, k] = 0.0         # the model cannot be built around it: no information
+    jac = np.nan_to_num(jac)
+    s2 = max(1.0, float(r0 @ r0) / max(len(r0) - n, 1))
+    cov = np.linalg.pinv(jac.T @ jac / s2 + np.diag(_pull(params) ** 2))
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None)), math.sqrt(s2)
+
+
+def _pinned(params: list[FitParam], sd: np.ndarray) -> np.ndarray:
+    """Which constants the modes pin: posterior variance <= (1 - :data:`PINNED`) x prior's."""
+    return sd ** 2 <= (1 - PINNED) * (1 / _pull(params)) ** 2
 
 
 def calibrate_to_modes(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float, float]] | None = None,
                        *, max_nfev: int = 400, passes: int = 3) -> ModeFit:
-    """Fit ``start``'s constants (:func:`fit_params`, within their bounds) to the identified
-    modes ``tm``. The modes are paired once (:func:`~ramdaq.analysis.gap.modal_level.compare`),
-    fitted, and paired again with the fitted model; while the pairing changes the fit is
-    repeated (at most ``passes`` times). When no form error is left, the fit is polished with
-    the identification's own standard errors as the only weights (the floors let it stop a
-    hundred standard errors short), and the polish is kept if it leaves no form error either.
+    """Fit ``start``'s constants (:func:`fit_params`, within their bounds, each pulled towards
+    its start by :func:`prior_sd`) to the identified modes ``tm``. The modes are paired once
+    (:func:`~ramdaq.analysis.gap.modal_level.compare`), fitted, and paired again with the fitted
+    model; while the pairing changes the fit is repeated (at most ``passes`` times). The
+    constants the modes do not pin (:data:`PINNED`, from the posterior at that fit) are then
+    held at their start and the others fitted again. When no form error is left, the fit is
+    polished with the identification's own standard errors as the only weights (the floors let
+    it stop a hundred standard errors short), and the polish is kept if it leaves no form error
+    either and moves no constant more than :data:`POLISH_SD` of its posterior sd. The posterior
+    sds and which constants are pinned are those with the floors' weights.
     Raises ValueError when no identified mode pairs with a model mode (nothing to fit)."""
     params = fit_params(start, bounds)
     top = 2 * float(np.max(tm.f_hz, initial=0.0))
@@ -354,17 +432,28 @@ def calibrate_to_modes(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float
         cmp = new
         if same:
             break
-    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev))
-    if out.form or out.stop is not Stop.CONVERGED:
+    keep = _pinned(params, _posterior(tm, start, params, _pairs(tm, cmp), theta)[0])
+    if not keep.all():
+        sub = [p for p, k in zip(params, keep, strict=True) if k]
+        theta = np.zeros(len(params))
+        if sub:
+            theta[keep], how = _solve(tm, start, sub, _pairs(tm, cmp), np.zeros(len(sub)), max_nfev)
+            nfev += how[2]
+    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev), keep)
+    if out.form or out.stop is not Stop.CONVERGED or not keep.any():
         return out
     fine = _pairs(tm, cmp, NO_FLOORS)
-    theta2, how2 = _solve(tm, start, params, fine, theta, 3 * max_nfev)
+    sub = [p for p, k in zip(params, keep, strict=True) if k]
+    theta2 = np.zeros(len(params))
+    theta2[keep], how2 = _solve(tm, start, sub, fine, theta[keep], 3 * max_nfev)
     note = "" if how2[0] is Stop.CONVERGED else f" ({how2[0].value}, {how2[2]} evaluations, but lower)"
     polished = _result(tm, start, params, theta2, top, before,
                        (Stop.CONVERGED, f"{how[1]}; polished on the identification's errors{note}",
-                        nfev + how2[2]))
+                        nfev + how2[2]), keep)
     better = _cost(tm, polished.rig, cmp, fine) < _cost(tm, out.rig, cmp, fine)
-    return polished if not polished.form and better else out
+    sd = np.array([p.sd for p in out.params])
+    within = bool(np.all(np.abs(theta2 - theta) <= POLISH_SD * np.nan_to_num(sd, nan=np.inf)))
+    return polished if not polished.form and better and within else out
 
 
 def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray,
@@ -380,13 +469,22 @@ def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta
 
 
 def _result(tm: TrialModes, start: Rig, params: list[FitParam], theta: np.ndarray, top: float,
-            before: ModalComparison, how: tuple[Stop, str, int]) -> ModeFit:
+            before: ModalComparison, how: tuple[Stop, str, int], pinned: np.ndarray | None = None,
+            weights: _Pairs | None = None) -> ModeFit:
+    """The fit at ``theta`` (held constants at 0), each constant's posterior sd with the
+    ``weights`` it was fitted with (default: the floors) and whether it was ``pinned``."""
     rig = apply(start, params, theta)
-    fitted = tuple(FittedParam(p.name, p.start, get_value(rig, p.name), p.lo, p.hi) for p in params)
     after = compare(tm, rig, top_hz=top)
+    pinned = np.ones(len(params), bool) if pinned is None else pinned
+    sd, scale = np.full(len(params), np.nan), 1.0
+    if params and after.pairs:
+        sd, scale = _posterior(tm, start, params, weights or _pairs(tm, after), theta)
+    fitted = tuple(FittedParam(p.name, p.start, get_value(rig, p.name), p.lo, p.hi, float(d), bool(k))
+                   for p, d, k in zip(params, sd, pinned, strict=True))
     return ModeFit(start=start, rig=rig, params=fitted, stop=how[0], message=how[1], nfev=how[2],
                    before=before, after=after, form=form_errors(tm, rig, after),
-                   cost_before=_cost(tm, start, before), cost_after=_cost(tm, rig, after))
+                   cost_before=_cost(tm, start, before), cost_after=_cost(tm, rig, after),
+                   misfit_scale=scale)
 
 
 def _safe(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray) -> np.ndarray:
@@ -551,7 +649,9 @@ class ModelLevel:
             "fitted": True, "identification_failed": skipped, "statement": self.statement(),
             "stop": f.stop.value, "message": f.message,
             "constants": {p.name: {"start": p.start, "value": p.value, "factor": round(p.factor, 5),
-                                   "bounds": [p.lo, p.hi], "at_bound": p.at_bound} for p in f.params},
+                                   "bounds": [p.lo, p.hi], "at_bound": p.at_bound,
+                                   "sd_rel": p.sd if math.isfinite(p.sd) else None,
+                                   "pinned": p.pinned} for p in f.params},
             "modes": [{"f_id_hz": p.f_id_hz, "f_id_se_hz": p.f_id_se_hz, "f_start_hz": b.f_model_hz,
                        "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
                        "mac_start": b.mac, "mac_fitted": p.mac}

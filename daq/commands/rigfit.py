@@ -86,10 +86,16 @@ def fit_lines(mf: ModeFit, path: Path) -> list[str]:
     """What ``ramdaq rig fit`` prints: the modes, the constants, the solver's end, the form."""
     out = mode_table(mf.before, mf.after)
     out.append("")
-    out.append("constants (fitted value, x start value, bounds):")
+    out.append("constants: start, fitted, x start, +- posterior sd (relative), bounds, and whether "
+               "these modes pin it (not pinned: held at its start):")
     for p in mf.params:
-        out.append(f"  {p.name:40s} {p.value:12.6g}  x{p.factor:6.4f}  [{p.lo:g}, {p.hi:g}]"
+        out.append(f"  {p.name:38s} {p.start:11.5g} {p.value:11.5g}  x{p.factor:6.4f} "
+                   f"+-{_f(100 * p.sd, '5.1f')} %  [{p.lo:g}, {p.hi:g}]  "
+                   + ("pinned" if p.pinned else "NOT PINNED, held")
                    + ("  AT BOUND" if p.at_bound else ""))
+    if mf.misfit_scale > 1:
+        out.append(f"  (sds widened x{mf.misfit_scale:.3g}: the modes differ from the fitted model by "
+                   "that much more than the identification's standard errors say)")
     out.append(f"solver: {mf.solver_text()}")
     out.append(f"model form left: {mf.form_text()}")
     out.append(f"wrote {path}")
