@@ -198,7 +198,7 @@ def _placed(K: int, free: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, n
 
 
 _MAX_STEPS = 8
-_CONVERGED = 1e-2  # a step below this many standard errors: converged (what remains is smaller)
+_CONVERGED = 1e-2  # a step below this many standard errors is the last (what remains is ~its square)
 
 
 def _gauss_newton(t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray, free: np.ndarray,
