@@ -6,8 +6,9 @@ report's own peak-ratio decrement (:mod:`ramdaq.analysis.modal.peaks`). Then the
 predominant mode:
 the rudder motions gamma, alpha, v (Eq 1-3b) and their decrements (Eq 4-6b), the modal decrement
 averaged over the rudder gages (Eq 7), the hull motions and the decrements relative to the hull
-(Eq 8-13), the damping constants C and c (Eq 16, 17) and the effective stock lengths
-(Appendix B, Figures 8 and 9).
+(Eq 8-13; each motion's decrement is its own fit, reached from the gages' joint poles by
+:mod:`ramdaq.analysis.report1836.motion_fits`), the damping constants C and c (Eq 16, 17) and
+the effective stock lengths (Appendix B, Figures 8 and 9).
 
 Accelerations stand in for the report's displacements: for one damped mode they differ by the
 same complex factor lambda^2 at every gage, so frequencies, decrements and amplitude ratios are
@@ -308,8 +309,9 @@ def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable,
     out = {}
     for (name, sig), fit in zip(signals.items(), fits, strict=True):
         if not np.isfinite(fit.delta[k]):
-            notes.append(f"{name}: no decrement, the {f:.3g} Hz mode is not above the noise in "
-                         f"it ({fit.method})")
+            why = ("its fit failed" if fit.method.endswith("failed")
+                   else "the mode is not above the noise in it")
+            notes.append(f"{name}: no decrement of the {f:.3g} Hz mode, {why}")
             out[name] = (Decrement(f, np.nan, np.nan, np.nan, np.nan), complex(fit.amplitude[k]))
             continue
         out[name] = (Decrement(float(fit.f_hz[k]), float(fit.delta[k]), float(fit.delta_se[k]),
