@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import linalg
 from scipy.linalg import LinAlgError, lapack
 from scipy.special import chdtri
 
@@ -82,21 +83,28 @@ def _linear(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, trend: i
     return _Linear(Phi, proj, B, R, np.sum(R * R, axis=0))
 
 
-def _gauss_newton_terms(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M, Tr, H): the Schur complement ``T^T P_perp T`` (2K, 2K), ``T^T r`` (2K, S) and the
-    weights H (K, 2, 2, S) with which mode k's parameter p (f, delta) combines its two T columns
-    (t e cos, t e sin) in signal s's Kaufman Jacobian column ``-P_perp T H[k, p, :, s]``."""
+def _weights(B: np.ndarray, f: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """H (K, 2, 2, S): the weights with which mode k's parameter p (f, delta) combines its two
+    T columns (t e cos, t e sin) in signal s's Kaufman Jacobian column ``-P_perp T H[k, p, :, s]``,
+    from the coefficients B (2K [+ trend], S) of the modes' columns."""
     K = f.size
-    T = lin.Phi[:, : 2 * K] * t[:, None]
-    Tp = T - lin.Phi @ lin.proj.coef(T)
-    b, bp = lin.B[0 : 2 * K : 2], lin.B[1 : 2 * K : 2]
+    b, bp = B[0 : 2 * K : 2], B[1 : 2 * K : 2]
     H = np.empty((K, 2, 2, b.shape[1]))
     H[:, 0, 0] = _TWO_PI * bp - d[:, None] * b  # d/df of e (b cos + b' sin), on t e cos
     H[:, 0, 1] = -_TWO_PI * b - d[:, None] * bp  # ... on t e sin
     H[:, 1, 0] = -f[:, None] * b  # d/d delta
     H[:, 1, 1] = -f[:, None] * bp
-    return Tp.T @ Tp, T.T @ lin.R, H
+    return H
+
+
+def _gauss_newton_terms(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, Tr, H): the Schur complement ``T^T P_perp T`` (2K, 2K), ``T^T r`` (2K, S) and the
+    Jacobian weights (:func:`_weights`) at the poles of ``lin``, T = t Phi's mode columns."""
+    K = f.size
+    T = lin.Phi[:, : 2 * K] * t[:, None]
+    Tp = T - lin.Phi @ lin.proj.coef(T)
+    return Tp.T @ Tp, T.T @ lin.R, _weights(lin.B, f, d)
 
 
 def _step(M: np.ndarray, Tr: np.ndarray, H: np.ndarray, free: np.ndarray
@@ -131,6 +139,41 @@ def _significant(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray) -> n
     env2 = np.sum(np.exp(-2.0 * (d * f)[:, None] * t[None, :]), axis=1) / 2.0
     amp2 = lin.B[0 : 2 * K : 2] ** 2 + lin.B[1 : 2 * K : 2] ** 2  # (K, S)
     return (amp2 * env2[:, None] / noise2[None, :]).T > _SIGNIFICANT
+
+
+class _Held:
+    """The signals' least squares with the modes ``free`` moving and the others (and the trend)
+    held at their joint poles: the held columns are projected out of the signals once (one QR
+    shared by every signal and step), so that a step touches only the free modes' columns."""
+
+    def __init__(self, t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray,
+                 free: np.ndarray, trend: int) -> None:
+        held = np.setdiff1d(np.arange(f.size), free)
+        self.t, self.grid = t, uniform_grid(t)
+        F = damped_basis(t, f[held], d[held], trend, self.grid)
+        Q, R = linalg.qr(F, mode="economic", check_finite=False)
+        rd = np.abs(np.diag(R))
+        self.QT = np.ascontiguousarray(Q[:, rd > 1e-10 * rd.max()].T) if rd.size else None
+        self.Yp = Y if self.QT is None else Y - (Y @ self.QT.T) @ self.QT
+
+    def _perp(self, A: np.ndarray) -> np.ndarray:
+        """A (n, c) with the held columns projected out."""
+        return A if self.QT is None else A - self.QT.T @ (self.QT @ A)
+
+    def terms(self, s: int, f: np.ndarray, d: np.ndarray
+              ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """Signal ``s``'s (rss, M, T^T r, H) with the free modes at poles (f, d) (as
+        :func:`_gauss_newton_terms` on all columns: the held ones profiled out)."""
+        phi = damped_basis(self.t, f, d, 0, self.grid)
+        c = phi.shape[1]
+        T = phi * self.t[:, None]
+        both = self._perp(np.hstack([phi, T]))  # one pass over the held columns for both
+        phi_p, T1 = both[:, :c], both[:, c:]
+        proj = Projector(phi_p)
+        b = proj.coef(self.Yp[s][:, None])
+        r = self.Yp[s] - phi_p @ b[:, 0]
+        Tp = T1 - phi_p @ proj.coef(T1)
+        return float(r @ r), Tp.T @ Tp, T.T @ r, _weights(b, f, d)[..., 0]
 
 
 def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
@@ -174,6 +217,7 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
     lin = _linear(t, Y, f, d, trend_terms)
     M, Tr, H = _gauss_newton_terms(t, lin, f, d)
     sig = _significant(t, lin, f, d) & wanted[None, :]
+    helds: dict[tuple[int, ...], _Held] = {}
     out = []
     for s in range(Y.shape[0]):
         amp = lin.B[0 : 2 * f.size : 2, s] - 1j * lin.B[1 : 2 * f.size : 2, s]
@@ -182,7 +226,10 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
             nan = np.full(f.size, np.nan)
             out.append(SignalModes(nan, nan, nan, nan, "none", amp))
             continue
-        est = _gauss_newton(t, Y[s], f, d, free, trend_terms,
+        key = tuple(free)
+        if key not in helds:
+            helds[key] = _Held(t, Y, f, d, free, trend_terms)
+        est = _gauss_newton(helds[key], s, f, d, free, trend_terms,
                             (M, Tr[:, s], H[..., s], float(lin.rss[s])))
         if est is None:
             est = _levenberg_marquardt(t, Y[s], f, d, free, trend_terms)
@@ -201,42 +248,45 @@ _MAX_STEPS = 8
 _CONVERGED = 1e-2  # a step below this many standard errors is the last (what remains is ~its square)
 
 
-def _gauss_newton(t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray, free: np.ndarray,
+def _gauss_newton(held: _Held, s: int, f: np.ndarray, d: np.ndarray, free: np.ndarray,
                   trend: int, first: tuple[np.ndarray, np.ndarray, np.ndarray, float]
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str] | None:
-    """Signal ``y``'s Gauss-Newton iteration on the modes ``free`` from the joint poles (the
-    others held), ``first`` its terms there (M, T^T r, H, rss) from the shared evaluation; a
-    step that raises the residual is halved (up to 4 times). (f, delta, f_se, delta_se,
-    method) once a step is below 1e-2 standard errors; None when it is not within 8 steps,
-    J^T J is singular or a pole leaves the bounds."""
-    K = f.size
-    fk, dk = f.copy(), d.copy()
+    """Signal ``s``'s Gauss-Newton iteration on the modes ``free`` from the joint poles, the
+    others held (``held``); ``first``: its terms there (M, T^T r, H, rss) from the shared
+    evaluation of all modes. A step that raises the residual is halved (up to 4 times).
+    (f, delta, f_se, delta_se, method) once a step is below 1e-2 standard errors; None when it
+    is not within 8 steps, J^T J is singular or a pole leaves the bounds."""
+    K, n = f.size, held.t.size
+    fk, dk = f[free], d[free]
     M, Tr, H, rss = first
+    H, Mf, Tf = H[free], M.reshape(K, 2, K, 2)[free][:, :, free], Tr.reshape(K, 2)[free]
+    M, Tr, H = Mf.reshape(2 * free.size, 2 * free.size), Tf.reshape(-1), H
+    every = np.arange(free.size)
+    dof = max(n - 2 * K - trend - 2 * free.size, 1)
     for _ in range(_MAX_STEPS):
-        st = _step(M, Tr, H, free)
+        st = _step(M, Tr, H, every)
         if st is None:
             return None
         step, inv, gain = st
-        dof = max(t.size - 2 * K - trend - 2 * free.size, 1)
         se = np.sqrt(np.abs(np.diag(inv)) * max(rss - gain, 0.0) / dof)
         if np.all(np.abs(step) <= _CONVERGED * se):
-            theta = np.column_stack([fk[free], dk[free]]).ravel() + step
+            theta = np.column_stack([fk, dk]).ravel() + step
             return (*_placed(K, free, theta), *_placed(K, free, se), "gauss-newton")
         for _ in range(5):
-            fn, dn = fk.copy(), dk.copy()
-            fn[free], dn[free] = fk[free] + step[0::2], dk[free] + step[1::2]
+            fn, dn = fk + step[0::2], dk + step[1::2]
             if np.any(fn <= 0) or np.any(np.abs(dn) >= _DELTA_BOUNDS[1]):
                 return None
-            lin = _linear(t, y[None, :], fn, dn, trend)
-            if lin.rss[0] <= rss:
+            terms = held.terms(s, fn, dn)
+            if terms[0] <= rss:
                 break
             step = step / 2
         else:
             return None
-        fk, dk, rss = fn, dn, float(lin.rss[0])
-        M, Tr, H = _gauss_newton_terms(t, lin, fk, dk)
-        Tr, H = Tr[:, 0], H[..., 0]
+        fk, dk = fn, dn
+        rss, M, Tr, H = terms
     return None
+
+
 def _levenberg_marquardt(t: np.ndarray, y: np.ndarray, f: np.ndarray, d: np.ndarray,
                          free: np.ndarray, trend: int
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
