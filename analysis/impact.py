@@ -6,8 +6,9 @@ report's own peak-ratio decrement (:mod:`ramdaq.analysis.modal.peaks`). Then the
 predominant mode:
 the rudder motions gamma, alpha, v (Eq 1-3b) and their decrements (Eq 4-6b), the modal decrement
 averaged over the rudder gages (Eq 7), the hull motions and the decrements relative to the hull
-(Eq 8-13), the damping constants C and c (Eq 16, 17) and the effective stock lengths
-(Appendix B, Figures 8 and 9).
+(Eq 8-13; each motion's decrement is its own fit, reached from the gages' joint poles by
+:mod:`ramdaq.analysis.report1836.motion_fits`), the damping constants C and c (Eq 16, 17) and
+the effective stock lengths (Appendix B, Figures 8 and 9).
 
 Accelerations stand in for the report's displacements: for one damped mode they differ by the
 same complex factor lambda^2 at every gage, so frequencies, decrements and amplitude ratios are
@@ -39,6 +40,7 @@ from .report1836.damping import (
     c_rotational_full,
     stock_stiffness_k_s,
 )
+from .report1836.motion_fits import fit_signals_at_poles
 from .report1836.motions import (
     alpha,
     alpha_b_from_13_14,
@@ -292,21 +294,30 @@ def _peak_decrement(x: np.ndarray, fs_hz: float, f_hz: float) -> tuple[float, fl
     return peak.delta, peak.std_error
 
 
-def signal_decrement(x: np.ndarray, fs_hz: float, f_hz: float, n_modes: int | None = None,
-                     start: tuple[np.ndarray, np.ndarray] | None = None
-                     ) -> tuple[Decrement, complex]:
-    """Decrement of the mode near ``f_hz`` in one signal (n_samples,), both ways, and the mode's
-    complex amplitude there. ``n_modes``: how many modes to fit (the multi-channel fit's count
-    skips the order search, ten times faster); ``None`` searches. ``start``: (f_hz, delta) of
-    the modes to start from (the multi-channel fit's, when the signal combines its gages: no
-    subspace estimate needed)."""
-    table = identify_modes(x[None, :], fs_hz, per_channel=False, n_modes=n_modes, start=start)
-    i = _nearest(table, f_hz)
-    peak = _peak_decrement(x, fs_hz, f_hz)
-    if i is None:
-        return Decrement(f_hz, np.nan, np.nan, *peak), complex("nan")
-    return (Decrement(float(table.frequency_hz[i]), float(table.delta[i]), float(table.delta_se[i]),
-                      *peak), complex(table.complex_amplitude[0, i]))
+def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable, k: int,
+                 notes: list[str]) -> dict[str, tuple[Decrement, complex]]:
+    """Each signal's decrement of the predominant mode ``k`` of ``table`` (its own fit, reached
+    from the joint poles: :mod:`~ramdaq.analysis.report1836.motion_fits`), beside the report's
+    peak-ratio one, and the mode's complex amplitude in it (the combination of the gages'). A
+    signal in which the mode does not stand out of the noise gets NaN and a note."""
+    if not signals:
+        return {}
+    fits = fit_signals_at_poles(np.array(list(signals.values())), fs_hz, table.frequency_hz,
+                                table.delta, modes=(k,),
+                                trend_terms=int(table.info.get("trend_terms", 1)))
+    f = float(table.frequency_hz[k])
+    out = {}
+    for (name, sig), fit in zip(signals.items(), fits, strict=True):
+        if not np.isfinite(fit.delta[k]):
+            why = ("its fit failed" if fit.method.endswith("failed")
+                   else "the mode is not above the noise in it")
+            notes.append(f"{name}: no decrement of the {f:.3g} Hz mode, {why}")
+            out[name] = (Decrement(f, np.nan, np.nan, np.nan, np.nan), complex(fit.amplitude[k]))
+            continue
+        out[name] = (Decrement(float(fit.f_hz[k]), float(fit.delta[k]), float(fit.delta_se[k]),
+                               *_peak_decrement(sig, fs_hz, f), f_se_hz=float(fit.f_se_hz[k])),
+                     complex(fit.amplitude[k]))
+    return out
 
 
 def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list[int]) -> ModeTable:
@@ -385,28 +396,25 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     def d(n: int) -> np.ndarray:
         return x[rows[n]]
 
-    def decrement(sig: np.ndarray) -> tuple[Decrement, complex]:
-        return signal_decrement(np.asarray(sig), fs_hz, f, len(table),
-                                start=(table.frequency_hz, table.delta))
-
     steps = list(CHAIN_STEPS)
-    motions: dict[str, Decrement] = {}
-    amps: dict[str, complex] = {}
-    relative: dict[str, Decrement] = {}
+    rudder: dict[str, np.ndarray] = {}
+    relative: dict[str, np.ndarray] = {}
     if steps[0] not in skip:
         signals = _rudder_motions(d, rig)
-        motions, amps = _motion_decrements(signals, verdicts, decrement, notes)
+        rudder = _usable_motions(signals, verdicts, notes)
         if steps[1] not in skip:
-            relative = _relative_decrements(d, rig, signals, decrement, notes)
-    hull = ({name: decrement(sig)[0] for name, sig in _hull_motions(d, rig, verdicts).items()}
-            if rig.structural else {})
+            relative = _relative_signals(d, rig, signals, notes)
+    hull = _hull_motions(d, rig, verdicts) if rig.structural else {}
+    fits = _motion_fits(rudder | relative | hull, fs_hz, table, k, notes)
+    motions = {name: fits[name][0] for name in rudder}
+    amps = {name: fits[name][1] for name in rudder}
     ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
     lengths, curves = _stock_lengths(amp, rig, notes) if steps[2] not in skip else ({}, {})
     damping = _damping(rig, f, float(table.delta[k]), gages, motions, ratio, amp, curves, notes,
                        full=steps[4] not in skip)
-    return {"motions": motions, "relative": relative, "alpha1_over_gamma1": ratio,
-            "damping": damping, "stock_lengths": lengths, "stock_curves": curves,
-            "hull_motions": hull}
+    return {"motions": motions, "relative": {name: fits[name][0] for name in relative},
+            "alpha1_over_gamma1": ratio, "damping": damping, "stock_lengths": lengths,
+            "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
 
 
 def predominant_mode(table: ModeTable, rudder_rows: list[int]) -> int:
@@ -433,27 +441,24 @@ def _rudder_motions(d: Callable[[int], np.ndarray], rig: Rig) -> dict[str, np.nd
     }
 
 
-def _motion_decrements(signals: dict[str, np.ndarray], verdicts: dict[int, GageVerdict],
-                       decrement: Callable[[np.ndarray], tuple[Decrement, complex]],
-                       notes: list[str]) -> tuple[dict[str, Decrement], dict[str, complex]]:
-    """Eq 4-6b: each rudder motion's decrement and complex amplitude at the predominant mode,
-    where both of its gages are usable (a note says which are not)."""
-    motions: dict[str, Decrement] = {}
-    amps: dict[str, complex] = {}
+def _usable_motions(signals: dict[str, np.ndarray], verdicts: dict[int, GageVerdict],
+                    notes: list[str]) -> dict[str, np.ndarray]:
+    """The rudder motions whose gages are all usable (Eq 4-6b are taken of those; a note names
+    the others' unusable gages)."""
+    out = {}
     for name, sig in signals.items():
         bad = [n for n in MOTION_GAGES[name] if not verdicts[n].ok]
         if bad:
             notes.append(f"{name}: not computed, gage(s) {bad} unusable")
             continue
-        motions[name], amps[name] = decrement(sig)
-    return motions, amps
+        out[name] = sig
+    return out
 
 
-def _relative_decrements(d: Callable[[int], np.ndarray], rig: Rig, signals: dict[str, np.ndarray],
-                         decrement: Callable[[np.ndarray], tuple[Decrement, complex]],
-                         notes: list[str]) -> dict[str, Decrement]:
+def _relative_signals(d: Callable[[int], np.ndarray], rig: Rig, signals: dict[str, np.ndarray],
+                      notes: list[str]) -> dict[str, np.ndarray]:
     """Eq 8-13: the hull motions from gages 13, 14 (and 5 for the yaw, when level with 13) and
-    the decrements of the rudder motions relative to the hull."""
+    the rudder motions relative to the hull, whose decrements Eq 10-13 are."""
     geom = gage_geometry(rig)
     alpha_b = alpha_b_from_13_14(d(13), d(14), geom.L_P)
     p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
@@ -463,9 +468,8 @@ def _relative_decrements(d: Callable[[int], np.ndarray], rig: Rig, signals: dict
     else:
         notes.append("gamma_b left out: hull gages 5 and 13 are not level")
     d_rh = d_rudder_hull(d(13), d(14), geom.L_H, geom.L_P, geom.h, gamma_b)
-    rel_signals = {"gamma_R": signals["gamma"] - gamma_b, "alpha_R": signals["alpha"] - alpha_b,
-                   "v_R_2_6": signals["v_2_6"] - d_rh, "v_R_4_8": signals["v_4_8"] - d_rh}
-    return {name: decrement(sig)[0] for name, sig in rel_signals.items()}
+    return {"gamma_R": signals["gamma"] - gamma_b, "alpha_R": signals["alpha"] - alpha_b,
+            "v_R_2_6": signals["v_2_6"] - d_rh, "v_R_4_8": signals["v_4_8"] - d_rh}
 
 
 def _hull_motions(d: Callable[[int], np.ndarray], rig: Rig,

@@ -11,8 +11,11 @@ single-threaded BLAS), and the median CPU of its parts run on their own: the per
 gage's verdict read from it; the channels it could not vouch for searched on their own, counted)
 and the joint fit of all gages (:func:`~ramdaq.analysis.modal.identify.identify_modes`); then
 the automatic order's cost against a fit of the order it found, given (``n_modes``), for the
-16 gages and for one gage. Issue 19's targets: a whole 16-gage hit in <= 0.2 s CPU at unchanged
-accuracy; automatic order no dearer than 2x a fit of known order. The machine is shared: the
+16 gages and for one gage. The report's chain is what ``analyze_decay`` costs beyond
+:func:`~ramdaq.analysis.modal.verdicts.assess_decay_jointly`, the fit it starts with (its motion
+fits, Eq 4-13; the peak decrements; the stock lengths; the damping constants). Issue 19's
+targets: a whole 16-gage hit in <= 0.2 s CPU at unchanged accuracy; automatic order no dearer
+than 2x a fit of known order. The machine is shared: the
 figures grow with its load (printed).
 """
 
@@ -64,6 +67,7 @@ def main() -> None:
     whole = [cpu(lambda x=x: analyze_decay(x, fs, rig, gages, onset_s=ONSET_S,
                                            decay_start_s=ONSET_S + SKIP_S)) for x in xs]
     verdicts = [cpu(lambda x=x: assess_decay(x, fs)) for x in xs]
+    jointly = [cpu(lambda x=x: assess_decay_jointly(x, fs)) for x in xs]
     own = [assess_decay_jointly(x, fs).own_searches for x in xs]
     joint = [cpu(lambda x=x: identify_modes(x, fs, per_channel=True)) for x in xs]
     print(f"ALBACORE in {args.medium}: {len(gages)} gages x {xs[0].shape[1]} samples at {fs:g} Hz, "
@@ -72,6 +76,9 @@ def main() -> None:
     print(f"  of which, run alone: verdicts (assess_decay) {np.median(verdicts):.3f} s "
           f"({np.mean(own):.1f} gage(s) a hit searched on their own), "
           f"joint fit (identify_modes) {np.median(joint):.3f} s")
+    print(f"  the rest of analyze_decay after its verdicts (assess_decay_jointly {np.median(jointly):.3f} s):"
+          f" per-gage peak decrements and the report's chain (motion fits, stock lengths, damping) "
+          f"{np.median(np.subtract(whole, jointly)):.3f} s (a difference of runs: noisy under load)")
     auto_known(xs, fs)
 
 

@@ -203,6 +203,32 @@ def test_effective_length_torsion_finds_where_gamma_stops_changing() -> None:
     assert res.value_at_attach == gamma_b
 
 
+@pytest.mark.parametrize("n_stock", [2, 3, 4])
+def test_effective_length_bending_is_the_least_squares_reading(rng: np.random.Generator,
+                                                                n_stock: int) -> None:
+    """On noisy points (no exact clamp) the reading is the grid's best trial height, refined:
+    its misfit is the end-load shape's ``lstsq`` misfit there (to rounding), and no trial
+    height of a 401-point grid fits better by ``lstsq`` (all trials are fitted at once)."""
+    for _ in range(5):
+        z_stock = np.sort(rng.uniform(0.0, 1.8, n_stock))
+        d_stock, d_hull = rng.normal(size=n_stock), rng.normal(size=2)
+        z_hull = np.array([2.9, 4.4])
+        res = sl.effective_length_bending(z_stock, d_stock, z_hull, d_hull, 1.0, n_grid=401)
+        w = d_stock - (res.intercept + res.slope * z_stock)
+        scale = np.max(np.abs(w))
+        at = _lstsq_misfit(res.z_attach, z_stock, w)
+        assert res.rms_residual == pytest.approx(at, abs=1e-12 * scale)
+        grid = np.linspace(z_stock.max(), z_hull.min(), 401)
+        assert res.rms_residual <= min(_lstsq_misfit(z, z_stock, w) for z in grid) + 1e-12 * scale
+
+
+def _lstsq_misfit(zb: float, z_stock: np.ndarray, w: np.ndarray) -> float:
+    """RMS misfit of ``w = s^2 (a + c s)`` (``a s^2`` for two points), s = zb - z_stock."""
+    s = zb - z_stock
+    A = np.column_stack([s**2, s**3] if z_stock.size >= 3 else [s**2])
+    return float(np.sqrt(np.mean((w - A @ np.linalg.lstsq(A, w, rcond=None)[0]) ** 2)))
+
+
 def test_effective_length_bad_inputs() -> None:
     with pytest.raises(ValueError, match="z_stock"):
         sl.effective_length_bending([0.0], [1.0], [3.0, 4.0], [0.0, 0.0], 1.0)

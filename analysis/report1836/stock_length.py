@@ -15,10 +15,10 @@ Bending (Figure 8)
     Euler-Bernoulli end-load shape ``w = s² (a + c s)`` with ``s = z′_B - z′``: zero deflection
     *and zero slope* at the clamp, which is exactly where the curve joins the line tangentially
     ("becomes linear"). z′_B is the height that best fits this shape to the stock points (linear
-    least squares in a, c for each trial z′_B, minimised over z′_B between the highest stock
-    point and the lowest hull-side point). With three stock points (gages 1/3, 7/11, 10/12) the
-    fit is exact; with two, only ``w = a s²`` is fitted. Shear deformation of a Timoshenko stock
-    adds a term linear in s that this reading ignores.
+    least squares in a, c for each trial z′_B, all the search grid's trials at once, minimised
+    over z′_B between the highest stock point and the lowest hull-side point). With three stock
+    points (gages 1/3, 7/11, 10/12) the fit is exact; with two, only ``w = a s²`` is fitted.
+    Shear deformation of a Timoshenko stock adds a term linear in s that this reading ignores.
 
 Torsion (Figure 9)
     A stock under an end torque twists linearly from the rudder up to its torsional attachment;
@@ -82,11 +82,27 @@ def _paired(zn: str, z: ArrayLike, vn: str, v: ArrayLike) -> tuple[np.ndarray, n
     return za, va
 
 
-def _end_load_fit(s: np.ndarray, w: np.ndarray, cubic: bool) -> tuple[np.ndarray, float]:
-    A = np.column_stack([s**2, s**3] if cubic else [s**2])
-    coef, *_ = np.linalg.lstsq(A, w, rcond=None)
-    resid = w - A @ coef
-    return coef, float(np.sqrt(np.mean(resid**2)))
+def _end_load_misfit(zb: np.ndarray, zs: np.ndarray, w: np.ndarray, cubic: bool) -> np.ndarray:
+    """RMS misfit of the least-squares fit of ``w = s^2 (a + c s)`` (``a s^2`` alone without
+    ``cubic``), ``s = zb - zs``, for every trial clamp height in ``zb`` (n_trials,) at once.
+
+    The residual is ``w`` less its projection on the columns s^2 (and s^3), orthonormalised
+    row by row by Gram-Schmidt twice over (as accurate as a QR); a column no larger than
+    rounding once the earlier ones are taken out adds nothing, as ``lstsq``'s rank cut-off."""
+    s = np.asarray(zb, dtype=float)[:, None] - zs[None, :]
+    r = np.broadcast_to(w, s.shape).copy()
+    basis: list[np.ndarray] = []
+    for col in ((s**2, s**3) if cubic else (s**2,)):
+        v = col.copy()
+        for _ in range(2):
+            for q in basis:
+                v -= np.sum(q * v, axis=1, keepdims=True) * q
+        norm = np.linalg.norm(v, axis=1, keepdims=True)
+        big = norm > 4 * np.finfo(float).eps * zs.size * np.linalg.norm(col, axis=1, keepdims=True)
+        q = np.divide(v, norm, out=np.zeros_like(v), where=big & (norm > 0))
+        basis.append(q)
+        r -= np.sum(q * r, axis=1, keepdims=True) * q
+    return np.sqrt(np.mean(r**2, axis=1))
 
 
 def effective_length_bending(
@@ -146,10 +162,10 @@ def effective_length_bending(
     cubic = zs.size >= 3
 
     def misfit(zb: float) -> float:
-        return _end_load_fit(zb - zs, w, cubic)[1]
+        return float(_end_load_misfit(np.array([zb]), zs, w, cubic)[0])
 
     grid = np.linspace(lo, hi, n_grid)
-    costs = np.array([misfit(z) for z in grid])
+    costs = _end_load_misfit(grid, zs, w, cubic)
     k = int(np.argmin(costs))
     a, c = grid[max(k - 1, 0)], grid[min(k + 1, n_grid - 1)]
     xatol = 1e-12 * (hi - lo)
