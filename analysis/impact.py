@@ -617,6 +617,13 @@ def _full_damping(a: dict[int, complex], f: float, delta: float, rig: Rig, m_y: 
                           r.stock_x_m, r.attach_z_m, ell, GJ_e, gamma2=cos["gamma"],
                           alpha2=cos["alpha"], v_b2=cos["v_b"], alpha_b2=cos["alpha_b"],
                           gamma_b1=sin["gamma_b"], gamma_b2=cos["gamma_b"])
+    for name, value, unit in (("C", C, "N s/m"), ("c", c, "N m s/rad")):
+        if not value > 0:  # kept, and said: a dashpot of zero or negative constant is no damping
+            notes.append(f"Eq {14 if name == 'C' else 15}: {name} = {float(value):.4g} {unit}, not a "
+                         f"damping constant. Eq 14/15 (re-derived: Appendix D's print is "
+                         f"incomplete) hang on the motions' small parts out of phase with v and "
+                         f"swing from hit to hit; Eq {16 if name == 'C' else 17} is the report's "
+                         f"reading without them")
     return FullDamping(C_eq14_N_s_per_m=float(C), c_eq15_N_m_s_per_rad=float(c),
                        k_s_N_per_m=k_s, ell_m=ell)
 

@@ -4,6 +4,7 @@ import json
 
 import pytest
 
+from ramdaq.daq.commands.analyze import format_summary
 from ramdaq.daq.commands.cli import main
 from tests.conftest import RIGS
 
@@ -94,3 +95,17 @@ def test_air_twin_must_be_the_same_rig_in_air(tmp_path, capsys):
                  str(SAMPLES / "sampson-water.mcap"), "--out", str(tmp_path), "--no-plots"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "sampson-water.mcap" in err[0] and "not air" in err[0]
+
+
+def test_a_damping_constant_of_no_sign_is_said_and_the_table_says_what_c_is(air_report, capsys):
+    """Eq 14/15 can come out negative (on the simulator's air trial too): each such hit's notes
+    say it is not a damping constant, a positive one draws no note; the table labels c per
+    radian and says what Eq 16/17 read (the whole decay on one dashpot)."""
+    out, rep = air_report
+    text = format_summary(rep)
+    assert "c (N m s/rad)" in text and "each putting the predominant mode's whole decay" in text
+    a = rep["impacts"][1]["analysis"]
+    for key, eq in (("C_eq14_N_s_per_m", "Eq 14"), ("c_eq15_N_m_s_per_rad", "Eq 15")):
+        value = a["damping"][key]
+        said = any(n.startswith(f"{eq}:") and "not a damping constant" in n for n in a["notes"])
+        assert said == (value <= 0), (key, value, a["notes"])

@@ -235,8 +235,13 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
                  "std": None if d["std"] is None else from_si(d["std"], q)}
             name += " (ton s/ft)" if key.startswith("C") else " (ft ton s)"
         else:
-            name += " (N s/m)" if key.startswith("C") else " (N m s)"
+            name += " (N s/m)" if key.startswith("C") else " (N m s/rad)"
         row(name, d, "{:.4g}")
+    if s["C_N_s_per_m"]["mean"] is not None or s["c_N_m_s_per_rad"]["mean"] is not None:
+        lines.append("  C, c: Eq 16 and 17, each putting the predominant mode's whole decay on one "
+                     "dashpot (the report's reading), not a rig's separate dashpots")
+    if s.get("delta_hull_motion"):
+        lines.append("  *_b: the hull's own motion at the rudder (gages 5, 13, 14; Eq 8-13)")
     return lines
 
 
