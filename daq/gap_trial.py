@@ -149,7 +149,8 @@ def _gages_present(path: str | Path, info: StreamInfo, rig: Rig | None) -> list[
     """The rig's gages the recording has, in the rig's channel order; three or more."""
     if rig is None:
         raise RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
-    rig.require_structure("the gap diagnosis (a model of the structure); pass --rig")
+    rig.require_structure("comparing a trial with the rig's model (ramdaq gap, ramdaq rig fit)",
+                          "pass --rig with a rig that describes it")
     rows = {g for g in info.gages if g}
     have = [g for g in rig.gages_by_channel() if g.number in rows]
     if len(have) < 3:

@@ -316,3 +316,8 @@ def test_channels_only_rig_refused_where_a_structure_is_needed(tmp_path):
 
     with pytest.raises(RigError, match=r"export-uff .* needs the structure"):
         export_uff(tmp_path / "x.uff", [], rig)
+    from ramdaq.daq.gap_trial import _gages_present  # noqa: PLC2701 - the gap's own check, not its loading
+
+    with pytest.raises(RigError, match=r"comparing a trial with the rig's model \(ramdaq gap, ramdaq "
+                       r"rig fit\) needs the structure; pass --rig with a rig that describes it$"):
+        _gages_present("t.mcap", None, rig)

@@ -294,11 +294,13 @@ class Rig:
         """The rig describes the structure (rudder, stock, hull), not only its channels."""
         return self.rudder is not None
 
-    def require_structure(self, what: str) -> None:
-        """Raise :class:`RigError` if this is a channels-only rig; ``what`` needs the structure."""
+    def require_structure(self, what: str, fix: str = "") -> None:
+        """Raise :class:`RigError` if this is a channels-only rig: ``what`` needs the structure;
+        ``fix``, if given, says what to do."""
         if not self.structural:
             raise RigError(f"{self.source}: rig {self.name!r} describes only its channels (no "
-                           f"[rudder], [stock], [hull]); {what} needs the structure")
+                           f"[rudder], [stock], [hull]); {what} needs the structure"
+                           + (f"; {fix}" if fix else ""))
 
     @property
     def n_channels(self) -> int:
