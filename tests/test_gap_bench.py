@@ -268,6 +268,59 @@ def test_a_strong_data_sensor_finding_outranks_the_models_unexplained():
     assert decision(_rec(candidates=[], data_findings=[hp, hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
 
 
+def test_a_double_hit_answers_unexplained_unless_the_trial_is_not_homogeneous():
+    """Issue 17: the modal family's double hits came out "unexplained" while the data-only check
+    found them at 10-600x chance. A double hit well above chance answers now; on a trial the
+    data layer finds not homogeneous across blows it does not (friction, a crack or a rattle
+    bend the one-blow decay the check fits: the modal family's development trials read them as
+    second blows at 50-140 % of the first), and the homogeneity finding does not answer either
+    (friction, a crack and a rattle all move the decrement with the blow)."""
+    from ramdaq.daq.commands.gap_bench import decision
+
+    dh = {"check": "double_hit", "layer": "excitation", "gages": list(range(1, 17)), "window": "early",
+          "mode_hz": [13.0], "statistic": 1.8e4, "chance_level": 29.1, "more": {}}
+    d = decision(_rec(effect="double_hit", expect="double_hit", data_findings=[dh]), 8.0, 10.0, 0.0)
+    assert d["named"] == "double_hit" and d["by"] == "data" and d["location"]["window"] == "early"
+    hom = {"check": "homogeneity", "layer": "nonlinearity", "gages": [2, 3], "window": "decay",
+           "mode_hz": [13.0], "statistic": 46.0, "chance_level": 4.0,
+           "more": {"decrement_per_doubling": {"value": -0.5}}}
+    assert decision(_rec(data_findings=[dh, hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    # with no gap the model names, the homogeneity finding answers (friction), not the double hit
+    assert decision(_rec(zdetect=2.0, data_findings=[dh, hom]), 8.0, 10.0, 0.0)["named"] == "friction"
+
+
+def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
+    """One decision (issue 17): ``ramdaq gap``'s report and the benchmark's scoring read the same
+    function. The model layer alone finds the gap "unexplained"; a high-pass the data-only layer
+    finds at 14x chance takes precedence in both, and the printed verdict says so."""
+    from types import SimpleNamespace
+
+    from ramdaq.analysis.gap.diagnose import Diagnosis
+    from ramdaq.daq.commands.gap import answer_lines, one_answer
+    from ramdaq.daq.commands.gap_bench import decision
+
+    hp = {"check": "highpass", "layer": "sensor", "gages": [14], "window": "decay", "mode_hz": [13.0],
+          "statistic": 239.0, "chance_level": 17.3, "more": {}, "text": "a 1.5 Hz high-pass on gage 14"}
+    r = _rec(effect="highpass", expect="highpass", candidates=[], data_findings=[hp])
+    where = r["unexplained_where"]
+    level = SimpleNamespace(form_gages=lambda: {12}, statement=lambda: "model form: x")
+    d = SimpleNamespace(verdict="unexplained", best=None, candidates=[], unexplained_where=where,
+                        model_level=level,
+                        data=SimpleNamespace(findings=[SimpleNamespace(to_json=lambda: hp)]))
+    d.model_choice = lambda: Diagnosis.model_choice(d)
+    d.answer = one_answer(d)
+    assert d.answer.to_json() == decision(r, 8.0, 10.0, 0.0)
+    assert d.answer.named == "highpass" and d.answer.by == "data"
+    head = Diagnosis.headline.fget(d)
+    assert head.startswith("explained by the data-only layer: highpass") and head.endswith("; model form: x")
+    assert "takes precedence" in answer_lines(d)[0]
+    # without the data-only finding both say unexplained, where the gap is
+    d.data = SimpleNamespace(findings=[])
+    d.answer = one_answer(d)
+    assert d.answer.to_json() == decision(r | {"data_findings": []}, 8.0, 10.0, 0.0)
+    assert Diagnosis.headline.fget(d).startswith("unexplained: gages 3") and answer_lines(d) == []
+
+
 _MISSED = ("measured on this check seed (2026-11-27, branch gen): the unexplained gap is placed "
            "on other gages, or a library effect is named")
 

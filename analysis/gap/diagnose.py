@@ -60,7 +60,7 @@ from .evidence import (
 )
 from .features import FeatureMap, feature_map
 from .forward import Forward
-from .layers import Precedence, model_gages, precedence, unconfirmed
+from .layers import Answer, Precedence, model_gages, precedence, strength, unconfirmed
 from .rigfit import ModelLevel
 from .sensors import DataChecks
 from .terms import Placement, Term
@@ -206,22 +206,38 @@ class Diagnosis:
     model's form error it left (:func:`~ramdaq.analysis.gap.rigfit.model_level`); None when
     the diagnosis started from the rig as given."""
 
+    answer: Answer | None = None
+    """The one report's answer of both layers (:func:`~ramdaq.analysis.gap.layers.answer`), the
+    same the benchmark scores: set by ``ramdaq gap`` once the model level and the data-only
+    checks have run; None for the effect search alone."""
+
+    def model_choice(self) -> str | None:
+        """The model layer's own choice: the named effect, "unexplained", or None (no gap)."""
+        return self.best.name if self.best else ("unexplained" if self.verdict == "unexplained" else None)
+
     @property
     def headline(self) -> str:
-        """The verdict in one line: with a model level, "no effect; model form: ..." when no
-        gap stands beyond the noise, else the verdict and the model's form error beside it."""
-        if self.model_level is None:
+        """The verdict in one line, from :attr:`answer` when set: "no effect" (the model's form
+        when it leaves a gap), "unexplained: where ...", "explained" (the model's named effect)
+        or the data-only layer's finding that answered; with a model level, the model's form
+        error beside it ("no effect; model form: ...")."""
+        form = f"; {self.model_level.statement()}" if self.model_level is not None else ""
+        a = self.answer
+        if a is None:
             w = self.unexplained_where
-            return self.verdict if w is None else f"unexplained: {where_text(w)}"
-        level = self.model_level
-        head = {"no gap beyond noise": "no effect",
-                "unexplained": ("no effect named, the gap is the rig model's form"
-                                if level.fit is not None and level.fit.form else "unexplained")
-                }.get(self.verdict, self.verdict)
-        w = self.unexplained_where
-        if w is not None and not set(w["gages"]) <= level.form_gages():
-            head = f"unexplained: {where_text(w)}"
-        return f"{head}; {level.statement()}"
+            return (self.verdict if w is None else f"unexplained: {where_text(w)}") + form
+        if a.named == "none":
+            head = ("no effect" if self.verdict == "no gap beyond noise"
+                    else "no effect named, the gap is the rig model's form")
+        elif a.named == "unexplained":
+            head = f"unexplained: {where_text(a.location)}" if a.location else "unexplained"
+        elif a.by == "data":
+            f = a.finding or {}
+            head = (f"explained by the data-only layer: {a.named} ({f.get('text', '')}; statistic "
+                    f"{strength(f):.1f}x its chance level)")
+        else:
+            head = self.verdict
+        return head + form
 
     @property
     def unexplained_where(self) -> dict | None:
@@ -248,6 +264,7 @@ class Diagnosis:
         return {
             "verdict": self.verdict,
             "headline": self.headline,
+            "answer": self.answer.to_json() if self.answer else None,
             "model_level": self.model_level.to_json() if self.model_level else None,
             "detection_z": round(self.z_detect, 2) if np.isfinite(self.z_detect) else None,
             "effect": self.best.name if self.best else None,

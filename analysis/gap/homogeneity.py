@@ -135,6 +135,10 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
         sa = np.sqrt((fm.amp_se[:, g, k] / a) ** 2 + AMP_FLOOR**2)
         b, se = _slope(level, np.log(a), sa)
         out.append((abs(b - 1) / se, "amplitude", float(fm.f_hz[k]), b - 1, k))
+    # a refit that did not converge (a mode the blow barely rings) gives no slope: not a finding
+    out = [o for o in out if np.isfinite(o[0]) and np.isfinite(o[3])]
+    if not out:
+        return []
     z, what, f_k, rel, k = max(out)
     chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(out))))
     if z <= chance:

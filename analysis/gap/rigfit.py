@@ -631,14 +631,6 @@ class ModelLevel:
         return set() if self.fit is None else {g for e in self.fit.form if not e.missing
                                                for g in e.gages}
 
-    def absorbs(self, gages: list[int]) -> bool:
-        """Whether an effect acting at ``gages`` (its location) is not separable from the
-        model's form error: every one of them is where the calibrated rig still misses a mode.
-        A sensor fault there and a rig that is wrong there look alike in the modes; the model
-        level does not tell them apart, so such an effect is not named on its strength."""
-        form = self.form_gages()
-        return bool(form) and bool(gages) and set(gages) <= form
-
     def to_json(self) -> dict:
         skipped = [] if self.modes is None else list(self.modes.skipped)
         if self.fit is None:

@@ -19,6 +19,7 @@ import numpy as np
 
 from ...analysis.gap.datamodel import P_CHANCE
 from ...analysis.gap.diagnose import Diagnosis, Settings, diagnose
+from ...analysis.gap.layers import Answer, answer
 from ...analysis.gap.rigfit import model_level as rig_to_modes
 from ...analysis.gap.sensors import DataChecks, check_trial
 from ...analysis.gap.trialdata import TrialData
@@ -58,12 +59,18 @@ def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settin
     d.model_level, d.data = level, data
     if note:
         d.notes.append(note)
-    if level is not None and d.best is not None and level.absorbs(d.best.location["gages"]):
-        d.notes.append(f"{d.best.name} at gages {', '.join(map(str, d.best.location['gages']))} would "
-                       "close the gap, but the rig calibrated to the trial's modes still misses them "
-                       "there: not separable from the model's form error, not named")
-        d.verdict, d.best = "unexplained", None
+    d.answer = one_answer(d)
     return lt, td, d
+
+
+def one_answer(d: Diagnosis) -> Answer:
+    """The one report's answer of both layers (:func:`ramdaq.analysis.gap.layers.answer`, the
+    function the benchmark scores with): the model's choice, set aside where the rig calibrated
+    to the trial's modes still misses them (model form), and a data-only finding's precedence."""
+    form = d.model_level.form_gages() if d.model_level is not None else set()
+    cands = [c.record() | {"location": c.location} for c in d.candidates]
+    finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
+    return answer(d.model_choice(), cands, d.unexplained_where, form, finds)
 
 
 def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,
@@ -90,6 +97,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
            f"{int((~td.fitted).sum())} held out), {td.n_gages} gages, compared up to "
            f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
            f"verdict: {_headline(d)}"]
+    out += answer_lines(d)
     zf = float(np.max(d.map_fit.z))
     held = (f", {float(np.max(d.map_held.z)):.1f} held out; the largest the held-out impacts reproduce "
             f"z = {d.z_detect:.1f}" if d.map_held else "")
@@ -139,6 +147,21 @@ def summary_lines(d: Diagnosis) -> list[str]:
         out.append(f"  with {d.best.name}:    {ms}")
     out += [f"  note: {n}" for n in d.notes]
     return out
+
+
+def answer_lines(d: Diagnosis) -> list[str]:
+    """Why the answer is not the model layer's own choice, when it is not."""
+    a, model = d.answer, d.model_choice()
+    if a is None or a.named == (model or "none"):
+        return []
+    alone = f"named {model}" if model and model != "unexplained" else ("found the gap unexplained"
+                                                                       if model else "saw no gap")
+    if a.by == "data":
+        why = "the data-only finding takes precedence (it rests on the recorded values alone)"
+    else:
+        why = ("it lies only where the rig calibrated to the trial's modes still misses them: not "
+               "separable from the model's form error")
+    return [f"  the model layer alone {alone}; {why}"]
 
 
 def data_lines(d: Diagnosis) -> list[str]:

@@ -276,39 +276,27 @@ def _min_closure(d) -> float:
     return FORM_MIN_CLOSURE if form else 0.0
 
 
-def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
-    """The verdict's choice re-evaluated for other thresholds (for tuning): the diagnosis' own
-    :func:`~ramdaq.analysis.gap.diagnose.choose` on the stored candidates."""
+def _model_choice(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str | None:
+    """The model layer's choice re-evaluated for other thresholds (for tuning): the diagnosis'
+    own :func:`~ramdaq.analysis.gap.verdict.choose` on the stored candidates; a perturbed-rig
+    trial whose model level left a form error asks more closure of an effect."""
     from ...analysis.gap.verdict import choose
+
+    floor = max(min_closure, r.get("min_closure", 0.0))
+    return choose(r["candidates"], _z(r) > z_gap, bic_min, floor)
+
+
+def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
+    """The model layer's answer alone (:func:`~ramdaq.analysis.gap.layers.model_answer`, as
+    ``ramdaq gap`` applies it): an effect, "unexplained", or "none"."""
+    from ...analysis.gap.layers import model_answer
 
     if "error" in r:
         return "none"
-    # a perturbed-rig trial whose model level left a form error asks more closure of an effect
-    # and names none acting only where that form error is; a gap it names nothing for is the
-    # model's form: "no effect; model form" (ramdaq.daq.commands.gap)
-    floor = max(min_closure, r.get("min_closure", 0.0))
-    named = choose(r["candidates"], _z(r) > z_gap, bic_min, floor)
-    form = set(r.get("form_gages", []))
-    if form:
-        c = next((c for c in r["candidates"] if c["name"] == named), None)
-        if named == "unexplained":
-            # unexplained where the calibrated rig still misses its modes is the model's form;
-            # unexplained elsewhere stands (issue 17: an effect outside the library)
-            w = r.get("unexplained_where")
-            if w is None or not w["gages"] or set(w["gages"]) <= form:
-                return "none"
-        elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= form:
-            return "none"
-    return named or "none"
+    return model_answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"],
+                        r.get("unexplained_where"), set(r.get("form_gages", []))).named
 
 
-DATA_EFFECT = {"gain": "gage_sensitivity", "dead": "gage_sensitivity", "rigid_body": "gage_alignment",
-               "time_skew": "time_skew", "highpass": "highpass", "clipping": "clipping",
-               "ambient_tone": "ambient_tone", "double_hit": "double_hit"}
-"""The library effect each data-only check's finding names (a homogeneity finding: friction when
-the decrement moves with the blow, "unexplained" when the frequency does -- an amplitude-
-dependent stiffness the library does not hold)."""
-DATA_WINDOW = {"pre": "pre", "early": "early", "peaks": "early", "decay": "late"}
 LAYER_OF = {"gage_sensitivity": "sensor", "gage_alignment": "sensor", "time_skew": "sensor",
             "clipping": "sensor", "highpass": "sensor", "ambient_tone": "excitation",
             "double_hit": "excitation", "friction": "nonlinearity", "hull_coupling": "structure",
@@ -319,46 +307,18 @@ whose right answer with a perturbed rig is "no effect; model form: ...")."""
 LAYERS = ("sensor", "excitation", "nonlinearity", "structure", "model form", "unexplained")
 
 
-def _data_effect(f: dict) -> str | None:
-    if f["check"] == "homogeneity":
-        return "unexplained" if "frequency_per_doubling" in f.get("more", {}) else "friction"
-    return DATA_EFFECT.get(f["check"])
-
-
-def _strength(f: dict) -> float:
-    """A stored finding's statistic over its chance level (JSON stores an infinite one as null)."""
-    stat = math.inf if f["statistic"] is None else f["statistic"]
-    return stat / max(f["chance_level"] or 1e-12, 1e-12)
-
-
 def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
-    """The one report's answer, both layers: the model layer's choice (:func:`_decide`), which a
-    data-only finding replaces when the model names no effect or blames a sensor (the data
-    layer rests on the recorded values and the gages' positions alone: its finding takes
-    precedence, :mod:`ramdaq.analysis.gap.layers`). Keys: ``named``, ``by`` ("model"/"data"),
-    ``location`` (as a candidate's, or None), ``closed_held`` (None when not measured)."""
-    from ...analysis.gap.layers import SENSOR_EFFECTS, overriding_unexplained
+    """The one report's answer, both layers, as ``ramdaq gap`` prints it: the same function
+    (:func:`ramdaq.analysis.gap.layers.answer`) on the stored result, the model's choice
+    re-evaluated for the thresholds given. Keys: ``named``, ``by`` ("model"/"data"),
+    ``location`` (as a candidate's, or None), ``closed_held`` (None when not measured),
+    ``finding`` (the data-only finding that answered, or None)."""
+    from ...analysis.gap.layers import answer
 
-    named = _decide(r, z_gap, bic_min, min_closure)
-    c = next((c for c in r.get("candidates", []) if c["name"] == named), None)
-    loc = c["location"] if c else (r.get("unexplained_where") if named == "unexplained" else None)
-    out = {"named": named, "by": "model", "location": loc, "closed_held": c["closed_held"] if c else None}
-    finds = [f for f in r.get("data_findings") or [] if _data_effect(f)]
-    if not finds or named in {_data_effect(f) for f in finds}:
-        return out
-    if named == "unexplained":
-        # a sensor finding well above chance outranks the model's unexplained (issue 17)
-        finds = [f for f in overriding_unexplained(r.get("data_findings") or []) if _data_effect(f)]
-        if not finds:
-            return out
-    elif named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
-        return out
-    f = max(finds, key=_strength)
-    eff = _data_effect(f)
-    cd = next((c for c in r.get("candidates", []) if c["name"] == eff), None)
-    return {"named": eff, "by": "data", "closed_held": cd["closed_held"] if cd else None,
-            "location": {"gages": f["gages"], "window": DATA_WINDOW.get(f["window"], f["window"]),
-                         "band_hz": None, "effect_mode_hz": f["mode_hz"][0] if f["mode_hz"] else None}}
+    if "error" in r:
+        return {"named": "none", "by": "model", "location": None, "closed_held": None, "finding": None}
+    return answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"], r.get("unexplained_where"),
+                  set(r.get("form_gages", [])), r.get("data_findings") or []).to_json()
 
 
 def _z(r: dict) -> float:
