@@ -14,7 +14,7 @@ run helps another:
   model level, data-only layer, effect search) and the report's JSON;
 - ``read``: reading the recording and cutting the trial (:func:`load_trial`, :func:`trial_data`);
 - ``model``: the model level (:func:`ramdaq.analysis.gap.rigfit.model_level`);
-- ``data``: the data-only layer (:func:`ramdaq.daq.commands.gap.data_only`);
+- ``data``: the data-only layer (:func:`ramdaq.daq.gap_layers.data_only`);
 - ``search``: the effect search (:func:`ramdaq.analysis.gap.diagnose.diagnose`) on the rig the
   model level calibrated.
 
@@ -66,7 +66,8 @@ def child(path: str, layer: str) -> dict:
 
     from ramdaq.analysis.gap.diagnose import diagnose
     from ramdaq.analysis.gap.rigfit import model_level
-    from ramdaq.daq.commands.gap import data_only, run_gap
+    from ramdaq.daq.commands.gap import run_gap
+    from ramdaq.daq.gap_layers import data_only
     from ramdaq.daq.gap_trial import load_trial, trial_data
 
     def timed(fn):

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..analysis.gap.diagnose import Diagnosis, Settings
+from ..analysis.gap.layers import Answer
 from ..analysis.impact import ImpactAnalysis
 from ..analysis.model.rig import Rig
 from .analyzer import HitResult, judge_event, trial_summary
@@ -177,12 +178,23 @@ class TrialDiagnosis:
 
     @property
     def verdict(self) -> str:
+        """The model layer's verdict (``explained``, ``unexplained``, ...); :attr:`answer` is
+        the report's answer of both layers."""
         return self.diagnosis.verdict
 
     @property
+    def answer(self) -> Answer | None:
+        """The one answer of both layers, as ``ramdaq gap`` prints it and the benchmark scores
+        it (:func:`~ramdaq.analysis.gap.layers.answer`)."""
+        return self.diagnosis.answer
+
+    @property
     def effect(self) -> str | None:
-        """The named effect, ``None`` unless the verdict is "explained"."""
-        return self.diagnosis.best.name if self.diagnosis.best else None
+        """The library effect the answer names; ``None`` for no effect or an unexplained gap."""
+        a = self.diagnosis.answer
+        if a is None:
+            return self.diagnosis.best.name if self.diagnosis.best else None
+        return None if a.named in ("none", "unexplained") else a.named
 
     def candidates(self) -> list[Candidate]:
         d = self.diagnosis
@@ -207,11 +219,12 @@ class TrialDiagnosis:
 def diagnose(src: Source, *, rig: Rig | str | Path | None = None, settings: Settings | None = None,
              progress: Callable[[str], None] | None = None) -> TrialDiagnosis:
     """Hold a recording against its rig's model as ``ramdaq gap`` does (minutes on two cores)."""
-    from ..analysis.gap.diagnose import diagnose as run
-    from .gap_trial import load_trial, trial_data
+    from .gap_layers import diagnose_trial
+    from .gap_trial import load_trial
 
     _check_blas_threads()
     rec = as_recording(src, rig)
-    lt = load_trial(rec, progress=progress)
-    return TrialDiagnosis(rec, run(trial_data(lt), settings or Settings(), progress), lt)
+    lt, _, d = diagnose_trial(load_trial(rec, progress=progress), settings=settings,
+                              progress=progress)
+    return TrialDiagnosis(rec, d, lt)
 

@@ -131,3 +131,17 @@ def test_shared_mode_columns_repeat_the_mode_table(analysed: ramdaq.TrialAnalysi
         assert (r.mode_f_hz, r.mode_delta, r.mode_zeta_se) == (
             m.frequency_hz[r.mode], m.delta[r.mode], m.zeta_se[r.mode])
         assert -np.pi <= r.phase_rad <= np.pi and r.amplitude > 0
+
+
+def test_diagnose_runs_every_layer_and_answers_as_ramdaq_gap() -> None:
+    """``ramdaq.diagnose`` runs the layers ``ramdaq gap`` runs (the model level calibrating the
+    rig to the trial's modes, the data-only checks) and carries the same one answer; it ran
+    the effect search alone and its ``effect`` was the model layer's choice."""
+    from ramdaq.daq.gap_layers import one_answer
+
+    air = Path(__file__).parent.parent / "recordings" / "albacore-air.mcap"
+    d = ramdaq.diagnose(air)
+    assert d.diagnosis.model_level is not None and d.diagnosis.data is not None
+    assert d.answer is not None and d.answer == one_answer(d.diagnosis)
+    # the simulator's own clean trial with its own rig: nothing to name
+    assert d.answer.named == "none" and d.effect is None

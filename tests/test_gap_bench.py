@@ -296,8 +296,9 @@ def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
     from types import SimpleNamespace
 
     from ramdaq.analysis.gap.diagnose import Diagnosis
-    from ramdaq.daq.commands.gap import answer_lines, one_answer
+    from ramdaq.daq.commands.gap import answer_lines
     from ramdaq.daq.commands.gap_bench import decision
+    from ramdaq.daq.gap_layers import one_answer
 
     hp = {"check": "highpass", "layer": "sensor", "gages": [14], "window": "decay", "mode_hz": [13.0],
           "statistic": 239.0, "chance_level": 17.3, "more": {}, "text": "a 1.5 Hz high-pass on gage 14"}

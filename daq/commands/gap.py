@@ -12,78 +12,25 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ...analysis.gap.datamodel import P_CHANCE
-from ...analysis.gap.diagnose import Diagnosis, Settings, diagnose
-from ...analysis.gap.layers import Answer, answer
-from ...analysis.gap.rigfit import model_level as rig_to_modes
-from ...analysis.gap.sensors import DataChecks, check_trial
+from ...analysis.gap.diagnose import Diagnosis, Settings
 from ...analysis.gap.trialdata import TrialData
 from ..analyzer import finite_json
-from ..gap_trial import LoadedTrial, load_trial, trial_data
-
-FORM_MIN_CLOSURE = 0.5
-"""When the rig calibrated to the trial's modes still misses some of them (a model-form error),
-an effect is named only if it closes at least half of the held-out impacts' gap: an effect that
-closes less is fitting the model's form (a crude rig's detuned mode), not a cause in the trial."""
+from ..gap_layers import diagnose_trial
+from ..gap_trial import LoadedTrial, load_trial
 
 
 def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settings | None = None,
             progress: Callable[[str], None] | None = None, data_checks: bool = True,
             model_level: bool = True, **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
-    """Diagnose a recording. With ``model_level`` the rig is first calibrated to the trial's
-    identified modes (:func:`~ramdaq.analysis.gap.rigfit.model_level`) and the effect search
-    runs on what that leaves; the diagnosis carries the model's form error. With
-    ``data_checks`` the data-only layer (:func:`data_only`) runs too and its findings join the
-    diagnosis."""
-    say = progress or (lambda s: None)
-    lt = load_trial(path, rig, progress)
-    td = trial_data(lt, **prep)
-    level = None
-    settings = settings or Settings()
-    if model_level:
-        say(f"model level: identifying the modes of {td.n_seg} impacts, calibrating the rig to them")
-        level = rig_to_modes(td)
-        if level.fit is not None:
-            lt = replace(lt, rig=level.fit.rig)
-            td = trial_data(lt, **prep)
-            if level.fit.form:
-                settings = replace(settings, min_closure=max(settings.min_closure, FORM_MIN_CLOSURE))
-        say(level.statement())
-    data, note = data_only(lt, td, prep.get("pre_s", 1.0), progress) if data_checks else (None, None)
-    d = diagnose(td, settings, progress)
-    d.model_level, d.data = level, data
-    if note:
-        d.notes.append(note)
-    d.answer = one_answer(d)
-    return lt, td, d
-
-
-def one_answer(d: Diagnosis) -> Answer:
-    """The one report's answer of both layers (:func:`ramdaq.analysis.gap.layers.answer`, the
-    function the benchmark scores with): the model's choice, set aside where the rig calibrated
-    to the trial's modes still misses them (model form), and a data-only finding's precedence."""
-    form = d.model_level.form_gages() if d.model_level is not None else set()
-    cands = [c.record() | {"location": c.location} for c in d.candidates]
-    finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
-    return answer(d.model_choice(), cands, d.unexplained_where, form, finds)
-
-
-def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,
-              progress: Callable[[str], None] | None = None) -> tuple[DataChecks | None, str | None]:
-    """The data-only checks (:func:`ramdaq.analysis.gap.sensors.check_trial`) of the recording at
-    its own rate, on the impacts the diagnosis compares, with the pre-trigger window ``pre_s``
-    (s); (None, why) when the trial leaves them nothing to read (too short a decay between
-    blows)."""
-    (progress or (lambda s: None))("data-only checks (free modal model, sensors, blows, ambient)")
-    try:
-        return check_trial(lt.x, lt.fs_hz, td.onsets_s, lt.rig.gages_by_channel(), pre_s=pre_s), None
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        return None, f"data-only checks not run: {exc}"
+    """Read a recording (:func:`~ramdaq.daq.gap_trial.load_trial`) and diagnose it
+    (:func:`~ramdaq.daq.gap_layers.diagnose_trial`, every layer unless turned off)."""
+    return diagnose_trial(load_trial(path, rig, progress), settings=settings, progress=progress,
+                          data_checks=data_checks, model_level=model_level, **prep)
 
 
 def _pct(v: float) -> str:

@@ -1,0 +1,76 @@
+"""The layers of a gap diagnosis run on a loaded trial, as ``ramdaq gap``, ``ramdaq batch gap``
+and :func:`ramdaq.daq.api.diagnose` run them: the model level (the rig calibrated to the trial's
+modes), the data-only checks, the effect search, and the one answer of both layers."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ..analysis.gap.diagnose import Diagnosis, Settings, diagnose
+from ..analysis.gap.layers import Answer, answer
+from ..analysis.gap.rigfit import model_level as rig_to_modes
+from ..analysis.gap.sensors import DataChecks, check_trial
+from ..analysis.gap.trialdata import TrialData
+from .gap_trial import LoadedTrial, trial_data
+
+FORM_MIN_CLOSURE = 0.5
+"""When the rig calibrated to the trial's modes still misses some of them (a model-form error),
+an effect is named only if it closes at least half of the held-out impacts' gap: an effect that
+closes less is fitting the model's form (a crude rig's detuned mode), not a cause in the trial."""
+
+
+def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
+                   progress: Callable[[str], None] | None = None, data_checks: bool = True,
+                   model_level: bool = True, **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
+    """Diagnose a loaded trial. With ``model_level`` the rig is first calibrated to the trial's
+    identified modes (:func:`~ramdaq.analysis.gap.rigfit.model_level`) and the effect search
+    runs on what that leaves; the diagnosis carries the model's form error. With
+    ``data_checks`` the data-only layer (:func:`data_only`) runs too and its findings join the
+    diagnosis; :attr:`Diagnosis.answer` is the one answer of both (:func:`one_answer`).
+    Returns the trial (with the calibrated rig), its data as compared, and the diagnosis."""
+    say = progress or (lambda s: None)
+    td = trial_data(lt, **prep)
+    level = None
+    settings = settings or Settings()
+    if model_level:
+        say(f"model level: identifying the modes of {td.n_seg} impacts, calibrating the rig to them")
+        level = rig_to_modes(td)
+        if level.fit is not None:
+            lt = replace(lt, rig=level.fit.rig)
+            td = trial_data(lt, **prep)
+            if level.fit.form:
+                settings = replace(settings, min_closure=max(settings.min_closure, FORM_MIN_CLOSURE))
+        say(level.statement())
+    data, note = data_only(lt, td, prep.get("pre_s", 1.0), progress) if data_checks else (None, None)
+    d = diagnose(td, settings, progress)
+    d.model_level, d.data = level, data
+    if note:
+        d.notes.append(note)
+    d.answer = one_answer(d)
+    return lt, td, d
+
+
+def one_answer(d: Diagnosis) -> Answer:
+    """The one report's answer of both layers (:func:`ramdaq.analysis.gap.layers.answer`, the
+    function the benchmark scores with): the model's choice, set aside where the rig calibrated
+    to the trial's modes still misses them (model form), and a data-only finding's precedence."""
+    form = d.model_level.form_gages() if d.model_level is not None else set()
+    cands = [c.record() | {"location": c.location} for c in d.candidates]
+    finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
+    return answer(d.model_choice(), cands, d.unexplained_where, form, finds)
+
+
+def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,
+              progress: Callable[[str], None] | None = None) -> tuple[DataChecks | None, str | None]:
+    """The data-only checks (:func:`ramdaq.analysis.gap.sensors.check_trial`) of the recording at
+    its own rate, on the impacts the diagnosis compares, with the pre-trigger window ``pre_s``
+    (s); (None, why) when the trial leaves them nothing to read (too short a decay between
+    blows)."""
+    (progress or (lambda s: None))("data-only checks (free modal model, sensors, blows, ambient)")
+    try:
+        return check_trial(lt.x, lt.fs_hz, td.onsets_s, lt.rig.gages_by_channel(), pre_s=pre_s), None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return None, f"data-only checks not run: {exc}"
