@@ -197,6 +197,8 @@ def main() -> None:
     ap.add_argument("--window", type=float, default=15.0,
                     help="s per window of the RSS floor (the lowest sample in each)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--keep", type=Path, default=None, metavar="DIR",
+                    help="write the .mcap and .rrd into DIR (kept) instead of a temporary folder")
     ap.add_argument("--verbose", action="store_true", help="print the session's hit messages")
     ap.add_argument("--mmap-threshold", type=int, default=None, metavar="BYTES",
                     help="glibc: give every allocation of BYTES or more its own mapping "
@@ -213,8 +215,10 @@ def main() -> None:
         set_mmap_threshold(args.mmap_threshold)
         print(f"glibc: every allocation of {args.mmap_threshold} B or more in its own mapping")
     with tempfile.TemporaryDirectory() as tmp:
-        outcome, rss = run_trial(args, Path(tmp), lambda r: print_growth(r, args))
-        size = {p.suffix: p.stat().st_size / 1e6 for p in Path(tmp).iterdir()}
+        folder = Path(tmp) if args.keep is None else args.keep
+        folder.mkdir(parents=True, exist_ok=True)
+        outcome, rss = run_trial(args, folder, lambda r: print_growth(r, args))
+        size = {p.suffix: p.stat().st_size / 1e6 for p in folder.glob("soak.*")}
     s = outcome.summary
     print(f"hits {s['hits']}, accepted {s['accepted']}; analyzer: {s['analyzer']}")
     print("files: " + ", ".join(f"{k} {v:.1f} MB" for k, v in sorted(size.items()))
