@@ -33,7 +33,7 @@ viewer holds ~70 B per point, so the live traces are never full rate (16 ch x 10
 
 Few entities, few chunks: every row logged to an entity at its own moment becomes a chunk of its
 own in the ``.rrd``, and the file's footer keeps a manifest entry per chunk in memory until the
-file is closed (~2 kB each, Rerun 0.41). First looks come every ~0.5 s while a blow rings; logged
+file is closed (~1.7 kB each, Rerun 0.41). First looks come every ~0.5 s while a blow rings; logged
 per gage (``results/gXX/...``) they were 32 chunks a look, ~8 MB/min of RSS and two thirds of the
 file (``benchmarks/soak.py``); as one row of all gages under ``results/looks`` they are 2.
 """
@@ -169,9 +169,10 @@ class RerunView:
     footer : bool
         Finish the ``.rrd`` with Rerun's footer (a manifest of every chunk: random access, and
         ``rerun rrd verify`` passes). Rerun keeps that manifest in memory until :meth:`close`,
-        ~1 kB per chunk written, so a long trial's RSS grows with it (``benchmarks/soak.py
-        --no-footer`` shows the difference); ``False`` for long sessions, and
-        ``rerun rrd optimize`` adds a footer afterwards.
+        ~1.7 kB per chunk written, so a long trial's RSS grows with it: a live trial writes
+        ~500 chunks a minute (5 a second of live traces, the rest per blow and look), ~0.9 MB
+        per minute (``benchmarks/rerun_rss.py --no-footer`` shows the difference); ``False``
+        for sessions of hours, and ``rerun rrd optimize`` adds a footer afterwards.
     memory_limit : str
         Buffer limit of the gRPC server (late-joining web viewers replay it) and of a spawned native
         viewer, e.g. ``"25%"`` of RAM or ``"2GB"``; the oldest data is dropped beyond it.
