@@ -42,16 +42,17 @@ def stream(fs_hz: float, seconds: float) -> tuple[object, list[Block]]:
 def bench_view(fs_hz: float, seconds: float, live_rate_hz: float, tmp: Path) -> None:
     info, blocks = stream(fs_hz, seconds)
     path = tmp / f"view_{fs_hz:g}.rrd"
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     with RerunView(info, rrd_path=path, live_rate_hz=live_rate_hz) as view:
         for b in blocks:
             view.log_block(b)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     n = sum(b.n_samples for b in blocks) * info.n_channels
     rows_s = info.fs_hz / view.bucket
     points_s = rows_s * (2 if view.bucket > 1 else 1) * info.n_channels
     print(f"log_block  16 ch x {fs_hz:>7g} Hz ({len(blocks)} blocks of {blocks[0].n_samples}): "
-          f"{n / wall / 1e6:6.1f} M samples/s in, {seconds / wall:4.0f}x real time; "
+          f"{n / wall / 1e6:6.1f} M samples/s in, {seconds / wall:4.0f}x real time, "
+          f"{cpu / seconds * 1e3:5.1f} ms CPU (all threads) per stream s; "
           f"bucket {view.bucket} -> {rows_s:.0f} rows/s/ch; "
           f".rrd {path.stat().st_size / seconds / 1e3:6.1f} kB per stream s; "
           f"viewer ~{points_s * 70 / 1e6:.1f} MB per stream s at 70 B/point")

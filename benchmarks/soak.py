@@ -20,6 +20,11 @@ how far it rises is how far the acquisition fell behind.
     python benchmarks/soak.py                         # 10 min at 2048 Hz, with the view
     python benchmarks/soak.py --rate 25600            # 5 min at 25.6 kHz, with the view
     python benchmarks/soak.py --minutes 2 --no-view   # a short check
+    python benchmarks/soak.py --rate 25600 --keep /tmp/s   # keep soak.mcap and soak.rrd
+
+Diagnostics (not what the trial does): ``--mmap-threshold`` and ``--trim-every`` change how
+glibc's heap returns freed memory; "RSS" minus glibc's "held" is Rerun's own allocator
+(mimalloc), Python's small objects and the code.
 """
 
 from __future__ import annotations
@@ -117,6 +122,7 @@ class RssSampler:
 
     def __init__(self, every_s: float, stream_s, duration_s: float, lag_s, on_end) -> None:
         self.every_s, self.stream_s, self.duration_s = every_s, stream_s, duration_s
+        self.trim_every_s: float | None = None  # glibc malloc_trim(0) this often, s, if set
         self.on_end = on_end  # called once, with this sampler, when the stream has ended
         self.lag_s = lag_s  # s the stream is behind the sample clock (wall; offset), or NaN
         self.samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
@@ -136,7 +142,11 @@ class RssSampler:
         self._thread.join()
 
     def _run(self) -> None:
+        last_trim = time.monotonic()
         while not self._stop.wait(self.every_s):
+            if self.trim_every_s and time.monotonic() - last_trim >= self.trim_every_s:
+                last_trim = time.monotonic()
+                ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
             t, rss = time.monotonic() - self._t0, self._proc.memory_info().rss / 1e6
             used, held = glibc_heap_mb()
             stream, lag, load = self.stream_s(), self.lag_s(), os.getloadavg()[0]
@@ -173,6 +183,7 @@ def run_trial(args: argparse.Namespace, folder: Path, on_end) -> tuple[object, R
 
     with RssSampler(args.every, lambda: session.samples / info.fs_hz, duration, lag_s,
                     on_end) as rss:
+        rss.trim_every_s = args.trim_every
         try:
             outcome = session.run()
         finally:
@@ -197,6 +208,11 @@ def main() -> None:
     ap.add_argument("--window", type=float, default=15.0,
                     help="s per window of the RSS floor (the lowest sample in each)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--trim-every", type=float, default=None, metavar="S",
+                    help="glibc: malloc_trim(0) every S s on the sampler's thread (a diagnostic: "
+                         "returns the heap's free pages; the trial does not do it)")
+    ap.add_argument("--keep", type=Path, default=None, metavar="DIR",
+                    help="write the .mcap and .rrd into DIR (kept) instead of a temporary folder")
     ap.add_argument("--verbose", action="store_true", help="print the session's hit messages")
     ap.add_argument("--mmap-threshold", type=int, default=None, metavar="BYTES",
                     help="glibc: give every allocation of BYTES or more its own mapping "
@@ -213,8 +229,10 @@ def main() -> None:
         set_mmap_threshold(args.mmap_threshold)
         print(f"glibc: every allocation of {args.mmap_threshold} B or more in its own mapping")
     with tempfile.TemporaryDirectory() as tmp:
-        outcome, rss = run_trial(args, Path(tmp), lambda r: print_growth(r, args))
-        size = {p.suffix: p.stat().st_size / 1e6 for p in Path(tmp).iterdir()}
+        folder = Path(tmp) if args.keep is None else args.keep
+        folder.mkdir(parents=True, exist_ok=True)
+        outcome, rss = run_trial(args, folder, lambda r: print_growth(r, args))
+        size = {p.suffix: p.stat().st_size / 1e6 for p in folder.glob("soak.*")}
     s = outcome.summary
     print(f"hits {s['hits']}, accepted {s['accepted']}; analyzer: {s['analyzer']}")
     print("files: " + ", ".join(f"{k} {v:.1f} MB" for k, v in sorted(size.items()))

@@ -33,7 +33,7 @@ viewer holds ~70 B per point, so the live traces are never full rate (16 ch x 10
 
 Few entities, few chunks: every row logged to an entity at its own moment becomes a chunk of its
 own in the ``.rrd``, and the file's footer keeps a manifest entry per chunk in memory until the
-file is closed (~2 kB each, Rerun 0.41). First looks come every ~0.5 s while a blow rings; logged
+file is closed (~1.7 kB each, Rerun 0.41). First looks come every ~0.5 s while a blow rings; logged
 per gage (``results/gXX/...``) they were 32 chunks a look, ~8 MB/min of RSS and two thirds of the
 file (``benchmarks/soak.py``); as one row of all gages under ``results/looks`` they are 2.
 """
@@ -52,12 +52,27 @@ from pathlib import Path
 from urllib.parse import quote
 
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
 
-from ..analysis.model.rig import Rig, parse_rig
-from ..drivers.block import Block, StreamInfo
-from .errors import ViewError
+# Rerun's Rust side allocates with its own mimalloc, which hands a freed page back to the OS only
+# after a purge delay, and only when the thread that owns it next calls into the allocator: in a
+# live trial the logging and writer threads mostly sleep, so the copies of every blow's full-rate
+# traces (16 ch x 1.2 s x 25.6 kHz x 8 B = 3.9 MB, held two or three times on the way to the file)
+# stayed resident, +6 to +12 MB per minute of a 25.6 kHz trial with the view alone
+# (``benchmarks/rerun_rss.py --pace 1``), flat with a purge delay of 0. mimalloc reads the option
+# when rerun's library loads, hence before the import; a value already in the environment is kept,
+# and the viewers started here (:func:`_run`) get the environment as it was.
+PURGE_ENV = "MIMALLOC_PURGE_DELAY"
+_SET_PURGE = PURGE_ENV not in os.environ
+PURGE_APPLIED = "rerun_bindings" not in sys.modules
+"""False when rerun was imported before this module, so the purge delay set here came too late."""
+os.environ.setdefault(PURGE_ENV, "0")
+
+import rerun as rr  # noqa: E402
+import rerun.blueprint as rrb  # noqa: E402
+
+from ..analysis.model.rig import Rig, parse_rig  # noqa: E402
+from ..drivers.block import Block, StreamInfo  # noqa: E402
+from .errors import ViewError  # noqa: E402
 
 TIMELINE = "time"
 BODY_COLORS = {"rudder": (60, 130, 230), "stock": (240, 150, 40), "hull": (150, 150, 150)}
@@ -116,9 +131,10 @@ def check_ports(web_port: int, grpc_port: int) -> None:
 
 
 def _run(args: list[str], **kw: object) -> subprocess.Popen:
-    """Start the wheel's ``rerun`` binary, quiet."""
+    """Start the wheel's ``rerun`` binary, quiet, in the environment without our purge delay."""
+    env = {k: v for k, v in os.environ.items() if not (_SET_PURGE and k == PURGE_ENV)}
     return subprocess.Popen([str(rerun_binary()), *args], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, **kw)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, **kw)
 
 
 class RerunView:
@@ -153,9 +169,10 @@ class RerunView:
     footer : bool
         Finish the ``.rrd`` with Rerun's footer (a manifest of every chunk: random access, and
         ``rerun rrd verify`` passes). Rerun keeps that manifest in memory until :meth:`close`,
-        ~1 kB per chunk written, so a long trial's RSS grows with it (``benchmarks/soak.py
-        --no-footer`` shows the difference); ``False`` for long sessions, and
-        ``rerun rrd optimize`` adds a footer afterwards.
+        ~1.7 kB per chunk written, so a long trial's RSS grows with it: a live trial writes
+        ~500 chunks a minute (5 a second of live traces, the rest per blow and look), ~0.9 MB
+        per minute (``benchmarks/rerun_rss.py --no-footer`` shows the difference); ``False``
+        for sessions of hours, and ``rerun rrd optimize`` adds a footer afterwards.
     memory_limit : str
         Buffer limit of the gRPC server (late-joining web viewers replay it) and of a spawned native
         viewer, e.g. ``"25%"`` of RAM or ``"2GB"``; the oldest data is dropped beyond it.

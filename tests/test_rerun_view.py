@@ -4,7 +4,9 @@ localhost and stopped."""
 
 from __future__ import annotations
 
+import os
 import socket
+import subprocess
 import sys
 import urllib.request
 from pathlib import Path
@@ -15,6 +17,7 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
+from ramdaq.daq import rerun_view
 from ramdaq.daq.errors import ViewError
 from ramdaq.daq.rerun_view import RerunView, check_ports
 from ramdaq.drivers.block import Block
@@ -225,3 +228,37 @@ def test_a_taken_port_is_named_before_anything_starts(tmp_path: Path) -> None:
             check_ports(busy, busy)
     assert not (tmp_path / "x.rrd").exists()
     check_ports(_free_port(), _free_port())  # free ones pass
+
+
+_PURGE_PROBE = ("import os, sys; import ramdaq.daq.rerun_view as v; "
+                "print(v.PURGE_APPLIED, os.environ.get(v.PURGE_ENV))")
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, "0"), ("250", "250")])
+def test_rerun_allocator_purges_at_once_unless_told_otherwise(given: str | None,
+                                                              expected: str) -> None:
+    """Importing the view sets Rerun's mimalloc purge delay to 0 before rerun's library loads (a
+    fresh interpreter, as the CLI starts), so pages freed by Rerun's threads go back to the OS; a
+    value the user gave is kept. (The RSS it saves is a benchmark's: benchmarks/rerun_rss.py
+    --pace 1.)"""
+    env = {k: v for k, v in os.environ.items() if k != "MIMALLOC_PURGE_DELAY"}
+    if given is not None:
+        env["MIMALLOC_PURGE_DELAY"] = given
+    out = subprocess.run([sys.executable, "-c", _PURGE_PROBE], env=env, capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert out == ["True", expected]
+
+
+def test_viewers_started_here_get_the_users_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The purge delay is for this process's Rerun: a viewer spawned by _run does not inherit the
+    value set here (it would when the user set it)."""
+    seen: dict[str, dict] = {}
+
+    def fake_popen(args: list[str], **kw: object) -> None:
+        seen["env"] = kw["env"]
+
+    monkeypatch.setattr(rerun_view.subprocess, "Popen", fake_popen)
+    monkeypatch.setattr(rerun_view, "_SET_PURGE", True)
+    rerun_view._run(["--version"])
+    assert rerun_view.PURGE_ENV not in seen["env"]
+    assert seen["env"].get("PATH") == os.environ.get("PATH")
