@@ -193,6 +193,7 @@ def test_gap_batch(client, fleet, tmp_path):
         k: (list(v) if isinstance(v, tuple) else v) for k, v in serial.rows[0].__dict__.items()}
     doc = json.loads((Path(r["folder"]) / "gap.json").read_text())
     assert doc["verdict"] == r["verdict"] and doc["effect"] == r["effect"]
+    assert r["answer"] == doc["answer"]["named"] and r["answered_by"] == doc["answer"]["by"]
 
 
 def test_gap_benchmark_through_dask_is_the_serial_run(client, tmp_path):

@@ -50,7 +50,9 @@ class GapRow:
     (residual energy beyond the noise, in noise variances), the share of it the named effect
     closes (1 = all; None without one) with its 95 % interval on the held-out impacts, the
     effect's ``dbic``, and the strongest ``findings`` in physical terms (one line each, as the
-    ``ramdaq gap`` summary prints them)."""
+    ``ramdaq gap`` summary prints them); ``answer`` the one answer of both layers (an effect's
+    name, ``"none"`` or ``"unexplained"``, as ``ramdaq gap`` prints it and the benchmark scores
+    it) and ``answered_by`` the layer that gave it (``"model"`` or ``"data"``)."""
 
     verdict: str
     effect: str | None
@@ -64,6 +66,8 @@ class GapRow:
     dbic: float | None
     impacts: int
     findings: tuple[str, ...]
+    answer: str | None = None
+    answered_by: str | None = None
 
 
 @dataclass(frozen=True)
@@ -182,7 +186,9 @@ def gap_row(d: Diagnosis, n_findings: int = 5) -> GapRow:
                   closed_held_out=_finite(b.closed_held) if b else None,
                   closed_held_out_lo=_finite(lo), closed_held_out_hi=_finite(hi),
                   dbic=_finite(b.dbic) if b else None, impacts=int(d.forward.td.n_seg),
-                  findings=tuple(r["text"] for r in fm.strongest(n_findings)) if fm else ())
+                  findings=tuple(r["text"] for r in fm.strongest(n_findings)) if fm else (),
+                  answer=d.answer.named if d.answer else None,
+                  answered_by=d.answer.by if d.answer else None)
 
 
 TASKS = {"analyze": analyze_task, "gap": gap_task}
