@@ -474,10 +474,11 @@ class Forward:
     def whitened(self, fit: Fit, segments: np.ndarray | None = None) -> np.ndarray:
         """Residual divided by each gage's sigma, flattened, over ``segments`` (default all);
         samples not compared are 0, so the length never changes."""
-        r = fit.resid * self.W
-        if segments is not None:
-            r = r[segments]
-        return np.nan_to_num(r.ravel(), nan=0.0)
+        if segments is None:
+            r = fit.resid * self.W
+        else:        # the segments first: the same products, fewer of them
+            r = fit.resid[segments] * self.W[segments]
+        return np.nan_to_num(r.ravel(), nan=0.0, copy=False)
 
 
 class Design:
