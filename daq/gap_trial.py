@@ -26,7 +26,9 @@ class LoadedTrial:
     channel order (a :class:`~ramdaq.analysis.gap.trialdata.ScaledCounts`, or an array in m/s^2
     when the recording came read already), ``fs_hz``, trigger ``onsets_s``, the (possibly
     reduced) ``rig``, ``rails`` (low, high) per row in m/s^2 when the converter's bits are known,
-    and the trigger's events. :attr:`x` is the whole trial in m/s^2, made when asked for."""
+    and the trigger's events (read from a file: without their samples, ``record`` None -- the
+    diagnosis reads the trial, not the trigger's records, which were 37 MB for 20 blows).
+    :attr:`x` is the whole trial in m/s^2, made when asked for."""
 
     rig: Rig
     data: ScaledCounts | np.ndarray
@@ -112,6 +114,8 @@ def _read_gages(path: str | Path, rig: Rig | str | Path | None):
                     c = c.astype(np.int16)
             parts.append((b.first_sample, c if same_scale else b.values()[rows]))
         impacts += trig.flush()
+    # the events' own copies of the samples (ImpactRecord) are let go: the counts are kept
+    impacts = [replace(ev, record=None) for ev in impacts]
     if not parts:
         return info, the_rig, have, np.empty((len(have), 0)), np.full(len(have), np.nan), 0, impacts
     data = _joined(parts, same_scale, scale, lo, hi)

@@ -54,3 +54,33 @@ def test_the_prediction_with_rung_out_blows_left_out_is_the_full_one(monkeypatch
     monkeypatch.setattr(forward, "RUNG_OUT", 1.0)
     crude = fw.fit(th, modes=ms)
     assert np.max(np.abs(crude.pred - full.pred)) > 1e-9 * scale
+
+
+def test_the_blocks_a_pulse_writes_solve_as_the_dense_unit_responses():
+    """A prediction made from only the (impact, segment) blocks a pulse writes is the one made
+    from the dense unit responses, to the bit (the block form only leaves the zeros out), for
+    the main blow alone and with a second, smaller contact 30 ms later (blocks written twice,
+    a ratio other than 1); and a design solves many data as a fresh one would."""
+    from ramdaq.analysis.gap.effects import EFFECTS
+    from ramdaq.analysis.gap.terms import Term, placement
+
+    td = trial_data(load_trial(ROOT / "recordings" / "albacore-water.mcap"))
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    ms = fw.modes(np.zeros(len(fw.params)))
+    pl = placement({"delays_ms": [30.0] * td.n_seg}, ("ratio",), ("1",), 0.0, 0.0, 1.0, [[0.2]])
+    hit = EFFECTS["double_hit"]
+    assert not hit.changes_units() and EFFECTS["friction"].changes_units()
+    preds = []
+    for terms in ([], [Term(hit, pl, np.array([0.2]))]):
+        U, dU = fw.unit_responses(ms, terms)
+        dense = fw.linear_design(U, dU, None)
+        blocks = fw.block_design(fw.unit_blocks(ms, terms), None)
+        for data in (fw.x0, 2 * fw.x0 + 1e-3):
+            c1, p1 = dense.solve(data)
+            c2, p2 = blocks.solve(data)
+            np.testing.assert_array_equal(c1, c2)
+            np.testing.assert_array_equal(p1, p2)
+        again = fw.linear_design(U, dU, None).solve(2 * fw.x0 + 1e-3)
+        np.testing.assert_array_equal(again[1], dense.solve(2 * fw.x0 + 1e-3)[1])
+        preds.append(p2)
+    assert np.max(np.abs(preds[0] - preds[1])) > 1e-6 * np.max(np.abs(preds[0]))   # the second contact shows

@@ -46,15 +46,15 @@ class Calibration:
     fitted parameters, the fit, ``chi2`` (sum of squared whitened residuals of the fitted
     impacts, priors excluded), ``prior`` (the prior's part of the cost, x2), ``jac`` the data
     rows of the Jacobian of the whitened residual in the base constants then the terms'
-    parameters, ``n_params``, ``nfev`` the predictions it took, ``stop`` how the solver ended
-    (giving up is not convergence)."""
+    parameters (None once let go: :meth:`drop_jacobian`), ``n_params``, ``nfev`` the
+    predictions it took, ``stop`` how the solver ended (giving up is not convergence)."""
 
     theta: np.ndarray
     terms: list[Term]
     fit: Fit
     chi2: float
     prior: float
-    jac: np.ndarray
+    jac: np.ndarray | None
     n_params: int
     nfev: int
     stop: Stop
@@ -64,6 +64,11 @@ class Calibration:
     def cost(self) -> float:
         """What the fit minimised: ``chi2 + prior``."""
         return self.chi2 + self.prior
+
+    def drop_jacobian(self) -> None:
+        """Let the Jacobian go (it is N x p, 40 MB for 20 impacts, and a judged candidate of
+        a search needs it no more); a score basis asked of this calibration then refuses."""
+        self.jac = None
 
     def columns(self, fw: Forward) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The linear columns of this calibration's prediction -- every impact's unit response,
@@ -114,9 +119,14 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
             i += k
         return th, out
 
+    last: dict[bytes, Fit] = {}     # the latest prediction: the solver mostly ends on it
+
     def residual(p: np.ndarray) -> np.ndarray:
         th, ts = unpack(p)
-        r = fw.whitened(fw.fit(th, ts), fitted)
+        fit = fw.fit(th, ts)
+        last.clear()
+        last[p.tobytes()] = fit
+        r = fw.whitened(fit, fitted)
         return np.concatenate([r, th / sd]) if free_base else r
 
     x_start = np.concatenate(([theta0] if free_base else []) + [t.x for t in terms])
@@ -136,7 +146,7 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
         J0[len(jac0):, :n_b] = np.diag(1 / sd)
     res = levenberg_marquardt(residual, x_start, lo_, hi_, x_scale, max_iter=max_iter, J0=J0)
     th, ts = unpack(res.x)
-    fit = fw.fit(th, ts)
+    fit = last.pop(res.x.tobytes(), None) or fw.fit(th, ts)
     r = fw.whitened(fit, fitted)
     n_data = len(r)
     jac = res.jac[:n_data] if free_base else np.zeros((n_data, 0))

@@ -546,10 +546,21 @@ def _candidates(search: _Search, sigs: list[Signature], significant: bool) -> li
                                                      default=0.0) >= st.close_enough):
             break
         cands += _consider(search, cands, [s])
+        _keep_best_jacobian(cands)
     pair = _second_effect(search, cands, live)
     if pair is not None:
         cands += _consider(search, cands, pair)
+    for c in cands:
+        c.cal.drop_jacobian()
     return cands
+
+
+def _keep_best_jacobian(cands: list[Candidate]) -> None:
+    """Let go of every single candidate's Jacobian (N x p, 40 MB at 20 impacts) but the best
+    one's, which :func:`_second_effect` scores on; nothing else reads them once judged."""
+    singles = sorted(cands, key=lambda c: c.dbic)
+    for c in singles[1:]:
+        c.cal.drop_jacobian()
 
 
 def _second_effect(search: _Search, cands: list[Candidate],

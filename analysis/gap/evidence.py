@@ -117,6 +117,8 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
     when it is right."""
     rng = np.random.default_rng(seed)
     U, dU, extra = cal.columns(fw)
+    design = fw.linear_design(U, dU, extra)      # the same columns for every replicate
+    del dU, extra
     out = np.empty((n_rep,) + fw.td.x.shape)
     needs_force = any(t.effect.needs_force for t in cal.terms)
     for r in range(n_rep):
@@ -134,7 +136,7 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
             Ur -= U
             x = x + np.tensordot(cal.fit.force, Ur, axes=1)
             del Ur
-        _, pred = fw._solve(U, dU, extra, x)
+        _, pred = design.solve(x)
         out[r] = np.where(fw.mask, x - pred, np.nan)
     return out
 
@@ -332,6 +334,8 @@ class ScoreBasis:
         self.fitted = np.flatnonzero(fw.td.fitted)
         self.W = fw.W[self.fitted]                 # the weights now (a later reweighting aside)
         self.L = fw.td.n_gages * fw.td.n_s         # rows per fitted segment
+        if cal.jac is None:
+            raise ValueError("score basis: the calibration's Jacobian was let go (drop_jacobian)")
         self.jac = cal.jac                         # (N, p): the calibration's own, not copied
         self.blocks, self.n_lin = _design_blocks(fw, cal, self.fitted)
         self._ginv = _gram_inverse(self._gram())

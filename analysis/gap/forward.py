@@ -142,6 +142,17 @@ def _rung_out(ms: ModeSet, c: np.ndarray, JT: np.ndarray) -> bool:
     return all(v <= RUNG_OUT * r for v, r in zip(now, ref, strict=True))
 
 
+def _add(blocks: dict, key: tuple[int, int], u: np.ndarray, du: np.ndarray) -> None:
+    """Add a response and its derivative to the block ``key`` (taken as it is when first
+    written, made contiguous: the same numbers as adding them to zeros). The arrays given must
+    not be used elsewhere (they may be added to in place)."""
+    if key in blocks:
+        blocks[key][0] += u
+        blocks[key][1] += du
+    else:
+        blocks[key] = [np.ascontiguousarray(u, dtype=float), np.ascontiguousarray(du, dtype=float)]
+
+
 @dataclass
 class Fit:
     """A prediction and how it matches the data.
@@ -244,14 +255,27 @@ class Forward:
         """Response of every impact per newton of peak force and its time derivative,
         each (n_imp, n_seg, n_gages, n_s); impact ``j`` is zero before its onset."""
         td = self.td
+        U = np.zeros((td.n_seg, td.n_seg, td.n_gages, td.n_s))
+        dU = np.zeros(U.shape)   # calloc: pages no pulse writes stay unmapped (zeros_like fills all)
+        for (j, s_), (u, du) in self.unit_blocks(ms, terms).items():
+            U[j, s_] = u
+            dU[j, s_] = du
+        for t in terms:
+            U, dU = t.effect.units(U, dU, ms, self, force, t)
+        return U, dU
+
+    def unit_blocks(self, ms: ModeSet, terms: list[Term] = ()) -> dict[tuple[int, int], list[np.ndarray]]:
+        """The blocks of :meth:`unit_responses` a pulse writes, before the terms' ``units`` hooks:
+        ``{(impact, segment): [u, du]}``, each (n_gages, n_s); every other block is zero (a blow
+        before its segment, or rung out). Summed in the same order as the dense form."""
+        td = self.td
         pulses = [(0.0, 1.0)]
         for t in terms:
             pulses += t.effect.pulses(t)
         basis = self.pulse_basis(ms)
         E, JT = basis
         T = ms.duration_s
-        U = np.zeros((td.n_seg, td.n_seg, td.n_gages, td.n_s))
-        dU = np.zeros(U.shape)   # calloc: pages no pulse writes stay unmapped (zeros_like fills all)
+        out: dict[tuple[int, int], list[np.ndarray]] = {}
         free = []      # (impact, segment, modal factors) of pulses over before the segment began
         for j in range(td.n_seg):
             for s_ in range(j, td.n_seg):
@@ -268,8 +292,8 @@ class Forward:
                         free.append((j, s_, c))
                         continue
                     u, du = self.pulse_response(ms, tau0, basis)
-                    U[j, s_] += ratio * u
-                    dU[j, s_] += ratio * du
+                    _add(out, (j, s_), u if ratio == 1.0 else ratio * u,
+                         du if ratio == 1.0 else ratio * du)
         if free:
             # a free decay is A diag(c) e^{lambda k dt}: all of them in one product
             C = np.stack([c for _, _, c in free])                         # (P, m)
@@ -279,11 +303,8 @@ class Forward:
             X = np.hstack([AC.real, -AC.imag]) @ np.vstack([E.real, E.imag])
             X = X.reshape(2, len(free), td.n_gages, td.n_s)
             for p_, (j, s_, _) in enumerate(free):
-                U[j, s_] += X[0, p_]
-                dU[j, s_] += X[1, p_]
-        for t in terms:
-            U, dU = t.effect.units(U, dU, ms, self, force, t)
-        return U, dU
+                _add(out, (j, s_), X[0, p_], X[1, p_])
+        return out
 
     def pulse_basis(self, ms: ModeSet) -> tuple[np.ndarray, np.ndarray]:
         """What every pulse of a mode set shares: ``e^{lambda k dt}`` on a segment's grid
@@ -365,13 +386,17 @@ class Forward:
         linear coefficients by weighted least squares against ``x`` (default: the data)."""
         ms = modes if modes is not None else self.modes(theta, terms)
         needs_force = any(t.effect.needs_force for t in terms)
-        U, dU = self.unit_responses(ms, terms)
         extra = self.columns(list(terms))
         data = self.x0 if x is None else np.where(self.td.valid, x, 0.0)
-        coef, pred = self._solve(U, dU, extra, data)
-        if needs_force:
-            U, dU = self.unit_responses(ms, terms, force=coef[: self.td.n_seg])
+        if any(t.effect.changes_units() for t in terms):
+            U, dU = self.unit_responses(ms, terms)
             coef, pred = self._solve(U, dU, extra, data)
+            if needs_force:
+                U, dU = self.unit_responses(ms, terms, force=coef[: self.td.n_seg])
+                coef, pred = self._solve(U, dU, extra, data)
+            del U, dU
+        else:     # no term changes the unit responses: only the blocks a pulse writes are made
+            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra).solve(data)
         mask = self.mask
         for t in terms:
             pred, m = t.effect.output(pred, self, t)
@@ -392,27 +417,42 @@ class Forward:
         return np.stack(cols)
 
     def _solve(self, U, dU, extra, data) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted least squares of ``data`` on the linear columns, segment by segment: impact
-        ``j`` is zero before segment ``j`` and a term's column may live in one segment only, so
-        each segment's normal equations hold just the columns alive there."""
+        """Weighted least squares of ``data`` on the linear columns (:class:`Design`)."""
+        return self.linear_design(U, dU, extra).solve(data)
+
+    def linear_design(self, U, dU, extra) -> Design:
+        """The linear columns ``U``, ``dU``, ``extra`` block by block (:class:`Design`): built
+        once, solved against as many data as wanted (the replicates re-solve the same design)."""
         n = U.shape[0]
         e = 0 if extra is None else extra.shape[0]
-        G = np.zeros((2 * n + e, 2 * n + e))
-        b = np.zeros(2 * n + e)
-        w2 = self._w2.reshape(self.td.n_seg, -1)
-        for s in range(self.td.n_seg):
-            idx, X = self.alive_columns(U, dU, extra, s)
-            Xw = X * w2[s]
-            G[np.ix_(idx, idx)] += Xw @ X.T
-            b[idx] += Xw @ data[s].ravel()
-        scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
-        Gs = G / scale[:, None] / scale[None, :]
-        coef = np.linalg.lstsq(Gs, b / scale, rcond=1e-10)[0] / scale
-        pred = np.empty_like(data)
-        for s in range(self.td.n_seg):      # the columns made again: one segment's at a time
-            idx, X = self.alive_columns(U, dU, extra, s)
-            pred[s] = (coef[idx] @ X).reshape(data.shape[1:])
-        return coef, pred
+        blocks = [self.alive_columns(U, dU, extra, s) for s in range(self.td.n_seg)]
+        return Design(blocks, 2 * n + e, self._w2.reshape(self.td.n_seg, -1))
+
+    def block_design(self, blocks: dict[tuple[int, int], list[np.ndarray]],
+                     extra: np.ndarray | None) -> Design:
+        """:meth:`linear_design` from the blocks of :meth:`unit_blocks` (the same columns, rows
+        and numbers as from the dense unit responses they fill)."""
+        n = self.td.n_seg
+        e = 0 if extra is None else extra.shape[0]
+        L = self.td.n_gages * self.td.n_s
+        zero = np.zeros(L)
+        out = []
+        for s in range(n):
+            # alive: impact s itself, and the earlier ones whose block a pulse wrote non-zero
+            live = [j for j in range(s + 1) if j == s or ((j, s) in blocks and (
+                blocks[j, s][0].any() or blocks[j, s][1].any()))]
+            a = len(live)
+            live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
+            idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
+            X = np.empty((len(idx), L))
+            for k, j in enumerate(live):
+                u, du = blocks.get((j, s), (zero, zero))
+                X[k] = u.ravel()
+                X[a + k] = du.ravel()
+            if live_e:
+                X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
+            out.append((idx, X))
+        return Design(out, 2 * n + e, self._w2.reshape(n, -1))
 
     def alive_columns(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
         """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
@@ -434,7 +474,40 @@ class Forward:
     def whitened(self, fit: Fit, segments: np.ndarray | None = None) -> np.ndarray:
         """Residual divided by each gage's sigma, flattened, over ``segments`` (default all);
         samples not compared are 0, so the length never changes."""
-        r = fit.resid * self.W
-        if segments is not None:
-            r = r[segments]
-        return np.nan_to_num(r.ravel(), nan=0.0)
+        if segments is None:
+            r = fit.resid * self.W
+        else:        # the segments first: the same products, fewer of them
+            r = fit.resid[segments] * self.W[segments]
+        return np.nan_to_num(r.ravel(), nan=0.0, copy=False)
+
+
+class Design:
+    """The linear columns of a prediction (every impact's unit response, its derivative, the
+    terms' own columns) held segment by segment: impact ``j`` is zero before segment ``j`` and a
+    term's column may live in one segment only, so each segment holds just the columns alive
+    there -- ``blocks[s] = (indices, rows (k, n_gages * n_s))`` -- and the weighted normal
+    equations are summed segment by segment (made once: the replicates solve many data against
+    one design). ``w2`` (n_seg, n_gages * n_s) the squared weights, zero where not compared;
+    the rows times them are kept beside the rows (``weighted``)."""
+
+    def __init__(self, blocks: list[tuple[list[int], np.ndarray]], n_cols: int, w2: np.ndarray) -> None:
+        self.blocks = blocks
+        self.n_cols = n_cols
+        self.weighted = [X * w2[s] for s, (_, X) in enumerate(blocks)]
+        G = np.zeros((n_cols, n_cols))
+        for (idx, X), Xw in zip(blocks, self.weighted, strict=True):
+            G[np.ix_(idx, idx)] += Xw @ X.T
+        self.scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
+        self.Gs = G / self.scale[:, None] / self.scale[None, :]
+
+    def solve(self, data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The coefficients fitted to ``data`` (n_seg, n_gages, n_s; zeros where there is none)
+        by weighted least squares, and the prediction they make (same shape)."""
+        b = np.zeros(self.n_cols)
+        for s, ((idx, _), Xw) in enumerate(zip(self.blocks, self.weighted, strict=True)):
+            b[idx] += Xw @ data[s].ravel()
+        coef = np.linalg.lstsq(self.Gs, b / self.scale, rcond=1e-10)[0] / self.scale
+        pred = np.empty_like(data)
+        for s, (idx, X) in enumerate(self.blocks):
+            pred[s] = (coef[idx] @ X).reshape(data.shape[1:])
+        return coef, pred

@@ -66,6 +66,12 @@ class Effect:
         return any(getattr(cls, h) is not getattr(Effect, h) for h in ("rig", "model", "modes"))
 
     @classmethod
+    def changes_units(cls) -> bool:
+        """True when the term changes the impacts' unit responses themselves (its ``units``
+        hook): a prediction then makes them whole, not only the blocks a pulse writes."""
+        return cls.units is not Effect.units
+
+    @classmethod
     def retunes(cls) -> bool:
         """True when the constants that tune the modes must be re-tuned to the data's spectrum
         with the term on before its refit starts (an extra mode pulls the others): by default,
