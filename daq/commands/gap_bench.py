@@ -269,8 +269,8 @@ def _generate_modal(sc: dict) -> dict:
 
 def _min_closure(d) -> float:
     """The least closure the diagnosis asked of a named effect (raised when the model level
-    left a form error: :data:`~ramdaq.daq.commands.gap.FORM_MIN_CLOSURE`)."""
-    from .gap import FORM_MIN_CLOSURE
+    left a form error: :data:`~ramdaq.daq.gap_layers.FORM_MIN_CLOSURE`)."""
+    from ..gap_layers import FORM_MIN_CLOSURE
 
     form = d.model_level is not None and d.model_level.fit is not None and d.model_level.fit.form
     return FORM_MIN_CLOSURE if form else 0.0
