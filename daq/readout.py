@@ -50,7 +50,7 @@ class LiveReadout:
         self.impacts: list[float] = []
         self.queue = 0
         self.overflows = 0
-        self.results: dict[str, tuple[float, float, bool]] = {}  # channel -> (f, delta, final)
+        self.results: dict[str, tuple[float, float, str]] = {}  # channel -> (f, delta, status)
         self.hits: list[str] = []
         self._next_print = every_s
         self.every_s = every_s
@@ -92,7 +92,13 @@ class LiveReadout:
 
     def set_result(self, channel: str, f_hz: float, delta: float, final: bool) -> None:
         """Show a gage's latest frequency (Hz) and decrement; ``final`` once the decay ended."""
-        self.results[channel] = (f_hz, delta, final)
+        self.results[channel] = (f_hz, delta, "final" if final else "so far")
+        self._refresh()
+
+    def set_unused(self, channel: str, why: str) -> None:
+        """The final analysis did not use this gage (``why``: its verdict, a few words): its
+        numbers so far are taken off and the status says so."""
+        self.results[channel] = (np.nan, np.nan, f"not used: {why}")
         self._refresh()
 
     def clear_results(self) -> None:
@@ -143,14 +149,14 @@ class LiveReadout:
         table.add_column("clipped", justify="right")
         table.add_column("f (Hz)", justify="right")
         table.add_column("delta", justify="right")
-        table.add_column("", justify="left")
+        table.add_column("result", justify="left")
         rms = self.rms
         for i, name in enumerate(self.info.channels):
             clip = str(int(self.clipped[i])) if self.clipped[i] else ""
-            f, d, final = self.results.get(name, (np.nan, np.nan, False))
+            f, d, status = self.results.get(name, (np.nan, np.nan, ""))
             table.add_row(name, f"{rms[i]:.4g}", f"{self.peak[i]:.4g}", self.info.units[i],
                           f"[red]{clip}[/red]" if clip else "",
                           "" if not np.isfinite(f) else f"{f:.3f}",
                           "" if not np.isfinite(d) else f"{d:.4f}",
-                          "" if name not in self.results else ("final" if final else "so far"))
+                          status)
         return Group(table, Text("\n".join(self.hits[-4:])), Text(health))
