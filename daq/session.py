@@ -529,7 +529,7 @@ class Session:
                     self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)
                 for n, v in a.verdicts.items():  # a look showed numbers the final did not take
                     if not v.ok:
-                        self.readout.set_unused(f"g{n:02d}", str(v.code).replace("_", " "))
+                        self.readout.set_unused(f"g{n:02d}", v.code.text)
         if self.view is not None:
             ev = hit.event
             self.view.log_impact(hit.index, ev.onset_s, _flags(ev), hit.accepted, hit.reason)

@@ -49,6 +49,16 @@ class Verdict(StrEnum):
     TOO_FEW_CYCLES = "too_few_cycles"
     NEGATIVE_DAMPING = "negative_damping"
 
+    @property
+    def text(self) -> str:
+        """The verdict in a few words, for a plot's title or a table's cell."""
+        return _VERDICT_TEXT[self]
+
+
+_VERDICT_TEXT = {Verdict.OK: "usable", Verdict.DEAD: "dead channel", Verdict.CLIPPED: "clipped",
+                 Verdict.NO_DECAY: "no free decay seen", Verdict.TOO_FEW_CYCLES: "too few cycles",
+                 Verdict.NEGATIVE_DAMPING: "grows instead of decaying"}
+
 
 @dataclass(frozen=True)
 class DecayAssessment:
