@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike
 from scipy import linalg
 from scipy.linalg import blas, lapack
 
-__all__ = ["VarProFit", "fit_channels_varpro", "fit_modes_varpro", "linear_amplitudes"]
+__all__ = ["VarProFit", "fit_channels_varpro", "fit_modes_varpro", "kaufman_weights", "linear_amplitudes"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -460,21 +460,30 @@ class _Problem:
                  Tr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(JᵀJ, Jᵀr) from the Schur complement M = Tᵀ P⊥ T (2K × 2K) and Tᵀr (2K × C)."""
         K = f.size
-        # H[k, p, a, c]: weight of T column (k, a) (a: t·c, t·s) in ∂Φ/∂θ_(k,p) B_c (p: f, δ).
-        # With (b, b') = B[2k:2k+2]: ∂/∂f: t·c (−δ b + 2π b') + t·s (−2π b − δ b');
-        # ∂/∂δ: −f (t·c b + t·s b'). Then JᵀJ = Σ_c Hᵀ M H blockwise and Jᵀr = −Σ_c Hᵀ Tᵀr.
-        b, bp = B[0 : 2 * K : 2], B[1 : 2 * K : 2]  # (K, n_channels)
-        dd, ff = d[:, None], f[:, None]
-        H = np.empty((K, 2, 2, B.shape[1]))
-        H[:, 0, 0] = _TWO_PI * bp - dd * b
-        H[:, 0, 1] = -_TWO_PI * b - dd * bp
-        H[:, 1, 0] = -ff * b
-        H[:, 1, 1] = -ff * bp
+        # JᵀJ = Σ_c Hᵀ M H blockwise and Jᵀr = −Σ_c Hᵀ Tᵀr (H: kaufman_weights)
+        H = kaufman_weights(B, f, d)
         HM = np.einsum("kpac,kalb->kplbc", H, M.reshape(K, 2, K, 2))
         JtJ = np.einsum("kplbc,lqbc->kplq", HM, H).reshape(2 * K, 2 * K)
         JtJ = 0.5 * (JtJ + JtJ.T)
         Jtr = -np.einsum("kpac,kac->kp", H, Tr.reshape(K, 2, -1)).reshape(2 * K)
         return JtJ, Jtr
+
+
+def kaufman_weights(B: np.ndarray, f: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """H (K, 2, 2, C): the weight ``H[k, p, a, c]`` of the time-derivative column (k, a) of
+    T = t Φ (a: t·e·cos, t·e·sin of mode k) in ∂Φ/∂θ_(k,p) B_c (p: f, δ), so that channel c's
+    Kaufman Jacobian column for θ_(k,p) is −P⊥ T H[k, p, :, c]; from the coefficients B
+    (2K [+ trend], C) of the modes' columns at poles f (Hz), δ (K,). With (b, b') = B[2k:2k+2]:
+    ∂/∂f: t·c (−δ b + 2π b') + t·s (−2π b − δ b'); ∂/∂δ: −f (t·c b + t·s b')."""
+    K = f.size
+    b, bp = B[0 : 2 * K : 2], B[1 : 2 * K : 2]  # (K, C)
+    dd, ff = d[:, None], f[:, None]
+    H = np.empty((K, 2, 2, B.shape[1]))
+    H[:, 0, 0] = _TWO_PI * bp - dd * b
+    H[:, 0, 1] = -_TWO_PI * b - dd * bp
+    H[:, 1, 0] = -ff * b
+    H[:, 1, 1] = -ff * bp
+    return H
 
 
 def _gauss_newton_decrease(JtJ: np.ndarray, Jtr: np.ndarray) -> float:

@@ -36,11 +36,10 @@ from scipy import linalg
 from scipy.linalg import LinAlgError, lapack
 from scipy.special import chdtri
 
-from ..modal.varpro import Projector, damped_basis, fit_modes_varpro, uniform_grid
+from ..modal.varpro import Projector, damped_basis, fit_modes_varpro, kaufman_weights, uniform_grid
 
 __all__ = ["SignalModes", "fit_signals_at_poles"]
 
-_TWO_PI = 2.0 * np.pi
 _SIGNIFICANT = float(chdtri(2, 1e-3))  # the per-gage fits' test of a mode in one channel
 _DELTA_BOUNDS = (-3.0, 3.0)  # as the per-gage fits'
 
@@ -83,28 +82,15 @@ def _linear(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, trend: i
     return _Linear(Phi, proj, B, R, np.sum(R * R, axis=0))
 
 
-def _weights(B: np.ndarray, f: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """H (K, 2, 2, S): the weights with which mode k's parameter p (f, delta) combines its two
-    T columns (t e cos, t e sin) in signal s's Kaufman Jacobian column ``-P_perp T H[k, p, :, s]``,
-    from the coefficients B (2K [+ trend], S) of the modes' columns."""
-    K = f.size
-    b, bp = B[0 : 2 * K : 2], B[1 : 2 * K : 2]
-    H = np.empty((K, 2, 2, b.shape[1]))
-    H[:, 0, 0] = _TWO_PI * bp - d[:, None] * b  # d/df of e (b cos + b' sin), on t e cos
-    H[:, 0, 1] = -_TWO_PI * b - d[:, None] * bp  # ... on t e sin
-    H[:, 1, 0] = -f[:, None] * b  # d/d delta
-    H[:, 1, 1] = -f[:, None] * bp
-    return H
-
-
 def _gauss_newton_terms(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M, Tr, H): the Schur complement ``T^T P_perp T`` (2K, 2K), ``T^T r`` (2K, S) and the
-    Jacobian weights (:func:`_weights`) at the poles of ``lin``, T = t Phi's mode columns."""
+    Jacobian weights (:func:`~ramdaq.analysis.modal.varpro.kaufman_weights`) at the poles of
+    ``lin``, T = t Phi's mode columns."""
     K = f.size
     T = lin.Phi[:, : 2 * K] * t[:, None]
     Tp = T - lin.Phi @ lin.proj.coef(T)
-    return Tp.T @ Tp, T.T @ lin.R, _weights(lin.B, f, d)
+    return Tp.T @ Tp, T.T @ lin.R, kaufman_weights(lin.B, f, d)
 
 
 def _step(M: np.ndarray, Tr: np.ndarray, H: np.ndarray, free: np.ndarray
@@ -173,7 +159,7 @@ class _Held:
         b = proj.coef(self.Yp[s][:, None])
         r = self.Yp[s] - phi_p @ b[:, 0]
         Tp = T1 - phi_p @ proj.coef(T1)
-        return float(r @ r), Tp.T @ Tp, T.T @ r, _weights(b, f, d)[..., 0]
+        return float(r @ r), Tp.T @ Tp, T.T @ r, kaufman_weights(b, f, d)[..., 0]
 
 
 def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
