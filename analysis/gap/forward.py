@@ -24,6 +24,7 @@ Weights are ``1 / sigma_g``, the noise rms of gage ``g`` in the decimated band.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -433,43 +434,16 @@ class Forward:
         """:meth:`linear_design` from the blocks of :meth:`unit_blocks` (the same columns, rows
         and numbers as from the dense unit responses they fill)."""
         n = self.td.n_seg
-        e = 0 if extra is None else extra.shape[0]
-        L = self.td.n_gages * self.td.n_s
-        zero = np.zeros(L)
-        out = []
-        for s in range(n):
-            # alive: impact s itself, and the earlier ones whose block a pulse wrote non-zero
-            live = [j for j in range(s + 1) if j == s or ((j, s) in blocks and (
-                blocks[j, s][0].any() or blocks[j, s][1].any()))]
-            a = len(live)
-            live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
-            idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
-            X = np.empty((len(idx), L))
-            for k, j in enumerate(live):
-                u, du = blocks.get((j, s), (zero, zero))
-                X[k] = u.ravel()
-                X[a + k] = du.ravel()
-            if live_e:
-                X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
-            out.append((idx, X))
-        return Design(out, 2 * n + e, self._w2.reshape(n, -1))
+        segs = [_segment_columns(n, self.td.n_gages * self.td.n_s, s,
+                                 lambda j, s=s: blocks.get((j, s)), extra) for s in range(n)]
+        return Design(segs, 2 * n + (0 if extra is None else extra.shape[0]),
+                      self._w2.reshape(n, -1))
 
     def alive_columns(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
         """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
         terms' columns not zero there -- as their indices and rows (k, n_gages * n_s)."""
-        n = U.shape[0]
-        e = 0 if extra is None else extra.shape[0]
-        # the impacts alive in segment s: 0 .. s, but for those rung out before it (all zero)
-        live = [j for j in range(min(s + 1, n)) if j == s or U[j, s].any() or dU[j, s].any()]
-        a = len(live)
-        live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
-        idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
-        X = np.empty((len(idx), U.shape[2] * U.shape[3]))
-        X[:a] = U[live, s].reshape(a, -1)
-        X[a:2 * a] = dU[live, s].reshape(a, -1)
-        if live_e:
-            X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
-        return idx, X
+        return _segment_columns(U.shape[0], U.shape[2] * U.shape[3], s,
+                                lambda j: (U[j, s], dU[j, s]), extra)
 
     def whitened(self, fit: Fit, segments: np.ndarray | None = None) -> np.ndarray:
         """Residual divided by each gage's sigma, flattened, over ``segments`` (default all);
@@ -479,6 +453,30 @@ class Forward:
         else:        # the segments first: the same products, fewer of them
             r = fit.resid[segments] * self.W[segments]
         return np.nan_to_num(r.ravel(), nan=0.0, copy=False)
+
+
+def _segment_columns(n: int, L: int, s: int,
+                     unit: Callable[[int], tuple[np.ndarray, np.ndarray] | None],
+                     extra: np.ndarray | None) -> tuple[list[int], np.ndarray]:
+    """The linear columns alive in segment ``s`` of ``n`` impacts: impact ``j``'s unit response
+    and its derivative there (``unit(j)``: the pair, each (n_gages, n_s); None where no pulse
+    wrote them, all zero), alive for j = s and for an earlier impact not rung out before it
+    (not all zero); the terms' columns ``extra`` not zero there. Their indices (impacts, their
+    derivatives after the ``n`` impacts, the terms' after those) and rows (k, ``L``)."""
+    e = 0 if extra is None else extra.shape[0]
+    units = {j: unit(j) for j in range(min(s + 1, n))}
+    live = [j for j, b in units.items() if j == s or (b is not None and (b[0].any() or b[1].any()))]
+    a = len(live)
+    live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
+    idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
+    X = np.zeros((len(idx), L))
+    for k, j in enumerate(live):
+        if units[j] is not None:
+            X[k] = units[j][0].ravel()
+            X[a + k] = units[j][1].ravel()
+    if live_e:
+        X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
+    return idx, X
 
 
 class Design:
