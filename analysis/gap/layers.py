@@ -113,12 +113,18 @@ def strength(f: dict) -> float:
     return stat / max(float(f["chance_level"] or 0.0), 1e-12)
 
 
+def not_homogeneous(findings: list[dict]) -> bool:
+    """Whether the data-only layer found the trial not homogeneous across blows (a finding of
+    the nonlinearity layer, as JSON): its other checks read linear models the trial bends."""
+    return any(f.get("layer") == Layer.NONLINEARITY for f in findings)
+
+
 def credible(findings: list[dict]) -> list[dict]:
     """The data-only findings (as JSON) that may answer for the trial: a double hit is not one
     when the same trial is found not homogeneous across blows -- the double-hit check fits a
     *linear* one-blow response, and an amplitude-dependent decay (friction stopping a mode's
     ringing half a period after the blow) is what a second blow in anti-phase fits best."""
-    nonlinear = any(f.get("layer") == Layer.NONLINEARITY for f in findings)
+    nonlinear = not_homogeneous(findings)
     return [f for f in findings if not (nonlinear and f["check"] == "double_hit")]
 
 
@@ -132,7 +138,7 @@ def overriding_unexplained(findings: list[dict]) -> list[dict]:
     rattle all move the decrement or the amplitude with the blow (the modal family's development
     trials), and only friction is in the library -- an amplitude-dependent trial the model leaves
     unexplained stays so."""
-    if any(f.get("layer") == Layer.NONLINEARITY for f in findings):
+    if not_homogeneous(findings):
         return []
     return [f for f in findings if f.get("layer") in set(Layer) and strength(f) >= PRECEDENCE_STRENGTH
             and (f["layer"] == Layer.SENSOR or f["check"] in OVERRIDING_EXCITATION)]
