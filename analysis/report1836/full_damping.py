@@ -171,8 +171,11 @@ def amplitude_covariance(n_samples: int, fs_hz: float, f_hz: np.ndarray, delta: 
                        trend_terms, uniform_grid(t))
     cols = Phi[:, 2 * k: 2 * k + 2]
     # the mode's two columns with every other column projected out: the Schur complement
-    Q, _ = np.linalg.qr(np.delete(Phi, [2 * k, 2 * k + 1], axis=1))
-    resid = cols - Q @ (Q.T @ cols)
+    others = np.delete(Phi, [2 * k, 2 * k + 1], axis=1)
+    resid = cols
+    if others.shape[1]:
+        Q, _ = np.linalg.qr(others)
+        resid = cols - Q @ (Q.T @ cols)
     flip = np.diag([1.0, -1.0])  # the basis is (e cos, e sin): a = b_cos - j b_sin
     unit = flip @ np.linalg.inv(resid.T @ resid) @ flip
     return np.asarray(noise_std, dtype=float)[:, None, None] ** 2 * unit[None, :, :]
