@@ -17,15 +17,26 @@ Why the measured constants swing
 --------------------------------
 Eq 14 is ``C = -2 m_y μ + (12 k_s / (v1 ω)) Q`` with the bracket
 ``Q = v_b2 - h γ2 + b α2 + (ℓ/2)(α2 + α_b2)``. For the ALBACORE-like rig in water (13.0 Hz)
-the model's exact mode has, relative to v1: v_b2 = +1.19e-3, h γ2 = +1.66e-4 (h < 0),
+the model's exact mode has, relative to v1: v_b2 = +1.19e-3, -h γ2 = -1.66e-4 (h < 0),
 b α2 = -6.49e-4, (ℓ/2) α2 = -2.30e-4, (ℓ/2) α_b2 = +1.96e-5 -- terms worth up to 4.4e4 N s/m
-each that cancel to Q/v1 = 1.6e-4, i.e. 5.9e3 N s/m of the rig's 3.73e4. ``12 k_s/ω`` is
-3.7e7 N s/m per unit Q/v1, so a phase error of 1e-4 rad between gages 2 and 6 (α's cosine part
-moves by 1e-4 α1) moves C by 1.7e3 N s/m; Eq 15 divides the same bracket, times h, by γ1 ω
-with γ1 = 0.12 v1, and adds the stock's torsion ``(GJ/ℓ_T) γ2 / (γ1 ω)``, so c moves ~25 times
-as far against a constant ten times smaller. With the rig's 0.005 m/s² channel noise the fitted
-phases scatter by ~1e-3 rad: Eq 14 comes out ±4e4, Eq 15 ±1e5, while Eq 16/17 are not affected
-(they use only the decrement and |α1/γ1|).
+of C each, that cancel to Q/v1 = 1.6e-4: 5.9e3 of the rig's 3.73e4 N s/m (the rest is
+``-2 m_y μ``, Eq 16). ``12 k_s/ω`` is 3.7e7 N s/m per unit of Q/v1, so a phase error of
+1e-4 rad in α (its cosine part moves by 1e-4 α1 = 4.6e-5 v1, times b + ℓ/2) moves C by
+3.6e3 N s/m. Eq 15 divides the same bracket, times h, by γ1 ω with γ1 = 0.12 v1, and adds
+the torsion ``(GJ/ℓ_T) γ2 / (γ1 ω)``: c moves |h| v1/γ1 = 3.3 times as far as C (N m s/rad
+against N s/m), against a constant ten times smaller.
+
+With the rig's 0.005 m/s² channel noise and its blow (0.65 m/s² at gage 6), 6 s of decay
+(``python benchmarks/eq14_15_inputs.py``, 400 draws at the exact pole), the inputs scatter,
+relative to v1, by: γ2 7.0e-4 (1.7 times its value; γ's phase 5.8e-3 rad), α2 4.7e-4 (1.1
+times; 1.0e-3 rad), v_b2 8.3e-4 (0.7 times), α_b2 5.6e-4 (16 times: gages 13 and 14 are 1.5 m
+apart on a hull that hardly tilts), γ_b2 3.4e-4 (5 times); v1, γ1 and α1 to 1e-3 and better.
+Eq 14 then scatters by 5.6e4 N s/m (26 % of draws negative) and Eq 15 by 1.8e5 N m s/rad
+(50 % negative) about the right means: there is no bias, only noise, and the recorded
+``c_eq15 = -3.6e5 ... -2.5e4`` of ``recordings/albacore-water.mcap`` are -2.3, -0.3 and -0.2
+standard errors from the rig's 3750. In air (24.5 Hz, the blow rings 7 times larger) Eq 14 is
+1.07e4 +- 0.4e4 (significant, right), Eq 15 still +- 1.3e4 against 503. Eq 16/17 are not
+affected: they use only the decrement and α1/γ1.
 
 Standard errors
 ---------------
