@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ramdaq.analysis.impact import analyze_decay
 from ramdaq.analysis.model import units as u
 from ramdaq.analysis.model.response import half_sine_response, modal_form
 from ramdaq.analysis.model.rig import load_rig
@@ -16,6 +17,7 @@ from ramdaq.analysis.report1836 import full_damping as fd
 from ramdaq.analysis.report1836 import motions as r
 from ramdaq.analysis.report1836 import stock_length as sl
 from ramdaq.analysis.report1836 import virtual_mass as vi
+from ramdaq.drivers.sim import SimDevice
 
 GEOM = r.GageGeometry(
     x1=1.10, x2=0.85, z1=0.95, z2=1.30, x5=0.70, x6=0.55, x7=0.12, x10=0.10,
@@ -550,3 +552,22 @@ def test_notes_say_when_eq14_15_are_not_significant_or_not_damping() -> None:
     unknown = fd.FullDampingEstimate(C=-1.0, C_se=np.nan, c=1.0, c_se=np.nan, stock=s)
     assert [n[:6] for n in unknown.notes()] == ["Eq 14:"]
     assert unknown.significant("C")
+
+
+def test_the_chain_gives_eq14_15_with_standard_errors_and_says_c_is_not_significant(albacore) -> None:
+    """The analysis of a simulated hit in water with the rig's noise (7 s, seed 1) carries Eq
+    14/15's standard errors; both constants lie within 3 s.e. of the rig's, and Eq 15's
+    (s.e. ~1.6e5 against c = 3750) is said to be not significant rather than printed bare."""
+    rig = albacore.with_medium("water")
+    with SimDevice(rig, duration_s=7.0, impacts=[1.0], noise=True, seed=1) as dev:
+        x = np.hstack([b.values() for b in dev])
+        gages = dev.info.gages
+    fs = rig.daq.sample_rate_hz
+    a = analyze_decay(x[:, int(1.03 * fs):], fs, rig, gages, onset_s=1.0, decay_start_s=1.03)
+    full, d = a.damping.full, rig.active_damping
+    assert 1e4 < full.C_eq14_se_N_s_per_m < 1e5 and 5e4 < full.c_eq15_se_N_m_s_per_rad < 5e5
+    assert abs(full.C_eq14_N_s_per_m - d.C_N_s_per_m) < 3 * full.C_eq14_se_N_s_per_m
+    assert abs(full.c_eq15_N_m_s_per_rad - d.c_N_m_s_per_rad) < 3 * full.c_eq15_se_N_m_s_per_rad
+    said = [n for n in a.notes if n.startswith("Eq 15:")]
+    assert len(said) == 1 and "not significant" in said[0]
+    assert a.damping.to_json()["c_eq15_se_N_m_s_per_rad"] == full.c_eq15_se_N_m_s_per_rad
