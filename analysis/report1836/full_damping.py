@@ -48,7 +48,12 @@ table's modes and its trend, the record's length and rate) -- :func:`amplitude_c
 Channels' noises are independent. C and c are propagated to first order (central differences
 on the real and imaginary part of each gage amplitude they use). Held fixed, and so left out
 of the error: the poles (their errors are a complex factor common to all channels to first
-order, which drops out) and the stock constants (ℓ from Figure 8, k_s, GJ from the rig). An
+order, which drops out; δ's own s.e., 5e-5, moves C by 15 N s/m) and the stock constants (ℓ
+from Figure 8, k_s, GJ from the rig): on 24 simulated hits in water ℓ's 9 mm scatter moved C
+by 830 N s/m and c by 2.7e3 N m s/rad rms, under 2 % of their standard errors. Checked: the
+per-gage amplitude covariance is within 3-25 % of the scatter over those hits, and C's and
+c's scatter is 0.8 times the propagated s.e. (24 hits: ±15 %); on the noise-free (24-bit)
+hit C = 37459 ± 371 and c = 3618 ± 1197 against the rig's 37344 and 3750. An
 estimate within two standard errors of zero is *not significant*: :meth:`FullDampingEstimate.notes`
 says so rather than printing a confident negative number.
 """
