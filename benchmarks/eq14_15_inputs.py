@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import fields, replace
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -109,7 +110,8 @@ def section_noise(rig: Rig, exact: tuple, draws: int, seconds: float = 6.0) -> N
     est = fd.full_damping(dict(zip(gages, acc, strict=True)), f, delta, rig, m.M[0, 0], m.M[1, 1], ell,
                           dict(zip(gages, cov, strict=True)))
     rng = np.random.default_rng(1836)
-    got_in, got_C, got_c = [], [], []
+    got_in, got_C, got_c, ref_C, ref_c, phases = [], [], [], [], [], []
+    names = [fl.name for fl in fields(fd.ModeMotions)]
     for _ in range(draws):
         b = pinv @ (clean + sigma * rng.standard_normal(clean.shape)).T
         amp = dict(zip(gages, b[0] - 1j * b[1], strict=True))
@@ -118,6 +120,12 @@ def section_noise(rig: Rig, exact: tuple, draws: int, seconds: float = 6.0) -> N
         C, c = fd.eq14_15(mm, f, delta, m.M[0, 0], m.M[1, 1], rig.rudder.Ixz_kg_m2, est.stock)
         got_C.append(C)
         got_c.append(c)
+        # the same with the phase reference (v's phase) exact: only the other motions' phases err
+        exact_ref = replace(mm, v=abs(mm.v) * motions.v / abs(motions.v))
+        C, c = fd.eq14_15(exact_ref, f, delta, m.M[0, 0], m.M[1, 1], rig.rudder.Ixz_kg_m2, est.stock)
+        ref_C.append(C)
+        ref_c.append(c)
+        phases.append([np.angle(getattr(mm, n) / getattr(motions, n)) for n in names])
     truth = inputs(motions)
     print(f"\n2. exact mode + white noise {sigma} m/s^2 rms, {seconds:g} s at {fs:g} Hz after the rig's blow "
           f"(|a| at gage 6: {abs(acc[gages.index(6)]):.3g} m/s^2), {draws} draws:")
@@ -131,6 +139,25 @@ def section_noise(rig: Rig, exact: tuple, draws: int, seconds: float = 6.0) -> N
         phase = f"{sd / abs(sin_exact[name[:-1]]):12.2e}" if name.endswith("2") else f"{'':12s}"
         print(f"   {name:10s} {truth[name]:+11.4e} {np.mean(x) - truth[name]:+10.2e} {sd:11.2e}"
               f" {sd / abs(truth[name]):13.2f} {phase}")
+    share = []
+    for g in fd.GAGES:  # noise on one gage at a time: each gage's share of C's and c's variance
+        row = gages.index(g)
+        Cs, cs = [], []
+        for _ in range(draws // 4):
+            y = clean[row] + sigma * rng.standard_normal(n)
+            b = pinv @ y
+            amp = dict(zip(gages, acc, strict=True)) | {g: b[0] - 1j * b[1]}
+            C, c = fd.eq14_15(fd.motions_from_gages(amp, rig, ell), f, delta, m.M[0, 0], m.M[1, 1],
+                              rig.rudder.Ixz_kg_m2, est.stock)
+            Cs.append(C)
+            cs.append(c)
+        share.append((g, np.std(Cs, ddof=1), np.std(cs, ddof=1)))
+    print("   scatter of C / c from one gage's noise alone: "
+          + ", ".join(f"g{g} {sC:.2g} / {sc:.2g}" for g, sC, sc in share))
+    print("   phase scatter of each motion (rad, absolute: the pole and t = 0 are exact): "
+          + ", ".join(f"{n} {v:.2e}" for n, v in zip(names, np.std(phases, axis=0, ddof=1), strict=True)))
+    print(f"   with v's phase (the reference) exact: C scatter {np.std(ref_C, ddof=1):.3g}, "
+          f"c scatter {np.std(ref_c, ddof=1):.3g}")
     d = rig.active_damping
     for name, x, se, true in (("C", got_C, est.C_se, d.C_N_s_per_m),
                               ("c", got_c, est.c_se, d.c_N_m_s_per_rad)):
