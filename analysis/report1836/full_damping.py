@@ -31,6 +31,9 @@ With the rig's 0.005 m/s² channel noise and its blow (0.65 m/s² at gage 6), 6 
 relative to v1, by: γ2 7.0e-4 (1.7 times its value; γ's phase 5.8e-3 rad), α2 4.7e-4 (1.1
 times; 1.0e-3 rad), v_b2 8.3e-4 (0.7 times), α_b2 5.6e-4 (16 times: gages 13 and 14 are 1.5 m
 apart on a hull that hardly tilts), γ_b2 3.4e-4 (5 times); v1, γ1 and α1 to 1e-3 and better.
+As phases: v (the time reference) 4e-4 rad, α 8e-4, γ 6e-3, v_b 1.7e-2, α_b 0.45. By gage,
+the noise of hull gage 13 (0.02 m/s² of this mode against 0.65 at gage 6: v_b2, the largest
+term) and rudder gage 2 (0.24 m/s²: α2) give most of the scatter, then gages 14 and 6.
 Eq 14 then scatters by 5.6e4 N s/m (26 % of draws negative) and Eq 15 by 1.8e5 N m s/rad
 (50 % negative) about the right means: there is no bias, only noise, and the recorded
 ``c_eq15 = -3.6e5 ... -2.5e4`` of ``recordings/albacore-water.mcap`` are -2.3, -0.3 and -0.2
