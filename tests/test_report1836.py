@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.signal
 
 from ramdaq.analysis.impact import analyze_decay
 from ramdaq.analysis.model import units as u
@@ -571,3 +572,17 @@ def test_the_chain_gives_eq14_15_with_standard_errors_and_says_c_is_not_signific
     said = [n for n in a.notes if n.startswith("Eq 15:")]
     assert len(said) == 1 and "not significant" in said[0]
     assert a.damping.to_json()["c_eq15_se_N_m_s_per_rad"] == full.c_eq15_se_N_m_s_per_rad
+
+
+def test_filtered_noise_factor_is_what_the_anti_alias_filter_does_to_white_noise(albacore) -> None:
+    """White noise through the rig's anti-alias filter (the simulator's SensorChain design):
+    its standard deviation falls by the factor's inverse, while its density at 13 Hz (where
+    |H| = 1) stays; 2e6 samples fix a standard deviation to 5e-4 (1/sqrt(2n)), so 3e-3."""
+    daq, fs = albacore.daq, albacore.daq.sample_rate_hz
+    factor = fd.filtered_noise_factor(daq, fs, 13.0)
+    sos = scipy.signal.butter(daq.anti_alias_order, daq.anti_alias_hz, fs=fs, output="sos")
+    w = np.random.default_rng(1836).standard_normal(2_000_000)
+    assert np.std(w) / np.std(scipy.signal.sosfilt(sos, w)) == pytest.approx(factor, rel=3e-3)
+    assert 1.1 < factor < 1.2  # 800 Hz corner at 2048 Hz: the filter keeps ~78 % of the power
+    nyquist = type(daq)(**{**daq.__dict__, "anti_alias_hz": fs / 2})
+    assert fd.filtered_noise_factor(nyquist, fs, 13.0) == 1.0
