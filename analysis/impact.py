@@ -410,7 +410,7 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
     lengths, curves = _stock_lengths(amp, rig, notes) if steps[2] not in skip else ({}, {})
     full = steps[4] not in skip
-    amp_cov = dict(zip(amp, table_amplitude_covariance(table, k), strict=True)) if full else None
+    amp_cov = dict(zip(amp, table_amplitude_covariance(table, k, rig.daq), strict=True)) if full else None
     damping = _damping(rig, f, float(table.delta[k]), gages, motions, ratio, amp, curves, notes,
                        full=full, amp_cov=amp_cov)
     return {"motions": motions, "relative": {name: fits[name][0] for name in relative},
