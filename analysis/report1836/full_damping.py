@@ -35,10 +35,12 @@ As phases: v (the time reference) 4e-4 rad, α 8e-4, γ 6e-3, v_b 1.7e-2, α_b 0
 the noise of hull gage 13 (0.02 m/s² of this mode against 0.65 at gage 6: v_b2, the largest
 term) and rudder gage 2 (0.24 m/s²: α2) give most of the scatter, then gages 14 and 6.
 Eq 14 then scatters by 5.6e4 N s/m (26 % of draws negative) and Eq 15 by 1.8e5 N m s/rad
-(50 % negative) about the right means: there is no bias, only noise, and the recorded
-``c_eq15 = -3.6e5 ... -2.5e4`` of ``recordings/albacore-water.mcap`` are -2.3, -0.3 and -0.2
-standard errors from the rig's 3750. In air (24.5 Hz, the blow rings 7 times larger) Eq 14 is
-1.07e4 +- 0.4e4 (significant, right), Eq 15 still +- 1.3e4 against 503. Eq 16/17 are not
+(50 % negative) about the right means: there is no bias, only noise. The recorded
+``c_eq15 = -3.6e5, -4.7e4, -2.5e4`` of ``recordings/albacore-water.mcap`` (s.e. 1.7e5 to
+1.8e5) are -2.0, -0.3 and -0.2 standard errors from the rig's 3750, its ``C_eq14 = 1.43e5,
+6.4e4, 4.6e4`` (s.e. 5.4e4 to 5.6e4) +1.9, +0.5, +0.2 from 3.73e4. In air (24.5 Hz, the blow
+rings 7 times larger) Eq 14 is 1.07e4 +- 0.4e4 (significant, right), Eq 15 still +- 1.3e4
+against 503. Eq 16/17 are not
 affected: they use only the decrement and α1/γ1.
 
 Standard errors
