@@ -33,13 +33,9 @@ from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_de
 from .model.geometry import gage_geometry, stock_pair
 from .model.rig import ALIGN_TOL_M, Rig
 from .model.structure import added_mass
-from .report1836.damping import (
-    C_translational,
-    C_translational_full,
-    c_rotational,
-    c_rotational_full,
-    stock_stiffness_k_s,
-)
+from .report1836.damping import C_translational, c_rotational
+from .report1836.full_damping import GAGES as EQ14_15_GAGES
+from .report1836.full_damping import full_damping, table_amplitude_covariance
 from .report1836.motion_fits import fit_signals_at_poles
 from .report1836.motions import (
     alpha,
@@ -160,12 +156,15 @@ class GageVerdict:
 @dataclass(frozen=True)
 class FullDamping:
     """Eq 14 and 15: C (N s/m) and c (N m s/rad) with the hull motions and the phases between
-    motions kept, and the stock stiffness k_s (N/m) and bending length ell (m) they used."""
+    motions kept, the stock stiffness k_s (N/m) and bending length ell (m) they used, and their
+    standard errors from the gages' noise (NaN when not known)."""
 
     C_eq14_N_s_per_m: float
     c_eq15_N_m_s_per_rad: float
     k_s_N_per_m: float
     ell_m: float
+    C_eq14_se_N_s_per_m: float = float("nan")
+    c_eq15_se_N_m_s_per_rad: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -410,8 +409,10 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     amps = {name: fits[name][1] for name in rudder}
     ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
     lengths, curves = _stock_lengths(amp, rig, notes) if steps[2] not in skip else ({}, {})
+    full = steps[4] not in skip
+    amp_cov = dict(zip(amp, table_amplitude_covariance(table, k, rig.daq), strict=True)) if full else None
     damping = _damping(rig, f, float(table.delta[k]), gages, motions, ratio, amp, curves, notes,
-                       full=steps[4] not in skip)
+                       full=full, amp_cov=amp_cov)
     return {"motions": motions, "relative": {name: fits[name][0] for name in relative},
             "alpha1_over_gamma1": ratio, "damping": damping, "stock_lengths": lengths,
             "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
@@ -490,7 +491,8 @@ def _hull_motions(d: Callable[[int], np.ndarray], rig: Rig,
 
 def _damping(rig: Rig, f: float, delta: float, gages: dict[int, Decrement],
              motions: dict[str, Decrement], ratio: float, amp: dict[int, complex],
-             curves: dict[str, list[float]], notes: list[str], full: bool = True) -> DampingConstants:
+             curves: dict[str, list[float]], notes: list[str], full: bool = True,
+             amp_cov: dict[int, np.ndarray] | None = None) -> DampingConstants:
     """Eq 16 and 17 with the rig's masses (plus the added mass in water), the modal decrement
     (Eq 7) over the rudder gages, and, with ``full``, Eq 14 and 15 (:func:`_full_damping`).
     ``f``, ``delta``: the predominant mode's; ``ratio``: alpha1 / gamma1. A channels-only rig
@@ -513,7 +515,7 @@ def _damping(rig: Rig, f: float, delta: float, gages: dict[int, Decrement],
         if "v_2_6" in motions else np.nan,
         c_N_m_s_per_rad=float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f, motions["gamma"].delta))
         if "gamma" in motions and np.isfinite(ratio) else np.nan,
-        full=_full_damping(amp, f, delta, rig, m_y, I_z, curves, notes) if full else None)
+        full=_full_damping(amp, f, delta, rig, m_y, I_z, curves, notes, amp_cov) if full else None)
 
 
 def _rudder_mean(deltas: list[float], notes: list[str]) -> float:
@@ -575,57 +577,27 @@ def _stock_lengths(amp: dict[int, complex], rig: Rig,
 
 
 def _full_damping(a: dict[int, complex], f: float, delta: float, rig: Rig, m_y: float,
-                  I_z: float, curves: dict, notes: list[str]) -> FullDamping | None:
-    """Eq 14 and 15: C and c with the hull motions and the phases between motions kept; None
-    (and a note) where a gage they need is unusable.
+                  I_z: float, curves: dict, notes: list[str],
+                  amp_cov: dict[int, np.ndarray] | None = None) -> FullDamping | None:
+    """Eq 14 and 15: C and c with the hull motions and the phases between motions kept, and
+    their standard errors from the amplitudes' covariance ``amp_cov`` (by gage); None (and a
+    note) where a gage they need is unusable. A note says when one is not significant or not
+    positive (:mod:`~ramdaq.analysis.report1836.full_damping`).
 
     The predominant mode's complex amplitudes ``a`` (by gage) give every motion's sine (in phase
-    with v) and cosine parts: displacement amplitudes are the accelerations' divided by
-    lambda^2, then turned so that v = v1 sin(wt). ``f`` (Hz), ``delta``: the mode's. The stock
-    constants come from the rig (EI, kappa A G, G J) and the effective bending length read off
-    Figure 8 (the rig's own when it could not be read).
+    with v) and cosine parts. ``f`` (Hz), ``delta``: the mode's. The stock constants come from
+    the rig (EI, kappa A G, G J) and the effective bending length read off Figure 8 (the rig's
+    own when it could not be read).
     """
-    if any(n not in a for n in (2, 4, 5, 6, 8, 13, 14)):
+    if any(n not in a for n in EQ14_15_GAGES):
         notes.append("Eq 14/15: not computed, a rudder or hull gage is unusable")
         return None
-    lam = -delta * f + 2j * np.pi * f
-    K = geometry_constants(gage_geometry(rig))
-    geom = gage_geometry(rig)
-    D = {n: v / lam**2 for n, v in a.items()}
     ell = curves.get("z_attach_bending_m", [rig.stock.bending_length_m])[0]
-    z_hull_attach = rig.rudder.attach_z_m + ell
-    p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
-    motion = {
-        "v": K["K3"] * (D[2] + K["K4"] * D[6]),
-        "gamma": K["K1"] * (D[4] - D[8]),
-        "alpha": K["K2"] * (D[6] - D[2]),
-        "alpha_b": (D[13] - D[14]) / geom.L_P,
-        "gamma_b": (D[13] - D[5]) / (p13[0] - p5[0]),
-    }
-    motion["v_b"] = D[13] + (p13[2] - z_hull_attach) * motion["alpha_b"]
-    turn = -1j * abs(motion["v"]) / motion["v"]
-    sin = {m: float(-np.imag(v * turn)) for m, v in motion.items()}
-    cos = {m: float(np.real(v * turn)) for m, v in motion.items()}
-    st, r = rig.stock, rig.rudder
-    k_s = float(stock_stiffness_k_s(st.E_Pa * st.I_m4, st.shear_area_m2 * st.G_Pa, ell))
-    # the model's torsion is G J / l_T; Eq 62b writes G J_e / l, so scale J_e to keep it
-    GJ_e = st.G_Pa * st.J_m4 * ell / st.torsion_length_m
-    C = C_translational_full(m_y, f, delta, sin["v"], k_s, r.stock_x_m, r.attach_z_m, ell,
-                             v_b2=cos["v_b"], gamma2=cos["gamma"], alpha2=cos["alpha"],
-                             alpha_b2=cos["alpha_b"])
-    c = c_rotational_full(I_z, r.Ixz_kg_m2, f, delta, sin["gamma"], sin["alpha"], k_s,
-                          r.stock_x_m, r.attach_z_m, ell, GJ_e, gamma2=cos["gamma"],
-                          alpha2=cos["alpha"], v_b2=cos["v_b"], alpha_b2=cos["alpha_b"],
-                          gamma_b1=sin["gamma_b"], gamma_b2=cos["gamma_b"])
-    for name, value, unit in (("C", C, "N s/m"), ("c", c, "N m s/rad")):
-        if not value > 0:  # kept, and said: a dashpot of zero or negative constant is no damping
-            notes.append(f"Eq {14 if name == 'C' else 15}: {name} = {float(value):.4g} {unit}, not a "
-                         f"damping constant. Eq 14/15 (re-derived: Appendix D's print is "
-                         f"incomplete) hang on the motions' small parts out of phase with v and "
-                         f"swing from hit to hit; Eq {16 if name == 'C' else 17} is the report's "
-                         f"reading without them")
-    return FullDamping(C_eq14_N_s_per_m=float(C), c_eq15_N_m_s_per_rad=float(c),
-                       k_s_N_per_m=k_s, ell_m=ell)
+    est = full_damping(a, f, delta, rig, m_y, I_z, ell, amp_cov)
+    notes.extend(est.notes())
+    return FullDamping(C_eq14_N_s_per_m=est.C, c_eq15_N_m_s_per_rad=est.c,
+                       k_s_N_per_m=est.stock.k_s, ell_m=ell, C_eq14_se_N_s_per_m=est.C_se,
+                       c_eq15_se_N_m_s_per_rad=est.c_se)
 
 
 @dataclass(frozen=True)

@@ -124,5 +124,6 @@ def test_eq_14_on_estimated_motions(water_clean):
     # report.json's damping: Eq 16/17 with what they used, then Eq 14/15's, under these keys
     assert list(a.damping.to_json()) == [
         "m_y_kg", "I_z_kg_m2", "I_xz_kg_m2", "delta_modal", "C_N_s_per_m", "c_N_m_s_per_rad",
-        "C_eq14_N_s_per_m", "c_eq15_N_m_s_per_rad", "k_s_N_per_m", "ell_m"]
+        "C_eq14_N_s_per_m", "c_eq15_N_m_s_per_rad", "k_s_N_per_m", "ell_m",
+        "C_eq14_se_N_s_per_m", "c_eq15_se_N_m_s_per_rad"]
     assert a.damping["C_eq14_N_s_per_m"] == a.damping.full.C_eq14_N_s_per_m

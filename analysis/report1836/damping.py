@@ -50,6 +50,16 @@ the denominator as ``(γ1 γ_b1)ω``; both are transcription damage. Reductions:
 ``γ_b1 = 0``, (15) gives ``c = -2μ (I_z - I_xz α1/γ1) = 2 (I_z - I_xz α1/γ1) f δ_γ`` (Eq 17).
 The sin parts of (62a, b) are a second relation each, dominated by the stiffness terms (they fix
 ω); the report does not use them, and neither does this module.
+
+Checked against the simulator (tests/test_report1836.py): the model of
+:mod:`ramdaq.analysis.model.structure` has exactly (62a)'s and (62b)'s rows -- the stock a beam
+element between the hull and the rudder attachment, C on v, c on γ - γ_b; its α row (62c) and
+``c_alpha`` on α - α_b enter neither (62a) nor (62b), nor therefore (14) or (15) -- and every
+exact damped mode of it (an eigenvector of the state matrix) gives back the rig's C and c
+through (14) and (15) to 1e-10, for both rigs, both media and the stern plane. With Table 1's
+printed minus on the (ℓ/2) term the ALBACORE-like 13 Hz mode misses C by 40 %. Eq 14/15 on
+*measured* amplitudes, their standard errors and why they swing:
+:mod:`ramdaq.analysis.report1836.full_damping`.
 """
 
 from __future__ import annotations
