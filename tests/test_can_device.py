@@ -224,7 +224,11 @@ def test_stream_is_recorded_bit_for_bit(tmp_path, rigs, dbc):
     emu, dev, blocks, events, info = _virtual_trial(tmp_path, dbc, rigs[dbc])
     truth = _truth(rigs[dbc])
     _check_against_truth(blocks, events, truth, emu.missing(truth.shape[1]))
-    assert not [e for e in events if e["kind"] != "gap"]
+    # A starved host (the suite at load 10+) may read a group's frames late: the device then says
+    # ``delayed_frames`` and places them where SEQ says -- a true report of the host's timing, not
+    # a fault of the stream; the counts above are still bit for bit. Nothing else may be reported.
+    assert not [e for e in events if e["kind"] not in ("gap", "delayed_frames")]
+    assert all(e["detail"]["frames"] > 0 for e in events if e["kind"] == "delayed_frames")
     assert dev.counters["frames"] == dev.counters["good_frames"]
     with _sim(rigs[dbc]) as sim:
         np.testing.assert_array_equal(blocks[0].scale, sim.read().scale)
