@@ -225,8 +225,8 @@ def test_import_without_a_rig_makes_one_and_analyze_reports_each_gage(forced, tm
     x = np.concatenate([b.counts * b.scale[:, None] for b in blocks], axis=1)
     p = write_csv(tmp_path / "hammer.csv", np.arange(x.shape[1]) / FS, np.vstack([x[3], x[16]]),
                   ["acc", "Load"], units=["", "N"])
-    rc, out, err = _run(["import", str(p), "--units", "m/s^2"], capsys)
-    assert rc == 1 and "without --rig, give --fs HZ and --units" in err
+    rc, out, err = _run(["import", str(p), "--fs", "2048"], capsys)
+    assert rc == 1 and "'acc' states no unit; give --units" in err
     rc, out, err = _run(["import", str(p), "--fs", "2048", "--units", "m/s^2", "--force-channel",
                          "Load"], capsys)
     assert rc == 0, err

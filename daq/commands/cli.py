@@ -393,20 +393,25 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                        rig_out: Path) -> tuple[object, dict[str, int]]:
-    """Without ``--rig``: a channels-only rig for the file's channels (``--channels`` names
-    them, else every one), and the source -> gage map. Needs ``--fs`` and ``--units``."""
+    """Without ``--rig``: a channels-only rig for the file's channels (every one), at the
+    file's own rate (``--fs`` checks it), each gage in the unit its samples are in: the file's
+    header unit where it states one (a differing ``--units`` is warned of and not applied),
+    else ``--units``. Returns the rig and the source -> gage map."""
     from ...analysis.model.rig import parse_rig
-    from ...drivers.files.minimal_rig import minimal_rig, source_channel_names
+    from ...drivers.files.minimal_rig import minimal_rig, source_channels
 
-    if args.fs is None or args.units is None:
-        raise ValueError("without --rig, give --fs HZ and --units g|m/s^2: they make the "
-                         "channels-only rig the record is imported with")
     if args.channels:
         raise ValueError("without --rig, every channel is imported (--force-channel names the "
                          "force); --channels maps channels onto a rig's gages")
-    names = source_channel_names(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit)
-    made = minimal_rig(names, name=src.stem, fs_hz=args.fs, units=args.units,
-                       force_channel=args.force_channel, medium=args.medium or "air")
+    found = source_channels(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit,
+                            fs_hz=args.fs)
+    made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
+                       units=args.units, force_channel=args.force_channel,
+                       medium=args.medium or "air", file_units=found.units)
+    for channel, unit in made.overridden:
+        print(f"warning: channel {channel!r} is in {unit} by the file's header; --units "
+              f"{args.units} applies only to channels that state no unit, so {unit} is applied "
+              f"and recorded in {rig_out.name}", file=sys.stderr)
     return parse_rig(made.text, source=str(rig_out)), made.channels
 
 
@@ -672,10 +677,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
     m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
-    m.add_argument("--rig", help="rig file (TOML) of the trial; without it, --fs and --units make "
-                   "a channels-only rig, written beside the output as OUT.rig.toml")
+    m.add_argument("--rig", help="rig file (TOML) of the trial; without it, a channels-only rig "
+                   "(the file's channels, units and rate) is written beside the output as "
+                   "OUT.rig.toml")
     m.add_argument("--units", choices=("g", "m/s^2"), help="without --rig: the unit of the "
-                   "acceleration channels whose file states none")
+                   "acceleration channels whose file states none (a unit the file states wins, "
+                   "with a warning where they differ)")
     m.add_argument("--out", help="output recording (default FILE.mcap)")
     m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
                    " (default: names like g01, gage 1, 1)")
