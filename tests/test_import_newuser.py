@@ -59,7 +59,7 @@ def test_written_rig_records_the_unit_applied_not_the_flag(tmp_path, capsys, hea
     src = _archive_b(tmp_path / "archive_B.csv", header, scale)
     rc, out, err = _run(["import", src, "--units", flag], capsys)
     assert rc == 0, err
-    assert "warning: channel 'AI0 acc' is in" in err and f"--units {flag}" in err
+    assert "warning: channels 'AI0 acc', 'AI1 acc' are in" in err and f"--units {flag}" in err
     rig = load_rig(tmp_path / "archive_B.rig.toml")
     assert {g.unit for g in rig.gages} == {header}
     first = _values(tmp_path / "archive_B.mcap")
@@ -90,3 +90,60 @@ def test_file_rate_is_taken_without_fs(tmp_path, capsys):
     assert "at 1651 Hz" in out
     rc, out, err = _run(["import", src, "--fs", "1000", "--out", tmp_path / "c.mcap"], capsys)
     assert rc == 1 and "1000 Hz" in err  # a stated rate is still checked against the file's
+
+
+# -- 3: channel names ----------------------------------------------------------------------------
+def test_written_rig_reimports_its_own_source(tmp_path, capsys):
+    """The rig ``import`` wrote refused its own source: ``'AI0 acc' is not a gage name``. It
+    records each gage's source channel, and a file with those channels maps through it; a file
+    with other names is told to use --channels (the option, not the Python argument)."""
+    src = _archive_b(tmp_path / "b.csv", "m/s^2")
+    assert _run(["import", src], capsys)[0] == 0
+    first = _values(tmp_path / "b.mcap")
+    rc, out, err = _run(["import", src, "--rig", tmp_path / "b.rig.toml", "--out",
+                         tmp_path / "again.mcap"], capsys)
+    assert rc == 0, err
+    assert np.array_equal(_values(tmp_path / "again.mcap"), first)  # same file, same counts
+    other = _archive_b(tmp_path / "o.csv", "m/s^2", names=("AI0", "AI1"))
+    rc, out, err = _run(["import", other, "--rig", tmp_path / "b.rig.toml"], capsys)
+    assert rc == 1 and "'AI0' is not a source channel of rig 'b'" in err
+    assert "--channels" in err and "channels=" not in err
+
+
+def test_force_channel_named_with_its_unit(tmp_path, capsys):
+    """``--force-channel 'Load cell [N]'`` (the header's text) was refused; the name without
+    the unit was needed. Both are taken, with and without a rig."""
+    t, x = _decay(5000.0, 2, dur=0.5)
+    f = 100.0 * np.exp(-((t - 0.1) / 1e-3) ** 2)
+    src = tmp_path / "a.csv"
+    src.write_text("Time [s],Accel 1 [g],Load cell [N]\n" + "".join(
+        f"{t[i]:.6f},{x[0, i] / G:.9e},{f[i]:.6f}\n" for i in range(t.size)))
+    rc, out, err = _run(["import", src, "--force-channel", "Load cell [N]"], capsys)
+    assert rc == 0, err
+    rig = load_rig(tmp_path / "a.rig.toml")
+    assert [fc.name for fc in rig.forces] == ["Load cell"] and rig.gages[0].unit == "g"
+    rc, out, err = _run(["import", src, "--rig", tmp_path / "a.rig.toml", "--force-channel",
+                         "Load cell [N]", "--out", tmp_path / "b.mcap"], capsys)
+    assert rc == 0, err
+    assert np.array_equal(_values(tmp_path / "b.mcap"), _values(tmp_path / "a.mcap"))
+
+
+def test_cli_messages_name_options_not_python_arguments(tmp_path, capsys):
+    """``(fs_hz=, --fs)``, ``allow_gaps= (--allow-gaps)`` on the command line: options only;
+    from Python both are named."""
+    src = _archive_b(tmp_path / "b.csv", "m/s^2")
+    assert _run(["import", src], capsys)[0] == 0
+    lines = src.read_text().split("\n")
+    lines[5] = lines[5].rsplit(",", 1)[0] + ","  # a missing value on line 6
+    gap = tmp_path / "gap.csv"
+    gap.write_text("\n".join(lines))
+    rc, out, err = _run(["import", gap, "--rig", tmp_path / "b.rig.toml"], capsys)
+    assert rc == 1 and "line 6" in err and "--allow-gaps" in err and "allow_gaps=" not in err
+    rc, out, err = _run(["import", src, "--rig", tmp_path / "b.rig.toml", "--fs", "1000",
+                         "--out", tmp_path / "x.mcap"], capsys)
+    assert rc == 1 and "--fs" in err and "fs_hz=" not in err
+    from ramdaq.drivers.files.import_common import ImportFormatError
+
+    with pytest.raises(ImportFormatError, match=r"allow_gaps= \(--allow-gaps\)"):
+        with open_device(str(gap), rig=tmp_path / "b.rig.toml") as dev:
+            list(dev)

@@ -342,7 +342,15 @@ def cmd_gap(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording."""
+    """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording; its
+    messages name the command's options (``--fs``), not the Python arguments."""
+    from ...drivers.files.import_common import cli_option_names
+
+    with cli_option_names():
+        return _import_file(args)
+
+
+def _import_file(args: argparse.Namespace) -> int:
     from ...drivers.files.import_common import parse_channel_map
     from ...drivers.registry import open_device
     from ..record import record
@@ -381,8 +389,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
-    print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
-          f"requantised to 24 bits; largest error "
+    print(f"counts: {exact} channel{'' if exact == 1 else 's'} kept their source step, "
+          f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
@@ -408,10 +416,13 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
     made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                        units=args.units, force_channel=args.force_channel,
                        medium=args.medium or "air", file_units=found.units)
-    for channel, unit in made.overridden:
-        print(f"warning: channel {channel!r} is in {unit} by the file's header; --units "
-              f"{args.units} applies only to channels that state no unit, so {unit} is applied "
-              f"and recorded in {rig_out.name}", file=sys.stderr)
+    for unit in sorted({u for _, u in made.overridden}):
+        names = [c for c, u in made.overridden if u == unit]
+        print(f"warning: channel{'s' if len(names) > 1 else ''} "
+              f"{', '.join(repr(c) for c in names)} {'are' if len(names) > 1 else 'is'} in "
+              f"{unit} by the file's header; --units {args.units} applies only to channels that "
+              f"state no unit, so {unit} is applied and recorded in {rig_out.name}",
+              file=sys.stderr)
     return parse_rig(made.text, source=str(rig_out)), made.channels
 
 

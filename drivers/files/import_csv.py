@@ -48,7 +48,7 @@ from os import PathLike
 import numpy as np
 
 from ...analysis.model.rig import Rig
-from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, option, snap_rate
 
 __all__ = ["CsvImportDevice", "read_csv_table", "sample_grid"]
 
@@ -183,8 +183,8 @@ def _time_unit(column: str, stated: str | None, given: str | None, name: str) ->
         return unit
     if given is None:
         raise ImportFormatError(f"{name}: time column {column!r} does not say its unit; name it "
-                                f"like time_s, 't [ms]', 'time (us)', or give time_unit= "
-                                f"(--time-unit s|ms|us)")
+                                f"like time_s, 't [ms]', 'time (us)', or give "
+                                f"{option('time_unit=', '--time-unit')} s|ms|us")
     return given
 
 
@@ -318,7 +318,8 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
         rel = t - t[0]
         if fs_hz is None:
             if t.size < 2:
-                raise ImportFormatError(f"{name}: one data row gives no sample rate; pass fs_hz=")
+                raise ImportFormatError(f"{name}: one data row gives no sample rate; give "
+                                        f"{option('fs_hz=', '--fs')}")
             fs_fit = 1.0 / float(np.median(dt))
             if rel[-1] * fs_fit > 2**40:
                 raise ImportFormatError(f"{name}: the time column spans {rel[-1] * fs_fit:.3g} samples")
@@ -348,7 +349,7 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
             if dt.size and abs(fs * float(np.median(dt)) - 1) > 0.01:  # printed steps: ~1e-3
                 raise ImportFormatError(f"{name}: the time column's sample rate is "
                                         f"{1 / float(np.median(dt)):.6g} Hz, not the {fs:g} Hz "
-                                        f"stated (fs_hz=, --fs)")
+                                        f"stated ({option('fs_hz=', '--fs')})")
         pos = rel * fs
         if pos[-1] > 2**40:
             raise ImportFormatError(f"{name}: the time column spans {pos[-1]:.3g} samples")

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ...analysis.model.rig import FORCE_UNITS, GAGE_UNITS, MAX_CHANNELS
-from .import_common import G0, ImportFormatError, gage_of_name, unit_factor
+from .import_common import G0, ImportFormatError, find_channel, gage_of_name, unit_factor
 
 __all__ = ["MinimalRig", "SourceChannels", "minimal_rig", "source_channels",
            "source_channel_names"]
@@ -112,6 +112,8 @@ def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
         raise ValueError(f"--units {units!r}: expected {' or '.join(GAGE_UNITS)}")
     if force_unit not in FORCE_UNITS:
         raise ValueError(f"force unit {force_unit!r}: expected {', '.join(FORCE_UNITS)}")
+    if force_channel is not None:
+        force_channel = find_channel(force_channel, names) or force_channel
     if force_channel is not None and force_channel not in names:
         raise ValueError(f"--force-channel {force_channel!r} is not a channel of the file (it has "
                          f"{', '.join(repr(n) for n in names[:20])})")
