@@ -147,3 +147,47 @@ def test_cli_messages_name_options_not_python_arguments(tmp_path, capsys):
     with pytest.raises(ImportFormatError, match=r"allow_gaps= \(--allow-gaps\)"):
         with open_device(str(gap), rig=tmp_path / "b.rig.toml") as dev:
             list(dev)
+
+
+# -- 4: CSV dialects -----------------------------------------------------------------------------
+def _dryd_a(path: Path, fs: float = 5000.0) -> tuple[Path, np.ndarray]:
+    """Drydock A's shape: a ``key;value`` header block, a blank line, ``;`` delimiters, decimal
+    commas, accelerations in g and a load cell in N."""
+    t, x = _decay(fs, 2, dur=0.4)
+    f = 1000.0 * np.exp(-((t - 0.1) / 1e-3) ** 2)
+    rows = ["Measurement system;HBM-like QuantumX export", "Date;2026-11-20",
+            "Sample rate;5000 Hz", "", "Time [s];Accel 1 [g];Accel 2 [g];Load cell [N]"]
+    rows += [";".join([f"{t[i]:.6f}", f"{x[0, i] / G:.8e}", f"{x[1, i] / G:.8e}",
+                       f"{f[i]:.3f}"]).replace(".", ",") for i in range(t.size)]
+    path.write_text("\n".join(rows) + "\n")
+    return path, x
+
+
+def test_header_block_and_decimal_commas_are_read_and_said(tmp_path, capsys):
+    """A ``key;value`` header block above the column names and ``0,000200`` decimals were
+    refused ('Operator' is not a number); now the block is skipped and both are said."""
+    src, x = _dryd_a(tmp_path / "dryd_A.csv")
+    rc, out, err = _run(["import", src, "--force-channel", "Load cell"], capsys)
+    assert rc == 0, err
+    assert "skipped 3 lines above the column names (lines 1-3" in out
+    assert "read decimal commas as decimal points (the delimiter is ';')" in out
+    got = _values(tmp_path / "dryd_A.mcap")
+    # 9 significant digits in g, requantised to 24 bits: well within 1e-7 of the peak
+    assert np.max(np.abs(got[:2] - x)) <= 1e-7 * np.max(np.abs(x))
+    assert load_rig(tmp_path / "dryd_A.rig.toml").daq.sample_rate_hz == 5000.0
+
+
+def test_bad_value_named_on_its_own_line(tmp_path, capsys):
+    """``0,000;abc`` on line 2 was reported on line 3 (the row was taken for a units row)."""
+    p = tmp_path / "c.csv"
+    p.write_text("time_s;g1\n0,000;abc\n0,001;2,5\n")
+    rc, out, err = _run(["import", p, "--units", "g"], capsys)
+    assert rc == 1 and "line 2, column 'g1': 'abc' is not a number" in err
+
+
+def test_quoted_decimal_comma_in_a_comma_file_says_what(tmp_path, capsys):
+    """A quoted ``"1,5"`` in a comma-separated file was '3 fields, expected 2'."""
+    p = tmp_path / "c.csv"
+    p.write_text('time_s,g1\n0.000,"1,5"\n0.001,2.5\n')
+    rc, out, err = _run(["import", p, "--units", "g"], capsys)
+    assert rc == 1 and "line 2, column 'g1': '1,5' is not a number (a decimal comma?" in err

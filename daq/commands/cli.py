@@ -389,7 +389,9 @@ def _import_file(args: argparse.Namespace) -> int:
     print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
-    print(f"counts: {exact} channel{'' if exact == 1 else 's'} kept their source step, "
+    for line in _read_notes(imp):
+        print(line)
+    print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     if rig_out is not None:
@@ -397,6 +399,20 @@ def _import_file(args: argparse.Namespace) -> int:
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
               f"ramdaq analyze {out} gives each gage's frequency and decrement")
     return EXIT_OK
+
+
+def _read_notes(imp: dict) -> list[str]:
+    """What the CSV reader made of the file's dialect: lines skipped, decimal commas."""
+    out = []
+    skipped = imp.get("skipped_lines")
+    if skipped:
+        n, a, b = skipped["count"], skipped["first"], skipped["last"]
+        out.append(f"skipped {n} line{'s' if n > 1 else ''} above the column names (line"
+                   f"{f's {a}-{b}' if b > a else f' {a}'}: a header block, not data)")
+    if imp.get("decimal") == ",":
+        out.append(f"read decimal commas as decimal points (the delimiter is "
+                   f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")
+    return out
 
 
 def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
