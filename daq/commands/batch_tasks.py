@@ -122,9 +122,26 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
 
 
 def one_line(exc: BaseException, limit: int = 300) -> str:
-    """An exception as one line: its type and the first line of its message."""
+    """An exception as one line in words: the first line of its message, which for ramdaq's
+    own errors (a damaged recording, a bad rig, a file that cannot be read) names the file and
+    what; any other exception is an ``internal error`` with its type."""
+    from ...analysis.model.rig import RigError
+    from ...drivers.errors import DeviceError
+    from ...drivers.mcap_format import RecordingError
+
     text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}"[:limit]
+    first = text[0] if text else ""
+    if isinstance(exc, RigError | DeviceError | RecordingError | OSError | ValueError) and first:
+        return first[:limit]
+    return f"internal error ({type(exc).__name__}){': ' + first if first else ''}"[:limit]
+
+
+def empty_file(path: str) -> str | None:
+    """``"PATH: empty (0 bytes), not a recording"`` for an empty file, else None."""
+    try:
+        return f"{path}: empty (0 bytes), not a recording" if os.path.getsize(path) == 0 else None
+    except OSError:
+        return None  # the task's own reading names it
 
 
 def _worker() -> str:
@@ -144,6 +161,8 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
     from .analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
+    if (why := empty_file(spec.path)) is not None:
+        return _finish(spec, t0, status="failed", status_reason=why)
     try:
         rig, hits = run_analysis(spec.path)
         write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
@@ -161,6 +180,8 @@ def gap_task(spec: TaskSpec) -> TaskResult:
     from .gap import run_gap, write_report
 
     t0 = time.perf_counter()
+    if (why := empty_file(spec.path)) is not None:
+        return _finish(spec, t0, status="failed", status_reason=why)
     try:
         lt, td, d = run_gap(spec.path)
         write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)

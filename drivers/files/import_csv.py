@@ -25,8 +25,8 @@ UTF-8 text (a byte-order mark is allowed), lines ending in LF or CRLF:
   as m/s^2 (a force channel: its rig unit), and said so in ``StreamInfo.extra``;
 * one row per sample, no thousands separators; a decimal point, or with a ``;`` or tab
   delimiter a decimal comma (``0,000200``; ``notes["decimal"] = ","``). A decimal comma in a
-  comma-separated file (quoted ``"1,5"``) is refused naming its line, column and why. An empty cell or ``nan`` is a
-  missing sample: an error naming its line and column, or with ``allow_gaps=``
+  comma-separated file (quoted ``"1,5"``) is refused naming its line, column and why. An empty
+  cell or ``nan`` is a missing sample: an error naming its line and column, or with ``allow_gaps=``
   (``--allow-gaps``) a gap: that row is not streamed. Blank lines and ``#`` lines are skipped.
 
 The rate fitted to the time column must be the rig's ``daq.sample_rate_hz`` unless ``fs_hz=``
