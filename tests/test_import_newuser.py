@@ -191,3 +191,33 @@ def test_quoted_decimal_comma_in_a_comma_file_says_what(tmp_path, capsys):
     p.write_text('time_s,g1\n0.000,"1,5"\n0.001,2.5\n')
     rc, out, err = _run(["import", p, "--units", "g"], capsys)
     assert rc == 1 and "line 2, column 'g1': '1,5' is not a number (a decimal comma?" in err
+
+
+# -- 6: export-uff of a channels-only import -----------------------------------------------------
+def test_export_uff_of_a_channels_only_import_writes_the_decays(tmp_path, capsys):
+    """``export-uff`` refused a channels-only import ('needs the structure') after analysing
+    it; now it writes the 58 decay records with direction 0 and says what was left out."""
+    import pyuff
+
+    fs = FS_B
+    t = np.arange(round(4.0 * fs)) / fs
+    tb = np.clip(t - 1.0, 0.0, None)
+    x = np.array([a * (t >= 1.0) * np.exp(-1.5 * tb) * np.sin(2 * np.pi * 8.3 * tb)
+                  for a in (0.5, 0.3)]) + 1e-5 * np.random.default_rng(0).standard_normal((2, t.size))
+    src = tmp_path / "b.csv"
+    src.write_text("t [ms],AI0 acc (m/s^2),AI1 acc (m/s^2)\n" + "".join(
+        f"{t[i] * 1e3:.4f},{x[0, i]:.9e},{x[1, i]:.9e}\n" for i in range(t.size)))
+    assert _run(["import", src], capsys)[0] == 0
+    rc, out, err = _run(["export-uff", tmp_path / "b.mcap"], capsys)
+    assert rc == 0, err
+    assert "UFF 15 (gage nodes) and 55 (" in out and "left out: rig 'b' describes only its " \
+           "channels" in out
+    sets = pyuff.UFF(str(tmp_path / "b.uff")).read_sets()
+    sets = sets if isinstance(sets, list) else [sets]
+    assert [d["type"] for d in sets] == [164, 58, 58]  # one accepted hit, two gages
+    assert [d["rsp_dir"] for d in sets[1:]] == [0, 0] and [d["rsp_node"] for d in sets[1:]] == [1, 2]
+    rec = _values(tmp_path / "b.mcap")
+    first = round(sets[1]["x"][0] * fs)
+    # E20.12 ordinates: 13 significant digits
+    assert np.allclose(sets[1]["data"], rec[0, first:first + sets[1]["data"].size], rtol=1e-11,
+                       atol=1e-12 * np.max(np.abs(rec[0])))

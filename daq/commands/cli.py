@@ -453,6 +453,8 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
     r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
     print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
           f"records from {r.hits} accepted of {len(hits)} hits")
+    if r.left_out:
+        print(r.left_out)
     return EXIT_OK
 
 
