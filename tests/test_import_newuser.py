@@ -221,3 +221,34 @@ def test_export_uff_of_a_channels_only_import_writes_the_decays(tmp_path, capsys
     # E20.12 ordinates: 13 significant digits
     assert np.allclose(sets[1]["data"], rec[0, first:first + sets[1]["data"].size], rtol=1e-11,
                        atol=1e-12 * np.max(np.abs(rec[0])))
+
+
+def test_uff_channels_by_their_id1_text(tmp_path, capsys):
+    """UFF channels were named only by node number ('1', 'force 100:+3'); a record's ID line 1
+    ('Accel 1', 'Hammer') names it too, for --force-channel and --channels."""
+    import pyuff
+
+    t, x = _decay(FS_B, 2, dur=0.5)
+    f = 100.0 * np.exp(-((t - 0.1) / 2e-3) ** 2)
+    sets = [pyuff.prepare_58(binary=0, id1=name, func_type=1, rsp_node=node, rsp_dir=3,
+                             ref_node=0, ref_dir=0, abscissa_spacing=1, abscissa_inc=1 / FS_B,
+                             abscissa_min=0.0, x=t, abscissa_spec_data_type=17,
+                             ordinate_spec_data_type=spec, orddenom_spec_data_type=0, data=y,
+                             ordinate_axis_units_lab=unit, abscissa_axis_units_lab="s",
+                             num_pts=t.size)
+            for name, node, spec, y, unit in [("Accel 1", 1, 12, x[0] / G, "g"),
+                                              ("Accel 2", 2, 12, x[1] / G, "g"),
+                                              ("Hammer", 100, 13, f, "N")]]
+    src = tmp_path / "c.uff"
+    pyuff.UFF(str(src)).write_sets(sets, mode="add")
+    rc, out, err = _run(["import", src, "--force-channel", "Hammer"], capsys)
+    assert rc == 0, err
+    rig = load_rig(tmp_path / "c.rig.toml")
+    assert [g.unit for g in rig.gages] == ["g", "g"] and rig.forces[0].name == "force 100:+3"
+    rc, out, err = _run(["import", src, "--rig", tmp_path / "c.rig.toml", "--channels",
+                         "Accel 2=g02", "--force-channel", "Hammer", "--out", tmp_path / "d.mcap"],
+                        capsys)
+    assert rc == 0, err
+    got = _values(tmp_path / "d.mcap")
+    # E20.12 in g: 13 digits, requantised to 24 bits: 6e-8 of the peak
+    assert got.shape[0] == 2 and np.max(np.abs(got[0] - x[1])) <= 1e-7 * np.max(np.abs(x[1]))

@@ -422,6 +422,7 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
     header unit where it states one (a differing ``--units`` is warned of and not applied),
     else ``--units``. Returns the rig and the source -> gage map."""
     from ...analysis.model.rig import parse_rig
+    from ...drivers.files.import_common import find_channel
     from ...drivers.files.minimal_rig import minimal_rig, source_channels
 
     if args.channels:
@@ -429,8 +430,10 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                          "force); --channels maps channels onto a rig's gages")
     found = source_channels(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit,
                             fs_hz=args.fs)
+    force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
+                                    or args.force_channel)
     made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
-                       units=args.units, force_channel=args.force_channel,
+                       units=args.units, force_channel=force,
                        medium=args.medium or "air", file_units=found.units)
     for unit in sorted({u for _, u in made.overridden}):
         names = [c for c, u in made.overridden if u == unit]
@@ -718,11 +721,13 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
     m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
     m.add_argument("--fs", type=_positive, help="the file's sample rate, Hz, when it differs from the "
-                   "rig's (the file's own rate must agree with it)")
+                   "rig's (the file's own rate must agree with it); without --rig the file's own "
+                   "rate is taken, and --fs only checks it")
     m.add_argument("--time-unit", choices=("s", "ms", "us"), help="CSV: the time column's unit, "
                    "when its header does not say it (time_s, 't [ms]', 'time (us)')")
     m.add_argument("--force-channel", help="the source channel that is the force (a load cell or "
-                   "instrumented hammer, in N, kN or lbf)")
+                   "instrumented hammer, in N, kN or lbf); its header text with the unit ('Load "
+                   "cell [N]') or a UFF record's ID line 1 ('Hammer') names it too")
     m.add_argument("--allow-gaps", action="store_true", help="import a missing value (empty, NaN) "
                    "as a gap in the recording instead of refusing the file")
     m.add_argument("--overwrite", action="store_true", help="replace an existing output file")

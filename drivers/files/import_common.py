@@ -104,13 +104,19 @@ _SOURCE_LINE = re.compile(r'^\[\[gages\]\]\s*#\s*source channel ("(?:[^"\\]|\\.)
                           r"\s*number\s*=\s*(\d+)", re.MULTILINE)
 
 
-def find_channel(name: str, names: list[str]) -> str | None:
-    """The one of ``names`` that ``name`` means: itself, or itself without a unit suffix
-    (``"Load cell [N]"``, ``"Load cell (N)"`` mean ``"Load cell"``); None if neither is there."""
-    if name in names:
-        return name
+def find_channel(name: str, names: list[str], aliases: Mapping[str, str] | None = None
+                 ) -> str | None:
+    """The one of ``names`` that ``name`` means: itself, another name of it (``aliases``: a UFF
+    record's ID line 1 for its node number), or either without a unit suffix (``"Load cell
+    [N]"``, ``"Load cell (N)"`` mean ``"Load cell"``); None if none is there."""
+    aliases = aliases or {}
     m = _UNIT_SUFFIX.match(name.strip())
-    return m.group(1) if m and m.group(1) in names else None
+    for n in (name, m.group(1) if m else None):
+        if n in names:
+            return n
+        if n in aliases:
+            return aliases[n]
+    return None
 
 
 def rig_source_map(rig_text: str) -> dict[str, int]:
@@ -170,7 +176,8 @@ class Pick:
 
 
 def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
-                 source: str, force_channel: str | None = None) -> list[Pick]:
+                 source: str, force_channel: str | None = None,
+                 aliases: Mapping[str, str] | None = None) -> list[Pick]:
     """Pick the source channels to import and their gages, in the rig's channel order.
 
     Parameters
@@ -187,12 +194,19 @@ def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
     force_channel : str, optional
         The source channel that is the rig's (first) force channel; by default a source channel
         named like one of the rig's ``[[forces]]`` is that force channel.
+    aliases : mapping of str to str, optional
+        Other names of source channels (:func:`find_channel`), for ``channels`` and
+        ``force_channel``.
 
     Returns
     -------
     list of Pick
         Sorted by rig channel.
     """
+    if aliases and channels is not None:
+        channels = {(find_channel(k, names, aliases) or k): g for k, g in channels.items()}
+    if aliases and force_channel is not None:
+        force_channel = find_channel(force_channel, names, aliases) or force_channel
     forces = _pick_forces(names, rig, force_channel, source)
     taken = {p.index for p in forces}
     names = [n if i not in taken else "" for i, n in enumerate(names)]  # "" is no gage name
@@ -457,6 +471,8 @@ class SourceTable:
         Releases the file once every channel has been read.
     where : callable, optional
         ``where(row)`` -> where that row is in the file (``"line 12"``), for messages.
+    aliases : dict
+        Other names of channels -> their name (a UFF record's ID line 1 -> its node).
     """
 
     names: list[str]
@@ -469,6 +485,7 @@ class SourceTable:
     notes: dict = field(default_factory=dict)
     close: Callable[[], None] | None = None
     where: Callable[[int], str] | None = None
+    aliases: dict[str, str] = field(default_factory=dict)
 
 
 class FileImportDevice(Device):
@@ -544,7 +561,7 @@ class FileImportDevice(Device):
                                     f"{int(idx[-1]) + 1} samples is out of range")
         self._check_rate(fs, name)
         picks = map_channels(src.names, self.rig, self._channel_map(src.names, name), name,
-                             self.force_channel)
+                             self.force_channel, src.aliases)
         counts = np.empty((len(picks), idx.size), np.int32)
         missing = np.zeros(idx.size, bool)
         scales, notes = [], {}

@@ -40,6 +40,7 @@ class SourceChannels:
     names: list[str]
     units: list[str | None]
     fs_hz: float
+    aliases: dict[str, str] | None = None
 
 
 def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
@@ -64,7 +65,7 @@ def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
             src.close()
     else:
         raise ImportFormatError(f"{path}: format {fmt!r} is not csv, uff or tdms")
-    return SourceChannels(list(src.names), list(src.units), float(src.fs_hz))
+    return SourceChannels(list(src.names), list(src.units), float(src.fs_hz), dict(src.aliases))
 
 
 def source_channel_names(path: Path, fmt: str, *, time_unit: str | None = None) -> list[str]:
