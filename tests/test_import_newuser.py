@@ -252,3 +252,16 @@ def test_uff_channels_by_their_id1_text(tmp_path, capsys):
     got = _values(tmp_path / "d.mcap")
     # E20.12 in g: 13 digits, requantised to 24 bits: 6e-8 of the peak
     assert got.shape[0] == 2 and np.max(np.abs(got[0] - x[1])) <= 1e-7 * np.max(np.abs(x[1]))
+
+
+def test_a_rig_unit_the_header_contradicts_is_warned_of(tmp_path, capsys):
+    """With --rig, a header unit that differs from the rig's gage unit is applied (the file's
+    word for its own samples) and said, naming the channel, not silently."""
+    src = _archive_b(tmp_path / "b.csv", "g", G)
+    assert _run(["import", src], capsys)[0] == 0
+    other = _archive_b(tmp_path / "o.csv", "m/s^2")
+    rc, out, err = _run(["import", other, "--rig", tmp_path / "b.rig.toml"], capsys)
+    assert rc == 0, err
+    assert "warning: channel 'AI0 acc' is in m/s^2 by the file's header, but rig 'b' says g" in err
+    _, x = _decay(FS_B, 2)
+    assert np.max(np.abs(_values(tmp_path / "o.mcap") - x)) <= 1e-7 * np.max(np.abs(x))

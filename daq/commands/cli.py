@@ -391,6 +391,12 @@ def _import_file(args: argparse.Namespace) -> int:
           f"({imp.get('missing_samples', 0)} samples missing)")
     for line in _read_notes(imp):
         print(line)
+    odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
+           if "rig_unit_not_applied" in c]
+    for source, unit, rig_unit in odd:
+        print(f"warning: channel {source!r} is in {unit} by the file's header, but rig "
+              f"{info.extra.get('rig_name')!r} says {rig_unit}: the header's unit was applied",
+              file=sys.stderr)
     print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))

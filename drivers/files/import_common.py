@@ -24,7 +24,8 @@ Counts and scale, per channel, in the file's own unit:
 measured largest error and the guaranteed bound (in the channel's SI unit, ``si_unit``). A missing
 value (NaN, empty) is an error naming where it is, unless ``allow_gaps``: then its row is not
 streamed, the blocks split there, a gap the recording keeps, never interpolated. Units: m/s^2 and
-g (9.80665 m/s^2) for a gage; N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
+g (9.80665 m/s^2) for a gage (the file's stated unit wins over the rig's; where they differ
+``"rig_unit_not_applied"`` says so); N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
 the stream by its rig name, unit ``"N"``, gage 0); anything else is refused naming the channel.
 The file's sample rate must be the rig's unless ``fs_hz`` states it. Every problem with a file is
 an :class:`ImportFormatError`: one line naming the file and what."""
@@ -594,6 +595,9 @@ class FileImportDevice(Device):
                 self.rig.gage(pick.gage).unit
             notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
                                 "si_unit": "N" if pick.is_force else "m/s^2", **q.to_json()}
+            if not pick.is_force and _stated(src.units[i]) and \
+                    factor != unit_factor(assumed, src.names[i], name):
+                notes[pick.name]["rig_unit_not_applied"] = assumed  # the header's unit wins
         if missing.all():
             raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
         # samples count from the file's time zero, so times in ramdaq are the file's times
