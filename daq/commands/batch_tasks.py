@@ -137,11 +137,17 @@ def one_line(exc: BaseException, limit: int = 300) -> str:
 
 
 def empty_file(path: str) -> str | None:
-    """``"PATH: empty (0 bytes), not a recording"`` for an empty file, else None."""
+    """``"empty (0 bytes), not a recording"`` for an empty file, else None."""
     try:
-        return f"{path}: empty (0 bytes), not a recording" if os.path.getsize(path) == 0 else None
+        return "empty (0 bytes), not a recording" if os.path.getsize(path) == 0 else None
     except OSError:
         return None  # the task's own reading names it
+
+
+def failure_reason(exc: BaseException, path: str) -> str:
+    """:func:`one_line` without the recording's path in front (the row names it)."""
+    text = one_line(exc)
+    return text[len(path) + 2:] if text.startswith(f"{path}: ") else text
 
 
 def _worker() -> str:
@@ -167,7 +173,7 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
         rig, hits = run_analysis(spec.path)
         write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
     except Exception as exc:  # a recording that breaks the analysis is a row, not a crash
-        return _finish(spec, t0, status="failed", status_reason=one_line(exc))
+        return _finish(spec, t0, status="failed", status_reason=failure_reason(exc, spec.path))
     rows = tuple(r for h in hits for r in mode_rows(h))
     return _finish(spec, t0, status="ok", hits_found=len(hits),
                    hits_accepted=sum(h.accepted for h in hits), rows=rows)
@@ -187,7 +193,7 @@ def gap_task(spec: TaskSpec) -> TaskResult:
         write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
         row = gap_row(d)
     except Exception as exc:  # a recording that breaks the diagnosis is a row, not a crash
-        return _finish(spec, t0, status="failed", status_reason=one_line(exc))
+        return _finish(spec, t0, status="failed", status_reason=failure_reason(exc, spec.path))
     return _finish(spec, t0, status="ok", hits_found=len(lt.onsets_s), hits_accepted=int(td.n_seg),
                    rows=(row,))
 
