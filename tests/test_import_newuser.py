@@ -265,3 +265,13 @@ def test_a_rig_unit_the_header_contradicts_is_warned_of(tmp_path, capsys):
     assert "warning: channel 'AI0 acc' is in m/s^2 by the file's header, but rig 'b' says g" in err
     _, x = _decay(FS_B, 2)
     assert np.max(np.abs(_values(tmp_path / "o.mcap") - x)) <= 1e-7 * np.max(np.abs(x))
+
+
+def test_a_tsv_file_is_read_as_csv(tmp_path, capsys):
+    """``dryd_A_tab.tsv`` without --format: 'format 'tsv' is not csv, uff or tdms'."""
+    src = tmp_path / "b.tsv"
+    src.write_text(_archive_b(tmp_path / "b.csv", "m/s^2").read_text().replace(",", "\t"))
+    rc, out, err = _run(["import", src], capsys)
+    assert rc == 0, err
+    assert _run(["import", tmp_path / "b.csv", "--out", tmp_path / "c.mcap"], capsys)[0] == 0
+    assert np.array_equal(_values(tmp_path / "b.mcap"), _values(tmp_path / "c.mcap"))

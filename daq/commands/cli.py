@@ -357,7 +357,7 @@ def _import_file(args: argparse.Namespace) -> int:
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".mcap")
-    fmt = args.format or src.suffix.lower().lstrip(".")
+    fmt = args.format or _SUFFIX_FORMAT.get(src.suffix.lower(), src.suffix.lower().lstrip("."))
     rig_out = None if args.rig else out.with_name(out.stem + ".rig.toml")
     for path in filter(None, (out, rig_out)):
         if path.exists() and not args.overwrite:
@@ -376,7 +376,7 @@ def _import_file(args: argparse.Namespace) -> int:
         options["time_unit"] = args.time_unit
     from .progress import progress_bar
 
-    device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
+    device = open_device(f"{fmt}://{src}" if fmt in ("csv", "uff", "tdms") else str(src), **options)
     with progress_bar(f"reading {src.name}", None):  # parsing the file: no count to show
         info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
@@ -405,6 +405,10 @@ def _import_file(args: argparse.Namespace) -> int:
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
               f"ramdaq analyze {out} gives each gage's frequency and decrement")
     return EXIT_OK
+
+
+_SUFFIX_FORMAT = {".tsv": "csv", ".txt": "csv", ".unv": "uff"}
+"""Suffixes ``import`` reads as another format's (a tab-separated file is a CSV to it)."""
 
 
 def _read_notes(imp: dict) -> list[str]:
