@@ -354,7 +354,7 @@ def test_cli_import_format_channels_medium(sim, tmp_path, capsys):
     args = ["import", str(src), "--rig", str(RIG), "--format", "csv", "--channels",
             "Accel A=g04", "--medium", "water", "--out", str(out)]
     assert main(args) == 0
-    assert "1 channels kept their source step" in capsys.readouterr().out
+    assert "1 channel kept its source step" in capsys.readouterr().out
     with McapReplayDevice(out) as dev:
         assert dev.info.gages == (4,) and dev.info.extra["medium"] == "water"
         assert np.array_equal(np.concatenate([b.counts for b in dev], axis=1), counts[:1, :300])

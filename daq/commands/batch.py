@@ -26,6 +26,7 @@ import glob
 import logging
 import os
 import signal
+import sys
 import threading
 import time
 import uuid
@@ -62,25 +63,54 @@ def cpu_count() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+IMPORTABLE = (".csv", ".tsv", ".txt", ".uff", ".unv", ".tdms")
+"""Suffixes of other systems' records: ``ramdaq import`` makes them recordings first."""
+
+
 def expand_paths(patterns: Sequence[str]) -> list[Path]:
     """Recordings named by files, folders (every ``*.mcap`` below) and globs (``**`` too), as
     absolute paths, each once, in the order given. A name that matches nothing is an error."""
+    return find_recordings(patterns)[0]
+
+
+def find_recordings(patterns: Sequence[str], exclude: Path | None = None
+                    ) -> tuple[list[Path], list[Path]]:
+    """:func:`expand_paths`, and the files the folders and globs held that are not ``.mcap``
+    recordings (left out; those under ``exclude``, the batch's own output, are not counted)."""
     out: dict[Path, None] = {}
+    left: dict[Path, None] = {}
     for p in patterns:
         if any(c in p for c in "*?["):
             hits = [Path(h) for h in sorted(glob.glob(p, recursive=True))]
-            found = [f for h in hits for f in (sorted(h.rglob("*.mcap")) if h.is_dir() else [h])
-                     if f.suffix == ".mcap"]
+            files = [f for h in hits for f in (sorted(h.rglob("*")) if h.is_dir() else [h])
+                     if f.is_file()]
         elif Path(p).is_dir():
-            found = sorted(Path(p).rglob("*.mcap"))
+            files = [f for f in sorted(Path(p).rglob("*")) if f.is_file()]
         elif Path(p).exists():
-            found = [Path(p)]
+            files = [Path(p)]
         else:
             raise FileNotFoundError(f"{p}: no such file or folder")
+        found = [f for f in files if f.suffix == ".mcap" or len(files) == 1 and Path(p) == f]
         if not found:
-            raise FileNotFoundError(f"{p}: matches no .mcap recording")
+            raise FileNotFoundError(f"{p}: matches no .mcap recording"
+                                    f"{_left_out_hint(files)}")
         out.update((f.resolve(), None) for f in found)
-    return list(out)
+        left.update((f.resolve(), None) for f in files if f.suffix != ".mcap" and f not in found)
+    skip = exclude.resolve() if exclude is not None else None
+    return list(out), [f for f in left if skip is None or not f.is_relative_to(skip)]
+
+
+def _left_out_hint(files: Sequence[Path]) -> str:
+    return ("; CSV, UFF and TDMS records are made recordings first with ramdaq import"
+            if any(f.suffix.lower() in IMPORTABLE for f in files) else "")
+
+
+def left_out_line(left: Sequence[Path]) -> str:
+    """One line on the files a batch left out, and why."""
+    n = len(left)
+    names = ", ".join(f.name for f in left[:3]) + (", ..." if n > 3 else "")
+    return (f"left out {n} file{'s' if n > 1 else ''} that {'are' if n > 1 else 'is'} not a "
+            f".mcap recording ({names}){_left_out_hint(left)}")
 
 
 def report_folders(paths: Sequence[Path], out: Path, kind: str) -> list[Path]:
@@ -290,6 +320,13 @@ def progress_bar(plan: BatchPlan, show: bool = True) -> Iterator[Callable[[TaskR
     if not show:
         yield lambda r: None
         return
+    if not sys.stderr.isatty():  # a log: no bar, and each failure one unwrapped line
+        def plain(r: TaskResult) -> None:
+            if r.status != "ok":
+                print(f"{r.status}: {r.recording}: {r.status_reason}", file=sys.stderr, flush=True)
+
+        yield plain
+        return
     cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             TextColumn("ETA"), TimeRemainingColumn())
     with Progress(*cols, console=Console(stderr=True)) as bar:
@@ -299,7 +336,7 @@ def progress_bar(plan: BatchPlan, show: bool = True) -> Iterator[Callable[[TaskR
             bar.advance(task)
             if r.status != "ok":
                 bar.console.print(f"{r.status}: {r.recording}: {r.status_reason}", markup=False,
-                                  highlight=False)
+                                  highlight=False, soft_wrap=True)
 
         yield advance
 
@@ -317,6 +354,7 @@ class BatchPlan:
     todo: tuple[TaskSpec, ...]
     carried: pa.Table | None
     note: str = ""
+    left_out: tuple[Path, ...] = ()
 
 
 def plan_batch(kind: str, patterns: Sequence[str], out: Path, *, plots: bool = True,
@@ -324,7 +362,7 @@ def plan_batch(kind: str, patterns: Sequence[str], out: Path, *, plots: bool = T
     """Find the recordings, hash them, and decide which need running (all with ``force``)."""
     if kind not in TASKS:
         raise ValueError(f"batch {kind!r}: one of {', '.join(TASKS)}")
-    paths = expand_paths(patterns)
+    paths, left = find_recordings(patterns, exclude=out)
     folders = report_folders(paths, out, kind)
     specs = tuple(TaskSpec(str(p), file_sha256(p), str(f), plots)
                   for p, f in zip(paths, folders, strict=True))
@@ -336,7 +374,8 @@ def plan_batch(kind: str, patterns: Sequence[str], out: Path, *, plots: bool = T
         import pyarrow.compute as pc
 
         carried = old.filter(pc.is_in(old.column("recording"), value_set=_array(sorted(done))))
-    return BatchPlan(kind, table, specs, tuple(s for s in specs if s.path not in done), carried, note)
+    return BatchPlan(kind, table, specs, tuple(s for s in specs if s.path not in done), carried, note,
+                     tuple(left))
 
 
 def _array(values: list[str]) -> pa.Array:
@@ -414,11 +453,11 @@ def _result_of(fut: Future, spec: TaskSpec) -> TaskResult:
     try:
         return fut.result()
     except KilledWorker as exc:
-        return TaskResult.not_run(spec, "lost", f"KilledWorker: the workers running it died {exc.args[2]} "
+        return TaskResult.not_run(spec, "lost", f"the workers running it died {exc.args[2]} "
                                   "times; dask gave up on it")
     except (Exception, asyncio.CancelledError) as exc:
         return TaskResult.not_run(spec, "lost", one_line(exc) if str(exc) else
-                                  f"{type(exc).__name__}: the cluster dropped the task")
+                                  "the cluster dropped the task (cancelled)")
 
 
 def finish(outcome: BatchOutcome) -> None:
@@ -453,11 +492,13 @@ def summary_lines(outcome: BatchOutcome) -> list[str]:
     recs = recordings_of(outcome.table)
     st = Counter(r["status"] for r in recs)
     out = [f"{'PARTIAL (interrupted): ' if outcome.interrupted else ''}batch {plan.kind} of "
-           f"{len(plan.specs)} recordings: {len(rs)} to run, {outcome.skipped} skipped (results current); "
-           f"{st['ok']} ok, {st['failed']} failed, {st['lost']} lost, {st['interrupted']} not run"]
+           f"{_n(len(plan.specs), 'recording')}: {len(rs)} to run, {outcome.skipped} skipped (results "
+           f"current); {st['ok']} ok, {st['failed']} failed, {st['lost']} lost, {st['interrupted']} not run"]
+    if plan.left_out:
+        out.append(f"  {left_out_line(plan.left_out)}")
     if rs and outcome.cluster:
-        out.append(f"  on {outcome.workers} workers at {outcome.cluster}: {outcome.seconds:.1f} s wall, "
-                   f"{sum(r.seconds for r in rs):.1f} s in tasks")
+        out.append(f"  on {_n(outcome.workers, 'worker')} at {outcome.cluster}: {outcome.seconds:.1f} s "
+                   f"wall, {sum(r.seconds for r in rs):.1f} s in tasks")
     ok = [r for r in recs if r["status"] == "ok"]
     if plan.kind == "analyze":
         hits, acc = sum(r["hits_found"] for r in ok), sum(r["hits_accepted"] for r in ok)
@@ -478,6 +519,11 @@ def summary_lines(outcome: BatchOutcome) -> list[str]:
     out += [f"  note: {w}" for w in ([plan.note] if plan.note else []) + (outcome.warnings or [])]
     out.append(f"  table: {plan.table}{' (PARTIAL)' if outcome.interrupted else ''}")
     return out
+
+
+def _n(count: int, noun: str) -> str:
+    """``"1 worker"``, ``"2 workers"``."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
 def run_batch(kind: str, patterns: Sequence[str], out: Path, *, client: Client | None = None,

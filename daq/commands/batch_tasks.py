@@ -122,9 +122,32 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
 
 
 def one_line(exc: BaseException, limit: int = 300) -> str:
-    """An exception as one line: its type and the first line of its message."""
+    """An exception as one line in words: the first line of its message, which for ramdaq's
+    own errors (a damaged recording, a bad rig, a file that cannot be read) names the file and
+    what; any other exception is an ``internal error`` with its type."""
+    from ...analysis.model.rig import RigError
+    from ...drivers.errors import DeviceError
+    from ...drivers.mcap_format import RecordingError
+
     text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}"[:limit]
+    first = text[0] if text else ""
+    if isinstance(exc, RigError | DeviceError | RecordingError | OSError | ValueError) and first:
+        return first[:limit]
+    return f"internal error ({type(exc).__name__}){': ' + first if first else ''}"[:limit]
+
+
+def empty_file(path: str) -> str | None:
+    """``"empty (0 bytes), not a recording"`` for an empty file, else None."""
+    try:
+        return "empty (0 bytes), not a recording" if os.path.getsize(path) == 0 else None
+    except OSError:
+        return None  # the task's own reading names it
+
+
+def failure_reason(exc: BaseException, path: str) -> str:
+    """:func:`one_line` without the recording's path in front (the row names it)."""
+    text = one_line(exc)
+    return text[len(path) + 2:] if text.startswith(f"{path}: ") else text
 
 
 def _worker() -> str:
@@ -144,11 +167,13 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
     from .analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
+    if (why := empty_file(spec.path)) is not None:
+        return _finish(spec, t0, status="failed", status_reason=why)
     try:
         rig, hits = run_analysis(spec.path)
         write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
     except Exception as exc:  # a recording that breaks the analysis is a row, not a crash
-        return _finish(spec, t0, status="failed", status_reason=one_line(exc))
+        return _finish(spec, t0, status="failed", status_reason=failure_reason(exc, spec.path))
     rows = tuple(r for h in hits for r in mode_rows(h))
     return _finish(spec, t0, status="ok", hits_found=len(hits),
                    hits_accepted=sum(h.accepted for h in hits), rows=rows)
@@ -161,12 +186,14 @@ def gap_task(spec: TaskSpec) -> TaskResult:
     from .gap import run_gap, write_report
 
     t0 = time.perf_counter()
+    if (why := empty_file(spec.path)) is not None:
+        return _finish(spec, t0, status="failed", status_reason=why)
     try:
         lt, td, d = run_gap(spec.path)
         write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
         row = gap_row(d)
     except Exception as exc:  # a recording that breaks the diagnosis is a row, not a crash
-        return _finish(spec, t0, status="failed", status_reason=one_line(exc))
+        return _finish(spec, t0, status="failed", status_reason=failure_reason(exc, spec.path))
     return _finish(spec, t0, status="ok", hits_found=len(lt.onsets_s), hits_accepted=int(td.n_seg),
                    rows=(row,))
 

@@ -342,14 +342,22 @@ def cmd_gap(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording."""
+    """Another system's recording (CSV, UFF 58, TDMS) into a ramdaq MCAP recording; its
+    messages name the command's options (``--fs``), not the Python arguments."""
+    from ...drivers.files.import_common import cli_option_names
+
+    with cli_option_names():
+        return _import_file(args)
+
+
+def _import_file(args: argparse.Namespace) -> int:
     from ...drivers.files.import_common import parse_channel_map
     from ...drivers.registry import open_device
     from ..record import record
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".mcap")
-    fmt = args.format or src.suffix.lower().lstrip(".")
+    fmt = args.format or _SUFFIX_FORMAT.get(src.suffix.lower(), src.suffix.lower().lstrip("."))
     rig_out = None if args.rig else out.with_name(out.stem + ".rig.toml")
     for path in filter(None, (out, rig_out)):
         if path.exists() and not args.overwrite:
@@ -368,7 +376,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         options["time_unit"] = args.time_unit
     from .progress import progress_bar
 
-    device = open_device(f"{args.format}://{src}" if args.format else str(src), **options)
+    device = open_device(f"{fmt}://{src}" if fmt in ("csv", "uff", "tdms") else str(src), **options)
     with progress_bar(f"reading {src.name}", None):  # parsing the file: no count to show
         info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
@@ -381,8 +389,16 @@ def cmd_import(args: argparse.Namespace) -> int:
     print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
-    print(f"counts: {exact} channels kept their source step, {info.n_channels - exact} "
-          f"requantised to 24 bits; largest error "
+    for line in _read_notes(imp):
+        print(line)
+    odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
+           if "rig_unit_not_applied" in c]
+    for source, unit, rig_unit in odd:
+        print(f"warning: channel {source!r} is in {unit} by the file's header, but rig "
+              f"{info.extra.get('rig_name')!r} says {rig_unit}: the header's unit was applied",
+              file=sys.stderr)
+    print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
+          f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
@@ -391,22 +407,51 @@ def cmd_import(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+_SUFFIX_FORMAT = {".tsv": "csv", ".txt": "csv", ".unv": "uff"}
+"""Suffixes ``import`` reads as another format's (a tab-separated file is a CSV to it)."""
+
+
+def _read_notes(imp: dict) -> list[str]:
+    """What the CSV reader made of the file's dialect: lines skipped, decimal commas."""
+    out = []
+    skipped = imp.get("skipped_lines")
+    if skipped:
+        n, a, b = skipped["count"], skipped["first"], skipped["last"]
+        out.append(f"skipped {n} line{'s' if n > 1 else ''} above the column names (line"
+                   f"{f's {a}-{b}' if b > a else f' {a}'}: a header block, not data)")
+    if imp.get("decimal") == ",":
+        out.append(f"read decimal commas as decimal points (the delimiter is "
+                   f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")
+    return out
+
+
 def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                        rig_out: Path) -> tuple[object, dict[str, int]]:
-    """Without ``--rig``: a channels-only rig for the file's channels (``--channels`` names
-    them, else every one), and the source -> gage map. Needs ``--fs`` and ``--units``."""
+    """Without ``--rig``: a channels-only rig for the file's channels (every one), at the
+    file's own rate (``--fs`` checks it), each gage in the unit its samples are in: the file's
+    header unit where it states one (a differing ``--units`` is warned of and not applied),
+    else ``--units``. Returns the rig and the source -> gage map."""
     from ...analysis.model.rig import parse_rig
-    from ...drivers.files.minimal_rig import minimal_rig, source_channel_names
+    from ...drivers.files.import_common import find_channel
+    from ...drivers.files.minimal_rig import minimal_rig, source_channels
 
-    if args.fs is None or args.units is None:
-        raise ValueError("without --rig, give --fs HZ and --units g|m/s^2: they make the "
-                         "channels-only rig the record is imported with")
     if args.channels:
         raise ValueError("without --rig, every channel is imported (--force-channel names the "
                          "force); --channels maps channels onto a rig's gages")
-    names = source_channel_names(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit)
-    made = minimal_rig(names, name=src.stem, fs_hz=args.fs, units=args.units,
-                       force_channel=args.force_channel, medium=args.medium or "air")
+    found = source_channels(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit,
+                            fs_hz=args.fs)
+    force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
+                                    or args.force_channel)
+    made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
+                       units=args.units, force_channel=force,
+                       medium=args.medium or "air", file_units=found.units)
+    for unit in sorted({u for _, u in made.overridden}):
+        names = [c for c, u in made.overridden if u == unit]
+        print(f"warning: channel{'s' if len(names) > 1 else ''} "
+              f"{', '.join(repr(c) for c in names)} {'are' if len(names) > 1 else 'is'} in "
+              f"{unit} by the file's header; --units {args.units} applies only to channels that "
+              f"state no unit, so {unit} is applied and recorded in {rig_out.name}",
+              file=sys.stderr)
     return parse_rig(made.text, source=str(rig_out)), made.channels
 
 
@@ -421,6 +466,8 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
     r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
     print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
           f"records from {r.hits} accepted of {len(hits)} hits")
+    if r.left_out:
+        print(r.left_out)
     return EXIT_OK
 
 
@@ -672,21 +719,25 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
     m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
-    m.add_argument("--rig", help="rig file (TOML) of the trial; without it, --fs and --units make "
-                   "a channels-only rig, written beside the output as OUT.rig.toml")
+    m.add_argument("--rig", help="rig file (TOML) of the trial; without it, a channels-only rig "
+                   "(the file's channels, units and rate) is written beside the output as "
+                   "OUT.rig.toml")
     m.add_argument("--units", choices=("g", "m/s^2"), help="without --rig: the unit of the "
-                   "acceleration channels whose file states none")
+                   "acceleration channels whose file states none (a unit the file states wins, "
+                   "with a warning where they differ)")
     m.add_argument("--out", help="output recording (default FILE.mcap)")
     m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
     m.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
     m.add_argument("--fs", type=_positive, help="the file's sample rate, Hz, when it differs from the "
-                   "rig's (the file's own rate must agree with it)")
+                   "rig's (the file's own rate must agree with it); without --rig the file's own "
+                   "rate is taken, and --fs only checks it")
     m.add_argument("--time-unit", choices=("s", "ms", "us"), help="CSV: the time column's unit, "
                    "when its header does not say it (time_s, 't [ms]', 'time (us)')")
     m.add_argument("--force-channel", help="the source channel that is the force (a load cell or "
-                   "instrumented hammer, in N, kN or lbf)")
+                   "instrumented hammer, in N, kN or lbf); its header text with the unit ('Load "
+                   "cell [N]') or a UFF record's ID line 1 ('Hammer') names it too")
     m.add_argument("--allow-gaps", action="store_true", help="import a missing value (empty, NaN) "
                    "as a gap in the recording instead of refusing the file")
     m.add_argument("--overwrite", action="store_true", help="replace an existing output file")

@@ -3,8 +3,13 @@ section and its plot (``frf.png``), from the accepted hits' records
 (:func:`ramdaq.analysis.modal.frf.h1_estimate`).
 
 Each blow is taken from :data:`PRE_S` before its onset (the force's rising edge) for the length
-of the shortest record among them, at most :data:`MAX_SAMPLES`; the section says how many
-samples and blows it used, in SI units: H1 in (m/s^2)/N, frequencies in Hz, phase in rad.
+of the shortest record among them -- the trigger's record runs to the decay's end, at most to
+the next blow -- and at most :data:`MAX_WINDOW_S`: the window is set by time, so the resolution
+(1 / window) does not shrink with the sample rate (a fixed 8192 samples was 1.64 s at 5000 Hz:
+0.61 Hz bins, a 12.50 Hz mode peaking at 12.21 Hz and |H1| 7 % high from the ringing cut off).
+The section says how many samples and blows it used, in SI units: H1 in (m/s^2)/N, frequencies
+in Hz, phase in rad; it holds every bin up to the last one where H1 is given (above it the
+force is more than 20 dB down and every gage's H1 is NaN), so its size follows the force's band.
 """
 
 from __future__ import annotations
@@ -21,13 +26,13 @@ from ..analyzer import HitResult, finite_json
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn, not with the report
     from matplotlib.figure import Figure
 
-__all__ = ["MAX_SAMPLES", "PRE_S", "frf_figure", "frf_section", "plot_frf"]
+__all__ = ["MAX_WINDOW_S", "PRE_S", "frf_figure", "frf_section", "plot_frf"]
 
 PRE_S = 0.002
 """Taken before each onset, s: the onset is the force's rise less the anti-alias delay."""
-MAX_SAMPLES = 8192
-"""Longest FRF window, samples: its resolution is fs / 8192 (0.25 Hz at 2048 Hz); the report
-holds every bin of every gage."""
+MAX_WINDOW_S = 10.0
+"""Longest FRF window, s: 0.1 Hz bins, five across the half-power band (2 zeta f) of a 12.5 Hz
+mode of zeta 0.02, by which time such a mode has decayed by e^-16."""
 
 
 def _blows(rig: Rig, hits: list[HitResult]) -> tuple[np.ndarray, np.ndarray, list[int], float]:
@@ -44,7 +49,7 @@ def _blows(rig: Rig, hits: list[HitResult]) -> tuple[np.ndarray, np.ndarray, lis
         rec = h.event.record
         a = max(0, h.event.onset_sample - round(PRE_S * fs) - rec.first_sample)
         cuts.append((rec, a))
-    n = min(MAX_SAMPLES, *(rec.counts.shape[1] - a for rec, a in cuts))
+    n = min(round(MAX_WINDOW_S * fs), *(rec.counts.shape[1] - a for rec, a in cuts))
     f = np.stack([rec.counts[f_row, a:a + n] * rec.scale[f_row] for rec, a in cuts])
     x = np.stack([rec.counts[g_rows, a:a + n] * rec.scale[g_rows, None] for rec, a in cuts])
     return f, x, [h.index for h in use], fs
@@ -70,15 +75,18 @@ def frf_section(rig: Rig, hits: list[HitResult]) -> dict | None:
 def _to_json(rig: Rig, est: FrfEstimate, used: list[int], n: int, fs: float) -> dict:
     names = [f"g{g.number:02d}" for g in rig.gages_by_channel()]
     peaks = est.peak_hz(1.0)
+    given = np.flatnonzero(np.any(np.isfinite(est.h1), axis=0))
+    m = int(given[-1]) + 1 if given.size else est.f_hz.size  # bins above: NaN for every gage
     return {
         "force_channel": rig.forces[0].name, "units": {"h1": "(m/s^2)/N", "f_hz": "Hz",
                                                        "phase": "rad", "coherence": "1"},
         "estimator": "H1", "hits": used, "n_blows": est.n_blows, "samples": n,
         "window_s": n / fs, "pre_s": PRE_S, "exp_tau_s": est.exp_tau_s,
-        "notes": list(est.notes), "f_hz": est.f_hz.tolist(),
-        "gages": {g: {"peak_hz": float(peaks[i]), "magnitude": finite_json(np.abs(est.h1[i]).tolist()),
-                      "phase_rad": finite_json(np.angle(est.h1[i]).tolist()),
-                      "coherence": finite_json(est.coherence[i].tolist())}
+        "notes": list(est.notes), "f_hz": est.f_hz[:m].tolist(), "bins_total": int(est.f_hz.size),
+        "gages": {g: {"peak_hz": float(peaks[i]),
+                      "magnitude": finite_json(np.abs(est.h1[i, :m]).tolist()),
+                      "phase_rad": finite_json(np.angle(est.h1[i, :m]).tolist()),
+                      "coherence": finite_json(est.coherence[i, :m].tolist())}
                   for i, g in enumerate(names)},
     }
 

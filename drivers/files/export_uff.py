@@ -24,6 +24,11 @@ The file holds, in this order (all SI: m, s, m/s^2):
   direction = its sensing axis; even abscissa from the decay start, increment 1/fs). Load case =
   hit index + 1; ID line 4 holds the exact first sample and rate.
 
+A channels-only rig (``ramdaq import`` without a rig) has no gage positions or sensing axes:
+its file holds UFF 164 and the 58 decay records with direction 0 (scalar), and
+:attr:`UffExport.left_out` says that the 15 nodes and 55 mode shapes were left out and why
+(pyuff's 55 writer writes three values a node, so a scalar 55 is not an option).
+
 Written ASCII (``binary=True``: 58b for the records) through pyuff, to a temporary file moved
 into place when complete. UFF prints headers with 6 significant digits (E13.5) and double
 ordinates with 13 (E20.12).
@@ -51,13 +56,15 @@ AXIS_CODES = {"x": 1, "y": 2, "z": 3, "-x": -1, "-y": -2, "-z": -3}
 
 @dataclass(frozen=True)
 class UffExport:
-    """What :func:`export_uff` wrote: its path, and how many hits, nodes, modes and records."""
+    """What :func:`export_uff` wrote: its path, and how many hits, nodes, modes and records;
+    ``left_out`` says what was not written and why (empty when nothing was left out)."""
 
     path: Path
     hits: int
     nodes: int
     modes: int
     records: int
+    left_out: str = ""
 
 
 def export_uff(path: str | PathLike, analysis_hits: Sequence, rig: Rig, *, source: str = "",
@@ -84,28 +91,23 @@ def export_uff(path: str | PathLike, analysis_hits: Sequence, rig: Rig, *, sourc
     """
     import pyuff
 
-    rig.require_structure("export-uff (the gages' positions and directions)")
     path = Path(path)
     stamp = time.strftime("%d-%b-%y %H:%M:%S").upper()
     id2 = f"ramdaq rig {rig.name} in {rig.medium}"[:80]
     id5 = (source or "ramdaq")[-80:]
     sets: list[dict] = [
         {"type": 164, "units_code": 1, "units_description": "SI", "temp_mode": 2,
-         "length": 1.0, "force": 1.0, "temp": 1.0, "temp_offset": 273.15},
-        {"type": 15, "node_nums": [g.number for g in rig.gages],
-         "def_cs": [0] * len(rig.gages), "disp_cs": [0] * len(rig.gages),
-         "color": [0] * len(rig.gages),
-         "x": [rig.surface.to_ship(g.position_m)[0] for g in rig.gages],
-         "y": [rig.surface.to_ship(g.position_m)[1] for g in rig.gages],
-         "z": [rig.surface.to_ship(g.position_m)[2] for g in rig.gages]},
-    ]
-    hits = modes = records = 0
+         "length": 1.0, "force": 1.0, "temp": 1.0, "temp_offset": 273.15}]
+    if rig.structural:
+        sets.append(_node_set(rig))
+    hits = modes = records = unwritten = 0
     for h in analysis_hits:
         if not h.accepted or h.analysis is None:
             continue
         hits += 1
         ids = {"id2": id2, "id3": stamp, "id5": id5}
-        mode_sets = _mode_sets(h.index, h.analysis, rig, ids)
+        mode_sets = _mode_sets(h.index, h.analysis, rig, ids) if rig.structural else []
+        unwritten += 0 if rig.structural else len(h.analysis.modes)
         record_sets = _decay_sets(h, rig, ids, binary)
         modes += len(mode_sets)
         records += len(record_sets)
@@ -119,7 +121,21 @@ def export_uff(path: str | PathLike, analysis_hits: Sequence, rig: Rig, *, sourc
     finally:
         if tmp.exists():
             tmp.unlink()
-    return UffExport(path, hits, len(rig.gages), modes, records)
+    left = "" if rig.structural else (
+        f"UFF 15 (gage nodes) and 55 ({unwritten} mode shape{'' if unwritten == 1 else 's'}) left "
+        f"out: rig {rig.name!r} describes only its channels, no gage positions or sensing axes; "
+        f"the 58 decay records have direction 0")
+    return UffExport(path, hits, len(rig.gages) if rig.structural else 0, modes, records, left)
+
+
+def _node_set(rig: Rig) -> dict:
+    """UFF 15: a node per gage at its position in ship axes, m."""
+    return {"type": 15, "node_nums": [g.number for g in rig.gages],
+         "def_cs": [0] * len(rig.gages), "disp_cs": [0] * len(rig.gages),
+         "color": [0] * len(rig.gages),
+         "x": [rig.surface.to_ship(g.position_m)[0] for g in rig.gages],
+         "y": [rig.surface.to_ship(g.position_m)[1] for g in rig.gages],
+         "z": [rig.surface.to_ship(g.position_m)[2] for g in rig.gages]}
 
 
 def _mode_sets(index: int, a: ImpactAnalysis, rig: Rig, ids: dict) -> list[dict]:
@@ -174,7 +190,7 @@ def _decay_sets(h, rig: Rig, ids: dict, binary: bool) -> list[dict]:
             "id4": f"first_sample {first} fs_hz {fs!r}"[:80], **ids,
             "func_type": 1, "func_id": len(out) + 1, "ver_num": 0, "load_case_id": h.index + 1,
             "rsp_ent_name": f"g{n:02d}", "rsp_node": n,
-            "rsp_dir": AXIS_CODES[rig.surface.ship_axis(rig.gage(n).axis)],
+            "rsp_dir": AXIS_CODES[rig.surface.ship_axis(rig.gage(n).axis)] if rig.structural else 0,
             "ref_ent_name": "NONE", "ref_node": 0,
             "ref_dir": 0, "abscissa_spacing": 1, "x": t, "data": np.ascontiguousarray(values[row]),
             "abscissa_spec_data_type": 17, "abscissa_axis_lab": "time",

@@ -24,16 +24,20 @@ Counts and scale, per channel, in the file's own unit:
 measured largest error and the guaranteed bound (in the channel's SI unit, ``si_unit``). A missing
 value (NaN, empty) is an error naming where it is, unless ``allow_gaps``: then its row is not
 streamed, the blocks split there, a gap the recording keeps, never interpolated. Units: m/s^2 and
-g (9.80665 m/s^2) for a gage; N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
+g (9.80665 m/s^2) for a gage (the file's stated unit wins over the rig's; where they differ
+``"rig_unit_not_applied"`` says so); N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
 the stream by its rig name, unit ``"N"``, gage 0); anything else is refused naming the channel.
 The file's sample rate must be the rig's unless ``fs_hz`` states it. Every problem with a file is
 an :class:`ImportFormatError`: one line naming the file and what."""
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
 import re
 from collections.abc import Callable, Iterator, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -48,7 +52,8 @@ from ..errors import DeviceError, DeviceNotFound
 __all__ = ["G0", "FULL_SCALE_COUNTS", "STEP_TOLERANCE", "ImportFormatError", "SourceTable",
            "Quantisation", "FileImportDevice", "gage_of_name", "parse_channel_map",
            "map_channels", "unit_factor", "force_unit_factor", "quantise", "detect_step",
-           "snap_rate", "Pick", "RATE_TOLERANCE"]
+           "snap_rate", "Pick", "RATE_TOLERANCE", "option", "cli_option_names", "find_channel",
+           "rig_source_map"]
 
 G0 = 9.80665
 """Standard gravity, m/s^2 per g."""
@@ -73,7 +78,56 @@ class ImportFormatError(DeviceError, ValueError):
         super().__init__(" ".join(str(message).split()))
 
 
+# -- how messages name options -------------------------------------------------------------------
+_CLI_NAMES: ContextVar[bool] = ContextVar("ramdaq_import_cli_names", default=False)
+
+
+@contextlib.contextmanager
+def cli_option_names() -> Iterator[None]:
+    """Within it, import messages name the command line's options only (``--fs``), not the
+    Python arguments (``fs_hz=``): ``ramdaq import`` reads files inside it."""
+    token = _CLI_NAMES.set(True)
+    try:
+        yield
+    finally:
+        _CLI_NAMES.reset(token)
+
+
+def option(python: str, cli: str) -> str:
+    """An option as a message names it: ``"--fs"`` on the command line (see
+    :func:`cli_option_names`), ``"fs_hz= (--fs)"`` from Python."""
+    return cli if _CLI_NAMES.get() else f"{python} ({cli})"
+
+
 # -- channels and units --------------------------------------------------------------------------
+_UNIT_SUFFIX = re.compile(r"^(.*?)\s*[\[(]\s*[^\])]*?\s*[\])]$")
+_SOURCE_LINE = re.compile(r'^\[\[gages\]\]\s*#\s*source channel ("(?:[^"\\]|\\.)*")\s*\n'
+                          r"\s*number\s*=\s*(\d+)", re.MULTILINE)
+
+
+def find_channel(name: str, names: list[str], aliases: Mapping[str, str] | None = None
+                 ) -> str | None:
+    """The one of ``names`` that ``name`` means: itself, another name of it (``aliases``: a UFF
+    record's ID line 1 for its node number), or either without a unit suffix (``"Load cell
+    [N]"``, ``"Load cell (N)"`` mean ``"Load cell"``); None if none is there."""
+    aliases = aliases or {}
+    m = _UNIT_SUFFIX.match(name.strip())
+    for n in (name, m.group(1) if m else None):
+        if n in names:
+            return n
+        if n in aliases:
+            return aliases[n]
+    return None
+
+
+def rig_source_map(rig_text: str) -> dict[str, int]:
+    """Source channel -> gage number as a channels-only rig written by ``ramdaq import``
+    records it (``[[gages]]  # source channel "AI0 acc"`` then ``number = 1``); empty for a rig
+    that records none."""
+
+    return {json.loads(m.group(1)): int(m.group(2)) for m in _SOURCE_LINE.finditer(rig_text)}
+
+
 _GAGE_NAME = re.compile(r"^(?:g|gage|gauge)?[\s_\-#]*0*(\d{1,4})$", re.IGNORECASE)
 
 
@@ -123,7 +177,8 @@ class Pick:
 
 
 def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
-                 source: str, force_channel: str | None = None) -> list[Pick]:
+                 source: str, force_channel: str | None = None,
+                 aliases: Mapping[str, str] | None = None) -> list[Pick]:
     """Pick the source channels to import and their gages, in the rig's channel order.
 
     Parameters
@@ -140,12 +195,19 @@ def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
     force_channel : str, optional
         The source channel that is the rig's (first) force channel; by default a source channel
         named like one of the rig's ``[[forces]]`` is that force channel.
+    aliases : mapping of str to str, optional
+        Other names of source channels (:func:`find_channel`), for ``channels`` and
+        ``force_channel``.
 
     Returns
     -------
     list of Pick
         Sorted by rig channel.
     """
+    if aliases and channels is not None:
+        channels = {(find_channel(k, names, aliases) or k): g for k, g in channels.items()}
+    if aliases and force_channel is not None:
+        force_channel = find_channel(force_channel, names, aliases) or force_channel
     forces = _pick_forces(names, rig, force_channel, source)
     taken = {p.index for p in forces}
     names = [n if i not in taken else "" for i, n in enumerate(names)]  # "" is no gage name
@@ -157,9 +219,11 @@ def map_channels(names: list[str], rig: Rig, channels: Mapping[str, int] | None,
 def _pick_forces(names: list[str], rig: Rig, force_channel: str | None, source: str) -> list[Pick]:
     """The source channels that are the rig's force channels (see :func:`map_channels`)."""
     if force_channel is not None:
-        if force_channel not in names:
+        found = find_channel(force_channel, names)
+        if found is None:
             raise ImportFormatError(f"{source}: force channel {force_channel!r} is not in the file "
                                     f"(it has {', '.join(repr(n) for n in names[:20])})")
+        force_channel = found
         if not rig.forces:
             raise ImportFormatError(f"{source}: force channel {force_channel!r} given, but rig "
                                     f"{rig.name!r} has no [[forces]] channel")
@@ -186,7 +250,7 @@ def _pick_gages(names: list[str], rig: Rig, channels: Mapping[str, int] | None, 
     for i, n, gage in pairs:
         if gage is None:
             raise ImportFormatError(f"{source}: channel {n!r} is not a gage name (g01, gage 1 "
-                                    f"or 1); map it with channels=")
+                                    f"or 1); map it with {option('channels=', '--channels')}")
         if gage not in known:
             raise ImportFormatError(f"{source}: channel {n!r} is gage {gage}, which rig "
                                     f"{rig.name!r} does not have")
@@ -408,6 +472,8 @@ class SourceTable:
         Releases the file once every channel has been read.
     where : callable, optional
         ``where(row)`` -> where that row is in the file (``"line 12"``), for messages.
+    aliases : dict
+        Other names of channels -> their name (a UFF record's ID line 1 -> its node).
     """
 
     names: list[str]
@@ -420,6 +486,7 @@ class SourceTable:
     notes: dict = field(default_factory=dict)
     close: Callable[[], None] | None = None
     where: Callable[[int], str] | None = None
+    aliases: dict[str, str] = field(default_factory=dict)
 
 
 class FileImportDevice(Device):
@@ -494,7 +561,8 @@ class FileImportDevice(Device):
             raise ImportFormatError(f"{name}: sample rate {fs:g} Hz, start {t0:g} s or length "
                                     f"{int(idx[-1]) + 1} samples is out of range")
         self._check_rate(fs, name)
-        picks = map_channels(src.names, self.rig, self.channels, name, self.force_channel)
+        picks = map_channels(src.names, self.rig, self._channel_map(src.names, name), name,
+                             self.force_channel, src.aliases)
         counts = np.empty((len(picks), idx.size), np.int32)
         missing = np.zeros(idx.size, bool)
         scales, notes = [], {}
@@ -510,7 +578,8 @@ class FileImportDevice(Device):
                 r = int(np.argmax(np.isnan(x)))
                 raise ImportFormatError(
                     f"{name}: {src.where(r) if src.where else f'row {r}'}, column "
-                    f"{src.names[i]!r}: missing value (empty or NaN); allow_gaps= (--allow-gaps) "
+                    f"{src.names[i]!r}: missing value (empty or NaN); "
+                    f"{option('allow_gaps=', '--allow-gaps')} "
                     f"imports it as a gap in the recording")
             factor = (force_unit_factor(src.units[i], self.rig.force(pick.name).unit,
                                         src.names[i], name) if pick.is_force
@@ -526,6 +595,9 @@ class FileImportDevice(Device):
                 self.rig.gage(pick.gage).unit
             notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
                                 "si_unit": "N" if pick.is_force else "m/s^2", **q.to_json()}
+            if not pick.is_force and _stated(src.units[i]) and \
+                    factor != unit_factor(assumed, src.names[i], name):
+                notes[pick.name]["rig_unit_not_applied"] = assumed  # the header's unit wins
         if missing.all():
             raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
         # samples count from the file's time zero, so times in ramdaq are the file's times
@@ -550,12 +622,31 @@ class FileImportDevice(Device):
             extra={"medium": self.rig.medium, "rig_name": self.rig.name,
                    "block_samples": self._block_n, "import": report})
 
+    def _channel_map(self, names: list[str], name: str) -> Mapping[str, int] | None:
+        """The map given, else the source channels the rig was written for (a channels-only
+        rig from ``ramdaq import``) when the file's channels are among them, else None."""
+        known = rig_source_map(self.rig.text)
+        if self.channels is not None or not known:
+            return self.channels
+        force = None if self.force_channel is None else find_channel(self.force_channel, names)
+        others = [n for n in names if n != force and n not in {f.name for f in self.rig.forces}]
+        if all(n in known for n in others):
+            return {n: known[n] for n in others}
+        if any(n in known for n in others) or all(gage_of_name(n) is None for n in others):
+            odd = next(n for n in others if n not in known)
+            have = ", ".join(repr(n) for n in list(known)[:20])
+            raise ImportFormatError(f"{name}: channel {odd!r} is not a source channel of rig "
+                                    f"{self.rig.name!r} (it was written for {have}); map this "
+                                    f"file's channels with {option('channels=', '--channels')}")
+        return None
+
     def _check_rate(self, fs: float, name: str) -> None:
         """The file's rate ``fs`` (Hz) against ``fs_hz`` as stated, else against the rig's."""
         if self.fs_hz is not None:
             if abs(fs / self.fs_hz - 1) > RATE_TOLERANCE:
                 raise ImportFormatError(f"{name}: the file's sample rate is {fs:g} Hz, not the "
-                                        f"{self.fs_hz:g} Hz stated (fs_hz=, --fs)")
+                                        f"{self.fs_hz:g} Hz stated "
+                                        f"({option('fs_hz=', '--fs')})")
             corner = self.rig.daq.anti_alias_hz
             if corner >= fs / 2:  # NaN (a channels-only rig that names no filter) passes
                 raise ImportFormatError(f"{name}: at {fs:g} Hz rig {self.rig.name!r}'s "
@@ -567,7 +658,8 @@ class FileImportDevice(Device):
         if abs(fs / rig_fs - 1) > RATE_TOLERANCE:
             raise ImportFormatError(f"{name}: the file's sample rate {fs:g} Hz disagrees with rig "
                                     f"{self.rig.name!r} (daq.sample_rate_hz = {rig_fs:g} Hz); if "
-                                    f"the file is right, state it with fs_hz= (--fs {fs:g})")
+                                    f"the file is right, state it with "
+                                    f"{option(f'fs_hz={fs:g}', f'--fs {fs:g}')}")
 
     def _iter_blocks(self) -> Iterator[Block]:
         seq = 0

@@ -10,7 +10,10 @@ The file
 --------
 UTF-8 text (a byte-order mark is allowed), lines ending in LF or CRLF:
 
-* optional comment lines starting with ``#`` before the header;
+* optional comment lines starting with ``#`` before the header, and a header block (``key;value``
+  lines, a title, blank lines): the column names are the last line above the first row of
+  numbers with as many fields (the line before when that is a units row), the lines above it are
+  skipped and counted in ``notes["skipped_lines"]``;
 * a header of column names separated by ``,``, ``;`` or a tab (the most frequent of the three
   in the header is the delimiter); the **first column is time**, the others are channels named
   like gages (``g01``, ``gage 1``, ``1``) unless ``channels=`` maps them;
@@ -20,8 +23,10 @@ UTF-8 text (a byte-order mark is allowed), lines ending in LF or CRLF:
   (``--time-unit``): a time column that says no unit is an error, never taken as seconds.
   Channels are in m/s^2 or g, a force channel in N, kN or lbf. A channel without a unit is taken
   as m/s^2 (a force channel: its rig unit), and said so in ``StreamInfo.extra``;
-* one row per sample, decimal point, no thousands separators. An empty cell or ``nan`` is a
-  missing sample: an error naming its line and column, or with ``allow_gaps=``
+* one row per sample, no thousands separators; a decimal point, or with a ``;`` or tab
+  delimiter a decimal comma (``0,000200``; ``notes["decimal"] = ","``). A decimal comma in a
+  comma-separated file (quoted ``"1,5"``) is refused naming its line, column and why. An empty
+  cell or ``nan`` is a missing sample: an error naming its line and column, or with ``allow_gaps=``
   (``--allow-gaps``) a gap: that row is not streamed. Blank lines and ``#`` lines are skipped.
 
 The rate fitted to the time column must be the rig's ``daq.sample_rate_hz`` unless ``fs_hz=``
@@ -39,6 +44,7 @@ parsed again line by line, which finds the line to name. Memory: the whole table
 
 from __future__ import annotations
 
+import csv
 import io
 import math
 import re
@@ -48,7 +54,7 @@ from os import PathLike
 import numpy as np
 
 from ...analysis.model.rig import Rig
-from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, option, snap_rate
 
 __all__ = ["CsvImportDevice", "read_csv_table", "sample_grid"]
 
@@ -57,6 +63,8 @@ _SLOW_BYTES = 64 << 10  # pieces numpy refuses are halved down to this, then rea
 _GRID_TOL = 0.1  # samples: how far a row's time may lie from its grid point
 _NUMBER = re.compile(r"^[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)$",
                      re.IGNORECASE)
+_COMMA_NUMBER = re.compile(r"^[+-]?(?:\d+,\d*|,\d+)(?:[eE][+-]?\d+)?$")
+_SCAN_LINES = 1000  # content lines searched for the first data row below a header block
 _NAME_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]$")
 _TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "\u00b5s": 1e-6}
 _TIME_NAME = re.compile(r"^(?:t|time|zeit)[\s_\-/]+(s|sec|ms|us|\u00b5s)$", re.IGNORECASE)
@@ -121,6 +129,7 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
     except UnicodeDecodeError as err:
         raise ImportFormatError(f"{name}: not UTF-8 text (byte {err.start})") from None
     lines = _Lines(text)
+    skipped = _skip_header_block(lines)
     header_no, header = lines.next_content(skip_comments=True)
     if header is None:
         raise ImportFormatError(f"{name}: empty file (no header line)")
@@ -144,7 +153,8 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
     mark = lines.pos
     row_no, row = lines.next_content(skip_comments=True)
     first_cell = row.split(delim)[0].strip().strip('"').strip() if row is not None else ""
-    if first_cell and not _NUMBER.match(first_cell):
+    if first_cell and not _NUMBER.match(first_cell) and not (
+            delim != "," and _COMMA_NUMBER.match(first_cell)):
         cells = [c.strip().strip('"').strip() for c in row.split(delim)]
         if len(cells) != ncols:
             raise ImportFormatError(f"{name}: line {row_no}: units row has {len(cells)} fields, "
@@ -152,16 +162,22 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
         units = [u or c or None for u, c in zip(units, cells, strict=True)]
     else:
         lines.pos, lines.number = mark, header_no
+    notes: dict = {"delimiter": delim, "time_column": names[0]}
+    if skipped:
+        notes["skipped_lines"] = skipped
+    if delim != "," and "," in text[lines.pos:]:  # a decimal comma: ',' is no delimiter here
+        text = text[:lines.pos] + text[lines.pos:].replace(",", ".")
+        notes["decimal"] = ","
     table, line_of_row = _parse_rows(text, lines.pos, lines.number, delim, names, name)
     if table.shape[0] == 0:
         raise ImportFormatError(f"{name}: no data rows after the header")
     t = table[:, 0] * _TIME_UNITS[_time_unit(names[0], units[0], time_unit, name)]
-    index, fs, notes = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name,
-                                   rate_hint=rate_hint)
+    index, fs, grid = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name,
+                                  rate_hint=rate_hint)
     channel_units = units[1:]
     return SourceTable(names=names[1:], units=channel_units, sample_index=index, fs_hz=fs,
                        t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
-                       notes={"delimiter": delim, "time_column": names[0], **notes},
+                       notes={**notes, **grid},
                        where=lambda r: f"line {line_of_row[r]}")
 
 
@@ -183,9 +199,70 @@ def _time_unit(column: str, stated: str | None, given: str | None, name: str) ->
         return unit
     if given is None:
         raise ImportFormatError(f"{name}: time column {column!r} does not say its unit; name it "
-                                f"like time_s, 't [ms]', 'time (us)', or give time_unit= "
-                                f"(--time-unit s|ms|us)")
+                                f"like time_s, 't [ms]', 'time (us)', or give "
+                                f"{option('time_unit=', '--time-unit')} s|ms|us")
     return given
+
+
+def _data_row(line: str) -> tuple[str, int] | None:
+    """``(delimiter, fields)`` if ``line`` is a row of numbers (decimal commas allowed with a
+    ``;`` or tab delimiter), else None."""
+    for d in ("\t", ";", ","):
+        if d not in line:
+            continue
+        cells = [c.strip().strip('"').strip() for c in line.split(d)]
+        if cells[0] and all(not c or _NUMBER.match(c) or (d != "," and _COMMA_NUMBER.match(c))
+                            for c in cells):
+            return d, len(cells)
+    return None
+
+
+def _units_like(line: str, delim: str) -> bool:
+    """A units row: its first cell (the time column's) is a time unit, bracketed or not."""
+    first = line.split(delim)[0].strip().strip('"').strip().strip("[]()").strip().lower()
+    return first in _TIME_UNITS
+
+
+def _skip_header_block(lines: _Lines) -> dict | None:
+    """Move ``lines`` past a header block (``key;value`` lines, a title) above the column
+    names: the column names are the last line above the first row of numbers with as many
+    fields (the one before it when that is a units row). Returns ``{"count", "first",
+    "last"}`` (file lines) of the lines skipped, or None; nothing moves when no row of numbers
+    is found in the first lines (the reader then names what is wrong)."""
+    probe = _Lines(lines.text)
+    seen: list[tuple[int, int, str | None]] = []  # (line number, pos before it, line or None)
+    prev = 0
+    while len(seen) < _SCAN_LINES:
+        before = probe.pos
+        no, line = probe.next_content(skip_comments=True)
+        if line is None:
+            return None
+        if no > prev + 1:
+            seen.append((no - 1, before, None))  # a blank or comment line: a break
+        prev = no
+        found = _data_row(line)
+        if found is not None:
+            break
+        seen.append((no, before, line))
+    else:
+        return None
+    delim, ncols = found
+    run = []
+    for item in reversed(seen):
+        if item[2] is None or len(item[2].split(delim)) != ncols:
+            break
+        first = item[2].split(delim)[0].strip().strip('"').strip()
+        if _NUMBER.match(first) or _COMMA_NUMBER.match(first):
+            return None  # a row of data with a bad cell: the reader names it
+        run.insert(0, item)
+    if not run:
+        return None
+    header = run[-2] if len(run) >= 2 and _units_like(run[-1][2], delim) else run[-1]
+    skip = [item for item in seen if item[0] < header[0] and item[2] is not None]
+    if not skip:
+        return None
+    lines.pos, lines.number = header[1], header[0] - 1
+    return {"count": len(skip), "first": skip[0][0], "last": skip[-1][0]}
 
 
 class _Lines:
@@ -257,7 +334,7 @@ def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
         line = line.rstrip("\r")
         if not line.strip() or line.lstrip().startswith("#"):
             continue
-        cells = line.split(delim)
+        cells = next(csv.reader([line], delimiter=delim)) if '"' in line else line.split(delim)
         if len(cells) != ncols:
             raise ImportFormatError(f"{name}: line {first + k}: {len(cells)} fields, expected "
                                     f"{ncols} (a truncated or damaged line?)")
@@ -269,8 +346,10 @@ def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
             elif _NUMBER.match(c):
                 row.append(float(c))
             else:
+                hint = (" (a decimal comma? they are read with a ';' or tab delimiter, not "
+                        "with ',')" if _COMMA_NUMBER.match(c) else "")
                 raise ImportFormatError(f"{name}: line {first + k}, column {names[j]!r}: "
-                                        f"{c[:24]!r} is not a number")
+                                        f"{c[:24]!r} is not a number{hint}")
         values.append(row)
         rows.append(first + k)
     return np.array(values, dtype=np.float64).reshape(-1, ncols), np.array(rows, np.int64)
@@ -318,7 +397,8 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
         rel = t - t[0]
         if fs_hz is None:
             if t.size < 2:
-                raise ImportFormatError(f"{name}: one data row gives no sample rate; pass fs_hz=")
+                raise ImportFormatError(f"{name}: one data row gives no sample rate; give "
+                                        f"{option('fs_hz=', '--fs')}")
             fs_fit = 1.0 / float(np.median(dt))
             if rel[-1] * fs_fit > 2**40:
                 raise ImportFormatError(f"{name}: the time column spans {rel[-1] * fs_fit:.3g} samples")
@@ -348,7 +428,7 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
             if dt.size and abs(fs * float(np.median(dt)) - 1) > 0.01:  # printed steps: ~1e-3
                 raise ImportFormatError(f"{name}: the time column's sample rate is "
                                         f"{1 / float(np.median(dt)):.6g} Hz, not the {fs:g} Hz "
-                                        f"stated (fs_hz=, --fs)")
+                                        f"stated ({option('fs_hz=', '--fs')})")
         pos = rel * fs
         if pos[-1] > 2**40:
             raise ImportFormatError(f"{name}: the time column spans {pos[-1]:.3g} samples")

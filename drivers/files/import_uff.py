@@ -71,12 +71,13 @@ class UffImportDevice(FileImportDevice):
 
 
 class _Record:
-    __slots__ = ("number", "node", "direction", "unit", "start", "inc", "data", "force")
+    __slots__ = ("number", "node", "direction", "unit", "start", "inc", "data", "force", "label")
 
     def __init__(self, number: int, node: int, direction: int, unit: str | None, start: float,
-                 inc: float, data: np.ndarray, force: bool = False) -> None:
+                 inc: float, data: np.ndarray, force: bool = False, label: str = "") -> None:
         self.number, self.node, self.direction, self.unit = number, node, direction, unit
         self.start, self.inc, self.data, self.force = start, inc, data, force
+        self.label = label  # ID line 1 ("Accel 1", "Hammer"): another name of the channel
 
 
 def read_uff_table(path: Path) -> SourceTable:
@@ -122,6 +123,7 @@ def _check_record(d: dict, number: int, path: Path) -> _Record:
         x_type = int(d.get("abscissa_spec_data_type", 0))
         y_type = int(d.get("ordinate_spec_data_type", 0))
         label = str(d.get("ordinate_axis_units_lab", "")).strip()
+        id1 = str(d.get("id1", "")).strip()
         data = np.asarray(d["data"])
     except (KeyError, TypeError, ValueError, OverflowError) as err:
         raise ImportFormatError(f"{where}: incomplete header ({type(err).__name__}: {err})") \
@@ -154,12 +156,14 @@ def _check_record(d: dict, number: int, path: Path) -> _Record:
         raise ImportFormatError(f"{where}: abscissa start {start} s, increment {inc} s unusable")
     unit = None if label.upper() in ("", "NONE") else label
     return _Record(number, node, direction, unit, start, inc,
-                   np.asarray(data, dtype=np.float64), force=y_type == _FORCE_TYPE)
+                   np.asarray(data, dtype=np.float64), force=y_type == _FORCE_TYPE,
+                   label="" if id1.upper() in ("", "NONE") else id1)
 
 
 def _channel_name(r: _Record, dirs: dict[int, set[int]]) -> str:
     """``"5"``, ``"5:+2"`` where node 5 has records in several directions, ``"force 5:+2"``
-    for a force record (not a gage name: mapped by ``force_channel=``)."""
+    for a force record (not a gage name: mapped by ``force_channel=``). A record's ID line 1
+    (``"Accel 1"``, ``"Hammer"``), where unique, names it too (:attr:`SourceTable.aliases`)."""
     if r.force:
         return f"force {r.node}:{r.direction:+d}"
     return str(r.node) if len(dirs[r.node]) == 1 else f"{r.node}:{r.direction:+d}"
@@ -221,7 +225,10 @@ def _table(records: list[_Record], path: Path, n_sets: int) -> SourceTable:
     def read(i: int) -> np.ndarray:
         return np.concatenate([segments[k][names[i]].data for k in starts])
 
+    labels = [first[nm].label for nm in names]
+    aliases = {lb: nm for lb, nm in zip(labels, names, strict=True)
+               if lb and labels.count(lb) == 1 and lb not in names}
     return SourceTable(names=names, units=units, sample_index=np.concatenate(index_parts),
-                       fs_hz=fs, t0_s=t0, read=read, fmt="uff58",
+                       fs_hz=fs, t0_s=t0, read=read, fmt="uff58", aliases=aliases,
                        notes={"records": len(records), "uff_sets": n_sets,
                               "record_segments": len(starts)})

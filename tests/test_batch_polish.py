@@ -1,0 +1,76 @@
+"""What a new user met with ``ramdaq batch`` on a folder of their records, without a cluster
+(fast): files left out are counted and said, failure reasons are words, an empty file is
+'empty (0 bytes)', a log gets unwrapped lines, and counts agree with their nouns."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from ramdaq.daq.commands.batch import BatchOutcome, finish, plan_batch, progress_bar, summary_lines
+from ramdaq.daq.commands.batch_tasks import TaskResult, TaskSpec, analyze_task
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "recordings" / "albacore-air.mcap"
+
+
+@pytest.fixture
+def archive(tmp_path) -> Path:
+    """The new user's archive: a recording, an empty file, a truncated one and a stray CSV."""
+    d = tmp_path / "archive"
+    d.mkdir()
+    shutil.copy(SAMPLE, d / "1998_B.mcap")
+    (d / "empty.mcap").write_bytes(b"")
+    (d / "corrupt_trunc.mcap").write_bytes(SAMPLE.read_bytes()[:300_000])
+    (d / "stray.csv").write_text("time_s,g01\n0,1\n")
+    return d
+
+
+def test_left_out_files_are_counted_and_said(archive, tmp_path):
+    """'batch analyze of 3 recordings' for 4 files said nothing of the CSV left out."""
+    plan = plan_batch("analyze", [str(archive)], tmp_path / "out")
+    assert len(plan.specs) == 3 and [p.name for p in plan.left_out] == ["stray.csv"]
+    outcome = BatchOutcome(plan, {s.path: TaskResult.not_run(s, "interrupted", "not run")
+                                  for s in plan.todo}, cluster="tcp://127.0.0.1:1", workers=1)
+    finish(outcome)
+    lines = summary_lines(outcome)
+    assert "left out 1 file that is not a .mcap recording (stray.csv); CSV, UFF and TDMS " \
+           "records are made recordings first with ramdaq import" in lines[1]
+    assert "of 3 recordings" in lines[0]
+
+
+def test_failure_reasons_are_words_and_an_empty_file_says_so(archive, tmp_path):
+    """``TruncatedRecording: ...`` and, for an empty file, 'does not start with the MCAP
+    magic'; now the message alone, and 'empty (0 bytes)'."""
+    def reason(name: str) -> str:
+        p = archive / name
+        r = analyze_task(TaskSpec(str(p), "", str(tmp_path / name), False))
+        assert r.status == "failed"
+        return r.status_reason
+
+    assert reason("empty.mcap") == "empty (0 bytes), not a recording"
+    why = reason("corrupt_trunc.mcap")  # the row names the recording: the reason does not repeat it
+    assert why.startswith("recording has no footer") and "TruncatedRecording" not in why
+
+
+def test_a_log_gets_unwrapped_lines(archive, tmp_path, capsys):
+    """Not a terminal: stderr was hard-wrapped at 80 columns mid-path by the bar's console."""
+    plan = plan_batch("analyze", [str(archive)], tmp_path / "out")
+    long = "/" + "x" * 120 + "/empty.mcap"
+    r = TaskResult(long, "", "failed", f"{long}: empty (0 bytes), not a recording", "", False)
+    with progress_bar(plan, True) as advance:
+        advance(r)
+    err = capsys.readouterr().err
+    assert err == f"failed: {long}: {long}: empty (0 bytes), not a recording\n"
+
+
+def test_one_worker_is_singular(archive, tmp_path):
+    plan = plan_batch("analyze", [str(archive / "1998_B.mcap")], tmp_path / "out")
+    s = plan.todo[0]
+    outcome = BatchOutcome(plan, {s.path: TaskResult.not_run(s, "lost", "x")},
+                           cluster="tcp://127.0.0.1:1", workers=1)
+    finish(outcome)
+    lines = summary_lines(outcome)
+    assert "batch analyze of 1 recording:" in lines[0] and "  on 1 worker at" in lines[1]
