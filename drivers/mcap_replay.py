@@ -376,6 +376,14 @@ class McapReplayDevice(Device):
         sample is due, counted from when the first block was read.
     speed : float
         Multiplier of the real-time pace (2.0 replays twice as fast).
+    join_s : float
+        With ``pace="fast"``: hand over consecutive recorded blocks joined into one of at most
+        this many seconds, where they follow each other with no gap and the same scale (a
+        block starts, as recorded, where a gap or a new scale does); its ``seq`` and ``t0_ns``
+        are its first recorded block's. The samples are the same, in fewer, longer blocks: a
+        replay flat out spends most of its non-analysis CPU per block (the trigger's filters,
+        the readout), and the trigger gives the same events whatever the blocks' length.
+        ``0`` (the default): the blocks exactly as recorded.
 
     Reading raises :class:`~ramdaq.drivers.mcap_format.CorruptRecording` at the first damaged
     record (see *Integrity* above), after the blocks before it.
@@ -383,12 +391,17 @@ class McapReplayDevice(Device):
 
     kind = "mcap"
 
-    def __init__(self, path: str | PathLike, *, pace: str = "fast", speed: float = 1.0) -> None:
+    def __init__(self, path: str | PathLike, *, pace: str = "fast", speed: float = 1.0,
+                 join_s: float = 0.0) -> None:
         super().__init__()
         if pace not in ("fast", "realtime"):
             raise ValueError(f"mcap: pace {pace!r} must be 'fast' or 'realtime'")
         if not speed > 0:
             raise ValueError(f"mcap: speed ({speed}) must be positive")
+        if not join_s >= 0 or (join_s and pace != "fast"):
+            raise ValueError(f"mcap: join_s ({join_s}) must be >= 0, and 0 unless pace is 'fast'")
+        self.join_s = float(join_s)
+        self._error: BaseException | None = None  # a read error met while joining, raised next
         self.path = Path(path)
         self.pace = pace
         self.speed = float(speed)
@@ -484,10 +497,15 @@ class McapReplayDevice(Device):
     def _read(self, timeout: float | None) -> Block | None:
         block = self._pending
         if block is None:
+            if self._error is not None:
+                err, self._error = self._error, None
+                raise err
             block = next(self._blocks, None)
             if block is None:
                 return None
         self._pending = None
+        if self.join_s:
+            return self._joined(block)
         if self.pace == "realtime":
             now = time.monotonic()
             if self._start is None:
@@ -502,6 +520,32 @@ class McapReplayDevice(Device):
             if wait > 0:
                 time.sleep(wait)
         return block
+
+    def _joined(self, block: Block) -> Block:
+        """``block`` and the recorded blocks that follow it with no gap and the same scale, as
+        one block of at most ``join_s`` seconds; the first that does not fit waits in
+        ``_pending``. A read error after the first block is raised by the next read, so that the
+        blocks before it are handed over first."""
+        limit = max(block.n_samples, round(self.join_s * block.fs_hz))
+        parts, n, end = [block], block.n_samples, block.next_sample
+        while n < limit:
+            try:
+                nxt = next(self._blocks, None)
+            except Exception as err:  # noqa: BLE001 -- raised by the next read, as said
+                self._error = err
+                break
+            if nxt is None:
+                break
+            if (nxt.first_sample != end or n + nxt.n_samples > limit
+                    or not np.array_equal(nxt.scale, block.scale)):
+                self._pending = nxt
+                break
+            parts.append(nxt)
+            n, end = n + nxt.n_samples, nxt.next_sample
+        if len(parts) == 1:
+            return block
+        return Block(block.seq, block.first_sample, block.t0_ns, block.fs_hz,
+                     np.concatenate([b.counts for b in parts], axis=1), block.scale)
 
     def _close(self) -> None:
         if self._file is not None:
