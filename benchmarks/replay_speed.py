@@ -127,13 +127,13 @@ def replay_parts(path: Path, cpu: float, startup: float) -> None:
     import contextlib
     import io
 
-    from ramdaq.daq.commands.cli import _print_outcome, build_parser
+    from ramdaq.daq.commands.cli import REPLAY_JOIN_S, _print_outcome, build_parser
     from ramdaq.daq.session import Session
     from ramdaq.daq.trigger import Trigger
     from ramdaq.drivers.mcap_replay import McapReplayDevice
 
     t0 = time.process_time()
-    dev = McapReplayDevice(path, pace="fast")
+    dev = McapReplayDevice(path, pace="fast", join_s=REPLAY_JOIN_S)  # as ramdaq replay reads it
     info = dev.open()
     blocks = list(dev)
     dev.close()
@@ -145,12 +145,13 @@ def replay_parts(path: Path, cpu: float, startup: float) -> None:
     trigger = time.process_time() - t0
     blocks_n = range(len(blocks))
     del blocks, events, trig
-    session = Session(McapReplayDevice(path, pace="fast"), readout=False)
+    session = Session(McapReplayDevice(path, pace="fast", join_s=REPLAY_JOIN_S), readout=False)
     t0 = time.process_time()
     outcome = session.run()
     whole = time.process_time() - t0
     finals = [j.cpu_s for j in session.job_times if j.kind == "final"]
-    print(f"{path}: {dur:.1f} s at {info.fs_hz:g} Hz in {len(blocks_n)} blocks, "
+    print(f"{path}: {dur:.1f} s at {info.fs_hz:g} Hz in {len(blocks_n)} blocks as read (joined up to "
+          f"{REPLAY_JOIN_S:g} s), "
           f"{len(outcome.hits)} blow(s); load average {os.getloadavg()[0]:.1f}")
     print(speed_line(dur, cpu, startup))
     t0 = time.process_time()
