@@ -101,7 +101,6 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
 
 from ..analysis import onset as ons
 from ..analysis.model.rig import STRUCTURE_TABLES
@@ -1185,6 +1184,8 @@ class Trigger:
         if kk >= _DESIGN_VOTES:
             return self.settings.double_on
         if kk not in self._double_on_k:
+            from scipy import optimize, stats  # here: once a stream, for a one- or two-gage vote
+
             nu, on = 2 * self._len.innovation - 1, self.settings.double_on
             target = _DESIGN_VOTES * stats.chi2.logsf(on * nu, nu) / kk
             self._double_on_k[kk] = float(optimize.brentq(
