@@ -56,7 +56,7 @@ from mcap.records import (
     Metadata,
     Schema,
 )
-from mcap.stream_reader import breakup_chunk
+from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 
 from . import mcap_format as fmt
 from .base import TIMED_OUT, Device
@@ -67,6 +67,7 @@ __all__ = ["McapReplayDevice", "JsonMessage", "RecordScanner", "Damage", "FileEn
            "check_mcap_magic"]
 
 _HEAD = struct.Struct("<BQ")  # every record: opcode, length of what follows
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # a message: channel id, sequence, log and publish time
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length (20), summary_start, summary_offset_start, crc
 _DATA_END_BYTES = _HEAD.size + 4  # opcode, length, data_section_crc
 _CHUNK_FIXED = struct.Struct("<QQQII")  # start, end time, uncompressed size, crc, len(compression)
@@ -219,11 +220,14 @@ class RecordScanner:
         The data section's CRC matched (``None``: not reached, not written, or already damaged).
     """
 
-    def __init__(self, f: BinaryIO, path: str | PathLike, *, strict: bool = False) -> None:
+    def __init__(self, f: BinaryIO, path: str | PathLike, *, strict: bool = False,
+                 topics: frozenset[str] | None = None) -> None:
         check_mcap_magic(f, path)
         self._f = f
         self.path = path
         self.strict = strict
+        self.topics = topics  # messages of these topics only (None: all), see _chunk_records
+        self._channel_topic: dict[int, str] = {}
         self.size = os.fstat(f.fileno()).st_size
         self.end = read_file_end(f, self.size)
         self.complete = False
@@ -306,7 +310,9 @@ class RecordScanner:
         length = len(raw) - _HEAD.size
         try:
             if opcode == Opcode.CHUNK:
-                records = breakup_chunk(Chunk.read(body), validate_crc=True)
+                chunk = Chunk.read(body)
+                records = (breakup_chunk(chunk, validate_crc=True) if self.topics is None
+                           else self._chunk_records(chunk))
                 self.chunks += 1
                 return records
             if opcode == Opcode.ATTACHMENT:
@@ -321,6 +327,35 @@ class RecordScanner:
             return [reader.read(body)] if reader else []
         except _DAMAGE as err:
             raise _Bad("chunk" if opcode == Opcode.CHUNK else "record", _why(err)) from err
+
+    def _chunk_records(self, chunk: Chunk) -> list[McapRecord]:
+        """A chunk's records as ``breakup_chunk`` gives them (its CRC checked the same way),
+        less the messages of topics other than :attr:`topics`, which are stepped over unparsed:
+        a trial's recording holds ten view messages (``/ramdaq/gages/trace``) for each block,
+        and parsing them was most of a replay's reading."""
+        stream, n = get_chunk_data_stream(chunk, validate_crc=True)
+        data = stream.read(n)
+        records: list[McapRecord] = []
+        pos, head, msg = 0, _HEAD, _MESSAGE_HEAD
+        while pos < n:
+            opcode, length = head.unpack_from(data, pos)
+            body, pos = pos + head.size, pos + head.size + length
+            if pos > n or (opcode == Opcode.MESSAGE and length < msg.size):
+                raise ValueError(f"a chunk record of {length} bytes runs past its chunk's end")
+            if opcode == Opcode.MESSAGE:
+                channel_id, sequence, log_time, publish_time = msg.unpack_from(data, body)
+                if self._channel_topic.get(channel_id) in self.topics or \
+                        channel_id not in self._channel_topic:
+                    records.append(Message(channel_id=channel_id, log_time=log_time,
+                                           data=data[body + msg.size:pos],
+                                           publish_time=publish_time, sequence=sequence))
+            elif opcode in (Opcode.CHANNEL, Opcode.SCHEMA):
+                reader = Channel if opcode == Opcode.CHANNEL else Schema
+                record = reader.read(ReadDataStream(BytesIO(data[body:pos])))
+                if isinstance(record, Channel):
+                    self._channel_topic[record.id] = record.topic
+                records.append(record)
+        return records
 
     # -- stepping over damage ------------------------------------------------------------------
     def _resync(self, bad: int) -> int | None:
@@ -419,7 +454,8 @@ class McapReplayDevice(Device):
         f = open(self.path, "rb")  # noqa: SIM115 - closed by _close, or below on failure
         try:
             info = self._read_info(f)
-            self._scanner = RecordScanner(f, self.path, strict=True)
+            self._scanner = RecordScanner(f, self.path, strict=True,
+                                          topics=frozenset({fmt.BLOCK_TOPIC}))
             self._blocks = self._iter_blocks(self._scanner, info.fs_hz)
         except BaseException:
             f.close()
