@@ -58,6 +58,10 @@ def in_process(path: Path) -> None:
     """Where ``ramdaq analyze``'s CPU goes: imports, analysis, each plot kind of one hit."""
     imports = least([sys.executable, "-c", "import ramdaq.daq.commands.cli, "
                      "ramdaq.daq.commands.analyze, ramdaq.analysis.impact"], 1)
+    base = least([sys.executable, "-c", "import numpy, scipy.special, scipy.linalg"], 1)
+    signal = least([sys.executable, "-c", "import scipy.signal"], 1)
+    mpl = least([sys.executable, "-c", "import ramdaq.daq.reports.impact_plots"], 1) - \
+        least([sys.executable, "-c", "import ramdaq.analysis.impact"], 1)
     from ramdaq.daq.api import decay_samples
     from ramdaq.daq.commands.analyze import run_analysis
     from ramdaq.daq.reports import impact_plots
@@ -67,8 +71,11 @@ def in_process(path: Path) -> None:
     rig, hits = run_analysis(path)
     analysis = time.process_time() - t0
     n_hits = sum(h.accepted for h in hits)
-    print(f"  of which: imports {imports:.2f} s (a fresh interpreter); analysis of {n_hits} "
-          f"hit(s) {analysis:.2f} s ({analysis / max(n_hits, 1):.2f} s a hit; target 0.2)")
+    print(f"  of which: imports {imports:.2f} s (a fresh interpreter; scipy.signal alone "
+          f"{signal:.2f} s, of which {signal - base:.2f} s past numpy, scipy.special and "
+          f"scipy.linalg: it imports scipy.stats); matplotlib for the plots {mpl:.2f} s more; "
+          f"analysis of {n_hits} hit(s) {analysis:.2f} s ({analysis / max(n_hits, 1):.2f} s a "
+          f"hit; target 0.2)")
     h = next(h for h in hits if h.accepted)
     x, fs = decay_samples(h, rig), h.event.record.fs_hz
     impact_plots.impact_figures(h.analysis, x, fs, rig, ("spectrum",))  # warm fonts
