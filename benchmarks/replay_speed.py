@@ -1,6 +1,7 @@
 """Replay and ``ramdaq analyze`` of a recording: CPU seconds and speed against real time.
 
 Run:  python benchmarks/replay_speed.py [--file recordings/albacore-water.mcap] [--runs 2]
+      [--long FILE.mcap | --no-long | --long-only]
 
 Each command runs as its own process (single-threaded BLAS, as the CLI sets it); its CPU time
 (user + system, ``resource.getrusage(RUSAGE_CHILDREN)``) is what is printed, the least of
