@@ -22,7 +22,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import signal
 
 from ..analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
 from ..analysis.model.rig import Rig
@@ -152,6 +151,8 @@ def coarsen(x: np.ndarray, fs_hz: float, coarse: Coarse,
     rate (Hz), and a sentence saying what was done and why. With ``scale`` (n_gages,), ``x``
     is counts and each row is multiplied by its scale first. Row by row: at most one row is
     held at the full rate in float64 (a whole 30 s, 16-gage decay at 25.6 kHz is 98 MB)."""
+    from scipy import signal  # only a coarse final decimates
+
     keep = min(x.shape[1], round(coarse.decay_s * fs_hz))
     q = max(1, int(fs_hz // coarse.rate_hz))
     scale = np.ones(x.shape[0]) if scale is None else scale

@@ -23,17 +23,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..analysis.gap.diagnose import Diagnosis, Settings
-from ..analysis.gap.layers import Answer
 from ..analysis.impact import ImpactAnalysis
 from ..analysis.model.rig import Rig
 from .analyzer import HitResult, judge_event, trial_summary
 from .mode_table import ModeEstimate, mode_rows
 from .recording import Recording, optional_import, read_recording, rig_or_fail
+
+if TYPE_CHECKING:  # the gap package (and its scipy.ndimage/optimize) only for ramdaq.diagnose
+    from ..analysis.gap.diagnose import Diagnosis, Settings
+    from ..analysis.gap.layers import Answer
 
 __all__ = ["ModeEstimate", "TrialAnalysis", "Candidate", "TrialDiagnosis", "analyze", "analyze_hits",
            "diagnose", "as_recording"]

@@ -101,7 +101,6 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
 
 from ..analysis import onset as ons
 from ..analysis.model.rig import STRUCTURE_TABLES
@@ -981,8 +980,11 @@ class Trigger:
             if (self._fidx is None and ev.scan.whitener is None
                     and end >= self._fit_start(ev) + n.fit):
                 self._fit(ev)
-            self._close_at_floor(ev, min(end, max_end + 1), out)
             r = self._scan_decay(ev, min(end, max_end + 1))
+            # the floor judged no further than the re-arm's sample: the record ends at whichever
+            # comes first in the stream, whatever the blocks' length (judged past it on a long
+            # block, the floor could end a record the re-arm had ended earlier on short ones)
+            self._close_at_floor(ev, min(end, max_end + 1) if r is None else min(end, r + 1), out)
             s = self._scan_sharp(ev, end if r is None else r)
             if s is not None and s - ev.onset <= n.double and ev.recorded:
                 ev.second = ev.second or (s, None)
@@ -1182,6 +1184,8 @@ class Trigger:
         if kk >= _DESIGN_VOTES:
             return self.settings.double_on
         if kk not in self._double_on_k:
+            from scipy import optimize, stats  # here: once a stream, for a one- or two-gage vote
+
             nu, on = 2 * self._len.innovation - 1, self.settings.double_on
             target = _DESIGN_VOTES * stats.chi2.logsf(on * nu, nu) / kk
             self._double_on_k[kk] = float(optimize.brentq(

@@ -56,7 +56,7 @@ from mcap.records import (
     Metadata,
     Schema,
 )
-from mcap.stream_reader import breakup_chunk
+from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
 
 from . import mcap_format as fmt
 from .base import TIMED_OUT, Device
@@ -67,6 +67,7 @@ __all__ = ["McapReplayDevice", "JsonMessage", "RecordScanner", "Damage", "FileEn
            "check_mcap_magic"]
 
 _HEAD = struct.Struct("<BQ")  # every record: opcode, length of what follows
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # a message: channel id, sequence, log and publish time
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length (20), summary_start, summary_offset_start, crc
 _DATA_END_BYTES = _HEAD.size + 4  # opcode, length, data_section_crc
 _CHUNK_FIXED = struct.Struct("<QQQII")  # start, end time, uncompressed size, crc, len(compression)
@@ -219,11 +220,14 @@ class RecordScanner:
         The data section's CRC matched (``None``: not reached, not written, or already damaged).
     """
 
-    def __init__(self, f: BinaryIO, path: str | PathLike, *, strict: bool = False) -> None:
+    def __init__(self, f: BinaryIO, path: str | PathLike, *, strict: bool = False,
+                 topics: frozenset[str] | None = None) -> None:
         check_mcap_magic(f, path)
         self._f = f
         self.path = path
         self.strict = strict
+        self.topics = topics  # messages of these topics only (None: all), see _chunk_records
+        self._channel_topic: dict[int, str] = {}
         self.size = os.fstat(f.fileno()).st_size
         self.end = read_file_end(f, self.size)
         self.complete = False
@@ -306,7 +310,9 @@ class RecordScanner:
         length = len(raw) - _HEAD.size
         try:
             if opcode == Opcode.CHUNK:
-                records = breakup_chunk(Chunk.read(body), validate_crc=True)
+                chunk = Chunk.read(body)
+                records = (breakup_chunk(chunk, validate_crc=True) if self.topics is None
+                           else self._chunk_records(chunk))
                 self.chunks += 1
                 return records
             if opcode == Opcode.ATTACHMENT:
@@ -321,6 +327,35 @@ class RecordScanner:
             return [reader.read(body)] if reader else []
         except _DAMAGE as err:
             raise _Bad("chunk" if opcode == Opcode.CHUNK else "record", _why(err)) from err
+
+    def _chunk_records(self, chunk: Chunk) -> list[McapRecord]:
+        """A chunk's records as ``breakup_chunk`` gives them (its CRC checked the same way),
+        less the messages of topics other than :attr:`topics`, which are stepped over unparsed:
+        a trial's recording holds ten view messages (``/ramdaq/gages/trace``) for each block,
+        and parsing them was most of a replay's reading."""
+        stream, n = get_chunk_data_stream(chunk, validate_crc=True)
+        data = stream.read(n)
+        records: list[McapRecord] = []
+        pos, head, msg = 0, _HEAD, _MESSAGE_HEAD
+        while pos < n:
+            opcode, length = head.unpack_from(data, pos)
+            body, pos = pos + head.size, pos + head.size + length
+            if pos > n or (opcode == Opcode.MESSAGE and length < msg.size):
+                raise ValueError(f"a chunk record of {length} bytes runs past its chunk's end")
+            if opcode == Opcode.MESSAGE:
+                channel_id, sequence, log_time, publish_time = msg.unpack_from(data, body)
+                if self._channel_topic.get(channel_id) in self.topics or \
+                        channel_id not in self._channel_topic:
+                    records.append(Message(channel_id=channel_id, log_time=log_time,
+                                           data=data[body + msg.size:pos],
+                                           publish_time=publish_time, sequence=sequence))
+            elif opcode in (Opcode.CHANNEL, Opcode.SCHEMA):
+                reader = Channel if opcode == Opcode.CHANNEL else Schema
+                record = reader.read(ReadDataStream(BytesIO(data[body:pos])))
+                if isinstance(record, Channel):
+                    self._channel_topic[record.id] = record.topic
+                records.append(record)
+        return records
 
     # -- stepping over damage ------------------------------------------------------------------
     def _resync(self, bad: int) -> int | None:
@@ -376,6 +411,14 @@ class McapReplayDevice(Device):
         sample is due, counted from when the first block was read.
     speed : float
         Multiplier of the real-time pace (2.0 replays twice as fast).
+    join_s : float
+        With ``pace="fast"``: hand over consecutive recorded blocks joined into one of at most
+        this many seconds, where they follow each other with no gap and the same scale (a
+        block starts, as recorded, where a gap or a new scale does); its ``seq`` and ``t0_ns``
+        are its first recorded block's. The samples are the same, in fewer, longer blocks: a
+        replay flat out spends most of its non-analysis CPU per block (the trigger's filters,
+        the readout), and the trigger gives the same events whatever the blocks' length.
+        ``0`` (the default): the blocks exactly as recorded.
 
     Reading raises :class:`~ramdaq.drivers.mcap_format.CorruptRecording` at the first damaged
     record (see *Integrity* above), after the blocks before it.
@@ -383,12 +426,17 @@ class McapReplayDevice(Device):
 
     kind = "mcap"
 
-    def __init__(self, path: str | PathLike, *, pace: str = "fast", speed: float = 1.0) -> None:
+    def __init__(self, path: str | PathLike, *, pace: str = "fast", speed: float = 1.0,
+                 join_s: float = 0.0) -> None:
         super().__init__()
         if pace not in ("fast", "realtime"):
             raise ValueError(f"mcap: pace {pace!r} must be 'fast' or 'realtime'")
         if not speed > 0:
             raise ValueError(f"mcap: speed ({speed}) must be positive")
+        if not join_s >= 0 or (join_s and pace != "fast"):
+            raise ValueError(f"mcap: join_s ({join_s}) must be >= 0, and 0 unless pace is 'fast'")
+        self.join_s = float(join_s)
+        self._error: BaseException | None = None  # a read error met while joining, raised next
         self.path = Path(path)
         self.pace = pace
         self.speed = float(speed)
@@ -406,7 +454,8 @@ class McapReplayDevice(Device):
         f = open(self.path, "rb")  # noqa: SIM115 - closed by _close, or below on failure
         try:
             info = self._read_info(f)
-            self._scanner = RecordScanner(f, self.path, strict=True)
+            self._scanner = RecordScanner(f, self.path, strict=True,
+                                          topics=frozenset({fmt.BLOCK_TOPIC}))
             self._blocks = self._iter_blocks(self._scanner, info.fs_hz)
         except BaseException:
             f.close()
@@ -484,10 +533,15 @@ class McapReplayDevice(Device):
     def _read(self, timeout: float | None) -> Block | None:
         block = self._pending
         if block is None:
+            if self._error is not None:
+                err, self._error = self._error, None
+                raise err
             block = next(self._blocks, None)
             if block is None:
                 return None
         self._pending = None
+        if self.join_s:
+            return self._joined(block)
         if self.pace == "realtime":
             now = time.monotonic()
             if self._start is None:
@@ -502,6 +556,32 @@ class McapReplayDevice(Device):
             if wait > 0:
                 time.sleep(wait)
         return block
+
+    def _joined(self, block: Block) -> Block:
+        """``block`` and the recorded blocks that follow it with no gap and the same scale, as
+        one block of at most ``join_s`` seconds; the first that does not fit waits in
+        ``_pending``. A read error after the first block is raised by the next read, so that the
+        blocks before it are handed over first."""
+        limit = max(block.n_samples, round(self.join_s * block.fs_hz))
+        parts, n, end = [block], block.n_samples, block.next_sample
+        while n < limit:
+            try:
+                nxt = next(self._blocks, None)
+            except Exception as err:  # noqa: BLE001 -- raised by the next read, as said
+                self._error = err
+                break
+            if nxt is None:
+                break
+            if (nxt.first_sample != end or n + nxt.n_samples > limit
+                    or not np.array_equal(nxt.scale, block.scale)):
+                self._pending = nxt
+                break
+            parts.append(nxt)
+            n, end = n + nxt.n_samples, nxt.next_sample
+        if len(parts) == 1:
+            return block
+        return Block(block.seq, block.first_sample, block.t0_ns, block.fs_hz,
+                     np.concatenate([b.counts for b in parts], axis=1), block.scale)
 
     def _close(self) -> None:
         if self._file is not None:

@@ -69,6 +69,32 @@ def test_round_trip_is_bit_identical_and_keeps_the_gap(tmp_path):
     json.dumps(dataclasses.asdict(d))  # the CLI prints it as JSON
 
 
+def test_joined_blocks_are_the_same_samples_and_stop_at_a_gap(tmp_path):
+    """``join_s`` (``ramdaq replay`` flat out): consecutive blocks come as one of at most
+    ``join_s`` seconds, the same samples in order, never across a gap or a change of scale;
+    only with ``pace="fast"``."""
+    path = tmp_path / "trial.mcap"
+    blocks = stream(30, seed=1, gap_after=19, gap_blocks=2)  # each with its own random scale
+    blocks = [dataclasses.replace(b, scale=blocks[0].scale * (2 if k == 25 else 1))
+              for k, b in enumerate(blocks)]
+    _record(path, blocks)
+    join_n = 4 * BLOCK_SAMPLES
+    _, back, _ = _replay(path, join_s=join_n / FS_HZ)
+    assert all(b.n_samples <= join_n for b in back) and len(back) < len(blocks)
+    # no block across the gap (after seq 19) or the new scale (seq 25, and 26 after it)
+    starts = {b.first_sample for b in back}
+    assert {blocks[k].first_sample for k in (0, 20, 25, 26)} <= starts
+    for b in back:  # each joined block is the recorded ones it starts with, side by side
+        k = next(k for k, r in enumerate(blocks) if r.first_sample == b.first_sample)
+        m = b.n_samples // BLOCK_SAMPLES
+        assert b.seq == blocks[k].seq and b.t0_ns == blocks[k].t0_ns
+        assert np.array_equal(b.counts, np.hstack([r.counts for r in blocks[k:k + m]]))
+        assert all(np.array_equal(r.scale, b.scale) for r in blocks[k:k + m])
+    assert sum(b.n_samples for b in back) == sum(b.n_samples for b in blocks)
+    with pytest.raises(ValueError, match="join_s"):
+        McapReplayDevice(path, pace="realtime", join_s=1.0)
+
+
 def test_readable_with_only_mcap_and_mcap_protobuf(tmp_path):
     """Another program needs nothing from ramdaq: mcap + mcap_protobuf's DecoderFactory."""
     path = tmp_path / "trial.mcap"

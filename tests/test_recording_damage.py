@@ -55,11 +55,11 @@ def _damaged(recording, tmp_path, offsets, name="damaged.mcap", keep=None):
     return out
 
 
-def _replay_until_error(path):
+def _replay_until_error(path, **kw):
     """The blocks replay hands out, and the error that ended it (``None`` if none)."""
     got = []
     try:
-        with McapReplayDevice(path) as dev:
+        with McapReplayDevice(path, **kw) as dev:
             for b in dev:
                 got.append(b)
     except RecordingError as err:
@@ -224,7 +224,8 @@ def test_undecodable_block_with_a_valid_crc_is_an_error(tmp_path):
     """A block message the writer itself got wrong (its chunk's CRC matches): replay stops
     with the file's name instead of ending the stream as if it were over."""
     path = tmp_path / "garbled.mcap"
-    blocks = stream(6, SEED, n_samples=N_SAMPLES)
+    blocks = [dataclasses.replace(b, scale=np.ones(b.n_channels))
+              for b in stream(6, SEED, n_samples=N_SAMPLES)]
     with open(path, "wb") as f:
         w = Writer(f)
         w.start()
@@ -239,6 +240,11 @@ def test_undecodable_block_with_a_valid_crc_is_an_error(tmp_path):
     assert [b.seq for b in got] == [0, 1, 2]
     assert isinstance(err, CorruptRecording) and "garbled.mcap: a block message" in str(err)
     assert "does not decode" in str(err) and "\n" not in str(err)
+    # blocks joined (ramdaq replay flat out): the three before it come first, as one, then the error
+    joined, err = _replay_until_error(path, join_s=1.0)
+    assert len(joined) == 1 and joined[0].seq == 0 and isinstance(err, CorruptRecording)
+    assert "garbled.mcap: a block message" in str(err)
+    assert np.array_equal(joined[0].counts, np.hstack([b.counts for b in got]))
 
 
 @pytest.mark.parametrize(("key", "value", "what"), [("fs_hz", "0.0", "fs_hz '0.0' is not a positive"),

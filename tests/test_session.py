@@ -100,6 +100,18 @@ def test_a_record_closes_at_the_noise_floor_and_replays_identically(floor_trial)
     assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
 
 
+@pytest.mark.parametrize("trial", ["live", "floor_trial"])
+def test_a_replay_of_joined_blocks_is_the_live_trial(trial, request):
+    """``ramdaq replay`` flat out hands the recorded 50 ms blocks over joined into 1 s ones
+    (``join_s``): the same events (records closed at the next blow, at the noise floor, at the
+    end) and the same numbers, to the last digit."""
+    tmp, outcome = request.getfixturevalue(trial)
+    name = "trial.mcap" if trial == "live" else "floor.mcap"
+    replayed = Session(McapReplayDevice(tmp / name, join_s=1.0), readout=False).run()
+    assert [h.event.to_json() for h in replayed.hits] == [h.event.to_json() for h in outcome.hits]
+    assert json.dumps(replayed.results_json()) == json.dumps(outcome.results_json())
+
+
 def test_first_looks_are_tried_at_two_then_three_periods_of_the_predominant_mode(albacore):
     """The look schedule (no analyzer: each look is done at once and never sure): a blow's
     first look has two periods of the rig model's predominant mode (13.0 Hz in water, Table

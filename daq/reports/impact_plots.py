@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.signal
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullLocator
 
@@ -158,14 +159,22 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
         if n not in row_of:
             continue
         j = row_of[n]
+        top = floor
         for k, c in enumerate(colours):
             amp = abs(m.complex_amplitude[j, k])
             d, f = m.channel_delta[j, k], m.channel_frequency_hz[j, k]
             # plot, not semilogy: the panel is log already, and semilogy resets its locators
-            ax.plot(*thinned(t, np.maximum(env[j, k], floor)), color=c, lw=0.8)
+            tt, yy = thinned(t, np.maximum(env[j, k], floor))
+            ax.plot(tt, yy, color=c, lw=0.8)
+            top = max(top, float(np.nanmax(yy, initial=floor)))
             if np.isfinite(d) and amp > 0:  # a straight line on log axes: two points draw it
                 ends = t[[0, -1]]
                 ax.plot(ends, amp * np.exp(-d * f * ends), color=c, lw=1.2, ls="--")
+                top = max(top, amp)
+        # the limits set, not found by autoscaling every line (a fifth of the figure's build):
+        # the curves' span, with the 5 % margins autoscaling gave (in decades on the log axis)
+        ax.set_xlim(-0.05 * t[-1], 1.05 * t[-1])
+        ax.set_ylim(floor, top * (top / floor) ** 0.05)
         g = a.gages.get(n)
         title = f"gage {n}"
         if g is not None and np.isfinite(g.delta):
@@ -175,7 +184,6 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
         # y given: the title is not moved clear of top tick labels (there are none), which
         # measured every tick label of the panel and was a third of the figure's drawing
         ax.set_title(title, fontsize=9, y=1.0)
-        ax.set_ylim(floor, None)
     labels = [f"{f:.2f} Hz, δ = {d:.4f}{' (predominant)' if k == a.predominant else ''}"
               for k, (f, d) in enumerate(zip(m.frequency_hz, m.delta, strict=True))]
     proxies = [axes[0].plot([], [], color=c)[0] for c in colours]
@@ -201,8 +209,6 @@ def _decay_panels(a: ImpactAnalysis, reuse: dict | None) -> tuple[Figure, np.nda
         for ax in axes:
             for line in list(ax.lines):
                 line.remove()
-            ax.relim()
-            ax.set_autoscale_on(True)
         return fig, axes
     n_col = 4
     n_row = -(-len(a.gage_numbers) // n_col)
@@ -210,6 +216,7 @@ def _decay_panels(a: ImpactAnalysis, reuse: dict | None) -> tuple[Figure, np.nda
     # A fixed layout (inches kept for the titles, legend and labels): the constrained layout
     # measured every tick label of every panel, and cost more than all the rest of the figure.
     fig = Figure(figsize=(16, height))
+    FigureCanvasAgg(fig)  # its own Agg canvas: a figure redrawn keeps its renderer (16 MB)
     fig.subplots_adjust(left=0.055, right=0.99, bottom=0.6 / height, top=1 - 1.05 / height,
                         hspace=0.32, wspace=0.2)
     axes = fig.subplots(n_row, n_col, sharex=True, squeeze=False).ravel()
