@@ -17,6 +17,11 @@ from rich.text import Text
 
 from ..drivers.block import Block, StreamInfo
 
+UNSURE_REL_SE = 0.25
+"""A gage's first-look decrement whose standard error is more than this fraction of itself is
+marked "unsure" (a gage at the noise level); the session shows a look only when the median gage
+is within it (``session.LOOK_REL_SE``)."""
+
 
 class LiveReadout:
     """Accumulates per-channel statistics block by block and shows them.
@@ -90,10 +95,36 @@ class LiveReadout:
             self._next_print += self.every_s
             self.console.print(self.line(), highlight=False)
 
-    def set_result(self, channel: str, f_hz: float, delta: float, final: bool) -> None:
-        """Show a gage's latest frequency (Hz) and decrement; ``final`` once the decay ended."""
-        self.results[channel] = (f_hz, delta, "final" if final else "so far")
+    def set_result(self, channel: str, f_hz: float, delta: float, final: bool,
+                   delta_se: float = np.nan) -> None:
+        """Show a gage's latest frequency (Hz) and decrement; ``final`` once the decay ended.
+        ``delta_se``, the decrement's standard error so far, is shown beside "so far" (a gage
+        at the noise level reads a number with an error as large as itself)."""
+        status = "final" if final else "so far"
+        if not final and np.isfinite(delta_se) and delta:
+            rel = abs(delta_se / delta)
+            status += f" (+-{100 * rel:.0f} %{', unsure' if rel > UNSURE_REL_SE else ''})"
+        self.results[channel] = (f_hz, delta, status)
         self._refresh()
+
+    def look(self, after_s: float, gages: dict[str, tuple[float, float, float]]) -> None:
+        """Show a first look taken ``after_s`` seconds into a decay: each gage's (f Hz, δ, δ's
+        standard error). On a terminal the table shows them; otherwise one plain line says
+        the median frequency and decrement over the gages whose decrement is sure to
+        :data:`UNSURE_REL_SE`, and how many were not."""
+        for name, (f, d, se) in gages.items():
+            self.set_result(name, f, d, final=False, delta_se=se)
+        if self._live is not None:
+            return
+        sure = [(f, d) for f, d, se in gages.values() if d and abs(se / d) <= UNSURE_REL_SE]
+        if not sure:
+            return
+        f_med, d_med = np.median(np.array(sure), axis=0)
+        d_all = [d for _, d in sure]
+        self.console.print(
+            f"  first look {after_s:.2f} s into the decay: f {f_med:.3f} Hz, delta {d_med:.4f} "
+            f"(median of {len(sure)} gage{'s' if len(sure) != 1 else ''}, "
+            f"{min(d_all):.4f}-{max(d_all):.4f}); {len(gages) - len(sure)} unsure", highlight=False)
 
     def set_unused(self, channel: str, why: str) -> None:
         """The final analysis did not use this gage (``why``: its verdict, a few words): its
@@ -126,14 +157,20 @@ class LiveReadout:
         return np.sqrt(sum(s for _, s in self._sq) / n)
 
     def line(self) -> str:
-        """One plain line: time, health and the three loudest gages."""
+        """One plain line: time, health and the three loudest channels of each unit (the
+        accelerometers' m/s^2 and a load cell's N are not ranked against each other)."""
         t = self.samples / self.info.fs_hz
-        loud = np.argsort(self.rms)[::-1][:3]
-        levels = ", ".join(f"{self.info.channels[i]} {self.rms[i]:.3g}" for i in loud)
         clip = f", CLIPPED {int(self.clipped.sum())}" if self.clipped.any() else ""
+        rms, units = self.rms, self.info.units
+        parts = []
+        for unit in dict.fromkeys(units):
+            rows = [i for i, u in enumerate(units) if u == unit]
+            loud = sorted(rows, key=lambda i: -rms[i])[:3]
+            parts.append(f"rms {unit}: " + ", ".join(
+                f"{self.info.channels[i]} {rms[i]:.3g}" for i in loud))
         return (f"t={t:7.2f} s  blocks {self.blocks}  gaps {self.gaps}  queue {self.queue}  "
                 f"overflows {self.overflows}  impacts {len(self.impacts)}{clip}  |  "
-                f"rms {self.info.units[0]}: {levels}")
+                + "  |  ".join(parts))
 
     def _table(self) -> Group:
         t = self.samples / self.info.fs_hz

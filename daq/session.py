@@ -63,7 +63,7 @@ from .analyzer import (
     trial_summary,
 )
 from .jobqueue import Admission, JobQueue, QueuePolicy
-from .readout import LiveReadout
+from .readout import UNSURE_REL_SE, LiveReadout
 from .record import store_block
 from .recorder import Recorder
 from .trigger import ImpactEvent, Trigger, TriggerSettings
@@ -78,10 +78,10 @@ ENVELOPE_POINTS = 256
 # after the onset: the blow, a double hit, clipping and the first cycles of the decay, where the
 # detail is; the rest of the decay is in the live min/max trace (rerun_view.LIVE_RATE_HZ rows/s).
 FULL_RATE_AFTER_S = 1.0
-LOOK_REL_SE = 0.25
+LOOK_REL_SE = UNSURE_REL_SE
 """A first look is shown when the median over gages of its decrement's standard error relative
 to the decrement is at most this (the estimator's own figure: a number +- 25 % at one sigma is
-worth a glance, a wilder one is not)."""
+worth a glance, a wilder one is not); a gage above it is marked "unsure" in the readout."""
 LOOK_EARLY = 0.1
 """A look due after k periods of free decay is taken on a block that ends this many periods
 early (a block's end rarely falls on a period's)."""
@@ -487,8 +487,7 @@ class Session:
         self.shown.append(Shown(-1 if self._ringing_hit is None else self._ringing_hit, "look",
                                 onset / self.info.fs_hz, time.monotonic()))
         if self.readout:
-            for n, (f, d, _) in look.gages.items():
-                self.readout.set_result(f"g{n:02d}", f, d, final=False)
+            self.readout.look(look.duration_s, {f"g{n:02d}": v for n, v in look.gages.items()})
         if self.view is not None:
             t = onset / self.info.fs_hz + look.duration_s
             for n, (f, d, _) in look.gages.items():

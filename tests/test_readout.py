@@ -52,3 +52,52 @@ def test_a_gage_the_final_does_not_use_loses_its_numbers_so_far(albacore):
     assert "not used: no decay" in row15 and "24.612" not in row15 and "0.0312" not in row15
     row4 = next(line for line in text.splitlines() if " g04 " in line)
     assert "24.503" in row4 and "final" in row4
+
+
+def _table_text(view) -> str:
+    console = Console(file=io.StringIO(), force_terminal=True, width=200)
+    console.print(view._table())
+    return console.file.getvalue()
+
+
+def test_a_look_marks_a_gage_at_the_noise_level_unsure(albacore):
+    """A new user saw g15/g16 at the noise level read '24.196 Hz, so far' like any other gage:
+    each number so far carries its decrement's standard error, and one beyond 25 % says unsure."""
+    view = _feed(Console(file=io.StringIO(), force_terminal=True, width=200), albacore)
+    view.look(0.4, {"g04": (24.50, 0.0580, 0.0029), "g15": (24.20, 0.0385, 0.0310)})
+    text = _table_text(view)
+    row4 = next(line for line in text.splitlines() if " g04 " in line)
+    row15 = next(line for line in text.splitlines() if " g15 " in line)
+    assert "so far (+-5 %)" in row4 and "unsure" not in row4
+    assert "so far (+-81 %, unsure)" in row15
+
+
+def test_without_a_terminal_a_look_prints_one_line_of_its_sure_gages(albacore):
+    """Off a terminal (a log, CI) the first looks were never printed though the summary counted
+    them: one line each, the median over the gages sure to 25 %, and how many were not."""
+    out = io.StringIO()
+    view = _feed(Console(file=out, force_terminal=False, width=300), albacore)
+    view.look(0.45, {"g01": (13.01, 0.0950, 0.004), "g02": (13.03, 0.0990, 0.006),
+                     "g03": (13.02, 0.0970, 0.005), "g16": (40.0, 0.01, 0.02)})
+    line = out.getvalue().splitlines()[-1]
+    assert line == ("  first look 0.45 s into the decay: f 13.020 Hz, delta 0.0970 "
+                    "(median of 3 gages, 0.0950-0.0990); 1 unsure")
+
+
+def test_plain_line_ranks_each_unit_on_its_own(albacore):
+    """A load cell's newtons were listed under 'rms m/s^2' and ranked against the gages."""
+    from dataclasses import replace
+
+    out = io.StringIO()
+    with SimDevice(albacore, duration_s=2.5, impacts=[1.0], seed=4) as dev:
+        info = dev.info
+        units = list(info.units)
+        units[-1] = "N"
+        view = LiveReadout(replace(info, units=tuple(units)), console=Console(file=out, width=300))
+        with view:
+            for block in dev:
+                view.update(block)
+    line = next(ln for ln in out.getvalue().splitlines() if ln.startswith("t="))
+    accel, force = line.split("|")[1:]
+    assert accel.strip().startswith("rms m/s^2: ") and info.channels[-1] not in accel
+    assert force.strip().startswith(f"rms N: {info.channels[-1]} ")  # its level when printed (t = 2 s)
