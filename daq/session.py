@@ -519,10 +519,10 @@ class Session:
         if a is None:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s REJECTED: {hit.reason}")
         else:
+            v = (f", delta_{self.rig.surface.label('v')} = {a.motions['v_2_6'].delta:.4f}"
+                 if "v_2_6" in a.motions else "")  # no motions on a channels-only rig
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s accepted: f = {a.f_hz:.3f} Hz,"
-                      f" delta_modal = {a.damping['delta_modal']:.4f}, "
-                      f"delta_{self.rig.surface.label('v')} = "
-                      f"{a.motions['v_2_6'].delta if 'v_2_6' in a.motions else float('nan'):.4f}")
+                      f" delta_modal = {a.damping['delta_modal']:.4f}{v}")
             if self.readout and self._ringing_hit in (None, hit.index):
                 for n, g in a.gages.items():
                     self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)

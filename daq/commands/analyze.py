@@ -208,6 +208,11 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
                      f"trigger was blind {st['blind_s']:.3f} s and arming {st['arming_s']:.3f} s")
     if s.get("not_analysable"):
         lines.append(f"{s['not_analysable']} blow(s) seen but not analysable (among the rejected)")
+    arming = sum("trigger still arming" in (r or "") for r in s.get("rejected", {}).values())
+    if arming:
+        lines.append(f"{arming} blow(s) came before the trigger's long-term average was full: "
+                     "not analysable live or in a replay (the trial's own trigger); "
+                     "`ramdaq analyze` arms on the whole record and analyses them")
     lines += [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
               f"(+- std, n):", "  quantity          mean        std     n"]
 
