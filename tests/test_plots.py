@@ -117,3 +117,30 @@ def test_a_decay_figure_redrawn_for_the_next_hit_is_the_one_drawn_anew(
                           tmp_path / "re", 1, ("decay",), reuse=reuse)
     assert "decay" in reuse
     assert np.array_equal(matplotlib.image.imread(fresh[0]), matplotlib.image.imread(redrawn[0]))
+
+
+def test_plots_a_channels_only_import_cannot_give_are_said(tmp_path: Path, capsys) -> None:
+    """``--plots all`` on a channels-only import left out the mode-shape and stock plots without
+    a word: report.json's ``skipped`` and the printed summary name each with why; the spectrum
+    says it is the mean of all gages (it said 'of the rudder gages' with no rudder)."""
+    from ramdaq.daq.commands.cli import main
+
+    t = np.arange(0, 8, 1e-3)  # 1000 Hz
+    rng = np.random.default_rng(3)
+    ring = np.where(t >= 2, np.exp(-0.02 * 2 * np.pi * 20 * (t - 2)) * np.sin(2 * np.pi * 20 * (t - 2)), 0)
+    acc = np.outer([1.0, 0.6], ring) + 1e-3 * rng.standard_normal((2, t.size))
+    csv = tmp_path / "two.csv"
+    csv.write_text("time [s],A1 [m/s^2],A2 [m/s^2]\n" + "\n".join(
+        f"{t[k]:.4f},{acc[0, k]:.6f},{acc[1, k]:.6f}" for k in range(t.size)) + "\n")
+    assert main(["import", str(csv)]) == 0
+    assert main(["analyze", str(tmp_path / "two.mcap"), "--plots", "all",
+                 "--out", str(tmp_path / "rep")]) == 0
+    printed = capsys.readouterr().out
+    report = __import__("json").loads((tmp_path / "rep" / "report.json").read_text())
+    steps = {s["step"]: s["reason"] for s in report["skipped"]}
+    assert "no gage positions" in steps["modeshape plot"] and "stock" in steps["stock plot"]
+    assert "skipped: modeshape plot: a channels-only rig" in printed
+    assert sorted(p.name for p in (tmp_path / "rep").glob("*.png")) == [
+        "impact0_decay.png", "impact0_spectrum.png"]
+    spectrum = ramdaq.analyze(tmp_path / "two.mcap", impact=0).figures(0)["spectrum"]
+    assert "mean of all gages" in spectrum.axes[0].get_ylabel()

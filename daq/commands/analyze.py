@@ -283,6 +283,21 @@ def plot_kinds(spec: str | None, *, off: bool = False) -> bool | tuple[str, ...]
     return kinds
 
 
+def _plots_not_drawn(kinds: Collection[str], rig: Rig, hits: list[HitResult]) -> list[dict]:
+    """The plot kinds asked for that this rig or these hits cannot give, each with why, as
+    report.json's ``skipped`` entries (``--plots all`` on a channels-only import left them out
+    without a word)."""
+    out = []
+    if "modeshape" in kinds and not rig.structural:
+        out.append({"step": "modeshape plot",
+                    "reason": "a channels-only rig has no gage positions or directions"})
+    if "stock" in kinds and not any(h.analysis is not None and h.analysis.stock_curves
+                                    for h in hits):
+        out.append({"step": "stock plot", "reason": "no accepted hit has the stock's gages "
+                    "(Report 1836's Figures 8 and 9 need gages along the stock)"})
+    return out
+
+
 def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path, *,
                    plots: bool | Collection[str] = True,
                    air: tuple[Rig, list[HitResult]] | None = None) -> tuple[dict, list[Path]]:
@@ -295,11 +310,12 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
     out.mkdir(parents=True, exist_ok=True)
     for old in _earlier_plots(out):  # a report folder holds one run: no plots of an earlier one
         old.unlink()
+    kinds = DEFAULT_PLOTS if plots is True else () if plots is False else tuple(plots)
+    report.setdefault("skipped", []).extend(_plots_not_drawn(kinds, rig, hits))
     tmp = out / f".report.json.{os.getpid()}"
     tmp.write_text(json.dumps(report, indent=1, default=json_default))
     os.replace(tmp, out / "report.json")
     files = [out / "report.json"]
-    kinds = DEFAULT_PLOTS if plots is True else () if plots is False else tuple(plots)
     if kinds:  # the driving-point FRFs (one figure a trial, none without a force channel) too
         files += plot_frf(report["frf"], out)
         from ..reports.impact_plots import plot_impact

@@ -264,8 +264,9 @@ def _decade(v: float, _pos: int | None = None) -> str:
 def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) -> Figure:
     """Mean power spectral density of the rudder gages' decay (Welch, 8 s segments at most) on
     log-log axes, each identified mode a numbered line listed in the legend."""
-    rows = [i for i, n in enumerate(a.gage_numbers) if rig.gage(n).body == "rudder"] or \
-        list(range(len(a.gage_numbers)))
+    rows = [i for i, n in enumerate(a.gage_numbers) if rig.gage(n).body == "rudder"]
+    which = f"the {rig.surface.body('rudder')} gages" if rows and rig.structural else "all gages"
+    rows = rows if rows and rig.structural else list(range(len(a.gage_numbers)))
     nper = min(x.shape[1], int(8 * fs_hz))
     f, pxx = scipy.signal.welch(x[rows], fs_hz, nperseg=nper, axis=-1)
     p = pxx.mean(axis=0)
@@ -285,7 +286,7 @@ def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) ->
     ax.set_ylim(max(float(np.percentile(p[keep], 5)) / 3, top * 1e-7), top * 3)
     ax.set_xlim(lo, hi)
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel(f"PSD, mean of the {rig.surface.body('rudder')} gages ((m/s²)²/Hz)")
+    ax.set_ylabel(f"PSD, mean of {which} ((m/s²)²/Hz)")
     ax.set_title("Spectrum of the free decay with the identified modes", y=1.0)
     ax.legend(fontsize=9, loc="lower left")
     return fig
@@ -324,14 +325,17 @@ def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
     ax.set_xlabel(f"{across} amplitude in phase with gage {4 if 4 in amp else '(largest)'} (m/s²)")
     ax.set_ylabel("z, up (m)" if sf.is_rudder else "inboard, along the stock to the hull (m)")
     ax.set_title(f"{across} gages seen from aft", fontsize=10, y=1.0)
-    for body, mk in marks.items():
-        ax.plot([], [], mk, color=BODY_COLOURS[body], label=sf.body(body))
-    ax.legend(fontsize=8, loc="best")
+    shown = {rig.gage(n).body for n in amp if abs(rig.gage(n).direction[1]) >= 0.9}
+    for body, mk in marks.items():  # a legend of the bodies drawn only
+        if body in shown:
+            ax.plot([], [], mk, color=BODY_COLOURS[body], label=sf.body(body))
+    if shown:
+        ax.legend(fontsize=8, loc="best")
     order = sorted(amp, key=lambda n: (-rig.gage(n).position_m[2], n))
     y = np.arange(len(order))
     bars.barh(y, [abs(amp[n]) for n in order], color=[BODY_COLOURS[rig.gage(n).body] for n in order])
     for yi, n in zip(y, order, strict=True):
-        bars.annotate(f"{np.degrees(np.angle(amp[n] * turn)):+.0f}°", (abs(amp[n]), yi),
+        bars.annotate(f"{round(float(np.degrees(np.angle(amp[n] * turn)))):+d}°", (abs(amp[n]), yi),
                       xytext=(3, 0), textcoords="offset points", va="center", fontsize=8)
     bars.set_yticks(y, [f"gage {n} ({sf.body(rig.gage(n).body)}, x {rig.gage(n).position_m[0]:+.2f}, "
                         f"z {rig.gage(n).position_m[2]:+.2f} m)" for n in order], fontsize=8)
