@@ -40,9 +40,12 @@ import numpy as np
 import scipy.optimize
 import scipy.stats
 
+from ..model.response import modal_form
 from ..model.rig import Rig, RigError
+from ..model.structure import build_model
 from .calibrate import Stop
 from .modal_level import ModalComparison, TrialModes, compare, model_modes_at_gages, trial_modes
+from .model_sensitivity import matrix_derivatives, mode_derivatives
 from .trialdata import TrialData
 
 FORM_F = 1e-3
@@ -367,6 +370,43 @@ def _residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
     return np.concatenate([_data_residual(tm, start, params, pr, theta), theta * _pull(params)])
 
 
+def _data_jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+                   theta: np.ndarray) -> np.ndarray:
+    """The Jacobian of :func:`_data_residual` at ``theta`` (rows as the residual's, one column
+    per constant), from the model's modal sensitivities (:mod:`.model_sensitivity`): one
+    eigen-analysis instead of two per constant. The shape rows differentiate the best complex
+    scale ``a`` too; a change of a model shape's scale moves nothing."""
+    rig = apply(start, params, theta)
+    form = modal_form(build_model(rig))
+    lam = form.eigenvalues[pr.i_model]
+    dlam, dacc = mode_derivatives(form, *matrix_derivatives(rig, [p.name for p in params]))
+    dlam = dlam[:, pr.i_model]                                      # (p, k)
+    df = dlam.imag / lam.imag / pr.s_f
+    dz = dlam.real / lam.real - (lam.conj() * dlam).real / np.abs(lam) ** 2
+    dz = np.where(np.isfinite(pr.s_zeta), dz / np.where(np.isfinite(pr.s_zeta), pr.s_zeta, 1.0), 0.0)
+    phi_m, phi = form.gage_acc[:, pr.i_model], tm.shapes[:, pr.i_id]
+    dphi = dacc[:, :, pr.i_model]                                   # (p, n_g, k)
+    norm = np.sum(np.abs(phi_m) ** 2, axis=0)
+    c = np.sum(np.conj(phi_m) * phi, axis=0)
+    da = (np.sum(np.conj(dphi) * phi, axis=1) / norm
+          - c * 2 * np.sum(np.conj(phi_m) * dphi, axis=1).real / norm ** 2)
+    dd = (da[:, None, :] * phi_m + (c / norm) * dphi) / pr.s_shape
+    p = len(params)
+    return np.concatenate([df, dz, dd.real.reshape(p, -1), dd.imag.reshape(p, -1)], axis=1).T
+
+
+def _jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+              theta: np.ndarray) -> np.ndarray:
+    """The Jacobian of :func:`_residual` (data rows, then the prior's diagonal). Where the
+    model cannot be built or differentiated (the residual is :func:`_safe`'s constant there)
+    its data rows are zero: no information, as differences of that constant gave."""
+    try:
+        jd = _data_jacobian(tm, start, params, pr, theta)
+    except (ValueError, np.linalg.LinAlgError):
+        jd = np.zeros((2 * len(pr.i_id) + 2 * pr.s_shape.size, len(params)))
+    return np.vstack([np.nan_to_num(jd), np.diag(_pull(params))])
+
+
 def _pull(params: list[FitParam]) -> np.ndarray:
     """1 / :func:`prior_sd` of each constant."""
     return np.array([1 / prior_sd(p) for p in params])
@@ -375,23 +415,16 @@ def _pull(params: list[FitParam]) -> np.ndarray:
 def _posterior(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
                theta: np.ndarray) -> tuple[np.ndarray, float]:
     """The posterior sd of each constant's log multiplier at ``theta`` (linearised: the data
-    Jacobian by central differences, each residual whitened by its standard error, the
-    Gauss-Newton precision J'J / s2 plus the prior's), and s = sqrt(s2), the misfit scale:
-    chi2 per degree of freedom of the data left, when above 1 (the standard errors were too
-    small for what the data and model differ by; their covariance is widened by it)."""
-    h = 1e-4
+    Jacobian from the modal sensitivities (:func:`_data_jacobian`), each residual whitened by its
+    standard error, the Gauss-Newton precision J'J / s2 plus the prior's), and s = sqrt(s2), the
+    misfit scale: chi2 per degree of freedom of the data left, when above 1 (the standard errors
+    were too small for what the data and model differ by; their covariance is widened by it)."""
     n = len(params)
     r0 = _data_residual(tm, start, params, pr, theta)
-    jac = np.empty((len(r0), n))
-    for k in range(n):
-        e = np.zeros(n)
-        e[k] = h
-        try:
-            jac[:, k] = (_data_residual(tm, start, params, pr, theta + e)
-                         - _data_residual(tm, start, params, pr, theta - e)) / (2 * h)
-        except (ValueError, np.linalg.LinAlgError):
-            jac[:, k] = 0.0         # the model cannot be built around it: no information
-    jac = np.nan_to_num(jac)
+    try:
+        jac = np.nan_to_num(_data_jacobian(tm, start, params, pr, theta))
+    except (ValueError, np.linalg.LinAlgError):
+        jac = np.zeros((len(r0), n))    # the model cannot be differentiated there: no information
     s2 = max(1.0, float(r0 @ r0) / max(len(r0) - n, 1))
     cov = np.linalg.pinv(jac.T @ jac / s2 + np.diag(_pull(params) ** 2))
     return np.sqrt(np.clip(np.diag(cov), 0.0, None)), math.sqrt(s2)
@@ -463,6 +496,7 @@ def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta
     hi = np.log([p.hi for p in params])
     res = scipy.optimize.least_squares(lambda th: _safe(tm, start, params, pr, th),
                                        np.clip(theta, lo, hi), bounds=(lo, hi), method="trf",
+                                       jac=lambda th: _jacobian(tm, start, params, pr, th),
                                        x_scale=0.1, max_nfev=max_nfev)
     stop = Stop.CONVERGED if res.status > 0 else Stop.ITERATION_LIMIT
     return res.x, (stop, str(res.message), int(res.nfev))
