@@ -392,7 +392,8 @@ class Forward:
         if any(t.effect.changes_units() for t in terms):
             U, dU = self.unit_responses(ms, terms)
             coef, pred = self._solve(U, dU, extra, data)
-            if needs_force:
+            if needs_force:     # the first responses let go before the second are made
+                del U, dU
                 U, dU = self.unit_responses(ms, terms, force=coef[: self.td.n_seg])
                 coef, pred = self._solve(U, dU, extra, data)
             del U, dU
