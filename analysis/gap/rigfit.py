@@ -40,11 +40,18 @@ import numpy as np
 import scipy.optimize
 import scipy.stats
 
-from ..model.response import modal_form
+from ..model.response import ModalForm, modal_form
 from ..model.rig import Rig, RigError
 from ..model.structure import build_model
 from .calibrate import Stop
-from .modal_level import ModalComparison, TrialModes, compare, model_modes_at_gages, trial_modes
+from .modal_level import (
+    ModalComparison,
+    TrialModes,
+    compare,
+    model_modes_at_gages,
+    modes_at_gages,
+    trial_modes,
+)
 from .model_sensitivity import matrix_derivatives, mode_derivatives
 from .trialdata import TrialData
 
@@ -345,11 +352,27 @@ def _pairs(tm: TrialModes, cmp: ModalComparison, floors: tuple[float, float, flo
                                              1e-12))
 
 
-def _differences(tm: TrialModes, rig: Rig, pr: _Pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _model_at(start: Rig, params: list[FitParam], theta: np.ndarray,
+              memo: dict | None = None) -> tuple[Rig, ModalForm]:
+    """The rig at ``theta`` and its model's modal form; ``memo`` keeps the last one made (the
+    solver asks for the Jacobian where it has just asked for the residual)."""
+    key = theta.tobytes()
+    if memo is not None and memo.get("key") == key:
+        return memo["rig"], memo["form"]
+    rig = apply(start, params, theta)
+    form = modal_form(build_model(rig))
+    if memo is not None:
+        memo.update(key=key, rig=rig, form=form)
+    return rig, form
+
+
+def _differences(tm: TrialModes, rig: Rig, pr: _Pairs,
+                 form: ModalForm | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whitened differences of the paired modes: frequency (n_pairs,), damping ratio
     (n_pairs,; 0 where not fitted) and shape (n_gages, n_pairs) complex, the model's shape
-    scaled by the complex factor that matches it best to the identified one."""
-    mm = model_modes_at_gages(rig)
+    scaled by the complex factor that matches it best to the identified one. ``form``:
+    ``rig``'s modal form, when already made."""
+    mm = model_modes_at_gages(rig) if form is None else modes_at_gages(form)
     if len(mm.f_hz) <= pr.i_model.max(initial=-1) or np.any(mm.f_hz[pr.i_model] <= 0):
         raise ValueError("the model lost a paired mode")
     f = np.log(mm.f_hz[pr.i_model] / tm.f_hz[pr.i_id]) / pr.s_f
@@ -360,24 +383,24 @@ def _differences(tm: TrialModes, rig: Rig, pr: _Pairs) -> tuple[np.ndarray, np.n
 
 
 def _data_residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
-                   theta: np.ndarray) -> np.ndarray:
-    f, z, d = _differences(tm, apply(start, params, theta), pr)
+                   theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
+    rig, form = _model_at(start, params, theta, memo)
+    f, z, d = _differences(tm, rig, pr, form)
     return np.concatenate([f, z, d.real.ravel(), d.imag.ravel()])
 
 
 def _residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
-              theta: np.ndarray) -> np.ndarray:
-    return np.concatenate([_data_residual(tm, start, params, pr, theta), theta * _pull(params)])
+              theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
+    return np.concatenate([_data_residual(tm, start, params, pr, theta, memo), theta * _pull(params)])
 
 
 def _data_jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
-                   theta: np.ndarray) -> np.ndarray:
+                   theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
     """The Jacobian of :func:`_data_residual` at ``theta`` (rows as the residual's, one column
     per constant), from the model's modal sensitivities (:mod:`.model_sensitivity`): one
     eigen-analysis instead of two per constant. The shape rows differentiate the best complex
     scale ``a`` too; a change of a model shape's scale moves nothing."""
-    rig = apply(start, params, theta)
-    form = modal_form(build_model(rig))
+    rig, form = _model_at(start, params, theta, memo)
     lam = form.eigenvalues[pr.i_model]
     dlam, dacc = mode_derivatives(form, *matrix_derivatives(rig, [p.name for p in params]))
     dlam = dlam[:, pr.i_model]                                      # (p, k)
@@ -396,12 +419,12 @@ def _data_jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pair
 
 
 def _jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
-              theta: np.ndarray) -> np.ndarray:
+              theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
     """The Jacobian of :func:`_residual` (data rows, then the prior's diagonal). Where the
     model cannot be built or differentiated (the residual is :func:`_safe`'s constant there)
     its data rows are zero: no information, as differences of that constant gave."""
     try:
-        jd = _data_jacobian(tm, start, params, pr, theta)
+        jd = _data_jacobian(tm, start, params, pr, theta, memo)
     except (ValueError, np.linalg.LinAlgError):
         jd = np.zeros((2 * len(pr.i_id) + 2 * pr.s_shape.size, len(params)))
     return np.vstack([np.nan_to_num(jd), np.diag(_pull(params))])
@@ -465,14 +488,16 @@ def calibrate_to_modes(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float
         cmp = new
         if same:
             break
-    keep = _pinned(params, _posterior(tm, start, params, _pairs(tm, cmp), theta)[0])
+    post = _posterior(tm, start, params, _pairs(tm, cmp), theta)
+    keep = _pinned(params, post[0])
     if not keep.all():
+        post = None                 # the others refitted: the posterior is the new fit's
         sub = [p for p, k in zip(params, keep, strict=True) if k]
         theta = np.zeros(len(params))
         if sub:
             theta[keep], how = _solve(tm, start, sub, _pairs(tm, cmp), np.zeros(len(sub)), max_nfev)
             nfev += how[2]
-    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev), keep)
+    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev), keep, posterior=post)
     if out.form or out.stop is not Stop.CONVERGED or not keep.any():
         return out
     fine = _pairs(tm, cmp, NO_FLOORS)
@@ -494,9 +519,10 @@ def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta
     """One bounded least-squares run from ``theta``: the end point and (stop, message, nfev)."""
     lo = np.log([p.lo for p in params])
     hi = np.log([p.hi for p in params])
-    res = scipy.optimize.least_squares(lambda th: _safe(tm, start, params, pr, th),
+    memo: dict = {}         # the model at the last point: its Jacobian is asked for there next
+    res = scipy.optimize.least_squares(lambda th: _safe(tm, start, params, pr, th, memo),
                                        np.clip(theta, lo, hi), bounds=(lo, hi), method="trf",
-                                       jac=lambda th: _jacobian(tm, start, params, pr, th),
+                                       jac=lambda th: _jacobian(tm, start, params, pr, th, memo),
                                        x_scale=0.1, max_nfev=max_nfev)
     stop = Stop.CONVERGED if res.status > 0 else Stop.ITERATION_LIMIT
     return res.x, (stop, str(res.message), int(res.nfev))
@@ -504,15 +530,19 @@ def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta
 
 def _result(tm: TrialModes, start: Rig, params: list[FitParam], theta: np.ndarray, top: float,
             before: ModalComparison, how: tuple[Stop, str, int], pinned: np.ndarray | None = None,
-            weights: _Pairs | None = None) -> ModeFit:
+            weights: _Pairs | None = None,
+            posterior: tuple[np.ndarray, float] | None = None) -> ModeFit:
     """The fit at ``theta`` (held constants at 0), each constant's posterior sd with the
-    ``weights`` it was fitted with (default: the floors) and whether it was ``pinned``."""
+    ``weights`` it was fitted with (default: the floors) and whether it was ``pinned``.
+    ``posterior``: :func:`_posterior` at this ``theta`` with the floors and this fit's pairs,
+    when already computed (the pinning test's, when nothing was held)."""
     rig = apply(start, params, theta)
     after = compare(tm, rig, top_hz=top)
     pinned = np.ones(len(params), bool) if pinned is None else pinned
     sd, scale = np.full(len(params), np.nan), 1.0
     if params and after.pairs:
-        sd, scale = _posterior(tm, start, params, weights or _pairs(tm, after), theta)
+        sd, scale = (posterior if posterior is not None and weights is None
+                     else _posterior(tm, start, params, weights or _pairs(tm, after), theta))
     fitted = tuple(FittedParam(p.name, p.start, get_value(rig, p.name), p.lo, p.hi, float(d), bool(k))
                    for p, d, k in zip(params, sd, pinned, strict=True))
     return ModeFit(start=start, rig=rig, params=fitted, stop=how[0], message=how[1], nfev=how[2],
@@ -521,12 +551,13 @@ def _result(tm: TrialModes, start: Rig, params: list[FitParam], theta: np.ndarra
                    misfit_scale=scale)
 
 
-def _safe(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray) -> np.ndarray:
+def _safe(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray,
+          memo: dict | None = None) -> np.ndarray:
     """:func:`_residual`, or a large constant where the model cannot be built (an inertia
     matrix no longer positive definite, an overdamped mode): the solver backs off."""
     n = 2 * len(pr.i_id) + 2 * pr.s_shape.size + len(theta)
     try:
-        r = _residual(tm, start, params, pr, theta)
+        r = _residual(tm, start, params, pr, theta, memo)
     except (ValueError, np.linalg.LinAlgError):
         return np.full(n, 1e4)
     return np.where(np.isfinite(r), r, 1e4)
