@@ -29,6 +29,23 @@ def _malloc_trim():
 
 _TRIM = _malloc_trim()
 
+_M_MMAP_THRESHOLD = -3
+"""glibc's ``mallopt`` parameter number of the mmap threshold (malloc.h)."""
+
+
+def _mallopt():
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        fn = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+    except (OSError, AttributeError):  # not glibc
+        return None
+    fn.argtypes, fn.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return fn
+
+
+_MALLOPT = _mallopt()
+
 
 def release_free_memory() -> bool:
     """Return the C heap's free pages to the OS; False where the C library cannot (not glibc)."""
@@ -36,3 +53,19 @@ def release_free_memory() -> bool:
         return False
     _TRIM(0)
     return True
+
+
+def map_large_blocks(threshold_bytes: int = 4 << 20) -> bool:
+    """Serve every allocation of ``threshold_bytes`` or more from its own mapping, returned to
+    the OS the moment it is freed; False where the C library cannot (not glibc).
+
+    glibc starts with a 128 kB threshold but raises it to the size of each large block freed
+    (up to 32 MB), after which blocks that size come from the heap and stay there when freed:
+    a process that makes and drops arrays of tens of MB (``ramdaq gap``: Jacobians, dense unit
+    responses, replicates) keeps the pages of its largest moment and grows by fragmentation
+    beyond it (the 10-minute, 20-blow trial: 642 MB max RSS with this, 733 MB without, for
+    53.6 against 51.5 s CPU under a load of 7.5). Setting the threshold
+    fixes it (no raising). The price: a fresh mapping's pages are faulted in anew each time."""
+    if _MALLOPT is None:
+        return False
+    return bool(_MALLOPT(_M_MMAP_THRESHOLD, int(threshold_bytes)))
