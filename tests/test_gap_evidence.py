@@ -223,6 +223,25 @@ def test_giving_up_is_not_convergence():
     assert res.x[0] == 0.5
 
 
+def test_the_normal_equations_in_row_blocks_are_the_whole_products():
+    """The LM step's normal equations are summed over blocks of rows of the scaled Jacobian
+    (no scaled copy of it whole): over 2.5 blocks of rows they equal ``Js' Js`` and ``Js' r``
+    of the whole scaled copy to the rounding of the sums (1e-12 of their scale: 1e5 terms each
+    ~1e-16 relative), and a Jacobian of fewer rows than a block is the one product exactly."""
+    from ramdaq.analysis.gap.calibrate import NORMAL_ROWS, _normal_equations
+
+    rng = np.random.default_rng(2)
+    J = rng.standard_normal((NORMAL_ROWS * 5 // 2, 7))
+    r = rng.standard_normal(len(J))
+    scale = np.exp(rng.normal(0, 2, 7))
+    A, g = _normal_equations(J, r, scale)
+    Js = J * scale
+    assert np.allclose(A, Js.T @ Js, rtol=0, atol=1e-12 * np.abs(Js.T @ Js).max())
+    assert np.allclose(g, Js.T @ r, rtol=0, atol=1e-12 * np.abs(Js).sum(axis=0).max())
+    A1, g1 = _normal_equations(J[:1000], r[:1000], scale)
+    assert np.array_equal(A1, Js[:1000].T @ Js[:1000]) and np.array_equal(g1, Js[:1000].T @ r[:1000])
+
+
 def test_a_pulse_long_before_its_contact_stays_finite_and_exact(trial):
     """A strongly damped mode's response to a contact that begins long after a segment's start
     (a second hit; an overdamped calibrated hull mode) is J(T) e^{lambda (t - T)} after the

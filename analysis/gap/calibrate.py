@@ -144,6 +144,7 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
         J0 = np.zeros((len(jac0) + n_b, len(x_start)))
         J0[: len(jac0), :n_b] = jac0[:, :n_b]
         J0[len(jac0):, :n_b] = np.diag(1 / sd)
+    del jac0        # copied: a caller's temporary (a reweighted Jacobian, N x p) goes now
     res = levenberg_marquardt(residual, x_start, lo_, hi_, x_scale, max_iter=max_iter, J0=J0)
     th, ts = unpack(res.x)
     fit = last.pop(res.x.tobytes(), None) or fw.fit(th, ts)
@@ -348,9 +349,7 @@ def _trial_point(J: np.ndarray, r: np.ndarray, x: np.ndarray, scale: np.ndarray,
                  lo: np.ndarray, hi: np.ndarray, max_step: float) -> np.ndarray:
     """The damped Gauss-Newton step from ``x`` (damping ``mu`` on the scaled normal equations'
     diagonal), at most ``max_step`` scales long, clipped to the bounds."""
-    Js = J * scale[None, :]
-    A = Js.T @ Js
-    g = Js.T @ r
+    A, g = _normal_equations(J, r, scale)
     d = np.sqrt(np.maximum(np.diag(A), 1e-30))
     step = -np.linalg.solve(A + mu * np.diag(d**2) + 1e-12 * np.eye(len(x)), g) * scale
     # a trust region: no step longer than ``max_step`` scales (a Gauss-Newton step across a
@@ -360,3 +359,21 @@ def _trial_point(J: np.ndarray, r: np.ndarray, x: np.ndarray, scale: np.ndarray,
     if n_step > max_step:
         step *= max_step / n_step
     return np.clip(x + step, lo, hi)
+
+
+NORMAL_ROWS = 1 << 15
+"""Rows of the Jacobian scaled at a time for the normal equations (8 MB at 32 columns)."""
+
+
+def _normal_equations(J: np.ndarray, r: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``Js' Js`` and ``Js' r`` of the column-scaled Jacobian ``Js = J * scale``, summed over
+    blocks of :data:`NORMAL_ROWS` rows: the scaled copy is never whole (it was N x p, as large as
+    the Jacobian, 25-80 MB for 20 impacts). Summed in blocks, the sums round differently from
+    one product over all rows (last bits)."""
+    p = J.shape[1]
+    A, g = np.zeros((p, p)), np.zeros(p)
+    for a in range(0, J.shape[0], NORMAL_ROWS):
+        Js = J[a:a + NORMAL_ROWS] * scale[None, :]
+        A += Js.T @ Js
+        g += Js.T @ r[a:a + NORMAL_ROWS]
+    return A, g

@@ -391,11 +391,16 @@ class Forward:
         data = self.x0 if x is None else np.where(self.td.valid, x, 0.0)
         if any(t.effect.changes_units() for t in terms):
             U, dU = self.unit_responses(ms, terms)
-            coef, pred = self._solve(U, dU, extra, data)
-            if needs_force:
+            design = self.linear_design(U, dU, extra)
+            del U, dU           # the design holds the rows it needs
+            coef, pred = design.solve(data)
+            if needs_force:     # the first design let go before the second is made
+                del design
                 U, dU = self.unit_responses(ms, terms, force=coef[: self.td.n_seg])
-                coef, pred = self._solve(U, dU, extra, data)
-            del U, dU
+                design = self.linear_design(U, dU, extra)
+                del U, dU
+                coef, pred = design.solve(data)
+            del design
         else:     # no term changes the unit responses: only the blocks a pulse writes are made
             coef, pred = self.block_design(self.unit_blocks(ms, terms), extra).solve(data)
         mask = self.mask
@@ -416,10 +421,6 @@ class Forward:
         if extra is not None:
             cols += list(extra)
         return np.stack(cols)
-
-    def _solve(self, U, dU, extra, data) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted least squares of ``data`` on the linear columns (:class:`Design`)."""
-        return self.linear_design(U, dU, extra).solve(data)
 
     def linear_design(self, U, dU, extra) -> Design:
         """The linear columns ``U``, ``dU``, ``extra`` block by block (:class:`Design`): built
@@ -486,15 +487,16 @@ class Design:
     there -- ``blocks[s] = (indices, rows (k, n_gages * n_s))`` -- and the weighted normal
     equations are summed segment by segment (made once: the replicates solve many data against
     one design). ``w2`` (n_seg, n_gages * n_s) the squared weights, zero where not compared;
-    the rows times them are kept beside the rows (``weighted``)."""
+    the rows times them are made segment by segment where they are used, never all kept (they
+    were as large as the rows: 75 MB for a friction term's dense responses over 20 impacts)."""
 
     def __init__(self, blocks: list[tuple[list[int], np.ndarray]], n_cols: int, w2: np.ndarray) -> None:
         self.blocks = blocks
         self.n_cols = n_cols
-        self.weighted = [X * w2[s] for s, (_, X) in enumerate(blocks)]
+        self.w2 = w2
         G = np.zeros((n_cols, n_cols))
-        for (idx, X), Xw in zip(blocks, self.weighted, strict=True):
-            G[np.ix_(idx, idx)] += Xw @ X.T
+        for s, (idx, X) in enumerate(blocks):
+            G[np.ix_(idx, idx)] += (X * w2[s]) @ X.T
         self.scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
         self.Gs = G / self.scale[:, None] / self.scale[None, :]
 
@@ -502,8 +504,8 @@ class Design:
         """The coefficients fitted to ``data`` (n_seg, n_gages, n_s; zeros where there is none)
         by weighted least squares, and the prediction they make (same shape)."""
         b = np.zeros(self.n_cols)
-        for s, ((idx, _), Xw) in enumerate(zip(self.blocks, self.weighted, strict=True)):
-            b[idx] += Xw @ data[s].ravel()
+        for s, (idx, X) in enumerate(self.blocks):
+            b[idx] += (X * self.w2[s]) @ data[s].ravel()
         coef = np.linalg.lstsq(self.Gs, b / self.scale, rcond=1e-10)[0] / self.scale
         pred = np.empty_like(data)
         for s, (idx, X) in enumerate(self.blocks):

@@ -27,7 +27,7 @@ import scipy.linalg
 import scipy.optimize
 
 from ..modal.identify import identify_modes
-from ..model.response import modal_form
+from ..model.response import ModalForm, modal_form
 from ..model.rig import BODIES, Rig
 from ..model.structure import build_model
 from .trialdata import TrialData
@@ -231,7 +231,12 @@ def _clusters(found: list[tuple], need: int) -> list[list[tuple[int, int]]]:
 # -- the model's side ----------------------------------------------------------------------------
 def model_modes_at_gages(rig: Rig) -> ModelModesAtGages:
     """The rig model's modes (in the rig's medium) with their gage acceleration shapes."""
-    form = modal_form(build_model(rig))
+    return modes_at_gages(modal_form(build_model(rig)))
+
+
+def modes_at_gages(form: ModalForm) -> ModelModesAtGages:
+    """A model's modal form's modes as the gages see them (:func:`model_modes_at_gages` of a
+    form already made)."""
     lam = form.eigenvalues
     return ModelModesAtGages(lam.imag / (2 * math.pi), -lam.real / np.abs(lam), form.gage_acc)
 

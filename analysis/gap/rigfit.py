@@ -40,9 +40,19 @@ import numpy as np
 import scipy.optimize
 import scipy.stats
 
+from ..model.response import ModalForm, modal_form
 from ..model.rig import Rig, RigError
+from ..model.structure import build_model
 from .calibrate import Stop
-from .modal_level import ModalComparison, TrialModes, compare, model_modes_at_gages, trial_modes
+from .modal_level import (
+    ModalComparison,
+    TrialModes,
+    compare,
+    model_modes_at_gages,
+    modes_at_gages,
+    trial_modes,
+)
+from .model_sensitivity import matrix_derivatives, mode_derivatives
 from .trialdata import TrialData
 
 FORM_F = 1e-3
@@ -342,11 +352,27 @@ def _pairs(tm: TrialModes, cmp: ModalComparison, floors: tuple[float, float, flo
                                              1e-12))
 
 
-def _differences(tm: TrialModes, rig: Rig, pr: _Pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _model_at(start: Rig, params: list[FitParam], theta: np.ndarray,
+              memo: dict | None = None) -> tuple[Rig, ModalForm]:
+    """The rig at ``theta`` and its model's modal form; ``memo`` keeps the last one made (the
+    solver asks for the Jacobian where it has just asked for the residual)."""
+    key = theta.tobytes()
+    if memo is not None and memo.get("key") == key:
+        return memo["rig"], memo["form"]
+    rig = apply(start, params, theta)
+    form = modal_form(build_model(rig))
+    if memo is not None:
+        memo.update(key=key, rig=rig, form=form)
+    return rig, form
+
+
+def _differences(tm: TrialModes, rig: Rig, pr: _Pairs,
+                 form: ModalForm | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whitened differences of the paired modes: frequency (n_pairs,), damping ratio
     (n_pairs,; 0 where not fitted) and shape (n_gages, n_pairs) complex, the model's shape
-    scaled by the complex factor that matches it best to the identified one."""
-    mm = model_modes_at_gages(rig)
+    scaled by the complex factor that matches it best to the identified one. ``form``:
+    ``rig``'s modal form, when already made."""
+    mm = model_modes_at_gages(rig) if form is None else modes_at_gages(form)
     if len(mm.f_hz) <= pr.i_model.max(initial=-1) or np.any(mm.f_hz[pr.i_model] <= 0):
         raise ValueError("the model lost a paired mode")
     f = np.log(mm.f_hz[pr.i_model] / tm.f_hz[pr.i_id]) / pr.s_f
@@ -357,14 +383,51 @@ def _differences(tm: TrialModes, rig: Rig, pr: _Pairs) -> tuple[np.ndarray, np.n
 
 
 def _data_residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
-                   theta: np.ndarray) -> np.ndarray:
-    f, z, d = _differences(tm, apply(start, params, theta), pr)
+                   theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
+    rig, form = _model_at(start, params, theta, memo)
+    f, z, d = _differences(tm, rig, pr, form)
     return np.concatenate([f, z, d.real.ravel(), d.imag.ravel()])
 
 
 def _residual(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
-              theta: np.ndarray) -> np.ndarray:
-    return np.concatenate([_data_residual(tm, start, params, pr, theta), theta * _pull(params)])
+              theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
+    return np.concatenate([_data_residual(tm, start, params, pr, theta, memo), theta * _pull(params)])
+
+
+def _data_jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+                   theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
+    """The Jacobian of :func:`_data_residual` at ``theta`` (rows as the residual's, one column
+    per constant), from the model's modal sensitivities (:mod:`.model_sensitivity`): one
+    eigen-analysis instead of two per constant. The shape rows differentiate the best complex
+    scale ``a`` too; a change of a model shape's scale moves nothing."""
+    rig, form = _model_at(start, params, theta, memo)
+    lam = form.eigenvalues[pr.i_model]
+    dlam, dacc = mode_derivatives(form, *matrix_derivatives(rig, [p.name for p in params]))
+    dlam = dlam[:, pr.i_model]                                      # (p, k)
+    df = dlam.imag / lam.imag / pr.s_f
+    dz = dlam.real / lam.real - (lam.conj() * dlam).real / np.abs(lam) ** 2
+    dz = np.where(np.isfinite(pr.s_zeta), dz / np.where(np.isfinite(pr.s_zeta), pr.s_zeta, 1.0), 0.0)
+    phi_m, phi = form.gage_acc[:, pr.i_model], tm.shapes[:, pr.i_id]
+    dphi = dacc[:, :, pr.i_model]                                   # (p, n_g, k)
+    norm = np.sum(np.abs(phi_m) ** 2, axis=0)
+    c = np.sum(np.conj(phi_m) * phi, axis=0)
+    da = (np.sum(np.conj(dphi) * phi, axis=1) / norm
+          - c * 2 * np.sum(np.conj(phi_m) * dphi, axis=1).real / norm ** 2)
+    dd = (da[:, None, :] * phi_m + (c / norm) * dphi) / pr.s_shape
+    p = len(params)
+    return np.concatenate([df, dz, dd.real.reshape(p, -1), dd.imag.reshape(p, -1)], axis=1).T
+
+
+def _jacobian(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
+              theta: np.ndarray, memo: dict | None = None) -> np.ndarray:
+    """The Jacobian of :func:`_residual` (data rows, then the prior's diagonal). Where the
+    model cannot be built or differentiated (the residual is :func:`_safe`'s constant there)
+    its data rows are zero: no information, as differences of that constant gave."""
+    try:
+        jd = _data_jacobian(tm, start, params, pr, theta, memo)
+    except (ValueError, np.linalg.LinAlgError):
+        jd = np.zeros((2 * len(pr.i_id) + 2 * pr.s_shape.size, len(params)))
+    return np.vstack([np.nan_to_num(jd), np.diag(_pull(params))])
 
 
 def _pull(params: list[FitParam]) -> np.ndarray:
@@ -375,23 +438,16 @@ def _pull(params: list[FitParam]) -> np.ndarray:
 def _posterior(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs,
                theta: np.ndarray) -> tuple[np.ndarray, float]:
     """The posterior sd of each constant's log multiplier at ``theta`` (linearised: the data
-    Jacobian by central differences, each residual whitened by its standard error, the
-    Gauss-Newton precision J'J / s2 plus the prior's), and s = sqrt(s2), the misfit scale:
-    chi2 per degree of freedom of the data left, when above 1 (the standard errors were too
-    small for what the data and model differ by; their covariance is widened by it)."""
-    h = 1e-4
+    Jacobian from the modal sensitivities (:func:`_data_jacobian`), each residual whitened by its
+    standard error, the Gauss-Newton precision J'J / s2 plus the prior's), and s = sqrt(s2), the
+    misfit scale: chi2 per degree of freedom of the data left, when above 1 (the standard errors
+    were too small for what the data and model differ by; their covariance is widened by it)."""
     n = len(params)
     r0 = _data_residual(tm, start, params, pr, theta)
-    jac = np.empty((len(r0), n))
-    for k in range(n):
-        e = np.zeros(n)
-        e[k] = h
-        try:
-            jac[:, k] = (_data_residual(tm, start, params, pr, theta + e)
-                         - _data_residual(tm, start, params, pr, theta - e)) / (2 * h)
-        except (ValueError, np.linalg.LinAlgError):
-            jac[:, k] = 0.0         # the model cannot be built around it: no information
-    jac = np.nan_to_num(jac)
+    try:
+        jac = np.nan_to_num(_data_jacobian(tm, start, params, pr, theta))
+    except (ValueError, np.linalg.LinAlgError):
+        jac = np.zeros((len(r0), n))    # the model cannot be differentiated there: no information
     s2 = max(1.0, float(r0 @ r0) / max(len(r0) - n, 1))
     cov = np.linalg.pinv(jac.T @ jac / s2 + np.diag(_pull(params) ** 2))
     return np.sqrt(np.clip(np.diag(cov), 0.0, None)), math.sqrt(s2)
@@ -432,14 +488,16 @@ def calibrate_to_modes(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float
         cmp = new
         if same:
             break
-    keep = _pinned(params, _posterior(tm, start, params, _pairs(tm, cmp), theta)[0])
+    post = _posterior(tm, start, params, _pairs(tm, cmp), theta)
+    keep = _pinned(params, post[0])
     if not keep.all():
+        post = None                 # the others refitted: the posterior is the new fit's
         sub = [p for p, k in zip(params, keep, strict=True) if k]
         theta = np.zeros(len(params))
         if sub:
             theta[keep], how = _solve(tm, start, sub, _pairs(tm, cmp), np.zeros(len(sub)), max_nfev)
             nfev += how[2]
-    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev), keep)
+    out = _result(tm, start, params, theta, top, before, (how[0], how[1], nfev), keep, posterior=post)
     if out.form or out.stop is not Stop.CONVERGED or not keep.any():
         return out
     fine = _pairs(tm, cmp, NO_FLOORS)
@@ -461,8 +519,10 @@ def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta
     """One bounded least-squares run from ``theta``: the end point and (stop, message, nfev)."""
     lo = np.log([p.lo for p in params])
     hi = np.log([p.hi for p in params])
-    res = scipy.optimize.least_squares(lambda th: _safe(tm, start, params, pr, th),
+    memo: dict = {}         # the model at the last point: its Jacobian is asked for there next
+    res = scipy.optimize.least_squares(lambda th: _safe(tm, start, params, pr, th, memo),
                                        np.clip(theta, lo, hi), bounds=(lo, hi), method="trf",
+                                       jac=lambda th: _jacobian(tm, start, params, pr, th, memo),
                                        x_scale=0.1, max_nfev=max_nfev)
     stop = Stop.CONVERGED if res.status > 0 else Stop.ITERATION_LIMIT
     return res.x, (stop, str(res.message), int(res.nfev))
@@ -470,15 +530,19 @@ def _solve(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta
 
 def _result(tm: TrialModes, start: Rig, params: list[FitParam], theta: np.ndarray, top: float,
             before: ModalComparison, how: tuple[Stop, str, int], pinned: np.ndarray | None = None,
-            weights: _Pairs | None = None) -> ModeFit:
+            weights: _Pairs | None = None,
+            posterior: tuple[np.ndarray, float] | None = None) -> ModeFit:
     """The fit at ``theta`` (held constants at 0), each constant's posterior sd with the
-    ``weights`` it was fitted with (default: the floors) and whether it was ``pinned``."""
+    ``weights`` it was fitted with (default: the floors) and whether it was ``pinned``.
+    ``posterior``: :func:`_posterior` at this ``theta`` with the floors and this fit's pairs,
+    when already computed (the pinning test's, when nothing was held)."""
     rig = apply(start, params, theta)
     after = compare(tm, rig, top_hz=top)
     pinned = np.ones(len(params), bool) if pinned is None else pinned
     sd, scale = np.full(len(params), np.nan), 1.0
     if params and after.pairs:
-        sd, scale = _posterior(tm, start, params, weights or _pairs(tm, after), theta)
+        sd, scale = (posterior if posterior is not None and weights is None
+                     else _posterior(tm, start, params, weights or _pairs(tm, after), theta))
     fitted = tuple(FittedParam(p.name, p.start, get_value(rig, p.name), p.lo, p.hi, float(d), bool(k))
                    for p, d, k in zip(params, sd, pinned, strict=True))
     return ModeFit(start=start, rig=rig, params=fitted, stop=how[0], message=how[1], nfev=how[2],
@@ -487,12 +551,13 @@ def _result(tm: TrialModes, start: Rig, params: list[FitParam], theta: np.ndarra
                    misfit_scale=scale)
 
 
-def _safe(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray) -> np.ndarray:
+def _safe(tm: TrialModes, start: Rig, params: list[FitParam], pr: _Pairs, theta: np.ndarray,
+          memo: dict | None = None) -> np.ndarray:
     """:func:`_residual`, or a large constant where the model cannot be built (an inertia
     matrix no longer positive definite, an overdamped mode): the solver backs off."""
     n = 2 * len(pr.i_id) + 2 * pr.s_shape.size + len(theta)
     try:
-        r = _residual(tm, start, params, pr, theta)
+        r = _residual(tm, start, params, pr, theta, memo)
     except (ValueError, np.linalg.LinAlgError):
         return np.full(n, 1e4)
     return np.where(np.isfinite(r), r, 1e4)

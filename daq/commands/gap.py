@@ -22,6 +22,7 @@ from ...analysis.gap.trialdata import TrialData
 from ..analyzer import finite_json
 from ..gap_layers import diagnose_trial
 from ..gap_trial import LoadedTrial, load_trial
+from ..heap import map_large_blocks
 
 
 def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settings | None = None,
@@ -29,6 +30,7 @@ def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settin
             model_level: bool = True, **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
     """Read a recording (:func:`~ramdaq.daq.gap_trial.load_trial`) and diagnose it
     (:func:`~ramdaq.daq.gap_layers.diagnose_trial`, every layer unless turned off)."""
+    map_large_blocks()      # arrays of MBs freed go back to the OS at once (daq/heap.py)
     return diagnose_trial(load_trial(path, rig, progress), settings=settings, progress=progress,
                           data_checks=data_checks, model_level=model_level, **prep)
 

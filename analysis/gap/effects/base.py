@@ -102,6 +102,9 @@ class Effect:
 
     def units(self, U: np.ndarray, dU: np.ndarray, ms: ModeSet, fw: Forward,
               force: np.ndarray | None, term: Term) -> tuple[np.ndarray, np.ndarray]:
+        """The unit responses and their derivatives (n_seg, n_seg, n_gages, n_s) with this
+        term's change of them. ``U`` and ``dU`` are the caller's own, made for this call
+        (:meth:`Forward.unit_responses`): they may be changed in place and returned."""
         return U, dU
 
     def output(self, pred: np.ndarray, fw: Forward, term: Term) -> tuple[np.ndarray, np.ndarray | None]:

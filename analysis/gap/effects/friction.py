@@ -31,7 +31,8 @@ class Friction(Effect):
         td = fw.td
         F = np.ones(td.n_seg) if force is None else np.abs(np.asarray(force, float))
         a0 = F / max(F.mean(), 1e-12)
-        U = U.copy()
+        # U is the caller's own (Forward.unit_responses makes it for this): changed in place,
+        # not copied -- a copy is (n_seg, n_seg, n_g, n_s), 77 MB for 20 impacts
         for j in range(td.n_seg):
             u = fw.mode_unit(ms, i, j)                                 # (n_seg, n_g, n_s)
             t = td.seg_t0_s[:, None] + np.arange(td.n_s)[None, :] / td.fs_hz - td.onsets_s[j]
