@@ -288,6 +288,9 @@ def test_a_double_hit_answers_unexplained_unless_the_trial_is_not_homogeneous():
            "mode_hz": [13.0], "statistic": 46.0, "chance_level": 4.0,
            "more": {"decrement_per_doubling": {"value": -0.5}}}
     assert decision(_rec(data_findings=[dh, hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    # a homogeneity slope barely past its chance level does not set a strong double hit aside
+    marginal = hom | {"statistic": 4.3}
+    assert decision(_rec(data_findings=[dh, marginal]), 8.0, 10.0, 0.0)["named"] == "double_hit"
     # with no gap the model names, the homogeneity finding answers, not the double hit
     assert decision(_rec(zdetect=2.0, data_findings=[dh, hom]), 8.0, 10.0, 0.0)["named"] == "unexplained"
     fr = hom | {"more": {"coulomb_law_z": {"value": 60.0}}}

@@ -123,8 +123,11 @@ def strength(f: dict) -> float:
 
 def not_homogeneous(findings: list[dict]) -> bool:
     """Whether the data-only layer found the trial not homogeneous across blows (a finding of
-    the nonlinearity layer, as JSON): its other checks read linear models the trial bends."""
-    return any(f.get("layer") == Layer.NONLINEARITY for f in findings)
+    the nonlinearity layer, as JSON, at least :data:`PRECEDENCE_STRENGTH` times its chance
+    level): its other checks read linear models the trial bends. A slope barely past its chance
+    level does not set the other checks aside (a modal development double hit at 600x chance
+    came with an amplitude slope at 1.07x)."""
+    return any(f.get("layer") == Layer.NONLINEARITY and strength(f) >= PRECEDENCE_STRENGTH for f in findings)
 
 
 def credible(findings: list[dict]) -> list[dict]:
@@ -200,15 +203,15 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     "unexplained" and a finding overrides it (:func:`overriding_unexplained`). Of several, the
     strongest against its chance level answers."""
     out = model_answer(model, candidates, where, form_gages)
-    finds = [f for f in credible(findings) if data_effect(f)]
     named = out.named
-    if not finds or named in {data_effect(f) for f in finds}:
-        return out
     if named == "unexplained":
         finds = [f for f in overriding_unexplained(findings) if data_effect(f)]
-        if not finds:
+    else:
+        finds = [f for f in credible(findings) if data_effect(f)]
+        if named in {data_effect(f) for f in finds} or (
+                named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}):
             return out
-    elif named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
+    if not finds:
         return out
     f = max(finds, key=strength)
     eff = data_effect(f)
