@@ -331,3 +331,23 @@ def test_a_second_blow_is_measured_with_the_contact_held():
     m = second_blow(x, fs, 1.0, poles, sig)
     assert m.delay_s == pytest.approx(d, abs=0.5 / fs)
     assert m.rho == pytest.approx(0.3, rel=0.05)
+
+
+def test_a_modal_friction_trial_reads_coulombs_law(tmp_path):
+    """Issue 17: the modal family's friction came out "unexplained" -- the homogeneity check saw
+    it but could not tell it from a crack or a rattle. This development trial (Coulomb friction
+    on its 12.9 Hz mode, size 0.5), recorded and read back as ``ramdaq gap`` reads it, now reads
+    Coulomb's law within its decays (a decrement per cycle growing as 1/amplitude, the frequency
+    within STIFF_MIN) beyond its chance level, on the gages where the mode shows, and the finding
+    names the library's friction."""
+    from ramdaq.analysis.gap.homogeneity import STIFF_MIN, homogeneity
+    from ramdaq.analysis.gap.layers import data_effect
+
+    lt, truth = _modal_trial("friction", 0, tmp_path)
+    nums = [g.number for g in lt.rig.gages_by_channel()]
+    fm = free_modal_model(lt.x, lt.fs_hz, lt.onsets_s, pre_s=1.0)
+    (f,) = homogeneity(lt.x, fm, nums)
+    more = {n: v for n, v, _ in f.more}
+    assert f.statistic > f.chance_level and "coulomb_law_z" in more, f.text
+    assert abs(more["frequency_change"]) < STIFF_MIN and abs(f.mode_hz[0] - truth["mode_hz"]) < 0.5
+    assert set(truth["gages"]) <= set(f.gages) and data_effect(f.to_json()) == "friction"
