@@ -309,3 +309,45 @@ def test_a_modal_double_hit_is_found_with_its_delay(tmp_path):
     more = {n: v for n, v, _ in f.more}
     assert more["delay_s"] == pytest.approx(truth["params"]["delay_s"], abs=2 / lt.fs_hz)
     assert f.size == pytest.approx(truth["params"]["ratio"], rel=0.2) and more["blows"] == 6
+
+
+def test_a_second_blow_is_measured_with_the_contact_held():
+    """The contact-held measurement (issue 17: read from where the modes' amplitudes step after
+    16 ms, a 26 ms, 15 % second blow came out 20.9 ms, 88 %): three modes rung by a 5 ms half-sine
+    and the same 30 % as large 18.1 ms later (on the sample grid), at four gages, white noise at
+    1e-3 of the peak. The delay to the sample and the size to 5 % (noise alone moves them far
+    less). The contact length is a nuisance the fast poles trade with, not asserted."""
+    from ramdaq.analysis.gap.contact import contact_response, second_blow
+
+    fs = 2048.0
+    poles = np.array([-0.02 * 2 * math.pi * f + 2j * math.pi * f for f in (13.0, 45.0, 80.0)])
+    t = np.arange(int(3.0 * fs)) / fs
+    d = 37 / fs                        # 18.1 ms, on the sample grid the delays are tried on
+    h = contact_response(t - 1.0, poles, 0.005) + 0.3 * contact_response(t - 1.0 - d, poles, 0.005)
+    shapes = np.random.default_rng(3).standard_normal((4, 3)) + 0.2j
+    x = np.real(shapes @ h.T)
+    x += 1e-3 * np.abs(x).max() * np.random.default_rng(4).standard_normal(x.shape)
+    sig = np.full(4, 1e-3 * np.abs(x).max())
+    m = second_blow(x, fs, 1.0, poles, sig)
+    assert m.delay_s == pytest.approx(d, abs=0.5 / fs)
+    assert m.rho == pytest.approx(0.3, rel=0.05)
+
+
+def test_a_modal_friction_trial_reads_coulombs_law(tmp_path):
+    """Issue 17: the modal family's friction came out "unexplained" -- the homogeneity check saw
+    it but could not tell it from a crack or a rattle. This development trial (Coulomb friction
+    on its 12.9 Hz mode, size 0.5), recorded and read back as ``ramdaq gap`` reads it, now reads
+    Coulomb's law within its decays (a decrement per cycle growing as 1/amplitude, the frequency
+    within STIFF_MIN) beyond its chance level, on the gages where the mode shows, and the finding
+    names the library's friction."""
+    from ramdaq.analysis.gap.homogeneity import STIFF_MIN, homogeneity
+    from ramdaq.analysis.gap.layers import data_effect
+
+    lt, truth = _modal_trial("friction", 0, tmp_path)
+    nums = [g.number for g in lt.rig.gages_by_channel()]
+    fm = free_modal_model(lt.x, lt.fs_hz, lt.onsets_s, pre_s=1.0)
+    (f,) = homogeneity(lt.x, fm, nums)
+    more = {n: v for n, v, _ in f.more}
+    assert f.statistic > f.chance_level and "coulomb_law_z" in more, f.text
+    assert abs(more["frequency_change"]) < STIFF_MIN and abs(f.mode_hz[0] - truth["mode_hz"]) < 0.5
+    assert set(truth["gages"]) <= set(f.gages) and data_effect(f.to_json()) == "friction"

@@ -5,6 +5,7 @@ blows of different force; the "unexplained" verdict for a gap no library effect 
 from __future__ import annotations
 
 import ast
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -89,17 +90,21 @@ def test_bad_input_is_refused():
         mf.gages_from_toml("name = 'x'\n")
 
 
-def _blows(coulomb: float, seed: int = 0):
+Q0 = 2 * 0.004 / math.pi / (2 * math.pi * 20.0)
+"""The unit blow's displacement amplitude of :func:`_blows`' mode: impulse / w."""
+
+
+def _blows(law: dict, seed: int = 0):
     """Three gages of one 20 Hz mode (zeta 1 %) rung by six blows of 0.5-2x, through the modal
-    family's own integrator, with Coulomb friction ``coulomb`` (m/s^2 per unit modal mass);
-    white noise at 1e-4 of the largest peak."""
+    family's own integrator with ``law`` (:func:`~ramdaq.analysis.truth.modal_family.nonlinear_mode`'s
+    keywords; linear when empty); white noise at 1e-4 of the largest peak."""
     fs, dt = 1024.0, 1 / 1024.0
     onsets = 1.0 + 3.0 * np.arange(6)
     peaks = np.array([1.0, 0.5, 2.0, 0.7, 1.4, 1.0])
     t = np.arange(int(19.0 * fs)) * dt
     force = mf.half_sine(onsets, peaks, 0.004, t)
-    if coulomb:
-        q, _ = mf.nonlinear_mode(20.0, 0.01, force, dt, coulomb=coulomb)
+    if law:
+        q, _ = mf.nonlinear_mode(20.0, 0.01, force, dt, **law)
     else:
         import scipy.signal
         q = scipy.signal.lfilter(*mf.mode_filter(20.0, 0.01, dt), force)
@@ -108,24 +113,42 @@ def _blows(coulomb: float, seed: int = 0):
     return x, fs, onsets
 
 
-@pytest.mark.parametrize("coulomb", [0.0, 2e-4])
-def test_homogeneity_flags_friction_and_not_a_linear_structure(coulomb):
-    """The same mode rung by blows of 0.5-2x: linear, its decrement and frequency do not move
-    with the blow (no finding, at P_CHANCE = 1e-3 after Bonferroni over the slopes); with
-    Coulomb friction (the median blow's ringing stops in about 1.5 s) the decrement falls as the
-    blow grows, beyond the chance level."""
-    from ramdaq.analysis.gap.datamodel import free_modal_model
-    from ramdaq.analysis.gap.homogeneity import homogeneity
+LAWS = {"linear": {}, "friction": {"coulomb": 2e-4},
+        "crack": {"crack_at": 0.5 * Q0, "crack_drop": 0.15},
+        "rattle": {"stop_at": 0.5 * Q0, "stop_k": 1.0}}
+"""The modal family's nonlinear laws at about its size 0.5: Coulomb friction stopping the median
+blow's ringing in about 1.5 s, a crack opening at half the unit blow's amplitude with a 15 %
+stiffness drop, a stop at half that amplitude as stiff as the mode."""
 
-    x, fs, onsets = _blows(coulomb)
+
+@pytest.mark.parametrize("law", list(LAWS))
+def test_homogeneity_tells_friction_from_a_crack_or_rattle(law):
+    """The same mode rung by blows of 0.5-2x. Linear: its decrement and frequency do not move
+    with the amplitude (no finding, at P_CHANCE = 1e-3 after Bonferroni over the slopes). With
+    Coulomb friction the decrement per cycle grows as 1/amplitude within the decays and the
+    frequency stays (Coulomb's law, the library's friction); a crack (softening) or a stop
+    (stiffening) moves the frequency with the amplitude by some per cent instead (no library
+    effect). Each beyond its chance level; about 1 s each."""
+    from ramdaq.analysis.gap.datamodel import free_modal_model
+    from ramdaq.analysis.gap.homogeneity import STIFF_MIN, homogeneity
+    from ramdaq.analysis.gap.layers import data_effect
+
+    x, fs, onsets = _blows(LAWS[law])
     fm = free_modal_model(x, fs, onsets)
     found = homogeneity(x, fm, (1, 2, 3))
-    if not coulomb:
+    if law == "linear":
         assert found == [], [f.text for f in found]
         return
     (f,) = found
     assert f.check == "homogeneity" and f.layer == "nonlinearity" and f.statistic > f.chance_level
-    # friction's linear decay: a decrement falling with the blow, or an extra slow pole of the
-    # same size after every blow (its amplitude does not grow as the blow)
-    assert f.size < 0 and "frequency_per_doubling" not in {m[0] for m in f.more}, f.text
-    assert abs(f.mode_hz[0] - 20.0) < 0.5 and 1 in f.gages
+    more = {m[0]: m[1] for m in f.more}
+    # the law's mode is the 20 Hz one, within the crack's or the stop's shift of it
+    assert abs(f.mode_hz[0] - 20.0) < 1.0 and 1 in f.gages
+    if law == "friction":
+        assert "coulomb_law_z" in more and abs(more["frequency_change"]) < STIFF_MIN, f.text
+        assert data_effect(f.to_json()) == "friction"
+    else:
+        # softening for the crack, stiffening for the stop
+        assert "stiffness_law_z" in more and (more["frequency_change"] < 0) == (law == "crack"), f.text
+        assert abs(more["frequency_change"]) >= STIFF_MIN
+        assert data_effect(f.to_json()) == "unexplained"

@@ -7,6 +7,16 @@ amplitude-dependent stiffness (a crack, a rattle: frequency moving with the blow
 other mode's amplitude must grow as the blow (log-log slope 1): friction's linear decay, which the
 free model fits with an extra slow pole of the same size after every blow, fails that.
 
+Which nonlinearity (:func:`decay_laws`): within each free decay, cycle by cycle, a mode's envelope
+and frequency (the band around it, its analytic signal) give the classical backbone and damping
+curves of nonlinear identification from free decays. Coulomb friction dissipates a fixed
+amplitude per cycle (``4 mu / w^2``): the decrement per cycle grows as ``1 / amplitude`` and the
+envelope falls linearly rather than exponentially, while the frequency stays the linear one (a
+Coulomb oscillator's half cycles are exactly ``pi / w``). A crack (bilinear stiffness, softening
+once it opens) or a rattle (a stop, stiffening at the clearance) moves the frequency with the
+amplitude instead, and conserves energy. Friction is in the library; an amplitude-dependent
+stiffness is not (the answer is "unexplained", with where and how big).
+
 Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate; :class:`~ramdaq.analysis.gap.datamodel.FreeModal`
 as made by :func:`~ramdaq.analysis.gap.datamodel.free_modal_model` on the same ``x``.
 """
@@ -15,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
@@ -38,6 +49,121 @@ error (the ram's contact time and place vary a little from blow to blow)."""
 MIN_SNR = 30.0
 """A mode is tested when even the weakest blow measures it this many standard errors at its best
 gage (its decrement then to a few per cent): a mode the small blows barely ring is not judged."""
+
+
+LAW_BAND = 0.12
+"""Half-width of the band a mode's cycles are read in, as a fraction of its frequency (and at
+least :data:`LAW_BAND_MIN_HZ`): wide enough for a crack's or a stop's frequency shift of some
+per cent, narrow enough to leave the neighbouring rudder modes out."""
+LAW_BAND_MIN_HZ = 1.0
+LAW_MIN_RATIO = 10.0
+"""A decay's cycles are read while the envelope stays this many times the gage's residual rms
+(the free model's, broadband): below, noise moves the decrement per cycle by more than 10 %."""
+LAW_EDGE_S = 0.25
+"""Most of the band filter's settling left before the decay window (the window starts
+:data:`~ramdaq.analysis.gap.datamodel.DECAY_START_S` after the blow, so this is after the onset)."""
+STIFF_MIN = 0.01
+"""Least frequency change over the measured amplitude range that names an amplitude-dependent
+stiffness, relative: the band's filter and its analytic signal bias a decaying mode's frequency by
+up to 0.2-0.4 % with friction or none (a Coulomb oscillator's frequency is its linear one); a
+crack opening at half the median blow's amplitude with a 15 % stiffness drop moves it by about 5 %
+(the modal family's size 0.5), a stop by 5-15 %."""
+
+
+@dataclass(frozen=True)
+class DecayLaw:
+    """One mode's backbone and damping curve over every blow's free decay, cycle by cycle at gage
+    ``gage`` (its number): the frequency's slope on the envelope (``z_stiffness`` its z, and
+    ``df_rel`` the relative change from the largest to the smallest amplitude measured) and the
+    decrement per cycle's slope on ``1 / envelope`` (Coulomb's law: ``z_coulomb`` its z,
+    positive when the decrement grows as the amplitude falls; ``coulomb`` the slope, m/s^2 of
+    envelope lost per cycle to friction, about ``4 mu / w^2`` in acceleration)."""
+
+    mode_hz: float
+    gage: int
+    n_cycles: int
+    z_stiffness: float
+    df_rel: float
+    z_coulomb: float
+    coulomb: float
+
+
+def _cycles(v: np.ndarray, fs_hz: float, f_hz: float, a: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per cycle of the mode at ``f_hz``, over ``v[a:a+n]`` (one gage, m/s^2): the envelope's mean
+    (m/s^2) and the frequency (Hz), from the analytic signal of the band around it (zero-phase)."""
+    half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
+    if f_hz + half >= 0.5 * fs_hz or f_hz - half <= 0:
+        return np.empty(0), np.empty(0)
+    sos = scipy.signal.butter(2, [f_hz - half, f_hz + half], "bandpass", fs=fs_hz, output="sos")
+    settle = int(3 * fs_hz / (math.pi * half))                       # three of the band's time constants
+    pre = min(settle, int(LAW_EDGE_S * fs_hz), a)
+    seg = v[a - pre: a + n + settle]
+    if seg.size < pre + n or not np.all(np.isfinite(seg)):
+        return np.empty(0), np.empty(0)
+    z = scipy.signal.hilbert(scipy.signal.sosfiltfilt(sos, seg))
+    idx = np.arange(pre + max(0, settle - pre), pre + n, fs_hz / f_hz).astype(int)
+    if idx.size < 5:
+        return np.empty(0), np.empty(0)
+    env = np.abs(z)
+    amp = np.array([env[p:q].mean() for p, q in zip(idx[:-1], idx[1:], strict=True)])
+    freq = np.diff(np.unwrap(np.angle(z))[idx]) * fs_hz / (2 * math.pi * np.diff(idx))
+    return amp, freq
+
+
+def _peak_hz(v: np.ndarray, fm: FreeModal, starts: np.ndarray, f_hz: float) -> float:
+    """The frequency (Hz) of the largest peak within the law's band around ``f_hz`` of the summed
+    periodograms of one gage's decay windows: a nonlinear mode the free linear model fits with a
+    cluster of poles is read at its own frequency, not at one of the cluster's."""
+    half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
+    nfft = 4 * fm.n_s
+    f = np.fft.rfftfreq(nfft, 1 / fm.fs_hz)
+    band = (f >= f_hz - half) & (f <= f_hz + half)
+    segs = np.stack([v[a:a + fm.n_s] for a in starts]) * np.hanning(fm.n_s)
+    p = np.sum(np.abs(np.fft.rfft(np.nan_to_num(segs), n=nfft, axis=-1)) ** 2, axis=0)
+    return float(f[band][np.argmax(p[band])]) if band.any() else f_hz
+
+
+def _ols_slope(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares slope of ``y`` on ``u`` (with an intercept) and its z (residual scatter)."""
+    X = np.column_stack([np.ones_like(u), u])
+    c, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ c
+    s2 = float(r @ r) / max(1, y.size - 2)
+    v = s2 * np.linalg.inv(X.T @ X)[1, 1]
+    return float(c[1]), float(c[1] / math.sqrt(v)) if v > 0 else 0.0
+
+
+def decay_laws(x: np.ndarray, fm: FreeModal, ks: Sequence[int], rows: Sequence[int],
+               numbers: Sequence[int]) -> list[DecayLaw]:
+    """The backbone and damping curve (:class:`DecayLaw`) of each mode ``ks`` at its gage row
+    ``rows[i]``, over every impact's decay window: cycles while the envelope stays
+    :data:`LAW_MIN_RATIO` times the gage's residual rms. A mode with fewer than 8 such cycles
+    over all blows has none."""
+    starts = np.rint(fm.t0_s * fm.fs_hz).astype(int)
+    out, seen = [], []
+    for k, g in zip(ks, rows, strict=True):
+        f_k = _peak_hz(x[g], fm, starts, float(fm.f_hz[k]))
+        if any(abs(f_k - f) < 0.5 * LAW_BAND * f for f in seen):
+            continue            # one mode the free linear model split into a cluster of poles
+        seen.append(f_k)
+        floor = LAW_MIN_RATIO * float(np.median(fm.noise[:, g]))
+        amps, freqs, decs = [], [], []
+        for a in starts:
+            amp, freq = _cycles(x[g], fm.fs_hz, f_k, int(a), fm.n_s)
+            n_ok = int(np.argmin(amp > floor)) if not np.all(amp > floor) else amp.size
+            if n_ok >= 3:
+                amps.append(amp[:n_ok - 1])
+                freqs.append(freq[:n_ok - 1])
+                decs.append(np.log(amp[:n_ok - 1] / amp[1:n_ok]))
+        if sum(a.size for a in amps) < 8:
+            continue
+        amp, freq, dec = np.concatenate(amps), np.concatenate(freqs), np.concatenate(decs)
+        rel = amp / amp.max()
+        bf, zf = _ols_slope(rel, freq)
+        bc, zc = _ols_slope(1 / rel, dec)
+        out.append(DecayLaw(f_k, int(numbers[g]), int(amp.size), zf,
+                            bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc * float(amp.max())))
+    return out
 
 
 def refit_poles(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray,
@@ -94,16 +220,81 @@ def own_amplitudes(fm: FreeModal) -> np.ndarray:
 def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
                 skip_rows: Sequence[int] = ()) -> list[Finding]:
     """The homogeneity check: per excited mode, the slope of frequency and of decrement against
-    the blow's level (per doubling of the blow), as z = slope / its standard error; a finding
-    for the largest |z| beyond its chance level (two-sided normal, Bonferroni over the 2 K
-    slopes at ``P_CHANCE``). Empty when the blows' levels spread too little or fewer than three
-    impacts."""
+    the blow's level (per doubling of the blow), and every other mode's amplitude against it
+    (:func:`_level_slopes`), and each mode's backbone and damping curve within the decays
+    (:func:`decay_laws`), each as z = slope / its standard error; a finding when the largest
+    |z| passes its chance level (two-sided normal, Bonferroni over every slope at
+    ``P_CHANCE``), naming the law it follows (:func:`_law_finding`). Empty with fewer than
+    three impacts."""
     snr = np.median(fm.snr(), axis=0)                                   # (n_g, K)
     snr[list(skip_rows)] = 0
     weakest = np.min(np.max(np.delete(fm.snr(), list(skip_rows), axis=1), axis=1), axis=0)
     ks = np.flatnonzero(~fm.steady & (weakest >= MIN_SNR))
-    if fm.amp.shape[0] < 3 or ks.size == 0:
+    # the decay laws read a mode wherever some blows ring it: friction stops the small blows'
+    # ringing of its mode first (the weakest blow may not measure it at all)
+    kl = np.flatnonzero(~fm.steady & (snr.max(axis=0) >= MIN_SNR))
+    if fm.amp.shape[0] < 3 or kl.size == 0:
         return []
+    slopes = _level_slopes(x, fm, ks, snr) if ks.size else []
+    laws = decay_laws(x, fm, kl, [int(np.argmax(snr[:, k])) for k in kl], numbers)
+    n_tests = len(slopes) + 2 * len(laws)
+    if n_tests == 0:
+        return []
+    chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * n_tests)))
+    null = ("slope z of a linear structure's poles, amplitudes and per-cycle frequency and decrement "
+            f"on the amplitude: standard normal, Bonferroni over {n_tests} slopes")
+    law = _law_finding(fm, laws, snr, numbers, chance, null)
+    if law is not None:
+        return [law]
+    if not slopes or max(slopes)[0] <= chance:
+        return []
+    return [_slope_finding(fm, max(slopes), snr, numbers, chance, null)]
+
+
+def _showing(fm: FreeModal, snr: np.ndarray, f_hz: float, numbers: Sequence[int]) -> tuple[int, ...]:
+    """The gages where the mode nearest ``f_hz`` shows at half its best SNR or more."""
+    g_snr = snr[:, int(np.argmin(np.abs(fm.f_hz - f_hz)))]
+    return tuple(numbers[g] for g in np.flatnonzero(g_snr >= 0.5 * g_snr.max()))
+
+
+def _law_finding(fm: FreeModal, laws: list[DecayLaw], snr: np.ndarray, numbers: Sequence[int],
+                 chance: float, null: str) -> Finding | None:
+    """The finding a decay law beyond ``chance`` makes: an amplitude-dependent stiffness when some
+    mode's frequency moves with its amplitude by :data:`STIFF_MIN` or more (a crack, a stop: no
+    library effect), else Coulomb friction when some mode's decrement per cycle grows as
+    ``1 / amplitude``; None when neither."""
+    stiff = [w for w in laws if abs(w.z_stiffness) > chance and abs(w.df_rel) >= STIFF_MIN]
+    if stiff:
+        w = max(stiff, key=lambda w: abs(w.z_stiffness))
+        sense = "falls" if w.df_rel < 0 else "rises"
+        return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, w.mode_hz, numbers),
+                       abs(w.z_stiffness), chance, w.df_rel, "relative frequency change",
+                       f"mode {w.mode_hz:.2f} Hz: its frequency {sense} by {100 * abs(w.df_rel):.1f} % "
+                       "as its amplitude grows within the decays (amplitude-dependent stiffness: a crack, "
+                       "a rattle, a stop; not in the library)",
+                       window="decay", mode_hz=(w.mode_hz,), null=null,
+                       more=(("stiffness_law_z", w.z_stiffness, "1"), ("frequency_change", w.df_rel, "1"),
+                             ("law_gage", float(w.gage), "number")))
+    fric = [w for w in laws if w.z_coulomb > chance]
+    if not fric:
+        return None
+    w = max(fric, key=lambda w: w.z_coulomb)
+    same = next((v for v in laws if v.mode_hz == w.mode_hz), w)
+    return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, w.mode_hz, numbers), w.z_coulomb,
+                   chance, w.coulomb, "m/s^2 per cycle",
+                   f"mode {w.mode_hz:.2f} Hz: Coulomb friction -- its decrement per cycle grows as "
+                   f"1/amplitude ({w.coulomb:.3g} m/s^2 of envelope lost per cycle), its frequency "
+                   f"unchanged ({100 * same.df_rel:+.2f} % over the decays)",
+                   window="decay", mode_hz=(w.mode_hz,), null=null,
+                   more=(("coulomb_law_z", w.z_coulomb, "1"), ("frequency_change", same.df_rel, "1"),
+                         ("law_gage", float(w.gage), "number")))
+
+
+def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
+                  snr: np.ndarray) -> list[tuple[float, str, float, float, int]]:
+    """Across the blows: each mode's frequency and decrement (refitted per impact) and every
+    other mode's amplitude against the best-measured mode's level, as (|z|, what, f_hz,
+    relative slope, k); empty when the blows' levels spread too little."""
     rows = list(dict.fromkeys(int(np.argmax(snr[:, k])) for k in ks))[:MAX_GAGES]
     kp = ks[int(np.argmax(snr[rows][:, ks].max(axis=0)))]               # the best-measured mode
     gp = int(np.argmax(snr[:, kp]))
@@ -136,27 +327,22 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
         b, se = _slope(level, np.log(a), sa)
         out.append((abs(b - 1) / se, "amplitude", float(fm.f_hz[k]), b - 1, k))
     # a refit that did not converge (a mode the blow barely rings) gives no slope: not a finding
-    out = [o for o in out if np.isfinite(o[0]) and np.isfinite(o[3])]
-    if not out:
-        return []
-    z, what, f_k, rel, k = max(out)
-    chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(out))))
-    if z <= chance:
-        return []
-    g_snr = snr[:, k]
-    gages = tuple(numbers[g] for g in np.flatnonzero(g_snr >= 0.5 * g_snr.max()))
+    return [o for o in out if np.isfinite(o[0]) and np.isfinite(o[3])]
+
+
+def _slope_finding(fm: FreeModal, best: tuple[float, str, float, float, int], snr: np.ndarray,
+                   numbers: Sequence[int], chance: float, null: str) -> Finding:
+    """The finding of a slope across the blows beyond chance whose law the decays did not tell:
+    the trial is not homogeneous, by what it is not said."""
+    z, what, f_k, rel, _ = best
     if what == "amplitude":
         text = (f"mode {f_k:.2f} Hz: amplitude grows as the blow to the power {1 + rel:.2f}, not 1 "
-                "(friction or amplitude-dependent damping)")
+                "(amplitude-dependent damping or stiffness; its law not told from the decays)")
         unit = "exponent - 1"
     else:
-        cause = ("friction or amplitude-dependent damping" if what == "decrement"
-                 else "amplitude-dependent stiffness (a crack, a rattle, a stop)")
-        text = f"mode {f_k:.2f} Hz: {what} changes by {100 * rel:+.1f} % per doubling of the blow ({cause})"
+        text = (f"mode {f_k:.2f} Hz: {what} changes by {100 * rel:+.1f} % per doubling of the blow "
+                "(amplitude-dependent damping or stiffness; its law not told from the decays)")
         unit = "per doubling of the blow"
-    return [Finding("homogeneity", Layer.NONLINEARITY, gages, z, chance, rel, unit, text,
-                    window="decay", mode_hz=(f_k,),
-                    null="slope z of a linear structure's poles and amplitudes on the blow level: "
-                         "standard normal, "
-                         f"Bonferroni over {len(out)} slopes",
-                    more=((f"{what}_per_doubling", rel, "1"),))]
+    return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, f_k, numbers), z, chance, rel, unit,
+                   text, window="decay", mode_hz=(f_k,), null=null,
+                   more=((f"{what}_per_doubling", rel, "1"),))

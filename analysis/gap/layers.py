@@ -88,8 +88,8 @@ DATA_EFFECT = {"gain": "gage_sensitivity", "dead": "gage_sensitivity", "rigid_bo
                "time_skew": "time_skew", "highpass": "highpass", "clipping": "clipping",
                "ambient_tone": "ambient_tone", "double_hit": "double_hit"}
 """The library effect each data-only check's finding names (a homogeneity finding: friction when
-the decrement moves with the blow, "unexplained" when the frequency does -- an amplitude-
-dependent stiffness the library does not hold: :func:`data_effect`)."""
+its decays follow Coulomb's law, "unexplained" otherwise -- an amplitude-dependent stiffness the
+library does not hold, or a law the decays did not tell: :func:`data_effect`)."""
 DATA_WINDOW = {"pre": "pre", "early": "early", "peaks": "early", "decay": "late"}
 """The report's window of a data-only finding's window."""
 OVERRIDING_EXCITATION = frozenset({"double_hit"})
@@ -102,8 +102,16 @@ def data_effect(f: dict) -> str | None:
     """The library effect (or "unexplained") a data-only finding as JSON names; None for a
     finding that names none (a flexible body, a noisy gage: model form and context)."""
     if f["check"] == "homogeneity":
-        return "unexplained" if "frequency_per_doubling" in f.get("more", {}) else "friction"
+        return "friction" if is_friction(f) else "unexplained"
     return DATA_EFFECT.get(f["check"])
+
+
+def is_friction(f: dict) -> bool:
+    """Whether a data-only finding (as JSON) is the homogeneity check's Coulomb friction: a mode's
+    decrement per cycle growing as 1/amplitude within the decays, its frequency unchanged
+    (:func:`~ramdaq.analysis.gap.homogeneity.decay_laws`)."""
+    more = f.get("more", {})
+    return f["check"] == "homogeneity" and "coulomb_law_z" in more and "stiffness_law_z" not in more
 
 
 def strength(f: dict) -> float:
@@ -115,8 +123,11 @@ def strength(f: dict) -> float:
 
 def not_homogeneous(findings: list[dict]) -> bool:
     """Whether the data-only layer found the trial not homogeneous across blows (a finding of
-    the nonlinearity layer, as JSON): its other checks read linear models the trial bends."""
-    return any(f.get("layer") == Layer.NONLINEARITY for f in findings)
+    the nonlinearity layer, as JSON, at least :data:`PRECEDENCE_STRENGTH` times its chance
+    level): its other checks read linear models the trial bends. A slope barely past its chance
+    level does not set the other checks aside (a modal development double hit at 600x chance
+    came with an amplitude slope at 1.07x)."""
+    return any(f.get("layer") == Layer.NONLINEARITY and strength(f) >= PRECEDENCE_STRENGTH for f in findings)
 
 
 def credible(findings: list[dict]) -> list[dict]:
@@ -134,14 +145,14 @@ def overriding_unexplained(findings: list[dict]) -> list[dict]:
     or a double hit (:data:`OVERRIDING_EXCITATION`); none when the data layer also found the
     trial not homogeneous across blows (a nonlinearity: the sensor checks read the free *linear*
     modal model's shapes, which an amplitude-dependent structure bends, and the double-hit check
-    a linear one-blow response). Not the homogeneity finding itself: friction, a crack and a
-    rattle all move the decrement or the amplitude with the blow (the modal family's development
-    trials), and only friction is in the library -- an amplitude-dependent trial the model leaves
-    unexplained stays so."""
+    a linear one-blow response) -- then only the homogeneity finding itself, when its decays
+    follow Coulomb's law (:func:`is_friction`): friction is in the library, while a crack's or a
+    rattle's amplitude-dependent stiffness (or a law the decays did not tell) is not, and a trial
+    the model leaves unexplained then stays so."""
+    strong = [f for f in findings if f.get("layer") in set(Layer) and strength(f) >= PRECEDENCE_STRENGTH]
     if not_homogeneous(findings):
-        return []
-    return [f for f in findings if f.get("layer") in set(Layer) and strength(f) >= PRECEDENCE_STRENGTH
-            and (f["layer"] == Layer.SENSOR or f["check"] in OVERRIDING_EXCITATION)]
+        return [f for f in strong if is_friction(f)]
+    return [f for f in strong if f["layer"] == Layer.SENSOR or f["check"] in OVERRIDING_EXCITATION]
 
 
 @dataclass(frozen=True)
@@ -192,15 +203,15 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     "unexplained" and a finding overrides it (:func:`overriding_unexplained`). Of several, the
     strongest against its chance level answers."""
     out = model_answer(model, candidates, where, form_gages)
-    finds = [f for f in credible(findings) if data_effect(f)]
     named = out.named
-    if not finds or named in {data_effect(f) for f in finds}:
-        return out
     if named == "unexplained":
         finds = [f for f in overriding_unexplained(findings) if data_effect(f)]
-        if not finds:
+    else:
+        finds = [f for f in credible(findings) if data_effect(f)]
+        if named in {data_effect(f) for f in finds} or (
+                named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}):
             return out
-    elif named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
+    if not finds:
         return out
     f = max(finds, key=strength)
     eff = data_effect(f)

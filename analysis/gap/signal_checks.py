@@ -17,6 +17,7 @@ import scipy.ndimage
 import scipy.optimize
 import scipy.stats
 
+from .contact import second_blow
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer
 
 CLIP_SPAN_S = 2.0
@@ -270,6 +271,11 @@ RHO_GRID = np.geomspace(0.02, 2.0, 14)
 """Sizes of a second blow tried, relative to the first (the scan's; the size reported is
 refined between the best one's neighbours)."""
 
+DELAY_AGREE_S = 0.01
+"""The contact-held measurement of a second blow (:func:`_measured`) is taken when its delay is
+within this of the scan's: the scan reads the delay from where the modes' amplitudes step, which
+a second contact's length blurs by a few ms, but the two see the same blow."""
+
 RHO_MIN = 0.1
 """Least size of a second blow reported, relative to the first: a smaller "second blow" is what
 a contact the model does not hold leaves in the early window (a 3-8 ms half-sine against the
@@ -303,17 +309,36 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
     if len(hits) < min(MIN_BLOWS, len(onsets_s)):
         return []
     stat = max(b[0] for _, b in hits)
-    d = float(np.median([b[1] for _, b in hits]))
-    rho = float(np.median([_refined_size(x, fs_hz, onsets_s[j], poles, sig, b[1], b[2]) for j, b in hits]))
+    d, rho, contact = _measured(x, fs_hz, onsets_s, poles, sig, hits)
     blows = ", ".join(str(j + 1) for j, _ in hits)
+    held = f"; contact {1e3 * contact:.1f} ms" if math.isfinite(contact) else ""
     return [Finding(
         check="double_hit", layer=Layer.EXCITATION, gages=tuple(numbers), statistic=stat,
         chance_level=chance, size=rho, unit="ratio", window="early",
         mode_hz=tuple(float(v) for v in fm.f_hz),
         text=f"a second blow {1e3 * d:.1f} ms after the first at {100 * rho:.0f} % of it "
-             f"(blows {blows} of {len(onsets_s)})",
+             f"(blows {blows} of {len(onsets_s)}{held})",
         null="whitened residual drop, chi-square 2 dof, Bonferroni over delays and blows",
-        more=(("delay_s", d, "s"), ("blows", float(len(hits)), "count")))]
+        more=(("delay_s", d, "s"), ("blows", float(len(hits)), "count"), ("contact_s", contact, "s")))]
+
+
+def _measured(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, poles: np.ndarray, sig: np.ndarray,
+              hits: list) -> tuple[float, float, float]:
+    """The second blow's delay (s), size (ratio) and the contact length (s), median over the blows
+    that showed it: measured with the contact held from the onset
+    (:func:`~ramdaq.analysis.gap.contact.second_blow`), whose delay and size are read from the
+    whole early window; where that finds no second blow of :data:`RHO_MIN` or more within
+    :data:`DELAY_AGREE_S` of the scan's delay, the scan's own (delay, refined size; contact
+    NaN)."""
+    out = []
+    for j, b in hits:
+        m = second_blow(x, fs_hz, onsets_s[j], poles, sig)
+        if m is not None and m.rho >= RHO_MIN and abs(m.delay_s - b[1]) <= DELAY_AGREE_S:
+            out.append((m.delay_s, m.rho, m.contact_s))
+        else:
+            out.append((b[1], _refined_size(x, fs_hz, onsets_s[j], poles, sig, b[1], b[2]), math.nan))
+    d, rho, contact = (float(np.median([o[i] for o in out])) for i in range(3))
+    return d, rho, contact
 
 
 def _double_hit_scan(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
