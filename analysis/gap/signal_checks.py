@@ -17,7 +17,7 @@ import scipy.ndimage
 import scipy.optimize
 import scipy.stats
 
-from .contact import second_blow
+from .contact import rss, second_blow
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer
 
 CLIP_SPAN_S = 2.0
@@ -351,7 +351,7 @@ def _double_hit_scan(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndar
         return 0.0, float("nan"), float("nan"), 1
     tau = (a + np.arange(y.shape[0])) / fs_hz - onset_s
     e1 = np.exp(np.multiply.outer(tau, poles))                        # (N, K)
-    rss0 = _rss(e1, y)
+    rss0 = rss(e1, y)
     delays = np.arange(2, max(3, y.shape[0] - int(SEEN_FOR_S * fs_hz)))
     # every other delay first, then the neighbours of the best (the drop is smooth over a sample)
     coarse = [_drop_at(e1, y, tau, i, poles, rss0) for i in delays[::2]]
@@ -373,9 +373,9 @@ def _drop_at(e1: np.ndarray, y: np.ndarray, tau: np.ndarray, i: int, poles: np.n
     d = float(tau[i] - tau[0] + EARLY_FROM_S)
     e2 = np.zeros_like(e1)
     e2[i:] = np.exp(np.multiply.outer(tau[i:] - d, poles))
-    rss = _rss(e1[None] + RHO_GRID[:, None, None] * e2[None], y)     # (n_rho,)
-    m = int(np.argmin(rss))
-    return float(rss0 - rss[m]), d, float(RHO_GRID[m])
+    by_rho = rss(e1[None] + RHO_GRID[:, None, None] * e2[None], y)     # (n_rho,)
+    m = int(np.argmin(by_rho))
+    return float(rss0 - by_rho[m]), d, float(RHO_GRID[m])
 
 
 def _refined_size(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray, sig: np.ndarray,
@@ -389,17 +389,7 @@ def _refined_size(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray
     e1 = np.exp(np.multiply.outer(tau, poles))
     e2 = np.where((tau >= d - 0.5 / fs_hz)[:, None], np.exp(np.multiply.outer(tau - d, poles)), 0)
     step = RHO_GRID[1] / RHO_GRID[0]
-    res = scipy.optimize.minimize_scalar(lambda r: float(_rss(e1 + r * e2, y)),
+    res = scipy.optimize.minimize_scalar(lambda r: float(rss(e1 + r * e2, y)),
                                          bounds=(rho / step, rho * step), method="bounded",
                                          options={"xatol": 1e-3 * rho})
     return float(res.x)
-
-
-def _rss(e: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Residual sum of squares of ``y`` (N, n_g) on the real basis of complex columns ``e``
-    (..., N, K) (their real and imaginary parts) and a constant."""
-    ones = np.ones(e.shape[:-1] + (1,))
-    A = np.concatenate([e.real, e.imag, ones], axis=-1)
-    Q, _ = np.linalg.qr(A)
-    proj = np.swapaxes(Q, -1, -2) @ y
-    return float(np.sum(y**2)) - np.sum(proj**2, axis=(-2, -1))
