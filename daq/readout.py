@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
+from rich import box
 from rich.console import Console, Group
 from rich.live import Live
 from rich.table import Table
@@ -101,9 +102,9 @@ class LiveReadout:
         ``delta_se``, the decrement's standard error so far, is shown beside "so far" (a gage
         at the noise level reads a number with an error as large as itself)."""
         status = "final" if final else "so far"
-        if not final and np.isfinite(delta_se) and delta:
+        if not final and np.isfinite(delta_se) and delta:  # short: an 80-column table
             rel = abs(delta_se / delta)
-            status += f" (+-{100 * rel:.0f} %{', unsure' if rel > UNSURE_REL_SE else ''})"
+            status = f"{'unsure' if rel > UNSURE_REL_SE else 'so far'} ±{100 * rel:.0f}%"
         self.results[channel] = (f_hz, delta, status)
         self._refresh()
 
@@ -174,11 +175,13 @@ class LiveReadout:
 
     def _table(self) -> Group:
         t = self.samples / self.info.fs_hz
-        health = (f"blocks {self.blocks}   gaps {self.gaps}   recorder queue {self.queue}   "
-                  f"overflows {self.overflows}   impacts at "
-                  + (", ".join(f"{s:.2f}" for s in self.impacts[-6:]) or "-") + " s")
+        health = (f"blocks {self.blocks}  gaps {self.gaps}  queue {self.queue}  "
+                  f"overflows {self.overflows}  impacts at "
+                  + (", ".join(f"{s:.2f}" for s in self.impacts[-3:]) or "-") + " s")
+        # no outer edge: 16 gages, the last hits and the health line fit an 80 x 24 terminal
         table = Table(title=f"ramdaq  {self.info.device}  t = {t:.2f} s  "
-                            f"({self.info.fs_hz:g} Hz, {self.info.n_channels} ch)")
+                            f"({self.info.fs_hz:g} Hz, {self.info.n_channels} ch)",
+                      box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
         table.add_column("gage", justify="right")
         table.add_column("rms (1 s)", justify="right")
         table.add_column("peak", justify="right")
@@ -196,4 +199,4 @@ class LiveReadout:
                           "" if not np.isfinite(f) else f"{f:.3f}",
                           "" if not np.isfinite(d) else f"{d:.4f}",
                           status)
-        return Group(table, Text("\n".join(self.hits[-4:])), Text(health))
+        return Group(table, Text("\n".join(self.hits[-3:])), Text(health))

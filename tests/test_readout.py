@@ -68,8 +68,8 @@ def test_a_look_marks_a_gage_at_the_noise_level_unsure(albacore):
     text = _table_text(view)
     row4 = next(line for line in text.splitlines() if " g04 " in line)
     row15 = next(line for line in text.splitlines() if " g15 " in line)
-    assert "so far (+-5 %)" in row4 and "unsure" not in row4
-    assert "so far (+-81 %, unsure)" in row15
+    assert "so far ±5%" in row4 and "unsure" not in row4
+    assert "unsure ±81%" in row15
 
 
 def test_without_a_terminal_a_look_prints_one_line_of_its_sure_gages(albacore):
