@@ -84,3 +84,17 @@ def test_cli_refuses_a_time_or_rate_that_is_not_above_zero(option, value, tmp_pa
                 str(out), "--no-rerun", cwd=tmp_path)
     assert r.returncode == 2, r.stderr  # argparse's usage error
     assert f"argument {option}: {value!r}" in r.stderr and not out.exists()
+
+
+@pytest.mark.parametrize(("extra", "named"), [(("--rig", "sampson"), "--rig"),
+                                              (("--medium", "water", "--seed", "3"), "--medium, --seed")])
+def test_a_recording_as_the_device_refuses_the_simulators_options(extra, named, tmp_path):
+    """A new user gave --rig with a recording as the device: 'internal error, TypeError' (exit 3);
+    --medium, --seed, --fs, --duration were ignored without a word. Each is a one-line refusal
+    naming the options, before anything is written."""
+    out = tmp_path / "x.mcap"
+    r = _ramdaq("trial", "--device", str(RIGS.parent / "albacore-air.mcap"), *extra,
+                "--quiet", "--out", str(out), "--no-rerun", cwd=tmp_path)
+    assert r.returncode == 1 and not out.exists()
+    line, = r.stderr.strip().splitlines()
+    assert line.startswith(f"ramdaq trial: {named}: ") and "Traceback" not in r.stderr

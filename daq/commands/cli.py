@@ -141,6 +141,10 @@ def cmd_recover(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+SIM_DURATION_S = 10.0
+"""A simulated trial's length without ``--duration``, s."""
+
+
 def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
     """Device options and a default recording name for ``--device sim``."""
     if not args.rig:
@@ -148,13 +152,14 @@ def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
     rig = load_rig(args.rig)
     if args.medium:
         rig = rig.with_medium(args.medium)
+    duration = SIM_DURATION_S if args.duration is None else args.duration
     impacts = list(args.impacts or [])
     if args.impact_every:
         t = args.impact_every / 2
-        while t < args.duration:
+        while t < duration:
             impacts.append(t)
             t += args.impact_every
-    return (dict(rig=rig, seed=args.seed, duration_s=args.duration, impacts=impacts, pace=pace,
+    return (dict(rig=rig, seed=args.seed or 0, duration_s=duration, impacts=impacts, pace=pace,
                  fs_hz=args.fs), f"{rig.name}-{rig.medium}")
 
 
@@ -165,7 +170,18 @@ def _device_options(args: argparse.Namespace) -> tuple[dict, str]:
     default_name = "trial"
     if args.device == "sim":
         options, default_name = _sim_options(args, "fast" if args.fast else "realtime")
-    elif args.rig:
+        return options, safe_name(default_name)
+    given = [opt for opt, v in (("--medium", args.medium), ("--duration", args.duration),
+                                ("--impacts", args.impacts), ("--impact-every", args.impact_every),
+                                ("--seed", args.seed), ("--fs", args.fs), ("--fast", args.fast))
+             if v not in (None, False)]
+    if given:
+        raise ValueError(f"{', '.join(given)}: for the simulator (--device sim) only; "
+                         f"--device {args.device} gives its own")
+    if args.rig:
+        if "://" not in args.device:  # a recording or another system's file carries its rig
+            raise ValueError(f"--rig: --device {args.device} is a file that carries its own rig; "
+                             "--rig is for sim, can:// and serial:// devices")
         options = {"rig": args.rig}
     return options, safe_name(default_name)
 
@@ -631,10 +647,10 @@ def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--rig", help="rig file (TOML) or a shipped rig's name (albacore, sampson, "
                    "stern_plane), required for the simulator")
     r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
-    r.add_argument("--duration", type=_positive, default=10.0, help="seconds to record (sim)")
+    r.add_argument("--duration", type=_positive, help="seconds to record (sim; default 10)")
     r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
     r.add_argument("--impact-every", type=_positive, help="a ram blow every S seconds")
-    r.add_argument("--seed", type=int, default=0, help="noise seed (sim)")
+    r.add_argument("--seed", type=int, help="noise seed (sim; default 0)")
     r.add_argument("--fs", type=_positive, help="override the rig's sample rate, Hz")
     r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
     r.add_argument("--name", help="recording name: writes recordings/NAME.mcap (a name, not a "
