@@ -66,10 +66,13 @@ def test_imported_csv_trial_is_diagnosed(csv_trial, capsys):
     k = labels.index(loc["band"])
     assert edges[k] <= f_true < edges[k + 1]
     assert doc["best"]["closed_held_out"] > 0.7
-    # in physical terms: the strongest discrepancy is that line before the blows, at the tone's
-    # frequency to the pre window's resolution 1/T, beyond the map's own chance level
-    top = doc["features"]["strongest"][0]
-    assert top["feature"] == "line" and top["window"] == "pre", top
+    # in physical terms: the strongest discrepancy before the blows is that line, at the tone's
+    # frequency to the pre window's resolution 1/T, beyond the map's own chance level. (Over all
+    # windows the tone leaking into the late decay's 7.6 Hz mode shape -- a MAC feature the
+    # ambient_tone term also takes away, z -> 0.6 -- can outrank it: its z against the replicate
+    # simulations read 13.6 or 25.4 with the replicates drawn for another file name.)
+    top = next(f for f in doc["features"]["strongest"] if f["window"] == "pre")
+    assert top["feature"] == "line", top
     pre_s = doc["features"]["pre_trigger_lines"]["pre_window_s"]
     assert top["mode_hz"] == pytest.approx(f_true, abs=1 / pre_s)
     assert top["z"] > doc["features"]["z_family"]
@@ -104,6 +107,7 @@ def test_unknown_effect_and_too_few_gages_are_refused(csv_trial, capsys, tmp_pat
     two.write_text(lines[0] + "\n" + "\n".join(",".join(c) for c in keep) + "\n")
     small = tmp_path / "two.mcap"
     assert main(["import", str(two), "--rig", str(rig), "--out", str(small)]) == 0
+    capsys.readouterr()  # the import's own output (its header-unit warning) is not the gap's
     assert main(["gap", str(small), "--no-plots", "--out", str(tmp_path / "g")]) == 1
     err = capsys.readouterr().err
     assert "only 2 of the rig's gages" in err and err.count("\n") == 1

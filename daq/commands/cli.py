@@ -418,10 +418,13 @@ def _import_file(args: argparse.Namespace) -> int:
         print(line)
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
-    for source, unit, rig_unit in odd:
-        print(f"warning: channel {source!r} is in {unit} by the file's header, but rig "
-              f"{info.extra.get('rig_name')!r} says {rig_unit}: the header's unit was applied",
-              file=sys.stderr)
+    for unit, rig_unit in sorted({(u, r) for _, u, r in odd}):  # one line per disagreement
+        names = [src_ for src_, u, r in odd if (u, r) == (unit, rig_unit)]
+        shown = ", ".join(repr(n) for n in names[:4]) + (f" and {len(names) - 4} more"
+                                                         if len(names) > 4 else "")
+        print(f"warning: channel{'s' if len(names) > 1 else ''} {shown} {'are' if len(names) > 1 else 'is'}"
+              f" in {unit} by the file's header, but rig {info.extra.get('rig_name')!r} says "
+              f"{rig_unit}: the header's unit was applied", file=sys.stderr)
     print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
