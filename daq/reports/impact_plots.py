@@ -75,8 +75,58 @@ def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_di
     files = []
     for kind, fig in impact_figures(a, x, fs_hz, rig, kinds, reuse=reuse).items():
         files.append(out_dir / f"impact{k}_{kind}.png")
-        write_png(fig, files[-1])
+        if kind == "decay":
+            write_decay_png(fig, files[-1], reuse)
+        else:
+            write_png(fig, files[-1])
     return files
+
+
+PER_HIT = "per-hit"
+"""The gid of the decay figure's figure-level texts that change from hit to hit."""
+
+
+def _per_hit_artists(fig: Figure) -> list:
+    """What of a decay figure (:func:`decay_figure`) is drawn anew for each hit, in drawing
+    order: each used panel's curves, frame, y axis and title, then the legend and the heading.
+    The rest -- backgrounds, x axes, axis labels, unused panels -- is the same for every hit
+    whose decay is as long."""
+    out = []
+    for ax in fig.axes:
+        if ax.collections:  # a used panel
+            out += [*ax.collections, *ax.spines.values(), ax.yaxis, ax.title]
+    return out + list(fig.legends) + [t for t in fig.texts if t.get_gid() == PER_HIT]
+
+
+def write_decay_png(fig: Figure, path: Path, reuse: dict | None = None) -> None:
+    """The decay figure written as :func:`write_png` does, in two layers: what is the same for
+    every hit, drawn once and kept in ``reuse`` (if given) while the figure and its time axis
+    are, then what is this hit's. A figure drawn anew is drawn in the same two layers, so that
+    the PNG is the same pixel for pixel either way; the figure itself is left as it was (a
+    notebook draws it whole)."""
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    dpi, per_hit = fig.dpi, _per_hit_artists(fig)
+    stamp = (fig.axes[0].get_xlim(), DPI)
+    kept = None if reuse is None else reuse.get("decay_background")
+    fig.set_dpi(DPI)
+    for art in per_hit:
+        art.set_animated(True)  # left out of canvas.draw
+    try:
+        if kept is not None and kept[0] is fig and kept[1] == stamp:
+            canvas.restore_region(kept[2])
+        else:
+            canvas.draw()
+            if reuse is not None:
+                reuse["decay_background"] = (fig, stamp, canvas.copy_from_bbox(fig.bbox))
+        for art in per_hit:
+            fig.draw_artist(art)
+        rgba = np.asarray(canvas.buffer_rgba())
+        png.write_png(path, rgba[..., :3] if rgba[..., 3].min() == 255 else rgba, DPI,
+                      PNG_COMPRESSION)
+    finally:
+        for art in per_hit:
+            art.set_animated(False)
+        fig.set_dpi(dpi)
 
 
 def write_png(fig: Figure, path: Path) -> None:
@@ -219,7 +269,8 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
                fontsize=9,
                title="solid: envelope of the mode's own component in the data; dashed: its fitted "
                      "decay |a| exp(−δ f t)", title_fontsize=9)
-    fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01, ha="left")
+    fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01,
+                 ha="left").set_gid(PER_HIT)
     return fig
 
 
