@@ -224,8 +224,11 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
     fig, axes = _decay_panels(a, reuse)
     colours = [f"C{k}" for k in range(len(m.frequency_hz))]
     floor = np.nanmax(env) * 1e-4  # four decades below the largest envelope
-    # the panels share x: one call sets all 16 (a call on each set every panel 16 times)
-    axes[0].set_xlim(-0.05 * t[-1], 1.05 * t[-1])
+    # the panels share x: one call sets all 16 (a call on each set every panel 16 times); the
+    # span a whole tenth of a second, so that the hits of a trial (decays a sample or so apart
+    # in length) share the time axis and the layer drawn once (write_decay_png)
+    span = np.ceil(t[-1] * 10 - 1e-9) / 10
+    axes[0].set_xlim(-0.05 * span, 1.05 * span)
     for ax, n in zip(axes, a.gage_numbers, strict=False):
         if n not in row_of:
             continue
