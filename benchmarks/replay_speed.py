@@ -13,8 +13,9 @@ is nearest to the program's own cost). Printed, each with issue 19's target:
 - ``ramdaq analyze FILE`` with the default plots, with ``--no-plots`` and with ``--plots all``
   (target <= 3 s CPU with plots for a 3-blow recording);
 - where ``analyze``'s time goes, in this process: the imports (a fresh interpreter importing
-  what ``ramdaq analyze`` imports), the analysis of every hit (:func:`run_analysis`, warm) and
-  each plot kind of one hit (built and written as PNG);
+  what ``ramdaq analyze`` imports), the analysis of every hit (:func:`run_analysis`, warm),
+  each plot kind of one hit (built and written as PNG), and a redrawn decay plot's steps (its
+  curves built; drawn and written; the PNG encoding alone);
 - a 10-minute, 20-blow water recording (``--long``; made once with ``ramdaq record --fast`` and
   kept under the temp folder): ``ramdaq replay``'s CPU and its speed against real time with the
   start-up (a fresh interpreter importing what ``ramdaq replay`` imports) and without it (the
@@ -92,9 +93,37 @@ def in_process(path: Path) -> None:
             impact_plots.plot_impact(h.analysis, decay_samples(h, rig), fs, rig, Path(tmp),
                                      h.index, ("decay",), reuse=reuse)
         every = time.process_time() - t0
+        steps = decay_steps(hits, rig, fs, Path(tmp) / "steps.png")
     print(f"  plots of one hit, built and written: {', '.join(parts)}")
     print(f"  the decay plots of all {n_hits} hits as ramdaq analyze draws them: {every:.2f} s "
-          f"({every / max(n_hits, 1):.2f} s a hit)")
+          f"({every / max(n_hits, 1):.2f} s a hit); {steps}")
+
+
+def decay_steps(hits: list, rig, fs: float, png: Path) -> str:
+    """A redrawn decay plot's steps (the mean over the accepted hits after the first, drawn on
+    the first's figure as ``ramdaq analyze`` draws them): its curves built, drawn and written,
+    and of that the PNG encoding alone."""
+    import numpy as np
+
+    from ramdaq.daq.api import decay_samples
+    from ramdaq.daq.reports import impact_plots
+    from ramdaq.daq.reports import png as png_file
+
+    accepted = [h for h in hits if h.accepted]
+    reuse: dict = {}
+    build = write = encode = 0.0
+    for i, h in enumerate(accepted):
+        t0 = time.process_time()
+        fig = impact_plots.decay_figure(h.analysis, decay_samples(h, rig), fs, reuse)
+        t1 = time.process_time()
+        impact_plots.write_decay_png(fig, png, reuse)
+        t2 = time.process_time()
+        png_file.encode_png(np.asarray(fig.canvas.buffer_rgba())[..., :3], impact_plots.DPI)
+        if i:  # the first builds the figure and its shared layer
+            build, write, encode = build + t1 - t0, write + t2 - t1, encode + time.process_time() - t2
+    n = max(len(accepted) - 1, 1)
+    return (f"a redrawn hit: curves built {build / n:.3f} s, drawn and written {write / n:.3f} s "
+            f"(of which the PNG encoding {encode / n:.3f} s)")
 
 
 LONG_CMD = ["record", "--rig", str(ROOT / "recordings" / "rigs" / "albacore.toml"), "--medium",

@@ -113,9 +113,13 @@ def test_a_decay_figure_redrawn_for_the_next_hit_is_the_one_drawn_anew(
     reuse: dict = {}
     plot_impact(h0.analysis, decay_samples(h0, hit0.rig), fs, hit0.rig, tmp_path / "re", 0,
                 ("decay",), reuse=reuse)
+    shared = reuse["decay_background"]
     redrawn = plot_impact(h1.analysis, decay_samples(h1, hit1.rig), fs, hit1.rig,
                           tmp_path / "re", 1, ("decay",), reuse=reuse)
     assert "decay" in reuse
+    # hit 1's decay is a sample shorter than hit 0's: the layer every hit shares (drawn for
+    # hit 0) was restored, not drawn again -- the pixels below compare that path
+    assert reuse["decay_background"] is shared
     assert np.array_equal(matplotlib.image.imread(fresh[0]), matplotlib.image.imread(redrawn[0]))
 
 
@@ -144,3 +148,23 @@ def test_plots_a_channels_only_import_cannot_give_are_said(tmp_path: Path, capsy
         "impact0_decay.png", "impact0_spectrum.png"]
     spectrum = ramdaq.analyze(tmp_path / "two.mcap", impact=0).figures(0)["spectrum"]
     assert "mean of all gages" in spectrum.axes[0].get_ylabel()
+
+
+def test_png_written_without_pillow_reads_back_exactly(tmp_path: Path) -> None:
+    """The plots' own PNG writer (zlib, no row filter): RGB and RGBA images read back by Pillow
+    byte for byte, with the resolution recorded; anything else is refused, not written."""
+    from PIL import Image
+
+    from ramdaq.daq.reports.png import write_png
+
+    rng = np.random.default_rng(5)
+    for channels, mode in ((3, "RGB"), (4, "RGBA")):
+        img = rng.integers(0, 256, (7, 11, channels), dtype=np.uint8)
+        write_png(tmp_path / f"{mode}.png", img, 150)
+        with Image.open(tmp_path / f"{mode}.png") as back:
+            assert back.mode == mode and back.size == (11, 7)
+            assert np.array_equal(np.asarray(back), img)
+            # PNG records whole pixels per metre: 150 dpi is 5906 /m, 150.01 dpi read back
+            assert back.info["dpi"][0] == pytest.approx(150, abs=0.02)
+    with pytest.raises(ValueError, match="uint8"):
+        write_png(tmp_path / "bad.png", np.zeros((2, 2, 3)), 150)

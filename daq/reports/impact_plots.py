@@ -20,18 +20,21 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullLocator
 
 from ...analysis.impact import ImpactAnalysis
 from ...analysis.modal.peaks import bandpass_mode
 from ...analysis.model.rig import Rig
+from . import png
 
 BODY_COLOURS = {"rudder": "tab:blue", "stock": "tab:orange", "hull": "tab:grey"}
 DPI = 150
 PNG_COMPRESSION = 3
-"""zlib level of the PNGs: 3 writes the 16-panel decay figure (2400 x 1710 px) in 2/3 of the
-time of the default 6 (0.10 s against 0.15 s CPU), the file 8 % larger."""
+"""zlib level of the PNGs: 3 wrote the 16-panel decay figure (2400 x 1710 px) in 2/3 of the
+time of the default 6 (0.10 s against 0.15 s CPU through Pillow), the file 8 % larger."""
 
 
 PLOT_KINDS = ("decay", "spectrum", "modeshape", "stock")
@@ -72,8 +75,74 @@ def plot_impact(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig, out_di
     files = []
     for kind, fig in impact_figures(a, x, fs_hz, rig, kinds, reuse=reuse).items():
         files.append(out_dir / f"impact{k}_{kind}.png")
-        fig.savefig(files[-1], dpi=DPI, pil_kwargs={"compress_level": PNG_COMPRESSION})
+        if kind == "decay":
+            write_decay_png(fig, files[-1], reuse)
+        else:
+            write_png(fig, files[-1])
     return files
+
+
+PER_HIT = "per-hit"
+"""The gid of the decay figure's figure-level texts that change from hit to hit."""
+
+
+def _per_hit_artists(fig: Figure) -> list:
+    """What of a decay figure (:func:`decay_figure`) is drawn anew for each hit, in drawing
+    order: each used panel's curves, frame, y axis and title, then the legend and the heading.
+    The rest -- backgrounds, x axes, axis labels, unused panels -- is the same for every hit
+    whose decay is as long."""
+    out = []
+    for ax in fig.axes:
+        if ax.collections:  # a used panel
+            out += [*ax.collections, *ax.spines.values(), ax.yaxis, ax.title]
+    return out + list(fig.legends) + [t for t in fig.texts if t.get_gid() == PER_HIT]
+
+
+def write_decay_png(fig: Figure, path: Path, reuse: dict | None = None) -> None:
+    """The decay figure written as :func:`write_png` does, in two layers: what is the same for
+    every hit, drawn once and kept in ``reuse`` (if given) while the figure and its time axis
+    are, then what is this hit's. A figure drawn anew is drawn in the same two layers, so that
+    the PNG is the same pixel for pixel either way; the figure itself is left as it was (a
+    notebook draws it whole)."""
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    dpi, per_hit = fig.dpi, _per_hit_artists(fig)
+    stamp = (fig.axes[0].get_xlim(), DPI)
+    kept = None if reuse is None else reuse.get("decay_background")
+    fig.set_dpi(DPI)
+    for art in per_hit:
+        art.set_animated(True)  # left out of canvas.draw
+    try:
+        if kept is not None and kept[0] is fig and kept[1] == stamp:
+            canvas.restore_region(kept[2])
+        else:
+            canvas.draw()
+            if reuse is not None:
+                reuse["decay_background"] = (fig, stamp, canvas.copy_from_bbox(fig.bbox))
+        for art in per_hit:
+            fig.draw_artist(art)
+        rgba = np.asarray(canvas.buffer_rgba())
+        png.write_png(path, rgba[..., :3] if rgba[..., 3].min() == 255 else rgba, DPI,
+                      PNG_COMPRESSION)
+    finally:
+        for art in per_hit:
+            art.set_animated(False)
+        fig.set_dpi(dpi)
+
+
+def write_png(fig: Figure, path: Path) -> None:
+    """``fig`` drawn at :data:`DPI` into ``path`` as an RGB PNG (RGBA if it is not opaque;
+    :func:`~.png.write_png`): ``savefig`` wrote RGBA with alpha 255 throughout, through
+    Pillow's per-row filter search, in twice the time."""
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    dpi = fig.dpi
+    fig.set_dpi(DPI)
+    try:
+        canvas.draw()
+        rgba = np.asarray(canvas.buffer_rgba())
+        png.write_png(path, rgba[..., :3] if rgba[..., 3].min() == 255 else rgba, DPI,
+                      PNG_COMPRESSION)
+    finally:
+        fig.set_dpi(dpi)
 
 
 PLOT_POINTS = 1200
@@ -155,25 +224,37 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
     fig, axes = _decay_panels(a, reuse)
     colours = [f"C{k}" for k in range(len(m.frequency_hz))]
     floor = np.nanmax(env) * 1e-4  # four decades below the largest envelope
+    # the panels share x: one call sets all 16 (a call on each set every panel 16 times); the
+    # span a whole tenth of a second, so that the hits of a trial (decays a sample or so apart
+    # in length) share the time axis and the layer drawn once (write_decay_png)
+    span = np.ceil(t[-1] * 10 - 1e-9) / 10
+    axes[0].set_xlim(-0.05 * span, 1.05 * span)
     for ax, n in zip(axes, a.gage_numbers, strict=False):
         if n not in row_of:
             continue
         j = row_of[n]
         top = floor
+        curves, fits, fit_colours = [], [], []
         for k, c in enumerate(colours):
             amp = abs(m.complex_amplitude[j, k])
             d, f = m.channel_delta[j, k], m.channel_frequency_hz[j, k]
-            # plot, not semilogy: the panel is log already, and semilogy resets its locators
             tt, yy = thinned(t, np.maximum(env[j, k], floor))
-            ax.plot(tt, yy, color=c, lw=0.8)
+            curves.append(np.column_stack([tt, yy]))
             top = max(top, float(np.nanmax(yy, initial=floor)))
             if np.isfinite(d) and amp > 0:  # a straight line on log axes: two points draw it
                 ends = t[[0, -1]]
-                ax.plot(ends, amp * np.exp(-d * f * ends), color=c, lw=1.2, ls="--")
+                fits.append(np.column_stack([ends, amp * np.exp(-d * f * ends)]))
+                fit_colours.append(c)
                 top = max(top, amp)
+        # one collection of a panel's envelopes and one of its fitted lines, not a Line2D each:
+        # a line made by ax.plot and drawn cost about 1 ms, and a figure has ~100 of them
+        ax.add_collection(LineCollection(curves, colors=colours, linewidths=0.8),
+                          autolim=False)
+        if fits:
+            ax.add_collection(LineCollection(fits, colors=fit_colours, linewidths=1.2,
+                                             linestyles="--"), autolim=False)
         # the limits set, not found by autoscaling every line (a fifth of the figure's build):
         # the curves' span, with the 5 % margins autoscaling gave (in decades on the log axis)
-        ax.set_xlim(-0.05 * t[-1], 1.05 * t[-1])
         ax.set_ylim(floor, top * (top / floor) ** 0.05)
         g = a.gages.get(n)
         title = f"gage {n}"
@@ -186,12 +267,13 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
         ax.set_title(title, fontsize=9, y=1.0)
     labels = [f"{f:.2f} Hz, δ = {d:.4f}{' (predominant)' if k == a.predominant else ''}"
               for k, (f, d) in enumerate(zip(m.frequency_hz, m.delta, strict=True))]
-    proxies = [axes[0].plot([], [], color=c)[0] for c in colours]
+    proxies = [Line2D([], [], color=c) for c in colours]
     fig.legend(proxies, labels, loc="upper right", bbox_to_anchor=(0.99, 1.0), ncols=len(labels),
                fontsize=9,
                title="solid: envelope of the mode's own component in the data; dashed: its fitted "
                      "decay |a| exp(−δ f t)", title_fontsize=9)
-    fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01, ha="left")
+    fig.suptitle(f"Free decay from {a.decay_start_s:.3f} s, per mode", x=0.01,
+                 ha="left").set_gid(PER_HIT)
     return fig
 
 
@@ -207,8 +289,8 @@ def _decay_panels(a: ImpactAnalysis, reuse: dict | None) -> tuple[Figure, np.nda
         for leg in list(fig.legends):
             leg.remove()
         for ax in axes:
-            for line in list(ax.lines):
-                line.remove()
+            for curves in list(ax.collections):
+                curves.remove()
         return fig, axes
     n_col = 4
     n_row = -(-len(a.gage_numbers) // n_col)
@@ -237,13 +319,11 @@ def _decay_panels(a: ImpactAnalysis, reuse: dict | None) -> tuple[Figure, np.nda
         ax.xaxis.set_major_locator(MaxNLocator(4))
     for ax in axes[len(a.gage_numbers):]:
         ax.set_visible(False)
-    for ax in axes[::n_col]:
-        ax.set_ylabel("envelope (m/s²)")
-    for ax in axes[-n_col:]:
-        ax.set_xlabel("time after the decay's start (s)")
-    for ax in axes:  # labels at fixed places: placed by their ticks' boxes, they measured every
-        ax.xaxis.set_label_coords(0.5, -0.16)  # tick label of every panel, a third of the drawing
-        ax.yaxis.set_label_coords(-0.15, 0.5)
+    # one label for each axis of all the panels, at a fixed place: a label per row and per
+    # column was 8 texts to draw each hit (text is most of the drawing: glyph by glyph), and
+    # placed by their ticks' boxes they measured every tick label of every panel
+    fig.supxlabel("time after the decay's start (s)", y=0.15 / height, va="bottom")
+    fig.supylabel("envelope of each mode (m/s²)", x=0.005, ha="left")
     if reuse is not None:
         reuse["decay"] = (key, fig, axes)
     return fig, axes
