@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
+import scipy.special
 import scipy.stats
 
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer
@@ -69,15 +70,25 @@ up to 0.2-0.4 % with friction or none (a Coulomb oscillator's frequency is its l
 crack opening at half the median blow's amplitude with a 15 % stiffness drop moves it by about 5 %
 (the modal family's size 0.5), a stop by 5-15 %."""
 
+COULOMB_MIN_CYCLES = 5
+"""Least cycles a blow's decay needs to give its own Coulomb slope (two parameters and some
+residual to weigh it by)."""
+COULOMB_MIN_BLOWS = 3
+"""Least blows with a Coulomb slope each: the slopes' spread across the blows is the test's error."""
+COULOMB_MIN = 0.1
+"""Least Coulomb friction named: what it adds to the decrement per cycle at the smallest amplitude
+read, relative to the median decrement per cycle (placeholder, set from measurements)."""
 
 @dataclass(frozen=True)
 class DecayLaw:
     """One mode's backbone and damping curve over every blow's free decay, cycle by cycle at gage
     ``gage`` (its number): the frequency's slope on the envelope (``z_stiffness`` its z, and
     ``df_rel`` the relative change from the largest to the smallest amplitude measured) and the
-    decrement per cycle's slope on ``1 / envelope`` (Coulomb's law: ``z_coulomb`` its z,
-    positive when the decrement grows as the amplitude falls; ``coulomb`` the slope, m/s^2 of
-    envelope lost per cycle to friction, about ``4 mu / w^2`` in acceleration)."""
+    decrement per cycle's slope on ``1 / envelope`` (Coulomb's law, :func:`coulomb_across_blows`
+    over ``n_blows`` blows: ``z_coulomb`` its z, positive when the decrement grows as the
+    amplitude falls; ``coulomb`` the slope, m/s^2 of envelope lost per cycle to friction, about
+    ``4 mu / w^2`` in acceleration; ``coulomb_size`` what it adds to the decrement at the
+    smallest amplitude read, relative to the median decrement per cycle)."""
 
     mode_hz: float
     gage: int
@@ -86,6 +97,8 @@ class DecayLaw:
     df_rel: float
     z_coulomb: float
     coulomb: float
+    n_blows: int
+    coulomb_size: float
 
 
 def _cycles(v: np.ndarray, fs_hz: float, f_hz: float, a: int, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -160,10 +173,45 @@ def decay_laws(x: np.ndarray, fm: FreeModal, ks: Sequence[int], rows: Sequence[i
         amp, freq, dec = np.concatenate(amps), np.concatenate(freqs), np.concatenate(decs)
         rel = amp / amp.max()
         bf, zf = _ols_slope(rel, freq)
-        bc, zc = _ols_slope(1 / rel, dec)
+        bc, zc, n_b = coulomb_across_blows(amps, decs)
+        lin = float(np.median(dec))
+        size = bc / (float(amp.min()) * lin) if lin > 0 and math.isfinite(bc) else math.inf
         out.append(DecayLaw(f_k, int(numbers[g]), int(amp.size), zf,
-                            bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc * float(amp.max())))
+                            bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc, n_b, size))
     return out
+
+
+def coulomb_across_blows(amps: Sequence[np.ndarray], decs: Sequence[np.ndarray]) -> tuple[float, float, int]:
+    """Coulomb's law over the blows' decays, one slope per blow: each blow's decrement per cycle
+    ``decs[b]`` regressed on ``1 / amps[b]`` (m/s^2; blows with fewer than
+    :data:`COULOMB_MIN_CYCLES` cycles or no spread of amplitude left out), the slopes' weighted
+    mean (weights from each blow's own residual scatter) and its standard error from the
+    slopes' spread across the blows (Birge: the weights' scale is not trusted, only their
+    ratios). The cycles within one blow are correlated (the band filter and the analytic signal
+    smooth the envelope's noise over some cycles), so a pooled per-cycle regression's error is
+    too small; blows are independent. Returns the slope (m/s^2 of envelope lost per cycle), its
+    z as a standard normal deviate (the slope / error is Student's t with n_blows - 1 degrees of
+    freedom, mapped to the normal deviate of the same upper tail), and the number of blows; nan,
+    0, n when fewer than :data:`COULOMB_MIN_BLOWS` blows."""
+    b, w = [], []
+    for amp, dec in zip(amps, decs, strict=True):
+        u = 1 / amp
+        if u.size < COULOMB_MIN_CYCLES or np.ptp(u) <= 0:
+            continue
+        slope, z = _ols_slope(u, dec)
+        if z != 0 and math.isfinite(z):
+            b.append(slope)
+            w.append((z / slope) ** 2)                                  # 1 / its naive variance
+    n = len(b)
+    if n < COULOMB_MIN_BLOWS:
+        return math.nan, 0.0, n
+    b, w = np.array(b), np.array(w)
+    mean = float(np.sum(w * b) / w.sum())
+    se = math.sqrt(float(np.sum(w * (b - mean) ** 2)) / ((n - 1) * float(w.sum())))
+    if se == 0:
+        return mean, 0.0, n
+    t = mean / se
+    return mean, float(-scipy.special.ndtri_exp(scipy.stats.t.logsf(t, n - 1))), n
 
 
 def refit_poles(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray,
