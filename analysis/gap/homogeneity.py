@@ -90,7 +90,8 @@ class DecayLaw:
     error allowing for :func:`correlated_cycles`, positive when the decrement grows as the
     amplitude falls; ``coulomb`` the slope, m/s^2 of envelope lost per cycle to friction, about
     ``4 mu / w^2`` in acceleration; ``coulomb_size`` what it adds to the decrement at the
-    smallest amplitude read, relative to the median decrement per cycle)."""
+    smallest amplitude read, relative to the median decrement per cycle; nan when that is not
+    positive)."""
 
     mode_hz: float
     gage: int
@@ -180,7 +181,8 @@ def decay_laws(x: np.ndarray, fm: FreeModal, ks: Sequence[int], rows: Sequence[i
         # the cycles' start moved)
         zc /= math.sqrt(correlated_cycles(f_k))
         lin = float(np.median(dec))
-        size = bc / (float(amp.min()) * lin) if lin > 0 else math.inf
+        # no size (nan, never named) when the median cycle does not decay
+        size = bc / (float(amp.min()) * lin) if lin > 0 else math.nan
         out.append(DecayLaw(f_k, int(numbers[g]), int(amp.size), zf,
                             bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc, size))
     return out
@@ -193,6 +195,7 @@ def correlated_cycles(f_hz: float) -> float:
     ``2 f / (pi h)`` (about 5.3 at :data:`LAW_BAND`), at least 1."""
     half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
     return max(1.0, 2 * f_hz / (math.pi * half))
+
 
 def refit_poles(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray,
                 n_iter: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
