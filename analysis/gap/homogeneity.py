@@ -15,7 +15,9 @@ envelope falls linearly rather than exponentially, while the frequency stays the
 Coulomb oscillator's half cycles are exactly ``pi / w``). A crack (bilinear stiffness, softening
 once it opens) or a rattle (a stop, stiffening at the clearance) moves the frequency with the
 amplitude instead, and conserves energy. Friction is in the library; an amplitude-dependent
-stiffness is not (the answer is "unexplained", with where and how big).
+stiffness is not (the answer is "unexplained", with where and how big). Coulomb's slope is
+judged with an error that allows for the cycles' shared noise (:func:`correlated_cycles`) and
+named only from a size (:data:`COULOMB_MIN`), as the stiffness law from :data:`STIFF_MIN`.
 
 Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate; :class:`~ramdaq.analysis.gap.datamodel.FreeModal`
 as made by :func:`~ramdaq.analysis.gap.datamodel.free_modal_model` on the same ``x``.
