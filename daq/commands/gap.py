@@ -52,10 +52,12 @@ def summary_lines(d: Diagnosis) -> list[str]:
             f"z = {d.z_detect:.1f}" if d.map_held else "")
     out.append(f"  largest map cell z = {zf:.1f} on the fitted impacts{held}")
     out += data_lines(d)
+    out += model_level_lines(d)
     cal = ", ".join(f"{p.name} x{math.exp(t):.3f}"
                     for p, t in zip(d.forward.params, d.base.theta, strict=True)
                     if abs(t) > 0.01)
-    out.append(f"  calibration moved: {cal or 'nothing beyond 1 %'}")
+    then = "then, to the fitted impacts' time histories, " if d.model_level is not None else ""
+    out.append(f"  {then}calibration moved: {cal or 'nothing beyond 1 %'}")
     if d.best:
         b = d.best
         loc = b.location
@@ -95,6 +97,30 @@ def summary_lines(d: Diagnosis) -> list[str]:
         ms = "; ".join(f"{m['f_hz']:.3f} Hz delta {m['delta']:.4f}" for m in d.best.modes_after)
         out.append(f"  with {d.best.name}:    {ms}")
     out += [f"  note: {n}" for n in d.notes]
+    return out
+
+
+def model_level_lines(d: Diagnosis) -> list[str]:
+    """What the model level did to the rig: the rig held against the trial, and each constant
+    the trial's modes pin that moved by more than 1 % or ended at a bound (factor and posterior
+    sd), and the ones held because the modes do not pin them. A user whose rig file was 20 %
+    off saw only the second calibration's moves, which start from the corrected rig."""
+    ml = d.model_level
+    if ml is None:
+        return []
+    rig = d.forward.td.rig
+    head = f"  model level: rig {rig.name!r} ({rig.medium})"
+    if ml.fit is None:
+        return [f"{head}: not calibrated ({ml.note})"]
+    moved = [p for p in ml.fit.params if p.pinned and (abs(math.log(p.factor)) > 0.01 or p.at_bound)]
+    held = [p.name for p in ml.fit.params if not p.pinned]
+    text = ", ".join(f"{p.name} x{p.factor:.3f}"
+                     + (f" +-{100 * p.sd:.1f} %" if math.isfinite(p.sd) else "")
+                     + (" AT ITS BOUND" if p.at_bound else "") for p in moved)
+    out = [f"{head} calibrated to the trial's modes ({ml.fit.stop.value}): "
+           f"{text or 'no constant moved beyond 1 %'}"]
+    if held:
+        out.append(f"    held at the rig's values (the modes do not pin them): {', '.join(held)}")
     return out
 
 
