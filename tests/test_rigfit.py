@@ -324,3 +324,19 @@ def test_rig_fit_brings_a_stiffness_20_percent_off_back(water_modes):
     assert abs(math.log(p.value / rig.stock.I_m4)) <= 3 * p.sd, p
     ref = {q.name: q for q in calibrate_to_modes(tm, rig).params}["stock.I_m4"]
     assert abs(math.log(p.value / ref.value)) < 0.1 * p.sd, (p, ref)
+
+
+def test_a_stern_planes_fitted_rig_is_written_in_its_own_keys(tmp_path):
+    """`ramdaq rig fit` on a trial of the shipped stern plane fitted, then refused to write:
+    'rudder.Iz_kg_m2: no [rudder] table header' -- a stern plane's file holds [plane] with
+    Iy/Ixy. The fitted file now names them as the plane does and reads back to the fit."""
+    from ramdaq.analysis.gap.rigfit import fitted_rig_text
+
+    rig = load_rig("stern_plane")
+    x, fs = sim_trial(rig)
+    mf = calibrate_to_modes(trial_modes(prepare(x, fs, np.array(IMPACTS), rig)), rig)
+    text = fitted_rig_text(mf, "sp.mcap", "2026-11-27")
+    assert "[rudder]" not in text and re.search(r"^Iy_kg_m2 = .*# fitted: x", text, re.M)
+    back = parse_rig(text, source="fitted")
+    for p in mf.params:
+        assert get_value(back, p.name) == pytest.approx(p.value, rel=1e-8), p.name

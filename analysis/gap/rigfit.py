@@ -43,6 +43,7 @@ import scipy.stats
 from ..model.response import ModalForm, modal_form
 from ..model.rig import Rig, RigError
 from ..model.structure import build_model
+from ..model.surface import plane_field
 from .calibrate import Stop
 from .modal_level import (
     ModalComparison,
@@ -608,8 +609,9 @@ def fitted_rig_text(mf: ModeFit, trial: str, date: str) -> str:
     ``trial`` and when (``date``). The result parses to the fitted values. Raises RigError
     when a constant's table is not in the text as a ``[table]`` header (an inline table)."""
     lines = mf.start.text.splitlines()
+    plane = not mf.start.surface.is_rudder  # a stern plane's file names [rudder] [plane]
     for p in mf.params:
-        lines = _set_line(lines, p, mf.start.source)
+        lines = _set_line(lines, p, mf.start.source, plane_field(p.name) if plane else p.name)
     ids = ", ".join(f"{q.f_id_hz:.3f}" for q in mf.after.pairs)
     head = [f"# Fitted by `ramdaq rig fit` on {date} from {trial} ({mf.after.trial.n_impacts} impacts; "
             f"modes {ids} Hz), starting from {mf.start.source} (medium {mf.start.medium}).",
@@ -624,13 +626,13 @@ def fitted_rig_text(mf: ModeFit, trial: str, date: str) -> str:
     return text
 
 
-def _set_line(lines: list[str], p: FittedParam, source: str) -> list[str]:
-    """``lines`` with key ``p.name`` set to its fitted value in its table (added after the
-    table's header when the key was left at its default)."""
-    if (m := _HULL.match(p.name)) is not None:
+def _set_line(lines: list[str], p: FittedParam, source: str, field: str) -> list[str]:
+    """``lines`` with ``p``'s key, named ``field`` in the file, set to its fitted value in its
+    table (added after the table's header when the key was left at its default)."""
+    if (m := _HULL.match(field)) is not None:
         table, index, key = "hull.modes", int(m[1]), m[2]
     else:
-        table, _, key = p.name.rpartition(".")
+        table, _, key = field.rpartition(".")
         index = 0
     seen, inside, header = -1, False, None
     for n, line in enumerate(lines):
@@ -648,7 +650,7 @@ def _set_line(lines: list[str], p: FittedParam, source: str) -> list[str]:
             out[n] = _value_line(line[: line.index("=")].rstrip(), p)
             return out
     if header is None:
-        raise RigError(f"{source}: {p.name}: no [{table}] table header for it in the text "
+        raise RigError(f"{source}: {field}: no [{table}] table header for it in the text "
                        "(an inline table?); the fitted rig cannot be written in its place")
     out = list(lines)
     out.insert(header + 1, _value_line(key, p))

@@ -223,6 +223,16 @@ def to_surface_frame(doc: dict[str, Any]) -> tuple[dict[str, Any], Surface, dict
     return out, surface, renames
 
 
+def plane_field(model_field: str) -> str:
+    """A rig constant's dotted path as a stern plane's file names it (``rudder.Iz_kg_m2`` ->
+    ``plane.Iy_kg_m2``); paths outside ``[rudder]`` are named alike in both files."""
+    table, _, key = model_field.partition(".")
+    if table != "rudder":
+        return model_field
+    back = {v: k for k, v in _PLANE_KEYS.items()}
+    return f"plane.{back.get(key, key)}"
+
+
 def _turn_vector(v: Any, surface: Surface) -> Any:
     ok = isinstance(v, list) and len(v) == 3 and all(
         isinstance(c, int | float) and not isinstance(c, bool) for c in v)
