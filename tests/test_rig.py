@@ -129,3 +129,19 @@ def test_implausible_values_named(old, new, field):
     with pytest.raises(RigError, match=rf"^bad\.toml: {field}: .*(implausible|positive)") as err:
         parse_rig(bad, "bad.toml")
     assert "\n" not in str(err.value)
+
+
+def test_ramdaq_rig_warns_of_modes_no_trial_can_record(tmp_path, capsys):
+    """A new user pasted the report's rudder mass (0.0878 ton s^2/ft) as mass_kg: ``ramdaq rig``
+    listed a 27 864 Hz mode at 2048 Hz samples without a word. A mode above half the sample rate
+    is named in a warning; the shipped rig raises none."""
+    from ramdaq.daq.commands.cli import main
+
+    text = (RIGS / "albacore.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(re.sub(r"(?m)^mass_kg = .*$", "mass_kg = 0.0878", text, count=1))
+    assert main(["rig", str(bad)]) == 0
+    out = capsys.readouterr().out
+    assert "warning: mode(s) at 27864 Hz lie above half the sample rate (1024 Hz)" in out
+    assert main(["rig", str(RIGS / "albacore.toml")]) == 0
+    assert "warning" not in capsys.readouterr().out

@@ -521,6 +521,12 @@ def cmd_rig(args: argparse.Namespace) -> int:
         for i, (f, d, z) in enumerate(zip(m.table.frequency_hz, m.table.decrement,
                                           m.table.damping_ratio, strict=True)):
             print(f"{'*' if i == m.predominant else ' '} {f:8.3f}  {d:7.4f}  {z:7.4f}")
+        nyquist = rig.daq.sample_rate_hz / 2
+        above = [f for f in m.table.frequency_hz if f >= nyquist]
+        if above:  # e.g. a unit slip: a mass in the report's ton s^2/ft read as kg
+            print(f"warning: mode(s) at {', '.join(f'{f:.0f}' for f in above)} Hz lie above half "
+                  f"the sample rate ({nyquist:g} Hz): no trial at this rate records them; a mass "
+                  f"or inertia in the report's units (ton s^2/ft, ft ton s^2) rather than SI?")
     if {"air", "water"} <= set(rig.damping):
         c = eq18_check(rig)
         print(f"\nEq 18: m_vir = m_a[(f_air/f_water)^2 - 1] = {c.m_a_kg:.0f} kg x "
