@@ -465,6 +465,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     verdict = "no gap beyond noise" if not significant else ("explained" if best else "unexplained")
     gap_fit, gap_held = m_fit.excess(), m_held.excess() if m_held else 0.0
     if best is not None:
+        best.cal.restore_fit(fw)    # let go if it was not the best single (_keep_best_jacobian)
         named, gap_fit, gap_held = _against_its_own_noise(search, best, gap_held)
         cands = [named if c is best else c for c in cands]
         best = named
@@ -556,11 +557,13 @@ def _candidates(search: _Search, sigs: list[Signature], significant: bool) -> li
 
 
 def _keep_best_jacobian(cands: list[Candidate]) -> None:
-    """Let go of every single candidate's Jacobian (N x p, 40 MB at 20 impacts) but the best
-    one's, which :func:`_second_effect` scores on; nothing else reads them once judged."""
+    """Let go of every single candidate's Jacobian (N x p, 40 MB at 20 impacts) and prediction
+    and residual but the best one's, which :func:`_second_effect` scores on and a pair starts
+    from; nothing else reads them once judged (the named one's fit is made again)."""
     singles = sorted(cands, key=lambda c: c.dbic)
     for c in singles[1:]:
         c.cal.drop_jacobian()
+        c.cal.drop_fit_arrays()     # remade for the one named (diagnose)
 
 
 def _second_effect(search: _Search, cands: list[Candidate],
