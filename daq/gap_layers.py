@@ -24,14 +24,19 @@ closes less is fitting the model's form (a crude rig's detuned mode), not a caus
 
 def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
                    progress: Callable[[str], None] | None = None, data_checks: bool = True,
-                   model_level: bool = True, **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
+                   model_level: bool = True, keep_counts: bool = True,
+                   **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
     """Diagnose a loaded trial. With ``model_level`` the rig is first calibrated to the trial's
     identified modes (:func:`~ramdaq.analysis.gap.rigfit.model_level`) and the effect search
     runs on what that leaves; the diagnosis carries the model's form error. With
     ``data_checks`` the data-only layer (:func:`data_only`) runs too and its findings join the
     diagnosis; :attr:`Diagnosis.answer` is the one answer of both (:func:`one_answer`).
+    Without ``keep_counts`` the trial's counts are let go once the data-only layer has read
+    them (:meth:`LoadedTrial.release_counts`, of ``lt`` and of the trial returned), before the
+    effect search, whose peak memory they would add to.
     Returns the trial (with the calibrated rig), its data as compared, and the diagnosis."""
     say = progress or (lambda s: None)
+    given = lt
     td = trial_data(lt, **prep)
     level = None
     settings = settings or Settings()
@@ -45,6 +50,9 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
                 settings = replace(settings, min_closure=max(settings.min_closure, FORM_MIN_CLOSURE))
         say(level.statement())
     data, note = data_only(lt, td, prep.get("pre_s", 1.0), progress) if data_checks else (None, None)
+    if not keep_counts:
+        given.release_counts()
+        lt.release_counts()
     d = diagnose(td, settings, progress)
     d.model_level, d.data = level, data
     if note:

@@ -28,10 +28,11 @@ class LoadedTrial:
     reduced) ``rig``, ``rails`` (low, high) per row in m/s^2 when the converter's bits are known,
     and the trigger's events (read from a file: without their samples, ``record`` None -- the
     diagnosis reads the trial, not the trigger's records, which were 37 MB for 20 blows).
-    :attr:`x` is the whole trial in m/s^2, made when asked for."""
+    :attr:`x` is the whole trial in m/s^2, made when asked for. ``data`` is None once let go
+    (:meth:`release_counts`, after the diagnosis has read all it needs of them)."""
 
     rig: Rig
-    data: ScaledCounts | np.ndarray
+    data: ScaledCounts | np.ndarray | None
     fs_hz: float
     onsets_s: np.ndarray
     rails: tuple[np.ndarray, np.ndarray] | None
@@ -42,7 +43,15 @@ class LoadedTrial:
     def x(self) -> np.ndarray:
         """The whole trial, float64 (n_gages, n) m/s^2, NaN in gaps: built anew from the counts
         at each call (8 bytes a sample: hold it only while it is used)."""
+        if self.data is None:
+            raise ValueError(f"{self.source}: the trial's counts were let go once the gap diagnosis "
+                             "had read them (run_gap); load_trial reads them again")
         return self.data.full() if isinstance(self.data, ScaledCounts) else self.data
+
+    def release_counts(self) -> None:
+        """Let the counts go (``data`` None): 2 bytes a sample, 37.5 MB for 10 minutes of 16
+        gages at 2048 Hz, which the diagnosis's effect search does not read."""
+        self.data = None
 
 
 def load_trial(src: str | Path | Recording, rig: Rig | str | Path | None = None,

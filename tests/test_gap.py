@@ -160,3 +160,32 @@ def test_every_effect_is_registered_and_leaves_a_signature(albacore_air):
         pl = eff.placements(fw, cal.fit)[0]
         d = template(fw, cal, Term(eff, pl, pl.probes[0]))
         assert np.sqrt(np.mean(d**2)) > 1e-3, name      # the probe moves the prediction
+
+
+def test_a_calibrations_fit_let_go_is_remade_to_the_last_bit(albacore_air):
+    """A search lets go of its candidates' predictions and residuals and remakes the named
+    one's (issue 19): the remade ones must be the very numbers the fit ended on, or the named
+    effect's replicates and features would move."""
+    x, fs = sim_trial(albacore_air)
+    td = prepare(x, fs, np.array(IMPACTS), albacore_air)
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    cal = calibrate(fw, max_iter=3)
+    pred, resid = cal.fit.pred, cal.fit.resid
+    cal.drop_fit_arrays()
+    assert cal.fit.pred is None and cal.fit.resid is None
+    cal.restore_fit(fw)
+    assert np.array_equal(cal.fit.pred, pred)
+    assert np.array_equal(cal.fit.resid, resid, equal_nan=True)
+
+
+def test_a_trial_whose_counts_were_let_go_says_so(albacore_air):
+    """run_gap lets the trial's counts go before the effect search (issue 19): asking for the
+    samples afterwards is an error naming the recording, not an empty or stale array."""
+    from ramdaq.daq.gap_trial import LoadedTrial
+
+    lt = LoadedTrial(albacore_air, np.zeros((3, 10)), 2048.0, np.array([0.1]), None, [], "t.mcap")
+    assert lt.x.shape == (3, 10)
+    lt.release_counts()
+    assert lt.data is None
+    with pytest.raises(ValueError, match="t.mcap: the trial's counts were let go"):
+        _ = lt.x

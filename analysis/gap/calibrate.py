@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
@@ -69,6 +69,19 @@ class Calibration:
         """Let the Jacobian go (it is N x p, 40 MB for 20 impacts, and a judged candidate of
         a search needs it no more); a score basis asked of this calibration then refuses."""
         self.jac = None
+
+    def drop_fit_arrays(self) -> None:
+        """Let the prediction and residual go (``fit.pred``, ``fit.resid`` None; (n_seg, n_g,
+        n_s) each, 3.6 MB each at 20 impacts): a search's candidate no longer read until it is
+        named. :meth:`restore_fit` makes them again, the same to the last bit."""
+        if self.fit.pred is not None:
+            self.fit = replace(self.fit, pred=None, resid=None)
+
+    def restore_fit(self, fw: Forward) -> None:
+        """The prediction and residual let go by :meth:`drop_fit_arrays` made again (one
+        prediction of ``fw``, the forward model this calibration was fitted with)."""
+        if self.fit.pred is None:
+            self.fit = fw.fit(self.theta, self.terms)
 
     def columns(self, fw: Forward) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The linear columns of this calibration's prediction -- every impact's unit response,

@@ -45,6 +45,7 @@ from .effects import EFFECTS
 from .evidence import (
     Bands,
     GapMap,
+    NoiseModel,
     ScoreBasis,
     Signature,
     bands_for,
@@ -396,10 +397,35 @@ def _by_z(sigs: Iterable[Signature]) -> list[Signature]:
 
 
 @dataclass
+class _Replicates:
+    """How the calibrated model's replicate residuals were made (86 MB at 20 impacts), to make
+    them again, the same to the last bit, when they are next read: the search need not hold
+    them while it refits. ``cal`` the calibration they simulate (its Jacobian let go), ``W``
+    the forward model's weights they were made under."""
+
+    fw: Forward
+    cal: Calibration
+    noise: NoiseModel
+    W: np.ndarray
+    settings: Settings
+
+    def make(self) -> np.ndarray:
+        """The replicates, (n_rep, n_seg, n_g, n_s) m/s^2 (one simulation of each)."""
+        st, w_now = self.settings, self.fw.W
+        self.fw.set_weights(self.W)
+        try:
+            return replicate_residuals(self.fw, self.cal, self.noise, st.n_rep, seed=st.seed,
+                                       form_tol=st.form_tol)
+        finally:
+            self.fw.set_weights(w_now)
+
+
+@dataclass
 class _Search:
     """What the search for an explanation shares once the model is calibrated: the weighted
     forward model, the settings, the spectrum prefit's constants ``theta_pre``, the calibrated
-    ``base``, its replicate residuals and their cell energies (``rep_cells``) and inflation
+    ``base``, its replicate residuals (None while let go; ``replicates`` makes them again) and
+    their cell energies (``rep_cells``) and inflation
     (``kappa_cells``) on ``bands``, the calibrated model's maps of the fitted and held-out
     impacts, the effective number of data ``n_eff`` (BIC's ln N), the bootstrap's generator, and
     where progress and notes go."""
@@ -408,7 +434,8 @@ class _Search:
     settings: Settings
     theta_pre: np.ndarray
     base: Calibration
-    reps: np.ndarray
+    reps: np.ndarray | None
+    replicates: _Replicates
     bands: Bands
     rep_cells: np.ndarray
     kappa_cells: np.ndarray
@@ -418,6 +445,12 @@ class _Search:
     rng: np.random.Generator
     say: Callable[[str], None]
     notes: list[str]
+
+    def held_reps(self) -> np.ndarray:
+        """The replicates, made again if they were let go, and held from then on."""
+        if self.reps is None:
+            self.reps = self.replicates.make()
+        return self.reps
 
     @property
     def td(self) -> TrialData:
@@ -442,7 +475,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     """Diagnose one trial (see the module docstring)."""
     t_start = time.perf_counter()
     say = progress or (lambda s: None)
-    fw, theta_pre, base, reps, bands, rep_cells = _calibrated(td, settings, say)
+    fw, theta_pre, base, reps, bands, rep_cells, made = _calibrated(td, settings, say)
     held = ~td.fitted
     m_fit = gap_map(fw, base.fit.resid, rep_cells, bands, td.fitted)
     m_held = gap_map(fw, base.fit.resid, rep_cells, bands, held) if held.any() else None
@@ -450,25 +483,29 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     significant = z_detect > settings.z_gap
     notes = _trial_notes(td)
     basis = ScoreBasis(fw, base, reps)
-    search = _Search(fw=fw, settings=settings, theta_pre=theta_pre, base=base, reps=reps,
-                     bands=bands, rep_cells=rep_cells,
+    search = _Search(fw=fw, settings=settings, theta_pre=theta_pre, base=base, reps=None,
+                     replicates=made, bands=bands, rep_cells=rep_cells,
                      kappa_cells=cell_inflation(fw, rep_cells, bands, td.fitted), m_fit=m_fit,
                      m_held=m_held, n_eff=basis.r.size, rng=np.random.default_rng(settings.seed),
                      say=say, notes=notes)
     names = settings.effects or tuple(EFFECTS)
     say(f"scoring {len(names)} candidate effects")
     sigs = _by_z(signature_scores(fw, base, basis, EFFECTS[n]) for n in names)
-    del basis      # (N, k) and the replicates whitened: a second effect's basis is made anew
+    # (N, k) and the replicates whitened: a second effect's basis is made anew; the replicates
+    # themselves are let go during the singles' refits (the search's peak) and made again
+    del basis, reps
     cands = sorted(_candidates(search, sigs, significant), key=lambda c: c.dbic)
     pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
     best = next((c for c in cands if c.name == pick), None)
     verdict = "no gap beyond noise" if not significant else ("explained" if best else "unexplained")
     gap_fit, gap_held = m_fit.excess(), m_held.excess() if m_held else 0.0
     if best is not None:
+        best.cal.restore_fit(fw)    # let go if it was not the best single (_keep_best_jacobian)
         named, gap_fit, gap_held = _against_its_own_noise(search, best, gap_held)
         cands = [named if c is best else c for c in cands]
         best = named
     notes += _solver_notes(base, best)
+    reps = search.held_reps()
     return Diagnosis(
         verdict=verdict, best=best, candidates=cands, signatures=sigs, base=base, map_fit=m_fit,
         map_held=m_held, gap_fit=gap_fit, gap_held=gap_held,
@@ -477,11 +514,12 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
 
 
 def _calibrated(td: TrialData, settings: Settings, say: Callable[[str], None]
-                ) -> tuple[Forward, np.ndarray, Calibration, np.ndarray, Bands, np.ndarray]:
+                ) -> tuple[Forward, np.ndarray, Calibration, np.ndarray, Bands, np.ndarray, _Replicates]:
     """Step 1: the noise, the calibration and its replicates. Returns the forward model weighted
     by what each gage x window tells beyond the model's form tolerance, the spectrum prefit's
     constants, the calibration refitted under those weights, its replicate residuals
-    (n_rep, n_seg, n_g, n_s) m/s^2, the map's bands and the replicates' cell energies."""
+    (n_rep, n_seg, n_g, n_s) m/s^2, the map's bands, the replicates' cell energies and how to
+    make the replicates again."""
     # noise first from the nominal model's residual, then everything is weighted by it
     sigma0 = np.full(td.n_gages, td.rig.daq.noise_m_s2_rms * math.sqrt(2 * td.lowpass_hz / td.fs_full_hz))
     fw0 = Forward(td, sigma0)
@@ -505,8 +543,11 @@ def _calibrated(td: TrialData, settings: Settings, say: Callable[[str], None]
     fw.set_weights(form_weights(fw, window_inflation(fw, rep_cells, td.fitted)))
     # the whitened residual's Jacobian scales with the weights, sample by sample
     ratio = (fw.W / W_old)[td.fitted].ravel()
-    base = calibrate(fw, theta0=base.theta, max_iter=settings.refit_iter, jac0=base.jac * ratio[:, None])
-    return fw, theta_pre, base, reps, bands, cell_energies(fw, reps, bands)
+    first = base
+    base = calibrate(fw, theta0=base.theta, max_iter=settings.refit_iter, jac0=first.jac * ratio[:, None])
+    first.drop_jacobian()
+    made = _Replicates(fw, first, noise, W_old, settings)
+    return fw, theta_pre, base, reps, bands, cell_energies(fw, reps, bands), made
 
 
 def _trial_notes(td: TrialData) -> list[str]:
@@ -556,11 +597,13 @@ def _candidates(search: _Search, sigs: list[Signature], significant: bool) -> li
 
 
 def _keep_best_jacobian(cands: list[Candidate]) -> None:
-    """Let go of every single candidate's Jacobian (N x p, 40 MB at 20 impacts) but the best
-    one's, which :func:`_second_effect` scores on; nothing else reads them once judged."""
+    """Let go of every single candidate's Jacobian (N x p, 40 MB at 20 impacts) and prediction
+    and residual but the best one's, which :func:`_second_effect` scores on and a pair starts
+    from; nothing else reads them once judged (the named one's fit is made again)."""
     singles = sorted(cands, key=lambda c: c.dbic)
     for c in singles[1:]:
         c.cal.drop_jacobian()
+        c.cal.drop_fit_arrays()     # remade for the one named (diagnose)
 
 
 def _second_effect(search: _Search, cands: list[Candidate],
@@ -573,10 +616,12 @@ def _second_effect(search: _Search, cands: list[Candidate],
         return None
     c1 = singles[0]
     first = next(s for s in live if s.effect.name == c1.name)
-    basis1 = ScoreBasis(search.fw, c1.cal, search.reps)
+    basis1 = ScoreBasis(search.fw, c1.cal, search.held_reps())
     search.say(f"scoring a second effect on top of {c1.name}")
     second = _by_z(signature_scores(search.fw, c1.cal, basis1, s.effect)
                    for s in live[: search.settings.top_k + 2] if s.effect.name != c1.name)
+    del basis1
+    c1.cal.drop_jacobian()      # scored on: a pair's refit starts from the base's Jacobian
     if second and second[0].placement is not None and second[0].z > search.settings.z_pair:
         return [first, second[0]]
     return None

@@ -158,13 +158,14 @@ def _add(blocks: dict, key: tuple[int, int], u: np.ndarray, du: np.ndarray) -> N
 class Fit:
     """A prediction and how it matches the data.
 
-    ``pred`` and ``resid`` (n_seg, n_gages, n_s) m/s^2 (resid NaN where there is no data);
+    ``pred`` and ``resid`` (n_seg, n_gages, n_s) m/s^2 (resid NaN where there is no data; both
+    None once let go, :meth:`~ramdaq.analysis.gap.calibrate.Calibration.drop_fit_arrays`);
     ``force`` (n_seg,) peak forces N; ``shift_s`` (n_seg,) onset corrections s;
     ``lin`` the extra linear coefficients; ``modes`` the :class:`ModeSet` used.
     """
 
-    pred: np.ndarray
-    resid: np.ndarray
+    pred: np.ndarray | None
+    resid: np.ndarray | None
     force: np.ndarray
     shift_s: np.ndarray
     lin: np.ndarray

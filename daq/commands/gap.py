@@ -29,10 +29,11 @@ def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settin
             progress: Callable[[str], None] | None = None, data_checks: bool = True,
             model_level: bool = True, **prep) -> tuple[LoadedTrial, TrialData, Diagnosis]:
     """Read a recording (:func:`~ramdaq.daq.gap_trial.load_trial`) and diagnose it
-    (:func:`~ramdaq.daq.gap_layers.diagnose_trial`, every layer unless turned off)."""
+    (:func:`~ramdaq.daq.gap_layers.diagnose_trial`, every layer unless turned off). The trial
+    returned holds no counts (``data`` None): they are let go before the effect search."""
     map_large_blocks()      # arrays of MBs freed go back to the OS at once (daq/heap.py)
     return diagnose_trial(load_trial(path, rig, progress), settings=settings, progress=progress,
-                          data_checks=data_checks, model_level=model_level, **prep)
+                          data_checks=data_checks, model_level=model_level, keep_counts=False, **prep)
 
 
 def _pct(v: float) -> str:
