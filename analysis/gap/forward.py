@@ -29,7 +29,6 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.signal
 
 from ..model.response import half_sine_response, modal_form
 from ..model.rig import Rig
@@ -200,11 +199,7 @@ class Forward:
         self.mask[:, :, td.windows.pre] = valid[:, :, td.windows.pre]
         self.x0 = np.where(valid, td.x, 0.0)
         self.set_weights(np.broadcast_to(self.weight[None, :, None], td.x.shape))
-        d = td.rig.daq
-        self._aa = None
-        if d.anti_alias_hz < td.fs_full_hz / 2:
-            self._aa = scipy.signal.butter(d.anti_alias_order, d.anti_alias_hz, fs=td.fs_full_hz,
-                                           output="sos")
+        self._aa = td.rig.daq.anti_alias_sos(td.fs_full_hz)
 
     def set_weights(self, W: np.ndarray) -> None:
         """Per-sample weights ``1 / sigma_eff`` (n_seg, n_gages, n_s), 1/(m/s^2)."""

@@ -241,6 +241,17 @@ class Daq:
     anti_alias_order: int
     noise_m_s2_rms: float
 
+    def anti_alias_sos(self, fs_hz: float) -> np.ndarray | None:
+        """The anti-alias low-pass (Butterworth of ``anti_alias_order`` at ``anti_alias_hz``) as
+        second-order sections at ``fs_hz``, shape (n_sections, 6); None when its corner is not
+        below half that rate (or not known: NaN), where it leaves the sampled band alone."""
+        if not self.anti_alias_hz < fs_hz / 2:
+            return None
+        import scipy.signal  # here: the rig is read where no filter is needed
+
+        return scipy.signal.butter(self.anti_alias_order, self.anti_alias_hz, fs=fs_hz,
+                                   output="sos")
+
 
 @dataclass(frozen=True)
 class ImpactSpec:

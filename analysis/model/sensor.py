@@ -55,10 +55,8 @@ class SensorChain:
         self.noise_rms = d.noise_m_s2_rms if noise else 0.0
         self.rng = np.random.default_rng(seed)
         n = len(self.sens)
-        self.sos = None
-        if anti_alias and d.anti_alias_hz < fs_hz / 2:
-            self.sos = scipy.signal.butter(d.anti_alias_order, d.anti_alias_hz, fs=fs_hz,
-                                           output="sos")
+        self.sos = d.anti_alias_sos(fs_hz) if anti_alias else None
+        if self.sos is not None:
             self.zi = np.zeros((self.sos.shape[0], n, 2))
         self.clipped = np.zeros(n, dtype=np.int64)
 

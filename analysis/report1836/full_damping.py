@@ -218,9 +218,9 @@ def filtered_noise_factor(daq: Daq, fs_hz: float, f_hz: float) -> float:
     it was sampled: ``|H(f)| / sqrt(mean |H|² over 0 .. fs/2)`` (1.13 for the shipped rigs'
     800 Hz, 4th order at 2048 Hz). White noise fills the band evenly; filtered, the residual's
     variance holds less than the band's share below the corner, where the modes are."""
-    if daq.anti_alias_hz >= fs_hz / 2:
+    sos = daq.anti_alias_sos(fs_hz)
+    if sos is None:
         return 1.0
-    sos = scipy.signal.butter(daq.anti_alias_order, daq.anti_alias_hz, fs=fs_hz, output="sos")
     _, H = scipy.signal.sosfreqz(sos, worN=4096, fs=fs_hz)
     _, Hf = scipy.signal.sosfreqz(sos, worN=[f_hz], fs=fs_hz)
     return float(abs(Hf[0]) / np.sqrt(np.mean(np.abs(H) ** 2)))
