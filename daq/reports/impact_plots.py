@@ -120,13 +120,18 @@ def write_decay_png(fig: Figure, path: Path, reuse: dict | None = None) -> None:
                 reuse["decay_background"] = (fig, stamp, canvas.copy_from_bbox(fig.bbox))
         for art in per_hit:
             fig.draw_artist(art)
-        rgba = np.asarray(canvas.buffer_rgba())
-        png.write_png(path, rgba[..., :3] if rgba[..., 3].min() == 255 else rgba, DPI,
-                      PNG_COMPRESSION)
+        _write_canvas(canvas, path)
     finally:
         for art in per_hit:
             art.set_animated(False)
         fig.set_dpi(dpi)
+
+
+def _write_canvas(canvas: FigureCanvasAgg, path: Path) -> None:
+    """What ``canvas`` has drawn, into ``path`` as PNG: RGB when it is opaque, else RGBA."""
+    rgba = np.asarray(canvas.buffer_rgba())
+    png.write_png(path, rgba[..., :3] if rgba[..., 3].min() == 255 else rgba, DPI,
+                  PNG_COMPRESSION)
 
 
 def write_png(fig: Figure, path: Path) -> None:
@@ -138,9 +143,7 @@ def write_png(fig: Figure, path: Path) -> None:
     fig.set_dpi(DPI)
     try:
         canvas.draw()
-        rgba = np.asarray(canvas.buffer_rgba())
-        png.write_png(path, rgba[..., :3] if rgba[..., 3].min() == 255 else rgba, DPI,
-                      PNG_COMPRESSION)
+        _write_canvas(canvas, path)
     finally:
         fig.set_dpi(dpi)
 
