@@ -94,6 +94,7 @@ def test_truncated_recording_is_one_line(csv_trial, capsys):
     mcap = tmp / "other_daq.mcap"
     if not mcap.exists():
         assert main(["import", str(csv), "--rig", str(rig), "--out", str(mcap)]) == 0
+    capsys.readouterr()  # the import's own output (its header-unit warning) is not the gap's
     cut = tmp / "cut.mcap"
     cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 3])
     assert main(["gap", str(cut), "--no-plots", "--out", str(tmp / "cut_gap")]) == 1
@@ -106,6 +107,7 @@ def test_unknown_effect_and_too_few_gages_are_refused(csv_trial, capsys, tmp_pat
     mcap = tmp / "other_daq.mcap"
     if not mcap.exists():
         assert main(["import", str(csv), "--rig", str(rig), "--out", str(mcap)]) == 0
+    capsys.readouterr()  # the import's own output is not the gap's
     assert main(["gap", str(mcap), "--effects", "ambient_tone,gremlins"]) == 1
     err = capsys.readouterr().err
     assert "unknown gap effect 'gremlins'" in err and err.count("\n") == 1

@@ -420,11 +420,9 @@ def _import_file(args: argparse.Namespace) -> int:
            if "rig_unit_not_applied" in c]
     for unit, rig_unit in sorted({(u, r) for _, u, r in odd}):  # one line per disagreement
         names = [src_ for src_, u, r in odd if (u, r) == (unit, rig_unit)]
-        shown = ", ".join(repr(n) for n in names[:4]) + (f" and {len(names) - 4} more"
-                                                         if len(names) > 4 else "")
-        print(f"warning: channel{'s' if len(names) > 1 else ''} {shown} {'are' if len(names) > 1 else 'is'}"
-              f" in {unit} by the file's header, but rig {info.extra.get('rig_name')!r} says "
-              f"{rig_unit}: the header's unit was applied", file=sys.stderr)
+        print(f"warning: {_channels_are(names, most=4)} in {unit} by the file's header, but rig "
+              f"{info.extra.get('rig_name')!r} says {rig_unit}: the header's unit was applied",
+              file=sys.stderr)
     print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
@@ -437,6 +435,15 @@ def _import_file(args: argparse.Namespace) -> int:
 
 _SUFFIX_FORMAT = {".tsv": "csv", ".txt": "csv", ".unv": "uff"}
 """Suffixes ``import`` reads as another format's (a tab-separated file is a CSV to it)."""
+
+
+def _channels_are(names: list[str], most: int | None = None) -> str:
+    """``channel 'a' is`` or ``channels 'a', 'b' are``, naming at most ``most`` (then "and N
+    more")."""
+    shown = ", ".join(repr(n) for n in names[:most])
+    if most is not None and len(names) > most:
+        shown += f" and {len(names) - most} more"
+    return f"channels {shown} are" if len(names) > 1 else f"channel {shown} is"
 
 
 def _read_notes(imp: dict) -> list[str]:
@@ -475,8 +482,7 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                        medium=args.medium or "air", file_units=found.units)
     for unit in sorted({u for _, u in made.overridden}):
         names = [c for c, u in made.overridden if u == unit]
-        print(f"warning: channel{'s' if len(names) > 1 else ''} "
-              f"{', '.join(repr(c) for c in names)} {'are' if len(names) > 1 else 'is'} in "
+        print(f"warning: {_channels_are(names)} in "
               f"{unit} by the file's header; --units {args.units} applies only to channels that "
               f"state no unit, so {unit} is applied and recorded in {rig_out.name}",
               file=sys.stderr)
