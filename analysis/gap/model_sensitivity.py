@@ -27,23 +27,10 @@ import numpy as np
 
 from ..model.response import ModalForm
 from ..model.rig import Rig
-from ..model.structure import added_mass, stock_element
+from ..model.structure import added_mass, dashpot_strokes, stock_element, stock_ends
 
 _HULL = re.compile(r"^hull\.modes\[(\d+)\]\.(\w+)$")
 _DAMPING = {"C_N_s_per_m": 0, "c_N_m_s_per_rad": 1, "c_alpha_N_m_s_per_rad": 2}
-
-
-def _stock_ends(rig: Rig, n: int) -> np.ndarray:
-    """Rows w1, theta1, w2, theta2, gamma, gamma_b of the stock's ends per unit DOF, (6, n):
-    ``build_model``'s congruence ``T``."""
-    r = rig.rudder
-    T = np.zeros((6, n))
-    T[2, :3] = (1.0, r.stock_x_m, -r.attach_z_m)
-    T[3, 2] = 1.0
-    T[4, 1] = 1.0
-    for k, mode in enumerate(rig.hull_modes):
-        T[0, 3 + k], T[1, 3 + k], T[5, 3 + k] = mode.v_b, mode.alpha_b, mode.gamma_b
-    return T
 
 
 def _dKe_stock_I(rig: Rig) -> np.ndarray:
@@ -67,8 +54,8 @@ def matrix_derivatives(rig: Rig, names: list[str]) -> tuple[np.ndarray, np.ndarr
     n = 3 + len(rig.hull_modes)
     p = len(names)
     dM, dC, dK = np.zeros((p, n, n)), np.zeros((p, n, n)), np.zeros((p, n, n))
-    T = _stock_ends(rig, n)
-    R = np.vstack([np.eye(1, n, 0), T[4] - T[5], T[3] - T[1]])
+    T = stock_ends(rig)
+    R = dashpot_strokes(T)
     water = rig.medium == "water"
     r, d = rig.rudder, rig.active_damping
     for k, name in enumerate(names):

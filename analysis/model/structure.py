@@ -139,6 +139,32 @@ def stock_element(rig: Rig) -> np.ndarray:
     ])
 
 
+def stock_ends(rig: Rig) -> np.ndarray:
+    """The stock's ends in terms of the model's coordinates q (rudder v, gamma, alpha, then one
+    per hull mode): rows w1, theta1, w2, theta2, gamma, gamma_b per unit of each, (6, n_dof)."""
+    r = rig.rudder
+    T = np.zeros((6, 3 + len(rig.hull_modes)))
+    T[2, :3] = (1.0, r.stock_x_m, -r.attach_z_m)
+    T[3, 2] = 1.0
+    T[4, 1] = 1.0
+    for k, mode in enumerate(rig.hull_modes):
+        T[0, 3 + k] = mode.v_b
+        T[1, 3 + k] = mode.alpha_b
+        T[5, 3 + k] = mode.gamma_b
+    return T
+
+
+def dashpot_strokes(T: np.ndarray) -> np.ndarray:
+    """What the rig's three dashpots (C, c, c_alpha) see per unit of each coordinate, from the
+    stock's ends ``T`` (:func:`stock_ends`): v (absolute), gamma - gamma_b, alpha - alpha_b,
+    (3, n_dof)."""
+    R = np.zeros((3, T.shape[1]))
+    R[0, 0] = 1.0
+    R[1] = T[4] - T[5]
+    R[2] = T[3] - T[1]
+    return R
+
+
 def build_model(rig: Rig) -> StructuralModel:
     """Assemble M, C, K and the gage output map for ``rig`` in its medium."""
     r, st, modes = rig.rudder, rig.stock, rig.hull_modes
@@ -152,16 +178,7 @@ def build_model(rig: Rig) -> StructuralModel:
     M[2, 2] = r.Ix_kg_m2 + add["Ix_vir"]
     M[1, 2] = M[2, 1] = -r.Ixz_kg_m2
 
-    # Ends of the stock in terms of q: rows w1, theta1, w2, theta2, gamma, gamma_b.
-    T = np.zeros((6, n))
-    h, b = r.stock_x_m, r.attach_z_m
-    T[2, :3] = (1.0, h, -b)
-    T[3, 2] = 1.0
-    T[4, 1] = 1.0
-    for k, mode in enumerate(modes):
-        T[0, 3 + k] = mode.v_b
-        T[1, 3 + k] = mode.alpha_b
-        T[5, 3 + k] = mode.gamma_b
+    T = stock_ends(rig)
     Ke = np.zeros((6, 6))
     Ke[:4, :4] = stock_element(rig)
     kt = st.G_Pa * st.J_m4 / st.torsion_length_m
@@ -169,11 +186,7 @@ def build_model(rig: Rig) -> StructuralModel:
     K = T.T @ Ke @ T
 
     d = rig.active_damping
-    # Damping on v (absolute), gamma - gamma_b, alpha - alpha_b.
-    R = np.zeros((3, n))
-    R[0, 0] = 1.0
-    R[1] = T[4] - T[5]
-    R[2] = T[3] - T[1]
+    R = dashpot_strokes(T)
     C = R.T @ np.diag([d.C_N_s_per_m, d.c_N_m_s_per_rad, d.c_alpha_N_m_s_per_rad]) @ R
 
     for k, mode in enumerate(modes):
