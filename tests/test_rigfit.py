@@ -204,8 +204,22 @@ def test_rig_fit_refuses_bad_bounds_in_one_line(perturbed_trial, capsys):
     assert err == ("ramdaq rig: --bound 'stock.I_m4': expected NAME=LO:HI, multipliers of the start "
                    "value, e.g. stock.I_m4=0.8:1.25")
     assert main(["rig", "fit", str(mcap), "--rig", str(start), "--bound", "mass=0.5:2"]) == 1
-    err = capsys.readouterr().err.strip()
+    cap = capsys.readouterr()
+    err = cap.err.strip()
     assert err.startswith("ramdaq rig: --bound mass: not a constant the fit can move") and "\n" not in err
+    assert "identifying modes" not in cap.out  # refused before the identification's work
+
+
+def test_rig_fit_starts_from_the_recordings_own_rig(perturbed_trial, capsys):
+    """Without --rig the start is the rig the trial was recorded with (here the true one)."""
+    tmp, _, truth, mcap = perturbed_trial
+    out = tmp / "own.toml"
+    assert main(["rig", "fit", str(mcap), "--out", str(out),
+                 "--bound", "hull.modes[0].damping_ratio=1:1"]) == 0
+    text = capsys.readouterr().out
+    assert "start rig: the one trial.mcap was recorded with" in text
+    # the rudder's mass is the scale the fit holds: the recorded rig's (1.22x the shipped one's)
+    assert load_rig(out).rudder.mass_kg == truth.rudder.mass_kg
 
 
 def test_gap_with_a_perturbed_rig_says_no_effect_and_model_form(perturbed_trial, capsys):

@@ -549,9 +549,9 @@ def cmd_rig_fit(args: argparse.Namespace) -> int:
     """``ramdaq rig fit TRIAL --rig START``: the rig's constants tuned to the trial's modes."""
     from .rigfit import fit_lines, parse_bounds, run_rig_fit
 
-    if not args.trial or not args.start:
-        raise SystemExit("ramdaq rig fit: give the trial and the start rig: "
-                         "ramdaq rig fit TRIAL.mcap --rig START.toml")
+    if not args.trial:
+        raise SystemExit("ramdaq rig fit: give the trial (and, unless it carries its rig, the "
+                         "start rig): ramdaq rig fit TRIAL.mcap [--rig START.toml]")
     mf, path = run_rig_fit(args.trial, args.start, out=Path(args.out) if args.out else None,
                            bounds=parse_bounds(args.bound), progress=lambda m: print(m, flush=True))
     print("\n".join(fit_lines(mf, path)))
@@ -750,7 +750,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "'rig fit TRIAL --rig START' tunes a rig to a trial's modes")
     g.add_argument("rig", help="rig file or shipped rig's name, or the word 'fit'")
     g.add_argument("trial", nargs="?", help="fit: the recording (.mcap) whose modes the rig is tuned to")
-    g.add_argument("--rig", dest="start", help="fit: the start rig (file or shipped name)")
+    g.add_argument("--rig", dest="start", help="fit: the start rig (file or shipped name; default: the rig "
+                   "the trial was recorded with)")
     g.add_argument("--out", help="fit: the fitted rig file (default TRIAL_rig.toml beside the trial)")
     g.add_argument("--bound", action="append", metavar="NAME=LO:HI",
                    help="fit: bounds of a constant as multipliers of its start value, e.g. "

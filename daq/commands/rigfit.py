@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ...analysis.gap.modal_level import ModalComparison, trial_modes
-from ...analysis.gap.rigfit import ModeFit, calibrate_to_modes, fitted_rig_text
+from ...analysis.gap.rigfit import ModeFit, calibrate_to_modes, fit_params, fitted_rig_text
 from ...analysis.model.rig import RigError
 from ..gap_trial import load_trial, trial_data
 
@@ -32,13 +32,18 @@ def parse_bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:
     return out
 
 
-def run_rig_fit(trial: str | Path, start: str | Path, *, out: Path | None = None,
+def run_rig_fit(trial: str | Path, start: str | Path | None = None, *, out: Path | None = None,
                 bounds: dict[str, tuple[float, float]] | None = None,
                 progress: Callable[[str], None] | None = None) -> tuple[ModeFit, Path]:
-    """Identify ``trial``'s modes, fit ``start``'s constants to them, write the fitted rig to
-    ``out`` (default: the trial's folder, ``TRIAL_rig.toml``). Returns the fit and the path."""
+    """Identify ``trial``'s modes, fit ``start``'s constants to them (``start`` None: the rig the
+    trial was recorded with), write the fitted rig to ``out`` (default: the trial's folder,
+    ``TRIAL_rig.toml``). ``bounds`` are checked against the rig before any identification.
+    Returns the fit and the path."""
     say = progress or (lambda s: None)
     lt = load_trial(trial, start, say)
+    if start is None:
+        say(f"start rig: the one {Path(trial).name} was recorded with ({lt.rig.name})")
+    fit_params(lt.rig, bounds)  # a misspelt --bound fails here, not after the identification
     td = trial_data(lt)
     say(f"identifying modes on {td.n_seg} impacts")
     tm = trial_modes(td)
