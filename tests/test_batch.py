@@ -23,6 +23,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
+import ramdaq.rigs
 from ramdaq.daq.commands.batch import (
     BatchOutcome,
     expand_paths,
@@ -181,19 +182,48 @@ def test_a_changed_recording_runs_again(fleet, tmp_path):
 
 
 def test_gap_batch(client, fleet, tmp_path):
+    """Held against a rig given for the whole batch (the shipped SAMPSON file the sample was made
+    from): the rig and its digest in the row, the numbers those of a serial run with that rig."""
     out = tmp_path / "out"
+    rig = Path(ramdaq.rigs.__file__).parent / "sampson.toml"
     run_batch("gap", [str(fleet / "a" / "sampson-water.mcap"), str(fleet / "b" / "truncated.mcap")], out,
-              client=client, plots=False)
+              client=client, plots=False, rig=rig)
     rows = {Path(r["recording"]).name: r for r in pq.read_table(out / "gap.parquet").to_pylist()}
     assert rows["truncated.mcap"]["status"] == "failed"
     r = rows["sampson-water.mcap"]
-    serial = gap_task(TaskSpec(r["recording"], r["sha256"], str(tmp_path / "serial"), False))
+    assert r["rig"] == str(rig.resolve()) and len(r["rig_sha256"]) == 64
+    serial = gap_task(TaskSpec(r["recording"], r["sha256"], str(tmp_path / "serial"), False,
+                               r["rig"], r["rig_sha256"]))
     assert r["status"] == "ok" and r["verdict"] == serial.rows[0].verdict
     assert {k: r[k] for k in serial.rows[0].__dataclass_fields__} == {
         k: (list(v) if isinstance(v, tuple) else v) for k, v in serial.rows[0].__dict__.items()}
     doc = json.loads((Path(r["folder"]) / "gap.json").read_text())
     assert doc["verdict"] == r["verdict"] and doc["effect"] == r["effect"]
     assert r["answer"] == doc["answer"]["named"] and r["answered_by"] == doc["answer"]["by"]
+
+
+def test_a_rig_for_the_batch_is_read_first_and_part_of_what_is_current(fleet, tmp_path):
+    """``batch gap --rig``: a bad rig is one error before any task; a finished run is current
+    for the same rig and not for another (nor for the recordings' own)."""
+    from ramdaq.analysis.model.rig import RigError
+
+    src = [str(fleet / "a" / "sampson-water.mcap")]
+    out = tmp_path / "out"
+    with pytest.raises(RigError, match="no-such-rig"):
+        plan_batch("gap", src, out, plots=False, rig=tmp_path / "no-such-rig.toml")
+    with pytest.raises(ValueError, match="--rig goes with 'batch gap'"):
+        plan_batch("analyze", src, out, plots=False, rig="sampson")
+    plan = plan_batch("gap", src, out, plots=False, rig="sampson")
+    (s,) = plan.specs
+    assert s.rig == "sampson" and len(s.rig_sha256) == 64
+    Path(s.folder).mkdir(parents=True)
+    (Path(s.folder) / "gap.json").write_text("{}")
+    done = TaskResult(s.path, s.sha256, "ok", folder=s.folder, plots=False, rig=s.rig,
+                      rig_sha256=s.rig_sha256, method=method_digest())
+    finish(BatchOutcome(plan, {s.path: done}))
+    assert plan_batch("gap", src, out, plots=False, rig="sampson").todo == ()
+    assert len(plan_batch("gap", src, out, plots=False, rig="albacore").todo) == 1
+    assert len(plan_batch("gap", src, out, plots=False).todo) == 1
 
 
 def test_gap_benchmark_through_dask_is_the_serial_run(client, tmp_path):

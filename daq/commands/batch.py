@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import glob
+import hashlib
 import logging
 import os
 import signal
@@ -207,17 +208,19 @@ def read_table(path: Path, kind: str) -> tuple[pa.Table | None, str]:
 
 def current(old: pa.Table | None, specs: Sequence[TaskSpec], kind: str) -> set[str]:
     """The recordings of ``specs`` whose rows in ``old`` are current: same content, same
-    code, same plots option, analysed (or failed) by that code, and the folder still there."""
+    code, same plots option, the same rig held (gap), analysed (or failed) by that code, and
+    the folder still there."""
     if old is None:
         return set()
     want = {s.path: s for s in specs}
     mine = method_digest()
     done = set()
-    for r in old.select(["recording", "sha256", "method", "plots", "status", "folder"]).to_pylist():
+    cols = ["recording", "sha256", "method", "plots", "rig_sha256", "status", "folder"]
+    for r in old.select(cols).to_pylist():
         s = want.get(r["recording"])
         if s is None or r["status"] not in ("ok", "failed") or r["method"] != mine:
             continue
-        if r["sha256"] == s.sha256 and r["plots"] == s.plots and (
+        if r["sha256"] == s.sha256 and r["plots"] == s.plots and r["rig_sha256"] == s.rig_sha256 and (
                 r["status"] == "failed" or (Path(r["folder"]) / REPORT[kind][1]).is_file()):
             done.add(s.path)
     return done
@@ -358,13 +361,18 @@ class BatchPlan:
 
 
 def plan_batch(kind: str, patterns: Sequence[str], out: Path, *, plots: bool = True,
-               force: bool = False) -> BatchPlan:
-    """Find the recordings, hash them, and decide which need running (all with ``force``)."""
+               force: bool = False, rig: str | Path | None = None) -> BatchPlan:
+    """Find the recordings, hash them, and decide which need running (all with ``force``).
+    ``rig`` (gap only: a rig file or a shipped rig's name) is read here, so a bad one is one
+    error before any task runs; every recording is then held against it."""
     if kind not in TASKS:
         raise ValueError(f"batch {kind!r}: one of {', '.join(TASKS)}")
+    if rig is not None and kind != "gap":
+        raise ValueError(f"batch {kind}: --rig goes with 'batch gap' (a recording carries its rig)")
+    rig_id, rig_sha = held_rig(rig)
     paths, left = find_recordings(patterns, exclude=out)
     folders = report_folders(paths, out, kind)
-    specs = tuple(TaskSpec(str(p), file_sha256(p), str(f), plots)
+    specs = tuple(TaskSpec(str(p), file_sha256(p), str(f), plots, rig_id, rig_sha)
                   for p, f in zip(paths, folders, strict=True))
     table = out / f"{kind}.parquet"
     old, note = (None, "") if force else read_table(table, kind)
@@ -526,13 +534,26 @@ def _n(count: int, noun: str) -> str:
     return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
+def held_rig(rig: str | Path | None) -> tuple[str, str]:
+    """``(how the workers find it, sha256 of its text)`` of a rig file (its absolute path) or a
+    shipped rig's name; ``("", "")`` for None (each recording's own). Raises RigError."""
+    if rig is None:
+        return "", ""
+    from ...analysis.model.rig import load_rig
+
+    text = load_rig(rig).text
+    where = str(Path(rig).resolve()) if Path(rig).is_file() else str(rig)
+    return where, hashlib.sha256(text.encode()).hexdigest()
+
+
 def run_batch(kind: str, patterns: Sequence[str], out: Path, *, client: Client | None = None,
               workers: int | None = None, scheduler: str | None = None, plots: bool = True,
-              force: bool = False, progress: bool = False) -> BatchOutcome:
+              force: bool = False, progress: bool = False,
+              rig: str | Path | None = None) -> BatchOutcome:
     """Plan, run on ``client`` (or on a cluster opened for the purpose, only when there is
     something to run), with a progress bar if asked, and write the table; the outcome.
     Python's entry to ``ramdaq batch``."""
-    plan = plan_batch(kind, patterns, out, plots=plots, force=force)
+    plan = plan_batch(kind, patterns, out, plots=plots, force=force, rig=rig)
     if not plan.todo:
         outcome = BatchOutcome(plan, {})
     elif client is not None:

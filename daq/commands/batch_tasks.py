@@ -35,12 +35,16 @@ ran (``interrupted``). Only ``ok`` and ``failed`` are results of the recording i
 @dataclass(frozen=True)
 class TaskSpec:
     """One recording to process: its absolute ``path`` (as the workers see it), its content
-    ``sha256`` (hex), the report ``folder`` to write and whether to draw the PNG ``plots``."""
+    ``sha256`` (hex), the report ``folder`` to write, whether to draw the PNG ``plots``, and the
+    ``rig`` to hold it against (gap only: a rig file's absolute path or a shipped rig's name;
+    ``""``: the rig the recording carries) with that rig's text's ``rig_sha256``."""
 
     path: str
     sha256: str
     folder: str
     plots: bool
+    rig: str = ""
+    rig_sha256: str = ""
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,8 @@ class GapRow:
 @dataclass(frozen=True)
 class TaskResult:
     """What one task gives back: the recording's identity (``recording`` path, content
-    ``sha256``, ``method`` digest of the code that ran, ``plots``), its ``status``
+    ``sha256``, ``method`` digest of the code that ran, ``plots``, the ``rig`` given and its
+    ``rig_sha256``, both ``""`` for the recording's own), its ``status``
     (:data:`STATUSES`) with a one-line ``status_reason`` when not ok, the report ``folder``, which
     ``worker`` ran it (host:pid) in ``seconds`` (wall, s), its ``hits_found`` and
     ``hits_accepted`` (for gap: impacts found and compared), and its ``rows``
@@ -85,6 +90,8 @@ class TaskResult:
     status_reason: str = ""
     folder: str = ""
     plots: bool = False
+    rig: str = ""
+    rig_sha256: str = ""
     method: str = ""
     worker: str = ""
     seconds: float = 0.0
@@ -95,7 +102,8 @@ class TaskResult:
     @classmethod
     def not_run(cls, spec: TaskSpec, status: str, reason: str) -> TaskResult:
         """A recording whose task gave no result (``lost``, ``interrupted``)."""
-        return cls(spec.path, spec.sha256, status, reason, spec.folder, spec.plots)
+        return cls(spec.path, spec.sha256, status, reason, spec.folder, spec.plots, spec.rig,
+                   spec.rig_sha256)
 
 
 @functools.cache
@@ -155,8 +163,8 @@ def _worker() -> str:
 
 
 def _finish(spec: TaskSpec, t0: float, **kw) -> TaskResult:
-    return TaskResult(spec.path, spec.sha256, folder=spec.folder, plots=spec.plots,
-                      method=method_digest(), worker=_worker(),
+    return TaskResult(spec.path, spec.sha256, folder=spec.folder, plots=spec.plots, rig=spec.rig,
+                      rig_sha256=spec.rig_sha256, method=method_digest(), worker=_worker(),
                       seconds=time.perf_counter() - t0, **kw)
 
 
@@ -180,16 +188,16 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
 
 
 def gap_task(spec: TaskSpec) -> TaskResult:
-    """``ramdaq gap`` of one recording with the default settings: its report folder (gap.json,
-    plots) written, its :class:`GapRow` returned. A recording that cannot be diagnosed is a
-    ``failed`` result naming why."""
+    """``ramdaq gap`` of one recording with the default settings, held against ``spec.rig`` (or
+    the rig it carries): its report folder (gap.json, plots) written, its :class:`GapRow`
+    returned. A recording that cannot be diagnosed is a ``failed`` result naming why."""
     from .gap import run_gap, write_report
 
     t0 = time.perf_counter()
     if (why := empty_file(spec.path)) is not None:
         return _finish(spec, t0, status="failed", status_reason=why)
     try:
-        lt, td, d = run_gap(spec.path)
+        lt, td, d = run_gap(spec.path, rig=spec.rig or None)
         write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
         row = gap_row(d)
     except Exception as exc:  # a recording that breaks the diagnosis is a row, not a crash

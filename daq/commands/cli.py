@@ -567,7 +567,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
     out = Path(args.out or f"batch_{args.kind}")
     try:
         outcome = run_batch(args.kind, args.paths, out, workers=args.workers, scheduler=args.scheduler,
-                            plots=not args.no_plots, force=args.force, progress=not args.quiet)
+                            plots=not args.no_plots, force=args.force, progress=not args.quiet,
+                            rig=getattr(args, "rig", None))
     except (ConnectionError, ClusterError) as err:
         print(f"ramdaq batch: {err}", file=sys.stderr)
         return 1
@@ -629,6 +630,10 @@ def _batch_parsers(sub: argparse._SubParsersAction) -> None:
                        "are current (same content, same code)")
         k.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
         k.add_argument("--quiet", action="store_true", help="no progress bar")
+        if kind == "gap":
+            k.add_argument("--rig", help="rig file or shipped rig's name to hold every recording "
+                           "against (default: the rig each recording carries; an import's "
+                           "channels-only rig has no model to hold)")
         k.set_defaults(func=cmd_batch)
 
     g = sub.add_parser("gap-benchmark", help="the gap diagnosis proven on simulated trials with a hidden "
