@@ -21,11 +21,12 @@ is otherwise left out as the report left it out (its Eq 9, 13 footnotes).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .modal.before_blow import ambient_modes
 from .modal.identify import identify_modes
 from .modal.peaks import decrement_from_peaks
 from .modal.table import ModeTable
@@ -336,7 +337,8 @@ def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list
 
 def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
                   onset_s: float = 0.0, decay_start_s: float = 0.0,
-                  adc_full_scale: float | None = None) -> ImpactAnalysis:
+                  adc_full_scale: float | None = None, pre: np.ndarray | None = None,
+                  pre_fs_hz: float | None = None) -> ImpactAnalysis:
     """Analyse one free decay.
 
     Parameters
@@ -353,6 +355,10 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         Impact onset and start of ``x``, seconds in the stream (for the record).
     adc_full_scale : float, optional
         Converter full scale in m/s^2 (the smallest over channels), to judge clipping.
+    pre : ndarray, (n_channels, n_pre), optional
+        The same channels before the blow (m/s^2, at ``pre_fs_hz``, default ``fs_hz``): a mode
+        already ringing there (:func:`~ramdaq.analysis.modal.before_blow.ambient_modes`) is
+        not taken as the predominant mode, and a note says so.
     """
     notes: list[str] = []
     judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale)
@@ -364,8 +370,14 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     table = _usable_fit(x, fs_hz, judged, good)
     if len(table) == 0:
         raise ValueError(f"no mode found above the noise ({table.info.get('reason', '')})")
+    ambient = ambient_modes(None if pre is None else pre[good], pre_fs_hz or fs_hz,
+                            table.frequency_hz, table.complex_amplitude)
     k = predominant_mode(table, [j for j, i in enumerate(good)
-                                 if rig.gage(gage_numbers[i]).body == "rudder"])
+                                 if rig.gage(gage_numbers[i]).body == "rudder"],
+                         exclude=[a for a, _ in ambient])
+    notes += [f"{table.frequency_hz[a]:.2f} Hz rang before the blow at {r:.0%} of its amplitude "
+              "at the decay's start: an ambient line, not the blow's free decay (not taken as "
+              "the predominant mode; its decrement is no damping measure)" for a, r in ambient]
     f = float(table.frequency_hz[k])
     gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),
                                         float(table.channel_delta[j, k]),
@@ -418,12 +430,15 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
             "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
 
 
-def predominant_mode(table: ModeTable, rudder_rows: list[int]) -> int:
+def predominant_mode(table: ModeTable, rudder_rows: list[int], exclude: Sequence[int] = ()) -> int:
     """Index in ``table`` of the predominant mode: the largest :func:`mode_energy` of the
     displacement amplitudes (accelerations in, a / w^2 judged, as on the report's records) over
-    the table's rows ``rudder_rows`` (the rudder gages; all rows where there are none)."""
+    the table's rows ``rudder_rows`` (the rudder gages; all rows where there are none), among
+    the modes not in ``exclude`` (ambient lines; all modes when every one is excluded)."""
     disp = table.amplitude / (2 * np.pi * table.frequency_hz) ** 2
     energy = mode_energy(disp[rudder_rows or slice(None)], table.delta * table.frequency_hz)
+    if len(set(exclude)) < len(energy):
+        energy[list(exclude)] = -np.inf
     return int(np.argmax(energy))
 
 

@@ -200,10 +200,12 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
         counts = (rec.counts[lo:hi, i0:] if gage_rows == list(range(lo, hi))
                   else rec.counts[gage_rows, i0:])
         x, fs, text = coarsen(counts, info.fs_hz, coarse, scale)
+    pre = rec.counts[gage_rows, :max(event.onset_sample - rec.first_sample, 0)] * scale[:, None]
     try:
         result = analyze_decay(x, fs, rig, tuple(info.gages[i] for i in gage_rows),
                                onset_s=event.onset_s, decay_start_s=start / info.fs_hz,
-                               adc_full_scale=_full_scale(info, scale))
+                               adc_full_scale=_full_scale(info, scale), pre=pre,
+                               pre_fs_hz=info.fs_hz)
     except ValueError as err:
         return HitResult(index, event, False, f"no usable decay: {err}", None, text)
     if event.end_reason == "gap":  # the record, not the ringing, ended: say where and why

@@ -161,6 +161,7 @@ def format_summary(report: dict, units: str = "si") -> str:
                           f" Hz, delta = {_fmt(m['delta'])} +- {_fmt(m['delta_se'], '.2g')}, zeta = "
                           f"{_fmt(m['zeta'], '.4%')} +- {_pct(m['zeta_se'])}"
                           for i, m in enumerate(a["modes"])]
+            lines += [f"    note: {n}" for n in a.get("notes", ())]
         else:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
                          f"{imp['reason']}")
