@@ -116,14 +116,22 @@ _STARTS = {"mp": matrix_pencil_poles, "esprit": esprit_poles, "era": era_poles}
 # not see); to rounding they took 5–11 evaluations, whose last 2–4 moved θ by 10⁻² to 10⁻⁵ SE.
 _CHANNEL_SE_TOL = 1e-4
 _SUBSPACE_MAX_SAMPLES = 2000
+# The residual round's pencil (step 5) is at most 100 long, not 400: with the strong modes taken
+# out, a weak one hidden by them stands alone in the residual and needs no fine resolution (the
+# held-pole NLS refines whatever start it gets). The cost is the pencil's eigendecomposition,
+# O(L³): 9 ms a call at L = 400 (a 16-gage record with its band at 270 Hz, 2000 samples), ~0.3 ms
+# at 100. Records whose band decimates them below 300 subspace samples (all of the accuracy
+# benchmark's) have L < 100 already.
+_RESIDUAL_PENCIL = 100
 _MAX_PRINCIPAL_CHANNELS = 8
 
 
 def _candidates(
     Y: np.ndarray, t: np.ndarray, fs: float, band_hi: float, order: int, method: str,
-    zeta_max: float, f_lo: float,
+    zeta_max: float, f_lo: float, max_length: int = 400,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate (f, δ) from the subspace start on decimated, whitened, compressed data."""
+    """Candidate (f, δ) from the subspace start on decimated, whitened, compressed data (pencil
+    length at most ``max_length``)."""
     d_sub = max(1, int(fs // (4.0 * band_hi)))
     if d_sub > 1 and Y.shape[-1] // d_sub > 3 * order + 30:
         Ys, _, _ = decimate_valid(Y, fs, d_sub, band_hi)
@@ -139,9 +147,12 @@ def _candidates(
     thr = 2.0 * (np.sqrt(n) + np.sqrt(Ys.shape[0])) ** 2
     r = int(np.clip(np.count_nonzero(S**2 > thr), 1, _MAX_PRINCIPAL_CHANNELS))
     Yc = U[:, :r].T @ Ys
-    L = default_pencil_length(n)
+    L = default_pencil_length(n, max_length)
     order = int(min(order, L - 2))
-    z = _STARTS[method](Yc, order)
+    if method == "era":  # block rows: as its default, for a pencil of L
+        z = era_poles(Yc, order, max(-(-(order + 2) // Yc.shape[0]) + 1, L // Yc.shape[0]))
+    else:
+        z = _STARTS[method](Yc, order, L)
     f, d = poles_to_modes(z, fs_sub)
     zeta = damping_ratio_from_decrement(d)
     ok = (f >= f_lo) & (f <= min(band_hi, 0.45 * fs_sub)) & (np.abs(zeta) <= zeta_max)
@@ -256,9 +267,11 @@ def identify_modes(
     def select(trend: bool | int, D: _Data) -> tuple[ModeSelector, int]:
         """The modes selected in ``D`` with ``trend`` columns in the model; and the candidates'
         count."""
-        def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        def ranked_candidates(Z: np.ndarray, w: np.ndarray, max_length: int = 400
+                              ) -> tuple[np.ndarray, np.ndarray]:
             """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
-            f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo)
+            f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo,
+                                   max_length)
             return _rank(Z, D.t, w, f_c, d_c, trend)
 
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
@@ -439,11 +452,12 @@ def _nls_data(Xa: np.ndarray, fs_hz: float, band_hi: float,
 
 
 def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
-                  ranked_candidates: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+                  ranked_candidates: Callable[..., tuple[np.ndarray, np.ndarray]],
                   max_modes: int) -> None:
     """Forward selection on ``sel`` (see the module docstring, step 5): the candidates (fc, dc),
     strongest first, until four in a row are rejected; then up to four candidates from the
-    residual (``ranked_candidates(residual, weights)``); then the pruning of modes no longer
+    residual (``ranked_candidates(residual, weights, max_length)``, a shorter pencil: see
+    ``_RESIDUAL_PENCIL``); then the pruning of modes no longer
     significant. Leaves the selected fit in ``sel.fit`` (None if none)."""
     misses = 0
     for f_c, d_c in zip(fc, dc, strict=True):  # strongest first
@@ -458,7 +472,7 @@ def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
         else:
             B = sel.fit.amplitude
             model = _synth(sel.t, sel.fit.f_hz, sel.fit.delta, B) + sel.fit.offset[:, None]
-        fr, dr = ranked_candidates(sel.Y - model, sel.w)
+        fr, dr = ranked_candidates(sel.Y - model, sel.w, _RESIDUAL_PENCIL)
         for f_c, d_c in zip(fr[:4], dr[:4], strict=True):
             if sel.fit.f_hz.size >= max_modes:
                 break
