@@ -22,14 +22,15 @@ The margin (4·gain + 1) covers the largest full-refit gain measured against the
 estimate, and every decision measured equalled that of a full refit (``docs/estimators.md``,
 "Order selection").
 
-Most noise candidates are rejected before their held-pole fit converges: it is judged first
-after two Levenberg–Marquardt iterations (~4 evaluations; converged, a noise candidate took
-~12, up to 72 creeping along a valley), and rejected there when Λ_p + 4·gain + 1 ≤ 0.6 ×
-threshold; Λ_p above the threshold goes to the full refit from there; anything else is
-converged and judged as above. Over 216 rejected candidates (the ALBACORE hits, 16 gages and
-one, 6 and 14 s; the accuracy benchmark's single- and two-mode records) the converged
+Most noise candidates are rejected before their held-pole fit converges: it is looked at after
+two Levenberg–Marquardt iterations (~4 evaluations; converged, a noise candidate took ~12, up
+to 72 creeping along a valley) and rejected there when Λ_p ≤ threshold and Λ_p + 4·gain + 1 ≤
+0.6 × threshold (not where the Gauss–Newton gain comes out negative: close modes, an
+indefinite model). Any other candidate is fitted again from its start and judged as above, on
+the path it takes without the look. Over 216 rejected candidates (the ALBACORE hits, 16 gages
+and one, 6 and 14 s; the accuracy benchmark's single- and two-mode records) the converged
 Λ_p + 4·gain + 1 rose by at most 0.23 × threshold after those two iterations, and none of the
-candidates the early test rejects exceeded 0.72 × threshold converged: every decision equalled
+candidates the early look rejects exceeded 0.72 × threshold converged: every decision equalled
 that of the converged test, with 0.4 × threshold to spare; half the held-fit evaluations go.
 
 Trial fits are converged to 10⁻³ of the residual variance (``chi2_tol``),
@@ -151,20 +152,18 @@ class ModeSelector:
                 rss_lin_w = held.weighted_rss(np.r_[fc], np.r_[dc])
                 if np.sum(self.rss * self.w**2 - rss_lin_w) < 0.25 * self.threshold:
                     return False
-                # The new mode alone, accepted poles held (see the module docstring): first
-                # _EARLY_ITER iterations, then on to convergence unless rejected early.
-                fp, dp, rss_p, noise_p, _ = held.fit(
-                    np.r_[fc], np.r_[dc], f_bounds_hz=self.f_lim, delta_bounds=(-3.0, 3.0),
-                    chi2_tol=_TRIAL_CHI2_TOL, max_iter=_EARLY_ITER)
-                verdict = self._held_verdict(fp, dp, rss_p, noise_p, _EARLY_REJECT)
-                if verdict is None:  # neither: the held fit converged, and judged as before
-                    fp, dp, rss_p, noise_p, _ = held.fit(
-                        fp, dp, f_bounds_hz=self.f_lim, delta_bounds=(-3.0, 3.0),
-                        chi2_tol=_TRIAL_CHI2_TOL)
-                    verdict = self._held_verdict(fp, dp, rss_p, noise_p, 1.0)
+                # The new mode alone, accepted poles held (see the module docstring): looked
+                # at after _EARLY_ITER iterations, then (unless rejected there) fitted again from
+                # its start to convergence, the path it takes without the early look.
+                kw = {"f_bounds_hz": self.f_lim, "delta_bounds": (-3.0, 3.0),
+                      "chi2_tol": _TRIAL_CHI2_TOL}
+                early = held.fit(np.r_[fc], np.r_[dc], max_iter=_EARLY_ITER, **kw)
+                if self._rejected(*early[:4], _EARLY_REJECT):
+                    return False
+                fp, dp, rss_p, noise_p, _ = held.fit(np.r_[fc], np.r_[dc], **kw)
+                if self._rejected(fp, dp, rss_p, noise_p, 1.0):
+                    return False
             except (ValueError, linalg.LinAlgError):
-                return False
-            if verdict is False:
                 return False
             f0, d0 = np.r_[self.fit.f_hz, fp], np.r_[self.fit.delta, dp]
         fit = self.refit(f0, d0, trial=True)
@@ -174,23 +173,24 @@ class ModeSelector:
         self.w = 1.0 / floor_noise(fit.noise_std, self.Y)
         return True
 
-    def _held_verdict(self, fp: np.ndarray, dp: np.ndarray, rss_p: np.ndarray,
-                      noise_p: np.ndarray, reject_below: float) -> bool | None:
-        """What a held-pole fit of the new mode (fp, δp; per-channel Σr² and noise std) says:
-        True when Λ_p exceeds the threshold (the full refit decides); False when Λ_p + 4·gain + 1
-        stays at or below ``reject_below`` × threshold (rejected); else None."""
+    def _rejected(self, fp: np.ndarray, dp: np.ndarray, rss_p: np.ndarray, noise_p: np.ndarray,
+                  fraction: float) -> bool:
+        """Whether a held-pole fit of the new mode (fp, δp; per-channel Σr² and noise std)
+        rejects it: Λ_p at most the threshold and Λ_p + 4·gain + 1 at most ``fraction`` × the
+        threshold. An early look (``fraction`` < 1) rejects nothing whose Gauss–Newton gain
+        came out negative: an indefinite model (close modes, JᵀJ rounded) says nothing yet."""
         lam_p = float(np.sum((self.rss - rss_p) / np.maximum(noise_p**2, 1e-300)))
         if lam_p > self.threshold:
-            return True
+            return False
         try:
             gain_w = self._gain()(np.r_[self.fit.f_hz, fp], np.r_[self.fit.delta, dp])
         except (ValueError, linalg.LinAlgError):
             gain_w = np.inf
         # weighted Σr² → Λ units (Λ divides by each channel's own residual variance)
         gain = gain_w * float(np.max(1.0 / np.maximum(self.w**2 * noise_p**2, 1e-300)))
-        if lam_p + _GAIN_MARGIN * gain + 1.0 <= reject_below * self.threshold:
+        if fraction < 1.0 and not gain >= 0.0:
             return False
-        return None if reject_below < 1.0 else True
+        return lam_p + _GAIN_MARGIN * gain + 1.0 <= fraction * self.threshold
 
     def significance(self) -> np.ndarray:
         """Λ of each mode of the current fit (amplitudes re-solved without it, poles fixed)."""
