@@ -81,6 +81,7 @@ from scipy.special import chdtri  # χ² isf, as scipy.stats.chi2.isf (stats cos
 from .crb import damping_ratio_from_decrement
 from .order import ModeSelector, floor_noise
 from .signal import (
+    band_lengths,
     decimate_valid,
     estimate_noise_std,
     fir_gain,
@@ -392,12 +393,14 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
 
 
 def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
-          P0: np.ndarray | None = None) -> float | None:
+          P0: np.ndarray | None = None, parts: dict[int, np.ndarray] | None = None
+          ) -> float | None:
     """Step 2 of the module docstring: the highest significant spectral peak of the channels
-    ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed."""
+    ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed
+    (``parts``: those of their first m samples, by m)."""
     P0 = kaiser_periodogram(Xa) if P0 is None else P0  # for the noise estimate and the band test
     sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
-    return significant_band(Xa, fs_hz, sig0, false_alarm, P0)
+    return significant_band(Xa, fs_hz, sig0, false_alarm, P0, parts)
 
 
 def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4) -> np.ndarray:
@@ -406,7 +409,10 @@ def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4) -
     same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test."""
     X = np.atleast_2d(np.asarray(x, dtype=float))
     P = kaiser_periodogram(X)
-    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, P[c : c + 1]) is not None
+    # every channel's periodograms at once (row by row the same operations: equal to the bit)
+    parts = {m: kaiser_periodogram(X[:, :m]) for m in band_lengths(X.shape[1])[1:]}
+    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, P[c : c + 1],
+                           {m: Pm[c : c + 1] for m, Pm in parts.items()}) is not None
                      for c in range(X.shape[0])], dtype=bool)
 
 

@@ -29,6 +29,7 @@ __all__ = [
     "estimate_noise_std",
     "fir_gain",
     "fir_noise_variance_factor",
+    "band_lengths",
     "significant_band_hz",
 ]
 
@@ -151,20 +152,29 @@ def significant_band_hz(
     return significant_band(a, fs_hz, noise_std, false_alarm, None)
 
 
+def band_lengths(n: int) -> list[int]:
+    """The record lengths whose periodograms :func:`significant_band_hz` tests, for a record of
+    ``n`` samples: the whole record and its first 1/4, 1/16, 1/64 (those of 64 samples or more):
+    a heavily damped mode lives in the first few per cent of a long record, where a
+    full-length window is ~0."""
+    return [m for m in (n, n // 4, n // 16, n // 64) if m >= 64] or [n]
+
+
 def significant_band(
     a: np.ndarray, fs_hz: float, noise_std: ArrayLike, false_alarm: float,
-    P_full: np.ndarray | None,
+    P_full: np.ndarray | None, parts: dict[int, np.ndarray] | None = None,
 ) -> float | None:
-    """:func:`significant_band_hz` on 2-D ``a``; ``P_full``: its whole-record periodogram if known."""
+    """:func:`significant_band_hz` on 2-D ``a``; ``P_full``: its whole-record periodogram if
+    known; ``parts``: periodograms of its first m samples already computed, by m."""
     sig = np.maximum(np.asarray(noise_std, dtype=float), 1e-300)
     n_ch, n = a.shape
-    # Periodograms of the whole record and of its first 1/4, 1/16, 1/64: a heavily damped
-    # mode lives in the first few per cent of a long record, where a full-length window is ~0.
-    lengths = [m for m in (n, n // 4, n // 16, n // 64) if m >= 64] or [n]
     spectra = []
     floor = None
-    for m in lengths:
-        P = P_full if m == n and P_full is not None else kaiser_periodogram(a[:, :m])
+    for m in band_lengths(n):
+        if m == n and P_full is not None:
+            P = P_full
+        else:
+            P = parts[m] if parts is not None and m in parts else kaiser_periodogram(a[:, :m])
         S = np.sum(P / (sig[:, None] ** 2), axis=0)[1:-1]
         f = np.arange(1, S.size + 1) * fs_hz / m
         if floor is None:  # from the whole record's spectrum (the finest: modes cover least)
