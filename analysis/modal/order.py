@@ -150,16 +150,19 @@ class ModeSelector:
                 # threshold is not worth a nonlinear refit. Not for the first, whose weights are
                 # not yet residual-based.
                 rss_lin_w = held.weighted_rss(np.r_[fc], np.r_[dc])
-                if np.sum(self.rss * self.w**2 - rss_lin_w) < 0.25 * self.threshold:
+                lam_lin = np.sum(self.rss * self.w**2 - rss_lin_w)
+                if lam_lin < 0.25 * self.threshold:
                     return False
                 # The new mode alone, accepted poles held (see the module docstring): looked
                 # at after _EARLY_ITER iterations, then (unless rejected there) fitted again from
                 # its start to convergence, the path it takes without the early look.
                 kw = {"f_bounds_hz": self.f_lim, "delta_bounds": (-3.0, 3.0),
                       "chi2_tol": _TRIAL_CHI2_TOL}
-                early = held.fit(np.r_[fc], np.r_[dc], max_iter=_EARLY_ITER, **kw)
-                if self._rejected(*early[:4], _EARLY_REJECT):
-                    return False
+                if lam_lin <= self.threshold:  # (above it, the held fit, which only descends
+                    # from there, is above it too: no early rejection possible)
+                    early = held.fit(np.r_[fc], np.r_[dc], max_iter=_EARLY_ITER, **kw)
+                    if self._rejected(*early[:4], _EARLY_REJECT):
+                        return False
                 fp, dp, rss_p, noise_p, _ = held.fit(np.r_[fc], np.r_[dc], **kw)
                 if self._rejected(fp, dp, rss_p, noise_p, 1.0):
                     return False
