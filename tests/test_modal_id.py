@@ -635,3 +635,20 @@ def test_channel_fits_stopped_by_their_standard_error_lie_within_a_hundredth_of_
         assert fc.success
         evals += ref.n_eval - fc.n_eval
     assert evals > 0  # and it saved evaluations
+
+
+def test_a_long_single_channel_is_searched_on_a_decimated_copy_and_refitted_on_itself():
+    rng = np.random.default_rng(26)
+    n = 12288  # 6 s at 2048 Hz: over 8192 samples, a band of ~80 Hz allows a factor of 3 or more
+    f, d = np.array([6.9, 13.0, 60.0]), np.array([0.12, 0.1, 0.015])
+    y = damped_sinusoids(FS_HZ, n, f, d, [1.0, 2.0, 1.5], [0.3, 1.0, 2.0]) \
+        + 0.01 * rng.standard_normal(n)
+    auto = identify_modes(y, FS_HZ, per_channel=False)
+    assert auto.info["search_decimation"] >= 3
+    np.testing.assert_allclose(auto.frequency_hz, f, rtol=1e-3)
+    # The modes it selected, refitted on the record itself to rounding: the fit of that order
+    # on the record (one channel, order given: no search copy), to far inside a standard error.
+    known = identify_modes(y, FS_HZ, per_channel=False, n_modes=3)
+    assert "search_decimation" not in known.info
+    assert np.all(np.abs(auto.delta - known.delta) <= 1e-3 * known.delta_se)
+    assert np.all(np.abs(auto.frequency_hz - known.frequency_hz) <= 1e-3 * known.frequency_se_hz)

@@ -41,10 +41,12 @@ Pipeline
    time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
    modes' poles held; if any are taken, the selection is run again with them in the
    model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
-   result is as without it. On records over ``search_max_samples`` (channels × samples) all of
-   this step runs on a copy decimated within the band (its many trial fits then touch a third
-   or less of the samples), and the modes it selects are refitted on the NLS data themselves
-   (``info["search_decimation"]``): the estimates are the whole record's.
+   result is as without it. On records over ``search_max_samples`` (channels × samples), or
+   whose channels hold over 8192 samples, all of this step runs on a copy decimated within the
+   band (its many trial fits then touch a third or less of the samples), and the modes it
+   selects are refitted on the NLS data themselves (``info["search_decimation"]``): the
+   estimates are the whole record's. (Not for one channel with ``n_modes`` given: its one fit
+   runs on the data themselves.)
 6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it,
    started at the joint poles and converged to ~0.01 of their standard errors
    (``_CHANNEL_SE_TOL``), not to rounding.
@@ -124,6 +126,9 @@ _SUBSPACE_MAX_SAMPLES = 2000
 # at 100. Records whose band decimates them below 300 subspace samples (all of the accuracy
 # benchmark's) have L < 100 already.
 _RESIDUAL_PENCIL = 100
+# A channel longer than 8192 samples is searched on a copy decimated within the band to about
+# 4096 samples, whatever the number of channels (one gage's record of 6 s at 2048 Hz: by 3).
+_SEARCH_MAX_LENGTH, _SEARCH_LENGTH = 8192, 4096
 _MAX_PRINCIPAL_CHANNELS = 8
 
 
@@ -223,10 +228,11 @@ def identify_modes(
     max_samples : int
         Channels × samples above which the record is decimated (memory, time).
     search_max_samples : int
-        Channels × samples above which the order is searched on a copy decimated within the
-        band (where the band allows a factor of 2 or more; ``info["search_decimation"]``), the
-        modes it finds refitted on the record itself: the estimates and their standard errors
-        are those of the whole record, the search's trial fits touch a fraction of it.
+        Channels × samples above which (or above 8192 samples a channel) the order is searched
+        on a copy decimated within the band (where the band allows a factor of 2 or more;
+        ``info["search_decimation"]``), the modes it finds refitted on the record itself: the
+        estimates and their standard errors are those of the whole record, the search's trial
+        fits touch a fraction of it.
     start : (f_hz, delta), optional
         Candidate poles to start from instead of the subspace estimate (step 4), e.g. the modes
         another fit found on channels of the same decay (a combination of them has the same
@@ -260,7 +266,9 @@ def identify_modes(
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
     # refitted on the data themselves, so the estimates are those of the full record.
-    data = _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples)
+    # (one channel with its order given: one fit, converged at once on the data themselves)
+    data = (full if n_modes is not None and Xa.shape[0] == 1
+            else _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples))
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
     start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
                                                 for v in start)
@@ -347,22 +355,29 @@ class _Data:
 def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi: float,
                  max_samples: int) -> _Data:
     """The data the order search runs on: ``full`` (the NLS data, ``Xa`` decimated by ``d_nls``)
-    decimated within ``band_hi`` when it holds over ``max_samples`` (channels x samples) and the
+    decimated within ``band_hi`` when it holds over ``max_samples`` (channels x samples) or its
+    channels over ``_SEARCH_MAX_LENGTH`` samples (then to about ``_SEARCH_LENGTH``), and the
     band allows a total factor of 2 or more above ``d_nls``; else ``full`` itself. Where the
     NLS data are decimated already, the search's copy is decimated from the record ``Xa``
     (rate ``fs_hz``) by the whole factor the band allows, over the same span (a factor of the
     NLS data's would have to be a multiple of ``d_nls``: 2 of 3 allowed, 14 s decays)."""
-    if full.Y.size <= max_samples:
+    if full.Y.size <= max_samples and full.Y.shape[1] <= _SEARCH_MAX_LENGTH:
         return full
+
+    def need(Y: np.ndarray) -> int:  # the factor that brings Y within both limits
+        n = Y.shape[1]
+        return int(np.ceil(max(Y.size / max_samples,
+                               n / _SEARCH_LENGTH if n > _SEARCH_MAX_LENGTH else 1.0)))
+
     d_max = int(fs_hz // (2.5 * band_hi))
     if d_nls == 1:
-        d = min(int(np.ceil(full.Y.size / max_samples)), d_max)
+        d = min(need(full.Y), d_max)
         if d < 2:
             return full
         Ys, idx, _ = decimate_valid(full.Y, full.fs, d, band_hi)
         t = full.t[idx]
     else:
-        d = min(int(np.ceil(Xa.size / max_samples)), d_max)
+        d = min(need(Xa), d_max)
         if d <= d_nls:
             return full
         Ys, idx, _ = decimate_valid(Xa, fs_hz, d, band_hi)
@@ -385,10 +400,14 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
     search's own last step); None when they do not fit there."""
     sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
                        (0.5 * f_lo, 0.49 * full.fs), full.w0)
-    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=True)
+    one = full.Y.shape[0] == 1  # its weight scales the cost, not the optimum: no reweighting
+    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=not one)
     if sel.fit is None:
         return None
-    _reweighted(sel)
+    if one:
+        sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)  # as _reweighted, without a refit
+    else:
+        _reweighted(sel)
     return sel
 
 
