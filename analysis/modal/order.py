@@ -183,8 +183,8 @@ class ModeSelector:
         threshold. An early look (``fraction`` < 1) rejects nothing whose Gauss–Newton gain
         came out negative: an indefinite model (close modes, JᵀJ rounded) says nothing yet."""
         lam_p = float(np.sum((self.rss - rss_p) / np.maximum(noise_p**2, 1e-300)))
-        if lam_p > self.threshold:
-            return False
+        if lam_p > self.threshold or (fraction < 1.0 and lam_p + 1.0 > fraction * self.threshold):
+            return False  # (an early look rejects only with a gain ≥ 0: Λ_p + 1 decides it here)
         try:
             gain_w = self._gain()(np.r_[self.fit.f_hz, fp], np.r_[self.fit.delta, dp])
         except (ValueError, linalg.LinAlgError):
