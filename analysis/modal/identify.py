@@ -108,7 +108,7 @@ from .varpro import (
     uniform_grid,
 )
 
-__all__ = ["ModeTable", "identify_modes", "peak_above_noise"]
+__all__ = ["ModeTable", "channel_periodograms", "identify_modes", "peak_above_noise"]
 
 _STARTS = {"mp": matrix_pencil_poles, "esprit": esprit_poles, "era": era_poles}
 # Per-channel fits (step 6) stop where the Gauss–Newton step promises to lower Σr² by < 10⁻⁴ of
@@ -195,6 +195,7 @@ def identify_modes(
     max_trend_terms: int = 16,
     start: tuple[ArrayLike, ArrayLike] | None = None,
     search_max_samples: int = 60_000,
+    periodograms: dict[int, np.ndarray] | None = None,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -238,6 +239,9 @@ def identify_modes(
         another fit found on channels of the same decay (a combination of them has the same
         poles): ranked and selected as the subspace's would be; candidates from the residual
         (step 5's second round) still come from the subspace.
+    periodograms : dict, optional
+        The channels' Kaiser periodograms of step 2 where the caller has them already
+        (:func:`channel_periodograms` of ``x``): not computed again.
 
     Returns
     -------
@@ -251,8 +255,10 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    P0 = kaiser_periodogram(Xa)  # the band test's, and the noise estimate's when not decimated
-    band = _band(Xa, fs_hz, false_alarm, P0)
+    pg = (channel_periodograms(Xa) if periodograms is None  # the band test's; P0: the noise
+          else {m: P[active] for m, P in periodograms.items()})  # estimate's when not decimated
+    P0 = pg[n]
+    band = _band(Xa, fs_hz, false_alarm, P0, pg)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -422,16 +428,25 @@ def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
     return significant_band(Xa, fs_hz, sig0, false_alarm, P0, parts)
 
 
-def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4) -> np.ndarray:
+def channel_periodograms(x: np.ndarray) -> dict[int, np.ndarray]:
+    """The Kaiser periodograms the band test (step 2) reads, of every row of ``x`` (n_channels,
+    n_samples) at once (row by row the same operations as one at a time: equal to the bit): of
+    the first m samples, by m (:func:`~ramdaq.analysis.modal.signal.band_lengths`; m = n_samples:
+    the whole record's)."""
+    return {m: kaiser_periodogram(x[:, :m]) for m in band_lengths(x.shape[1])}
+
+
+def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4,
+                     periodograms: dict[int, np.ndarray] | None = None) -> np.ndarray:
     """Whether each channel alone (rows of ``x``, (n_channels, n_samples)) shows a spectral peak
     above its noise: where not, :func:`identify_modes` on that channel alone (automatic order,
-    same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test."""
+    same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test.
+    ``periodograms``: :func:`channel_periodograms` of ``x`` where the caller has them."""
     X = np.atleast_2d(np.asarray(x, dtype=float))
-    P = kaiser_periodogram(X)
-    # every channel's periodograms at once (row by row the same operations: equal to the bit)
-    parts = {m: kaiser_periodogram(X[:, :m]) for m in band_lengths(X.shape[1])[1:]}
-    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, P[c : c + 1],
-                           {m: Pm[c : c + 1] for m, Pm in parts.items()}) is not None
+    pg = channel_periodograms(X) if periodograms is None else periodograms
+    n = X.shape[1]
+    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, pg[n][c : c + 1],
+                           {m: P[c : c + 1] for m, P in pg.items()}) is not None
                      for c in range(X.shape[0])], dtype=bool)
 
 
