@@ -652,3 +652,37 @@ def test_a_long_single_channel_is_searched_on_a_decimated_copy_and_refitted_on_i
     assert "search_decimation" not in known.info
     assert np.all(np.abs(auto.delta - known.delta) <= 1e-3 * known.delta_se)
     assert np.all(np.abs(auto.frequency_hz - known.frequency_hz) <= 1e-3 * known.frequency_se_hz)
+
+
+def test_the_early_look_at_held_fits_decides_as_the_converged_test(monkeypatch):
+    from ramdaq.analysis.modal import order, varpro
+
+    rng = np.random.default_rng(27)
+    n = 6000  # 12 gages: searched on a copy decimated by 3, as a hit is; noise candidates tried
+    f, d = np.array([6.9, 13.0, 60.0, 215.0]), np.array([0.12, 0.1, 0.015, 0.002])
+    x = damped_sinusoids(FS_HZ, n, f, d, rng.normal(size=(12, 4))) \
+        + 0.02 * rng.standard_normal((12, n))
+    two = damped_sinusoids(FS_HZ, 2508, [24.5, 24.745], [0.06, 0.07], [1.0, 0.8], [0.4, 2.0]) \
+        + 0.005 * rng.standard_normal(2508)  # two modes 1 % apart, 40 dB
+    evals = []
+    fit = varpro.HeldPoleFitter.fit
+
+    def counted(self, *a, **k):
+        got = fit(self, *a, **k)
+        evals.append(got[4])
+        return got
+
+    monkeypatch.setattr(varpro.HeldPoleFitter, "fit", counted)
+    runs, look = {}, order._EARLY_REJECT
+    for early in (look, 0.0):  # 0: never rejected early (Λ_p + 1 > 0)
+        monkeypatch.setattr(order, "_EARLY_REJECT", early)
+        evals.clear()
+        runs[early] = ([identify_modes(y, FS_HZ, per_channel=False) for y in (x, two)],
+                       sum(evals))
+    (with_look, n_with), (without, n_without) = runs[look], runs[0.0]
+    for a, b in zip(with_look, without, strict=True):
+        # the same decisions, hence the same fits, to the bit
+        np.testing.assert_array_equal(a.frequency_hz, b.frequency_hz)
+        np.testing.assert_array_equal(a.delta, b.delta)
+    assert len(with_look[0]) == 4 and len(with_look[1]) == 2
+    assert n_with < n_without  # and the look saved held-fit evaluations
