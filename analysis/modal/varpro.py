@@ -698,7 +698,7 @@ def fit_modes_varpro(
         Gauss–Newton step promises to lower the weighted Σr² by less than ``se_tol`` times its
         variance per degree of freedom: f and δ are then within about √se_tol of their standard
         errors of the converged values (0: off). The per-channel fits of
-        :func:`~ramdaq.analysis.modal.identify.identify_modes` use 1e-4.
+        :func:`~ramdaq.analysis.modal.identify.identify_modes` use 3e-4.
 
     Returns
     -------
