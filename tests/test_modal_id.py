@@ -657,8 +657,10 @@ def test_a_long_single_channel_is_searched_on_a_decimated_copy_and_refitted_on_i
 def test_the_early_look_at_held_fits_decides_as_the_converged_test(monkeypatch):
     from ramdaq.analysis.modal import order, varpro
 
-    rng = np.random.default_rng(27)
-    n = 6000  # 12 gages: searched on a copy decimated by 3, as a hit is; noise candidates tried
+    # seed 33: the threshold raised for the decimated copy's coloured noise (noise_colour 1.12)
+    # leaves a noise candidate for the held fit in 5 of seeds 27-35 (27, used before, none)
+    rng = np.random.default_rng(33)
+    n = 6000  # 12 gages: searched on a copy decimated by 2, as a hit is; noise candidates tried
     f, d = np.array([6.9, 13.0, 60.0, 215.0]), np.array([0.12, 0.1, 0.015, 0.002])
     x = damped_sinusoids(FS_HZ, n, f, d, rng.normal(size=(12, 4))) \
         + 0.02 * rng.standard_normal((12, n))

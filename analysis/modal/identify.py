@@ -89,6 +89,7 @@ from .signal import (
     fir_gain,
     fir_noise_variance_factor,
     kaiser_periodogram,
+    noise_colour,
     noise_std_from_periodogram,
     significant_band,
 )
@@ -268,8 +269,9 @@ def identify_modes(
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
-    full = _Data(Y, t, fs_nls, false_alarm,
-                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None)
+    full = _Data(Y, t, fs_nls, false_alarm, band_hz=(f_lo, band_hi),
+                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None,
+                 periodogram=P0 if Y is Xa else None)
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
     # refitted on the data themselves, so the estimates are those of the full record.
@@ -328,7 +330,7 @@ def identify_modes(
             sel, n_cand = (refined, n_cand) if refined is not None else search(full)
     threshold = full.threshold
     info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": n_cand,
-             "lr_threshold": threshold}
+             "lr_threshold": threshold, "noise_colour": full.colour}
     if sel.fit is None:
         table = _empty(n_ch, fs_hz, n, method, info | {"reason": "no significant mode"})
     else:
@@ -343,20 +345,33 @@ def identify_modes(
 class _Data:
     """What the order search runs on: data (n_channels, n_samples), times (s), rate (Hz), the
     starting weights 1/σ and the likelihood-ratio threshold for its size; ``decimation``
-    relative to the record (that of the NLS data when they are the record itself)."""
+    relative to the record (that of the NLS data when they are the record itself).
+
+    The threshold is χ²(2 n_channels) at ``false_alarm`` / (2 n_samples) in units of the
+    in-band noise variance; Λ divides by each channel's whole-band residual variance, so the
+    threshold is raised by the noise's in-band density over its mean (``colour``,
+    :func:`~ramdaq.analysis.modal.signal.noise_colour` over ``band_hz``, (lo, hi) Hz; 1 for
+    white noise). Without it a converter's anti-alias roll-off (1.28 on the stern plane's
+    simulated record) let the search accept noise: a pole at 382 Hz growing by e^50 over the
+    window, at Λ 151 against 148, whose basis column then hid the 20 Hz mode from the gap's
+    free modal model."""
 
     Y: np.ndarray
     t: np.ndarray
     fs: float
     false_alarm: float
     decimation: int = 1
+    band_hz: tuple[float, float] = (0.0, np.inf)
     noise_std: np.ndarray | None = None  # of Y's rows when known (= estimate_noise_std(Y))
+    periodogram: np.ndarray | None = None  # of Y's rows when known (= kaiser_periodogram(Y))
 
     def __post_init__(self) -> None:
-        sig = estimate_noise_std(self.Y) if self.noise_std is None else self.noise_std
+        P = kaiser_periodogram(self.Y) if self.periodogram is None else self.periodogram
+        sig = noise_std_from_periodogram(P) if self.noise_std is None else self.noise_std
         self.w0 = 1.0 / floor_noise(sig, self.Y)
-        self.threshold = float(chdtri(2 * self.Y.shape[0],
-                                      self.false_alarm / (2.0 * self.Y.shape[-1])))
+        self.colour = noise_colour(P, self.fs, self.band_hz)
+        self.threshold = self.colour * float(chdtri(2 * self.Y.shape[0],
+                                                    self.false_alarm / (2.0 * self.Y.shape[-1])))
 
 
 def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi: float,
@@ -392,7 +407,7 @@ def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi:
         Ys, t = Ys[:, inside], idx[inside] / fs_hz
     if Ys.shape[-1] < 256:
         return full
-    return _Data(Ys, t, fs_hz / d, full.false_alarm, d)
+    return _Data(Ys, t, fs_hz / d, full.false_alarm, d, full.band_hz)
 
 
 def _reweighted(sel: ModeSelector) -> None:
