@@ -131,6 +131,11 @@ _RESIDUAL_PENCIL = 100
 # A channel longer than 8192 samples is searched on a copy decimated within the band to about
 # 4096 samples, whatever the number of channels (one gage's record of 6 s at 2048 Hz: by 3).
 _SEARCH_MAX_LENGTH, _SEARCH_LENGTH = 8192, 4096
+# A search copy of several channels still over 1.5 x search_max_samples where the band allows no
+# more decimation (16 gages x 14 s at 270 Hz: 16 x 9557) is cropped to the larger of 4096 and
+# search_max_samples / channels samples (the decay's tail, its weakest part, left out of the
+# search; the modes found are refitted on the whole NLS data).
+_SEARCH_CROP = 1.5
 _MAX_PRINCIPAL_CHANNELS = 8
 
 
@@ -407,6 +412,9 @@ def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi:
         Ys, t = Ys[:, inside], idx[inside] / fs_hz
     if Ys.shape[-1] < 256:
         return full
+    if Ys.shape[0] > 1 and Ys.size > _SEARCH_CROP * max_samples:  # the band capped d: the tail
+        keep = max(_SEARCH_LENGTH, max_samples // Ys.shape[0])  # (weakest) is not searched
+        Ys, t = Ys[:, :keep], t[:keep]
     return _Data(Ys, t, fs_hz / d, full.false_alarm, d, full.band_hz)
 
 
