@@ -126,7 +126,10 @@ _SUBSPACE_MAX_SAMPLES = 2000
 # held-pole NLS refines whatever start it gets). The cost is the pencil's eigendecomposition,
 # O(L³): 9 ms a call at L = 400 (a 16-gage record with its band at 270 Hz, 2000 samples), ~0.3 ms
 # at 100. Records whose band decimates them below 300 subspace samples (all of the accuracy
-# benchmark's) have L < 100 already.
+# benchmark's) have L < 100 already. Its coarser starts reach noise optima that the longer
+# pencil's did not offer: safe only with the threshold raised for coloured noise (_Data): with
+# the white threshold it took the stern plane's stacked decays to a 382 Hz pole growing by e^50
+# (Λ 151 against 148), which lost their 20 Hz mode (tests/test_free_modes_stern_plane.py).
 _RESIDUAL_PENCIL = 100
 # A channel longer than 8192 samples is searched on a copy decimated within the band to about
 # 4096 samples, whatever the number of channels (one gage's record of 6 s at 2048 Hz: by 3).
