@@ -31,13 +31,15 @@ Pipeline
    when the likelihood ratio Λ = Σ_c (RSS_c,without − RSS_c,with) / σ̂²_c of the refitted model
    exceeds the χ²(2·n_channels) quantile at ``false_alarm`` / (2·n_samples) — a Bonferroni
    correction for the search over frequency and damping cells, so a record yields a spurious
-   mode with probability about ``false_alarm``. A second round takes candidates from the
-   residual (weak modes hidden by strong ones), and accepted modes whose Λ falls below the
-   threshold are removed again. With ``n_modes`` given, the strongest n candidates are fitted
-   as they are (when they do not fit together, the order is selected up to n; fewer modes than
-   asked are said in ``info["fewer_modes"]``). Then the trend: a slow drift (a DC step, a
-   swell, a sensor's recovery) left in the residual hides weak modes and inflates every
-   standard error, so Legendre trend columns beyond the constant are tried one or two at a
+   mode with probability about ``false_alarm``; where the noise is denser in the band than on
+   average (an anti-alias or decimation filter's roll-off: Λ divides by the whole-band
+   variance) the threshold is raised by that ratio (``info["noise_colour"]``). A second round
+   takes candidates from the residual (weak modes hidden by strong ones), and accepted modes
+   whose Λ falls below the threshold are removed again. With ``n_modes`` given, the strongest
+   n candidates are fitted as they are (when they do not fit together, the order is selected
+   up to n; fewer modes than asked are said in ``info["fewer_modes"]``). Then the trend: a
+   slow drift (a DC step, a swell, a sensor's recovery) left in the residual hides weak modes
+   and inflates every standard error, so Legendre trend columns beyond the constant are tried one or two at a
    time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
    modes' poles held; if any are taken, the selection is run again with them in the
    model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
