@@ -28,7 +28,7 @@ import numpy as np
 
 from .modal.before_blow import ambient_modes
 from .modal.identify import identify_modes
-from .modal.peaks import decrement_from_peaks
+from .modal.peaks import decrements_from_peaks
 from .modal.table import ModeTable
 from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_decay_jointly
 from .model.geometry import gage_geometry, stock_pair
@@ -284,14 +284,16 @@ def _nearest(table: ModeTable, f_hz: float) -> int | None:
     return i if abs(table.frequency_hz[i] / f_hz - 1) < 0.1 else None
 
 
-def _peak_decrement(x: np.ndarray, fs_hz: float, f_hz: float) -> tuple[float, float]:
-    """The report's peak-ratio decrement and its standard error; NaN where the mode is too weak
-    in this signal to show three peaks above the noise."""
+def _peak_decrements(x: np.ndarray, fs_hz: float, f_hz: float) -> list[tuple[float, float]]:
+    """The report's peak-ratio decrement and its standard error of each row of ``x`` (signals,
+    samples; all at once: :func:`~ramdaq.analysis.modal.peaks.decrements_from_peaks`); NaN where
+    the mode is too weak in a signal to show three peaks above the noise."""
+    nan = (np.nan, np.nan)
     try:
-        peak = decrement_from_peaks(x, fs_hz, f_hz)
-    except ValueError:
-        return np.nan, np.nan
-    return peak.delta, peak.std_error
+        got = decrements_from_peaks(x, fs_hz, f_hz)
+    except ValueError:  # refused for all rows alike (too few samples a period, or in all)
+        return [nan] * len(x)
+    return [nan if isinstance(p, ValueError) else (p.delta, p.std_error) for p in got]
 
 
 def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable, k: int,
@@ -302,12 +304,13 @@ def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable,
     signal in which the mode does not stand out of the noise gets NaN and a note."""
     if not signals:
         return {}
-    fits = fit_signals_at_poles(np.array(list(signals.values())), fs_hz, table.frequency_hz,
-                                table.delta, modes=(k,),
+    S = np.array(list(signals.values()))
+    fits = fit_signals_at_poles(S, fs_hz, table.frequency_hz, table.delta, modes=(k,),
                                 trend_terms=int(table.info.get("trend_terms", 1)))
     f = float(table.frequency_hz[k])
+    peaks = _peak_decrements(S, fs_hz, f)
     out = {}
-    for (name, sig), fit in zip(signals.items(), fits, strict=True):
+    for name, fit, peak in zip(signals, fits, peaks, strict=True):
         if not np.isfinite(fit.delta[k]):
             why = ("its fit failed" if fit.method.endswith("failed")
                    else "the mode is not above the noise in it")
@@ -315,7 +318,7 @@ def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable,
             out[name] = (Decrement(f, np.nan, np.nan, np.nan, np.nan), complex(fit.amplitude[k]))
             continue
         out[name] = (Decrement(float(fit.f_hz[k]), float(fit.delta[k]), float(fit.delta_se[k]),
-                               *_peak_decrement(sig, fs_hz, f), f_se_hz=float(fit.f_se_hz[k])),
+                               *peak, f_se_hz=float(fit.f_se_hz[k])),
                      complex(fit.amplitude[k]))
     return out
 
@@ -379,10 +382,11 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
               "at the decay's start: an ambient line, not the blow's free decay (not taken as "
               "the predominant mode; its decrement is no damping measure)" for a, r in ambient]
     f = float(table.frequency_hz[k])
+    peaks = _peak_decrements(x[good], fs_hz, f)
     gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),
                                         float(table.channel_delta[j, k]),
                                         float(table.channel_delta_se[j, k]),
-                                        *_peak_decrement(x[i], fs_hz, f),
+                                        *peaks[j],
                                         f_se_hz=float(table.channel_frequency_se_hz[j, k]))
              for j, i in enumerate(good)}
     amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}

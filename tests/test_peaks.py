@@ -75,3 +75,25 @@ def test_too_few_peaks_raises():
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match="peaks"):
         decrement_from_peaks(rng.standard_normal(2000) * 1e-3, FS_HZ, 24.5, noise_std=1e-3)
+
+
+def test_rows_at_once_equal_each_row_alone_to_the_bit():
+    from ramdaq.analysis.modal.peaks import decrements_from_peaks
+
+    rng = np.random.default_rng(7)
+    fs = 2048.0
+    x = damped_sinusoids(fs, 6000, [13.0, 60.0], [0.1, 0.02], rng.normal(size=(5, 2)))
+    x = x + 0.01 * rng.standard_normal(x.shape)
+    x[4] = 1e-3 * rng.standard_normal(6000)  # noise only: fewer than 3 peaks above it
+    got = decrements_from_peaks(x, fs, 13.0)
+    for row, g in zip(x, got, strict=True):
+        try:
+            ref = decrement_from_peaks(row, fs, 13.0)
+        except ValueError as e:
+            assert isinstance(g, ValueError) and str(g) == str(e)
+            continue
+        # The same filter, noise estimate and peaks, row by row: equal, not merely close.
+        assert (g.delta, g.std_error, g.n_ratios) == (ref.delta, ref.std_error, ref.n_ratios)
+        np.testing.assert_array_equal(g.peak_times_s, ref.peak_times_s)
+    assert isinstance(got[4], ValueError)
+    assert sum(isinstance(g, ValueError) for g in got) == 1

@@ -31,21 +31,27 @@ Pipeline
    when the likelihood ratio Λ = Σ_c (RSS_c,without − RSS_c,with) / σ̂²_c of the refitted model
    exceeds the χ²(2·n_channels) quantile at ``false_alarm`` / (2·n_samples) — a Bonferroni
    correction for the search over frequency and damping cells, so a record yields a spurious
-   mode with probability about ``false_alarm``. A second round takes candidates from the
-   residual (weak modes hidden by strong ones), and accepted modes whose Λ falls below the
-   threshold are removed again. With ``n_modes`` given, the strongest n candidates are fitted
-   as they are (when they do not fit together, the order is selected up to n; fewer modes than
-   asked are said in ``info["fewer_modes"]``). Then the trend: a slow drift (a DC step, a
-   swell, a sensor's recovery) left in the residual hides weak modes and inflates every
-   standard error, so Legendre trend columns beyond the constant are tried one or two at a
+   mode with probability about ``false_alarm``; where the noise is denser in the band than on
+   average (an anti-alias or decimation filter's roll-off: Λ divides by the whole-band
+   variance) the threshold is raised by that ratio (``info["noise_colour"]``). A second round
+   takes candidates from the residual (weak modes hidden by strong ones), and accepted modes
+   whose Λ falls below the threshold are removed again. With ``n_modes`` given, the strongest
+   n candidates are fitted as they are (when they do not fit together, the order is selected
+   up to n; fewer modes than asked are said in ``info["fewer_modes"]``). Then the trend: a
+   slow drift (a DC step, a swell, a sensor's recovery) left in the residual hides weak modes
+   and inflates every standard error, so Legendre trend columns beyond the constant are tried one or two at a
    time with the same likelihood-ratio test (χ²(step · n_channels) at ``false_alarm``), the
    modes' poles held; if any are taken, the selection is run again with them in the
    model (``info["trend_terms"]``). Without a drift the test keeps the constant alone and the
-   result is as without it. On records over ``search_max_samples`` (channels × samples) all of
-   this step runs on a copy decimated within the band (its many trial fits then touch a third
-   or less of the samples), and the modes it selects are refitted on the NLS data themselves
-   (``info["search_decimation"]``): the estimates are the whole record's.
-6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it.
+   result is as without it. On records over ``search_max_samples`` (channels × samples), or
+   whose channels hold over 8192 samples, all of this step runs on a copy decimated within the
+   band (its many trial fits then touch a third or less of the samples), and the modes it
+   selects are refitted on the NLS data themselves (``info["search_decimation"]``): the
+   estimates are the whole record's. (Not for one channel with ``n_modes`` given: its one fit
+   runs on the data themselves.)
+6. Per-channel fits (``per_channel=True``): each channel alone, with the modes significant in it,
+   started at the joint poles and converged to ~0.02 of their standard errors
+   (``_CHANNEL_SE_TOL``), not to rounding.
 7. Terms with less than one cycle in the record (drift, a slow step) are kept in the model but
    not reported (``info["nuisance_terms_hz"]``).
 
@@ -79,11 +85,13 @@ from scipy.special import chdtri  # χ² isf, as scipy.stats.chi2.isf (stats cos
 from .crb import damping_ratio_from_decrement
 from .order import ModeSelector, floor_noise
 from .signal import (
+    band_lengths,
     decimate_valid,
     estimate_noise_std,
     fir_gain,
     fir_noise_variance_factor,
     kaiser_periodogram,
+    noise_colour,
     noise_std_from_periodogram,
     significant_band,
 )
@@ -103,18 +111,45 @@ from .varpro import (
     uniform_grid,
 )
 
-__all__ = ["ModeTable", "identify_modes", "peak_above_noise"]
+__all__ = ["ModeTable", "channel_periodograms", "identify_modes", "peak_above_noise"]
 
 _STARTS = {"mp": matrix_pencil_poles, "esprit": esprit_poles, "era": era_poles}
+# Per-channel fits (step 6) stop where the Gauss–Newton step promises to lower Σr² by < 3·10⁻⁴ of
+# the residual variance s²: f and δ are then within ~0.02 of their standard errors of the
+# converged values (Δθᵀ Cov⁻¹ Δθ = ΔΣr²/s²; measured on the ALBACORE hits, 6 and 14 s, 150
+# channel fits: the remaining ΔΣr² at that stop at most 6·10⁻⁴ s², 0.025 standard errors; a
+# spread 1.0003x the converged one's). From the joint poles these fits converge only linearly
+# (~4x a step: the noise's curvature, which Gauss–Newton does not see); to rounding they took
+# 5–11 evaluations, whose last 2–4 moved θ by 10⁻² to 10⁻⁵ SE; now 3.8 on average (the first shared).
+_CHANNEL_SE_TOL = 3e-4
 _SUBSPACE_MAX_SAMPLES = 2000
+# The residual round's pencil (step 5) is at most 100 long, not 400: with the strong modes taken
+# out, a weak one hidden by them stands alone in the residual and needs no fine resolution (the
+# held-pole NLS refines whatever start it gets). The cost is the pencil's eigendecomposition,
+# O(L³): 9 ms a call at L = 400 (a 16-gage record with its band at 270 Hz, 2000 samples), ~0.3 ms
+# at 100. Records whose band decimates them below 300 subspace samples (all of the accuracy
+# benchmark's) have L < 100 already. Its coarser starts reach noise optima that the longer
+# pencil's did not offer: safe only with the threshold raised for coloured noise (_Data): with
+# the white threshold it took the stern plane's stacked decays to a 382 Hz pole growing by e^50
+# (Λ 151 against 148), which lost their 20 Hz mode (tests/test_free_modes_stern_plane.py).
+_RESIDUAL_PENCIL = 100
+# A channel longer than 8192 samples is searched on a copy decimated within the band to about
+# 4096 samples, whatever the number of channels (one gage's record of 6 s at 2048 Hz: by 3).
+_SEARCH_MAX_LENGTH, _SEARCH_LENGTH = 8192, 4096
+# A search copy of several channels still over 1.5 x search_max_samples where the band allows no
+# more decimation (16 gages x 14 s at 270 Hz: 16 x 9557) is cropped to the larger of 4096 and
+# search_max_samples / channels samples (the decay's tail, its weakest part, left out of the
+# search; the modes found are refitted on the whole NLS data).
+_SEARCH_CROP = 1.5
 _MAX_PRINCIPAL_CHANNELS = 8
 
 
 def _candidates(
     Y: np.ndarray, t: np.ndarray, fs: float, band_hi: float, order: int, method: str,
-    zeta_max: float, f_lo: float,
+    zeta_max: float, f_lo: float, max_length: int = 400,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate (f, δ) from the subspace start on decimated, whitened, compressed data."""
+    """Candidate (f, δ) from the subspace start on decimated, whitened, compressed data (pencil
+    length at most ``max_length``)."""
     d_sub = max(1, int(fs // (4.0 * band_hi)))
     if d_sub > 1 and Y.shape[-1] // d_sub > 3 * order + 30:
         Ys, _, _ = decimate_valid(Y, fs, d_sub, band_hi)
@@ -130,9 +165,12 @@ def _candidates(
     thr = 2.0 * (np.sqrt(n) + np.sqrt(Ys.shape[0])) ** 2
     r = int(np.clip(np.count_nonzero(S**2 > thr), 1, _MAX_PRINCIPAL_CHANNELS))
     Yc = U[:, :r].T @ Ys
-    L = default_pencil_length(n)
+    L = default_pencil_length(n, max_length)
     order = int(min(order, L - 2))
-    z = _STARTS[method](Yc, order)
+    if method == "era":  # block rows: as its default, for a pencil of L
+        z = era_poles(Yc, order, max(-(-(order + 2) // Yc.shape[0]) + 1, L // Yc.shape[0]))
+    else:
+        z = _STARTS[method](Yc, order, L)
     f, d = poles_to_modes(z, fs_sub)
     zeta = damping_ratio_from_decrement(d)
     ok = (f >= f_lo) & (f <= min(band_hi, 0.45 * fs_sub)) & (np.abs(zeta) <= zeta_max)
@@ -169,6 +207,7 @@ def identify_modes(
     max_trend_terms: int = 16,
     start: tuple[ArrayLike, ArrayLike] | None = None,
     search_max_samples: int = 60_000,
+    periodograms: dict[int, np.ndarray] | None = None,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -202,15 +241,19 @@ def identify_modes(
     max_samples : int
         Channels × samples above which the record is decimated (memory, time).
     search_max_samples : int
-        Channels × samples above which the order is searched on a copy decimated within the
-        band (where the band allows a factor of 2 or more; ``info["search_decimation"]``), the
-        modes it finds refitted on the record itself: the estimates and their standard errors
-        are those of the whole record, the search's trial fits touch a fraction of it.
+        Channels × samples above which (or above 8192 samples a channel) the order is searched
+        on a copy decimated within the band (where the band allows a factor of 2 or more;
+        ``info["search_decimation"]``), the modes it finds refitted on the record itself: the
+        estimates and their standard errors are those of the whole record, the search's trial
+        fits touch a fraction of it.
     start : (f_hz, delta), optional
         Candidate poles to start from instead of the subspace estimate (step 4), e.g. the modes
         another fit found on channels of the same decay (a combination of them has the same
         poles): ranked and selected as the subspace's would be; candidates from the residual
         (step 5's second round) still come from the subspace.
+    periodograms : dict, optional
+        The channels' Kaiser periodograms of step 2 where the caller has them already
+        (:func:`channel_periodograms` of ``x``): not computed again.
 
     Returns
     -------
@@ -224,8 +267,10 @@ def identify_modes(
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
-    P0 = kaiser_periodogram(Xa)  # the band test's, and the noise estimate's when not decimated
-    band = _band(Xa, fs_hz, false_alarm, P0)
+    pg = (channel_periodograms(Xa) if periodograms is None  # the band test's; P0: the noise
+          else {m: P[active] for m, P in periodograms.items()})  # estimate's when not decimated
+    P0 = pg[n]
+    band = _band(Xa, fs_hz, false_alarm, P0, pg)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -234,12 +279,15 @@ def identify_modes(
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
-    full = _Data(Y, t, fs_nls, false_alarm,
-                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None)
+    full = _Data(Y, t, fs_nls, false_alarm, band_hz=(f_lo, band_hi),
+                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None,
+                 periodogram=P0 if Y is Xa else None)
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
     # refitted on the data themselves, so the estimates are those of the full record.
-    data = _search_data(full, band_hi, search_max_samples)
+    # (one channel with its order given: one fit, converged at once on the data themselves)
+    data = (full if n_modes is not None and Xa.shape[0] == 1
+            else _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples))
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
     start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
                                                 for v in start)
@@ -247,9 +295,11 @@ def identify_modes(
     def select(trend: bool | int, D: _Data) -> tuple[ModeSelector, int]:
         """The modes selected in ``D`` with ``trend`` columns in the model; and the candidates'
         count."""
-        def ranked_candidates(Z: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        def ranked_candidates(Z: np.ndarray, w: np.ndarray, max_length: int = 400
+                              ) -> tuple[np.ndarray, np.ndarray]:
             """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
-            f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo)
+            f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo,
+                                   max_length)
             return _rank(Z, D.t, w, f_c, d_c, trend)
 
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
@@ -290,7 +340,7 @@ def identify_modes(
             sel, n_cand = (refined, n_cand) if refined is not None else search(full)
     threshold = full.threshold
     info |= {"decimation": d_nls, "band_hz": band_hi, "n_candidates": n_cand,
-             "lr_threshold": threshold}
+             "lr_threshold": threshold, "noise_colour": full.colour}
     if sel.fit is None:
         table = _empty(n_ch, fs_hz, n, method, info | {"reason": "no significant mode"})
     else:
@@ -305,35 +355,72 @@ def identify_modes(
 class _Data:
     """What the order search runs on: data (n_channels, n_samples), times (s), rate (Hz), the
     starting weights 1/σ and the likelihood-ratio threshold for its size; ``decimation``
-    relative to the NLS data."""
+    relative to the record (that of the NLS data when they are the record itself).
+
+    The threshold is χ²(2 n_channels) at ``false_alarm`` / (2 n_samples) in units of the
+    in-band noise variance; Λ divides by each channel's whole-band residual variance, so the
+    threshold is raised by the noise's in-band density over its mean (``colour``,
+    :func:`~ramdaq.analysis.modal.signal.noise_colour` over ``band_hz``, (lo, hi) Hz; 1 for
+    white noise). Without it a converter's anti-alias roll-off (1.28 on the stern plane's
+    simulated record) let the search accept noise: a pole at 382 Hz growing by e^50 over the
+    window, at Λ 151 against 148, whose basis column then hid the 20 Hz mode from the gap's
+    free modal model."""
 
     Y: np.ndarray
     t: np.ndarray
     fs: float
     false_alarm: float
     decimation: int = 1
+    band_hz: tuple[float, float] = (0.0, np.inf)
     noise_std: np.ndarray | None = None  # of Y's rows when known (= estimate_noise_std(Y))
+    periodogram: np.ndarray | None = None  # of Y's rows when known (= kaiser_periodogram(Y))
 
     def __post_init__(self) -> None:
-        sig = estimate_noise_std(self.Y) if self.noise_std is None else self.noise_std
+        P = kaiser_periodogram(self.Y) if self.periodogram is None else self.periodogram
+        sig = noise_std_from_periodogram(P) if self.noise_std is None else self.noise_std
         self.w0 = 1.0 / floor_noise(sig, self.Y)
-        self.threshold = float(chdtri(2 * self.Y.shape[0],
-                                      self.false_alarm / (2.0 * self.Y.shape[-1])))
+        self.colour = noise_colour(P, self.fs, self.band_hz)
+        self.threshold = self.colour * float(chdtri(2 * self.Y.shape[0],
+                                                    self.false_alarm / (2.0 * self.Y.shape[-1])))
 
 
-def _search_data(full: _Data, band_hi: float, max_samples: int) -> _Data:
-    """``full`` decimated within ``band_hi`` for the order search when it holds over
-    ``max_samples`` (channels x samples) and the band allows a factor of 2 or more; else
-    ``full`` itself."""
-    if full.Y.size <= max_samples:
+def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi: float,
+                 max_samples: int) -> _Data:
+    """The data the order search runs on: ``full`` (the NLS data, ``Xa`` decimated by ``d_nls``)
+    decimated within ``band_hi`` when it holds over ``max_samples`` (channels x samples) or its
+    channels over ``_SEARCH_MAX_LENGTH`` samples (then to about ``_SEARCH_LENGTH``), and the
+    band allows a total factor of 2 or more above ``d_nls``; else ``full`` itself. Where the
+    NLS data are decimated already, the search's copy is decimated from the record ``Xa``
+    (rate ``fs_hz``) by the whole factor the band allows, over the same span (a factor of the
+    NLS data's would have to be a multiple of ``d_nls``: 2 of 3 allowed, 14 s decays)."""
+    if full.Y.size <= max_samples and full.Y.shape[1] <= _SEARCH_MAX_LENGTH:
         return full
-    d = min(int(np.ceil(full.Y.size / max_samples)), int(full.fs // (2.5 * band_hi)))
-    if d < 2:
-        return full
-    Ys, idx, _ = decimate_valid(full.Y, full.fs, d, band_hi)
+
+    def need(Y: np.ndarray) -> int:  # the factor that brings Y within both limits
+        n = Y.shape[1]
+        return int(np.ceil(max(Y.size / max_samples,
+                               n / _SEARCH_LENGTH if n > _SEARCH_MAX_LENGTH else 1.0)))
+
+    d_max = int(fs_hz // (2.5 * band_hi))
+    if d_nls == 1:
+        d = min(need(full.Y), d_max)
+        if d < 2:
+            return full
+        Ys, idx, _ = decimate_valid(full.Y, full.fs, d, band_hi)
+        t = full.t[idx]
+    else:
+        d = min(need(Xa), d_max)
+        if d <= d_nls:
+            return full
+        Ys, idx, _ = decimate_valid(Xa, fs_hz, d, band_hi)
+        inside = idx <= round(full.t[-1] * fs_hz)  # the NLS data's span (they may be cropped)
+        Ys, t = Ys[:, inside], idx[inside] / fs_hz
     if Ys.shape[-1] < 256:
         return full
-    return _Data(Ys, full.t[idx], full.fs / d, full.false_alarm, d)
+    if Ys.shape[0] > 1 and Ys.size > _SEARCH_CROP * max_samples:  # the band capped d: the tail
+        keep = max(_SEARCH_LENGTH, max_samples // Ys.shape[0])  # (weakest) is not searched
+        Ys, t = Ys[:, :keep], t[:keep]
+    return _Data(Ys, t, fs_hz / d, full.false_alarm, d, full.band_hz)
 
 
 def _reweighted(sel: ModeSelector) -> None:
@@ -348,29 +435,47 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
     search's own last step); None when they do not fit there."""
     sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
                        (0.5 * f_lo, 0.49 * full.fs), full.w0)
-    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=True)
+    one = full.Y.shape[0] == 1  # its weight scales the cost, not the optimum: no reweighting
+    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=not one)
     if sel.fit is None:
         return None
-    _reweighted(sel)
+    if one:
+        sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)  # as _reweighted, without a refit
+    else:
+        _reweighted(sel)
     return sel
 
 
 def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
-          P0: np.ndarray | None = None) -> float | None:
+          P0: np.ndarray | None = None, parts: dict[int, np.ndarray] | None = None
+          ) -> float | None:
     """Step 2 of the module docstring: the highest significant spectral peak of the channels
-    ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed."""
+    ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed
+    (``parts``: those of their first m samples, by m)."""
     P0 = kaiser_periodogram(Xa) if P0 is None else P0  # for the noise estimate and the band test
     sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
-    return significant_band(Xa, fs_hz, sig0, false_alarm, P0)
+    return significant_band(Xa, fs_hz, sig0, false_alarm, P0, parts)
 
 
-def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4) -> np.ndarray:
+def channel_periodograms(x: np.ndarray) -> dict[int, np.ndarray]:
+    """The Kaiser periodograms the band test (step 2) reads, of every row of ``x`` (n_channels,
+    n_samples) at once (row by row the same operations as one at a time: equal to the bit): of
+    the first m samples, by m (:func:`~ramdaq.analysis.modal.signal.band_lengths`; m = n_samples:
+    the whole record's)."""
+    return {m: kaiser_periodogram(x[:, :m]) for m in band_lengths(x.shape[1])}
+
+
+def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4,
+                     periodograms: dict[int, np.ndarray] | None = None) -> np.ndarray:
     """Whether each channel alone (rows of ``x``, (n_channels, n_samples)) shows a spectral peak
     above its noise: where not, :func:`identify_modes` on that channel alone (automatic order,
-    same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test."""
+    same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test.
+    ``periodograms``: :func:`channel_periodograms` of ``x`` where the caller has them."""
     X = np.atleast_2d(np.asarray(x, dtype=float))
-    P = kaiser_periodogram(X)
-    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, P[c : c + 1]) is not None
+    pg = channel_periodograms(X) if periodograms is None else periodograms
+    n = X.shape[1]
+    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, pg[n][c : c + 1],
+                           {m: P[c : c + 1] for m, P in pg.items()}) is not None
                      for c in range(X.shape[0])], dtype=bool)
 
 
@@ -416,11 +521,12 @@ def _nls_data(Xa: np.ndarray, fs_hz: float, band_hi: float,
 
 
 def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
-                  ranked_candidates: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+                  ranked_candidates: Callable[..., tuple[np.ndarray, np.ndarray]],
                   max_modes: int) -> None:
     """Forward selection on ``sel`` (see the module docstring, step 5): the candidates (fc, dc),
     strongest first, until four in a row are rejected; then up to four candidates from the
-    residual (``ranked_candidates(residual, weights)``); then the pruning of modes no longer
+    residual (``ranked_candidates(residual, weights, max_length)``, a shorter pencil: see
+    ``_RESIDUAL_PENCIL``); then the pruning of modes no longer
     significant. Leaves the selected fit in ``sel.fit`` (None if none)."""
     misses = 0
     for f_c, d_c in zip(fc, dc, strict=True):  # strongest first
@@ -435,7 +541,7 @@ def _select_order(sel: ModeSelector, fc: np.ndarray, dc: np.ndarray,
         else:
             B = sel.fit.amplitude
             model = _synth(sel.t, sel.fit.f_hz, sel.fit.delta, B) + sel.fit.offset[:, None]
-        fr, dr = ranked_candidates(sel.Y - model, sel.w)
+        fr, dr = ranked_candidates(sel.Y - model, sel.w, _RESIDUAL_PENCIL)
         for f_c, d_c in zip(fr[:4], dr[:4], strict=True):
             if sel.fit.f_hz.size >= max_modes:
                 break
@@ -531,7 +637,8 @@ def _channel_fits(sel: ModeSelector, channels: np.ndarray):
     for ks, rows in groups.items():
         k = np.array(ks)
         fits = fit_channels_varpro(sel.t, sel.Y[rows], f[k], d[k], fit_offset=sel.fit_offset,
-                                   f_bounds_hz=sel.f_lim, delta_bounds=(-3.0, 3.0))
+                                   f_bounds_hz=sel.f_lim, delta_bounds=(-3.0, 3.0),
+                                   se_tol=_CHANNEL_SE_TOL)
         for j, fc in zip(rows, fits, strict=True):
             if fc is not None:
                 yield int(channels[j]), k, fc

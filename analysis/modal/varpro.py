@@ -518,7 +518,8 @@ _EXTRAPOLATE_RATIO = 1.5  # actual / predicted decrease above which a step is do
 _MAX_DOUBLINGS = 6
 
 
-def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, first=None):
+def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, first=None,  # noqa: PLR0913
+                         se_tol=0.0):
     """Levenberg–Marquardt with step doubling where the Gauss–Newton model is too pessimistic.
 
     A fit whose residual is not small next to its signal (a weak mode at the noise level: the
@@ -532,7 +533,10 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
 
     Converged: a step changes θ by < 1e-10 relative, or Σr² by < 1e-11 relative, or (with
     ``chi2_tol`` > 0) an accepted step lowered Σr² by less than ``chi2_tol`` · Σr²/dof and the
-    undamped Gauss–Newton model promises less than that from the new point as well.
+    undamped Gauss–Newton model promises less than that from the new point as well; or (with
+    ``se_tol`` > 0) the undamped Gauss–Newton step from the current point (the start, or an
+    accepted one) promises less than ``se_tol`` · Σr²/dof: θ then lies within about √se_tol
+    standard errors of the minimum (Δθᵀ Cov⁻¹ Δθ = ΔΣr² / s²).
     ``first``: ``prob.residual(theta)`` when the caller has it already.
 
     Gave up (not converged): the damping grew past 1e10 without a step that lowers Σr² (or,
@@ -550,6 +554,8 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     cost = prob.sumsq(resid)
     JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
     lam, n_eval, stop = 1e-4, 1, LMStop.ITERATION_LIMIT
+    if se_tol > 0 and _gauss_newton_decrease(JtJ, Jtr) < se_tol * cost / max(dof, 1):
+        max_iter, stop = 0, LMStop.CONVERGED  # the start is within √se_tol standard errors
     for _ in range(max_iter):
         sc = 1.0 / np.sqrt(np.maximum(JtJ.diagonal(), 1e-300))
         A = JtJ * sc[:, None] * sc[None, :]
@@ -585,9 +591,10 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
             theta, cost, resid, proj, B = new, cost_new, r_new, p_new, B_new
             JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
             lam = max(lam / 5.0, 1e-12)
-            if not (small or rel < 1e-11) and chi2_tol > 0:
+            if not (small or rel < 1e-11) and (chi2_tol > 0 or se_tol > 0):
                 ftol = chi2_tol * cost / max(dof, 1)
-                small = drop < ftol and _gauss_newton_decrease(JtJ, Jtr) < ftol
+                gn = _gauss_newton_decrease(JtJ, Jtr)
+                small = (drop < ftol and gn < ftol) or gn < se_tol * cost / max(dof, 1)
             if small or rel < 1e-11:
                 stop = LMStop.CONVERGED
                 break
@@ -661,6 +668,7 @@ def fit_modes_varpro(
     delta_bounds: tuple[float, float] = (-2.0, 20.0),
     max_iter: int = 100,
     chi2_tol: float = 0.0,
+    se_tol: float = 0.0,
 ) -> VarProFit:
     """Fit damped modes with poles shared by all channels by variable projection.
 
@@ -685,6 +693,12 @@ def fit_modes_varpro(
         ``chi2_tol`` times its variance per degree of freedom (0: to rounding). The order search
         uses 1e-3 for its trial fits, which only decide a likelihood-ratio test (Λ then within
         ~1e-3 of its converged value, against thresholds of tens); final fits use 0.
+    se_tol : float
+        Also stop at a point (the start or an accepted step) from which the undamped
+        Gauss–Newton step promises to lower the weighted Σr² by less than ``se_tol`` times its
+        variance per degree of freedom: f and δ are then within about √se_tol of their standard
+        errors of the converged values (0: off). The per-channel fits of
+        :func:`~ramdaq.analysis.modal.identify.identify_modes` use 3e-4.
 
     Returns
     -------
@@ -701,7 +715,7 @@ def fit_modes_varpro(
         raise ValueError(f"n_samples ({N}) too small for {K} modes")
     prob = _Problem(t, (Y * w[:, None]).T, fit_offset)
     lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
-    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol)
+    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol, se_tol=se_tol)
 
 
 def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
@@ -716,15 +730,16 @@ def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
 
 
 def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: np.ndarray,
-            max_iter: int, chi2_tol: float, first: tuple | None = None) -> VarProFit:
+            max_iter: int, chi2_tol: float, first: tuple | None = None,
+            se_tol: float = 0.0) -> VarProFit:
     """:func:`fit_modes_varpro`'s fit and result on ``prob`` (weights ``w``) from θ₀ (``first``:
-    ``prob.residual(theta0)`` when known)."""
+    ``prob.residual(theta0)`` when known; ``se_tol``: :func:`_levenberg_marquardt`'s)."""
     fit_offset = prob.offset
     K, C, N = theta0.size // 2, prob.Yc.shape[0], prob.Yc.shape[1]
     P = 2 * K + int(fit_offset)
     dof = C * N - C * P - 2 * K
     theta, resid_w, B, JtJ, n_eval, stop = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
-                                                                chi2_tol, dof, first)
+                                                                chi2_tol, dof, first, se_tol)
     B = B / w[None, :]
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
@@ -748,13 +763,13 @@ def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, 
 def fit_channels_varpro(
     t_s: np.ndarray, y: np.ndarray, f0_hz: np.ndarray, delta0: np.ndarray, *,
     fit_offset: bool | int, f_bounds_hz: tuple[float, float],
-    delta_bounds: tuple[float, float], max_iter: int = 100,
+    delta_bounds: tuple[float, float], max_iter: int = 100, se_tol: float = 0.0,
 ) -> list[VarProFit | None]:
     """Each channel (row of ``y``, (n_channels, n_samples)) fitted on its own from the same
-    start: ``fit_modes_varpro(t_s, y[c:c+1], f0_hz, delta0, ...)`` for every c (None where
-    that raises ValueError or LinAlgError), the first evaluation at the common start (basis,
-    its factorisation and the Grams of the derivative columns: all but each channel's
-    coefficients, residual and Tᵀr) computed once for all channels."""
+    start: ``fit_modes_varpro(t_s, y[c:c+1], f0_hz, delta0, ..., se_tol=se_tol)`` for every c
+    (None where that raises ValueError or LinAlgError), the first evaluation at the common
+    start (basis, its factorisation and the Grams of the derivative columns: all but each
+    channel's coefficients, residual and Tᵀr) computed once for all channels."""
     t = np.asarray(t_s, dtype=float)
     Y = np.atleast_2d(np.asarray(y, dtype=float))
     f0, d0 = np.asarray(f0_hz, dtype=float), np.asarray(delta0, dtype=float)
@@ -780,7 +795,7 @@ def fit_channels_varpro(
             pc.grams = (shared[0], shared[1], None, shared[2][:, c : c + 1])
             first = (np.ascontiguousarray(R[:, c : c + 1]), pc, B[:, c : c + 1])
         try:
-            out.append(_fitted(prob, theta0, lo, hi, np.ones(1), max_iter, 0.0, first))
+            out.append(_fitted(prob, theta0, lo, hi, np.ones(1), max_iter, 0.0, first, se_tol))
         except (ValueError, linalg.LinAlgError):
             out.append(None)
     return out

@@ -33,7 +33,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .identify import identify_modes, peak_above_noise
+from .identify import channel_periodograms, identify_modes, peak_above_noise
 from .table import ModeTable
 
 __all__ = ["DecayAssessment", "JointAssessment", "Verdict", "assess_decay", "assess_decay_jointly"]
@@ -239,15 +239,18 @@ def assess_decay_jointly(
     n_ch, n = X.shape
     out = _screen(X, adc_full_scale, clip_run)
     rest = [c for c in range(n_ch) if c not in out]
+    pg = channel_periodograms(X[rest]) if rest else {}  # read by both tests, computed once
     if rest:  # the channel's own order search would stop at its first test: no peak at all
-        for c, peak in zip(rest, peak_above_noise(X[rest], fs_hz, false_alarm=false_alarm),
-                           strict=True):
+        for c, peak in zip(rest, peak_above_noise(X[rest], fs_hz, false_alarm=false_alarm,
+                                                  periodograms=pg), strict=True):
             if not peak:
                 out[c] = DecayAssessment(c, Verdict.NO_DECAY, "no mode significantly above noise")
     rows = tuple(c for c in range(n_ch) if c not in out)
     table = None
     if rows:
-        table = identify_modes(X[list(rows)], fs_hz, false_alarm=false_alarm, per_channel=True)
+        sel = [rest.index(c) for c in rows]
+        table = identify_modes(X[list(rows)], fs_hz, false_alarm=false_alarm, per_channel=True,
+                               periodograms={m: P[sel] for m, P in pg.items()})
         for j, c in enumerate(rows):
             got = _judge_from_joint(c, j, table, min_cycles, min_delta, false_alarm)
             if got is not None:
