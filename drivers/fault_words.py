@@ -58,7 +58,7 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
         "frame_mismatch": lambda: f"device sends {d.get('channels')} channels, the rig expects "
                                   f"{d.get('expected')}: frames refused"
                                   + (f" ({d['total']} so far)" if d.get("total", 1) > 1 else ""),
-        "no_data": lambda: f"no data from {device} for {d.get('silent_s', 0):.1f} s",
+        "no_data": lambda: f"no data from {device} for {d.get('quiet_s', 0):g} s",
         "data_back": lambda: f"data from {device} again after {d.get('silent_s', 0):.1f} s",
         "bus_lost": lambda: f"CAN bus {d.get('bus', '?')} lost ({d.get('error', '?')})",
         "bus_off": lambda: f"CAN bus {d.get('bus', '?')} off ({d.get('reason', '')})",

@@ -207,6 +207,7 @@ class SerialDevice(Device):
         self._refused = self._refused_said = 0  # frames of a wrong channel count: all, reported
         self._refused_next = 0.0  # monotonic s of the next frame_mismatch report
         self._refused_at_block = 0  # ... refused when the last block was made
+        self._refused_last = (0, 0)  # sequence number and channel count of the last refused
 
     # -- Device hooks ------------------------------------------------------------------------
     def _open(self) -> StreamInfo:
@@ -295,6 +296,7 @@ class SerialDevice(Device):
         self._drop_port()
         self._ingest(self.parser.flush())
         self._end_repeats()
+        self._report_refused()
         self._emit_partial()
         if self._ended:  # the device said goodbye before it went: not a fault
             return
@@ -356,12 +358,18 @@ class SerialDevice(Device):
         """A frame of the wrong channel count, refused: reported at once, then at most once per
         ``report_s`` with the count; until a block comes, this says why no data come."""
         self._refused += 1
-        now = time.monotonic()
-        if now >= self._refused_next:
-            self._fault("frame_mismatch", self._t_next(), seq=frame.seq, channels=frame.n_channels,
+        self._refused_last = (frame.seq, frame.n_channels)
+        if time.monotonic() >= self._refused_next:
+            self._report_refused()
+
+    def _report_refused(self) -> None:
+        """A ``frame_mismatch`` for the frames refused since the last one, if any."""
+        if self._refused > self._refused_said:
+            seq, channels = self._refused_last
+            self._fault("frame_mismatch", self._t_next(), seq=seq, channels=channels,
                         expected=self.n_channels, frames=self._refused - self._refused_said,
                         total=self._refused)
-            self._refused_said, self._refused_next = self._refused, now + self.report_s
+            self._refused_said, self._refused_next = self._refused, time.monotonic() + self.report_s
 
     def _place(self, frame: Frame) -> None:
         """Where a CRC-valid frame goes (module notes): on from the last, dropped as a repeat,

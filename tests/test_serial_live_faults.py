@@ -1,0 +1,126 @@
+"""A serial front-end that goes quiet, vanishes or sends the wrong layout, as a new user met them
+(issue: front-ends, /tmp/t7): a real pty, frames written by a thread as a front-end writes them,
+the real SerialDevice and the live trial Session. What the session says is asserted line by line;
+what the recording holds, event by event, at its stream time.
+
+No timing is asserted: the front-end's pauses (1.5 s) are five times ``quiet_s`` (0.3 s), so
+the silence is seen whatever the load; its stream time comes from the samples, not the clock.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+import tty
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ramdaq.daq.session import Session
+from ramdaq.drivers.block import sample_time_ns
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.serial_device import SerialDevice
+from ramdaq.drivers.serial_frames import encode_frame
+
+pytestmark = pytest.mark.timeout(60)
+
+RIG = Path(__file__).resolve().parent.parent / "recordings" / "rigs" / "albacore.toml"
+FS, NS = 2048.0, 32  # the rig's rate; samples per frame
+
+
+def _frames(first_seq: int, n: int, channels: int) -> bytes:
+    rng = np.random.default_rng(first_seq)
+    return b"".join(encode_frame(k, k * NS, rng.integers(-1000, 1000, (channels, NS)))
+                    for k in range(first_seq, first_seq + n))
+
+
+def _front_end(script: list) -> tuple[str, threading.Thread]:
+    """A pty whose master side plays ``script``: bytes to write, or seconds to pause; then the
+    port vanishes (both sides closed)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    name = os.ttyname(slave)
+
+    def play() -> None:
+        time.sleep(0.3)  # let the device open the port
+        for step in script:
+            if isinstance(step, bytes):
+                os.write(master, step)
+            else:
+                time.sleep(step)
+        os.close(master)
+        os.close(slave)
+
+    th = threading.Thread(target=play, name="front-end", daemon=True)
+    th.start()
+    return name, th
+
+
+def _trial(tmp_path: Path, script: list, quiet_s: float = 0.3
+           ) -> tuple[str, list[str], list[dict], object]:
+    port, th = _front_end(script)
+    dev = SerialDevice(port, rig=str(RIG), quiet_s=quiet_s, reconnect_s=0.1, give_up_s=0.5)
+    shown: list[str] = []
+    out = Session(dev, record_path=tmp_path / "t.mcap", readout=False, log=shown.append).run()
+    th.join(10)
+    with McapReplayDevice(tmp_path / "t.mcap") as back:
+        events = back.events()
+    return f"serial://{port}", shown, events, out
+
+
+def test_silence_then_data_then_vanish_said_when_they_happen(tmp_path):
+    n = 16  # frames before and after the silence: 0.25 s of samples each
+    garbage = b"\x00half a frame from before the connect\xeb\x90\x01"
+    device, shown, events, out = _trial(tmp_path, [
+        garbage + _frames(0, n, 16), 1.5, _frames(n, n, 16), 1.5])
+    t_quiet = sample_time_ns(n * NS, FS) / 1e9
+    said = [s for s in shown if s.startswith((device, "no data", "data from", "device"))]
+    assert said[0] == f"no data from {device} for 0.3 s (stream time {t_quiet:.3f} s)"
+    assert said[1].startswith(f"data from {device} again after ")
+    assert said[2] == f"no data from {device} for 0.3 s (stream time {2 * t_quiet:.3f} s)"
+    assert said[3].startswith(f"{device} at {2 * t_quiet:.3f} s: port {device[9:]} lost (")
+    assert said[3].endswith("reconnecting every 0.1 s, giving up after 0.5 s")
+    assert said[4] == (f"device ended the stream: serial: {device[9:]} vanished and did not "
+                       "come back within 0.5 s")
+    assert said[5] == "device faults: 2 silence(s) of the device, 1 lost port(s) or bus(es)"
+    assert len(said) == 6 and out.notes  # the connect's stray bytes: recorded, not said
+    ev = [(e["kind"], e["t_ns"]) for e in events]
+    assert ev == [("resync", 0), ("no_data", sample_time_ns(n * NS, FS)),
+                  ("data_back", sample_time_ns(n * NS, FS)),
+                  ("no_data", sample_time_ns(2 * n * NS, FS)),
+                  ("port_lost", sample_time_ns(2 * n * NS, FS)),
+                  ("device_error", sample_time_ns(2 * n * NS, FS))]
+    assert events[0]["detail"]["at_connect"] is True
+
+
+def test_one_corrupt_frame_is_one_line(tmp_path):
+    good = _frames(0, 20, 16)
+    size = len(good) // 20
+    bad = bytearray(good)
+    bad[10 * size + 30] ^= 0xFF  # a payload byte of frame 10
+    device, shown, events, _ = _trial(tmp_path, [bytes(bad), 0.5], quiet_s=5.0)
+    t = sample_time_ns(10 * NS, FS) / 1e9
+    said = [s for s in shown if s.startswith(device)]
+    assert said[0] == (f"{device} at {t:.3f} s: 1 corrupt frame dropped (CRC failed); "
+                       f"{size} stray bytes skipped to the next frame; 32 samples (0.016 s) missing")
+    assert said[1].startswith(f"{device} at {20 * NS / FS:.3f} s: port ")
+    assert len(said) == 2
+    kinds = [e["kind"] for e in events]
+    assert kinds[:3] == ["crc_error", "resync", "seq_gap"]  # each still an event
+
+
+def test_wrong_channel_count_said_once_and_counted(tmp_path):
+    n = 100  # frames of 8 channels to a rig of 16
+    device, shown, events, out = _trial(tmp_path, [_frames(0, n, 8), 1.0])
+    said = [s for s in shown if s.startswith((device, "no data", "device"))]
+    assert said[0] == f"{device} at 0.000 s: device sends 8 channels, the rig expects 16: frames refused"
+    assert said[1].startswith(f"{device} at 0.000 s: port ")
+    assert said[2].startswith("device ended the stream: ")
+    assert said[3] == (f"device faults: {n} frame(s) refused for a wrong channel count, "
+                       "1 lost port(s) or bus(es)")
+    assert len(said) == 4  # and no "no data": the refused frames say why
+    refused = [e["detail"] for e in events if e["kind"] == "frame_mismatch"]
+    assert sum(d["frames"] for d in refused) == refused[-1]["total"] == n
+    assert out.samples == 0
