@@ -25,7 +25,7 @@ __all__ = ["FaultWords", "REPEAT_S"]
 
 REPEAT_S = 10.0
 """Least seconds between two lines for a fault that repeats (``frame_mismatch``)."""
-_INCIDENT = ("crc_error", "resync", "seq_gap", "bad_crc", "wrong_dlc", "bad_frame")
+_INCIDENT = ("crc_error", "resync", "seq_gap", "bad_crc", "wrong_dlc", "bad_frame", "port_back")
 _REPEATING = ("frame_mismatch",)
 
 
