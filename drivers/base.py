@@ -166,8 +166,14 @@ class Device(ABC):
         self._t_after = end
 
     def __iter__(self) -> Iterator[Block]:
+        """Every block to the stream's end; a device with ``quiet_s`` is read with a timeout
+        underneath, so that its silences are noted (``no_data``) even by a plain loop."""
+        poll = None if self.quiet_s is None else min(0.25, self.quiet_s)
         while True:
-            block = self.read()
+            try:
+                block = self.read(poll)
+            except DeviceTimeout:
+                continue
             if block is None:
                 return
             yield block

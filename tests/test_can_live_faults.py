@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import os
 import select
+import subprocess
+import sys
 import threading
 import time
 import tty
@@ -21,6 +23,8 @@ from ramdaq.drivers.emulators.can_emulator import rig_with_adc_bits
 from ramdaq.drivers.errors import DeviceTimeout
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from tests.conftest import RIGS
+
+REPO = RIGS.parent.parent
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -47,15 +51,15 @@ def test_nothing_on_a_virtual_bus_is_no_data_at_stream_time_zero(rig16):
     assert [(f.kind, f.t_ns, f.detail["quiet_s"]) for f in faults] == [("no_data", 0, 0.2)]
 
 
-def _adapter(pause_s: float) -> tuple[str, threading.Thread]:
+def _adapter(pause_s: float, wait_s: float = 5.0) -> tuple[str, threading.Thread]:
     """An slcan adapter on a pty: answers the host's commands, sends no frame, and vanishes
-    ``pause_s`` after the host opened the channel."""
+    ``pause_s`` after the host opened the channel (or after ``wait_s`` without a command)."""
     master, slave = os.openpty()
     tty.setraw(slave)
 
     def run() -> None:
         got = b""
-        while b"O\r" not in got and select.select([master], [], [], 5.0)[0]:
+        while b"O\r" not in got and select.select([master], [], [], wait_s)[0]:
             data = os.read(master, 100)
             got += data
             os.write(master, b"\r" * data.count(b"\r"))
@@ -86,3 +90,19 @@ def test_slcan_adapter_that_vanishes_ends_the_trial_as_a_failure(tmp_path, rig16
         events = back.events()
     assert [(e["kind"], e["t_ns"]) for e in events] == [("no_data", 0), ("bus_lost", 0),
                                                         ("device_error", 0)]
+
+
+def test_cli_trial_on_a_vanished_slcan_adapter_exits_1_with_one_line(tmp_path, rig16):
+    port, th = _adapter(pause_s=1.0, wait_s=60.0)  # the command's start-up is not timed
+    url = f"can://slcan/{port}?sleep_after_open=0&quiet_s=0.3&dbc=classic&rig={rig16}"
+    r = subprocess.run([sys.executable, "-m", "ramdaq", "trial", "--device", url, "--no-rerun",
+                        "--out", str(tmp_path / "t.mcap"), "--quiet"], cwd=tmp_path,
+                       env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True,
+                       text=True, timeout=90)
+    th.join(10)
+    assert r.returncode == 1, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        f"ramdaq trial: the device ended the stream: can: slcan/{port} lost ("), r.stderr
+    assert f"no data from can://slcan/{port} for 0.3 s (stream time 0.000 s)" in r.stdout
+    assert f"can://slcan/{port} at 0.000 s: CAN bus slcan/{port} lost (" in r.stdout

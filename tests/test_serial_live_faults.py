@@ -18,8 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ramdaq.daq.record import record
 from ramdaq.daq.session import Session
 from ramdaq.drivers.block import sample_time_ns
+from ramdaq.drivers.errors import DeviceClosed
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.serial_device import SerialDevice
 from ramdaq.drivers.serial_frames import encode_frame
@@ -124,3 +126,18 @@ def test_wrong_channel_count_said_once_and_counted(tmp_path):
     refused = [e["detail"] for e in events if e["kind"] == "frame_mismatch"]
     assert sum(d["frames"] for d in refused) == refused[-1]["total"] == n
     assert out.samples == 0
+
+
+def test_record_loop_records_the_silence(tmp_path):
+    """``ramdaq record``'s plain loop (``for block in device``) notes the silence too: the
+    device reads itself with a timeout underneath."""
+    n = 16
+    port, th = _front_end([_frames(0, n, 16), 1.5, _frames(n, n, 16), 0.5])
+    dev = SerialDevice(port, rig=str(RIG), quiet_s=0.3, reconnect_s=0.1, give_up_s=0.3)
+    with pytest.raises(DeviceClosed):
+        record(dev, tmp_path / "r.mcap", readout=False)
+    th.join(10)
+    with McapReplayDevice(tmp_path / "r.mcap") as back:
+        events = back.events()
+    t = sample_time_ns(n * NS, FS)
+    assert [(e["kind"], e["t_ns"]) for e in events][:2] == [("no_data", t), ("data_back", t)]
