@@ -19,9 +19,11 @@ import pytest
 
 from ramdaq.daq.session import Session
 from ramdaq.drivers.can_device import CanDevice
-from ramdaq.drivers.emulators.can_emulator import rig_with_adc_bits
+from ramdaq.drivers.can_frames import FrameCodec
+from ramdaq.drivers.emulators.can_emulator import CanEmulator, rig_with_adc_bits, slcan_line
 from ramdaq.drivers.errors import DeviceTimeout
 from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.sim import SimDevice
 from tests.conftest import RIGS
 
 REPO = RIGS.parent.parent
@@ -106,3 +108,56 @@ def test_cli_trial_on_a_vanished_slcan_adapter_exits_1_with_one_line(tmp_path, r
         f"ramdaq trial: the device ended the stream: can: slcan/{port} lost ("), r.stderr
     assert f"no data from can://slcan/{port} for 0.3 s (stream time 0.000 s)" in r.stdout
     assert f"can://slcan/{port} at 0.000 s: CAN bus slcan/{port} lost (" in r.stdout
+
+
+
+def _adapter_with_a_torn_first_line(rig, duration_s: float) -> tuple[str, threading.Thread]:
+    """An slcan adapter whose first bytes after the host opened the channel are the tail of a
+    line it was sending before (as the user's adapter was), then frames at real-time pace; it
+    stays up 2 s after the last."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    sim = SimDevice(rig, seed=1, duration_s=duration_s, impacts=[], pace="fast")
+    emu = CanEmulator(FrameCodec("classic"), sim)
+    opened = threading.Event()
+
+    def answer() -> None:  # the host's commands (S8, O, ...) each get a CR
+        try:
+            while (data := os.read(master, 100)):
+                os.write(master, b"\r" * data.count(b"\r"))
+                if b"O\r" in data:
+                    opened.set()
+        except OSError:
+            return
+
+    def run() -> None:
+        threading.Thread(target=answer, daemon=True).start()
+        opened.wait(10)
+        os.write(master, b"100010000000000\r")  # the tail of a line cut by the connect
+        with sim:
+            t0 = time.monotonic()
+            for w in emu.frames():
+                if (wait := t0 + w.t_s - time.monotonic()) > 0:
+                    time.sleep(wait)
+                if (line := slcan_line(w.msg)) is not None:
+                    os.write(master, line)
+        time.sleep(2.0)
+        os.close(master)
+        os.close(slave)
+
+    th = threading.Thread(target=run, name="slcan-torn-first-line", daemon=True)
+    th.start()
+    return os.ttyname(slave), th
+
+
+def test_a_torn_first_line_at_connect_is_recorded_not_said(tmp_path, rig16):
+    port, th = _adapter_with_a_torn_first_line(rig16, duration_s=1.0)
+    dev = CanDevice(f"slcan/{port}?sleep_after_open=0&idle_s=0.3", dbc="classic", rig=str(rig16))
+    shown: list[str] = []
+    out = Session(dev, record_path=tmp_path / "t.mcap", readout=False, log=shown.append).run()
+    th.join(10)
+    with McapReplayDevice(tmp_path / "t.mcap") as back:
+        events = back.events()
+    assert [(e["kind"], e["detail"]["at_connect"]) for e in events] == [("bad_frame", True)]
+    assert [s for s in shown if s.startswith((f"can://slcan/{port}", "device"))] == [], shown
+    assert out.samples == 3 * (2048 // 3) and not out.notes  # every whole 3-sample cycle of the second
