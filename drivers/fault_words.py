@@ -80,6 +80,15 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
         "foreign_sender": lambda: "a second sender with this front-end's identifiers: its frames "
                                   "are dropped",
         "foreign_sender_gone": lambda: "the second sender is quiet again",
+        "foreign_frame": lambda: f"{_s(d.get('count', 1), 'frame')} of the second sender dropped",
+        "conflicting_frame": lambda: f"{_s(d.get('count', 1), 'cycle')} in which the two senders "
+                                     "disagree lost",
+        "duplicate_frame": lambda: f"{_s(d.get('count', 1), 'duplicate frame')} dropped",
+        "late_frame": lambda: f"{_s(d.get('count', 1), 'frame')} too late for its cycle dropped",
+        "seq_outlier": lambda: f"{_s(d.get('count', 1), 'frame')} with a lone SEQ jump dropped",
+        "error_frame": lambda: f"{_s(d.get('count', 1), 'CAN error frame')} "
+                               f"(class {d.get('error_class', '?')})",
+        "error_passive": lambda: f"CAN bus {d.get('bus', '?')} error-passive",
     }
     fn = words.get(k)
     if fn is not None:

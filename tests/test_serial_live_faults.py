@@ -10,6 +10,7 @@ the silence is seen whatever the load; its stream time comes from the samples, n
 from __future__ import annotations
 
 import os
+import re
 import threading
 import time
 import tty
@@ -20,8 +21,11 @@ import pytest
 
 from ramdaq.daq.record import record
 from ramdaq.daq.session import Session
+from ramdaq.drivers.base import DeviceFault
 from ramdaq.drivers.block import sample_time_ns
+from ramdaq.drivers.can_frames import REJECTIONS
 from ramdaq.drivers.errors import DeviceClosed
+from ramdaq.drivers.fault_words import FaultWords, describe
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.serial_device import SerialDevice
 from ramdaq.drivers.serial_frames import encode_frame
@@ -141,3 +145,28 @@ def test_record_loop_records_the_silence(tmp_path):
         events = back.events()
     t = sample_time_ns(n * NS, FS)
     assert [(e["kind"], e["t_ns"]) for e in events][:2] == [("no_data", t), ("data_back", t)]
+
+
+def test_every_fault_a_driver_reports_has_words():
+    """Each fault kind the drivers emit (found in their source) is told in words, not as the
+    fallback that spells the kind and its dict."""
+    src = "".join(p.read_text() for p in (RIG.parents[2] / "drivers").glob("*.py"))
+    kinds = set(re.findall(r'(?:_fault|_count|SeqNote|_drop_side)\("([a-z_]+)"', src))
+    kinds |= set(re.findall(r'return "([a-z_]+_frame)"', src)) | set(REJECTIONS)
+    assert {"no_data", "port_lost", "bus_lost", "frame_mismatch", "late_frame"} <= kinds
+    for kind in sorted(kinds):
+        words = describe(DeviceFault(kind, 0, {"count": 2}), "dev", FS)
+        assert words and "(count 2)" not in words, (kind, words)  # the fallback spells the dict
+
+
+def test_fault_lines_hide_connect_noise_and_group_one_incident():
+    w = FaultWords("serial://x", FS)
+    connect = DeviceFault("resync", 0, {"bytes_discarded": 1096, "at_connect": True})
+    crc = DeviceFault("crc_error", 5 * 10**9, {"count": 1})
+    resync = DeviceFault("resync", 5 * 10**9, {"bytes_discarded": 1560})
+    gap = DeviceFault("seq_gap", 5 * 10**9, {"missing_samples": 32})
+    assert w.lines([connect]) == []
+    assert w.lines([crc, resync]) == ["serial://x at 5.000 s: 1 corrupt frame dropped (CRC failed); "
+                                      "1560 stray bytes skipped to the next frame"]
+    assert w.lines([gap]) == []  # the same incident, reported with the next block
+    assert w.tally() == "device faults: 1 corrupt frame(s), 1 gap(s) in the frame sequence"
