@@ -376,14 +376,14 @@ class Session:
     def _end_of_stream(self, rec: Recorder | None) -> None:
         """The last faults, the trigger's open event, and every final analysis still queued."""
         self._show_faults(self.device.take_faults(), rec)  # faults reported with the last read
-        tally = self._fault_words.tally()
-        if tally:
-            self._say(tally)
         for ev in self.trigger.flush():
             self._on_event(ev, rec)
         self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
         self._jobs.join()
         self._drain(rec)
+        tally = self._fault_words.tally()  # next to the trial's summary
+        if tally:
+            self._say(tally)
 
     def _on_event(self, ev: ImpactEvent, rec: Recorder | None) -> None:
         k = self._n_events

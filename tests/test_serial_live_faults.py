@@ -42,15 +42,17 @@ def _frames(first_seq: int, n: int, channels: int) -> bytes:
                     for k in range(first_seq, first_seq + n))
 
 
-def _front_end(script: list) -> tuple[str, threading.Thread]:
-    """A pty whose master side plays ``script``: bytes to write, or seconds to pause; then the
-    port vanishes (both sides closed)."""
+def _front_end(script: list) -> tuple[str, threading.Thread, threading.Event]:
+    """A pty whose master side plays ``script`` once the event is set (the port opened: pyserial's
+    open flushes what was waiting): bytes to write, or seconds to pause; then the port vanishes
+    (both sides closed)."""
     master, slave = os.openpty()
     tty.setraw(slave)
     name = os.ttyname(slave)
+    go = threading.Event()
 
     def play() -> None:
-        time.sleep(0.3)  # let the device open the port
+        go.wait(30)
         for step in script:
             if isinstance(step, bytes):
                 os.write(master, step)
@@ -61,13 +63,15 @@ def _front_end(script: list) -> tuple[str, threading.Thread]:
 
     th = threading.Thread(target=play, name="front-end", daemon=True)
     th.start()
-    return name, th
+    return name, th, go
 
 
 def _trial(tmp_path: Path, script: list, quiet_s: float = 0.3
            ) -> tuple[str, list[str], list[dict], object]:
-    port, th = _front_end(script)
+    port, th, go = _front_end(script)
     dev = SerialDevice(port, rig=str(RIG), quiet_s=quiet_s, reconnect_s=0.1, give_up_s=0.5)
+    dev.open()
+    go.set()
     shown: list[str] = []
     out = Session(dev, record_path=tmp_path / "t.mcap", readout=False, log=shown.append).run()
     th.join(10)
@@ -136,8 +140,10 @@ def test_record_loop_records_the_silence(tmp_path):
     """``ramdaq record``'s plain loop (``for block in device``) notes the silence too: the
     device reads itself with a timeout underneath."""
     n = 16
-    port, th = _front_end([_frames(0, n, 16), 1.5, _frames(n, n, 16), 0.5])
+    port, th, go = _front_end([_frames(0, n, 16), 1.5, _frames(n, n, 16), 0.5])
     dev = SerialDevice(port, rig=str(RIG), quiet_s=0.3, reconnect_s=0.1, give_up_s=0.3)
+    dev.open()
+    go.set()
     with pytest.raises(DeviceClosed):
         record(dev, tmp_path / "r.mcap", readout=False)
     th.join(10)
