@@ -5,9 +5,9 @@ only decides what a person watching the trial is told, and how:
 
 * a fault marked ``at_connect`` (bytes before the first frame boundary, the backlog of an
   adapter's start-up) is part of a normal connect: recorded, not shown;
-* faults at one stream time that are one incident -- a corrupt frame, the bytes skipped to find
-  the next frame and the samples it took with it -- are one line; a part of that incident
-  reported later (in the next batch) is not shown again;
+* faults within :data:`INCIDENT_S` of stream time that are one incident -- a corrupt frame,
+  the bytes skipped to find the next frame and the samples it took with it -- are one line;
+  a part of that incident reported later (in the next batch) is not shown again;
 * a fault that repeats every frame (a wrong channel count) is shown once, and then at most every
   :data:`REPEAT_S` seconds (wall clock: no samples may be coming) with the count so far;
 * :meth:`FaultWords.tally` gives one line of counts for the trial's summary.
@@ -23,6 +23,10 @@ from .base import DeviceFault
 
 __all__ = ["FaultWords", "REPEAT_S"]
 
+INCIDENT_S = 0.01
+"""Faults of an incident's kinds this close in stream time are one incident, s: a CAN frame of
+the wrong length and the cycle it lost are a sample apart; two serial frames (32 samples at
+2048 Hz, 15.6 ms) are never this close."""
 REPEAT_S = 10.0
 """Least seconds between two lines for a fault that repeats (``frame_mismatch``)."""
 _INCIDENT = ("crc_error", "resync", "seq_gap", "bad_crc", "wrong_dlc", "bad_frame", "port_back")
@@ -97,6 +101,10 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
     return k.replace("_", " ") + (f" ({extra})" if extra else "")
 
 
+def _near(a_ns: int, b_ns: int) -> bool:
+    return abs(a_ns - b_ns) <= INCIDENT_S * 1e9
+
+
 class FaultWords:
     """Turns batches of faults into the lines to show (module notes); keeps the counts."""
 
@@ -117,10 +125,10 @@ class FaultWords:
                 continue
             self._count(f)
             if f.kind in _INCIDENT:
-                if group and group[0].t_ns != f.t_ns:
+                if group and not _near(group[0].t_ns, f.t_ns):
                     out.append(self._incident(group))
                     group = []
-                if group or f.t_ns != self._incident_t:
+                if group or self._incident_t is None or not _near(f.t_ns, self._incident_t):
                     group.append(f)
                 continue
             if group:

@@ -163,7 +163,8 @@ def test_drops_corruption_and_garbage_become_gaps_and_events(tmp_path, transport
     assert s["dropped"] and s["corrupted"] and s["garbage"]
     assert np.array_equal(missing, frames_missing(s, missing.size, "dropped", "corrupted"))
     n = kinds(events)
-    # one line per incident: a stream time with a fault shown once, whatever its parts
+    # one line per incident: a stream time with a fault shown once, whatever its parts (the
+    # emulator's faults are whole frames apart, farther than fault_words.INCIDENT_S)
     said = shown_faults(shown, f"serial://{address}")
     assert len(said) == len({e["t_ns"] for e in events if e["kind"] in ("crc_error", "resync",
                                                                          "seq_gap")})
