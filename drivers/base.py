@@ -40,7 +40,9 @@ is missed."""
 class DeviceFault:
     """Something the device saw go wrong, for the recording's events and the live view:
     ``kind`` (e.g. ``"crc_error"``, ``"error_frame"``, ``"bus_off"``, ``"port_lost"``,
-    ``"resync"``), device time ``t_ns`` and a JSON-serialisable ``detail``."""
+    ``"resync"``, ``"no_data"``), device time ``t_ns`` and a JSON-serialisable ``detail``
+    (``at_connect``: part of a normal connect; :mod:`ramdaq.drivers.fault_words` does not show
+    it). ``docs/drivers.md`` says what each kind means."""
 
     kind: str
     t_ns: int

@@ -29,6 +29,7 @@ from ramdaq.drivers.fault_words import FaultWords, describe
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.serial_device import SerialDevice
 from ramdaq.drivers.serial_frames import encode_frame
+from ramdaq.drivers.sim import SimDevice
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -181,3 +182,34 @@ def test_fault_lines_hide_connect_noise_and_group_one_incident():
     lost = DeviceFault("seq_gap", sample_time_ns(10126, FS), {"missing_samples": 3})
     assert can.lines([dlc, lost]) == ["can://slcan/x at 4.945 s: 1 frame of the wrong length "
                                       "dropped (id 0x40f, 6 bytes); 3 samples (0.001 s) missing"]
+
+
+class _CtrlCAfter(SimDevice):
+    """The simulator, until Ctrl-C comes during the read of block ``n``."""
+
+    def __init__(self, n: int) -> None:
+        super().__init__(RIG, seed=1, duration_s=10.0, impacts=[], pace="fast")
+        self.n = n
+
+    def _read(self, timeout):
+        if self._seq_read == self.n:
+            raise KeyboardInterrupt
+        self._seq_read += 1
+        return super()._read(timeout)
+
+    _seq_read = 0
+
+
+def test_interrupted_event_carries_the_stream_time(tmp_path):
+    out = Session(_CtrlCAfter(7), record_path=tmp_path / "c.mcap", readout=False).run()
+    with McapReplayDevice(tmp_path / "c.mcap") as back:
+        events = back.events()
+    assert out.interrupted and out.samples > 0
+    assert [(e["kind"], e["t_ns"]) for e in events] == [("interrupted", sample_time_ns(out.samples, FS))]
+
+
+def test_quiet_s_is_a_query_key_and_must_be_positive():
+    assert SerialDevice("/dev/ttyNONE?quiet_s=2.5").quiet_s == 2.5
+    assert SerialDevice("/dev/ttyNONE").quiet_s == 1.0  # drivers.base.QUIET_S
+    with pytest.raises(ValueError, match=r"^serial: quiet_s \(0.0\) must be positive$"):
+        SerialDevice("/dev/ttyNONE?quiet_s=0")
