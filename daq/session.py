@@ -45,7 +45,7 @@ import numpy as np
 from ..analysis.impact import FirstLook
 from ..analysis.model.rig import Rig, parse_rig
 from ..analysis.model.rig_modes import modes_in
-from ..drivers.base import Device
+from ..drivers.base import Device, DeviceFault
 from ..drivers.block import Block, sample_time_ns
 from ..drivers.errors import DeviceError, DeviceTimeout
 from ..drivers.fault_words import FaultWords
@@ -339,7 +339,8 @@ class Session:
         """Stream time just after the last sample taken, ns (0 before the first block)."""
         return 0 if self._next_sample is None else sample_time_ns(self._next_sample, self.info.fs_hz)
 
-    def _show_faults(self, faults: list, rec: Recorder | None, recorded: bool = False) -> None:
+    def _show_faults(self, faults: list[DeviceFault], rec: Recorder | None,
+                     recorded: bool = False) -> None:
         """Record the device's faults (unless ``store_block`` did) and say them in words."""
         if rec and not recorded:
             for fault in faults:

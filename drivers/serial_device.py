@@ -139,6 +139,8 @@ class SerialDevice(Device):
         Seconds without a block, port open, before ``no_data`` is reported; default 1.
     read_slice_s : float
         Longest wait for bytes in one go, s: the granularity of ``read(timeout)``.
+    report_s : float
+        Frames of a wrong channel count are reported at most this often, s (the first at once).
     """
 
     kind = "serial"
