@@ -45,9 +45,10 @@ import numpy as np
 from ..analysis.impact import FirstLook
 from ..analysis.model.rig import Rig, parse_rig
 from ..analysis.model.rig_modes import modes_in
-from ..drivers.base import Device
-from ..drivers.block import Block
-from ..drivers.errors import DeviceError
+from ..drivers.base import Device, DeviceFault
+from ..drivers.block import Block, sample_time_ns
+from ..drivers.errors import DeviceError, DeviceTimeout
+from ..drivers.fault_words import FaultWords
 from ..drivers.mcap_format import IMPACTS_TOPIC
 from .analyzer import (
     AnalyzerLoad,
@@ -94,6 +95,8 @@ fraction (and by ``update_s`` at least): a look's numbers change only as its dec
 fair part of itself (and not at all once the ringing is under the noise), and a look every
 ``update_s`` on a 14 s decay was 28 looks a blow at ~0.1 s CPU each -- most of a live trial's
 CPU, taken from the finals and the next blow's first looks -- where 1.5x makes about 8."""
+FAULT_POLL_S = 0.25
+"""Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 SUMMARY_TOPIC = "/ramdaq/summary"
 """The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 
@@ -247,6 +250,7 @@ class Session:
         self._onsets: dict[int, float] = {}  # hit index -> onset, s, as soon as it rings
         self._gage_rows = [i for i, g in enumerate(self.info.gages) if g]
         self._gages = tuple(self.info.gages[i] for i in self._gage_rows)
+        self._fault_words = FaultWords(self.info.device, self.info.fs_hz)
 
     # -- the analyzer threads -----------------------------------------------------------------
     def _worker(self, kind: type[FinalJob] | type[LookJob]) -> None:
@@ -310,18 +314,39 @@ class Session:
     def _stream(self, rec: Recorder | None) -> bool:
         """Take every block of the device; True if Ctrl-C ended the stream."""
         try:
-            for block in self.device:
+            while True:
+                try:  # a timeout, so that what a quiet device reports is said at once
+                    block = self.device.read(timeout=FAULT_POLL_S)
+                except DeviceTimeout:
+                    self._show_faults(self.device.take_faults(), rec)
+                    continue
+                if block is None:
+                    break
                 self._take(block, rec)
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             if rec:
-                rec.event("interrupted", 0, reason=str(err) or "Ctrl-C")
+                rec.event("interrupted", self._t_end(), reason=str(err) or "Ctrl-C")
             return True
         except DeviceError as err:  # the device gave up: keep what came, say why
+            self._show_faults(self.device.take_faults(), rec)
             self._say(f"device ended the stream: {err}")
             if rec:
-                rec.event("device_error", 0, message=str(err))
+                rec.event("device_error", self._t_end(), message=str(err))
             self.notes.append(str(err))
         return False
+
+    def _t_end(self) -> int:
+        """Stream time just after the last sample taken, ns (0 before the first block)."""
+        return 0 if self._next_sample is None else sample_time_ns(self._next_sample, self.info.fs_hz)
+
+    def _show_faults(self, faults: list[DeviceFault], rec: Recorder | None,
+                     recorded: bool = False) -> None:
+        """Record the device's faults (unless ``store_block`` did) and say them in words."""
+        if rec and not recorded:
+            for fault in faults:
+                rec.event(fault.kind, fault.t_ns, **fault.detail)
+        for line in self._fault_words.lines(faults):
+            self._say(line)
 
     def _take(self, block: Block, rec: Recorder | None) -> None:
         """One block through the recorder, the trigger, the first looks and the views."""
@@ -331,8 +356,7 @@ class Session:
                 wait_for_room=getattr(self.device, "pace", "realtime") == "fast")
         else:
             faults = self.device.take_faults()
-        for fault in faults:
-            self._say(f"device fault: {fault.kind} {fault.detail}")
+        self._show_faults(faults, rec, recorded=True)
         gap = self._next_sample is not None and block.first_sample != self._next_sample
         self._next_sample = block.next_sample
         if self.wall_at_start is None:
@@ -352,15 +376,15 @@ class Session:
 
     def _end_of_stream(self, rec: Recorder | None) -> None:
         """The last faults, the trigger's open event, and every final analysis still queued."""
-        for fault in self.device.take_faults():  # faults reported with the last read
-            if rec:
-                rec.event(fault.kind, fault.t_ns, **fault.detail)
-            self._say(f"device fault: {fault.kind} {fault.detail}")
+        self._show_faults(self.device.take_faults(), rec)  # faults reported with the last read
         for ev in self.trigger.flush():
             self._on_event(ev, rec)
         self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
         self._jobs.join()
         self._drain(rec)
+        tally = self._fault_words.tally()  # next to the trial's summary
+        if tally:
+            self._say(tally)
 
     def _on_event(self, ev: ImpactEvent, rec: Recorder | None) -> None:
         k = self._n_events

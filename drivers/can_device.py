@@ -8,7 +8,7 @@
 The address is ``INTERFACE/CHANNEL`` of any python-can interface (``socketcan/can0``,
 ``pcan/PCAN_USBBUS1``, ``kvaser/0``, ``vector/0``, ``slcan//dev/ttyACM0``, ``virtual/0``) and a
 query: ``rig``, ``dbc``, ``channels``, ``fs_hz``, ``block_s``, ``bitrate``, ``data_bitrate``, ``fd``,
-``duration_s``, ``idle_s``, ``group_timeout_s``, ``clock_tolerance_s``, ``bus`` (one more
+``duration_s``, ``idle_s``, ``quiet_s``, ``group_timeout_s``, ``clock_tolerance_s``, ``bus`` (one more
 ``INTERFACE/CHANNEL``, repeatable); any other key goes to ``can.Bus`` (e.g. ``sleep_after_open=0``
 for slcan). slcan is opened as python-can opens it but read by
 :class:`ramdaq.drivers.slcan_reader.SlcanReader`: every byte waiting at most every ``read_every_s``
@@ -50,7 +50,14 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
 * frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
   (``bad_frame``, with the line), late and duplicate frames are counted; these faults are
   reported at most once per ``report_s`` with their counts. ``bus_lost`` (the interface failed)
-  ends that bus; when none is left the stream ends.
+  ends that bus; when none is left, the samples already assembled are handed out and then
+  :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
+* ``no_data`` / ``data_back``: no block for ``quiet_s`` (default 1 s; :mod:`ramdaq.drivers.base`),
+  also before the first frame; ``idle_s`` (default: never) instead *ends* the stream after that
+  long without a frame (only once frames have come);
+* faults of a normal connect -- before the first block, a torn first line (``bad_frame``), an
+  incomplete first cycle (``seq_gap``), the adapter's start-up backlog (``delayed_frames``,
+  python-can's slcan sleeps 2 s after opening) -- carry ``at_connect``: recorded, not shown.
 """
 
 from __future__ import annotations
@@ -66,10 +73,10 @@ import can
 import numpy as np
 
 from ..analysis.model.rig import Rig, load_rig, parse_rig
-from .base import TIMED_OUT, Device
+from .base import QUIET_S, TIMED_OUT, Device, DeviceFault
 from .block import Block, StreamInfo, sample_time_ns
 from .can_frames import UNRELATED, CycleAssembler, FrameCodec
-from .errors import DeviceNotFound
+from .errors import DeviceClosed, DeviceNotFound
 from .rig_channels import rig_channels
 from .slcan_reader import SlcanFrame, SlcanReader
 
@@ -77,7 +84,8 @@ __all__ = ["CanDevice", "parse_address"]
 
 _BUS_OFF, _RESTARTED, _CRTL, _CRTL_ACTIVE = 0x40, 0x100, 0x04, 0x40  # linux/can/error.h
 _OPTIONS = {"rig", "dbc", "channels", "fs_hz", "block_s", "bitrate", "data_bitrate", "fd", "bus",
-            "duration_s", "idle_s", "group_timeout_s", "clock_tolerance_s", "scale"}
+            "duration_s", "idle_s", "quiet_s", "group_timeout_s", "clock_tolerance_s", "scale"}
+_CONNECT_KINDS = ("bad_frame", "seq_gap", "delayed_frames", "late_frame")
 
 
 def _coerce(text: str) -> object:
@@ -187,6 +195,9 @@ class CanDevice(Device):
         self.total_n = None if dur is None else round(float(dur) * self.fs_hz)
         idle = idle_s if idle_s is not None else q.get("idle_s")
         self.idle_s = None if idle is None else float(idle)
+        self.quiet_s = float(q.get("quiet_s", QUIET_S))  # the query's only (module notes)
+        if not self.quiet_s > 0:
+            raise ValueError(f"can://{address}: quiet_s ({self.quiet_s}) must be positive")
         self.group_timeout_s = float(group_timeout_s or q.get("group_timeout_s", 0.5))
         self.report_s = report_s
         self.scale = self._scales(scale if scale is not None else q.get("scale", 1.0), n)
@@ -197,6 +208,7 @@ class CanDevice(Device):
         self._frames = self._good = 0
         self._dirty = False
         self._buses: list = []
+        self._lost: list[str] = []  # "bus (error)" of each bus lost
         self._origin: int | None = None
         self._pos = 0
         self._seq = 0
@@ -314,6 +326,8 @@ class CanDevice(Device):
             if self._ended:
                 for kind in list(self._pending):
                     self._report(kind, math.inf)
+                if self._lost and not self._buses:
+                    raise DeviceClosed(f"can: {'; '.join(self._lost)}: the device vanished")
                 return None
             wait = 0.05
             if deadline is not None:
@@ -361,7 +375,9 @@ class CanDevice(Device):
         return None
 
     def _lose_bus(self, i: int, err: Exception) -> None:
-        self._fault("bus_lost", self._t_ns(), bus=self._names.pop(i), error=str(err)[:120])
+        why = " ".join(str(err).split())[:120] or type(err).__name__
+        self._lost.append(f"{self._names[i]} lost ({why})")
+        self._fault("bus_lost", self._t_ns(), bus=self._names.pop(i), error=why)
         self._stateful.pop(i)
         bus = self._buses.pop(i)
         try:
@@ -473,6 +489,15 @@ class CanDevice(Device):
         """Device time of ``sample`` (absolute), default the newest sample seen."""
         s = max(((g.hi + 1) * g.T for g in self.groups.values()), default=0) if sample is None else sample
         return sample_time_ns(max(0, s - (self._origin or 0)), self.fs_hz)
+
+    def _fault(self, kind: str, t_ns: int, **detail: object) -> None:
+        """Base's, with ``at_connect`` on the faults of a normal connect (module notes)."""
+        if self._seq == 0 and kind in _CONNECT_KINDS:
+            detail["at_connect"] = True
+        self._faults.append(DeviceFault(kind, t_ns, dict(detail)))
+
+    def _t_heard_ns(self) -> int:
+        return self._t_ns() if self._origin is not None else 0
 
     @property
     def counters(self) -> Counter:

@@ -9,7 +9,7 @@
 
 The address is anything :func:`serial.serial_for_url` opens (a device path, ``socket://``,
 ``rfc2217://``, ...). Query keys this back-end knows (``rig``, ``fs_hz``, ``channels``,
-``block_s``, ``baudrate``, ``reconnect_s``, ``give_up_s``) are taken out of the URL before it is
+``block_s``, ``baudrate``, ``reconnect_s``, ``give_up_s``, ``quiet_s``) are taken out of the URL before it is
 handed to pyserial; any other key (``logging=debug``) is left for pyserial.
 
 Frames are gathered into blocks of at most ``block_s`` (and at least one frame); a block's
@@ -32,7 +32,9 @@ classified against the stream so far (its sequence number, sample index and payl
 Faults are reported through :meth:`~ramdaq.drivers.base.Device.take_faults`, never raised:
 
 * ``crc_error`` -- frames whose header or payload CRC failed (``count``, ``total``);
-* ``resync`` -- sync regained after garbage or a torn frame (``bytes_discarded``, ``seq``);
+* ``resync`` -- sync regained after garbage or a torn frame (``bytes_discarded``, ``seq``;
+  ``at_connect`` when no frame had been placed yet: the bytes before the first frame boundary
+  of a connect are normal, recorded but not shown);
 * ``seq_gap`` -- frames missing from the sequence (``missing_frames``, ``missing_samples``);
 * ``repeated_frame`` -- frames received again, dropped (``frames``, ``first_seq``, ``last_seq``,
   ``samples``, ``placed_at``: the stream sample where the first of them had been placed);
@@ -43,7 +45,11 @@ Faults are reported through :meth:`~ramdaq.drivers.base.Device.take_faults`, nev
 * ``port_lost`` -- the port vanished (USB unplug, bridge down, EOF on a pty or socket);
 * ``port_back`` -- the port reopened and data flows again, with the gap it left
   (``gap_samples``, ``gap_frames``, ``down_s``);
-* ``frame_mismatch`` -- a CRC-valid frame with the wrong channel count, dropped.
+* ``frame_mismatch`` -- CRC-valid frames with the wrong channel count, dropped: the first at
+  once, then at most once per ``report_s`` (1 s) with the count (``channels``, ``expected``,
+  ``frames`` since the last report, ``total``);
+* ``no_data`` / ``data_back`` -- no block for ``quiet_s`` (default 1 s) while the port is open,
+  and the block that ended that silence (:mod:`ramdaq.drivers.base`).
 
 A lost port is reopened with the same URL every ``reconnect_s`` seconds; after ``give_up_s``
 seconds without it, :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the URL.
@@ -64,7 +70,7 @@ import numpy as np
 import serial
 
 from ..analysis.model.rig import Rig, load_rig, parse_rig
-from .base import TIMED_OUT, Device
+from .base import QUIET_S, TIMED_OUT, Device
 from .block import Block, StreamInfo, sample_time_ns
 from .errors import DeviceClosed, DeviceNotFound
 from .rig_channels import rig_channels
@@ -73,7 +79,7 @@ from .serial_frames import Frame, FrameParser
 __all__ = ["SerialDevice", "split_url"]
 
 _QUERY_KEYS = {"rig": str, "fs_hz": float, "channels": int, "block_s": float, "baudrate": int,
-               "reconnect_s": float, "give_up_s": float}
+               "reconnect_s": float, "give_up_s": float, "quiet_s": float}
 _READ_CHUNK = 1 << 16
 _HISTORY = 4096  # frames remembered (by sequence number) to tell a repeat from a restart
 _PORT_ERRORS = (serial.SerialException, OSError)
@@ -129,8 +135,12 @@ class SerialDevice(Device):
         Seconds between attempts to reopen a lost port; default 0.5.
     give_up_s : float, optional
         Seconds a port may stay lost before the stream ends with ``DeviceClosed``; default 30.
+    quiet_s : float, optional
+        Seconds without a block, port open, before ``no_data`` is reported; default 1.
     read_slice_s : float
         Longest wait for bytes in one go, s: the granularity of ``read(timeout)``.
+    report_s : float
+        Frames of a wrong channel count are reported at most this often, s (the first at once).
     """
 
     kind = "serial"
@@ -138,11 +148,13 @@ class SerialDevice(Device):
     def __init__(self, url: str, *, baudrate: int | None = None, rig: Rig | str | Path | None = None,
                  channels: int | None = None, fs_hz: float | None = None,
                  block_s: float | None = None, reconnect_s: float | None = None,
-                 give_up_s: float | None = None, read_slice_s: float = 0.02) -> None:
+                 give_up_s: float | None = None, quiet_s: float | None = None,
+                 read_slice_s: float = 0.02, report_s: float = 1.0) -> None:
         super().__init__()
         self.url, query = split_url(url)
         given = {"rig": rig, "fs_hz": fs_hz, "channels": channels, "block_s": block_s,
-                 "baudrate": baudrate, "reconnect_s": reconnect_s, "give_up_s": give_up_s}
+                 "baudrate": baudrate, "reconnect_s": reconnect_s, "give_up_s": give_up_s,
+                 "quiet_s": quiet_s}
         opts = {}
         for key, value in given.items():
             if key in query and value is not None:
@@ -161,8 +173,10 @@ class SerialDevice(Device):
         self.block_s = float(opts["block_s"] if opts["block_s"] is not None else 0.05)
         self.reconnect_s = float(opts["reconnect_s"] if opts["reconnect_s"] is not None else 0.5)
         self.give_up_s = float(opts["give_up_s"] if opts["give_up_s"] is not None else 30.0)
+        self.quiet_s = float(opts["quiet_s"] if opts["quiet_s"] is not None else QUIET_S)
         self.read_slice_s = float(read_slice_s)
-        for name in ("fs_hz", "block_s", "reconnect_s", "give_up_s", "read_slice_s"):
+        self.report_s = float(report_s)
+        for name in ("fs_hz", "block_s", "reconnect_s", "give_up_s", "quiet_s", "read_slice_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"serial: {name} ({getattr(self, name)}) must be positive")
         if self.rig is not None and self.n_channels != rig_ch:
@@ -192,6 +206,10 @@ class SerialDevice(Device):
         self._lost_at: float | None = None
         self._next_try = 0.0
         self._back: float | None = None  # seconds the port was down, until data flows again
+        self._refused = self._refused_said = 0  # frames of a wrong channel count: all, reported
+        self._refused_next = 0.0  # monotonic s of the next frame_mismatch report
+        self._refused_at_block = 0  # ... refused when the last block was made
+        self._refused_last = (0, 0)  # sequence number and channel count of the last refused
 
     # -- Device hooks ------------------------------------------------------------------------
     def _open(self) -> StreamInfo:
@@ -280,6 +298,7 @@ class SerialDevice(Device):
         self._drop_port()
         self._ingest(self.parser.flush())
         self._end_repeats()
+        self._report_refused()
         self._emit_partial()
         if self._ended:  # the device said goodbye before it went: not a fault
             return
@@ -320,8 +339,9 @@ class SerialDevice(Device):
                 self._fault("crc_error", self._t_next(), count=frame.failed_crc,
                             total=self.parser.crc_errors)
             if frame.skipped_bytes:
+                connect = {"at_connect": True} if self._next is None else {}
                 self._fault("resync", self._t_next(), bytes_discarded=frame.skipped_bytes,
-                            seq=frame.seq, total=self.parser.resyncs)
+                            seq=frame.seq, total=self.parser.resyncs, **connect)
             if frame.end:
                 if self._suspect is not None:
                     self._judge_suspect(frame)
@@ -330,12 +350,28 @@ class SerialDevice(Device):
                 self._drop_port()
                 break
             if frame.n_channels != self.n_channels:
-                self._fault("frame_mismatch", self._t_next(), seq=frame.seq,
-                            channels=frame.n_channels, expected=self.n_channels)
+                self._mismatch(frame)
                 continue
             self._place(frame)
         if self._ended:
             self._emit_partial()
+
+    def _mismatch(self, frame: Frame) -> None:
+        """A frame of the wrong channel count, refused: reported at once, then at most once per
+        ``report_s`` with the count; until a block comes, this says why no data come."""
+        self._refused += 1
+        self._refused_last = (frame.seq, frame.n_channels)
+        if time.monotonic() >= self._refused_next:
+            self._report_refused()
+
+    def _report_refused(self) -> None:
+        """A ``frame_mismatch`` for the frames refused since the last one, if any."""
+        if self._refused > self._refused_said:
+            seq, channels = self._refused_last
+            self._fault("frame_mismatch", self._t_next(), seq=seq, channels=channels,
+                        expected=self.n_channels, frames=self._refused - self._refused_said,
+                        total=self._refused)
+            self._refused_said, self._refused_next = self._refused, time.monotonic() + self.report_s
 
     def _place(self, frame: Frame) -> None:
         """Where a CRC-valid frame goes (module notes): on from the last, dropped as a repeat,
@@ -430,9 +466,17 @@ class SerialDevice(Device):
         if self._part_n + frame.n_samples > self.block_n:  # another such frame would not fit
             self._emit_partial()
 
+    def _t_heard_ns(self) -> int:
+        return self._t_next()
+
+    def _silence_explained(self) -> bool:
+        """port_lost or frame_mismatch already said why no blocks come."""
+        return self._lost_at is not None or self._refused > self._refused_at_block
+
     def _emit_partial(self) -> None:
         if not self._parts:
             return
+        self._refused_at_block = self._refused
         counts = np.ascontiguousarray(np.concatenate(self._parts, axis=1), dtype=np.int32)
         self._ready.append(Block(seq=self._seq, first_sample=self._part_first,
                                  t0_ns=sample_time_ns(self._part_first, self.fs_hz),

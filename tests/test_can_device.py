@@ -11,6 +11,7 @@ import heapq
 import itertools
 import json
 import os
+import re
 import select
 import subprocess
 import sys
@@ -35,7 +36,7 @@ from ramdaq.drivers.emulators.can_emulator import (
     send_frames,
     slcan_line,
 )
-from ramdaq.drivers.errors import DeviceNotFound
+from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.registry import open_device
 from ramdaq.drivers.sim import SimDevice
@@ -565,7 +566,10 @@ def test_emulator_gone_ends_the_stream(tmp_path, rigs):
     first = dev.read(timeout=5)
     proc.kill()
     proc.wait(5)
-    rest = list(dev)
+    rest = []
+    with pytest.raises(DeviceClosed, match=re.escape(f"can: slcan/{port} lost (")):
+        while True:  # the samples assembled are handed out, then the vanished adapter is said
+            rest.append(dev.read(timeout=5))
     faults = dev.take_faults()
     dev.close()
     assert first.first_sample == 0 and sum(b.n_samples for b in rest) < 30 * 2048

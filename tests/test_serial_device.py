@@ -119,13 +119,9 @@ def live_trial(dev: SerialDevice, path: Path) -> list[str]:
     return shown
 
 
-def shown_faults(shown: list[str]) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for line in shown:
-        if line.startswith("device fault: "):
-            kind = line.split()[2]
-            out[kind] = out.get(kind, 0) + 1
-    return out
+def shown_faults(shown: list[str], device: str) -> list[str]:
+    """The lines the session said about the device's faults (:mod:`ramdaq.drivers.fault_words`)."""
+    return [line for line in shown if line.startswith(device + " at ")]
 
 
 def kinds(events: list[dict]) -> dict[str, int]:
@@ -144,6 +140,9 @@ def test_recording_equals_the_simulator_bit_for_bit(tmp_path, transport):
         rec = record(dev, path, readout=False)
         s = summary(proc)
     missing, events = check_recording(path)
+    # the emulator's start-up may outlast quiet_s on a loaded machine: a silence before the
+    # first sample is said (no_data, data_back at 0 s), and is not this test's subject
+    events = [e for e in events if not (e["kind"] in ("no_data", "data_back") and e["t_ns"] == 0)]
     assert not missing.any() and rec.gaps == 0 and events == []
     assert s["samples_sent"] == round(DURATION * 2048) == rec.samples
     p = dev.parser
@@ -167,7 +166,11 @@ def test_drops_corruption_and_garbage_become_gaps_and_events(tmp_path, transport
     assert s["dropped"] and s["corrupted"] and s["garbage"]
     assert np.array_equal(missing, frames_missing(s, missing.size, "dropped", "corrupted"))
     n = kinds(events)
-    assert shown_faults(shown) == {k: n[k] for k in ("crc_error", "resync", "seq_gap")}
+    # one line per incident: a stream time with a fault shown once, whatever its parts (the
+    # emulator's faults are whole frames apart, farther than fault_words.INCIDENT_S)
+    said = shown_faults(shown, f"serial://{address}")
+    assert len(said) == len({e["t_ns"] for e in events if e["kind"] in ("crc_error", "resync",
+                                                                         "seq_gap")})
     assert dev.parser.crc_errors == len(s["corrupted"]) == sum(
         e["detail"]["count"] for e in events if e["kind"] == "crc_error")
     assert n["seq_gap"] == n["gap"]
@@ -195,7 +198,8 @@ def test_unplug_and_replug_over_socket(tmp_path):
         shown = live_trial(dev, path)
         s = summary(proc)
     missing, events = check_recording(path)
-    assert shown_faults(shown) == {"port_lost": 1, "resync": 1, "port_back": 1}
+    said = shown_faults(shown, f"serial://{address}")
+    assert len(said) == 2 and " lost (" in said[0] and " back after " in said[1]
     assert s["torn"] and s["lost"]
     assert np.array_equal(missing, frames_missing(s, missing.size, "torn", "lost"))
     n = kinds(events)
@@ -260,9 +264,10 @@ def test_cli_trial_over_serial_gives_the_simulator_trials_numbers(tmp_path):
             cli.kill()
         s = summary(proc)
     assert cli.returncode == 0, stderr
-    assert stdout.count("device fault: resync") == len(s["garbage"]) > 0
+    assert stdout.count("stray bytes skipped to the next frame") == len(s["garbage"]) > 0
     missing, events = check_recording(out, duration=6.0, impacts=[3.0])
-    assert not missing.any() and kinds(events) == {"resync": len(s["garbage"])}
+    events = [e for e in events if not (e["kind"] in ("no_data", "data_back") and e["t_ns"] == 0)]
+    assert not missing.any() and kinds(events) == {"resync": len(s["garbage"])}  # (start-up: above)
     assert len(direct.hits) == 1
     assert _canonical(results.read_text()) == _canonical(json.dumps(direct.results_json(),
                                                                      default=_plain))
