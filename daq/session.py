@@ -6,7 +6,9 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   the recorder's bounded queue, through the trigger (vectorised, far faster than real time), to
   the live views;
 - two analyzer threads take work from the main loop through a bounded queue
-  (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis), the other,
+  (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis; on a live
+  device it hands the analysis to a worker process, :mod:`ramdaq.daq.final_process`, so that
+  the final and the acquisition run on two cores, not on one interpreter lock), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
   next blow's first looks. A first look is asked for when the last one is done: the first after
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
@@ -62,6 +64,7 @@ from .analyzer import (
     run_job,
     trial_summary,
 )
+from .final_process import FinalProcess, WorkerDied
 from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import UNSURE_REL_SE, LiveReadout
 from .record import store_block
@@ -121,7 +124,8 @@ class Shown:
 class JobTime:
     """One analyzer job's timing: ``kind`` ("look" or "final"), the blow's onset sample, one
     past the last sample the job had, when it was queued, started and ended
-    (``time.monotonic()``, s) and the CPU its thread spent on it (``time.thread_time()``, s)."""
+    (``time.monotonic()``, s) and the CPU spent on it (s): its thread's (``time.thread_time()``),
+    or, for a final run in the worker process, the worker's (``time.process_time()``)."""
 
     kind: str
     onset_sample: int
@@ -183,6 +187,12 @@ class Session:
         flat out with no live view (``ramdaq replay`` without ``--realtime`` or a view), where
         nobody can watch a look before its final comes and the finals are what a replay
         reproduces (the looks cost ~10 % of such a replay's CPU).
+    final_process : bool, optional
+        Run the finals in a worker process (:mod:`ramdaq.daq.final_process`); default: yes for
+        a device paced in real time (a live front-end, ``pace="realtime"``), whose finals would
+        otherwise share the interpreter lock with the acquisition, and no for one that can wait
+        (a replay or a simulator flat out: one core, no process to start). The numbers are the
+        same either way.
 
     Held for the summary per hit: its numbers and its trigger event, without the samples (the
     recording has them), so that memory stays flat however long the trial.
@@ -194,7 +204,7 @@ class Session:
                  trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None,
                  queue_policy: QueuePolicy | None = None, shed: bool | None = None,
-                 looks: bool | None = None) -> None:
+                 looks: bool | None = None, final_process: bool | None = None) -> None:
         self.device = device
         self.info = device.open()
         if not self.info.rig_toml:
@@ -225,6 +235,9 @@ class Session:
         self.shed = getattr(device, "pace", "realtime") != "fast" if shed is None else shed
         self.looks = (view is not None or getattr(device, "kind", "") != "mcap"
                       or getattr(device, "pace", "realtime") != "fast") if looks is None else looks
+        self._final_process_wanted = (getattr(device, "pace", "realtime") == "realtime"
+                                      if final_process is None else final_process)
+        self._final_process: FinalProcess | None = None  # started by run()
         self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
@@ -255,25 +268,33 @@ class Session:
             if job is None:
                 return
             wall, cpu = time.monotonic(), time.thread_time()
+            worker_cpu = None
             try:
-                self._done.put(run_job(job, self.info, self.rig, self._gages))
+                if kind is FinalJob and self._final_process is not None:
+                    done, worker_cpu = self._final_process.run(job)
+                else:
+                    done = run_job(job, self.info, self.rig, self._gages)
+                self._done.put(done)
             except Exception as err:  # never let the analyzer thread die silently
                 self._done.put(JobFailed(job, err))
             finally:
                 final = kind is FinalJob
+                cpu = time.thread_time() - cpu if worker_cpu is None else worker_cpu
                 onset = job.event.onset_sample if final else job.onset_sample
                 data_end = (job.event.last_sample + 1 if final else
                             onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
                 self.job_times.append(JobTime(
                     "final" if final else "look", onset, data_end,
                     self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
-                    time.monotonic(), time.thread_time() - cpu))
+                    time.monotonic(), cpu))
                 del job  # the samples go with the job's result, not with this frame
                 self._jobs.done(kind)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
         """Stream the device to its end (or Ctrl-C), then wait for every final analysis."""
+        if self._final_process_wanted:
+            self._final_process = FinalProcess(self.info, self.rig, self._gages)
         for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):
             threading.Thread(target=self._worker, args=(kind,), name=name, daemon=True).start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
@@ -290,6 +311,8 @@ class Session:
                 rec.write_json(SUMMARY_TOPIC, finite_json(summary), self._t_ns)
         finally:
             self._jobs.stop()
+            if self._final_process is not None:
+                self._final_process.close()
             if self.readout:
                 self.readout.__exit__(None, None, None)
             if rec:
@@ -464,6 +487,11 @@ class Session:
                 self._show_final(done.hit, done.doc, rec)
             elif isinstance(done.job, FinalJob):  # judge_event does not raise; should it, the hit stays
                 job, err = done.job, done.error
+                if isinstance(err, WorkerDied):
+                    self._say(f"hit {job.index}: {err}; a new worker takes the next final")
+                    if rec:
+                        rec.event("analysis_worker_died", job.event.t_ns, index=job.index,
+                                  message=str(err))
                 hit = HitResult(job.index, job.event, False,
                                 f"analysis failed: {type(err).__name__}: {err}", None)
                 self._show_final(hit, hit_to_json(hit), rec)

@@ -1,0 +1,57 @@
+"""A live trial's finals in a worker process: the same numbers as a replay on one thread, and a
+worker that dies is an event and a rejected hit, not the end of the trial."""
+
+import json
+import os
+
+import pytest
+
+from ramdaq.daq.final_process import run_final
+from ramdaq.daq.session import Session
+from ramdaq.drivers.mcap_replay import McapReplayDevice
+from ramdaq.drivers.sim import SimDevice
+
+
+def _die_on_hit_0(job):
+    """In the worker: exit at once on hit 0 (a crash the worker cannot report), else run."""
+    if job.index == 0:
+        os._exit(3)
+    return run_final(job)
+
+
+@pytest.fixture(scope="module")
+def worker_trial(tmp_path_factory, request):
+    rig = request.getfixturevalue("albacore")
+    tmp = tmp_path_factory.mktemp("worker")
+    dev = SimDevice(rig, duration_s=7.0, impacts=[2.5, 4.8], seed=21)
+    session = Session(dev, record_path=tmp / "trial.mcap", readout=False, final_process=True)
+    return tmp, session, session.run()
+
+
+def test_finals_in_a_worker_process_are_the_replays_to_the_last_digit(worker_trial):
+    tmp, session, outcome = worker_trial
+    assert session._final_process is not None and session._final_process.deaths == 0
+    assert [h.index for h in outcome.hits] == [0, 1] and all(h.accepted for h in outcome.hits)
+    replay = Session(McapReplayDevice(tmp / "trial.mcap"), readout=False)
+    assert replay._final_process_wanted is False  # a replay flat out stays on its own thread
+    assert json.dumps(replay.run().results_json()) == json.dumps(outcome.results_json())
+    # the worker's own CPU is what the job times hold (a thread waiting on a pipe spends ~none)
+    assert all(j.cpu_s > 0.05 for j in session.job_times if j.kind == "final")
+
+
+def test_a_worker_that_dies_is_an_event_and_the_trial_goes_on(albacore, tmp_path):
+    dev = SimDevice(albacore, duration_s=7.0, impacts=[2.5, 4.8], seed=21)
+    session = Session(dev, record_path=tmp_path / "t.mcap", readout=False, final_process=True)
+    session._final_process_wanted = False  # started below, with the target that dies
+    from ramdaq.daq.final_process import FinalProcess
+
+    session._final_process = FinalProcess(session.info, session.rig, session._gages,
+                                          target=_die_on_hit_0)
+    outcome = session.run()
+    first, second = outcome.hits
+    assert not first.accepted and "worker process died" in first.reason
+    assert second.accepted  # a new worker took the next final
+    assert session._final_process.deaths == 1
+    with McapReplayDevice(tmp_path / "t.mcap") as rec:
+        died = [e for e in rec.events() if e["kind"] == "analysis_worker_died"]
+    assert [e["detail"]["index"] for e in died] == [0]
