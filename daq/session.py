@@ -2,7 +2,8 @@
 
 Threads (the only place in ramdaq that starts them, besides the recorder's writer):
 
-- the caller's thread reads the device and never waits on disk or analysis: each block goes to
+- the caller's thread reads the device and never waits on disk or analysis (but in a replay
+  nobody watches, below): each block goes to
   the recorder's bounded queue, through the trigger (vectorised, far faster than real time), to
   the live views;
 - two analyzer threads take work from the main loop through a bounded queue
@@ -10,7 +11,10 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   device it hands the analysis to a worker process, :mod:`ramdaq.daq.final_process`, so that
   the final and the acquisition run on two cores, not on one interpreter lock), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
-  next blow's first looks. A first look is asked for when the last one is done: the first after
+  next blow's first looks. (A replay flat out with no looks and no view runs each final on the
+  caller's thread instead, as its record closes, :attr:`Session.finals_inline`: nobody watches
+  it, and the two threads' contention cost such a replay 5-9 % of its CPU.) A first look is
+  asked for when the last one is done: the first after
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
   rig has no model), on the first block that ends by then; then one period more each until
@@ -238,6 +242,11 @@ class Session:
         self._final_process_wanted = (getattr(device, "pace", "realtime") == "realtime"
                                       if final_process is None else final_process)
         self._final_process: FinalProcess | None = None  # started by run()
+        # a replay flat out that nobody watches (no looks, no view) runs each final on the
+        # stream's thread as its record closes: no thread to hand it to, and the two threads'
+        # contention cost a replay 5-9 % of its CPU (the finals' own included)
+        self.finals_inline = (not self.shed and not self.looks and view is None
+                              and not self._final_process_wanted)
         self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
@@ -267,28 +276,41 @@ class Session:
             job = self._jobs.get(kind)
             if job is None:
                 return
-            wall, cpu = time.monotonic(), time.thread_time()
-            worker_cpu = None
-            try:
-                if kind is FinalJob and self._final_process is not None:
-                    done, worker_cpu = self._final_process.run(job)
-                else:
-                    done = run_job(job, self.info, self.rig, self._gages)
-                self._done.put(done)
-            except Exception as err:  # never let the analyzer thread die silently
-                self._done.put(JobFailed(job, err))
-            finally:
-                final = kind is FinalJob
-                cpu = time.thread_time() - cpu if worker_cpu is None else worker_cpu
-                onset = job.event.onset_sample if final else job.onset_sample
-                data_end = (job.event.last_sample + 1 if final else
-                            onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
-                self.job_times.append(JobTime(
-                    "final" if final else "look", onset, data_end,
-                    self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
-                    time.monotonic(), cpu))
-                del job  # the samples go with the job's result, not with this frame
-                self._jobs.done(kind)
+            self._run_one(kind, job)
+            del job  # the samples go with the job's result, not with this frame
+            self._jobs.done(kind)
+
+    def _run_one(self, kind: type[FinalJob] | type[LookJob], job: FinalJob | LookJob) -> None:
+        """Do ``job`` (in the finals' worker process if there is one), put its result (or its
+        failure) for :meth:`_drain` and time it (:class:`JobTime`)."""
+        wall, cpu = time.monotonic(), time.thread_time()
+        worker_cpu = None
+        try:
+            if kind is FinalJob and self._final_process is not None:
+                done, worker_cpu = self._final_process.run(job)
+            else:
+                done = run_job(job, self.info, self.rig, self._gages)
+            self._done.put(done)
+        except Exception as err:  # never let the analyzer thread die silently
+            self._done.put(JobFailed(job, err))
+        finally:
+            final = kind is FinalJob
+            cpu = time.thread_time() - cpu if worker_cpu is None else worker_cpu
+            onset = job.event.onset_sample if final else job.onset_sample
+            data_end = (job.event.last_sample + 1 if final else
+                        onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
+            self.job_times.append(JobTime(
+                "final" if final else "look", onset, data_end,
+                self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
+                time.monotonic(), cpu))
+
+    def _final_inline(self) -> None:
+        """Run the final just queued on this thread (:attr:`finals_inline`)."""
+        job = self._jobs.get(FinalJob)
+        if job is not None:
+            self._run_one(FinalJob, job)
+            del job
+            self._jobs.done(FinalJob)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
@@ -296,7 +318,9 @@ class Session:
         if self._final_process_wanted:
             self._final_process = FinalProcess(self.info, self.rig, self._gages)
         for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):
-            threading.Thread(target=self._worker, args=(kind,), name=name, daemon=True).start()
+            if not (kind is FinalJob and self.finals_inline):
+                threading.Thread(target=self._worker, args=(kind,), name=name,
+                                 daemon=True).start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
                if self.record_path else None)
         self._rec = rec
@@ -400,6 +424,8 @@ class Session:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
         self._queued[ev.onset_sample] = time.monotonic()
         self._admitted(self._jobs.put_final(FinalJob(k, ev), wait=not self.shed), ev, rec)
+        if self.finals_inline:
+            self._final_inline()
         self._next_look = None
         self._ringing_hit = None
 

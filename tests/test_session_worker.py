@@ -33,7 +33,8 @@ def test_finals_in_a_worker_process_are_the_replays_to_the_last_digit(worker_tri
     assert session._final_process is not None and session._final_process.deaths == 0
     assert [h.index for h in outcome.hits] == [0, 1] and all(h.accepted for h in outcome.hits)
     replay = Session(McapReplayDevice(tmp / "trial.mcap"), readout=False)
-    assert replay._final_process_wanted is False  # a replay flat out stays on its own thread
+    # a replay flat out runs its finals on the stream's own thread
+    assert replay._final_process_wanted is False and replay.finals_inline
     assert json.dumps(replay.run().results_json()) == json.dumps(outcome.results_json())
     # the worker's own CPU is what the job times hold (a thread waiting on a pipe spends ~none)
     assert all(j.cpu_s > 0.05 for j in session.job_times if j.kind == "final")
