@@ -67,6 +67,7 @@ class _FreeCoreLooks:
 
     def __init__(self, session: Session) -> None:
         self.session, self.busy_until, self.fs = session, 0.0, session.info.fs_hz
+        self.last_start = 0.0  # stream s the latest look started
         self.policy = session._jobs.policy  # the session's own bound on a look's samples
         self.first_sure: dict[int, float] = {}  # onset sample -> stream s its first sure look showed
 
@@ -74,13 +75,20 @@ class _FreeCoreLooks:
     def looks_pending(self) -> int:
         return int(self.session._next_sample / self.fs < self.busy_until)
 
+    @property
+    def looks_waiting(self) -> int:
+        """A look queued behind a running one has not started yet."""
+        return int(self.session._next_sample / self.fs < self.last_start)
+
     def put_look(self, job: LookJob) -> bool:
         s = self.session
         if job.onset_sample in self.first_sure:  # the later looks of a blow are not timed
             return False
         cpu = time.process_time()
         done = run_job(job, s.info, s.rig, s._gages)
-        end = s._next_sample / self.fs + time.process_time() - cpu
+        # it starts when the look before it is done (it waited behind it) or now
+        self.last_start = max(s._next_sample / self.fs, self.busy_until)
+        end = self.last_start + time.process_time() - cpu
         self.busy_until = end
         if done.look is not None and look_is_sure(done.look):
             self.first_sure.setdefault(job.onset_sample, end)

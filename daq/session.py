@@ -18,8 +18,9 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
   rig has no model), on the first block that ends by then; then one period more each until
-  one is sure enough to show (:data:`LOOK_REL_SE`), then each time the decay has grown by
-  :data:`LOOK_GROWTH` (and ``update_s`` at least). A later blow
+  one is sure enough to show (:data:`LOOK_REL_SE`; such a look, if the one before is still
+  running, waits behind it in the queue rather than for a block after it), then each time the
+  decay has grown by :data:`LOOK_GROWTH` (and ``update_s`` at least). A later blow
   starts a period past the last blow's longest look that was not sure (its own standard error
   said how many were worth waiting for), so a look that cannot be sure does not hold the look thread
   when the one that can is due. When the analyzer falls behind a live device,
@@ -454,7 +455,10 @@ class Session:
         if not self.looks:
             return
         early = round(LOOK_EARLY * self._period_n)
-        if now + early < self._next_look or self._jobs.looks_pending:  # or still running
+        # until a look of this blow is sure, the next waits behind a running one (it starts as
+        # soon as the thread is free); after, a look is not asked for while one is pending
+        busy = self._jobs.looks_pending if self._look_sure else self._jobs.looks_waiting
+        if now + early < self._next_look or busy:
             return
         if self._look_sure:  # the decay half as long again, and update_s at least
             self._next_look = now + max(self.update_n, round(LOOK_GROWTH * (now - start)))
