@@ -317,7 +317,11 @@ class Session:
     def run(self) -> TrialOutcome:
         """Stream the device to its end (or Ctrl-C), then wait for every final analysis."""
         if self._final_process_wanted:
-            self._final_process = FinalProcess(self.info, self.rig, self._gages)
+            try:
+                self._final_process = FinalProcess(self.info, self.rig, self._gages)
+            except (OSError, RuntimeError) as err:  # no process to be had: the thread it is
+                self._say(f"finals run on the analyzer thread: no worker process ({err})")
+                self.notes.append(f"no finals worker process: {err}")
         for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):
             if not (kind is FinalJob and self.finals_inline):
                 threading.Thread(target=self._worker, args=(kind,), name=name,

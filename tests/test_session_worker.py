@@ -56,3 +56,17 @@ def test_a_worker_that_dies_is_an_event_and_the_trial_goes_on(albacore, tmp_path
     with McapReplayDevice(tmp_path / "t.mcap") as rec:
         died = [e for e in rec.events() if e["kind"] == "analysis_worker_died"]
     assert [e["detail"]["index"] for e in died] == [0]
+
+
+def test_a_worker_that_cannot_start_leaves_the_finals_on_the_thread(albacore, monkeypatch):
+    from ramdaq.daq import session as session_module
+
+    def cannot(*args, **kwargs):
+        raise OSError("Resource temporarily unavailable")
+
+    monkeypatch.setattr(session_module, "FinalProcess", cannot)
+    dev = SimDevice(albacore, duration_s=4.5, impacts=[2.5], seed=21)
+    session = Session(dev, readout=False, final_process=True)
+    outcome = session.run()
+    assert session._final_process is None and [h.accepted for h in outcome.hits] == [True]
+    assert outcome.notes == ["no finals worker process: Resource temporarily unavailable"]
