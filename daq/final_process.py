@@ -12,7 +12,9 @@ record (the session puts its own back). :func:`~ramdaq.daq.analyzer.run_job` is 
 function the in-process lane runs, so the numbers are the same to the last digit.
 
 The worker ignores Ctrl-C (the terminal sends it to the whole process group; the session
-ends the stream and then waits for the finals queued, as without a worker). A worker that dies
+ends the stream and then waits for the finals queued, as without a worker). A worker that
+never came up raises :class:`WorkerUnavailable`: the session then runs the finals on its
+thread, as without a worker, and says so. A worker that dies
 (killed, out of memory, a crash in a C extension) raises :class:`WorkerDied` for the job it was
 running; a new worker is started for the next job, and the session records the death as an
 event and rejects that hit with the reason -- the trial goes on.
@@ -38,6 +40,12 @@ _STATE: tuple[StreamInfo, Rig, tuple[int, ...]] | None = None
 
 class WorkerDied(RuntimeError):
     """The worker process died while it ran a final (its exit code in the message)."""
+
+
+class WorkerUnavailable(RuntimeError):
+    """The worker process never came up (its interpreter, its imports or its initializer
+    failed: e.g. the calling script re-run by ``spawn`` as ``__mp_main__`` fails there): no
+    job ever ran in it, so the job in hand may run on the calling thread instead."""
 
 
 def _start(info: StreamInfo, rig: Rig, gages: tuple[int, ...]) -> None:
@@ -70,18 +78,26 @@ class FinalProcess:
     as the worker imports it by name).
     """
 
+    initializer: Callable[..., None] = staticmethod(_start)
+    """What a new worker runs first, given (info, rig, gages)."""
+
     def __init__(self, info: StreamInfo, rig: Rig, gages: tuple[int, ...],
                  target: Callable[[FinalJob], tuple[FinalDone, float]] = run_final) -> None:
         self._args = (info, rig, gages)
         self.target = target
         self.deaths = 0
+        self._came_up = False  # a worker has done a job (its start-up no-op at least)
         self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
         pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_start, initargs=self._args)
-        pool.submit(_ready)  # the worker starts now
+                                   initializer=self.initializer, initargs=self._args)
+        pool.submit(_ready).add_done_callback(self._up)  # the worker starts now
         return pool
+
+    def _up(self, ready) -> None:
+        if not ready.cancelled() and ready.exception() is None:
+            self._came_up = True
 
     def run(self, job: FinalJob) -> tuple[FinalDone, float]:
         """``job``'s result (with the session's own event, record and all) and the worker's
@@ -90,6 +106,10 @@ class FinalProcess:
         try:
             done, cpu_s = self._pool.submit(self.target, job).result()
         except BrokenProcessPool as err:
+            if not self._came_up:
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                raise WorkerUnavailable(f"the finals' worker process did not start ({err})") \
+                    from err
             self.deaths += 1
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = self._new_pool()

@@ -69,7 +69,7 @@ from .analyzer import (
     run_job,
     trial_summary,
 )
-from .final_process import FinalProcess, WorkerDied
+from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import UNSURE_REL_SE, LiveReadout
 from .record import store_block
@@ -112,6 +112,15 @@ class JobFailed:
 
     job: FinalJob | LookJob
     error: Exception
+
+
+@dataclass(frozen=True)
+class Notice:
+    """Something the analyzer thread has to say (shown, noted, and written as an event of
+    ``kind`` by the main loop, which owns the readout and the recorder)."""
+
+    kind: str
+    text: str
 
 
 @dataclass(frozen=True)
@@ -248,7 +257,7 @@ class Session:
         # contention cost a replay 5-9 % of its CPU (the finals' own included)
         self.finals_inline = (not self.shed and not self.looks and view is None
                               and not self._final_process_wanted)
-        self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
+        self._done: queue.Queue[FinalDone | LookDone | JobFailed | Notice] = queue.Queue()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
         self.samples = 0
@@ -288,7 +297,13 @@ class Session:
         worker_cpu = None
         try:
             if kind is FinalJob and self._final_process is not None:
-                done, worker_cpu = self._final_process.run(job)
+                try:
+                    done, worker_cpu = self._final_process.run(job)
+                except WorkerUnavailable as err:  # nothing ran there: this thread it is
+                    self._final_process = None
+                    self._done.put(Notice("analysis_worker_unavailable",
+                                          f"finals run on the analyzer thread: {err}"))
+                    done = run_job(job, self.info, self.rig, self._gages)
             else:
                 done = run_job(job, self.info, self.rig, self._gages)
             self._done.put(done)
@@ -515,7 +530,12 @@ class Session:
                 done = self._done.get_nowait()
             except queue.Empty:
                 return
-            if isinstance(done, LookDone):
+            if isinstance(done, Notice):
+                self._say(done.text)
+                self.notes.append(done.text)
+                if rec:
+                    rec.event(done.kind, self._t_ns, message=done.text)
+            elif isinstance(done, LookDone):
                 self._show_look(done.onset_sample, done.look)
             elif isinstance(done, FinalDone):
                 self._show_final(done.hit, done.doc, rec)

@@ -2,21 +2,14 @@
 worker that dies is an event and a rejected hit, not the end of the trial."""
 
 import json
-import os
 
 import pytest
 
-from ramdaq.daq.final_process import run_final
 from ramdaq.daq.session import Session
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.sim import SimDevice
 
-
-def _die_on_hit_0(job):
-    """In the worker: exit at once on hit 0 (a crash the worker cannot report), else run."""
-    if job.index == 0:
-        os._exit(3)
-    return run_final(job)
+from .worker_helpers import cannot_start, die_on_hit_0
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +40,7 @@ def test_a_worker_that_dies_is_an_event_and_the_trial_goes_on(albacore, tmp_path
     from ramdaq.daq.final_process import FinalProcess
 
     session._final_process = FinalProcess(session.info, session.rig, session._gages,
-                                          target=_die_on_hit_0)
+                                          target=die_on_hit_0)
     outcome = session.run()
     first, second = outcome.hits
     assert not first.accepted and "worker process died" in first.reason
@@ -70,3 +63,24 @@ def test_a_worker_that_cannot_start_leaves_the_finals_on_the_thread(albacore, mo
     outcome = session.run()
     assert session._final_process is None and [h.accepted for h in outcome.hits] == [True]
     assert outcome.notes == ["no finals worker process: Resource temporarily unavailable"]
+
+
+def test_a_worker_that_never_comes_up_leaves_the_finals_on_the_thread(albacore, tmp_path):
+    """Nothing ran in the worker: the final in hand and the next run on the analyzer thread,
+    said in the notes and as an event; every hit analysed."""
+    from ramdaq.daq.final_process import FinalProcess
+
+    class NeverUp(FinalProcess):
+        initializer = staticmethod(cannot_start)
+
+    dev = SimDevice(albacore, duration_s=7.0, impacts=[2.5, 4.8], seed=21)
+    session = Session(dev, record_path=tmp_path / "t.mcap", readout=False, final_process=True)
+    session._final_process_wanted = False
+    session._final_process = NeverUp(session.info, session.rig, session._gages)
+    outcome = session.run()
+    assert [h.accepted for h in outcome.hits] == [True, True]
+    assert session._final_process is None
+    assert len(outcome.notes) == 1 and "did not start" in outcome.notes[0]
+    with McapReplayDevice(tmp_path / "t.mcap") as rec:
+        kinds = [e["kind"] for e in rec.events()]
+    assert kinds.count("analysis_worker_unavailable") == 1
