@@ -334,7 +334,7 @@ class Session:
         if self._final_process_wanted:
             try:
                 self._final_process = FinalProcess(self.info, self.rig, self._gages)
-            except (OSError, RuntimeError) as err:  # no process to be had: the thread it is
+            except (OSError, RuntimeError, ValueError) as err:  # no process: the thread it is
                 self._say(f"finals run on the analyzer thread: no worker process ({err})")
                 self.notes.append(f"no finals worker process: {err}")
         for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):

@@ -14,5 +14,5 @@ def die_on_hit_0(job):
 
 
 def cannot_start(*args):
-    """A worker's initializer that fails (as a script re-run by ``spawn`` would, in it)."""
+    """A worker's initializer that fails (a worker that never comes up)."""
     raise RuntimeError("no start")
