@@ -11,9 +11,11 @@ over the blows, each beside issue 19's target: the first look within 5 cycles of
 predominant mode after every blow (0.38 s at 13 Hz in water), the final numbers within 0.5 s of
 the decay reaching the noise floor; the looks skipped; the CPU time of the process and the load.
 A final's latency after the floor is split into the stream's lag, the wait for the finals
-thread and the analysis (wall and thread CPU). On a shared machine the wall-clock figures
-measure the contention; so the first looks are also timed "on a free core": the same trial run
-flat out, each look run at once and its CPU time counted on the stream's clock.
+thread and the analysis (wall and CPU: the finals' worker process's, where the session runs the
+finals in one, as it does for a device paced in real time; else the finals thread's). On a
+shared machine the wall-clock figures measure the contention; so the first looks are also
+timed "on a free core": the same trial run flat out, each look run at once and its CPU time
+counted on the stream's clock.
 
 In water the ALBACORE-like rig's decay takes ~14 s to reach the noise floor after a 20 kN blow
 (58 dB), so the default spacing is 20 s; at 10 s every record is cut by the next blow.
@@ -65,6 +67,7 @@ class _FreeCoreLooks:
 
     def __init__(self, session: Session) -> None:
         self.session, self.busy_until, self.fs = session, 0.0, session.info.fs_hz
+        self.last_start = 0.0  # stream s the latest look started
         self.policy = session._jobs.policy  # the session's own bound on a look's samples
         self.first_sure: dict[int, float] = {}  # onset sample -> stream s its first sure look showed
 
@@ -72,13 +75,20 @@ class _FreeCoreLooks:
     def looks_pending(self) -> int:
         return int(self.session._next_sample / self.fs < self.busy_until)
 
+    @property
+    def looks_waiting(self) -> int:
+        """A look queued behind a running one has not started yet."""
+        return int(self.session._next_sample / self.fs < self.last_start)
+
     def put_look(self, job: LookJob) -> bool:
         s = self.session
         if job.onset_sample in self.first_sure:  # the later looks of a blow are not timed
             return False
         cpu = time.process_time()
         done = run_job(job, s.info, s.rig, s._gages)
-        end = s._next_sample / self.fs + time.process_time() - cpu
+        # it starts when the look before it is done (it waited behind it) or now
+        self.last_start = max(s._next_sample / self.fs, self.busy_until)
+        end = self.last_start + time.process_time() - cpu
         self.busy_until = end
         if done.look is not None and look_is_sure(done.look):
             self.first_sure.setdefault(job.onset_sample, end)
@@ -209,6 +219,7 @@ def main() -> None:
     report("final after floor, free core", free_final, None, n,
            f"<= {GOAL_FLOOR_S:g} s; stream lag + queue wait + the analysis's CPU, not its wall")
     cpu_finals = [j.cpu_s for j in jobs.values()]
+    worker = session._final_process is not None  # the finals ran in a worker process
     if cpu_finals:
         print(f"  final analysis CPU per hit: median {statistics.median(cpu_finals):.2f} s, max "
               f"{max(cpu_finals):.2f} s (issue 19: <= 0.2 s, helper hitcost's item); on a free "
@@ -222,7 +233,9 @@ def main() -> None:
           f"floor (onset, s): {sorted(onsets - set(floors))}")
     print(f"  the stream ended {lag:.1f} s behind the wall clock (the device paced in real time; "
           f"a lag means the acquisition could not keep up and every latency above includes it);"
-          f" CPU {cpu:.1f} s in {args.every * args.blows:.0f} s of stream; load average "
+          f" CPU {cpu:.1f} s in the trial's process"
+          + (f" and {sum(cpu_finals):.1f} s in its finals' worker process" if worker else "")
+          + f" in {args.every * args.blows:.0f} s of stream; load average "
           f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, on {os.cpu_count()} "
           f"cores (CPU contention inflates every wall-clock latency)")
     print(f"  result: first look {'PASS' if ok_look and len(looks) == n else 'FAIL'} "

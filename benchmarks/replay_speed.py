@@ -21,7 +21,8 @@ is nearest to the program's own cost). Printed, each with issue 19's target:
   start-up (a fresh interpreter importing what ``ramdaq replay`` imports) and without it (the
   steady state: ``(CPU - start-up)``), and where the CPU goes, measured here one part at a time:
   reading and decoding the blocks, the trigger over them, the finals (each analyzer job's own
-  thread CPU, ``time.thread_time``), the rest of the session (queue, readout, bookkeeping) and
+  thread CPU, ``time.thread_time``; split into the estimator, ``analyze_decay``, and the rest of
+  the final), the rest of the session (queue, readout, bookkeeping) and
   the summary printed at the end. A throughput ">= 100x real time" is honest only as a steady
   state plus a stated start-up cost: both are printed.
 """
@@ -29,6 +30,7 @@ is nearest to the program's own cost). Printed, each with issue 19's target:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import resource
 import subprocess
@@ -157,11 +159,34 @@ def speed_line(dur: float, cpu: float, startup: float) -> str:
             f"{dur / steady:.0f}x real time (target >= 100x)")
 
 
+@contextlib.contextmanager
+def estimator_timed():
+    """The thread CPU seconds of each :func:`~ramdaq.analysis.impact.analyze_decay` call a
+    final makes meanwhile (the estimator), in a list; the rest of a final is its judging, its
+    record's copy to SI and its JSON."""
+    from ramdaq.daq import analyzer
+
+    spent: list[float] = []
+    inner = analyzer.analyze_decay
+
+    def timed(*args, **kwargs):
+        t0 = time.thread_time()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            spent.append(time.thread_time() - t0)
+
+    analyzer.analyze_decay = timed
+    try:
+        yield spent
+    finally:
+        analyzer.analyze_decay = inner
+
+
 def replay_parts(path: Path, cpu: float, startup: float) -> None:
     """``ramdaq replay`` of ``path`` (``cpu`` s, ``startup`` of them the start-up) against real
     time, and where its CPU goes, one part at a time in this process (warm: the imports are the
     start-up's): reading, trigger, finals, the rest, the summary."""
-    import contextlib
     import io
 
     from ramdaq.daq.commands.cli import REPLAY_JOIN_S, _print_outcome, build_parser
@@ -184,7 +209,8 @@ def replay_parts(path: Path, cpu: float, startup: float) -> None:
     del blocks, events, trig
     session = Session(McapReplayDevice(path, pace="fast", join_s=REPLAY_JOIN_S), readout=False)
     t0 = time.process_time()
-    outcome = session.run()
+    with estimator_timed() as estimator:
+        outcome = session.run()
     whole = time.process_time() - t0
     finals = [j.cpu_s for j in session.job_times if j.kind == "final"]
     print(f"{path}: {dur:.1f} s at {info.fs_hz:g} Hz in {len(blocks_n)} blocks as read (joined up to "
@@ -202,6 +228,9 @@ def replay_parts(path: Path, cpu: float, startup: float) -> None:
           f"({len(finals)} of them, {sum(finals) / n:.2f} s a hit, {min(finals, default=0):.2f}-"
           f"{max(finals, default=0):.2f}), the rest of the session (queue, bookkeeping) "
           f"{rest:.2f} s, the summary printed {report:.3f} s")
+    print(f"  the finals split: the estimator (analyze_decay) {sum(estimator):.2f} s, the rest of "
+          f"the final (judging the event, its record to SI, the JSON) "
+          f"{sum(finals) - sum(estimator):.3f} s")
     print(f"  without the finals (reading, trigger, the rest): {whole - sum(finals):.2f} s CPU = "
           f"{dur / max(whole - sum(finals), 1e-9):.0f}x real time; the finals alone "
           f"{dur / max(sum(finals), 1e-9):.0f}x")

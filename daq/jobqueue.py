@@ -6,8 +6,10 @@ running; its bound (:class:`QueuePolicy`) is on the bytes of samples those jobs 
 and on the number of finals. A live trial cannot wait for the analyzer -- the device does not
 stop -- so when the analyzer falls behind the queue *sheds* work, in this order:
 
-1. **First looks go first.** A first look is queued only when no other look is waiting or
-   running and its samples fit ``max_look_bytes`` (a look is the decay so far, at the full
+1. **First looks go first.** A first look is queued only when no other look is waiting (one
+   may be running: the session queues a blow's next look behind a running one only while none
+   of the blow's looks has been sure, so that the look due next starts the moment the thread is
+   free, not a block later) and its samples fit ``max_look_bytes`` (a look is the decay so far, at the full
    rate: 16 gages x 5 s at 25.6 kHz; at 2048 Hz a minute, never reached); a final whose record
    would take the queue past its bytes bound pushes the first look still waiting out of the
    queue.
@@ -126,8 +128,9 @@ class JobQueue:
 
     # -- the acquisition side -------------------------------------------------------------------
     def put_look(self, job: LookJob) -> bool:
-        """Queue a first look unless another is waiting or running, or its samples would pass
-        ``max_look_bytes`` or take the queue past its bytes bound; False if not queued."""
+        """Queue a first look unless another is waiting (one running does not count), or its
+        samples would pass ``max_look_bytes`` or take the queue past its bytes bound; False if
+        not queued."""
         with self._cond:
             if not self._look_fits(job_bytes(job)):
                 return False
@@ -182,6 +185,12 @@ class JobQueue:
         with self._cond:
             return self._looks()
 
+    @property
+    def looks_waiting(self) -> int:
+        """First looks waiting (not yet running)."""
+        with self._cond:
+            return sum(isinstance(j, LookJob) for j in self._jobs)
+
     # -- the analyzer side ----------------------------------------------------------------------
     def get(self, kind: type[FinalJob] | type[LookJob]) -> FinalJob | LookJob | None:
         """The next job of ``kind``, the lane of the calling thread (it counts as held until
@@ -224,7 +233,8 @@ class JobQueue:
                 + (self._running[LookJob] is not None))
 
     def _look_fits(self, n_bytes: int) -> bool:
-        return (not self._looks() and n_bytes <= self.policy.max_look_bytes
+        return (not any(isinstance(j, LookJob) for j in self._jobs)
+                and n_bytes <= self.policy.max_look_bytes
                 and self._held + n_bytes <= self.policy.max_bytes)
 
     def _fits_bytes(self, job: FinalJob) -> bool:

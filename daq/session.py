@@ -2,18 +2,25 @@
 
 Threads (the only place in ramdaq that starts them, besides the recorder's writer):
 
-- the caller's thread reads the device and never waits on disk or analysis: each block goes to
+- the caller's thread reads the device and never waits on disk or analysis (but in a replay
+  nobody watches, below): each block goes to
   the recorder's bounded queue, through the trigger (vectorised, far faster than real time), to
   the live views;
 - two analyzer threads take work from the main loop through a bounded queue
-  (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis), the other,
+  (:mod:`ramdaq.daq.jobqueue`): one every finished impact record (a final analysis; on a live
+  device it hands the analysis to a worker process, :mod:`ramdaq.daq.final_process`, so that
+  the final and the acquisition run on two cores, not on one interpreter lock), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
-  next blow's first looks. A first look is asked for when the last one is done: the first after
+  next blow's first looks. (A replay flat out with no looks and no view runs each final on the
+  caller's thread instead, as its record closes, :attr:`Session.finals_inline`: nobody watches
+  it, and the two threads' contention cost such a replay 5-9 % of its CPU.) A first look is
+  asked for when the last one is done: the first after
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
   rig has no model), on the first block that ends by then; then one period more each until
-  one is sure enough to show (:data:`LOOK_REL_SE`), then each time the decay has grown by
-  :data:`LOOK_GROWTH` (and ``update_s`` at least). A later blow
+  one is sure enough to show (:data:`LOOK_REL_SE`; such a look, if the one before is still
+  running, waits behind it in the queue rather than for a block after it), then each time the
+  decay has grown by :data:`LOOK_GROWTH` (and ``update_s`` at least). A later blow
   starts a period past the last blow's longest look that was not sure (its own standard error
   said how many were worth waiting for), so a look that cannot be sure does not hold the look thread
   when the one that can is due. When the analyzer falls behind a live device,
@@ -63,6 +70,7 @@ from .analyzer import (
     run_job,
     trial_summary,
 )
+from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import UNSURE_REL_SE, LiveReadout
 from .record import store_block
@@ -110,6 +118,15 @@ class JobFailed:
 
 
 @dataclass(frozen=True)
+class Notice:
+    """Something the analyzer thread has to say (shown, noted, and written as an event of
+    ``kind`` by the main loop, which owns the readout and the recorder)."""
+
+    kind: str
+    text: str
+
+
+@dataclass(frozen=True)
 class Shown:
     """When a hit's numbers were shown: hit ``index``, ``kind`` ("look" or "final"), the blow's
     onset sample in s of stream, and the wall clock then (``time.monotonic()``, s)."""
@@ -124,7 +141,8 @@ class Shown:
 class JobTime:
     """One analyzer job's timing: ``kind`` ("look" or "final"), the blow's onset sample, one
     past the last sample the job had, when it was queued, started and ended
-    (``time.monotonic()``, s) and the CPU its thread spent on it (``time.thread_time()``, s)."""
+    (``time.monotonic()``, s) and the CPU spent on it (s): its thread's (``time.thread_time()``),
+    or, for a final run in the worker process, the worker's (``time.process_time()``)."""
 
     kind: str
     onset_sample: int
@@ -186,6 +204,12 @@ class Session:
         flat out with no live view (``ramdaq replay`` without ``--realtime`` or a view), where
         nobody can watch a look before its final comes and the finals are what a replay
         reproduces (the looks cost ~10 % of such a replay's CPU).
+    final_process : bool, optional
+        Run the finals in a worker process (:mod:`ramdaq.daq.final_process`); default: yes for
+        a device paced in real time (a live front-end, ``pace="realtime"``), whose finals would
+        otherwise share the interpreter lock with the acquisition, and no for one that can wait
+        (a replay or a simulator flat out: one core, no process to start). The numbers are the
+        same either way.
 
     Held for the summary per hit: its numbers and its trigger event, without the samples (the
     recording has them), so that memory stays flat however long the trial.
@@ -197,7 +221,7 @@ class Session:
                  trigger_settings: TriggerSettings | None = None,
                  log: Callable[[str], None] | None = None,
                  queue_policy: QueuePolicy | None = None, shed: bool | None = None,
-                 looks: bool | None = None) -> None:
+                 looks: bool | None = None, final_process: bool | None = None) -> None:
         self.device = device
         self.info = device.open()
         if not self.info.rig_toml:
@@ -228,7 +252,15 @@ class Session:
         self.shed = getattr(device, "pace", "realtime") != "fast" if shed is None else shed
         self.looks = (view is not None or getattr(device, "kind", "") != "mcap"
                       or getattr(device, "pace", "realtime") != "fast") if looks is None else looks
-        self._done: queue.Queue[FinalDone | LookDone | JobFailed] = queue.Queue()
+        self._final_process_wanted = (getattr(device, "pace", "realtime") == "realtime"
+                                      if final_process is None else final_process)
+        self._final_process: FinalProcess | None = None  # started by run()
+        # a replay flat out that nobody watches (no looks, no view) runs each final on the
+        # stream's thread as its record closes: no thread to hand it to, and the two threads'
+        # contention cost a replay 5-9 % of its CPU (the finals' own included)
+        self.finals_inline = (not self.shed and not self.looks and view is None
+                              and not self._final_process_wanted)
+        self._done: queue.Queue[FinalDone | LookDone | JobFailed | Notice] = queue.Queue()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
         self.samples = 0
@@ -258,28 +290,61 @@ class Session:
             job = self._jobs.get(kind)
             if job is None:
                 return
-            wall, cpu = time.monotonic(), time.thread_time()
-            try:
-                self._done.put(run_job(job, self.info, self.rig, self._gages))
-            except Exception as err:  # never let the analyzer thread die silently
-                self._done.put(JobFailed(job, err))
-            finally:
-                final = kind is FinalJob
-                onset = job.event.onset_sample if final else job.onset_sample
-                data_end = (job.event.last_sample + 1 if final else
-                            onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
-                self.job_times.append(JobTime(
-                    "final" if final else "look", onset, data_end,
-                    self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
-                    time.monotonic(), time.thread_time() - cpu))
-                del job  # the samples go with the job's result, not with this frame
-                self._jobs.done(kind)
+            self._run_one(kind, job)
+            del job  # the samples go with the job's result, not with this frame
+            self._jobs.done(kind)
+
+    def _run_one(self, kind: type[FinalJob] | type[LookJob], job: FinalJob | LookJob) -> None:
+        """Do ``job`` (in the finals' worker process if there is one), put its result (or its
+        failure) for :meth:`_drain` and time it (:class:`JobTime`)."""
+        wall, cpu = time.monotonic(), time.thread_time()
+        worker_cpu = None
+        try:
+            if kind is FinalJob and self._final_process is not None:
+                try:
+                    done, worker_cpu = self._final_process.run(job)
+                except WorkerUnavailable as err:  # nothing ran there: this thread it is
+                    self._final_process = None
+                    self._done.put(Notice("analysis_worker_unavailable",
+                                          f"finals run on the analyzer thread: {err}"))
+                    done = run_job(job, self.info, self.rig, self._gages)
+            else:
+                done = run_job(job, self.info, self.rig, self._gages)
+            self._done.put(done)
+        except Exception as err:  # never let the analyzer thread die silently
+            self._done.put(JobFailed(job, err))
+        finally:
+            final = kind is FinalJob
+            cpu = time.thread_time() - cpu if worker_cpu is None else worker_cpu
+            onset = job.event.onset_sample if final else job.onset_sample
+            data_end = (job.event.last_sample + 1 if final else
+                        onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
+            self.job_times.append(JobTime(
+                "final" if final else "look", onset, data_end,
+                self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
+                time.monotonic(), cpu))
+
+    def _final_inline(self) -> None:
+        """Run the final just queued on this thread (:attr:`finals_inline`)."""
+        job = self._jobs.get(FinalJob)
+        if job is not None:
+            self._run_one(FinalJob, job)
+            del job
+            self._jobs.done(FinalJob)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
         """Stream the device to its end (or Ctrl-C), then wait for every final analysis."""
+        if self._final_process_wanted:
+            try:
+                self._final_process = FinalProcess(self.info, self.rig, self._gages)
+            except (OSError, RuntimeError, ValueError) as err:  # no process: the thread it is
+                self._say(f"finals run on the analyzer thread: no worker process ({err})")
+                self.notes.append(f"no finals worker process: {err}")
         for kind, name in ((FinalJob, "ramdaq-finals"), (LookJob, "ramdaq-looks")):
-            threading.Thread(target=self._worker, args=(kind,), name=name, daemon=True).start()
+            if not (kind is FinalJob and self.finals_inline):
+                threading.Thread(target=self._worker, args=(kind,), name=name,
+                                 daemon=True).start()
         rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
                if self.record_path else None)
         self._rec = rec
@@ -294,6 +359,8 @@ class Session:
                 rec.write_json(SUMMARY_TOPIC, finite_json(summary), self._t_ns)
         finally:
             self._jobs.stop()
+            if self._final_process is not None:
+                self._final_process.close()
             if self.readout:
                 self.readout.__exit__(None, None, None)
             if rec:
@@ -401,6 +468,8 @@ class Session:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
         self._queued[ev.onset_sample] = time.monotonic()
         self._admitted(self._jobs.put_final(FinalJob(k, ev), wait=not self.shed), ev, rec)
+        if self.finals_inline:
+            self._final_inline()
         self._next_look = None
         self._ringing_hit = None
 
@@ -429,7 +498,10 @@ class Session:
         if not self.looks:
             return
         early = round(LOOK_EARLY * self._period_n)
-        if now + early < self._next_look or self._jobs.looks_pending:  # or still running
+        # until a look of this blow is sure, the next waits behind a running one (it starts as
+        # soon as the thread is free); after, a look is not asked for while one is pending
+        busy = self._jobs.looks_pending if self._look_sure else self._jobs.looks_waiting
+        if now + early < self._next_look or busy:
             return
         if self._look_sure:  # the decay half as long again, and update_s at least
             self._next_look = now + max(self.update_n, round(LOOK_GROWTH * (now - start)))
@@ -482,12 +554,22 @@ class Session:
                 done = self._done.get_nowait()
             except queue.Empty:
                 return
-            if isinstance(done, LookDone):
+            if isinstance(done, Notice):
+                self._say(done.text)
+                self.notes.append(done.text)
+                if rec:
+                    rec.event(done.kind, self._t_ns, message=done.text)
+            elif isinstance(done, LookDone):
                 self._show_look(done.onset_sample, done.look)
             elif isinstance(done, FinalDone):
                 self._show_final(done.hit, done.doc, rec)
             elif isinstance(done.job, FinalJob):  # judge_event does not raise; should it, the hit stays
                 job, err = done.job, done.error
+                if isinstance(err, WorkerDied):
+                    self._say(f"hit {job.index}: {err}; a new worker takes the next final")
+                    if rec:
+                        rec.event("analysis_worker_died", job.event.t_ns, index=job.index,
+                                  message=str(err))
                 hit = HitResult(job.index, job.event, False,
                                 f"analysis failed: {type(err).__name__}: {err}", None)
                 self._show_final(hit, hit_to_json(hit), rec)
