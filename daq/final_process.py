@@ -163,7 +163,14 @@ class FinalProcess:
 
 def _serve(rx: BinaryIO, tx: BinaryIO) -> int:
     """The worker's loop: set up, say ready, then one job in, one result out, until the pipe
-    closes."""
+    closes (a session gone before the worker was ready, or before its result, included)."""
+    try:
+        return _loop(rx, tx)
+    except (BrokenPipeError, EOFError):
+        return 0
+
+
+def _loop(rx: BinaryIO, tx: BinaryIO) -> int:
     sys.path[:0] = [p for p in pickle.load(rx) if p not in sys.path]
     initializer, target, args = pickle.load(rx)
     initializer(*args)
@@ -180,5 +187,11 @@ def _serve(rx: BinaryIO, tx: BinaryIO) -> int:
 
 if __name__ == "__main__":
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the session's to handle
-    with os.fdopen(int(sys.argv[1]), "rb") as _rx, os.fdopen(int(sys.argv[2]), "wb") as _tx:
-        sys.exit(_serve(_rx, _tx))
+    _rx, _tx = os.fdopen(int(sys.argv[1]), "rb"), os.fdopen(int(sys.argv[2]), "wb")
+    code = _serve(_rx, _tx)
+    for _f in (_rx, _tx):
+        try:
+            _f.close()
+        except BrokenPipeError:  # the session closed its end first: nothing left to say
+            pass
+    sys.exit(code)
