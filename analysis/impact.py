@@ -631,18 +631,21 @@ class FirstLook:
 
 
 def first_look(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
-               max_samples: int = 40_000) -> FirstLook | None:
+               max_samples: int = 40_000, pre: np.ndarray | None = None) -> FirstLook | None:
     """Quick per-gage frequency and decrement on the decay so far, (n_gages, n) m/s^2.
 
     The same estimator as the final analysis, on a decimated copy (``max_samples``) and
-    without verdicts or the report's chain: a first look, refined as the decay goes on.
+    without verdicts or the report's chain: a first look, refined as the decay goes on. ``pre``
+    (n_gages, n_pre) m/s^2 at ``fs_hz``, the same gages before the blow: a mode already ringing
+    there is not taken as the predominant one (as in :func:`analyze_decay`).
     Returns None when no mode stands above the noise yet.
     """
     table = identify_modes(x, fs_hz, per_channel=True, max_samples=max_samples)
     if len(table) == 0:
         return None
+    ambient = ambient_modes(pre, fs_hz, table.frequency_hz, table.complex_amplitude)
     k = predominant_mode(table, [i for i, n in enumerate(gage_numbers)
-                                 if rig.gage(n).body == "rudder"])
+                                 if rig.gage(n).body == "rudder"], exclude=[a for a, _ in ambient])
     gages = {n: (float(table.channel_frequency_hz[i, k]), float(table.channel_delta[i, k]),
                  float(table.channel_delta_se[i, k])) for i, n in enumerate(gage_numbers)}
     return FirstLook(x.shape[1] / fs_hz, float(table.frequency_hz[k]), float(table.delta[k]),

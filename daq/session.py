@@ -97,6 +97,11 @@ early (a block's end rarely falls on a period's)."""
 LOOK_CYCLES = 2
 """Periods of the predominant mode of free decay before a blow's first look is tried: two
 periods are the least from which a decrement (the ratio of successive peaks) can come at all."""
+LOOK_PRE_MARGIN_S = 0.05
+"""A first look's pre-trigger window ends this long before the blow's detection sample (which
+comes after the blow's start by about the trigger's STA window, 10 ms by default), so that it holds
+no part of the blow: the lines in it are the ones that rang before (an ambient hull tone),
+which a look does not take as the predominant mode."""
 LOOK_GROWTH = 0.5
 """Once a blow's look has been shown, the next is taken when its decay has grown by this
 fraction (and by ``update_s`` at least): a look's numbers change only as its decay grows by a
@@ -518,8 +523,19 @@ class Session:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
-        if not self._jobs.put_look(LookJob(onset, x)):
+        if not self._jobs.put_look(LookJob(onset, x, self._before_blow(onset))):
             self._look_skipped(onset, "its samples would pass the queue's bytes bound")
+
+    def _before_blow(self, onset: int) -> np.ndarray | None:
+        """The gage rows in the pre-trigger window before the blow detected at sample
+        ``onset`` (SI units), ending :data:`LOOK_PRE_MARGIN_S` before it (the detection comes
+        after the blow's start); None where the ring no longer holds them."""
+        end = onset - round(LOOK_PRE_MARGIN_S * self.info.fs_hz)
+        n = round(self.trigger.settings.pre_trigger_s * self.info.fs_hz)
+        try:
+            return self.trigger.recent(max(end - n, 0), end)[self._gage_rows]
+        except IndexError:
+            return None
 
     def _look_skipped(self, onset: int, why: str) -> None:
         self.skipped_updates += 1

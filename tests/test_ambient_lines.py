@@ -77,3 +77,28 @@ def test_the_sampson_sample_is_analysed_on_its_rudder_mode(tmp_path, capsys):
         a = imp["analysis"]
         assert abs(a["f_hz"] - 7.598) < 0.01
         assert a["damping"]["delta_modal"] > 0
+
+
+def test_a_live_first_look_is_on_the_rudder_mode_too(sampson):
+    """The live session's first looks carry the blow's pre-trigger window: on the SAMPSON-like
+    rig in water (its hull tone at 2.18 Hz rings before the blow) each look computed reads the
+    7.598 Hz mode, as the final does (looks run at once here, in the main thread)."""
+    from ramdaq.daq.analyzer import run_job
+    from ramdaq.daq.session import Session
+    from ramdaq.drivers.sim import SimDevice
+
+    dev = SimDevice(sampson.with_medium("water"), duration_s=5.0, impacts=[3.0], seed=3)
+    session = Session(dev, readout=False)
+    looks = []
+
+    def look_now(job):
+        assert job.pre is not None and job.pre.shape[1] == round(0.5 * dev.info.fs_hz)
+        done = run_job(job, session.info, session.rig, session._gages)
+        looks.append(done.look)
+        return True
+
+    session._jobs.put_look = look_now
+    for block in dev:
+        session._take(block, None)
+    seen = [lk.f_hz for lk in looks if lk is not None]
+    assert seen and all(abs(f - 7.598) < 0.1 for f in seen), seen
