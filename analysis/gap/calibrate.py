@@ -13,9 +13,11 @@ sees them as parameters. The held-out impacts enter only through their own force
 from __future__ import annotations
 
 import math
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import IO
 
 import numpy as np
 
@@ -59,6 +61,8 @@ class Calibration:
     nfev: int
     stop: Stop
     cache: dict = field(default_factory=dict)
+    parked: IO[bytes] | None = field(default=None, repr=False)
+    """The unnamed temporary file the Jacobian is parked in (:meth:`park_jacobian`), or None."""
 
     @property
     def cost(self) -> float:
@@ -69,6 +73,36 @@ class Calibration:
         """Let the Jacobian go (it is N x p, 40 MB for 20 impacts, and a judged candidate of
         a search needs it no more); a score basis asked of this calibration then refuses."""
         self.jac = None
+        if self.parked is not None:
+            self.parked.close()
+            self.parked = None
+
+    def park_jacobian(self) -> None:
+        """Move the Jacobian out of memory into an unnamed temporary file (gone when closed),
+        while it is not read: N x p, 24 MB for 20 impacts of 9 constants, 76 MB with a double
+        hit's 20 delays, and a search holds the calibration's, the best refit's and the one
+        being made at once. :meth:`jacobian` reads it back, :meth:`unpark_jacobian` holds it
+        again -- the same numbers to the last bit (``np.save``/``np.load``)."""
+        if self.jac is None:
+            return
+        f = tempfile.TemporaryFile()
+        np.save(f, self.jac, allow_pickle=False)
+        self.parked, self.jac = f, None
+
+    def jacobian(self) -> np.ndarray | None:
+        """The Jacobian, read back from its file when parked (a copy for the caller, not
+        kept); None once let go."""
+        if self.jac is not None or self.parked is None:
+            return self.jac
+        self.parked.seek(0)
+        return np.load(self.parked, allow_pickle=False)
+
+    def unpark_jacobian(self) -> None:
+        """Hold the parked Jacobian in memory again (:attr:`jac`), its file closed."""
+        if self.parked is not None:
+            jac = self.jacobian()
+            self.drop_jacobian()
+            self.jac = jac
 
     def drop_fit_arrays(self) -> None:
         """Let the prediction and residual go (``fit.pred``, ``fit.resid`` None; (n_seg, n_g,
