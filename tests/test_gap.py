@@ -214,3 +214,19 @@ def test_a_trial_whose_counts_were_let_go_says_so(albacore_air):
     assert lt.data is None
     with pytest.raises(ValueError, match="t.mcap: the trial's counts were let go"):
         _ = lt.x
+
+
+def test_the_gaps_progress_hands_the_heap_back_and_passes_every_message_on(monkeypatch):
+    """run_gap's progress (issue 19) trims the C heap before each phase's message and passes
+    the message on unchanged, in order; without a progress it only trims."""
+    import ramdaq.daq.commands.gap as gap
+
+    trims = []
+    monkeypatch.setattr(gap, "release_free_memory", lambda: trims.append(1) or True)
+    got: list[str] = []
+    say = gap.trimming(got.append)
+    say("scoring 12 candidate effects")
+    say("refitting with friction")
+    assert got == ["scoring 12 candidate effects", "refitting with friction"] and len(trims) == 2
+    gap.trimming(None)("calibrating")
+    assert len(trims) == 3
