@@ -178,7 +178,7 @@ def test_a_calibrations_fit_let_go_is_remade_to_the_last_bit(albacore_air):
     assert np.array_equal(cal.fit.resid, resid, equal_nan=True)
 
 
-def test_a_parked_jacobian_is_read_back_to_the_last_bit(albacore_air):
+def test_a_parked_jacobian_is_read_back_to_the_last_bit(albacore_air, monkeypatch):
     """A search parks the Jacobians it does not read while a refit runs (issue 19): read back
     they must be the very numbers (a refit started from them, a score basis projecting them
     out, would otherwise move), a score basis asked of a parked one refuses, and letting it go
@@ -201,6 +201,15 @@ def test_a_parked_jacobian_is_read_back_to_the_last_bit(albacore_air):
     f = cal.parked
     cal.drop_jacobian()
     assert f.closed and cal.jacobian() is None
+    # no temporary file to be had: the Jacobian stays in memory, the same numbers
+    cal.jac = jac.copy()
+
+    def no_file():
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr("tempfile.TemporaryFile", no_file)
+    cal.park_jacobian()
+    assert cal.parked is None and np.array_equal(cal.jac, jac)
 
 
 def test_a_trial_whose_counts_were_let_go_says_so(albacore_air):

@@ -82,11 +82,16 @@ class Calibration:
         while it is not read: N x p, 24 MB for 20 impacts of 9 constants, 76 MB with a double
         hit's 20 delays, and a search holds the calibration's, the best refit's and the one
         being made at once. :meth:`jacobian` reads it back, :meth:`unpark_jacobian` holds it
-        again -- the same numbers to the last bit (``np.save``/``np.load``)."""
+        again -- the same numbers to the last bit (``np.save``/``np.load``). Where no temporary
+        file can be written (no space, no writable temporary folder) it stays in memory: the
+        diagnosis is the same, only its peak memory is not lowered."""
         if self.jac is None:
             return
-        f = tempfile.TemporaryFile()
-        np.save(f, self.jac, allow_pickle=False)
+        try:
+            f = tempfile.TemporaryFile()
+            np.save(f, self.jac, allow_pickle=False)
+        except OSError:
+            return
         self.parked, self.jac = f, None
 
     def jacobian(self) -> np.ndarray | None:
