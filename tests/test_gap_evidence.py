@@ -372,3 +372,38 @@ def test_the_replicates_made_from_unit_blocks_are_the_dense_forms_to_the_last_bi
         x = x + np.tensordot(fit.force, Ur, axes=1)
         want = np.where(fw.mask, x - design.solve(x)[1], np.nan)
         assert np.array_equal(got[r], want, equal_nan=True)
+
+
+def test_the_prediction_rate_and_score_basis_from_blocks_are_the_dense_ones_to_the_bit(trial, monkeypatch):
+    """A calibration's prediction rate (a time skew's template) and a score basis's design are
+    made from the unit blocks a pulse writes (a friction term's added), not from the dense unit
+    responses: the same numbers to the bit, with no term and with a friction term."""
+    from ramdaq.analysis.gap.calibrate import Calibration, Stop
+    from ramdaq.analysis.gap.effects import EFFECTS
+    from ramdaq.analysis.gap.evidence import ScoreBasis
+    from ramdaq.analysis.gap.terms import Term
+
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    theta = np.zeros(len(fw.params))
+    fric = EFFECTS["friction"]
+    pl = fric.placements(fw, fw.fit(theta))[0]
+    N = int(td.fitted.sum()) * td.n_gages * td.n_s
+    jac = np.random.default_rng(4).standard_normal((N, 2))
+    reps = np.zeros((2,) + td.x.shape)
+    for terms in ([], [Term(fric, pl, np.array([0.3]))]):
+        fit = fw.fit(theta, terms)
+        got = {}
+        for how in ("blocks", "dense"):
+            if how == "dense":
+                monkeypatch.setattr(Forward, "term_blocks", lambda *a, **k: None)
+            cal = Calibration(theta, terms, fit, 0.0, 0.0, jac, 2, 1, Stop.NOTHING_TO_FIT)
+            got[how] = cal.pred_rate(fw), ScoreBasis(fw, cal, reps)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(got["blocks"][0], got["dense"][0])
+        b, d = got["blocks"][1], got["dense"][1]
+        assert b.n_lin == d.n_lin and len(b.blocks) == len(d.blocks)
+        for (i1, X1), (i2, X2) in zip(b.blocks, d.blocks, strict=True):
+            np.testing.assert_array_equal(i1, i2)
+            np.testing.assert_array_equal(X1, X2)
+        assert np.abs(got["blocks"][0]).max() > 0

@@ -132,10 +132,32 @@ class Calibration:
                                   force=self.fit.force if needs_force else None)
         return U, dU, fw.columns(self.terms)
 
+    def blocks(self, fw: Forward) -> dict[tuple[int, int], list[np.ndarray]] | None:
+        """The unit responses and derivatives of :meth:`columns` as the blocks they are not zero
+        in (:meth:`Forward.term_blocks`), or None when a term has no block form."""
+        needs_force = any(t.effect.needs_force for t in self.terms)
+        return fw.term_blocks(self.fit.modes, self.terms, force=self.fit.force if needs_force else None)
+
     def pred_rate(self, fw: Forward) -> np.ndarray:
-        """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached)."""
+        """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached): ``force . dU``
+        over the impacts, segment by segment from :meth:`blocks` (each segment's (n_imp, n_g *
+        n_s) rows, zeros where no block is: the numbers of the dense product, whose unit
+        responses were made whole), the dense form when a term has no blocks."""
         if "pred_rate" not in self.cache:
-            self.cache["pred_rate"] = np.tensordot(self.fit.force, self.columns(fw)[1], axes=1)
+            blocks = self.blocks(fw)
+            if blocks is None:
+                self.cache["pred_rate"] = np.tensordot(self.fit.force, self.columns(fw)[1], axes=1)
+                return self.cache["pred_rate"]
+            td = fw.td
+            out = np.empty(td.x.shape)
+            D = np.zeros((td.n_seg, td.n_gages * td.n_s))
+            for s in range(td.n_seg):
+                D[:] = 0.0
+                for j in range(s + 1):
+                    if (b := blocks.pop((j, s), None)) is not None:
+                        D[j] = b[1].ravel()
+                out[s] = (self.fit.force @ D).reshape(td.n_gages, td.n_s)
+            self.cache["pred_rate"] = out
         return self.cache["pred_rate"]
 
 

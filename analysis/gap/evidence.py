@@ -455,13 +455,19 @@ def _design_blocks(fw: Forward, cal: Calibration, fitted: np.ndarray
     whitened sample space, block by block: per fitted segment the indices of the columns alive
     there and their rows (a, n_g * n_s); and the number of linear columns. A column alive in no
     fitted segment (a held-out blow rung out before the next) is no direction at all."""
-    U, dU, extra = cal.columns(fw)
+    units = cal.blocks(fw)      # the blocks a pulse writes, each let go as it is taken
+    if units is None:
+        U, dU, extra = cal.columns(fw)
+        columns = lambda s: fw.alive_columns(U, dU, extra, s)             # noqa: E731
+    else:
+        extra = fw.columns(cal.terms)
+        columns = lambda s: fw.segment_columns(units, extra, s, consume=True)   # noqa: E731
     blocks = []
     for s in fitted:
-        idx, X = fw.alive_columns(U, dU, extra, s)
+        idx, X = columns(s)
         X *= (fw.mask[s] * fw.W[s]).ravel()[None, :]
         blocks.append((np.asarray(idx, dtype=int), X))
-    n_lin = 2 * U.shape[0] + (0 if extra is None else extra.shape[0])
+    n_lin = 2 * fw.td.n_seg + (0 if extra is None else extra.shape[0])
     return blocks, n_lin
 
 

@@ -415,13 +415,31 @@ class Forward:
         by segment as the design takes their rows), else from the dense unit responses -- the
         same numbers. A friction term's dense form was (n_imp, n_seg, n_g, n_s) touched whole,
         75 MB at 20 impacts, beside the design made of it."""
+        blocks = self.term_blocks(ms, terms, force)
+        if blocks is not None:
+            return self.block_design(blocks, extra, consume=True)
+        U, dU = self.unit_responses(ms, terms, force=force)
+        return self.linear_design(U, dU, extra)
+
+    def term_blocks(self, ms: ModeSet, terms: list[Term] = (),
+                    force: np.ndarray | None = None) -> dict[tuple[int, int], list[np.ndarray]] | None:
+        """:meth:`unit_blocks` with the terms' changes of the unit responses made on them
+        (``units_on_blocks``, at the impacts' ``force`` where given): the blocks of
+        :meth:`unit_responses` (segment >= impact; every other block zero); None when a term
+        has no block form."""
         blocks = self.unit_blocks(ms, terms)
         if all(t.effect.units_on_blocks(blocks, ms, self, force, t) for t in terms
                if t.effect.changes_units()):
-            return self.block_design(blocks, extra, consume=True)
-        del blocks
-        U, dU = self.unit_responses(ms, terms, force=force)
-        return self.linear_design(U, dU, extra)
+            return blocks
+        return None
+
+    def segment_columns(self, blocks: dict[tuple[int, int], list[np.ndarray]], extra: np.ndarray | None,
+                        s: int, *, consume: bool = False) -> tuple[list[int], np.ndarray]:
+        """:meth:`alive_columns` of segment ``s`` from blocks (:meth:`term_blocks`); with
+        ``consume`` the segment's blocks are taken out of ``blocks``."""
+        take = blocks.pop if consume else blocks.get
+        return _segment_columns(self.td.n_seg, self.td.n_gages * self.td.n_s, s,
+                                lambda j: take((j, s), None), extra)
 
     def design(self, U: np.ndarray, dU: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
         """The linear columns (forces, onset shifts, terms' own), (n_cols, n_seg, n_g, n_s)."""
