@@ -178,6 +178,40 @@ def test_a_calibrations_fit_let_go_is_remade_to_the_last_bit(albacore_air):
     assert np.array_equal(cal.fit.resid, resid, equal_nan=True)
 
 
+def test_a_parked_jacobian_is_read_back_to_the_last_bit(albacore_air, monkeypatch):
+    """A search parks the Jacobians it does not read while a refit runs (issue 19): read back
+    they must be the very numbers (a refit started from them, a score basis projecting them
+    out, would otherwise move), a score basis asked of a parked one refuses, and letting it go
+    closes its file."""
+    from ramdaq.analysis.gap.evidence import ScoreBasis
+
+    x, fs = sim_trial(albacore_air)
+    td = prepare(x, fs, np.array(IMPACTS), albacore_air)
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    cal = calibrate(fw, max_iter=3)
+    jac = cal.jac.copy()
+    cal.park_jacobian()
+    assert cal.jac is None and cal.parked is not None
+    assert np.array_equal(cal.jacobian(), jac) and cal.jac is None     # read, not held
+    with pytest.raises(ValueError, match="Jacobian was let go"):
+        ScoreBasis(fw, cal, np.zeros((2,) + td.x.shape))
+    cal.unpark_jacobian()
+    assert np.array_equal(cal.jac, jac) and cal.parked is None
+    cal.park_jacobian()
+    f = cal.parked
+    cal.drop_jacobian()
+    assert f.closed and cal.jacobian() is None
+    # no temporary file to be had: the Jacobian stays in memory, the same numbers
+    cal.jac = jac.copy()
+
+    def no_file():
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr("tempfile.TemporaryFile", no_file)
+    cal.park_jacobian()
+    assert cal.parked is None and np.array_equal(cal.jac, jac)
+
+
 def test_a_trial_whose_counts_were_let_go_says_so(albacore_air):
     """run_gap lets the trial's counts go before the effect search (issue 19): asking for the
     samples afterwards is an error naming the recording, not an empty or stale array."""
@@ -189,3 +223,19 @@ def test_a_trial_whose_counts_were_let_go_says_so(albacore_air):
     assert lt.data is None
     with pytest.raises(ValueError, match="t.mcap: the trial's counts were let go"):
         _ = lt.x
+
+
+def test_the_gaps_progress_hands_the_heap_back_and_passes_every_message_on(monkeypatch):
+    """run_gap's progress (issue 19) trims the C heap before each phase's message and passes
+    the message on unchanged, in order; without a progress it only trims."""
+    import ramdaq.daq.commands.gap as gap
+
+    trims = []
+    monkeypatch.setattr(gap, "release_free_memory", lambda: trims.append(1) or True)
+    got: list[str] = []
+    say = gap.trimming(got.append)
+    say("scoring 12 candidate effects")
+    say("refitting with friction")
+    assert got == ["scoring 12 candidate effects", "refitting with friction"] and len(trims) == 2
+    gap.trimming(None)("calibrating")
+    assert len(trims) == 3

@@ -343,3 +343,67 @@ def test_the_blockwise_score_basis_projects_as_a_dense_qr_of_the_design_does(tri
     np.testing.assert_allclose(basis.project(D), ref, rtol=0, atol=1e-9 * np.abs(D).max())
     Rw = np.nan_to_num(reps[:, fitted] * fw.W[fitted]).reshape(len(reps), -1)
     np.testing.assert_allclose(basis.reps_dot(ref), Rw @ ref.T, rtol=1e-12, atol=1e-9)
+
+
+def test_the_replicates_made_from_unit_blocks_are_the_dense_forms_to_the_last_bit(trial):
+    """The replicates' model-form change is made segment by segment from the unit blocks a
+    pulse writes (no dense (n_imp, n_seg, n_g, n_s) difference touched whole per replicate):
+    the same numbers, bit for bit, as ``force . (U_r - U)`` over the dense unit responses, and
+    the design they are re-solved with is the one the dense unit responses make."""
+    from ramdaq.analysis.gap.calibrate import Calibration, Stop
+    from ramdaq.analysis.gap.evidence import DECAY_TOL_PER_FORM_TOL, noise_model, replicate_residuals
+
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    fit = fw.fit(np.zeros(len(fw.params)))
+    cal = Calibration(np.zeros(len(fw.params)), [], fit, 0.0, 0.0, None, 0, 1, Stop.NOTHING_TO_FIT)
+    noise = noise_model(fw, fit.resid)
+    got = replicate_residuals(fw, cal, noise, 3, seed=5, form_tol=0.02)
+    rng = np.random.default_rng(5)
+    U, dU, extra = cal.columns(fw)
+    design = fw.linear_design(U, dU, extra)
+    for r in range(3):       # the dense form, as the replicates were made before
+        x = fit.pred + noise.draw(rng, td.n_seg)
+        ms = fit.modes.copy()
+        xi = rng.standard_normal(ms.A.shape) + 1j * rng.standard_normal(ms.A.shape)
+        ms.A = ms.A * (1 + 0.02 * xi / math.sqrt(2))
+        ms.lam = ms.lam + ms.lam.real * DECAY_TOL_PER_FORM_TOL * 0.02 * rng.standard_normal(ms.lam.shape)
+        Ur = fw.unit_responses(ms)[0] - U
+        x = x + np.tensordot(fit.force, Ur, axes=1)
+        want = np.where(fw.mask, x - design.solve(x)[1], np.nan)
+        assert np.array_equal(got[r], want, equal_nan=True)
+
+
+def test_the_prediction_rate_and_score_basis_from_blocks_are_the_dense_ones_to_the_bit(trial, monkeypatch):
+    """A calibration's prediction rate (a time skew's template) and a score basis's design are
+    made from the unit blocks a pulse writes (a friction term's added), not from the dense unit
+    responses: the same numbers to the bit, with no term and with a friction term."""
+    from ramdaq.analysis.gap.calibrate import Calibration, Stop
+    from ramdaq.analysis.gap.effects import EFFECTS
+    from ramdaq.analysis.gap.evidence import ScoreBasis
+    from ramdaq.analysis.gap.terms import Term
+
+    _, td = trial
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    theta = np.zeros(len(fw.params))
+    fric = EFFECTS["friction"]
+    pl = fric.placements(fw, fw.fit(theta))[0]
+    N = int(td.fitted.sum()) * td.n_gages * td.n_s
+    jac = np.random.default_rng(4).standard_normal((N, 2))
+    reps = np.zeros((2,) + td.x.shape)
+    for terms in ([], [Term(fric, pl, np.array([0.3]))]):
+        fit = fw.fit(theta, terms)
+        got = {}
+        for how in ("blocks", "dense"):
+            if how == "dense":
+                monkeypatch.setattr(Forward, "term_blocks", lambda *a, **k: None)
+            cal = Calibration(theta, terms, fit, 0.0, 0.0, jac, 2, 1, Stop.NOTHING_TO_FIT)
+            got[how] = cal.pred_rate(fw), ScoreBasis(fw, cal, reps)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(got["blocks"][0], got["dense"][0])
+        b, d = got["blocks"][1], got["dense"][1]
+        assert b.n_lin == d.n_lin and len(b.blocks) == len(d.blocks)
+        for (i1, X1), (i2, X2) in zip(b.blocks, d.blocks, strict=True):
+            np.testing.assert_array_equal(i1, i2)
+            np.testing.assert_array_equal(X1, X2)
+        assert np.abs(got["blocks"][0]).max() > 0

@@ -84,3 +84,31 @@ def test_the_blocks_a_pulse_writes_solve_as_the_dense_unit_responses():
         np.testing.assert_array_equal(again[1], dense.solve(2 * fw.x0 + 1e-3)[1])
         preds.append(p2)
     assert np.max(np.abs(preds[0] - preds[1])) > 1e-6 * np.max(np.abs(preds[0]))   # the second contact shows
+
+
+def test_a_friction_terms_prediction_from_blocks_is_its_dense_ones_to_the_bit(monkeypatch):
+    """A friction term changes every impact's unit response in every later segment: its
+    prediction made on the blocks a pulse writes (the friction's blocks added, each let go as
+    the design takes it) is the one made from the dense unit responses, forces and all, to the
+    bit; and with the friction off the blocks are the pulses' alone."""
+    from ramdaq.analysis.gap.effects import EFFECTS
+    from ramdaq.analysis.gap.effects.friction import Friction
+    from ramdaq.analysis.gap.terms import Term
+
+    td = trial_data(load_trial(ROOT / "recordings" / "albacore-water.mcap"))
+    fw = Forward(td, np.full(td.n_gages, 1e-3))
+    theta = np.zeros(len(fw.params))
+    fric = EFFECTS["friction"]
+    pl = fric.placements(fw, fw.fit(theta))[0]
+    fits = {}
+    for how in ("blocks", "dense"):
+        if how == "dense":
+            monkeypatch.setattr(Friction, "units_on_blocks", lambda *a: False)
+        fits[how] = [fw.fit(theta, [Term(fric, pl, np.array([k]))]) for k in (0.0, 0.3)]
+    for a, b in zip(fits["blocks"], fits["dense"], strict=True):
+        np.testing.assert_array_equal(a.pred, b.pred)
+        np.testing.assert_array_equal(a.force, b.force)
+    # the friction moves the prediction, and off it is the model without the term
+    off, on = fits["blocks"]
+    assert np.max(np.abs(on.pred - off.pred)) > 1e-3 * np.max(np.abs(off.pred))
+    np.testing.assert_array_equal(off.pred, fw.fit(theta).pred)

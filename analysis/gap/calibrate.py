@@ -13,9 +13,11 @@ sees them as parameters. The held-out impacts enter only through their own force
 from __future__ import annotations
 
 import math
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import IO
 
 import numpy as np
 
@@ -59,6 +61,8 @@ class Calibration:
     nfev: int
     stop: Stop
     cache: dict = field(default_factory=dict)
+    parked: IO[bytes] | None = field(default=None, repr=False)
+    """The unnamed temporary file the Jacobian is parked in (:meth:`park_jacobian`), or None."""
 
     @property
     def cost(self) -> float:
@@ -69,6 +73,41 @@ class Calibration:
         """Let the Jacobian go (it is N x p, 40 MB for 20 impacts, and a judged candidate of
         a search needs it no more); a score basis asked of this calibration then refuses."""
         self.jac = None
+        if self.parked is not None:
+            self.parked.close()
+            self.parked = None
+
+    def park_jacobian(self) -> None:
+        """Move the Jacobian out of memory into an unnamed temporary file (gone when closed),
+        while it is not read: N x p, 24 MB for 20 impacts of 9 constants, 76 MB with a double
+        hit's 20 delays, and a search holds the calibration's, the best refit's and the one
+        being made at once. :meth:`jacobian` reads it back, :meth:`unpark_jacobian` holds it
+        again -- the same numbers to the last bit (``np.save``/``np.load``). Where no temporary
+        file can be written (no space, no writable temporary folder) it stays in memory: the
+        diagnosis is the same, only its peak memory is not lowered."""
+        if self.jac is None:
+            return
+        try:
+            f = tempfile.TemporaryFile()
+            np.save(f, self.jac, allow_pickle=False)
+        except OSError:
+            return
+        self.parked, self.jac = f, None
+
+    def jacobian(self) -> np.ndarray | None:
+        """The Jacobian, read back from its file when parked (a copy for the caller, not
+        kept); None once let go."""
+        if self.jac is not None or self.parked is None:
+            return self.jac
+        self.parked.seek(0)
+        return np.load(self.parked, allow_pickle=False)
+
+    def unpark_jacobian(self) -> None:
+        """Hold the parked Jacobian in memory again (:attr:`jac`), its file closed."""
+        if self.parked is not None:
+            jac = self.jacobian()
+            self.drop_jacobian()
+            self.jac = jac
 
     def drop_fit_arrays(self) -> None:
         """Let the prediction and residual go (``fit.pred``, ``fit.resid`` None; (n_seg, n_g,
@@ -93,10 +132,32 @@ class Calibration:
                                   force=self.fit.force if needs_force else None)
         return U, dU, fw.columns(self.terms)
 
+    def blocks(self, fw: Forward) -> dict[tuple[int, int], list[np.ndarray]] | None:
+        """The unit responses and derivatives of :meth:`columns` as the blocks they are not zero
+        in (:meth:`Forward.term_blocks`), or None when a term has no block form."""
+        needs_force = any(t.effect.needs_force for t in self.terms)
+        return fw.term_blocks(self.fit.modes, self.terms, force=self.fit.force if needs_force else None)
+
     def pred_rate(self, fw: Forward) -> np.ndarray:
-        """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached)."""
+        """Time derivative of the prediction, (n_seg, n_g, n_s), m/s^3 (cached): ``force . dU``
+        over the impacts, segment by segment from :meth:`blocks` (each segment's (n_imp, n_g *
+        n_s) rows, zeros where no block is: the numbers of the dense product, whose unit
+        responses were made whole), the dense form when a term has no blocks."""
         if "pred_rate" not in self.cache:
-            self.cache["pred_rate"] = np.tensordot(self.fit.force, self.columns(fw)[1], axes=1)
+            blocks = self.blocks(fw)
+            if blocks is None:
+                self.cache["pred_rate"] = np.tensordot(self.fit.force, self.columns(fw)[1], axes=1)
+                return self.cache["pred_rate"]
+            td = fw.td
+            out = np.empty(td.x.shape)
+            D = np.zeros((td.n_seg, td.n_gages * td.n_s))
+            for s in range(td.n_seg):
+                D[:] = 0.0
+                for j in range(s + 1):
+                    if (b := blocks.pop((j, s), None)) is not None:
+                        D[j] = b[1].ravel()
+                out[s] = (self.fit.force @ D).reshape(td.n_gages, td.n_s)
+            self.cache["pred_rate"] = out
         return self.cache["pred_rate"]
 
 

@@ -330,7 +330,7 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     best = None
     for _, t, th in _shortlist(tried, n_short):
         try:
-            cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jac)
+            cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jacobian())
         except (ValueError, np.linalg.LinAlgError):
             continue
         if best is None or cal.cost < best.cost:
@@ -494,6 +494,9 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     # (N, k) and the replicates whitened: a second effect's basis is made anew; the replicates
     # themselves are let go during the singles' refits (the search's peak) and made again
     del basis, reps
+    # the calibration's Jacobian is read from here on only to start each refit (copied into
+    # the solver's): parked while the refits run, which each hold one of their own
+    base.park_jacobian()
     cands = sorted(_candidates(search, sigs, significant), key=lambda c: c.dbic)
     pick = choose([c.record() for c in cands], significant, settings.bic_min, settings.min_closure)
     best = next((c for c in cands if c.name == pick), None)
@@ -599,11 +602,14 @@ def _candidates(search: _Search, sigs: list[Signature], significant: bool) -> li
 def _keep_best_jacobian(cands: list[Candidate]) -> None:
     """Let go of every single candidate's Jacobian (N x p, 40 MB at 20 impacts) and prediction
     and residual but the best one's, which :func:`_second_effect` scores on and a pair starts
-    from; nothing else reads them once judged (the named one's fit is made again)."""
+    from; nothing else reads them once judged (the named one's fit is made again). The best
+    one's Jacobian is parked (:meth:`Calibration.park_jacobian`) while the next singles refit."""
     singles = sorted(cands, key=lambda c: c.dbic)
     for c in singles[1:]:
         c.cal.drop_jacobian()
         c.cal.drop_fit_arrays()     # remade for the one named (diagnose)
+    if singles:
+        singles[0].cal.park_jacobian()
 
 
 def _second_effect(search: _Search, cands: list[Candidate],
@@ -616,6 +622,7 @@ def _second_effect(search: _Search, cands: list[Candidate],
         return None
     c1 = singles[0]
     first = next(s for s in live if s.effect.name == c1.name)
+    c1.cal.unpark_jacobian()
     basis1 = ScoreBasis(search.fw, c1.cal, search.held_reps())
     search.say(f"scoring a second effect on top of {c1.name}")
     second = _by_z(signature_scores(search.fw, c1.cal, basis1, s.effect)
@@ -676,7 +683,7 @@ def _refit(search: _Search, terms: list[Term], theta0: np.ndarray, new: list[boo
     if any(len(t.x) for t, n in zip(terms, new, strict=True) if n):
         terms = calibrate(search.fw, terms, theta0=theta0, free_base=False, max_iter=15).terms
     return calibrate(search.fw, terms, theta0=theta0, max_iter=search.settings.refit_iter,
-                     jac0=search.base.jac)
+                     jac0=search.base.jacobian())
 
 
 def _refit_single(search: _Search, sig: Signature, cal: Calibration) -> Calibration:
@@ -686,6 +693,7 @@ def _refit_single(search: _Search, sig: Signature, cal: Calibration) -> Calibrat
     up to :data:`N_REREAD` times while that improves."""
     if cal.cost > search.base.cost:
         pl = sig.placement
+        cal.park_jacobian()     # the refit being made holds its own
         alt = _refit(search, [Term(sig.effect, pl, np.clip(sig.x0, pl.lo, pl.hi))],
                      search.base.theta, [True])
         cal = min(cal, alt, key=lambda c: c.cost)
@@ -693,10 +701,12 @@ def _refit_single(search: _Search, sig: Signature, cal: Calibration) -> Calibrat
         pl = sig.effect.placement_after(search.fw, cal)
         if pl is None or pl.key == cal.terms[0].placement.key:
             break
+        cal.park_jacobian()
         alt = _refit(search, [Term(sig.effect, pl, _carry(cal.terms[0], pl))], cal.theta, [True])
         if alt.cost >= cal.cost:
             break
         cal = alt
+    cal.unpark_jacobian()
     return cal
 
 

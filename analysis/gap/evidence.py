@@ -28,7 +28,7 @@ import scipy.stats
 
 from .calibrate import Calibration
 from .effects.base import Effect, Placement, Term, whiten_fitted
-from .forward import Forward
+from .forward import Design, Forward, ModeSet
 
 WINDOWS = ("pre", "early", "late")
 DECAY_TOL_PER_FORM_TOL = 5.0
@@ -116,9 +116,7 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
     rate by ``DECAY_TOL_PER_FORM_TOL * form_tol``: what a model "right to within form_tol" leaves
     when it is right."""
     rng = np.random.default_rng(seed)
-    U, dU, extra = cal.columns(fw)
-    design = fw.linear_design(U, dU, extra)      # the same columns for every replicate
-    del dU, extra
+    U, u_blocks, design = _replicate_design(fw, cal)     # the same columns for every replicate
     out = np.empty((n_rep,) + fw.td.x.shape)
     needs_force = any(t.effect.needs_force for t in cal.terms)
     for r in range(n_rep):
@@ -131,13 +129,55 @@ def replicate_residuals(fw: Forward, cal: Calibration, noise: NoiseModel, n_rep:
             # constants are shared by all modes, so their per-mode rates are the loosest part
             rel = DECAY_TOL_PER_FORM_TOL * form_tol * rng.standard_normal(ms.lam.shape)
             ms.lam = ms.lam + ms.lam.real * rel
-            # the derivative is not wanted: dropped at once; the difference made in place
-            Ur = fw.unit_responses(ms, cal.terms, force=cal.fit.force if needs_force else None)[0]
-            Ur -= U
-            x = x + np.tensordot(cal.fit.force, Ur, axes=1)
-            del Ur
+            x = x + _form_change(fw, cal, ms, U, u_blocks, needs_force)
         _, pred = design.solve(x)
         out[r] = np.where(fw.mask, x - pred, np.nan)
+    return out
+
+
+def _replicate_design(fw: Forward, cal: Calibration) -> tuple[np.ndarray | None, dict | None, Design]:
+    """The calibration's linear columns as the replicates re-solve them: (None, its unit blocks
+    (:meth:`Forward.unit_blocks`, the derivatives let go), their design) when no term changes
+    the unit responses -- the numbers :meth:`Forward.fit` solves with --; else (the dense unit
+    responses (n_imp, n_seg, n_g, n_s), None, their design)."""
+    if any(t.effect.changes_units() for t in cal.terms):
+        U, dU, extra = cal.columns(fw)
+        return U, None, fw.linear_design(U, dU, extra)
+    blocks = fw.unit_blocks(cal.fit.modes, cal.terms)
+    design = fw.block_design(blocks, fw.columns(cal.terms))
+    for b in blocks.values():
+        b[1] = None     # the derivatives are in the design; the differences read the responses
+    return None, blocks, design
+
+
+def _form_change(fw: Forward, cal: Calibration, ms: ModeSet, U: np.ndarray | None,
+                 u_blocks: dict | None, needs_force: bool) -> np.ndarray:
+    """What perturbing the calibrated modes to ``ms`` changes in the prediction at the
+    calibrated forces, (n_seg, n_g, n_s) m/s^2: ``force . (U_r - U)`` over the impacts.
+
+    With ``u_blocks`` (the calibration's unit blocks, :meth:`Forward.unit_blocks`) the
+    difference is made segment by segment from the perturbed modes' blocks, each segment's
+    (n_imp, n_g * n_s) rows with zeros where neither writes -- the same numbers, impact by
+    impact, as the dense form, whose difference touched every page of an (n_imp, n_seg, n_g,
+    n_s) array (72 MB at 20 impacts) per replicate; else the dense unit responses."""
+    force = cal.fit.force
+    if u_blocks is None:
+        # the derivative is not wanted: dropped at once; the difference made in place
+        Ur = fw.unit_responses(ms, cal.terms, force=force if needs_force else None)[0]
+        Ur -= U
+        return np.tensordot(force, Ur, axes=1)
+    td = fw.td
+    r_blocks = fw.unit_blocks(ms, cal.terms)
+    out = np.empty(td.x.shape)
+    D = np.zeros((td.n_seg, td.n_gages * td.n_s))
+    for s in range(td.n_seg):
+        D[:] = 0.0
+        for j in range(s + 1):
+            if (b := r_blocks.get((j, s))) is not None:
+                D[j] = b[0].ravel()
+            if (b := u_blocks.get((j, s))) is not None:
+                D[j] -= b[0].ravel()
+        out[s] = (force @ D).reshape(td.n_gages, td.n_s)
     return out
 
 
@@ -415,13 +455,19 @@ def _design_blocks(fw: Forward, cal: Calibration, fitted: np.ndarray
     whitened sample space, block by block: per fitted segment the indices of the columns alive
     there and their rows (a, n_g * n_s); and the number of linear columns. A column alive in no
     fitted segment (a held-out blow rung out before the next) is no direction at all."""
-    U, dU, extra = cal.columns(fw)
+    units = cal.blocks(fw)      # the blocks a pulse writes, each let go as it is taken
+    if units is None:
+        U, dU, extra = cal.columns(fw)
+        columns = lambda s: fw.alive_columns(U, dU, extra, s)             # noqa: E731
+    else:
+        extra = fw.columns(cal.terms)
+        columns = lambda s: fw.segment_columns(units, extra, s, consume=True)   # noqa: E731
     blocks = []
     for s in fitted:
-        idx, X = fw.alive_columns(U, dU, extra, s)
+        idx, X = columns(s)
         X *= (fw.mask[s] * fw.W[s]).ravel()[None, :]
         blocks.append((np.asarray(idx, dtype=int), X))
-    n_lin = 2 * U.shape[0] + (0 if extra is None else extra.shape[0])
+    n_lin = 2 * fw.td.n_seg + (0 if extra is None else extra.shape[0])
     return blocks, n_lin
 
 

@@ -386,19 +386,15 @@ class Forward:
         extra = self.columns(list(terms))
         data = self.x0 if x is None else np.where(self.td.valid, x, 0.0)
         if any(t.effect.changes_units() for t in terms):
-            U, dU = self.unit_responses(ms, terms)
-            design = self.linear_design(U, dU, extra)
-            del U, dU           # the design holds the rows it needs
+            design = self.unit_design(ms, terms, extra)
             coef, pred = design.solve(data)
             if needs_force:     # the first design let go before the second is made
                 del design
-                U, dU = self.unit_responses(ms, terms, force=coef[: self.td.n_seg])
-                design = self.linear_design(U, dU, extra)
-                del U, dU
+                design = self.unit_design(ms, terms, extra, force=coef[: self.td.n_seg])
                 coef, pred = design.solve(data)
             del design
         else:     # no term changes the unit responses: only the blocks a pulse writes are made
-            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra).solve(data)
+            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra, consume=True).solve(data)
         mask = self.mask
         for t in terms:
             pred, m = t.effect.output(pred, self, t)
@@ -410,6 +406,40 @@ class Forward:
         src = self.td.x if x is None else x
         resid = np.where(mask, src - pred, np.nan)
         return Fit(pred, resid, force, shift, coef[2 * n:], ms)
+
+    def unit_design(self, ms: ModeSet, terms: list[Term], extra: np.ndarray | None,
+                    force: np.ndarray | None = None) -> Design:
+        """The linear design of the impacts' unit responses as the terms change them (their
+        ``units`` hooks, at the impacts' ``force`` where given): from the blocks a pulse writes
+        when every such term can change those (``units_on_blocks``; the blocks let go segment
+        by segment as the design takes their rows), else from the dense unit responses -- the
+        same numbers. A friction term's dense form was (n_imp, n_seg, n_g, n_s) touched whole,
+        75 MB at 20 impacts, beside the design made of it."""
+        blocks = self.term_blocks(ms, terms, force)
+        if blocks is not None:
+            return self.block_design(blocks, extra, consume=True)
+        U, dU = self.unit_responses(ms, terms, force=force)
+        return self.linear_design(U, dU, extra)
+
+    def term_blocks(self, ms: ModeSet, terms: list[Term] = (),
+                    force: np.ndarray | None = None) -> dict[tuple[int, int], list[np.ndarray]] | None:
+        """:meth:`unit_blocks` with the terms' changes of the unit responses made on them
+        (``units_on_blocks``, at the impacts' ``force`` where given): the blocks of
+        :meth:`unit_responses` (segment >= impact; every other block zero); None when a term
+        has no block form."""
+        blocks = self.unit_blocks(ms, terms)
+        if all(t.effect.units_on_blocks(blocks, ms, self, force, t) for t in terms
+               if t.effect.changes_units()):
+            return blocks
+        return None
+
+    def segment_columns(self, blocks: dict[tuple[int, int], list[np.ndarray]], extra: np.ndarray | None,
+                        s: int, *, consume: bool = False) -> tuple[list[int], np.ndarray]:
+        """:meth:`alive_columns` of segment ``s`` from blocks (:meth:`term_blocks`); with
+        ``consume`` the segment's blocks are taken out of ``blocks``."""
+        take = blocks.pop if consume else blocks.get
+        return _segment_columns(self.td.n_seg, self.td.n_gages * self.td.n_s, s,
+                                lambda j: take((j, s), None), extra)
 
     def design(self, U: np.ndarray, dU: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
         """The linear columns (forces, onset shifts, terms' own), (n_cols, n_seg, n_g, n_s)."""
@@ -427,12 +457,14 @@ class Forward:
         return Design(blocks, 2 * n + e, self._w2.reshape(self.td.n_seg, -1))
 
     def block_design(self, blocks: dict[tuple[int, int], list[np.ndarray]],
-                     extra: np.ndarray | None) -> Design:
+                     extra: np.ndarray | None, *, consume: bool = False) -> Design:
         """:meth:`linear_design` from the blocks of :meth:`unit_blocks` (the same columns, rows
-        and numbers as from the dense unit responses they fill)."""
+        and numbers as from the dense unit responses they fill); with ``consume`` each block is
+        taken out of ``blocks`` as its segment's rows are made (no second copy of them all)."""
         n = self.td.n_seg
+        take = blocks.pop if consume else blocks.get
         segs = [_segment_columns(n, self.td.n_gages * self.td.n_s, s,
-                                 lambda j, s=s: blocks.get((j, s)), extra) for s in range(n)]
+                                 lambda j, s=s: take((j, s), None), extra) for s in range(n)]
         return Design(segs, 2 * n + (0 if extra is None else extra.shape[0]),
                       self._w2.reshape(n, -1))
 

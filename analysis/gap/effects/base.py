@@ -107,6 +107,15 @@ class Effect:
         (:meth:`Forward.unit_responses`): they may be changed in place and returned."""
         return U, dU
 
+    def units_on_blocks(self, blocks: dict[tuple[int, int], list[np.ndarray]], ms: ModeSet,
+                        fw: Forward, force: np.ndarray | None, term: Term) -> bool:
+        """This term's change of the unit responses made on the blocks a pulse writes
+        (:meth:`Forward.unit_blocks`: ``{(impact, segment): [u, du]}``, segment >= impact), in
+        place, a block added where it writes one no pulse did -- the numbers its :meth:`units`
+        makes on those blocks of the dense form: True; False (no such form: the dense unit
+        responses are then made)."""
+        return False
+
     def output(self, pred: np.ndarray, fw: Forward, term: Term) -> tuple[np.ndarray, np.ndarray | None]:
         """Last word on the prediction; may return a mask (n_seg, n_g, n_s) of samples that
         still count."""
