@@ -56,3 +56,28 @@ def test_form_modes_list_every_gage_beyond_chance():
     lvl = ModelLevel(modes=None, fit=Fit())
     assert lvl.form_modes() == [(23.44, [2, 1, 3, 7, 11, 12, 10])]
     assert lvl.form_gages() == {1, 2, 3, 7}       # the line's worst four, as before
+
+
+def _law(kind: str, stat: float) -> dict:
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    more = (("coulomb_law_z", stat, "1"),) if kind == "coulomb" else (
+        (("stiffness_law_z", stat, "1"),) if kind == "stiffness" else (("amplitude_per_doubling", 0.8, "1"),))
+    return Finding(check="homogeneity", layer=Layer.NONLINEARITY, gages=(1, 4, 8), statistic=stat,
+                   chance_level=4.134, size=0.157, unit="m/s^2 per cycle", text=kind, window="decay",
+                   mode_hz=(23.88,), more=more).to_json()
+
+
+def test_a_told_law_well_above_chance_outranks_a_named_linear_effect():
+    # issue 17, modal check seed 157001: Coulomb's law at 84.9 (20.5x its chance level 4.13)
+    # while the model named hull_coupling
+    cand = {"name": "hull_coupling", "dbic": -100.0, "closed_held": 0.8, "closed_fit": 0.8,
+            "location": {"gages": [14, 15], "window": "late"}}
+    a = answer("hull_coupling", [cand], None, set(), [_law("coulomb", 84.9)])
+    assert a.named == "friction" and a.by == "data" and a.location["gages"] == [1, 4, 8]
+    # an amplitude-dependent stiffness is no library effect: unexplained, by the data
+    assert answer("hull_coupling", [cand], None, set(), [_law("stiffness", 84.9)]).named == "unexplained"
+    # a slope across the blows whose law the decays did not tell, or a law barely past its
+    # chance level (1.5x, under PRECEDENCE_STRENGTH), leaves the model's effect standing
+    assert answer("hull_coupling", [cand], None, set(), [_law("slope", 84.9)]).named == "hull_coupling"
+    assert answer("hull_coupling", [cand], None, set(), [_law("coulomb", 6.2)]).named == "hull_coupling"

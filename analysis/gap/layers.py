@@ -115,6 +115,14 @@ def is_friction(f: dict) -> bool:
     return f["check"] == "homogeneity" and "coulomb_law_z" in more and "stiffness_law_z" not in more
 
 
+def told_law(f: dict) -> bool:
+    """Whether a data-only finding (as JSON) is the homogeneity check's with the law its decays
+    follow told: Coulomb friction (:func:`is_friction`) or an amplitude-dependent stiffness
+    (``stiffness_law_z``), not a slope across the blows alone."""
+    more = f.get("more", {})
+    return f["check"] == "homogeneity" and ("coulomb_law_z" in more or "stiffness_law_z" in more)
+
+
 def strength(f: dict) -> float:
     """A finding's (as JSON) statistic over its chance level; JSON stores an infinite statistic
     as null (a dead gage), a statistic that could not be measured is no finding at all."""
@@ -220,7 +228,11 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     scores: the model layer's (:func:`model_answer`), which a credible data-only finding
     (:func:`credible`) replaces when the model names no effect or blames a sensor (the data layer
     rests on the recorded values and the gages' positions alone), and when the model says
-    "unexplained" and a finding overrides it (:func:`overriding_unexplained`). Of several, the
+    "unexplained" and a finding overrides it (:func:`overriding_unexplained`). A named linear
+    effect (structure, excitation) gives way only to a nonlinearity whose law the decays told
+    (:func:`told_law`) well above chance: no linear model update makes a decrement grow as
+    1/amplitude or a frequency move with it (issue 17: a modal friction trial read Coulomb's law
+    at 20.5x its chance level while the model named hull_coupling). Of several, the
     strongest against its chance level answers. ``form_modes``: the modes the calibrated rig
     still misses, as :func:`model_answer` reads them."""
     out = model_answer(model, candidates, where, form_gages, form_modes)
@@ -229,9 +241,13 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
         finds = [f for f in overriding_unexplained(findings) if data_effect(f)]
     else:
         finds = [f for f in credible(findings) if data_effect(f)]
-        if named in {data_effect(f) for f in finds} or (
-                named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}):
+        laws = [f for f in finds if told_law(f) and strength(f) >= PRECEDENCE_STRENGTH]
+        if named in {data_effect(f) for f in finds}:
             return out
+        if named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
+            if not laws:
+                return out
+            finds = laws
     if not finds:
         return out
     f = max(finds, key=strength)
