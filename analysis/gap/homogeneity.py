@@ -35,7 +35,7 @@ import scipy.signal
 import scipy.stats
 
 from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer
-from .signal_checks import EARLY_FROM_S
+from .signal_checks import EARLY_FROM_S, early_lines
 
 F_FLOOR = 2e-4
 """Relative frequency scatter accepted from blow to blow on top of each fit's standard error
@@ -209,10 +209,6 @@ def _law(v: np.ndarray, fs_hz: float, f_k: float, starts: np.ndarray, n: int, fl
     return DecayLaw(f_k, gage, int(amp.size), zf, bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc, size)
 
 
-EARLY_PEAKS = 3
-"""Most lines of the early window outside the free model's modes whose decay laws are read."""
-
-
 def early_laws(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
                skip_rows: Sequence[int] = ()) -> list[DecayLaw]:
     """Decay laws (:class:`DecayLaw`) of modes the free modal model does not hold because they
@@ -221,9 +217,9 @@ def early_laws(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     start, :data:`~ramdaq.analysis.gap.datamodel.DECAY_START_S`): friction stops a mode within
     some cycles (issue 17: the modal family's friction on a 58 Hz and a 340 Hz mode was gone
     0.2 s and 0.05 s after the blow, and the homogeneity check, reading the free model's modes
-    only, never saw it). The :data:`EARLY_PEAKS` largest peaks of the early windows' summed
-    periodogram (each gage's over its noise variance; at least two law bands from every free
-    model pole, whose leakage would beat in the band), each at its best gage; cycles are read
+    only, never saw it). The early window's lines the free model lacks
+    (:func:`~ramdaq.analysis.gap.signal_checks.early_lines`: at least two law bands from every
+    free-model pole, whose leakage would beat in the band), each at its best gage; cycles are read
     from one band time constant past the early window's start (the zero-phase band filter's
     rise on the blow), until the envelope first stops falling. Coulomb's law only
     (``z_stiffness`` 0): the frequency read this near the blow, over few cycles, is biased by
@@ -231,33 +227,13 @@ def early_laws(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     at z 5.2 and 4.5, past the chance level), while their decrements' slopes on 1/amplitude
     stayed within |z| 1.2."""
     fs = fm.fs_hz
-    onsets = fm.t0_s - DECAY_START_S
+    f, W, a0 = early_lines(x, fs, fm.t0_s - DECAY_START_S, fm, skip_rows=skip_rows)
     m = int((DECAY_START_S - EARLY_FROM_S) * fs)
-    a0 = np.rint((onsets + EARLY_FROM_S) * fs).astype(int)
-    if m < 16 or a0.min() < 0:
-        return []
-    seg = np.nan_to_num(np.stack([x[:, a:a + m] for a in a0]))          # (n_imp, n_g, m)
-    nfft = 4 * m
-    f = np.fft.rfftfreq(nfft, 1 / fs)
-    P = np.sum(np.abs(np.fft.rfft(seg * np.hanning(m), n=nfft, axis=-1)) ** 2, axis=0)
-    sig2 = np.maximum(np.median(fm.noise, axis=0) ** 2, 1e-300)
-    W = P / sig2[:, None]
-    W[list(skip_rows)] = 0
-    S = W.max(axis=0)
-    half = np.maximum(LAW_BAND * f, LAW_BAND_MIN_HZ)
-    ok = (f - half > 0) & (f + half < 0.45 * fs)
-    for fk in fm.f_hz:
-        ok &= np.abs(f - fk) >= 2 * max(LAW_BAND * fk, LAW_BAND_MIN_HZ)
-    peaks, _ = scipy.signal.find_peaks(np.where(ok, S, 0))
     out: list[DecayLaw] = []
-    for i in peaks[np.argsort(-S[peaks])]:
-        if len(out) >= EARLY_PEAKS:
-            break
-        if any(abs(f[i] - w.mode_hz) < 2 * LAW_BAND * w.mode_hz for w in out):
-            continue
+    for i, fk in enumerate(f):
         g = int(np.argmax(W[:, i]))
-        lead = int(fs / (math.pi * half[i]))
-        law = _law(x[g], fs, float(f[i]), a0 + lead, m - lead,
+        lead = int(fs / (math.pi * max(LAW_BAND * fk, LAW_BAND_MIN_HZ)))
+        law = _law(x[g], fs, float(fk), a0 + lead, m - lead,
                    LAW_MIN_RATIO * float(np.median(fm.noise[:, g])), int(numbers[g]), falling=True)
         if law is not None:     # its gages: at half the best gage's amplitude or more
             shows = tuple(numbers[r] for r in np.flatnonzero(W[:, i] >= 0.25 * W[g, i]))
