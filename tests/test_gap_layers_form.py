@@ -81,3 +81,21 @@ def test_a_told_law_well_above_chance_outranks_a_named_linear_effect():
     # chance level (1.5x, under PRECEDENCE_STRENGTH), leaves the model's effect standing
     assert answer("hull_coupling", [cand], None, set(), [_law("slope", 84.9)]).named == "hull_coupling"
     assert answer("hull_coupling", [cand], None, set(), [_law("coulomb", 6.2)]).named == "hull_coupling"
+
+
+def test_a_trial_not_homogeneous_sets_the_linear_shape_checks_aside():
+    # modal check seed 157000: friction on a 12.7 Hz mode; the phases read a 2.8-sample skew of
+    # gage 12 at 11.8x its chance level, the homogeneity check a slope at 11.3x
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    skew = Finding(check="time_skew", layer=Layer.SENSOR, gages=(12,), statistic=205.1, chance_level=17.34,
+                   size=0.00136, unit="s", text="skew", window="decay").to_json()
+    clip = Finding(check="clipping", layer=Layer.SENSOR, gages=(3,), statistic=40.0, chance_level=3.0,
+                   size=1.0, unit="m/s^2", text="flat", window="peaks").to_json()
+    slope = _law("slope", 46.07)
+    a = answer(None, [], None, set(), [skew, slope])
+    assert a.named == "unexplained" and a.finding["check"] == "homogeneity"
+    # without the nonlinearity the skew answers; a flat top reads the raw values and stays (the
+    # stronger against its chance level: 13x against the slope's 11x)
+    assert answer(None, [], None, set(), [skew]).named == "time_skew"
+    assert answer(None, [], None, set(), [clip, slope]).named == "clipping"
