@@ -99,3 +99,14 @@ def test_a_trial_not_homogeneous_sets_the_linear_shape_checks_aside():
     # stronger against its chance level: 13x against the slope's 11x)
     assert answer(None, [], None, set(), [skew]).named == "time_skew"
     assert answer(None, [], None, set(), [clip, slope]).named == "clipping"
+
+
+def test_an_unexplained_answer_of_the_data_layer_is_placed_in_words():
+    # the data layer's "unexplained" (a homogeneity slope whose law the decays did not tell)
+    # carries a finding's place, not a map's: the headline's line must not need the map's keys
+    from ramdaq.analysis.gap.verdict import where_text
+
+    a = answer(None, [], None, set(), [_law("slope", 46.07)])
+    assert a.named == "unexplained" and a.by == "data"
+    assert where_text(a.location) == "gages 1, 4, 8, band 23.9 Hz, late window"
+    assert where_text(WHERE).endswith("excess 1.4e+08 noise variances (cell z up to 37.0)")

@@ -102,9 +102,12 @@ def gap_where(fitted: GapMap, held: GapMap | None) -> dict:
 
 
 def where_text(w: dict) -> str:
-    """One line: an unexplained gap's gages, band, window and size."""
-    return (f"gages {', '.join(map(str, w['gages'])) or '-'}, band {w['band']}, {w['window']} window, "
-            f"excess {w['excess']:.3g} noise variances (cell z up to {w['z']:.1f})")
+    """One line: an unexplained gap's gages, band, window and size (:func:`gap_where`); of a
+    data-only finding's place (gages, window, the mode it is at, no map cells) what it has."""
+    band = w.get("band") or (f"{w['effect_mode_hz']:.1f} Hz" if w.get("effect_mode_hz") else "-")
+    size = (f", excess {w['excess']:.3g} noise variances (cell z up to {w['z']:.1f})"
+            if "excess" in w and "z" in w else "")
+    return f"gages {', '.join(map(str, w['gages'])) or '-'}, band {band}, {w['window']} window{size}"
 
 
 CLOSURE_TIE = 0.05
