@@ -66,9 +66,10 @@ def one_answer(d: Diagnosis) -> Answer:
     function the benchmark scores with): the model's choice, set aside where the rig calibrated
     to the trial's modes still misses them (model form), and a data-only finding's precedence."""
     form = d.model_level.form_gages() if d.model_level is not None else set()
+    modes = d.model_level.form_modes() if d.model_level is not None else []
     cands = [c.record() | {"location": c.location} for c in d.candidates]
     finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
-    return answer(d.model_choice(), cands, d.unexplained_where, form, finds)
+    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes)
 
 
 def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,

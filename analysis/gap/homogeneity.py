@@ -25,6 +25,7 @@ as made by :func:`~ramdaq.analysis.gap.datamodel.free_modal_model` on the same `
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -33,7 +34,8 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from .datamodel import P_CHANCE, Finding, FreeModal, Layer
+from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer
+from .signal_checks import EARLY_FROM_S, early_lines
 
 F_FLOOR = 2e-4
 """Relative frequency scatter accepted from blow to blow on top of each fit's standard error
@@ -93,7 +95,8 @@ class DecayLaw:
     amplitude falls; ``coulomb`` the slope, m/s^2 of envelope lost per cycle to friction, about
     ``4 mu / w^2`` in acceleration; ``coulomb_size`` what it adds to the decrement at the
     smallest amplitude read, relative to the median decrement per cycle; nan when that is not
-    positive)."""
+    positive). ``showing``: the gages (numbers) that show a mode the free modal model does not
+    hold (:func:`early_laws`); empty for the free model's modes."""
 
     mode_hz: float
     gage: int
@@ -103,6 +106,7 @@ class DecayLaw:
     z_coulomb: float
     coulomb: float
     coulomb_size: float
+    showing: tuple[int, ...] = ()
 
 
 def _cycles(v: np.ndarray, fs_hz: float, f_hz: float, a: int, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -163,30 +167,77 @@ def decay_laws(x: np.ndarray, fm: FreeModal, ks: Sequence[int], rows: Sequence[i
         if any(abs(f_k - f) < 0.5 * LAW_BAND * f for f in seen):
             continue            # one mode the free linear model split into a cluster of poles
         seen.append(f_k)
-        floor = LAW_MIN_RATIO * float(np.median(fm.noise[:, g]))
-        amps, freqs, decs = [], [], []
-        for a in starts:
-            amp, freq = _cycles(x[g], fm.fs_hz, f_k, int(a), fm.n_s)
-            n_ok = int(np.argmin(amp > floor)) if not np.all(amp > floor) else amp.size
-            if n_ok >= 3:
-                amps.append(amp[:n_ok - 1])
-                freqs.append(freq[:n_ok - 1])
-                decs.append(np.log(amp[:n_ok - 1] / amp[1:n_ok]))
-        if sum(a.size for a in amps) < 8:
-            continue
-        amp, freq, dec = np.concatenate(amps), np.concatenate(freqs), np.concatenate(decs)
-        rel = amp / amp.max()
-        bf, zf = _ols_slope(rel, freq)
-        bc, zc = _ols_slope(1 / amp, dec)
-        # the cycles' envelopes share their noise over some cycles: the per-cycle regression's
-        # error is too small by the square root of how many (issue 17: its z moved by +-5 when
-        # the cycles' start moved)
-        zc /= math.sqrt(correlated_cycles(f_k))
-        lin = float(np.median(dec))
-        # no size (nan, never named) when the median cycle does not decay
-        size = bc / (float(amp.min()) * lin) if lin > 0 else math.nan
-        out.append(DecayLaw(f_k, int(numbers[g]), int(amp.size), zf,
-                            bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc, size))
+        law = _law(x[g], fm.fs_hz, f_k, starts, fm.n_s, LAW_MIN_RATIO * float(np.median(fm.noise[:, g])),
+                   int(numbers[g]))
+        if law is not None:
+            out.append(law)
+    return out
+
+
+def _law(v: np.ndarray, fs_hz: float, f_k: float, starts: np.ndarray, n: int, floor: float,
+         gage: int, *, falling: bool = False) -> DecayLaw | None:
+    """One mode's :class:`DecayLaw` at ``f_k`` (Hz) on one gage's record ``v`` over the windows
+    ``v[a:a+n]`` (``a`` in ``starts``), cycles while the envelope stays above ``floor`` (m/s^2)
+    and, with ``falling``, until it first stops falling (a mode friction has stuck leaves the
+    band filter's smoothing of the stop and other lines' leakage, at small amplitudes that do
+    not decay: read on 1/amplitude, they would outweigh the decay); None with fewer than 8 such
+    cycles over all windows."""
+    amps, freqs, decs = [], [], []
+    for a in starts:
+        amp, freq = _cycles(v, fs_hz, f_k, int(a), n)
+        ok = amp > floor
+        if falling and amp.size > 1:
+            ok[1:] &= np.cumprod(amp[1:] < amp[:-1]).astype(bool)
+        n_ok = int(np.argmin(ok)) if not np.all(ok) else amp.size
+        if n_ok >= 3:
+            amps.append(amp[:n_ok - 1])
+            freqs.append(freq[:n_ok - 1])
+            decs.append(np.log(amp[:n_ok - 1] / amp[1:n_ok]))
+    if sum(a.size for a in amps) < 8:
+        return None
+    amp, freq, dec = np.concatenate(amps), np.concatenate(freqs), np.concatenate(decs)
+    rel = amp / amp.max()
+    bf, zf = _ols_slope(rel, freq)
+    bc, zc = _ols_slope(1 / amp, dec)
+    # the cycles' envelopes share their noise over some cycles: the per-cycle regression's
+    # error is too small by the square root of how many (issue 17: its z moved by +-5 when
+    # the cycles' start moved)
+    zc /= math.sqrt(correlated_cycles(f_k))
+    lin = float(np.median(dec))
+    # no size (nan, never named) when the median cycle does not decay
+    size = bc / (float(amp.min()) * lin) if lin > 0 else math.nan
+    return DecayLaw(f_k, gage, int(amp.size), zf, bf * (1 - rel.min()) / float(np.mean(freq)), zc, bc, size)
+
+
+def early_laws(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
+               skip_rows: Sequence[int] = ()) -> list[DecayLaw]:
+    """Decay laws (:class:`DecayLaw`) of modes the free modal model does not hold because they
+    no longer ring in its decay window, read in the early window instead (from
+    :data:`~ramdaq.analysis.gap.signal_checks.EARLY_FROM_S` after each blow to the decay window's
+    start, :data:`~ramdaq.analysis.gap.datamodel.DECAY_START_S`): friction stops a mode within
+    some cycles (issue 17: the modal family's friction on a 58 Hz and a 340 Hz mode was gone
+    0.2 s and 0.05 s after the blow, and the homogeneity check, reading the free model's modes
+    only, never saw it). The early window's lines the free model lacks
+    (:func:`~ramdaq.analysis.gap.signal_checks.early_lines`: at least two law bands from every
+    free-model pole, whose leakage would beat in the band), each at its best gage; cycles are read
+    from one band time constant past the early window's start (the zero-phase band filter's
+    rise on the blow), until the envelope first stops falling. Coulomb's law only
+    (``z_stiffness`` 0): the frequency read this near the blow, over few cycles, is biased by
+    neighbouring lines beating in the band (two clean modal check trials read -1.3 % and -2.3 %
+    at z 5.2 and 4.5, past the chance level), while their decrements' slopes on 1/amplitude
+    stayed within |z| 1.2."""
+    fs = fm.fs_hz
+    f, W, a0 = early_lines(x, fs, fm.t0_s - DECAY_START_S, fm, skip_rows=skip_rows)
+    m = int((DECAY_START_S - EARLY_FROM_S) * fs)
+    out: list[DecayLaw] = []
+    for i, fk in enumerate(f):
+        g = int(np.argmax(W[:, i]))
+        lead = int(fs / (math.pi * max(LAW_BAND * fk, LAW_BAND_MIN_HZ)))
+        law = _law(x[g], fs, float(fk), a0 + lead, m - lead,
+                   LAW_MIN_RATIO * float(np.median(fm.noise[:, g])), int(numbers[g]), falling=True)
+        if law is not None:     # its gages: at half the best gage's amplitude or more
+            shows = tuple(numbers[r] for r in np.flatnonzero(W[:, i] >= 0.25 * W[g, i]))
+            out.append(dataclasses.replace(law, showing=shows, z_stiffness=0.0))
     return out
 
 
@@ -270,6 +321,7 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
         return []
     slopes = _level_slopes(x, fm, ks, snr) if ks.size else []
     laws = decay_laws(x, fm, kl, [int(np.argmax(snr[:, k])) for k in kl], numbers)
+    laws += early_laws(x, fm, numbers, skip_rows)
     n_tests = len(slopes) + 2 * len(laws)
     if n_tests == 0:
         return []
@@ -284,8 +336,12 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     return [_slope_finding(fm, max(slopes), snr, numbers, chance, null)]
 
 
-def _showing(fm: FreeModal, snr: np.ndarray, f_hz: float, numbers: Sequence[int]) -> tuple[int, ...]:
-    """The gages where the mode nearest ``f_hz`` shows at half its best SNR or more."""
+def _showing(fm: FreeModal, snr: np.ndarray, f_hz: float, numbers: Sequence[int],
+             law: DecayLaw | None = None) -> tuple[int, ...]:
+    """The gages where the mode nearest ``f_hz`` shows at half its best SNR or more (a decay law
+    of a mode the free model does not hold: the gages it was found on)."""
+    if law is not None and law.showing:
+        return law.showing
     g_snr = snr[:, int(np.argmin(np.abs(fm.f_hz - f_hz)))]
     return tuple(numbers[g] for g in np.flatnonzero(g_snr >= 0.5 * g_snr.max()))
 
@@ -300,7 +356,7 @@ def _law_finding(fm: FreeModal, laws: list[DecayLaw], snr: np.ndarray, numbers: 
     if stiff:
         w = max(stiff, key=lambda w: abs(w.z_stiffness))
         sense = "falls" if w.df_rel < 0 else "rises"
-        return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, w.mode_hz, numbers),
+        return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, w.mode_hz, numbers, w),
                        abs(w.z_stiffness), chance, w.df_rel, "relative frequency change",
                        f"mode {w.mode_hz:.2f} Hz: its frequency {sense} by {100 * abs(w.df_rel):.1f} % "
                        "as its amplitude grows within the decays (amplitude-dependent stiffness: a crack, "
@@ -313,7 +369,7 @@ def _law_finding(fm: FreeModal, laws: list[DecayLaw], snr: np.ndarray, numbers: 
         return None
     w = max(fric, key=lambda w: w.z_coulomb)
     same = next((v for v in laws if v.mode_hz == w.mode_hz), w)
-    return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, w.mode_hz, numbers), w.z_coulomb,
+    return Finding("homogeneity", Layer.NONLINEARITY, _showing(fm, snr, w.mode_hz, numbers, w), w.z_coulomb,
                    chance, w.coulomb, "m/s^2 per cycle",
                    f"mode {w.mode_hz:.2f} Hz: Coulomb friction -- its decrement per cycle grows as "
                    f"1/amplitude ({w.coulomb:.3g} m/s^2 of envelope lost per cycle, {w.coulomb_size:.2g} "

@@ -146,8 +146,10 @@ class FormError:
     """What the fitted model still misses in one identified mode (``f_id_hz``): the frequency
     difference ``df_rel`` (model/identified - 1) and its score ``z_f`` against the combined
     standard error; ``one_minus_mac`` over all gages and per body (NaN where not defined);
-    ``gages`` the gages carrying most of the shape difference, worst first; ``missing`` when
-    the model has no mode for it at all."""
+    ``gages`` the gages carrying most of the shape difference, worst first (at most four, for
+    the report's line); ``beyond`` every gage whose shape entry differs beyond chance, worst
+    first (a shape the model gets wrong as a whole differs at every gage the mode moves);
+    ``missing`` when the model has no mode for it at all."""
 
     f_id_hz: float
     df_rel: float
@@ -157,6 +159,7 @@ class FormError:
     one_minus_mac_hull: float
     gages: tuple[int, ...]
     missing: bool = False
+    beyond: tuple[int, ...] = ()
 
     def text(self) -> str:
         if self.missing:
@@ -583,13 +586,14 @@ def form_errors(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> tuple[FormErr
         for k, p in enumerate(cmp.pairs):
             limit = significant(int(tm.n_seen[p.i_id]), n_tests)
             zg = np.abs(d[:, k])
-            worst = [i for i in np.argsort(-zg) if zg[i] > limit][:4]
-            if abs(f[k]) <= limit and not worst:
+            beyond = [i for i in np.argsort(-zg) if zg[i] > limit]
+            if abs(f[k]) <= limit and not beyond:
                 continue
             out.append(FormError(f_id_hz=p.f_id_hz, df_rel=p.df_rel, z_f=float(f[k]),
                                  one_minus_mac=1 - p.mac, one_minus_mac_rudder=1 - p.mac_rudder,
                                  one_minus_mac_hull=1 - p.mac_hull,
-                                 gages=tuple(tm.gage_numbers[i] for i in worst)))
+                                 gages=tuple(tm.gage_numbers[i] for i in beyond[:4]),
+                                 beyond=tuple(tm.gage_numbers[i] for i in beyond)))
     for i in cmp.unpaired_id:
         big = np.argsort(-np.abs(tm.shapes[:, i]))[:3]
         out.append(FormError(f_id_hz=float(tm.f_hz[i]), df_rel=float("nan"), z_f=float("nan"),
@@ -698,6 +702,14 @@ class ModelLevel:
         return set() if self.fit is None else {g for e in self.fit.form if not e.missing
                                                for g in e.gages}
 
+    def form_modes(self) -> list[tuple[float, list[int]]]:
+        """Each identified mode the fitted rig has but still misses (its shape or frequency): its
+        frequency (Hz) and every gage where its shape differs beyond chance (all of them, not
+        only the worst four :meth:`form_gages` reads; none when only its frequency misses).
+        Empty when nothing was fitted or no form error is left."""
+        return [] if self.fit is None else [(e.f_id_hz, list(e.beyond))
+                                            for e in self.fit.form if not e.missing]
+
     def to_json(self) -> dict:
         skipped = [] if self.modes is None else list(self.modes.skipped)
         if self.fit is None:
@@ -716,7 +728,8 @@ class ModelLevel:
                        "mac_start": b.mac, "mac_fitted": p.mac}
                       for p, b in _matched(f.after, f.before)],
             "form_errors": [{"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
-                             "gages": list(e.gages), "missing_in_model": e.missing} for e in f.form],
+                             "gages": list(e.gages), "beyond_gages": list(e.beyond),
+                             "missing_in_model": e.missing} for e in f.form],
         }
 
 

@@ -15,10 +15,11 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.ndimage
 import scipy.optimize
+import scipy.signal
 import scipy.stats
 
 from .contact import rss, second_blow
-from .datamodel import P_CHANCE, Finding, FreeModal, Layer
+from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer
 
 CLIP_SPAN_S = 2.0
 """How long after each onset flat tops are looked for, s (the ringing is largest early)."""
@@ -282,6 +283,67 @@ a contact the model does not hold leaves in the early window (a 3-8 ms half-sine
 nominal 5 ms, a flexible body's early response; issue 17's modal family read them as 1-6 %
 second blows in every trial). Stated a priori: the double hits of both generators are 0.3x the
 blow at size 1, and a ram's rebound worth naming is a tenth of its blow or more."""
+
+
+EARLY_LINES = 3
+"""Most lines of the early window outside the free modal model's poles that are looked at."""
+LINE_GUARD = 0.24
+"""An early line is looked at only this far (relative, and at least :data:`LINE_GUARD_HZ`) from
+every free-model pole: nearer, it is that pole's own leakage (a Hann window's main lobe over the
+early window is a few Hz wide), and it would beat with it in the homogeneity check's band
+(twice :data:`~ramdaq.analysis.gap.homogeneity.LAW_BAND`)."""
+LINE_GUARD_HZ = 2.0
+
+
+def early_lines(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, fm: FreeModal,
+                noise: np.ndarray | None = None,
+                skip_rows: Sequence[int] = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lines of the early windows (:data:`EARLY_FROM_S` after each onset to the free model's
+    decay window, :data:`~ramdaq.analysis.gap.datamodel.DECAY_START_S`) that the free modal
+    model does not hold: modes that no longer ring in its decay window (a heavily damped mode, a
+    mode friction stops). The :data:`EARLY_LINES` largest peaks of the early windows' Hann
+    periodogram, with the free model's poles fitted and taken out, summed over the blows, each
+    gage's over its noise variance (``noise`` (n_g,) rms, m/s^2, of ``x``'s rows; default the
+    free model's residual, when ``x`` has its rows) and the number of blows, at least
+    :data:`LINE_GUARD` from every free-model pole and below 0.45 ``fs_hz``, largest first, that
+    pass the chance level of that ratio (Gamma(n_imp, 1) / n_imp, Bonferroni over gages and
+    independent bins at ``P_CHANCE``). Returns (f_hz (L,), the ratio (n_g, L), the early
+    windows' first samples (n_imp,))."""
+    m = int((DECAY_START_S - EARLY_FROM_S) * fs_hz)
+    a0 = np.rint((np.asarray(onsets_s) + EARLY_FROM_S) * fs_hz).astype(int)
+    none = (np.empty(0), np.empty((x.shape[0], 0)), a0)
+    if m < 16 or a0.min() < 0 or a0.max() + m > x.shape[1]:
+        return none
+    seg = np.nan_to_num(np.stack([x[:, a:a + m] for a in a0]))          # (n_imp, n_g, m)
+    # the free model's modes taken out (free amplitudes per blow and gage): their side lobes
+    # over so short a window would otherwise be the largest "lines" past the guard
+    e = np.exp(np.multiply.outer(np.arange(m) / fs_hz, fm.poles))
+    A = np.column_stack([e.real, e.imag, np.ones(m)])
+    for j in range(len(a0)):
+        c, *_ = np.linalg.lstsq(A, seg[j].T, rcond=None)
+        seg[j] -= (A @ c).T
+    win = np.hanning(m)
+    nfft = 4 * m
+    f = np.fft.rfftfreq(nfft, 1 / fs_hz)
+    P = np.sum(np.abs(np.fft.rfft(seg * win, n=nfft, axis=-1)) ** 2, axis=0)
+    rms = np.median(fm.noise, axis=0) if noise is None else np.asarray(noise)
+    sig2 = np.maximum(rms**2, 1e-300)
+    W = P / (sig2[:, None] * len(a0) * float(win @ win))
+    W[list(skip_rows)] = 0
+    S = W.max(axis=0)
+    ok = (f > 0) & (f < 0.45 * fs_hz)
+    for fk in fm.f_hz:
+        ok &= np.abs(f - fk) >= max(LINE_GUARD * fk, LINE_GUARD_HZ)
+    n_bins = max(1, int(ok.sum() * m / nfft))
+    chance = float(scipy.stats.gamma.isf(P_CHANCE / (n_bins * x.shape[0]), len(a0))) / len(a0)
+    peaks, _ = scipy.signal.find_peaks(np.where(ok, S, 0))
+    picked: list[int] = []
+    for i in peaks[np.argsort(-S[peaks])]:
+        if len(picked) >= EARLY_LINES or S[i] <= chance:
+            break
+        if all(abs(f[i] - f[j]) >= LINE_GUARD * f[j] for j in picked):
+            picked.append(int(i))
+    return f[picked], W[:, picked], a0
 
 
 def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int],

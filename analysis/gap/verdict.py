@@ -83,7 +83,8 @@ def gap_where(fitted: GapMap, held: GapMap | None) -> dict:
     """Where a gap no library effect closes lies, and how big: the gages holding at least half
     the largest gage's excess energy (cells both maps show beyond chance, when any), the band
     and window holding most, the total excess (noise variances, whitened units) and the largest
-    cell z. Keys: ``gages``, ``band``, ``band_hz``, ``window``, ``excess``, ``z``."""
+    cell z. Keys: ``gages``, ``band``, ``band_hz``, ``band_edges_hz`` (the band's [low, high),
+    Hz), ``window``, ``excess``, ``z``."""
     cells = fitted.gap_cells()
     if held is not None and (cells & held.gap_cells()).any():
         cells = cells & held.gap_cells()
@@ -96,13 +97,17 @@ def gap_where(fitted: GapMap, held: GapMap | None) -> dict:
     bands = fitted.bands
     z = float(np.max(np.where(cells, fitted.z, -np.inf), initial=-np.inf))
     return {"gages": gages[:6], "band": bands.labels[b], "band_hz": round(float(bands.center_hz[b]), 3),
+            "band_edges_hz": [float(bands.edges_hz[b]), float(bands.edges_hz[b + 1])],
             "window": WINDOWS[w], "excess": float(ex.sum()), "z": z}
 
 
 def where_text(w: dict) -> str:
-    """One line: an unexplained gap's gages, band, window and size."""
-    return (f"gages {', '.join(map(str, w['gages'])) or '-'}, band {w['band']}, {w['window']} window, "
-            f"excess {w['excess']:.3g} noise variances (cell z up to {w['z']:.1f})")
+    """One line: an unexplained gap's gages, band, window and size (:func:`gap_where`); of a
+    data-only finding's place (gages, window, the mode it is at, no map cells) what it has."""
+    band = w.get("band") or (f"{w['effect_mode_hz']:.1f} Hz" if w.get("effect_mode_hz") else "-")
+    size = (f", excess {w['excess']:.3g} noise variances (cell z up to {w['z']:.1f})"
+            if "excess" in w and "z" in w else "")
+    return f"gages {', '.join(map(str, w['gages'])) or '-'}, band {band}, {w['window']} window{size}"
 
 
 CLOSURE_TIE = 0.05
