@@ -210,7 +210,8 @@ def run_one(sc: dict, workdir: str) -> dict:
         "band_edges_hz": d.map_fit.bands.edges_hz.tolist(),
         "seconds": t_diag, "seconds_generate": t_gen,
     } | ({"headline": d.headline, "min_closure": _min_closure(d),
-          "form_gages": sorted(d.model_level.form_gages()) if d.model_level else []} if perturb else {})
+          "form_gages": sorted(d.model_level.form_gages()) if d.model_level else [],
+          "form_modes": d.model_level.form_modes() if d.model_level else []} if perturb else {})
 
 
 def _generate_truth(sc: dict) -> dict:
@@ -294,7 +295,8 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
     if "error" in r:
         return "none"
     return model_answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"],
-                        r.get("unexplained_where"), set(r.get("form_gages", []))).named
+                        r.get("unexplained_where"), set(r.get("form_gages", [])),
+                        r.get("form_modes", [])).named
 
 
 LAYER_OF = {"gage_sensitivity": "sensor", "gage_alignment": "sensor", "time_skew": "sensor",
@@ -318,7 +320,8 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
     if "error" in r:
         return {"named": "none", "by": "model", "location": None, "closed_held": None, "finding": None}
     return answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"], r.get("unexplained_where"),
-                  set(r.get("form_gages", [])), r.get("data_findings") or []).to_json()
+                  set(r.get("form_gages", [])), r.get("data_findings") or [],
+                  r.get("form_modes", [])).to_json()
 
 
 def _z(r: dict) -> float:
