@@ -107,7 +107,7 @@ def free_core_looks(args: argparse.Namespace) -> dict[float, float]:
     simulated trial run flat out through a session whose looks run as :class:`_FreeCoreLooks`
     says; the look is shown when its CPU time after its last block has passed."""
     dev = SimDevice(RIG, medium=args.medium, seed=args.seed, impacts=_impacts(args),
-                    fs_hz=args.rate, duration_s=args.every * args.blows, pace="fast")
+                    fs_hz=args.rate, duration_s=_duration(args), pace="fast")
     session = Session(dev, readout=False)
     fake = _FreeCoreLooks(session)
     session._jobs = fake
@@ -119,6 +119,12 @@ def free_core_looks(args: argparse.Namespace) -> dict[float, float]:
 
 def _impacts(args: argparse.Namespace) -> list[float]:
     return [args.every / 2 + args.every * k for k in range(args.blows)]
+
+
+def _duration(args: argparse.Namespace) -> float:
+    """Stream length, s: every blow, the last included, has ``--every`` s to ring down (the
+    last had half of it, and its record was cut by the stream's end before its noise floor)."""
+    return args.every / 2 + args.every * args.blows
 
 
 def floor_s(outcome, fs_hz: float) -> dict[float, float]:
@@ -168,12 +174,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     dev = SimDevice(RIG, medium=args.medium, seed=args.seed, impacts=_impacts(args), fs_hz=args.rate,
-                    duration_s=args.every * args.blows, pace="realtime")
+                    duration_s=_duration(args), pace="realtime")
     info = dev.open()
     load0 = os.getloadavg()[0]
     print(f"live latency: {args.blows} blows every {args.every:g} s at {args.rate:g} Hz, "
           f"{args.medium}, view {'on' if args.view else 'off'} (about "
-          f"{args.every * args.blows:.0f} s of real time); load average {load0:.1f} on "
+          f"{_duration(args):.0f} s of real time); load average {load0:.1f} on "
           f"{os.cpu_count()} cores at the start", flush=True)
     cpu0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
@@ -235,7 +241,7 @@ def main() -> None:
           f"a lag means the acquisition could not keep up and every latency above includes it);"
           f" CPU {cpu:.1f} s in the trial's process"
           + (f" and {sum(cpu_finals):.1f} s in its finals' worker process" if worker else "")
-          + f" in {args.every * args.blows:.0f} s of stream; load average "
+          + f" in {_duration(args):.0f} s of stream; load average "
           f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, on {os.cpu_count()} "
           f"cores (CPU contention inflates every wall-clock latency)")
     print(f"  result: first look {'PASS' if ok_look and len(looks) == n else 'FAIL'} "
