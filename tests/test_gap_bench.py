@@ -412,3 +412,24 @@ def test_the_score_prints_its_confidence_intervals():
     assert "(0 of 1; 95 % upper bound 95 %)" in text            # false alarms, Clopper-Pearson
     assert any(line.startswith("what this size can show") for line in lines)
     assert "modal   unexplained      1   100%" in text and "21-100 %" in text
+
+
+def _stand_in(sc: dict, workdir: str) -> dict:
+    """A scenario's result without running it (module level: the worker unpickles it by name)."""
+    return _rec(effect="none", expect="none", size=0.0, zdetect=2.0, cpu_seconds=1.5) | sc
+
+
+def test_the_run_prints_its_wall_and_cpu_time(tmp_path, capsys, monkeypatch):
+    """The whole run's wall and CPU time (this process and its workers, and the scenarios' own)
+    end the figures; a stand-in scenario (the worker is forked, so it runs the stand-in too)
+    keeps it quick."""
+    from ramdaq.daq.commands import gap_bench
+
+    monkeypatch.setattr(gap_bench, "run_one", _stand_in)
+    assert gap_bench.run_benchmark(tmp_path, per_class=1, seeds="check", jobs=1, effects=("none",),
+                                   perturb=0.25, family="modal") == 0
+    out = capsys.readouterr().out
+    assert "no false alarm in 1 no-effect trials bounds the rate by 95 %" in out
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("whole run: ") and "min CPU of this process and its workers" in last
+    assert "the scenarios' own 0.0 min (median 1.5 s a scenario)" in last

@@ -575,7 +575,7 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
            f"false alarms on no-effect trials: {100 * s['false_alarms']:.1f} %{_bound(s)}   (target <= 5 %)",
            "localisation of correct identifications: " + ", ".join(
                f"{k} {100 * v:.0f} %" for k, v in s["localisation"].items())
-           + (f" (gages{_ci(s['gages_k'], s['gages_n'])})" if "gages_n" in s else ""),
+           + (f" (gages{_ci(s['gages_k'], s['gages_n'])})" if s.get("gages_n") else ""),
            f"median fraction of the gap closed on held-out impacts: {100 * s['closed_held_median']:.0f} %"
            "   (target >= 70 %)",
            f"cost per diagnosis: median {s['seconds_median']:.1f} s, max {s['seconds_max']:.1f} s "
