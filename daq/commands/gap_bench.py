@@ -217,7 +217,12 @@ def run_one(sc: dict, workdir: str) -> dict:
     from .gap import run_gap
 
     t0, c0 = time.perf_counter(), time.process_time()
-    gen = _generate_modal(sc) if sc.get("family") == "modal" else _generate_truth(sc)
+    try:
+        gen = _generate_modal(sc) if sc.get("family") == "modal" else _generate_truth(sc)
+    except Exception as exc:  # a generator's failure is one scenario's result, not the run's end
+        return sc | {"error": f"generating: {type(exc).__name__}: {exc}", "seconds": 0.0,
+                     "cpu_seconds": time.process_time() - c0, "expect": sc["effect"],
+                     "truth": {"gages": [], "mode_hz": None, "window": "all"}}
     t_gen = time.perf_counter() - t0
     path = Path(workdir) / f"{sc.get('family', 'truth')}-{sc['effect']}-{sc['seed']}.mcap"
     dev = ArrayDevice(gen["counts"], gen["scale"], gen["fs_hz"], gages=gen["gages"], rig_toml=gen["rig"].text,
