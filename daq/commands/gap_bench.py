@@ -106,10 +106,13 @@ MIN_BLOWS = 4
 PER_CLASS = 6
 """Scenarios per effect class by default: 28 classes x 6 = 168 trials at about 10 s CPU each
 (four blows; six took about 17.5) is some 14 min with two processes on two free cores, within
-issue 17's 20 min. The price is in the intervals the run prints (Wilson 95 %): a top-1 of 85 %
-over the modal family's 84 effect trials is known to 75-91 %, over a layer's ~30 trials to
-70-95 %; no false alarm in a family's 6 no-effect trials bounds the rate only by 39 % (95 %,
-one-sided: <= 5 % needs 59 clean trials)."""
+issue 17's 20 min. Measured: ``--check --per-class 2 --jobs 1`` (56 trials, both families,
+perturbed rigs) took 9.1 min wall and 9.1 min CPU at load 1.3 on two cores, 9.75 s CPU a trial
+(median 9.4): 168 trials are 27 CPU-min, 13.7 min on two processes. The price is in the
+intervals the run prints (Wilson 95 %): a top-1 of 85 % over the modal family's 84 effect
+trials is known to 75-91 %, over a layer's ~30 trials to 70-95 %; no false alarm in a
+family's 6 no-effect trials bounds the rate only by 39 % (95 %, one-sided: <= 5 % needs 59
+clean trials)."""
 
 FAMILIES = ("truth", "modal")
 """Generator families: ``truth`` the richer simulator (:mod:`ramdaq.analysis.truth.trial`),
