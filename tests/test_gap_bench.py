@@ -373,3 +373,63 @@ def test_an_effect_outside_the_library_comes_out_unexplained(tmp_path, effect):
     d = decision(r, 8.0, 10.0, 0.0)
     assert d["named"] == "unexplained", (d, r.get("headline"))
     assert set(d["location"]["gages"]) & set(r["truth"]["gages"]), (d["location"], r["truth"])
+
+
+def test_wilson_interval():
+    """The Wilson score interval against its closed form at the edges (k = 0: 0 to
+    z^2 / (n + z^2)) and a value worked by hand (17 of 20 at 95 %: 0.640-0.948:
+    centre 0.794, half-width 0.154)."""
+    from ramdaq.daq.commands.gap_bench import wilson
+
+    z = 1.96
+    assert wilson(0, 10) == pytest.approx((0.0, z * z / (10 + z * z)), abs=1e-12)
+    assert wilson(10, 10) == pytest.approx((1 - z * z / (10 + z * z), 1.0), abs=1e-12)
+    assert wilson(17, 20) == pytest.approx((0.640, 0.948), abs=1e-3)
+    assert all(np.isnan(wilson(0, 0)))
+
+
+def test_a_benchmark_trial_has_the_blows_asked_for():
+    """``--blows`` reaches both generators (the trigger sees each blow); fewer than four leave
+    no impact to hold out after three fitted, and are refused."""
+    from ramdaq.daq.commands.gap_bench import _generate_modal, _generate_truth
+
+    for fam, gen in (("truth", _generate_truth), ("modal", _generate_modal)):
+        (sc,) = scenarios(1, "check", ("none",), 0.25, fam, blows=4)
+        assert sc["blows"] == 4 and gen(sc)["n_impacts"] == 4
+    with pytest.raises(ValueError, match="--blows 3"):
+        scenarios(1, "check", blows=3)
+
+
+def test_the_score_prints_its_confidence_intervals():
+    """Top-1 per family and layer with its Wilson interval, false alarms with their one-sided
+    bound, and what the run's size can show."""
+    from ramdaq.daq.commands.gap_bench import format_score
+
+    rs = [_rec(), _rec(effect="none", expect="none", size=0.0, zdetect=2.0)]
+    lines = format_score(score(rs, {}, 8.0, 10.0, 0.0), {})
+    text = "\n".join(lines)
+    assert "(1 of 1; 95 % interval 21-100 %)" in text          # top-1, Wilson of 1 of 1
+    assert "(0 of 1; 95 % upper bound 95 %)" in text            # false alarms, Clopper-Pearson
+    assert any(line.startswith("what this size can show") for line in lines)
+    assert "modal   unexplained      1   100%" in text and "21-100 %" in text
+
+
+def _stand_in(sc: dict, workdir: str) -> dict:
+    """A scenario's result without running it (module level: the worker unpickles it by name)."""
+    return _rec(effect="none", expect="none", size=0.0, zdetect=2.0, cpu_seconds=1.5) | sc
+
+
+def test_the_run_prints_its_wall_and_cpu_time(tmp_path, capsys, monkeypatch):
+    """The whole run's wall and CPU time (this process and its workers, and the scenarios' own)
+    end the figures; a stand-in scenario (the worker is forked, so it runs the stand-in too)
+    keeps it quick."""
+    from ramdaq.daq.commands import gap_bench
+
+    monkeypatch.setattr(gap_bench, "run_one", _stand_in)
+    assert gap_bench.run_benchmark(tmp_path, per_class=1, seeds="check", jobs=1, effects=("none",),
+                                   perturb=0.25, family="modal") == 0
+    out = capsys.readouterr().out
+    assert "no false alarm in 1 no-effect trials bounds the rate by 95 %" in out
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("whole run: ") and "min CPU of this process and its workers" in last
+    assert "the scenarios' own 0.0 min (median 1.5 s a scenario)" in last

@@ -222,3 +222,22 @@ def test_coulombs_law_below_its_size_floor_is_not_named_friction(coulomb, named)
     assert w.z_coulomb > 5 and (w.coulomb_size >= COULOMB_MIN) == named, w
     effects = [data_effect(f.to_json()) for f in homogeneity(x, fm, (1, 2, 3))]
     assert ("friction" in effects) == named, effects
+
+
+def test_an_ambient_tone_on_a_record_of_any_length():
+    """The tone's slow wander steps every 64 oversampled samples: a record whose length is no
+    multiple of 64 (the check seeds' four-blow SAMPSON trial, 155000, stopped the benchmark with
+    shapes (167780,) against (167744,)) gets its last step whole, and its tone stays on the hull
+    gages before the first blow."""
+    from ramdaq.daq.commands.gap_bench import _generate_modal, scenarios
+
+    (sc,) = [s for s in scenarios(1, "check", ("ambient_tone",), 0.25, "modal", blows=4)]
+    assert sc["seed"] == 155000 and sc["rig"] == "sampson"
+    gen = _generate_modal(sc)
+    n_o = gen["counts"].shape[1] * mf.OVERSAMPLE
+    assert n_o % 64 != 0
+    pre = gen["counts"][:, : int(2.5 * gen["fs_hz"])] * gen["scale"][:, None]
+    rows = [i for i, g in enumerate(gen["gages"]) if g in gen["truth"]["gages"]]
+    others = [i for i in range(len(gen["gages"])) if i not in rows]
+    # the tone (20 x noise rms x size 0.5 = 10 x) stands well above the noise floor on its gages
+    assert np.median(pre[rows].std(axis=1)) > 3 * np.median(pre[others].std(axis=1))

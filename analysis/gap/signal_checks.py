@@ -18,7 +18,7 @@ import scipy.optimize
 import scipy.signal
 import scipy.stats
 
-from .contact import rss, second_blow
+from .contact import early_poles, rss, second_blow
 from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer
 
 CLIP_SPAN_S = 2.0
@@ -364,7 +364,10 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
     sig = np.array([_pre_noise(v, fs_hz, onsets_s, 1.0) for v in x])
     sig = np.maximum(sig, 1e-12)
     poles = fm.poles[~fm.steady]                   # a second blow does not start a tone again
-    best = [_double_hit_scan(x, fs_hz, t, poles, sig) for t in onsets_s]
+    # with the early window's own poles (modes damped out before the free model's decay window,
+    # which the scan would otherwise fit with a second blow: contact.early_poles)
+    best = [_double_hit_scan(x, fs_hz, t, np.concatenate([poles, early_poles(x, fs_hz, t, poles, sig)]), sig)
+            for t in onsets_s]
     n_d = best[0][3]
     chance = float(scipy.stats.chi2.isf(P_CHANCE / (n_d * len(onsets_s)), 2))
     hits = [(j, b) for j, b in enumerate(best) if b[0] > chance and b[2] >= RHO_MIN]

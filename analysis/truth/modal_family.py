@@ -440,7 +440,8 @@ def _response(modes: Modes, masses: np.ndarray, pred: int, plan: Plan, onsets: n
     if plan.tone:
         k, fr = plan.tone["mode"], plan.tone["f_hz"]
         rng = np.random.default_rng(int(1e6 * fr) % 2**31)
-        slow = scipy.signal.lfilter([0.002], [1, -0.998], rng.standard_normal((2, n_o // 64)), axis=1)
+        # one slow step every 64 samples, the last one whole (n_o need not be a multiple of 64)
+        slow = scipy.signal.lfilter([0.002], [1, -0.998], rng.standard_normal((2, -(-n_o // 64))), axis=1)
         slow = np.repeat(slow / max(slow.std(), 1e-12), 64, axis=1)[:, :n_o]
         amp = plan.tone["amp"] * (1 + 0.15 * slow[0])
         acc += np.outer(modes.shape[k] / np.abs(modes.shape[k]).max(),

@@ -54,7 +54,7 @@ from ...analysis.model.rig import RigError, load_rig, parse_rig
 from ...analysis.model.surface import Surface
 from ...drivers.errors import DeviceError
 from ..errors import RecordingError, ViewError
-from .gap_bench import SEED_SETS
+from .gap_bench import BLOWS, MIN_BLOWS, PER_CLASS, SEED_SETS
 
 RECORDINGS = Path("recordings")
 DESCRIPTION = """\
@@ -593,7 +593,7 @@ def cmd_gap_benchmark(args: argparse.Namespace) -> int:
     from .progress import progress_bar
 
     kw = dict(per_class=args.per_class, seeds=seeds, jobs=args.jobs, effects=effects, rescore=args.rescore,
-              thresholds=args.thresholds, family=args.family,
+              thresholds=args.thresholds, family=args.family, blows=args.blows,
               perturb=(0.0 if seeds == "dev" else 0.25) if args.perturb is None else args.perturb,
               progress=lambda m: print(m, flush=True),
               bar=lambda n: progress_bar("gap benchmark", n, unit="scenarios"))
@@ -639,7 +639,12 @@ def _batch_parsers(sub: argparse._SubParsersAction) -> None:
     g = sub.add_parser("gap-benchmark", help="the gap diagnosis proven on simulated trials with a hidden "
                        "effect (as 'gap benchmark'), optionally on a dask cluster")
     g.add_argument("--out", help="output folder (default gap_benchmark/)")
-    g.add_argument("--per-class", type=int, default=20, help="scenarios per effect class (default 20)")
+    g.add_argument("--per-class", type=int, default=PER_CLASS,
+                   help=f"scenarios per effect class (default {PER_CLASS}: the whole run within 20 min on "
+                        "two cores)")
+    g.add_argument("--blows", type=int, default=BLOWS,
+                   help=f"blows per trial (default {BLOWS}; at least {MIN_BLOWS}: three fitted, one held "
+                        "out)")
     g.add_argument("--seeds", choices=list(SEED_SETS), help="the seed set: " + "; ".join(
         f"{k}, {v[1]}" for k, v in SEED_SETS.items()) + " (default benchmark)")
     g.add_argument("--dev", action="store_true", help="--seeds dev (tunes the thresholds)")
