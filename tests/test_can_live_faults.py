@@ -65,11 +65,20 @@ def _adapter(pause_s: float, wait_s: float = 5.0) -> tuple[str, threading.Thread
             data = os.read(master, 100)
             got += data
             os.write(master, b"\r" * data.count(b"\r"))
-        time.sleep(pause_s)
+
+    return _play(master, slave, run, pause_s, "slcan-adapter")
+
+
+def _play(master: int, slave: int, run, linger_s: float, name: str) -> tuple[str, threading.Thread]:
+    """``run()`` on a daemon thread, then the pty closed ``linger_s`` later (the adapter
+    vanishes); the host's port name and the thread."""
+    def play() -> None:
+        run()
+        time.sleep(linger_s)
         os.close(master)
         os.close(slave)
 
-    th = threading.Thread(target=run, name="slcan-adapter", daemon=True)
+    th = threading.Thread(target=play, name=name, daemon=True)
     th.start()
     return os.ttyname(slave), th
 
@@ -141,13 +150,8 @@ def _adapter_with_a_torn_first_line(rig, duration_s: float) -> tuple[str, thread
                     time.sleep(wait)
                 if (line := slcan_line(w.msg)) is not None:
                     os.write(master, line)
-        time.sleep(2.0)
-        os.close(master)
-        os.close(slave)
 
-    th = threading.Thread(target=run, name="slcan-torn-first-line", daemon=True)
-    th.start()
-    return os.ttyname(slave), th
+    return _play(master, slave, run, 2.0, "slcan-torn-first-line")
 
 
 def test_a_torn_first_line_at_connect_is_recorded_not_said(tmp_path, rig16):
