@@ -270,7 +270,8 @@ def identify_modes(
     pg = (channel_periodograms(Xa) if periodograms is None  # the band test's; P0: the noise
           else {m: P[active] for m, P in periodograms.items()})  # estimate's when not decimated
     P0 = pg[n]
-    band = _band(Xa, fs_hz, false_alarm, P0, pg)
+    sig0 = noise_std_from_periodogram(P0)  # the band test's, and the search's when not decimated
+    band = _band(Xa, fs_hz, false_alarm, P0, pg, sig0)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -280,7 +281,7 @@ def identify_modes(
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
     full = _Data(Y, t, fs_nls, false_alarm, band_hz=(f_lo, band_hi),
-                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None,
+                 noise_std=sig0 if Y is Xa else None,
                  periodogram=P0 if Y is Xa else None)
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
