@@ -94,6 +94,7 @@ from .signal import (
     noise_colour,
     noise_std_from_periodogram,
     significant_band,
+    significant_bands_alone,
 )
 from .subspace import (
     default_pencil_length,
@@ -478,9 +479,7 @@ def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4,
     pg = channel_periodograms(X) if periodograms is None else periodograms
     n = X.shape[1]
     sig = noise_std_from_periodogram(pg[n]) if noise_std is None else noise_std
-    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, pg[n][c : c + 1],
-                           {m: P[c : c + 1] for m, P in pg.items()}, sig[c : c + 1]) is not None
-                     for c in range(X.shape[0])], dtype=bool)
+    return np.isfinite(significant_bands_alone(fs_hz, floor_noise(sig, X), false_alarm, pg, n))
 
 
 def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,
