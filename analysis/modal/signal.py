@@ -250,7 +250,8 @@ def significant_bands_alone(fs_hz: float, noise_std: np.ndarray, false_alarm: fl
         f = np.arange(1, S.shape[1] + 1) * fs_hz / m
         if level is None:  # _noise_floor's blocks (of one channel), every channel at once
             blocks = np.array_split(np.arange(S.shape[1]), max(1, S.shape[1] // 2048))
-            level = np.stack([np.median(S[:, i], axis=1) for i in blocks], axis=1)
+            level = np.stack([np.median(S[:, i[0] : i[-1] + 1], axis=1) for i in blocks],
+                             axis=1)
             level = level / gammaincinv(1, 0.5)
             level = np.where(level > 1.0 + 1e-9, level, 1.0)
             edges = np.array([f[i[-1]] for i in blocks[:-1]])
