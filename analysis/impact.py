@@ -284,13 +284,15 @@ def _nearest(table: ModeTable, f_hz: float) -> int | None:
     return i if abs(table.frequency_hz[i] / f_hz - 1) < 0.1 else None
 
 
-def _peak_decrements(x: np.ndarray, fs_hz: float, f_hz: float) -> list[tuple[float, float]]:
+def _peak_decrements(x: np.ndarray, fs_hz: float, f_hz: float,
+                     noise_std: np.ndarray | None = None) -> list[tuple[float, float]]:
     """The report's peak-ratio decrement and its standard error of each row of ``x`` (signals,
-    samples; all at once: :func:`~ramdaq.analysis.modal.peaks.decrements_from_peaks`); NaN where
-    the mode is too weak in a signal to show three peaks above the noise."""
+    samples; all at once: :func:`~ramdaq.analysis.modal.peaks.decrements_from_peaks`; each row's
+    ``noise_std`` where known); NaN where the mode is too weak in a signal to show three peaks
+    above the noise."""
     nan = (np.nan, np.nan)
     try:
-        got = decrements_from_peaks(x, fs_hz, f_hz)
+        got = decrements_from_peaks(x, fs_hz, f_hz, noise_std=noise_std)
     except ValueError:  # refused for all rows alike (too few samples a period, or in all)
         return [nan] * len(x)
     return [nan if isinstance(p, ValueError) else (p.delta, p.std_error) for p in got]
@@ -382,7 +384,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
               "at the decay's start: an ambient line, not the blow's free decay (not taken as "
               "the predominant mode; its decrement is no damping measure)" for a, r in ambient]
     f = float(table.frequency_hz[k])
-    peaks = _peak_decrements(x[good], fs_hz, f)
+    peaks = _peak_decrements(x[good], fs_hz, f, judged.noise_std[good])  # the verdicts' noise
     gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),
                                         float(table.channel_delta[j, k]),
                                         float(table.channel_delta_se[j, k]),

@@ -688,3 +688,30 @@ def test_the_early_look_at_held_fits_decides_as_the_converged_test(monkeypatch):
         np.testing.assert_array_equal(a.delta, b.delta)
     assert len(with_look[0]) == 4 and len(with_look[1]) == 2
     assert n_with < n_without  # and the look saved held-fit evaluations
+
+
+def test_each_channels_band_at_once_equals_each_channel_alone_to_the_bit():
+    """The verdicts' no-peak screen tests every channel's spectrum at once: the same band, to
+    the bit, as the band test run on each channel alone (strong, weak, coloured-noise-only and
+    white-noise-only rows; 4 record lengths tested, several floor blocks)."""
+    from scipy import signal as sps
+
+    from ramdaq.analysis.modal.identify import channel_periodograms
+    from ramdaq.analysis.modal.signal import (
+        estimate_noise_std,
+        significant_band,
+        significant_bands_alone,
+    )
+
+    rng = np.random.default_rng(3)
+    fs, n = 2048.0, 20000
+    x = damped_sinusoids(fs, n, [13.0, 215.0], [0.05, 0.02], rng.normal(size=(4, 2)))
+    x[2] *= 0.003  # weak: near the noise
+    x = x + 0.01 * rng.standard_normal(x.shape)
+    x[3] = sps.lfilter(*sps.butter(4, 0.3), 0.01 * rng.standard_normal(n))  # coloured noise only
+    x = np.vstack([x, 0.01 * rng.standard_normal(n)])  # white noise only
+    sig = estimate_noise_std(x)
+    got = significant_bands_alone(fs, sig, 1e-4, channel_periodograms(x), n)
+    want = [significant_band(x[c : c + 1], fs, sig[c : c + 1], 1e-4, None) for c in range(5)]
+    assert [None if np.isnan(g) else g for g in got] == want
+    assert np.isfinite(got[0]) and np.isnan(got[4])  # a strong decay is seen, white noise not

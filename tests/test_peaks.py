@@ -97,3 +97,24 @@ def test_rows_at_once_equal_each_row_alone_to_the_bit():
         np.testing.assert_array_equal(g.peak_times_s, ref.peak_times_s)
     assert isinstance(got[4], ValueError)
     assert sum(isinstance(g, ValueError) for g in got) == 1
+
+
+def test_rows_given_their_noise_equal_rows_estimating_it_to_the_bit():
+    """A hit's gages pass the verdicts' noise std (the same periodogram median): same result;
+    a noise vector that does not match the rows is refused."""
+    from ramdaq.analysis.modal.peaks import decrements_from_peaks
+    from ramdaq.analysis.modal.signal import estimate_noise_std
+
+    rng = np.random.default_rng(8)
+    fs = 2048.0
+    x = damped_sinusoids(fs, 6000, [13.0, 60.0], [0.1, 0.02], rng.normal(size=(3, 2)))
+    x = x + 0.01 * rng.standard_normal(x.shape)
+    got = decrements_from_peaks(x, fs, 13.0, noise_std=estimate_noise_std(x))
+    for g, ref in zip(got, decrements_from_peaks(x, fs, 13.0), strict=True):
+        assert (g.delta, g.std_error, g.n_ratios) == (ref.delta, ref.std_error, ref.n_ratios)
+    # Noise said 30x larger: the peaks' 5-sigma floor moves, so the peaks read do (the given
+    # noise is the one used).
+    other = decrements_from_peaks(x, fs, 13.0, noise_std=30 * estimate_noise_std(x))
+    assert any(o.n_ratios != g.n_ratios for o, g in zip(other, got, strict=True))
+    with pytest.raises(ValueError, match="noise_std"):
+        decrements_from_peaks(x, fs, 13.0, noise_std=np.ones(2))

@@ -94,6 +94,7 @@ from .signal import (
     noise_colour,
     noise_std_from_periodogram,
     significant_band,
+    significant_bands_alone,
 )
 from .subspace import (
     default_pencil_length,
@@ -270,7 +271,8 @@ def identify_modes(
     pg = (channel_periodograms(Xa) if periodograms is None  # the band test's; P0: the noise
           else {m: P[active] for m, P in periodograms.items()})  # estimate's when not decimated
     P0 = pg[n]
-    band = _band(Xa, fs_hz, false_alarm, P0, pg)
+    sig0 = noise_std_from_periodogram(P0)  # the band test's, and the search's when not decimated
+    band = _band(Xa, fs_hz, false_alarm, P0, pg, sig0)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
@@ -280,7 +282,7 @@ def identify_modes(
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
     full = _Data(Y, t, fs_nls, false_alarm, band_hz=(f_lo, band_hi),
-                 noise_std=noise_std_from_periodogram(P0) if Y is Xa else None,
+                 noise_std=sig0 if Y is Xa else None,
                  periodogram=P0 if Y is Xa else None)
     # The order is searched on a copy decimated within the band when the record is long (the
     # search's many trial fits then touch a fraction of the samples); the modes found are then
@@ -447,13 +449,13 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
 
 
 def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,
-          P0: np.ndarray | None = None, parts: dict[int, np.ndarray] | None = None
-          ) -> float | None:
+          P0: np.ndarray | None = None, parts: dict[int, np.ndarray] | None = None,
+          sig: np.ndarray | None = None) -> float | None:
     """Step 2 of the module docstring: the highest significant spectral peak of the channels
     ``Xa`` together (Hz), None if none; ``P0``: their Kaiser periodogram if already computed
-    (``parts``: those of their first m samples, by m)."""
+    (``parts``: those of their first m samples, by m; ``sig``: the noise std from ``P0``)."""
     P0 = kaiser_periodogram(Xa) if P0 is None else P0  # for the noise estimate and the band test
-    sig0 = floor_noise(noise_std_from_periodogram(P0), Xa)
+    sig0 = floor_noise(noise_std_from_periodogram(P0) if sig is None else sig, Xa)
     return significant_band(Xa, fs_hz, sig0, false_alarm, P0, parts)
 
 
@@ -466,17 +468,18 @@ def channel_periodograms(x: np.ndarray) -> dict[int, np.ndarray]:
 
 
 def peak_above_noise(x: ArrayLike, fs_hz: float, *, false_alarm: float = 1e-4,
-                     periodograms: dict[int, np.ndarray] | None = None) -> np.ndarray:
+                     periodograms: dict[int, np.ndarray] | None = None,
+                     noise_std: np.ndarray | None = None) -> np.ndarray:
     """Whether each channel alone (rows of ``x``, (n_channels, n_samples)) shows a spectral peak
     above its noise: where not, :func:`identify_modes` on that channel alone (automatic order,
     same ``false_alarm``) finds no mode ("no spectral peak above noise"), by the same test.
-    ``periodograms``: :func:`channel_periodograms` of ``x`` where the caller has them."""
+    ``periodograms``: :func:`channel_periodograms` of ``x`` where the caller has them;
+    ``noise_std``: ``noise_std_from_periodogram`` of their whole-record one, likewise."""
     X = np.atleast_2d(np.asarray(x, dtype=float))
     pg = channel_periodograms(X) if periodograms is None else periodograms
     n = X.shape[1]
-    return np.array([_band(X[c : c + 1], fs_hz, false_alarm, pg[n][c : c + 1],
-                           {m: P[c : c + 1] for m, P in pg.items()}) is not None
-                     for c in range(X.shape[0])], dtype=bool)
+    sig = noise_std_from_periodogram(pg[n]) if noise_std is None else noise_std
+    return np.isfinite(significant_bands_alone(fs_hz, floor_noise(sig, X), false_alarm, pg, n))
 
 
 def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,

@@ -234,6 +234,41 @@ def significant_band(
     return None if top is None else float(top)
 
 
+def significant_bands_alone(fs_hz: float, noise_std: np.ndarray, false_alarm: float,
+                            parts: dict[int, np.ndarray], n: int) -> np.ndarray:
+    """:func:`significant_band` of each channel on its own, all at once (the same operations
+    row by row: equal to the bit; one call instead of one a channel, whose Python overhead cost
+    more than the arithmetic: 16 gages x 14 s, ~7 -> ~2 ms). ``parts``: the channels' Kaiser
+    periodograms (n_channels, bins) of their first m samples by m, for every m of
+    :func:`band_lengths` (``n``: the record's length); ``noise_std`` (n_channels,). Returns the
+    highest significant peak (Hz) of each channel, NaN where none."""
+    sig = np.maximum(np.asarray(noise_std, dtype=float), 1e-300)
+    spectra = []
+    level = edges = None
+    for m in band_lengths(n):
+        S = (parts[m] / (sig[:, None] ** 2))[:, 1:-1]  # one channel's channel sum: itself
+        f = np.arange(1, S.shape[1] + 1) * fs_hz / m
+        if level is None:  # _noise_floor's blocks (of one channel), every channel at once
+            blocks = np.array_split(np.arange(S.shape[1]), max(1, S.shape[1] // 2048))
+            level = np.stack([np.median(S[:, i[0] : i[-1] + 1], axis=1) for i in blocks],
+                             axis=1)
+            level = level / gammaincinv(1, 0.5)
+            level = np.where(level > 1.0 + 1e-9, level, 1.0)
+            edges = np.array([f[i[-1]] for i in blocks[:-1]])
+        spectra.append((S / level[:, np.searchsorted(edges, f, side="left")], f))
+    threshold = gammainccinv(1, false_alarm / max(sum(S.shape[1] for S, _ in spectra), 1))
+    tops = np.full(sig.size, np.nan)
+    for c in range(sig.size):
+        for S, f in spectra:
+            hit = np.flatnonzero(S[c] > threshold)
+            if hit.size:
+                gaps = np.flatnonzero(np.diff(hit) > 1)
+                run = np.arange(hit[gaps[-1] + 1] if gaps.size else hit[0], hit[-1] + 1)
+                top = f[run[np.argmax(S[c, run])]]
+                tops[c] = top if np.isnan(tops[c]) else max(tops[c], top)
+    return tops
+
+
 def _noise_floor(S: np.ndarray, f: np.ndarray, n_ch: int):
     """Coloured noise: the level of the channel-summed whitened spectrum ``S`` (bins at ``f``
     Hz) relative to white noise of the median-based σ, as a step function of frequency

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .identify import channel_periodograms, identify_modes, peak_above_noise
+from .signal import noise_std_from_periodogram
 from .table import ModeTable
 
 __all__ = ["DecayAssessment", "JointAssessment", "Verdict", "assess_decay", "assess_decay_jointly"]
@@ -178,6 +179,11 @@ class JointAssessment:
     quiet_rows : tuple of int
         Channels among ``rows`` with no mode significant in them, in the joint fit or in their
         own search: noise only, which shaped the joint fit's modes by no more than noise.
+    noise_std : numpy.ndarray, shape (n_channels,) or None
+        Each input channel's white-noise std from its whole-record periodogram (in its unit;
+        :func:`~ramdaq.analysis.modal.signal.estimate_noise_std`, equal to the bit), NaN for a
+        channel the cheap checks (dead, clipped, too short) set aside: for the hit's peak
+        decrements, which need it too.
     """
 
     verdicts: list[DecayAssessment]
@@ -185,6 +191,7 @@ class JointAssessment:
     rows: tuple[int, ...]
     own_searches: int
     quiet_rows: tuple[int, ...] = ()
+    noise_std: np.ndarray | None = None
 
 
 def _screen(X: np.ndarray, adc_full_scale: float | None, clip_run: int) -> dict[int, DecayAssessment]:
@@ -240,9 +247,12 @@ def assess_decay_jointly(
     out = _screen(X, adc_full_scale, clip_run)
     rest = [c for c in range(n_ch) if c not in out]
     pg = channel_periodograms(X[rest]) if rest else {}  # read by both tests, computed once
+    sigma = np.full(n_ch, np.nan)
     if rest:  # the channel's own order search would stop at its first test: no peak at all
+        sigma[rest] = noise_std_from_periodogram(pg[n])
         for c, peak in zip(rest, peak_above_noise(X[rest], fs_hz, false_alarm=false_alarm,
-                                                  periodograms=pg), strict=True):
+                                                  periodograms=pg, noise_std=sigma[rest]),
+                           strict=True):
             if not peak:
                 out[c] = DecayAssessment(c, Verdict.NO_DECAY, "no mode significantly above noise")
     rows = tuple(c for c in range(n_ch) if c not in out)
@@ -264,7 +274,8 @@ def assess_decay_jointly(
         out[c] = _judge(c, tab, n / fs_hz, min_cycles, min_delta)
         if len(tab) == 0 and not _significant_in(table, rows.index(c), false_alarm).size:
             quiet.append(c)
-    return JointAssessment([out[c] for c in range(n_ch)], table, rows, len(own), tuple(quiet))
+    return JointAssessment([out[c] for c in range(n_ch)], table, rows, len(own), tuple(quiet),
+                           sigma)
 
 
 def _significant_in(table: ModeTable, j: int, false_alarm: float) -> np.ndarray:
