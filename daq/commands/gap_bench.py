@@ -446,8 +446,8 @@ def pod_threshold(sizes: np.ndarray, hits: np.ndarray, pod: float = POD) -> floa
                       options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 4000}).x
     if b1 <= 0:
         return math.inf
-    x = math.exp((math.log(pod / (1 - pod)) - b0) / b1)
-    return x if x <= float(sz.max()) * (1 + 1e-9) else math.inf
+    log_x = (math.log(pod / (1 - pod)) - b0) / b1  # a slope near 0 puts it far past any size
+    return math.exp(log_x) if log_x <= math.log(float(sz.max()) * (1 + 1e-9)) else math.inf
 
 
 def size_thresholds(results: list[dict], z_gap: float, pod: float = POD,
