@@ -92,10 +92,11 @@ def test_pod_threshold_edge_cases():
     assert pod_threshold(a, np.zeros(5, bool)) == np.inf
     # detection falling with size, or never reaching 90 % within the sizes tried
     assert pod_threshold(a, np.array([1, 1, 0, 1, 0], bool)) == np.inf
-    # a single hit among misses (friction on the 4-blow development seeds): the fitted slope is
-    # near zero and the 90 % point far past every size (it overflowed math.exp)
+    # hits at the smallest and the largest size only (highpass on the 4-blow development seeds
+    # at z 3): the fitted slope is near zero and the 90 % point far past every size (it
+    # overflowed math.exp)
     six = 0.05 * 40 ** (np.arange(6) / 5)
-    assert pod_threshold(six, np.array([0, 0, 0, 0, 1, 0], bool)) == np.inf
+    assert pod_threshold(six, np.array([1, 0, 0, 0, 0, 1], bool)) == np.inf
 
 
 def test_false_alarm_bound_is_clopper_pearson():
