@@ -114,6 +114,8 @@ def check_mcap_magic(f: BinaryIO, path: str | PathLike) -> None:
     f.seek(0)
     head = f.read(len(fmt.MCAP_MAGIC))
     f.seek(0)
+    if not head:
+        raise fmt.NotARamdaqRecording(f"{path}: empty (0 bytes), not a recording")
     if head != fmt.MCAP_MAGIC:
         raise fmt.NotARamdaqRecording(f"{path}: not an MCAP file (it does not start with the MCAP magic)")
 

@@ -261,6 +261,16 @@ def test_recover_refuses_a_file_that_is_not_mcap(tmp_path):
     assert "\n" not in str(err.value) and not dst.exists()
 
 
+def test_an_empty_file_is_said_to_be_empty(tmp_path):
+    """Every reader says what a new user's empty file is, as ``batch`` did alone before."""
+    empty = tmp_path / "e.mcap"
+    empty.write_bytes(b"")
+    with pytest.raises(NotARamdaqRecording, match=r"e\.mcap: empty \(0 bytes\), not a recording$"):
+        describe_recording(empty)
+    with pytest.raises(NotARamdaqRecording, match=r"e\.mcap: empty \(0 bytes\)"):
+        recover(empty, tmp_path / "out.mcap")
+
+
 @pytest.mark.parametrize("fraction", [0.001, 0.2, 0.45, 0.7, 0.99])
 def test_recover_keeps_every_complete_chunk(tmp_path, fraction):
     """Cut anywhere in the data (even inside the header): recover writes a valid file whose

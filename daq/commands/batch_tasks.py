@@ -144,14 +144,6 @@ def one_line(exc: BaseException, limit: int = 300) -> str:
     return f"internal error ({type(exc).__name__}){': ' + first if first else ''}"[:limit]
 
 
-def empty_file(path: str) -> str | None:
-    """``"empty (0 bytes), not a recording"`` for an empty file, else None."""
-    try:
-        return "empty (0 bytes), not a recording" if os.path.getsize(path) == 0 else None
-    except OSError:
-        return None  # the task's own reading names it
-
-
 def failure_reason(exc: BaseException, path: str) -> str:
     """:func:`one_line` without the recording's path in front (the row names it)."""
     text = one_line(exc)
@@ -175,8 +167,6 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
     from .analyze import run_analysis, write_analysis
 
     t0 = time.perf_counter()
-    if (why := empty_file(spec.path)) is not None:
-        return _finish(spec, t0, status="failed", status_reason=why)
     try:
         rig, hits = run_analysis(spec.path)
         write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
@@ -194,8 +184,6 @@ def gap_task(spec: TaskSpec) -> TaskResult:
     from .gap import run_gap, write_report
 
     t0 = time.perf_counter()
-    if (why := empty_file(spec.path)) is not None:
-        return _finish(spec, t0, status="failed", status_reason=why)
     try:
         lt, td, d = run_gap(spec.path, rig=spec.rig or None)
         write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
