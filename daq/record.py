@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..drivers.base import Device, DeviceFault
 from ..drivers.block import Block
+from ..drivers.fault_words import FaultWords
 from ..drivers.mcap_format import SIM_IMPACTS_TOPIC
 from .readout import LiveReadout
 from .recorder import Recorder
@@ -56,13 +57,19 @@ class RecordSummary:
     impacts: int
     interrupted: bool
     wall_s: float
+    faults: str | None = None  # one line of what went wrong with the device, None if nothing did
 
 
 def record(device: Device, path: str | Path, *, readout: bool = True, overwrite: bool = False,
            queue_blocks: int = 256, chunk_seconds: float = 0.25,
-           progress: Callable[[Block], None] | None = None) -> RecordSummary:
+           progress: Callable[[Block], None] | None = None,
+           say: Callable[[str], None] | None = None) -> RecordSummary:
     """Record ``device`` into ``path`` until its stream ends or Ctrl-C; the file is always
-    finished (footer written), also on interruption. ``progress`` gets each block written."""
+    finished (footer written), also on interruption. ``progress`` gets each block written.
+
+    The device's faults are recorded as events and told in words as they come, one line an
+    incident (:class:`~ramdaq.drivers.fault_words.FaultWords`, as a live trial tells them): in
+    the readout when there is one, else to ``say``. The summary's ``faults`` counts them."""
     info = device.open()
     paced = getattr(device, "pace", "realtime") != "fast"
     truth = getattr(device, "delivered_impacts", None)
@@ -73,14 +80,19 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
     t_wall = time.monotonic()
     adc_bits = info.extra.get("adc_bits")
     view = LiveReadout(info, adc_bits=adc_bits) if readout else None
+    words = FaultWords(info.device, info.fs_hz)
+    tell = view.hit if view else say
     with Recorder(path, info, queue_blocks=queue_blocks, chunk_seconds=chunk_seconds,
                   overwrite=overwrite) as rec:
         try:
             if view:
                 view.__enter__()
             for block in device:
-                written_truth, _ = store_block(rec, device, block, written_truth,
-                                               wait_for_room=not paced, queue_limit=queue_blocks)
+                written_truth, faults = store_block(rec, device, block, written_truth,
+                                                    wait_for_room=not paced, queue_limit=queue_blocks)
+                for line in words.lines(faults):  # counted whether told or not
+                    if tell:
+                        tell(line)
                 if progress:
                     progress(block)
                 gap = last is not None and block.first_sample != last
@@ -98,4 +110,5 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
             device.close()
     stats = rec.stats
     return RecordSummary(Path(path), stats.blocks, stats.samples, stats.samples / info.fs_hz, gaps,
-                         stats.overflows, written_truth, interrupted, time.monotonic() - t_wall)
+                         stats.overflows, written_truth, interrupted, time.monotonic() - t_wall,
+                         words.tally())

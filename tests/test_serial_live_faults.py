@@ -154,6 +154,27 @@ def test_record_loop_records_the_silence(tmp_path):
     assert [(e["kind"], e["t_ns"]) for e in events][:2] == [("no_data", t), ("data_back", t)]
 
 
+def test_record_loop_says_each_fault_as_it_comes(tmp_path):
+    """``ramdaq record`` tells a corrupt frame in the same one line a live trial does (it used to
+    record it and say nothing until the summary)."""
+    good = _frames(0, 20, 16)
+    size = len(good) // 20
+    bad = bytearray(good)
+    bad[10 * size + 30] ^= 0xFF  # a payload byte of frame 10
+    port, th, go = _front_end([bytes(bad), 0.5])
+    dev = SerialDevice(port, rig=str(RIG), quiet_s=5.0, reconnect_s=0.1, give_up_s=0.3)
+    dev.open()
+    go.set()
+    said: list[str] = []
+    with pytest.raises(DeviceClosed):
+        record(dev, tmp_path / "r.mcap", readout=False, say=said.append)
+    th.join(10)
+    device = f"serial://{port}"
+    t = sample_time_ns(10 * NS, FS) / 1e9
+    assert said[0] == (f"{device} at {t:.3f} s: 1 corrupt frame dropped (CRC failed); "
+                       f"{size} stray bytes skipped to the next frame; 32 samples (0.016 s) missing")
+
+
 def test_every_fault_a_driver_reports_has_words():
     """Each fault kind the drivers emit (found in their source) is told in words, not as the
     fallback that spells the kind and its dict."""

@@ -114,12 +114,15 @@ def cmd_record(args: argparse.Namespace) -> int:
     print(f"recording {device.info.device} ({device.info.n_channels} ch at "
           f"{device.info.fs_hz:g} Hz) into {out}; Ctrl-C ends it cleanly", flush=True)
     try:
-        s = record(device, out, readout=not args.quiet, overwrite=args.overwrite)
+        s = record(device, out, readout=not args.quiet, overwrite=args.overwrite,
+                   say=lambda line: print(line, file=sys.stderr, flush=True))
     except DeviceError as err:  # the recorder finished the file before this got here
         raise DeviceError(f"{err}; {out} holds what came before, finished") from err
     print(f"{'interrupted: ' if s.interrupted else ''}wrote {out}: {s.duration_s:.2f} s, "
           f"{s.blocks} blocks, {s.samples * device.info.n_channels:,} samples, {s.gaps} gaps, "
           f"{s.overflows} overflows, {s.impacts} impacts, in {s.wall_s:.1f} s wall time")
+    if s.faults:
+        print(s.faults)
     return EXIT_OK
 
 
