@@ -145,3 +145,20 @@ def test_ramdaq_rig_warns_of_modes_no_trial_can_record(tmp_path, capsys):
     assert "warning: mode(s) at 27864 Hz lie above half the sample rate (1024 Hz)" in out
     assert main(["rig", str(RIGS / "albacore.toml")]) == 0
     assert "warning" not in capsys.readouterr().out
+
+
+def test_ramdaq_rig_prints_zeta_in_percent_as_analyze_does(capsys):
+    """``rig`` printed the damping ratio as a fraction where ``analyze`` prints a percentage (a
+    new user read 0.0163 as 0.0163 %). Each row's zeta (%) is 100 x delta / 2 pi: for light
+    damping delta = 2 pi zeta / sqrt(1 - zeta^2), 1.3e-4 off at zeta 1.6 %; the printed digits
+    (delta to 1e-4, zeta to 1e-3 %) bound the rows with delta >= 0.05 to 0.2 % relative."""
+    from ramdaq.daq.commands.cli import main
+
+    assert main(["rig", str(RIGS / "albacore.toml")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("   f (Hz)    delta   zeta (%)") == 2
+    rows = [r.lstrip("* ").split() for r in out.splitlines() if re.match(r"^[* ] +\d+\.\d{3} ", r)]
+    strong = [(float(d), float(z)) for _, d, z in rows if float(d) >= 0.05]
+    assert len(strong) >= 4  # two modes in air, two in water
+    for d, z in strong:
+        assert z == pytest.approx(100 * d / (2 * 3.141592653589793), rel=2e-3)

@@ -526,10 +526,10 @@ def cmd_rig(args: argparse.Namespace) -> int:
             continue
         m = modes_in(rig, medium)
         print(f"\nmodes in {medium}:  (* predominant after the rig's default ram blow)")
-        print("   f (Hz)    delta     zeta")
+        print("   f (Hz)    delta   zeta (%)")  # zeta in percent, as analyze prints it
         for i, (f, d, z) in enumerate(zip(m.table.frequency_hz, m.table.decrement,
                                           m.table.damping_ratio, strict=True)):
-            print(f"{'*' if i == m.predominant else ' '} {f:8.3f}  {d:7.4f}  {z:7.4f}")
+            print(f"{'*' if i == m.predominant else ' '} {f:8.3f}  {d:7.4f}  {100 * z:8.3f}")
         nyquist = rig.daq.sample_rate_hz / 2
         above = [f for f in m.table.frequency_hz if f >= nyquist]
         if above:  # e.g. a unit slip: a mass in the report's ton s^2/ft read as kg

@@ -62,23 +62,23 @@ def _f(v: float, fmt: str) -> str:
 
 
 def mode_table(before: ModalComparison, after: ModalComparison) -> list[str]:
-    """The identified modes beside the start and the fitted model's: frequency, damping ratio,
-    MAC over all gages and per body."""
+    """The identified modes beside the start and the fitted model's: frequency, damping ratio
+    (percent, as ``analyze`` and ``rig`` print it), MAC over all gages and per body."""
     tm = before.trial
     out = [f"modes identified on {tm.n_impacts} impacts (+- standard error from their spread) "
            "against the start rig and the fitted one:",
            "   identified               |  start rig                  |  fitted rig",
-           "   f (Hz)   +-       zeta    |  f (Hz)   df %   zeta   MAC  |  f (Hz)   df %   zeta   MAC"
+           "   f (Hz)   +-     zeta %    |  f (Hz)   df % zeta %  MAC  |  f (Hz)   df % zeta %  MAC"
            "   MAC rudder/hull"]
     b = {p.i_id: p for p in before.pairs}
     a = {p.i_id: p for p in after.pairs}
     for i in range(tm.n_modes):
-        row = f"{tm.f_hz[i]:9.4f} {tm.f_se_hz[i]:7.1e} {tm.zeta[i]:7.4f}   |"
+        row = f"{tm.f_hz[i]:9.4f} {tm.f_se_hz[i]:7.1e} {100 * tm.zeta[i]:7.3f}   |"
         for p in (b.get(i), a.get(i)):
             if p is None:
                 row += "  (no model mode pairs with it)  |"
                 continue
-            row += (f" {p.f_model_hz:8.3f} {100 * p.df_rel:+6.2f} {p.zeta_model:6.4f} "
+            row += (f" {p.f_model_hz:8.3f} {100 * p.df_rel:+6.2f} {100 * p.zeta_model:6.3f} "
                     f"{p.mac:6.4f} |")
         p = a.get(i)
         if p is not None:
