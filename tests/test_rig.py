@@ -162,3 +162,24 @@ def test_ramdaq_rig_prints_zeta_in_percent_as_analyze_does(capsys):
     assert len(strong) >= 4  # two modes in air, two in water
     for d, z in strong:
         assert z == pytest.approx(100 * d / (2 * 3.141592653589793), rel=2e-3)
+
+
+def test_ramdaq_rig_units_report_gives_eq18_in_ton_s2_per_ft(capsys):
+    """``rig --units report`` states Eq 18's masses in the report's ton s^2/ft (SI inside, the
+    report's units at the edge on request); each is the SI line's kg over 1 ton s^2/ft =
+    9964.016 N / 0.3048 m = 32 690.3 kg, to the printed digits (kg to 1, ton s^2/ft to 1e-4).
+    The rudder's mass in air is Report 1836 Table 2's 0.0878 ton s^2/ft."""
+    from ramdaq.daq.commands.cli import main
+
+    unit = r"(kg|ton s\^2/ft)"
+    pattern = (rf"Eq 18: m_vir = m_a\[\(f_air/f_water\)\^2 - 1\] = ([\d.]+) {unit} x "
+               rf"\[\([\d.]+/[\d.]+\)\^2 - 1\] = ([\d.]+) {unit}")
+    assert main(["rig", str(RIGS / "albacore.toml")]) == 0
+    si = re.search(pattern, capsys.readouterr().out).groups()
+    assert main(["rig", str(RIGS / "albacore.toml"), "--units", "report"]) == 0
+    rep = re.search(pattern, capsys.readouterr().out).groups()
+    assert (si[1], si[3], rep[1], rep[3]) == ("kg", "kg", "ton s^2/ft", "ton s^2/ft")
+    per_unit = 2240 * 4.4482216152605 / 0.3048
+    for kg, ton in ((si[0], rep[0]), (si[2], rep[2])):
+        assert float(ton) == pytest.approx(float(kg) / per_unit, abs=0.5 / per_unit + 0.5e-4)
+    assert float(rep[0]) == pytest.approx(0.0878, abs=0.5e-4)

@@ -537,10 +537,16 @@ def cmd_rig(args: argparse.Namespace) -> int:
                   f"the sample rate ({nyquist:g} Hz): no trial at this rate records them; a mass "
                   f"or inertia in the report's units (ton s^2/ft, ft ton s^2) rather than SI?")
     if {"air", "water"} <= set(rig.damping):
+        from ...analysis.model.units import from_si
+
         c = eq18_check(rig)
-        print(f"\nEq 18: m_vir = m_a[(f_air/f_water)^2 - 1] = {c.m_a_kg:.0f} kg x "
-              f"[({c.f_air_hz:.2f}/{c.f_water_hz:.2f})^2 - 1] = {c.m_vir_eq18_kg:.0f} kg")
-        print(f"model's own added mass (Eq 19): {c.m_vir_model_kg:.0f} kg; Eq 18 is "
+        report = args.units == "report"
+        unit, fmt = ("ton s^2/ft", ".4f") if report else ("kg", ".0f")
+        m_a, m18, m19 = (from_si(v, "mass") if report else v
+                         for v in (c.m_a_kg, c.m_vir_eq18_kg, c.m_vir_model_kg))
+        print(f"\nEq 18: m_vir = m_a[(f_air/f_water)^2 - 1] = {m_a:{fmt}} {unit} x "
+              f"[({c.f_air_hz:.2f}/{c.f_water_hz:.2f})^2 - 1] = {m18:{fmt}} {unit}")
+        print(f"model's own added mass (Eq 19): {m19:{fmt}} {unit}; Eq 18 is "
               f"{100 * c.difference:+.1f} % off it. Eq 18 assumes an uncoupled translation mode;"
               f" the predominant mode couples v with alpha and gamma, whose added inertias "
               f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
@@ -769,6 +775,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--bound", action="append", metavar="NAME=LO:HI",
                    help="fit: bounds of a constant as multipliers of its start value, e.g. "
                         "stock.I_m4=0.8:1.25 (1:1 holds it); repeatable")
+    g.add_argument("--units", choices=("si", "report"), default="si",
+                   help="masses in Eq 18's lines: SI (kg), or the report's ton s^2/ft")
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
