@@ -5,8 +5,8 @@ through the same pipeline), ``analyze`` (the trial report), ``record`` (a device
 file, with a live readout), ``info`` (what a recording holds), ``recover`` (a valid copy of a
 recording whose writer was killed or whose bytes were damaged), ``rig`` (a rig's modes in air
 and in water, and Eq 18 on them; ``rig fit`` tunes a rig's constants to a trial's identified
-modes and writes the new rig), ``import`` (CSV, UFF 58, TDMS into MCAP) and ``export-uff``
-(modes and decays as UFF).
+modes and writes the new rig), ``import`` (CSV, UFF 58, TDMS into MCAP), ``export-uff``
+(modes and decays as UFF) and ``export-csv`` (every recorded sample as CSV).
 
 Outputs: ``--name NAME`` writes ``recordings/NAME.mcap`` and cannot leave ``recordings/`` (no
 absolute name, no ``..``); a rig's name used as the default is reduced to letters, digits,
@@ -492,6 +492,19 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
     return parse_rig(made.text, source=str(rig_out)), made.channels
 
 
+def cmd_export_csv(args: argparse.Namespace) -> int:
+    """Every sample of a recording as CSV, with its events and gaps in the comment lines."""
+    from ...drivers.files.export_csv import export_csv
+
+    src = Path(args.file)
+    out = Path(args.out) if args.out else src.with_suffix(".csv")
+    _check_outputs([out], args.overwrite)
+    r = export_csv(src, out, units=args.units)
+    print(f"wrote {out}: {r.rows:,} samples of {r.channels} channels ({args.units}), "
+          f"{r.gaps} gap(s) ({r.missing} samples missing), {r.events} event(s) in its comments")
+    return EXIT_OK
+
+
 def cmd_export_uff(args: argparse.Namespace) -> int:
     """A recording's identified modes and decay records as UFF 15/55/58 for modal software."""
     from ...drivers.files.export_uff import export_uff
@@ -810,6 +823,14 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--out", help="output file (default FILE.uff)")
     x.add_argument("--binary", action="store_true", help="binary 58b decay records")
     x.set_defaults(func=cmd_export_uff)
+
+    xc = sub.add_parser("export-csv", help="every recorded sample as CSV (what ramdaq import reads back)")
+    xc.add_argument("file", help="a recording (MCAP)")
+    xc.add_argument("--out", help="output file (default FILE.csv)")
+    xc.add_argument("--units", choices=("m/s^2", "g"), default="m/s^2",
+                    help="the gages' unit (a force channel stays in N); default m/s^2")
+    xc.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    xc.set_defaults(func=cmd_export_csv)
 
     _batch_parsers(sub)
     p.add_argument("--debug", action="store_true", help="the traceback of an internal error")
