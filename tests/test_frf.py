@@ -179,3 +179,47 @@ def test_window_spans_the_record_between_blows_not_8192_samples():
     # margin over that and lies far below the 7 % the 1.64 s window gave
     assert np.max(np.abs(h[band] / np.abs(exact[band]) - 1)) < 1e-3
     assert abs(frf["gages"]["g01"]["peak_hz"] - 12.5) <= f[1]  # within a bin (0.127 Hz)
+
+
+def test_an_import_of_fewer_channels_than_the_rig_analyses(tmp_path):
+    """A new user's CSV had 12 of the rig's 16 gages (or no load-cell column): ``import`` took
+    it, as it takes any subset of the rig's channels, and ``analyze`` then failed inside the FRF
+    (the rig's DAQ channel numbers used as the recording's rows). The FRF now reads the rows by
+    the recorded channels: the 12 recorded gages' H1, and no FRF, with the reason, when the
+    force was not recorded. The CSV comes from ``ramdaq export-csv`` of a simulated trial with
+    the load cell, its columns dropped with the csv module."""
+    import csv
+
+    from ramdaq.analysis.model.rig import parse_rig
+    from ramdaq.daq.commands.cli import main
+    from ramdaq.daq.record import record
+    from ramdaq.drivers.sim import SimDevice
+    from tests.conftest import RIGS
+
+    text = (RIGS / "albacore.toml").read_text() + '\n[[forces]]\nname = "ram"\nchannel = 16\n'
+    rig_path = tmp_path / "force.toml"
+    rig_path.write_text(text)
+    trial = tmp_path / "t.mcap"
+    record(SimDevice(parse_rig(text, str(rig_path)), duration_s=9.0, impacts=[2.0, 5.5], seed=2),
+           trial, readout=False)
+    assert main(["export-csv", str(trial)]) == 0
+    rows = list(csv.reader(line for line in trial.with_suffix(".csv").read_text().splitlines()
+                           if not line.startswith("#")))
+    cases = {"twelve": list(range(13)) + [17], "noforce": list(range(17))}  # columns kept
+    assert rows[0][17] == "ram [N]" and rows[0][12] == "g12 [m/s^2]"
+    for name, keep in cases.items():
+        path = tmp_path / f"{name}.csv"
+        path.write_text("\n".join(",".join(r[i] for i in keep) for r in rows) + "\n")
+        out = tmp_path / f"{name}.mcap"
+        assert main(["import", str(path), "--rig", str(rig_path), "--out", str(out)]) == 0
+        assert main(["analyze", str(out), "--out", str(tmp_path / name), "--no-plots"]) == 0
+        frf = json.loads((tmp_path / name / "report.json").read_text())["frf"]
+        if name == "twelve":
+            assert sorted(frf["gages"]) == [f"g{g:02d}" for g in range(1, 13)]
+            f = np.array(frf["f_hz"])
+            band = (f >= 20) & (f <= 30)  # the predominant mode in air, as the test above
+            peaks = [f[band][np.argmax(np.array(d["magnitude"])[band])] for d in frf["gages"].values()]
+            assert np.median(np.abs(np.array(peaks) / 24.5 - 1)) < 0.02, peaks
+        else:
+            assert frf == {"not_computed": "the rig's force channel 'ram' is not in the recording "
+                           "(its channels: " + ", ".join(f"g{g:02d}" for g in range(1, 17)) + ")"}

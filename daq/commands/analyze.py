@@ -90,6 +90,15 @@ def check_air_twin(rig: Rig, air_rig: Rig, air_path: str | Path) -> None:
                          f"{rig.name!r}; Eq 18 compares one surface in air and in water")
 
 
+def recorded_channels(path: str | Path) -> tuple[str, ...]:
+    """The recording's channel names, row by row (its stream's, which an import may give fewer
+    of than its rig declares)."""
+    from ...drivers.mcap_replay import McapReplayDevice
+
+    with McapReplayDevice(path) as dev:
+        return dev.info.channels
+
+
 def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                  air: tuple[Rig, list[HitResult]] | None = None) -> dict:
     """The trial report as a JSON-serialisable dict (every NaN or infinity written as ``None``)."""
@@ -117,7 +126,8 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                     for h in hits],
         "summary": surface.relabel(summary),
         "virtual_inertias": vi,
-        "frf": frf_section(rig, hits),  # driving-point H1 where the rig has a force channel
+        # driving-point H1 where the rig has a force channel; rows as recorded
+        "frf": frf_section(rig, hits, recorded_channels(path)) if rig.forces else None,
     })
 
 

@@ -14,6 +14,7 @@ force is more than 20 dB down and every gage's H1 is NaN), so its size follows t
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -35,14 +36,27 @@ MAX_WINDOW_S = 10.0
 mode of zeta 0.02, by which time such a mode has decayed by e^-16."""
 
 
-def _blows(rig: Rig, hits: list[HitResult]) -> tuple[np.ndarray, np.ndarray, list[int], float]:
-    """(force (n_blows, n), acceleration (n_blows, n_gages, n), hit indices, fs) of the
-    accepted hits that kept their records."""
-    f_row = rig.forces[0].channel
-    g_rows = [g.channel for g in rig.gages_by_channel()]
+def _rows(rig: Rig, channels: Sequence[str] | None) -> tuple[int | None, list[int], list[int]]:
+    """The recorded rows of the rig's first force channel (None when not recorded) and of its
+    gages, with those gages' numbers. ``channels``: the recording's channel names, row by row
+    (an import may hold fewer than the rig declares); None: the rig's own, in DAQ order."""
+    if channels is None:
+        return rig.forces[0].channel, [g.channel for g in rig.gages_by_channel()], \
+            [g.number for g in rig.gages_by_channel()]
+    name = rig.forces[0].name
+    f_row = channels.index(name) if name in channels else None
+    gages = [g.number for g in rig.gages_by_channel() if f"g{g.number:02d}" in channels]
+    return f_row, [channels.index(f"g{g:02d}") for g in gages], gages
+
+
+def _blows(rig: Rig, hits: list[HitResult], channels: Sequence[str] | None
+           ) -> tuple[np.ndarray, np.ndarray, list[int], float, list[int]]:
+    """(force (n_blows, n), acceleration (n_blows, n_gages, n), hit indices, fs, gage numbers)
+    of the accepted hits that kept their records."""
     use = [h for h in hits if h.accepted and h.event.record is not None]
     if not use:
-        return np.zeros((0, 0)), np.zeros((0, len(g_rows), 0)), [], 0.0
+        return np.zeros((0, 0)), np.zeros((0, 0, 0)), [], 0.0, []
+    f_row, g_rows, gages = _rows(rig, channels)
     fs = use[0].event.record.fs_hz
     cuts = []
     for h in use:
@@ -52,28 +66,35 @@ def _blows(rig: Rig, hits: list[HitResult]) -> tuple[np.ndarray, np.ndarray, lis
     n = min(round(MAX_WINDOW_S * fs), *(rec.counts.shape[1] - a for rec, a in cuts))
     f = np.stack([rec.counts[f_row, a:a + n] * rec.scale[f_row] for rec, a in cuts])
     x = np.stack([rec.counts[g_rows, a:a + n] * rec.scale[g_rows, None] for rec, a in cuts])
-    return f, x, [h.index for h in use], fs
+    return f, x, [h.index for h in use], fs, gages
 
 
-def frf_section(rig: Rig, hits: list[HitResult]) -> dict | None:
+def frf_section(rig: Rig, hits: list[HitResult], channels: Sequence[str] | None = None
+                ) -> dict | None:
     """``report.json``'s ``frf``: per gage the H1 (magnitude, phase) and coherence against the
     rig's first force channel over the accepted hits, with the frequency of its largest
     ``|H1|`` above 1 Hz; ``None`` for a rig without a force channel, ``{"not_computed": why}``
-    where there is nothing to compute it from."""
+    where there is nothing to compute it from (no accepted hit, the force not recorded).
+    ``channels``: the recording's channel names row by row (``StreamInfo.channels``); None
+    when its rows are the rig's DAQ channels."""
     if not rig.forces:
         return None
-    force, accel, used, fs = _blows(rig, hits)
+    if _rows(rig, channels)[0] is None:
+        return {"not_computed": f"the rig's force channel {rig.forces[0].name!r} is not in the "
+                                f"recording (its channels: {', '.join(channels)})"}
+    force, accel, used, fs, gages = _blows(rig, hits, channels)
     if not used:
         return {"not_computed": "no accepted hit with its record"}
     try:
         est = h1_estimate(force, accel, fs)
     except ValueError as err:
         return {"not_computed": str(err)}
-    return _to_json(rig, est, used, force.shape[1], fs)
+    return _to_json(rig, est, used, force.shape[1], fs, gages)
 
 
-def _to_json(rig: Rig, est: FrfEstimate, used: list[int], n: int, fs: float) -> dict:
-    names = [f"g{g.number:02d}" for g in rig.gages_by_channel()]
+def _to_json(rig: Rig, est: FrfEstimate, used: list[int], n: int, fs: float,
+             gages: list[int]) -> dict:
+    names = [f"g{g:02d}" for g in gages]
     peaks = est.peak_hz(1.0)
     given = np.flatnonzero(np.any(np.isfinite(est.h1), axis=0))
     m = int(given[-1]) + 1 if given.size else est.f_hz.size  # bins above: NaN for every gage
