@@ -181,13 +181,14 @@ def test_window_spans_the_record_between_blows_not_8192_samples():
     assert abs(frf["gages"]["g01"]["peak_hz"] - 12.5) <= f[1]  # within a bin (0.127 Hz)
 
 
-def test_an_import_of_fewer_channels_than_the_rig_analyses(tmp_path):
+def test_an_import_of_fewer_channels_than_the_rig_analyses(tmp_path, capsys):
     """A new user's CSV had 12 of the rig's 16 gages (or no load-cell column): ``import`` took
     it, as it takes any subset of the rig's channels, and ``analyze`` then failed inside the FRF
     (the rig's DAQ channel numbers used as the recording's rows). The FRF now reads the rows by
     the recorded channels: the 12 recorded gages' H1, and no FRF, with the reason, when the
-    force was not recorded. The CSV comes from ``ramdaq export-csv`` of a simulated trial with
-    the load cell, its columns dropped with the csv module."""
+    force was not recorded. ``import`` says which of the rig's channels it did not fill. The
+    CSV comes from ``ramdaq export-csv`` of a simulated trial with the load cell, its columns
+    dropped with the csv module."""
     import csv
 
     from ramdaq.analysis.model.rig import parse_rig
@@ -212,6 +213,9 @@ def test_an_import_of_fewer_channels_than_the_rig_analyses(tmp_path):
         path.write_text("\n".join(",".join(r[i] for i in keep) for r in rows) + "\n")
         out = tmp_path / f"{name}.mcap"
         assert main(["import", str(path), "--rig", str(rig_path), "--out", str(out)]) == 0
+        said = {"twelve": "gage(s) 13, 14, 15, 16", "noforce": "force channel 'ram'"}[name]
+        assert (f"warning: rig 'albacore-like' declares {said}, which no column of {name}.csv "
+                "fills: not recorded") in capsys.readouterr().err
         assert main(["analyze", str(out), "--out", str(tmp_path / name), "--no-plots"]) == 0
         frf = json.loads((tmp_path / name / "report.json").read_text())["frf"]
         if name == "twelve":

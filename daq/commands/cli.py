@@ -429,11 +429,24 @@ def _import_file(args: argparse.Namespace) -> int:
     print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
+    left = _not_recorded(options["rig"], info.channels)
+    if left:
+        print(f"warning: rig {options['rig'].name!r} declares {left}, which no column of {src.name} "
+              f"fills: not recorded (the analysis uses the recorded channels; --channels / "
+              f"--force-channel map columns named otherwise)", file=sys.stderr)
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
               f"ramdaq analyze {out} gives each gage's frequency and decrement")
     return EXIT_OK
+
+
+def _not_recorded(rig, channels: tuple[str, ...]) -> str:
+    """The rig's gages and force channels a recording's ``channels`` lack, in words ("" if none)."""
+    gages = [str(g.number) for g in rig.gages_by_channel() if f"g{g.number:02d}" not in channels]
+    forces = [repr(f.name) for f in rig.forces if f.name not in channels]
+    return " and ".join(([f"gage(s) {', '.join(gages)}"] if gages else [])
+                        + ([f"force channel {', '.join(forces)}"] if forces else []))
 
 
 _SUFFIX_FORMAT = {".tsv": "csv", ".txt": "csv", ".unv": "uff"}
