@@ -210,6 +210,18 @@ def test_rig_fit_refuses_bad_bounds_in_one_line(perturbed_trial, capsys):
     assert "identifying modes" not in cap.out  # refused before the identification's work
 
 
+def test_rig_fit_refuses_to_write_over_an_existing_rig(perturbed_trial, capsys):
+    """A new user's ``rig fit ... --rig mine.toml --out mine.toml`` replaced the start rig without
+    a word; an existing output is refused, before the identification, unless --overwrite."""
+    tmp, start, _, mcap = perturbed_trial
+    before = start.read_text()
+    assert main(["rig", "fit", str(mcap), "--rig", str(start), "--out", str(start)]) == 1
+    cap = capsys.readouterr()
+    assert cap.err.strip() == (f"ramdaq rig: {start} exists (it is the start rig); --overwrite "
+                               "replaces it")
+    assert "identifying modes" not in cap.out and start.read_text() == before
+
+
 def test_rig_fit_starts_from_the_recordings_own_rig(perturbed_trial, capsys):
     """Without --rig the start is the rig the trial was recorded with (here the true one)."""
     tmp, _, truth, mcap = perturbed_trial

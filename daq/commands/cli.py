@@ -539,8 +539,9 @@ def cmd_rig(args: argparse.Namespace) -> int:
 
     if args.rig == "fit":
         return cmd_rig_fit(args)
-    if args.trial or args.start or args.out or args.bound:
-        raise SystemExit("ramdaq rig: a trial, --rig, --out and --bound go with 'ramdaq rig fit'")
+    if args.trial or args.start or args.out or args.bound or args.overwrite:
+        raise SystemExit("ramdaq rig: a trial, --rig, --out, --bound and --overwrite go with "
+                         "'ramdaq rig fit'")
     rig = load_rig(args.rig)
     print(f"rig {rig.name} ({args.rig}): {rig.surface.title}, {len(rig.gages)} gages, "
           f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
@@ -588,7 +589,8 @@ def cmd_rig_fit(args: argparse.Namespace) -> int:
         raise SystemExit("ramdaq rig fit: give the trial (and, unless it carries its rig, the "
                          "start rig): ramdaq rig fit TRIAL.mcap [--rig START.toml]")
     mf, path = run_rig_fit(args.trial, args.start, out=Path(args.out) if args.out else None,
-                           bounds=parse_bounds(args.bound), progress=lambda m: print(m, flush=True))
+                           bounds=parse_bounds(args.bound), progress=lambda m: print(m, flush=True),
+                           overwrite=args.overwrite)
     print("\n".join(fit_lines(mf, path)))
     return EXIT_OK
 
@@ -803,6 +805,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "stock.I_m4=0.8:1.25 (1:1 holds it); repeatable")
     g.add_argument("--units", choices=("si", "report"), default="si",
                    help="masses in Eq 18's lines: SI (kg), or the report's ton s^2/ft")
+    g.add_argument("--overwrite", action="store_true", help="fit: replace an existing --out file")
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")

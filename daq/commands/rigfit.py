@@ -34,11 +34,18 @@ def parse_bounds(items: list[str] | None) -> dict[str, tuple[float, float]]:
 
 def run_rig_fit(trial: str | Path, start: str | Path | None = None, *, out: Path | None = None,
                 bounds: dict[str, tuple[float, float]] | None = None,
-                progress: Callable[[str], None] | None = None) -> tuple[ModeFit, Path]:
+                progress: Callable[[str], None] | None = None,
+                overwrite: bool = False) -> tuple[ModeFit, Path]:
     """Identify ``trial``'s modes, fit ``start``'s constants to them (``start`` None: the rig the
     trial was recorded with), write the fitted rig to ``out`` (default: the trial's folder,
-    ``TRIAL_rig.toml``). ``bounds`` are checked against the rig before any identification.
+    ``TRIAL_rig.toml``). ``bounds`` are checked against the rig before any identification; an
+    existing ``out`` is refused (``FileExistsError``) before it too, unless ``overwrite``.
     Returns the fit and the path."""
+    path = out if out is not None else Path(trial).with_name(Path(trial).stem + "_rig.toml")
+    if path.exists() and not overwrite:
+        same = start is not None and Path(start).exists() and path.resolve() == Path(start).resolve()
+        raise FileExistsError(f"{path} exists{' (it is the start rig)' if same else ''}; "
+                              "--overwrite replaces it")
     say = progress or (lambda s: None)
     lt = load_trial(trial, start, say)
     if start is None:
@@ -51,7 +58,6 @@ def run_rig_fit(trial: str | Path, start: str | Path | None = None, *, out: Path
         raise ValueError(f"{trial}: no mode recurs across the impacts: nothing to fit the rig to")
     say(f"fitting the rig's constants to {tm.n_modes} modes")
     mf = calibrate_to_modes(tm, lt.rig, bounds)
-    path = out if out is not None else Path(trial).with_name(Path(trial).stem + "_rig.toml")
     text = fitted_rig_text(mf, str(trial), datetime.date.today().isoformat())
     path.write_text(text, encoding="utf-8")
     return mf, path
