@@ -110,7 +110,8 @@ def test_unknown_effect_and_too_few_gages_are_refused(csv_trial, capsys, tmp_pat
     capsys.readouterr()  # the import's own output is not the gap's
     assert main(["gap", str(mcap), "--effects", "ambient_tone,gremlins"]) == 1
     err = capsys.readouterr().err
-    assert "unknown gap effect 'gremlins'" in err and err.count("\n") == 1
+    assert err.startswith("ramdaq gap: unknown gap effect 'gremlins'; known: ")  # not in quotes
+    assert err.count("\n") == 1
     two = tmp_path / "two.csv"
     lines = csv.read_text().splitlines()
     keep = [ln.split(",")[:3] for ln in lines[1:]]

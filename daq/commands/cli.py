@@ -898,6 +898,8 @@ def _one_line(err: BaseException) -> str:
     """An error as one line; an OSError as ``FILE: what`` (``[Errno 13] ...`` says less)."""
     if isinstance(err, OSError) and err.filename is not None and err.strerror:
         text = f"{err.filename}: {err.strerror}"
+    elif isinstance(err, KeyError) and len(err.args) == 1 and isinstance(err.args[0], str):
+        text = err.args[0]  # str() of a KeyError is its message's repr, in quotes
     else:
         text = str(err) or type(err).__name__
     return " ".join(text.split())

@@ -84,7 +84,8 @@ def summary_lines(d: Diagnosis) -> list[str]:
         out += [f"    not confirmed: the data-only {c} check finds nothing beyond chance"
                 for c in d.unconfirmed]
         for t in b.terms:
-            ps = ", ".join(f"{n} = {v['value']:.4g} {v['unit']}" for n, v in t.to_json()["params"].items())
+            ps = ", ".join(f"{n} = {v['value']:.4g}" + (f" {v['unit']}" if v["unit"] not in ("", "1") else "")
+                           for n, v in t.to_json()["params"].items())  # a ratio has no unit to print
             if ps:
                 out.append(f"    {t.effect.name}: {ps}")
         out.append(f"  where: gages {', '.join(map(str, loc['gages'])) or '-'}; band {loc['band']}; "
@@ -172,9 +173,11 @@ def data_lines(d: Diagnosis) -> list[str]:
     return out
 
 def _headline(d: Diagnosis) -> str:
-    """The verdict in capitals, the model level's statement as it is (gage numbers, Hz)."""
+    """The verdict's words in capitals up to its first colon or parenthesis; what follows (a
+    finding's text: gage numbers, Hz, x-1.000) and the model level's statement as they are."""
     verdict, _, form = d.headline.partition("; ")
-    return verdict.upper() + (f"; {form}" if form else "")
+    cut = min((i for i in (verdict.find(":"), verdict.find(" (")) if i >= 0), default=len(verdict))
+    return verdict[:cut].upper() + verdict[cut:] + (f"; {form}" if form else "")
 
 
 def feature_lines(d: Diagnosis, n: int = 5) -> list[str]:

@@ -92,10 +92,11 @@ def _feature_row(fig: Figure, axes, fm: FeatureMap, title: str, vmax: float) -> 
     panels += [(fm.line_z, "lines before the blows", fm.bands.labels, gl),
                (fm.mac_z.T, "MAC (z > 0: less alike)", [f"{f:.1f} Hz" for f in fm.mode_hz],
                 list(DECAY_WINDOWS))]
-    for ax, (z, name, xl, yl) in zip(axes, panels, strict=False):
+    for k, (ax, (z, name, xl, yl)) in enumerate(zip(axes, panels, strict=False)):
         im = ax.imshow(np.ma.masked_invalid(z), **kw)
         _hatch_missing(ax, z)
-        ax.set_title(f"{title}: {name}", fontsize=8)
+        # the row's model (a pair of effects is long) once, above its first panel
+        ax.set_title(f"{title}\n{name}" if k == 0 else name, fontsize=8, loc="left" if k == 0 else "center")
         ax.set_xticks(range(len(xl)), xl, rotation=60, ha="right", fontsize=6)
         ax.set_yticks(range(len(yl)), yl, fontsize=6)
     cbar = fig.colorbar(im, ax=axes, label="z against the replicates", shrink=0.8)
