@@ -88,6 +88,8 @@ def test_file_rate_is_taken_without_fs(tmp_path, capsys):
     assert rc == 0, err
     assert load_rig(tmp_path / "b.rig.toml").daq.sample_rate_hz == FS_B
     assert "at 1651 Hz" in out
+    # the medium a channels-only rig takes is said, and how to change it (it was silent)
+    assert "(no --rig given; medium air, --medium water for a flooded trial)" in out
     rc, out, err = _run(["import", src, "--fs", "1000", "--out", tmp_path / "c.mcap"], capsys)
     assert rc == 1 and "1000 Hz" in err  # a stated rate is still checked against the file's
 

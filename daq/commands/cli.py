@@ -436,8 +436,10 @@ def _import_file(args: argparse.Namespace) -> int:
               f"--force-channel map columns named otherwise)", file=sys.stderr)
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
-        print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given); "
-              f"ramdaq analyze {out} gives each gage's frequency and decrement")
+        print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given; "
+              f"medium {options['rig'].medium}" + ("" if args.medium else ", --medium water for a "
+                                                    "flooded trial") + f"); ramdaq analyze {out} "
+              "gives each gage's frequency and decrement")
     return EXIT_OK
 
 
