@@ -295,7 +295,21 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
                               for m in sorted({m for a in ok for m in a.hull_motions})},
         "C_N_s_per_m": _mean_scatter([a.damping["C_N_s_per_m"] for a in ok]),
         "c_N_m_s_per_rad": _mean_scatter([a.damping["c_N_m_s_per_rad"] for a in ok]),
+        "gages_not_used": gages_not_used(ok),
     }
+
+
+def gages_not_used(ok: list) -> dict[str, str]:
+    """The gages no accepted hit took (``g15`` -> the first hit's verdict on it, in words), so a
+    summary without them says why: a stock gage that saw no free decay, a dead channel."""
+    used = {n for a in ok for n in a.gages}
+    out: dict[str, str] = {}
+    for a in ok:
+        for n in a.gage_numbers:
+            if n not in used and f"g{n:02d}" not in out:
+                v = a.verdicts[n]
+                out[f"g{n:02d}"] = f"{v.code}: {v.reason}" if v.reason else str(v.code)
+    return dict(sorted(out.items()))
 
 
 def finite_json(obj: object) -> object:

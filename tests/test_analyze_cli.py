@@ -109,3 +109,16 @@ def test_a_damping_constant_of_no_sign_is_said_and_the_table_says_what_c_is(air_
         value = a["damping"][key]
         said = any(n.startswith(f"{eq}:") and "not a damping constant" in n for n in a["notes"])
         assert said == (value <= 0), (key, value, a["notes"])
+
+
+def test_a_gage_no_hit_took_is_said_with_its_reason(air_report):
+    """The summary listed g01..g14 and dropped the vertical hull gages 15 and 16 without a word
+    (a new user asked where they went). A horizontal blow gives them no free decay: the summary
+    names each with the analysis's verdict on it; every other gage has its decrement row."""
+    out, rep = air_report
+    s = rep["summary"]
+    assert sorted(s["gages_not_used"]) == ["g15", "g16"]
+    assert all(why.startswith("no_decay: ") for why in s["gages_not_used"].values())
+    assert set(s["delta_gage"]) | set(s["gages_not_used"]) == {f"g{g:02d}" for g in range(1, 17)}
+    text = format_summary(rep)
+    assert "  g15 not used in any accepted hit: no_decay: " in text

@@ -242,6 +242,8 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
         row(f"delta_{m}", d)
     for g, d in s["delta_gage"].items():
         row(f"delta {g}", d)
+    for g, why in (s.get("gages_not_used") or {}).items():
+        lines.append(f"  {g} not used in any accepted hit: {why}")
     for key, q in (("C_N_s_per_m", "damping_translational"), ("c_N_m_s_per_rad",
                                                                "damping_rotational")):
         d = dict(s[key])
