@@ -87,6 +87,7 @@ from .order import ModeSelector, floor_noise
 from .signal import (
     band_lengths,
     decimate_valid,
+    decimated_index,
     estimate_noise_std,
     fir_gain,
     fir_noise_variance_factor,
@@ -414,15 +415,32 @@ def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi:
         d = min(need(Xa), d_max)
         if d <= d_nls:
             return full
-        Ys, idx, _ = decimate_valid(Xa, fs_hz, d, band_hi)
-        inside = idx <= round(full.t[-1] * fs_hz)  # the NLS data's span (they may be cropped)
-        Ys, t = Ys[:, inside], idx[inside] / fs_hz
+        # Outputs within the NLS data's span (they may be cropped). A several-channel copy still
+        # over 1.5 x max_samples where the band allows no more decimation (16 gages x 14 s at a
+        # 270 Hz band) is cropped to _search_crop samples, its tail (weakest) left out of the
+        # search: it is decimated only as far as it is kept (the same outputs to the bit).
+        n_out = int(np.count_nonzero(decimated_index(Xa.shape[1], fs_hz, d, band_hi)
+                                     <= round(full.t[-1] * fs_hz)))
+        if n_out < 256:
+            return full
+        rows = Xa.shape[0]
+        keep = (_search_crop(rows, max_samples)
+                if rows > 1 and rows * n_out > _SEARCH_CROP * max_samples else None)
+        Ys, idx, _ = decimate_valid(Xa, fs_hz, d, band_hi, max_outputs=keep)
+        inside = idx <= round(full.t[-1] * fs_hz)
+        return _Data(Ys[:, inside], idx[inside] / fs_hz, fs_hz / d, full.false_alarm, d,
+                     full.band_hz)
     if Ys.shape[-1] < 256:
         return full
-    if Ys.shape[0] > 1 and Ys.size > _SEARCH_CROP * max_samples:  # the band capped d: the tail
-        keep = max(_SEARCH_LENGTH, max_samples // Ys.shape[0])  # (weakest) is not searched
+    if Ys.shape[0] > 1 and Ys.size > _SEARCH_CROP * max_samples:  # as above
+        keep = _search_crop(Ys.shape[0], max_samples)
         Ys, t = Ys[:, :keep], t[:keep]
     return _Data(Ys, t, fs_hz / d, full.false_alarm, d, full.band_hz)
+
+
+def _search_crop(n_channels: int, max_samples: int) -> int:
+    """How many samples a search copy of ``n_channels`` cropped by ``_SEARCH_CROP`` keeps."""
+    return max(_SEARCH_LENGTH, max_samples // n_channels)
 
 
 def _reweighted(sel: ModeSelector) -> None:
