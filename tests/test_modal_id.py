@@ -11,7 +11,7 @@ import pytest
 
 from ramdaq.analysis.modal.crb import crb_damped_sinusoid
 from ramdaq.analysis.modal.identify import identify_modes
-from ramdaq.analysis.modal.signal import damped_sinusoids
+from ramdaq.analysis.modal.signal import damped_sinusoids, decimate_valid, decimated_index
 from ramdaq.analysis.modal.varpro import _Problem
 from ramdaq.analysis.modal.verdicts import Verdict, assess_decay, assess_decay_jointly
 
@@ -715,3 +715,18 @@ def test_each_channels_band_at_once_equals_each_channel_alone_to_the_bit():
     want = [significant_band(x[c : c + 1], fs, sig[c : c + 1], 1e-4, None) for c in range(5)]
     assert [None if np.isnan(g) else g for g in got] == want
     assert np.isfinite(got[0]) and np.isnan(got[4])  # a strong decay is seen, white noise not
+
+
+@pytest.mark.parametrize("factor, m", [(2, 1), (3, 100), (3, 4096), (3, 10_000)])
+def test_decimate_valid_up_to_max_outputs_equals_the_whole_records_first_outputs(factor, m):
+    """A search copy decimated only as far as it is kept (identify's cropped 14 s copies) holds
+    the whole record's first outputs to the bit, and decimated_index names the whole record's
+    outputs without filtering (m = 10 000: more than the record gives, all of them)."""
+    x = np.random.default_rng(5).standard_normal((3, 12_001))
+    y, idx, taps = decimate_valid(x, 2048.0, factor, 270.0)
+    yp, idxp, tapsp = decimate_valid(x, 2048.0, factor, 270.0, max_outputs=m)
+    k = min(m, idx.size)
+    assert yp.shape == (3, k)
+    assert np.array_equal(yp, y[:, :k]) and np.array_equal(idxp, idx[:k])
+    assert np.array_equal(tapsp, taps)
+    assert np.array_equal(decimated_index(x.shape[1], 2048.0, factor, 270.0), idx)

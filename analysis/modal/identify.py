@@ -87,6 +87,7 @@ from .order import ModeSelector, floor_noise
 from .signal import (
     band_lengths,
     decimate_valid,
+    decimated_index,
     estimate_noise_std,
     fir_gain,
     fir_noise_variance_factor,
@@ -414,15 +415,32 @@ def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi:
         d = min(need(Xa), d_max)
         if d <= d_nls:
             return full
-        Ys, idx, _ = decimate_valid(Xa, fs_hz, d, band_hi)
-        inside = idx <= round(full.t[-1] * fs_hz)  # the NLS data's span (they may be cropped)
-        Ys, t = Ys[:, inside], idx[inside] / fs_hz
+        # Outputs within the NLS data's span (they may be cropped). A several-channel copy still
+        # over 1.5 x max_samples where the band allows no more decimation (16 gages x 14 s at a
+        # 270 Hz band) is cropped to _search_crop samples, its tail (weakest) left out of the
+        # search: it is decimated only as far as it is kept (the same outputs to the bit).
+        n_out = int(np.count_nonzero(decimated_index(Xa.shape[1], fs_hz, d, band_hi)
+                                     <= round(full.t[-1] * fs_hz)))
+        if n_out < 256:
+            return full
+        rows = Xa.shape[0]
+        keep = (_search_crop(rows, max_samples)
+                if rows > 1 and rows * n_out > _SEARCH_CROP * max_samples else None)
+        Ys, idx, _ = decimate_valid(Xa, fs_hz, d, band_hi, max_outputs=keep)
+        inside = idx <= round(full.t[-1] * fs_hz)
+        return _Data(Ys[:, inside], idx[inside] / fs_hz, fs_hz / d, full.false_alarm, d,
+                     full.band_hz)
     if Ys.shape[-1] < 256:
         return full
-    if Ys.shape[0] > 1 and Ys.size > _SEARCH_CROP * max_samples:  # the band capped d: the tail
-        keep = max(_SEARCH_LENGTH, max_samples // Ys.shape[0])  # (weakest) is not searched
+    if Ys.shape[0] > 1 and Ys.size > _SEARCH_CROP * max_samples:  # as above
+        keep = _search_crop(Ys.shape[0], max_samples)
         Ys, t = Ys[:, :keep], t[:keep]
     return _Data(Ys, t, fs_hz / d, full.false_alarm, d, full.band_hz)
+
+
+def _search_crop(n_channels: int, max_samples: int) -> int:
+    """How many samples a search copy of ``n_channels`` cropped by ``_SEARCH_CROP`` keeps."""
+    return max(_SEARCH_LENGTH, max_samples // n_channels)
 
 
 def _reweighted(sel: ModeSelector) -> None:
@@ -437,15 +455,21 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
     search's own last step); None when they do not fit there."""
     sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
                        (0.5 * f_lo, 0.49 * full.fs), full.w0)
-    one = full.Y.shape[0] == 1  # its weight scales the cost, not the optimum: no reweighting
-    sel.fit = sel.refit(found.fit.f_hz, found.fit.delta, trial=not one)
-    if sel.fit is None:
-        return None
-    if one:
-        sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)  # as _reweighted, without a refit
-    else:
-        _reweighted(sel)
-    return sel
+    f, d = found.fit.f_hz, found.fit.delta
+    if full.Y.shape[0] == 1:  # its weight scales the cost, not the optimum: no reweighting
+        sel.fit = sel.refit(f, d)
+        if sel.fit is not None:
+            sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)  # as _reweighted, no refit
+        return sel if sel.fit is not None else None
+    # The weights from the residual at the poles found (linear least squares), not from a trial
+    # fit's: the search converged them on the decimated copy, and the few σ² a refit would take
+    # off each channel's Σr² move its weight by ~1e-4 relative, the optimum by far less.
+    C, N = full.Y.shape
+    _, _, rss = linear_amplitudes(full.t, full.Y, f, d, fit_offset=found.fit_offset)
+    dof = max(N - 4 * f.size - int(found.fit_offset) - 2 * f.size / C, 1)
+    sel.w = 1.0 / floor_noise(np.sqrt(rss / dof), sel.Y)
+    sel.fit = sel.refit(f, d)
+    return sel if sel.fit is not None else None
 
 
 def _band(Xa: np.ndarray, fs_hz: float, false_alarm: float,

@@ -141,15 +141,18 @@ class ModeSelector:
 
     def try_add(self, fc: float, dc: float) -> bool:
         """Refit with one more mode started at (fc, δc); keep it if Λ exceeds the threshold."""
-        f0 = np.r_[self.fit.f_hz if self.fit else [], fc]
-        d0 = np.r_[self.fit.delta if self.fit else [], dc]
+        # (arrays joined by np.concatenate: the same values as the index trick r_, ~10 µs
+        # less a call, ~10 calls a try)
+        fc1, dc1 = np.array([fc], dtype=float), np.array([dc], dtype=float)
+        f0 = fc1 if self.fit is None else np.concatenate((self.fit.f_hz, fc1))
+        d0 = dc1 if self.fit is None else np.concatenate((self.fit.delta, dc1))
         if self.fit is not None:
             try:
                 held = self._held_fitter()
                 # Linear screen (poles fixed at their starts): a candidate far below the
                 # threshold is not worth a nonlinear refit. Not for the first, whose weights are
                 # not yet residual-based.
-                rss_lin_w = held.weighted_rss(np.r_[fc], np.r_[dc])
+                rss_lin_w = held.weighted_rss(fc1, dc1)
                 lam_lin = np.sum(self.rss * self.w**2 - rss_lin_w)
                 if lam_lin < 0.25 * self.threshold:
                     return False
@@ -160,15 +163,15 @@ class ModeSelector:
                       "chi2_tol": _TRIAL_CHI2_TOL}
                 if lam_lin <= self.threshold:  # (above it, the held fit, which only descends
                     # from there, is above it too: no early rejection possible)
-                    early = held.fit(np.r_[fc], np.r_[dc], max_iter=_EARLY_ITER, **kw)
+                    early = held.fit(fc1, dc1, max_iter=_EARLY_ITER, **kw)
                     if self._rejected(*early[:4], _EARLY_REJECT):
                         return False
-                fp, dp, rss_p, noise_p, _ = held.fit(np.r_[fc], np.r_[dc], **kw)
+                fp, dp, rss_p, noise_p, _ = held.fit(fc1, dc1, **kw)
                 if self._rejected(fp, dp, rss_p, noise_p, 1.0):
                     return False
             except (ValueError, linalg.LinAlgError):
                 return False
-            f0, d0 = np.r_[self.fit.f_hz, fp], np.r_[self.fit.delta, dp]
+            f0, d0 = np.concatenate((self.fit.f_hz, fp)), np.concatenate((self.fit.delta, dp))
         fit = self.refit(f0, d0, trial=True)
         if fit is None or self._lr(self.rss, fit) <= self.threshold:
             return False
@@ -186,7 +189,8 @@ class ModeSelector:
         if lam_p > self.threshold or (fraction < 1.0 and lam_p + 1.0 > fraction * self.threshold):
             return False  # (an early look rejects only with a gain ≥ 0: Λ_p + 1 decides it here)
         try:
-            gain_w = self._gain()(np.r_[self.fit.f_hz, fp], np.r_[self.fit.delta, dp])
+            gain_w = self._gain()(np.concatenate((self.fit.f_hz, fp)),
+                                   np.concatenate((self.fit.delta, dp)))
         except (ValueError, linalg.LinAlgError):
             gain_w = np.inf
         # weighted Σr² → Λ units (Λ divides by each channel's own residual variance)

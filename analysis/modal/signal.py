@@ -307,7 +307,7 @@ def _fir_taps(factor: int, band_hz: float, fs_hz: float) -> np.ndarray:
 
 
 def decimate_valid(
-    x: ArrayLike, fs_hz: float, factor: int, band_hz: float
+    x: ArrayLike, fs_hz: float, factor: int, band_hz: float, max_outputs: int | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Low-pass and decimate, returning only outputs whose filter window lies inside the record.
 
@@ -321,6 +321,9 @@ def decimate_valid(
         Decimation factor (≥ 1; 1 returns `x` unchanged).
     band_hz : float
         Highest frequency to keep undistorted (Hz); must be below fs_hz / (2 factor).
+    max_outputs : int, optional
+        Only the first ``max_outputs`` of those outputs, the record read only as far as they
+        need (each output equal to the bit to the same output of the whole record's).
 
     Returns
     -------
@@ -341,12 +344,25 @@ def decimate_valid(
         raise ValueError(f"band_hz ({band_hz}) must lie in (0, {0.5 * fs_hz / factor})")
     h = _fir_taps(factor, band_hz, fs_hz)
     c = (h.size - 1) // 2
+    if max_outputs is not None:  # output j reads samples j - (taps - 1) ... j
+        last = -(-(h.size - 1) // factor) * factor + (max(int(max_outputs), 1) - 1) * factor
+        a = a[:, : last + 1]
     full = signal.upfirdn(h, a, up=1, down=factor, axis=-1)  # full[k] = conv[k * factor]
     j = np.arange(full.shape[-1]) * factor
     keep = (j >= h.size - 1) & (j <= a.shape[-1] - 1)
     if not np.any(keep):
         raise ValueError(f"record ({a.shape[-1]} samples) is shorter than the FIR ({h.size})")
     return full[:, keep], j[keep] - c, h
+
+
+def decimated_index(n_samples: int, fs_hz: float, factor: int, band_hz: float) -> np.ndarray:
+    """The ``n_index`` that :func:`decimate_valid` returns for a record of ``n_samples``
+    (which outputs it keeps), without filtering anything."""
+    if factor == 1:
+        return np.arange(n_samples)
+    h = _fir_taps(int(factor), band_hz, fs_hz)
+    j = np.arange(-(-(h.size - 1) // factor) * factor, n_samples, factor)
+    return j - (h.size - 1) // 2
 
 
 def fir_gain(taps: np.ndarray, z: ArrayLike) -> np.ndarray:

@@ -138,7 +138,7 @@ def damped_basis(
     if grid is not None and K:
         t0, dt = grid
         ends = np.maximum(s.real * t0, s.real * (t0 + dt * (n - 1)))
-        blocked = bool(np.all(ends < 300.0))  # else the envelope clamp below is active
+        blocked = bool((ends < 300.0).all())  # else the envelope clamp below is active
     if blocked:
         grids = None if scratch is None else scratch.get("grids")
         if grids is None:
@@ -230,7 +230,7 @@ class Projector:
         G = G * self.inv_norm[:, None] * self.inv_norm[None, :]
         self.cho = None
         c, info = lapack.dpotrf(G, lower=1)
-        if info == 0 and np.min(np.abs(c.diagonal())) ** 2 > 1e-10:  # cond(Φ) below ~1e5
+        if info == 0 and np.abs(c.diagonal()).min() ** 2 > 1e-10:  # cond(Φ) below ~1e5
             self.cho = (c, True)
         if self.cho is None and Phi is not None:
             self.Q, self.R = linalg.qr(Phi, mode="economic", check_finite=False)
@@ -346,7 +346,7 @@ class _Problem:
         if self.QfT is not None:
             WQ = W @ self.QfT.T
             G = G0 - WQ @ WQ.T
-        if not np.all(G.diagonal() >= 1e-6 * G0.diagonal()):
+        if not (G.diagonal() >= 1e-6 * G0.diagonal()).all():
             if len(self._pool) < 4:
                 self._pool.append(W)
             return None
@@ -360,7 +360,7 @@ class _Problem:
         ss = None
         if need_ss:
             ss = self._yy - np.sum(WY[:P] * B, axis=0)
-            if not np.all(ss >= _GRAM_MIN_FRACTION * self._yy):
+            if not (ss >= _GRAM_MIN_FRACTION * self._yy).all():
                 self.release(proj)
                 return None
         proj.grams = (G[:P, P:], G[P:, P:], WY[P:], None)  # ΦᵀP⊥T, TᵀP⊥T, TᵀY, (Tᵀr)
@@ -427,7 +427,7 @@ class _Problem:
             PtT, TT, TtY, Tr = grams  # Tᵀr itself when known, else from TᵀY
             V = proj.whitened(PtT)
             M = TT - V.T @ V
-            if np.all(M.diagonal() > 1e-8 * TT.diagonal()):
+            if (M.diagonal() > 1e-8 * TT.diagonal()).all():
                 return self._jtj_jtr(f, d, B, M, TtY - PtT.T @ B if Tr is None else Tr)
             raw = proj.raw  # the Schur complement lost digits: the explicit path
             proj = Projector(self._perp(raw))
@@ -444,7 +444,7 @@ class _Problem:
         if proj.cho is not None:
             V = proj.whitened(PtT)
             M = TT - V.T @ V
-            if not np.all(M.diagonal() > 1e-8 * TT.diagonal()):
+            if not (M.diagonal() > 1e-8 * TT.diagonal()).all():
                 M = None
         if M is None:
             Tp = T - Phi @ proj.coef(T)
@@ -569,9 +569,9 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
         n_eval += 1
         cost_new = prob.sumsq(r_new)
         if cost_new <= cost:
-            small = np.all(np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc))
+            small = bool((np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc)).all())
             rel = (cost - cost_new) / max(cost, 1e-300)
-            if (small or rel < 1e-11) and np.any((new <= lo) | (new >= hi)):
+            if (small or rel < 1e-11) and ((new <= lo) | (new >= hi)).any():
                 tol = max(1e-11 * cost, chi2_tol * cost / max(dof, 1))
                 if _free_descent(A, g, theta, lo, hi) > tol:  # stuck on a bound, not at a minimum
                     prob.release(p_new)
@@ -619,12 +619,12 @@ def _damped_step(A: np.ndarray, g: np.ndarray, lam: float, theta: np.ndarray, lo
     free inside the box); with every coordinate held the step is zero (no 0 x 0 system reaches
     LAPACK)."""
     # = linalg.solve(..., assume_a="pos") (same LAPACK call and triangle, less overhead)
-    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
+    if not (np.isfinite(A).all() and np.isfinite(g).all()):
         raise ValueError("array must not contain infs or NaNs")
     held = ((theta <= lo) & (g > 0)) | ((theta >= hi) & (g < 0))
-    if np.all(held):  # every coordinate pinned: no step (a KKT point, which the caller judges)
+    if held.all():  # every coordinate pinned: no step (a KKT point, which the caller judges)
         return np.zeros_like(g), 0
-    if np.any(held):
+    if held.any():
         u, free = np.zeros_like(g), ~held
         _, u_free, info = lapack.dposv(A[np.ix_(free, free)] + lam * np.eye(np.sum(free)),
                                        -g[free], lower=0)
