@@ -127,30 +127,3 @@ def test_eq_14_on_estimated_motions(water_clean):
         "C_eq14_N_s_per_m", "c_eq15_N_m_s_per_rad", "k_s_N_per_m", "ell_m",
         "C_eq14_se_N_s_per_m", "c_eq15_se_N_m_s_per_rad"]
     assert a.damping["C_eq14_N_s_per_m"] == a.damping.full.C_eq14_N_s_per_m
-
-
-def test_motion_fits_on_the_joint_fits_decimated_data_give_the_signals_own_numbers():
-    """Where the joint fit decimated a long record (16 gages x 14 s: by 2), the motions' fits
-    run on signals decimated by its filter: a combination of two damped modes gives back the
-    13 Hz mode's delta within 4 of its reported standard errors, and its complex amplitude at
-    t = 0 of the full-rate signal (the filter's gain and delay undone: left in, the 5 ms delay
-    alone turns it by 0.4 rad) within 1e-3 (~30 of its standard errors at this noise)."""
-    from ramdaq.analysis.impact import _motion_fits
-    from ramdaq.analysis.modal.identify import identify_modes
-    from ramdaq.analysis.modal.signal import damped_sinusoids
-
-    fs, n = 2048.0, 28_672
-    f, d = np.array([13.0, 59.8]), np.array([0.10, 0.0155])
-    rng = np.random.default_rng(3)
-    amps = rng.normal(size=(16, 2)) + 1j * rng.normal(size=(16, 2))  # Re(a e^(st)) per gage
-    x = damped_sinusoids(fs, n, f, d, np.abs(amps), np.angle(amps))
-    x += 1e-3 * rng.standard_normal(x.shape)
-    table = identify_modes(x, fs, per_channel=False)
-    assert table.info["decimation"] == 2 and len(table) == 2
-    w = np.array([0.7, -1.3])
-    notes: list[str] = []
-    got, amp = _motion_fits({"s": w @ x[:2]}, fs, table, 0, notes)["s"]
-    assert abs(got.delta - 0.10) < 4 * got.delta_se
-    assert abs(got.f_hz - 13.0) < 4 * got.f_se_hz
-    assert abs(amp / (w @ amps[:2, 0]) - 1) < 1e-3
-    assert not notes
