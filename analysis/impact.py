@@ -29,7 +29,6 @@ import numpy as np
 from .modal.before_blow import ambient_modes
 from .modal.identify import identify_modes
 from .modal.peaks import decrements_from_peaks
-from .modal.signal import decimate_valid, fir_gain, fir_noise_variance_factor
 from .modal.table import ModeTable
 from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_decay_jointly
 from .model.geometry import gage_geometry, stock_pair
@@ -304,53 +303,26 @@ def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable,
     """Each signal's decrement of the predominant mode ``k`` of ``table`` (its own fit, reached
     from the joint poles: :mod:`~ramdaq.analysis.report1836.motion_fits`), beside the report's
     peak-ratio one, and the mode's complex amplitude in it (the combination of the gages'). A
-    signal in which the mode does not stand out of the noise gets NaN and a note.
-
-    The fits run on the data the joint fit ran on: where it decimated the record within its band
-    (``table.info["decimation"]``, ``["band_hz"]``: a 16-gage 14 s decay, by 2), the signals are
-    decimated by the same filter, their standard errors corrected for its noise density and their
-    amplitudes for its gain and delay (:func:`_decimated`)."""
+    signal in which the mode does not stand out of the noise gets NaN and a note."""
     if not signals:
         return {}
     S = np.array(list(signals.values()))
-    Sd, fs_d, se_fac, amp_fac = _decimated(S, fs_hz, table)
-    fits = fit_signals_at_poles(Sd, fs_d, table.frequency_hz, table.delta, modes=(k,),
+    fits = fit_signals_at_poles(S, fs_hz, table.frequency_hz, table.delta, modes=(k,),
                                 trend_terms=int(table.info.get("trend_terms", 1)))
     f = float(table.frequency_hz[k])
     peaks = _peak_decrements(S, fs_hz, f)
     out = {}
     for name, fit, peak in zip(signals, fits, peaks, strict=True):
-        amp = complex(fit.amplitude[k] * amp_fac[k])
         if not np.isfinite(fit.delta[k]):
             why = ("its fit failed" if fit.method.endswith("failed")
                    else "the mode is not above the noise in it")
             notes.append(f"{name}: no decrement of the {f:.3g} Hz mode, {why}")
-            out[name] = (Decrement(f, np.nan, np.nan, np.nan, np.nan), amp)
+            out[name] = (Decrement(f, np.nan, np.nan, np.nan, np.nan), complex(fit.amplitude[k]))
             continue
-        out[name] = (Decrement(float(fit.f_hz[k]), float(fit.delta[k]),
-                               float(fit.delta_se[k] * se_fac[k]), *peak,
-                               f_se_hz=float(fit.f_se_hz[k] * se_fac[k])), amp)
+        out[name] = (Decrement(float(fit.f_hz[k]), float(fit.delta[k]), float(fit.delta_se[k]),
+                               *peak, f_se_hz=float(fit.f_se_hz[k])),
+                     complex(fit.amplitude[k]))
     return out
-
-
-def _decimated(S: np.ndarray, fs_hz: float, table: ModeTable
-               ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
-    """The signals ``S`` (n_signals, n_samples) as the joint fit ``table`` saw its data:
-    decimated within its band by its factor (``decimate_valid``, the same filter) where it was,
-    else as they are. Returns (data, their rate Hz, the factor on each mode's standard errors
-    for the filter's noise density, the factor from each mode's amplitude in the data, at
-    their first sample, to its amplitude at t = 0 of ``S``): the joint fit's own corrections
-    (:func:`~ramdaq.analysis.modal.identify.identify_modes`, ``_table``)."""
-    K = len(table)
-    factor = int(table.info.get("decimation", 1))
-    if factor <= 1:
-        return S, fs_hz, np.ones(K), np.ones(K, dtype=complex)
-    Sd, idx, taps = decimate_valid(S, fs_hz, factor, float(table.info["band_hz"]))
-    f, d = table.frequency_hz, table.delta
-    s = -d * f + 2j * np.pi * f  # continuous poles, 1/s
-    se_fac = np.sqrt(fir_noise_variance_factor(taps, factor, f, fs_hz))
-    amp_fac = 1.0 / (fir_gain(taps, np.exp(s / fs_hz)) * np.exp(s * idx[0] / fs_hz))
-    return Sd, fs_hz / factor, se_fac, amp_fac
 
 
 def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list[int]) -> ModeTable:
