@@ -1028,8 +1028,7 @@ class Trigger:
         if ev.floor is None:
             ev.floor = FloorWatch.begin(ev.pre[ev.voters], ev.onset, self._len.post, self.fs_hz,
                                         self._noise_bw)
-        rows = self._vidx[ev.voters]
-        end = ev.floor.scan(lambda a, b: self._values(a, b, rows), limit)
+        end = ev.floor.scan(lambda a, b: self._squares(a, b)[ev.voters], limit, squared=True)
         if end is not None:
             ev.end, ev.end_reason = end, "decayed"
             self._hand_over(ev, out)
