@@ -293,13 +293,20 @@ class Session:
 
     # -- the analyzer threads -----------------------------------------------------------------
     def _worker(self, kind: type[FinalJob] | type[LookJob]) -> None:
-        while True:
-            job = self._jobs.get(kind)
-            if job is None:
-                return
-            self._run_one(kind, job)
-            del job  # the samples go with the job's result, not with this frame
-            self._jobs.done(kind)
+        while self._take_and_run(kind):
+            pass
+
+    def _take_and_run(self, kind: type[FinalJob] | type[LookJob]) -> bool:
+        """Take the next job of ``kind`` from the queue (waiting for one), run it and mark it
+        done; False once the queue is stopped and empty. The samples go with the job's result,
+        not with a frame that lives on."""
+        job = self._jobs.get(kind)
+        if job is None:
+            return False
+        self._run_one(kind, job)
+        del job
+        self._jobs.done(kind)
+        return True
 
     def _run_one(self, kind: type[FinalJob] | type[LookJob], job: FinalJob | LookJob) -> None:
         """Do ``job`` (in the finals' worker process if there is one), put its result (or its
@@ -333,11 +340,7 @@ class Session:
 
     def _final_inline(self) -> None:
         """Run the final just queued on this thread (:attr:`finals_inline`)."""
-        job = self._jobs.get(FinalJob)
-        if job is not None:
-            self._run_one(FinalJob, job)
-            del job
-            self._jobs.done(FinalJob)
+        self._take_and_run(FinalJob)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
