@@ -77,6 +77,7 @@ _COMPRESSIONS = (b"zstd", b"lz4", b"")
 _KNOWN = frozenset(int(o) for o in Opcode)
 _PARSED = (Opcode.HEADER, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE, Opcode.CHUNK,
            Opcode.ATTACHMENT, Opcode.METADATA, Opcode.DATA_END)
+_OP_MESSAGE, _OP_CHANNEL, _OP_SCHEMA = int(Opcode.MESSAGE), int(Opcode.CHANNEL), int(Opcode.SCHEMA)
 _NOT_PARSED = frozenset(int(o) for o in Opcode if o not in _PARSED)  # indexes, footer, ...
 _SCAN_WINDOW = 1 << 20  # bytes searched at a time for the next intact chunk
 # What a damaged record raises inside the mcap record parsers and the decompressors: short reads
@@ -385,19 +386,21 @@ class RecordScanner:
         records: list[McapRecord] = []
         pos, unpack, rest = 0, _MESSAGE_AT.unpack_from, _MESSAGE_REST.unpack_from
         known, wanted = self._channel_topic, self._wanted
+        head, least, message = _HEAD.size, _MESSAGE_HEAD.size, _OP_MESSAGE  # locals: the loop's
         while pos < n:
             opcode, length, channel_id = unpack(data, pos)
-            body, pos = pos + _HEAD.size, pos + _HEAD.size + length
-            if pos > n or (opcode == Opcode.MESSAGE and length < _MESSAGE_HEAD.size):
+            body = pos + head
+            pos = body + length
+            if pos > n or (opcode == message and length < least):
                 raise ValueError(f"a chunk record of {length} bytes runs past its chunk's end")
-            if opcode == Opcode.MESSAGE:
+            if opcode == message:
                 if channel_id in wanted or channel_id not in known:
                     sequence, log_time, publish_time = rest(data, body + 2)
                     records.append(Message(channel_id=channel_id, log_time=log_time,
-                                           data=data[body + _MESSAGE_HEAD.size:pos],
+                                           data=data[body + least:pos],
                                            publish_time=publish_time, sequence=sequence))
-            elif opcode in (Opcode.CHANNEL, Opcode.SCHEMA):
-                reader = Channel if opcode == Opcode.CHANNEL else Schema
+            elif opcode == _OP_CHANNEL or opcode == _OP_SCHEMA:
+                reader = Channel if opcode == _OP_CHANNEL else Schema
                 record = reader.read(ReadDataStream(BytesIO(data[body:pos])))
                 if isinstance(record, Channel):
                     known[record.id] = record.topic
