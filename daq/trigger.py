@@ -552,7 +552,8 @@ class _ContactScan:
     dead_until: int = 0
     whitener: _Whitener | None = None
     ref: np.ndarray | None = None          # the innovation's running mean, units^2
-    ref_trace: np.ndarray | None = field(default=None, repr=False)  # its values in the last scan
+    ref_trace: np.ndarray | None = field(default=None, repr=False)  # its values in the last
+    # scan, [:, i] up to its sample i
 
 
 @dataclass
@@ -1169,7 +1170,8 @@ class Trigger:
             e = _innovation(x, scan.whitener.a)
             e2 = e * e
             p, last = ons.exp_average(e2, n.innovation, scan.level)
-            ratio = p / self._innovation_ref(scan, e2)
+            ratio = self._innovation_ref(scan, e2)
+            np.divide(p, ratio, out=ratio)  # p / level, in the level's array
             kk = min(self._k, len(ev.voters))
             on = (ratio > self._double_on(kk)).sum(axis=0) >= kk
             off = (ratio > s.off).sum(axis=0) < kk
@@ -1182,8 +1184,8 @@ class Trigger:
             scan.pos, scan.level = limit, last
             return None
         scan.pos, scan.level = a + j + 1, None if p is None else p[:, j].copy()
-        if scan.ref_trace is not None:
-            scan.ref = scan.ref_trace[:, j + 1].copy()
+        if scan.ref_trace is not None:  # the mean up to the contact's sample, inclusive
+            scan.ref = scan.ref_trace[:, j].copy()
         scan.dead_until = a + j + n.guard
         return a + j
 
@@ -1218,9 +1220,11 @@ class Trigger:
         prev = var if scan.ref is None else scan.ref
         n = max(self._len.envelope, _REF_STA * self._len.innovation)
         ref, last = ons.exp_average(e2, n, prev)
-        trace = np.concatenate([prev[:, None], ref], axis=1)  # [:, i]: up to sample i - 1
-        scan.ref, scan.ref_trace = last, trace
-        return np.maximum(var[:, None], trace[:, :-1])
+        scan.ref, scan.ref_trace = last, ref  # ref[:, i]: the mean up to sample i
+        before = np.empty_like(ref)  # [:, i]: up to sample i - 1, in one array for the caller
+        before[:, 0] = prev
+        before[:, 1:] = ref[:, :-1]
+        return np.maximum(var[:, None], before, out=before)
 
     def _close(self, reason: str) -> list[ImpactEvent]:
         """Close the open event at the last sample in the ring (gap or end of stream)."""
@@ -1289,7 +1293,10 @@ def _innovation(x: np.ndarray, a: np.ndarray) -> np.ndarray:
     ``apply_along_axis`` and a dozen checks a call (a quarter of the second-contact scan's
     CPU). Shape (n_rows, n - order); the filter's first coefficient is 1."""
     order, n = len(a) - 1, x.shape[-1]
-    return np.stack([np.convolve(a, row)[order:n] for row in x])
+    e = np.empty((x.shape[0], n - order))
+    for i, row in enumerate(x):
+        e[i] = np.convolve(a, row)[order:n]
+    return e
 
 
 def _voting_rows(info: StreamInfo, s: TriggerSettings) -> tuple[np.ndarray, int]:
