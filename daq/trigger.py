@@ -771,9 +771,9 @@ class Trigger:
         self._expected = block.next_sample
         self._ring.write(block.first_sample, block.counts)
         self._scale = block.scale
-        x = (block.counts * block.scale[:, None] if self._all_vote
-             else block.counts[self._vidx] * block.scale[self._vidx, None])
-        x2 = x * x
+        x2 = (block.counts * block.scale[:, None] if self._all_vote
+              else block.counts[self._vidx] * block.scale[self._vidx, None])
+        np.multiply(x2, x2, out=x2)  # x * x, in x's array
         self._block_x2 = (block.first_sample, x2)
         sta, self._levels.sta = ons.exp_average(x2, self._len.sta, self._levels.sta)
         self._run(block.first_sample, x2, sta, out)
@@ -951,7 +951,7 @@ class Trigger:
         lta_last, m0 = levels.lta, levels.n
         lta = levels.advance_lta(x2[:, seg], nlta)
         if self._fidx is None:
-            hit = (sta[:, seg] > s.on * lta).sum(axis=0) >= self._k
+            hit = (sta[:, seg] > np.multiply(s.on, lta, out=lta)).sum(axis=0) >= self._k
         else:
             hit = self._force_hits(pos, limit)
         idx = np.flatnonzero(hit)
