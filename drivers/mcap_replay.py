@@ -557,6 +557,7 @@ class McapReplayDevice(Device):
         topics: dict[int, str] = {}
         last: Block | None = None
         records = iter(scanner)
+        decode, block_topic = fmt.decode_block, fmt.BLOCK_TOPIC  # locals: looked up per record
         while True:
             try:
                 record = next(records, None)
@@ -564,11 +565,11 @@ class McapReplayDevice(Device):
                 raise fmt.CorruptRecording(f"{err}; {self._read_so_far(last)}") from err
             if record is None:
                 return
-            if isinstance(record, Channel):
-                topics[record.id] = record.topic
-            elif isinstance(record, Message) and topics.get(record.channel_id) == fmt.BLOCK_TOPIC:
+            if isinstance(record, Message):  # the most of them, so asked first
+                if topics.get(record.channel_id) != block_topic:
+                    continue
                 try:
-                    block = fmt.decode_block(record.data)
+                    block = decode(record.data)
                 except FrameError as err:
                     raise fmt.CorruptRecording(
                         f"{self.path}: a block message in the chunk ending at byte "
@@ -576,6 +577,8 @@ class McapReplayDevice(Device):
                     ) from err
                 last = block
                 yield block
+            elif isinstance(record, Channel):
+                topics[record.id] = record.topic
 
     def _read_so_far(self, last: Block | None) -> str:
         if last is None:
@@ -617,7 +620,7 @@ class McapReplayDevice(Device):
         ``_pending``. A read error after the first block is raised by the next read, so that the
         blocks before it are handed over first."""
         limit = max(block.n_samples, round(self.join_s * block.fs_hz))
-        parts, n, end = [block], block.n_samples, block.next_sample
+        parts, n, end, scale = [block], block.n_samples, block.next_sample, block.scale
         while n < limit:
             try:
                 nxt = next(self._blocks, None)
@@ -626,12 +629,15 @@ class McapReplayDevice(Device):
                 break
             if nxt is None:
                 break
-            if (nxt.first_sample != end or n + nxt.n_samples > limit
-                    or not np.array_equal(nxt.scale, block.scale)):
+            m = nxt.counts.shape[1]
+            # the same scale: np.array_equal's test (shapes, then every element), less its
+            # conversions and dispatch (asked once a recorded block)
+            if (nxt.first_sample != end or n + m > limit or nxt.scale.shape != scale.shape
+                    or not (nxt.scale == scale).all()):
                 self._pending = nxt
                 break
             parts.append(nxt)
-            n, end = n + nxt.n_samples, nxt.next_sample
+            n, end = n + m, nxt.first_sample + m
         if len(parts) == 1:
             return block
         return Block(block.seq, block.first_sample, block.t0_ns, block.fs_hz,
