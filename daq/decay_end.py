@@ -87,17 +87,20 @@ class FloorWatch:
         noise = np.maximum(np.asarray(noise, dtype=float), np.finfo(float).tiny)
         return cls(noise, window, floor_threshold(window, bandwidth), onset + min_n)
 
-    def scan(self, read: Callable[[int, int], np.ndarray], limit: int) -> int | None:
+    def scan(self, read: Callable[[int, int], np.ndarray], limit: int, *,
+             squared: bool = False) -> int | None:
         """Judge every whole window before sample ``limit``; ``read(a, b)`` gives the watched
-        gages' samples ``a .. b-1`` (SI units, shape (n, b - a)). The record's last sample once
-        the decay is at the floor (then and ever after), else None."""
+        gages' samples ``a .. b-1`` (SI units, shape (n, b - a)), or with ``squared`` their
+        squares (units^2; a caller that has them spares the square). The record's last sample
+        once the decay is at the floor (then and ever after), else None."""
         if self.end is not None:
             return self.end
         m = (limit - self.pos) // self.window
         if m <= 0:
             return None
         x = read(self.pos, self.pos + m * self.window)
-        ratio = (x * x).reshape(len(self.noise), m, self.window).mean(axis=2) / self.noise[:, None]
+        x2 = x if squared else x * x
+        ratio = x2.reshape(len(self.noise), m, self.window).mean(axis=2) / self.noise[:, None]
         if self.rows is None:
             ringing = ratio[:, 0] - 1.0
             loud = ringing >= ringing.max() * 10 ** (-PREDOMINANT_DB / 10)

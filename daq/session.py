@@ -46,6 +46,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -73,9 +74,10 @@ from .analyzer import (
 from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import UNSURE_REL_SE, LiveReadout
-from .record import store_block
-from .recorder import Recorder
 from .trigger import ImpactEvent, Trigger, TriggerSettings
+
+if TYPE_CHECKING:  # the recorder (the MCAP writer) is imported only by a session that records
+    from .recorder import Recorder
 
 RESULTS_TOPIC = "/ramdaq/results"
 """Per-hit final results (JSON, SI units) written into the recording by a live trial."""
@@ -291,13 +293,20 @@ class Session:
 
     # -- the analyzer threads -----------------------------------------------------------------
     def _worker(self, kind: type[FinalJob] | type[LookJob]) -> None:
-        while True:
-            job = self._jobs.get(kind)
-            if job is None:
-                return
-            self._run_one(kind, job)
-            del job  # the samples go with the job's result, not with this frame
-            self._jobs.done(kind)
+        while self._take_and_run(kind):
+            pass
+
+    def _take_and_run(self, kind: type[FinalJob] | type[LookJob]) -> bool:
+        """Take the next job of ``kind`` from the queue (waiting for one), run it and mark it
+        done; False once the queue is stopped and empty. The samples go with the job's result,
+        not with a frame that lives on."""
+        job = self._jobs.get(kind)
+        if job is None:
+            return False
+        self._run_one(kind, job)
+        del job
+        self._jobs.done(kind)
+        return True
 
     def _run_one(self, kind: type[FinalJob] | type[LookJob], job: FinalJob | LookJob) -> None:
         """Do ``job`` (in the finals' worker process if there is one), put its result (or its
@@ -331,11 +340,7 @@ class Session:
 
     def _final_inline(self) -> None:
         """Run the final just queued on this thread (:attr:`finals_inline`)."""
-        job = self._jobs.get(FinalJob)
-        if job is not None:
-            self._run_one(FinalJob, job)
-            del job
-            self._jobs.done(FinalJob)
+        self._take_and_run(FinalJob)
 
     # -- the main loop ------------------------------------------------------------------------
     def run(self) -> TrialOutcome:
@@ -350,8 +355,11 @@ class Session:
             if not (kind is FinalJob and self.finals_inline):
                 threading.Thread(target=self._worker, args=(kind,), name=name,
                                  daemon=True).start()
-        rec = (Recorder(self.record_path, self.info, overwrite=self.overwrite)
-               if self.record_path else None)
+        rec = None
+        if self.record_path:  # here: a replay records nothing and needs no MCAP writer
+            from .recorder import Recorder
+
+            rec = Recorder(self.record_path, self.info, overwrite=self.overwrite)
         self._rec = rec
         if self.readout:
             self.readout.__enter__()
@@ -423,6 +431,8 @@ class Session:
     def _take(self, block: Block, rec: Recorder | None) -> None:
         """One block through the recorder, the trigger, the first looks and the views."""
         if rec:
+            from .record import store_block  # a dictionary look-up once imported
+
             self._truth_written, faults = store_block(
                 rec, self.device, block, self._truth_written,
                 wait_for_room=getattr(self.device, "pace", "realtime") == "fast")

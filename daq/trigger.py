@@ -552,7 +552,8 @@ class _ContactScan:
     dead_until: int = 0
     whitener: _Whitener | None = None
     ref: np.ndarray | None = None          # the innovation's running mean, units^2
-    ref_trace: np.ndarray | None = field(default=None, repr=False)  # its values in the last scan
+    ref_trace: np.ndarray | None = field(default=None, repr=False)  # its values in the last
+    # scan, [:, i] up to its sample i
 
 
 @dataclass
@@ -669,6 +670,8 @@ class Trigger:
         self.info, self.settings, self.fs_hz = info, s, float(info.fs_hz)
         self._len = _Lengths.at(s, self.fs_hz)
         self._vidx, self._k = _voting_rows(info, s)
+        self._all_vote = np.array_equal(self._vidx, np.arange(info.n_channels))  # no row copy
+        self._block_x2 = (0, np.zeros((len(self._vidx), 0)))  # the latest block's x**2, voters
         self._fidx = _force_row(info, s)
         self.mode = "sta_lta" if self._fidx is None else "force"
         anti_alias = _anti_alias_or_none(info) if s.delay_s is not None else _rig_anti_alias(info)
@@ -768,8 +771,10 @@ class Trigger:
         self._expected = block.next_sample
         self._ring.write(block.first_sample, block.counts)
         self._scale = block.scale
-        x = block.counts[self._vidx] * block.scale[self._vidx, None]
-        x2 = x * x
+        x2 = (block.counts * block.scale[:, None] if self._all_vote
+              else block.counts[self._vidx] * block.scale[self._vidx, None])
+        np.multiply(x2, x2, out=x2)  # x * x, in x's array
+        self._block_x2 = (block.first_sample, x2)
         sta, self._levels.sta = ons.exp_average(x2, self._len.sta, self._levels.sta)
         self._run(block.first_sample, x2, sta, out)
         return out
@@ -929,6 +934,16 @@ class Trigger:
     def _values(self, a: int, b: int, rows: Any) -> np.ndarray:
         return self._ring.read(a, b, rows) * self._scale[rows, None]
 
+    def _squares(self, a: int, b: int) -> np.ndarray:
+        """``x * x`` of the voting rows at samples ``a .. b-1`` (units^2): the block's own,
+        squared once in :meth:`process`, where it holds them (the same numbers: counts times
+        the same scale, squared), else from the ring."""
+        b0, x2 = self._block_x2
+        if b0 <= a and b <= b0 + x2.shape[1]:
+            return x2[:, a - b0:b - b0]
+        x = self._values(a, b, self._vidx)
+        return x * x
+
     def _detect(self, pos: int, limit: int, b0: int, x2: np.ndarray, sta: np.ndarray) -> int | None:
         """First trigger in ``pos .. limit-1`` while armed; the LTA advances up to it."""
         seg = slice(pos - b0, limit - b0)
@@ -936,7 +951,7 @@ class Trigger:
         lta_last, m0 = levels.lta, levels.n
         lta = levels.advance_lta(x2[:, seg], nlta)
         if self._fidx is None:
-            hit = (sta[:, seg] > s.on * lta).sum(axis=0) >= self._k
+            hit = (sta[:, seg] > np.multiply(s.on, lta, out=lta)).sum(axis=0) >= self._k
         else:
             hit = self._force_hits(pos, limit)
         idx = np.flatnonzero(hit)
@@ -1014,8 +1029,7 @@ class Trigger:
         if ev.floor is None:
             ev.floor = FloorWatch.begin(ev.pre[ev.voters], ev.onset, self._len.post, self.fs_hz,
                                         self._noise_bw)
-        rows = self._vidx[ev.voters]
-        end = ev.floor.scan(lambda a, b: self._values(a, b, rows), limit)
+        end = ev.floor.scan(lambda a, b: self._squares(a, b)[ev.voters], limit, squared=True)
         if end is not None:
             ev.end, ev.end_reason = end, "decayed"
             self._hand_over(ev, out)
@@ -1132,8 +1146,7 @@ class Trigger:
         if w.decayed is not None or limit <= w.pos:
             return w.decayed
         a, n = w.pos, self._len
-        x = self._values(a, limit, self._vidx)
-        env, last = ons.exp_average(x * x, n.envelope, w.level)
+        env, last = ons.exp_average(self._squares(a, limit), n.envelope, w.level)
         ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.settings.rearm_ratio
         ok[:max(0, ev.onset + n.envelope - a)] = False
         j, w.hold = ons.first_hold(ok, n.hold, w.hold)
@@ -1154,9 +1167,11 @@ class Trigger:
             on, off, p, last = f >= self._f_level, f < s.hysteresis * self._f_level, None, None
         else:
             x = self._values(a - n.order, limit, self._vidx[ev.voters])
-            e = ons.prediction_error(x, scan.whitener.a)
-            p, last = ons.exp_average(e * e, n.innovation, scan.level)
-            ratio = p / self._innovation_ref(scan, e * e)
+            e = _innovation(x, scan.whitener.a)
+            e2 = e * e
+            p, last = ons.exp_average(e2, n.innovation, scan.level)
+            ratio = self._innovation_ref(scan, e2)
+            np.divide(p, ratio, out=ratio)  # p / level, in the level's array
             kk = min(self._k, len(ev.voters))
             on = (ratio > self._double_on(kk)).sum(axis=0) >= kk
             off = (ratio > s.off).sum(axis=0) < kk
@@ -1169,8 +1184,8 @@ class Trigger:
             scan.pos, scan.level = limit, last
             return None
         scan.pos, scan.level = a + j + 1, None if p is None else p[:, j].copy()
-        if scan.ref_trace is not None:
-            scan.ref = scan.ref_trace[:, j + 1].copy()
+        if scan.ref_trace is not None:  # the mean up to the contact's sample, inclusive
+            scan.ref = scan.ref_trace[:, j].copy()
         scan.dead_until = a + j + n.guard
         return a + j
 
@@ -1205,9 +1220,11 @@ class Trigger:
         prev = var if scan.ref is None else scan.ref
         n = max(self._len.envelope, _REF_STA * self._len.innovation)
         ref, last = ons.exp_average(e2, n, prev)
-        trace = np.concatenate([prev[:, None], ref], axis=1)  # [:, i]: up to sample i - 1
-        scan.ref, scan.ref_trace = last, trace
-        return np.maximum(var[:, None], trace[:, :-1])
+        scan.ref, scan.ref_trace = last, ref  # ref[:, i]: the mean up to sample i
+        before = np.empty_like(ref)  # [:, i]: up to sample i - 1, in one array for the caller
+        before[:, 0] = prev
+        before[:, 1:] = ref[:, :-1]
+        return np.maximum(var[:, None], before, out=before)
 
     def _close(self, reason: str) -> list[ImpactEvent]:
         """Close the open event at the last sample in the ring (gap or end of stream)."""
@@ -1267,6 +1284,19 @@ class Trigger:
             not_analysable=ev.not_analysable,
             record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
                                 self._scale.copy()) if self.settings.keep_records else None)
+
+
+def _innovation(x: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """:func:`ramdaq.analysis.onset.prediction_error` of the rows of ``x`` (n_rows, n), the
+    same numbers: ``scipy.signal.lfilter(a, [1.0], x)`` runs an FIR filter as ``np.convolve(a,
+    row)`` on each row and keeps the first ``n`` samples, as here, but through
+    ``apply_along_axis`` and a dozen checks a call (a quarter of the second-contact scan's
+    CPU). Shape (n_rows, n - order); the filter's first coefficient is 1."""
+    order, n = len(a) - 1, x.shape[-1]
+    e = np.empty((x.shape[0], n - order))
+    for i, row in enumerate(x):
+        e[i] = np.convolve(a, row)[order:n]
+    return e
 
 
 def _voting_rows(info: StreamInfo, s: TriggerSettings) -> tuple[np.ndarray, int]:

@@ -287,7 +287,7 @@ def decode_block(data: bytes) -> Block:
         raise FrameError(f"{BLOCK_TOPIC}: message is not a ramdaq.Block ({err})") from err
     n_ch, n_s = msg.n_channels, msg.n_samples
     counts = np.asarray(msg.counts, dtype=np.int32)  # upb has __array__: a memcpy, not a loop
-    scale = np.asarray(msg.scale, dtype=np.float64)
+    scale = np.array(msg.scale[:], dtype=np.float64)  # via a list: half the time of asarray
     if counts.size != n_ch * n_s or scale.size != n_ch:
         raise FrameError(
             f"{BLOCK_TOPIC}: block seq {msg.seq} has {counts.size} counts and {scale.size} "

@@ -56,7 +56,7 @@ from mcap.records import (
     Metadata,
     Schema,
 )
-from mcap.stream_reader import breakup_chunk, get_chunk_data_stream
+from mcap.stream_reader import CRCValidationError, breakup_chunk, get_chunk_data_stream
 
 from . import mcap_format as fmt
 from .base import TIMED_OUT, Device
@@ -68,11 +68,17 @@ __all__ = ["McapReplayDevice", "JsonMessage", "RecordScanner", "Damage", "FileEn
 
 _HEAD = struct.Struct("<BQ")  # every record: opcode, length of what follows
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # a message: channel id, sequence, log and publish time
+_MESSAGE_AT = struct.Struct("<BQH")  # a chunk's record: opcode, length; a message's channel id
+_MESSAGE_REST = struct.Struct("<IQQ")  # a message after its channel id: sequence, log, publish
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length (20), summary_start, summary_offset_start, crc
 _DATA_END_BYTES = _HEAD.size + 4  # opcode, length, data_section_crc
 _CHUNK_FIXED = struct.Struct("<QQQII")  # start, end time, uncompressed size, crc, len(compression)
 _COMPRESSIONS = (b"zstd", b"lz4", b"")
 _KNOWN = frozenset(int(o) for o in Opcode)
+_PARSED = (Opcode.HEADER, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE, Opcode.CHUNK,
+           Opcode.ATTACHMENT, Opcode.METADATA, Opcode.DATA_END)
+_OP_MESSAGE, _OP_CHANNEL, _OP_SCHEMA = int(Opcode.MESSAGE), int(Opcode.CHANNEL), int(Opcode.SCHEMA)
+_NOT_PARSED = frozenset(int(o) for o in Opcode if o not in _PARSED)  # indexes, footer, ...
 _SCAN_WINDOW = 1 << 20  # bytes searched at a time for the next intact chunk
 # What a damaged record raises inside the mcap record parsers and the decompressors: short reads
 # (EndOfFile, struct.error), bad lengths (McapError), a failed CRC or bad UTF-8 (ValueError),
@@ -177,6 +183,11 @@ class Damage:
         return f"{self.what} at byte {self.start} ({self.bytes} bytes skipped): {self.reason}"
 
 
+def _stream(raw: bytes) -> ReadDataStream:
+    """The body of the record ``raw`` (its opcode and length skipped) as ``mcap`` reads one."""
+    return ReadDataStream(BytesIO(raw[_HEAD.size:]))
+
+
 class _Bad(Exception):
     """A record at a given offset failed: why, and what it was."""
 
@@ -230,6 +241,8 @@ class RecordScanner:
         self.strict = strict
         self.topics = topics  # messages of these topics only (None: all), see _chunk_records
         self._channel_topic: dict[int, str] = {}
+        self._wanted: set[int] = set()  # ids of the channels of ``topics``
+        self._zstd: zstandard.ZstdDecompressor | None = None
         self.size = os.fstat(f.fileno()).st_size
         self.end = read_file_end(f, self.size)
         self.complete = False
@@ -308,54 +321,93 @@ class RecordScanner:
 
     def _parse(self, opcode: int, raw: bytes) -> list[McapRecord]:
         """The records a record holds (a chunk's, checked against its CRC); ``_Bad`` if damaged."""
-        body = ReadDataStream(BytesIO(raw[_HEAD.size:]))
+        if opcode in _NOT_PARSED:  # index records and the like: read (for the CRC), dropped
+            return []
         length = len(raw) - _HEAD.size
         try:
             if opcode == Opcode.CHUNK:
-                chunk = Chunk.read(body)
-                records = (breakup_chunk(chunk, validate_crc=True) if self.topics is None
-                           else self._chunk_records(chunk))
+                records = (breakup_chunk(Chunk.read(_stream(raw)), validate_crc=True)
+                           if self.topics is None else self._chunk_records(raw))
                 self.chunks += 1
                 return records
             if opcode == Opcode.ATTACHMENT:
                 (crc,) = struct.unpack_from("<I", raw, len(raw) - 4)
                 if crc and zlib.crc32(raw[_HEAD.size:-4]) != crc:
                     raise ValueError(f"attachment CRC {crc} does not match its bytes")
-                return [Attachment.read(body)]
+                return [Attachment.read(_stream(raw))]
             if opcode == Opcode.MESSAGE:
-                return [Message.read(body, length)]
+                return [Message.read(_stream(raw), length)]
             reader = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
-                      Opcode.METADATA: Metadata, Opcode.DATA_END: DataEnd}.get(Opcode(opcode))
-            return [reader.read(body)] if reader else []
+                      Opcode.METADATA: Metadata, Opcode.DATA_END: DataEnd}[Opcode(opcode)]
+            return [reader.read(_stream(raw))]
         except _DAMAGE as err:
             raise _Bad("chunk" if opcode == Opcode.CHUNK else "record", _why(err)) from err
 
-    def _chunk_records(self, chunk: Chunk) -> list[McapRecord]:
-        """A chunk's records as ``breakup_chunk`` gives them (its CRC checked the same way),
-        less the messages of topics other than :attr:`topics`, which are stepped over unparsed:
-        a trial's recording holds ten view messages (``/ramdaq/gages/trace``) for each block,
-        and parsing them was most of a replay's reading."""
-        stream, n = get_chunk_data_stream(chunk, validate_crc=True)
-        data = stream.read(n)
+    def _chunk_data(self, raw: bytes) -> bytes:
+        """The records of the chunk record ``raw`` (header included), uncompressed and checked
+        against the chunk's CRC, as ``Chunk.read`` and ``get_chunk_data_stream`` give them and
+        with their errors, without their copies: zstd through one decompressor kept for the
+        file (a new one a chunk cost a fifth of a replay's reading), other compressions
+        through ``mcap``."""
+        at = _HEAD.size + _CHUNK_FIXED.size
+        _, _, size, crc, n = _CHUNK_FIXED.unpack_from(raw, _HEAD.size)
+        compression = raw[at:at + n]
+        if compression not in (b"zstd", b""):
+            stream, n_data = get_chunk_data_stream(Chunk.read(_stream(raw)), validate_crc=True)
+            return stream.read(n_data)
+        (n_data,) = struct.unpack_from("<Q", raw, at + n)
+        start = at + n + 8
+        if n_data > len(raw) - start:
+            raise ValueError(f"the chunk's {n_data} bytes of records run past its record")
+        view = memoryview(raw)[start:start + n_data]
+        if compression == b"zstd":
+            if self._zstd is None:
+                self._zstd = zstandard.ZstdDecompressor()
+            data = self._zstd.decompress(view, max_output_size=size)
+        else:
+            data = bytes(view)
+        actual = zlib.crc32(data) if crc else 0
+        if actual != crc:
+            chunk = Chunk(compression=compression.decode(), data=bytes(view),
+                          message_start_time=0, message_end_time=0, uncompressed_crc=crc,
+                          uncompressed_size=size)
+            raise CRCValidationError(expected=crc, actual=actual, record=chunk)
+        return data
+
+    def _chunk_records(self, raw: bytes) -> list[McapRecord]:
+        """The records of the chunk record ``raw`` as ``breakup_chunk`` gives them (its CRC
+        checked the same way), less the messages of topics other than :attr:`topics`, which
+        are stepped over unparsed: a trial's recording holds ten view messages
+        (``/ramdaq/gages/trace``) for each block, and parsing them was most of a replay's
+        reading (so the loop over them is kept to one ``unpack`` and one test a record)."""
+        data = self._chunk_data(raw)
+        n = len(data)
+        data += bytes(_MESSAGE_AT.size - _HEAD.size)  # so a message's channel id reads with its head
         records: list[McapRecord] = []
-        pos, head, msg = 0, _HEAD, _MESSAGE_HEAD
+        pos, unpack, rest = 0, _MESSAGE_AT.unpack_from, _MESSAGE_REST.unpack_from
+        known, wanted = self._channel_topic, self._wanted
+        head, least, message = _HEAD.size, _MESSAGE_HEAD.size, _OP_MESSAGE  # locals: the loop's
         while pos < n:
-            opcode, length = head.unpack_from(data, pos)
-            body, pos = pos + head.size, pos + head.size + length
-            if pos > n or (opcode == Opcode.MESSAGE and length < msg.size):
+            opcode, length, channel_id = unpack(data, pos)
+            body = pos + head
+            pos = body + length
+            if pos > n or (opcode == message and length < least):
                 raise ValueError(f"a chunk record of {length} bytes runs past its chunk's end")
-            if opcode == Opcode.MESSAGE:
-                channel_id, sequence, log_time, publish_time = msg.unpack_from(data, body)
-                if self._channel_topic.get(channel_id) in self.topics or \
-                        channel_id not in self._channel_topic:
+            if opcode == message:
+                if channel_id in wanted or channel_id not in known:
+                    sequence, log_time, publish_time = rest(data, body + 2)
                     records.append(Message(channel_id=channel_id, log_time=log_time,
-                                           data=data[body + msg.size:pos],
+                                           data=data[body + least:pos],
                                            publish_time=publish_time, sequence=sequence))
-            elif opcode in (Opcode.CHANNEL, Opcode.SCHEMA):
-                reader = Channel if opcode == Opcode.CHANNEL else Schema
+            elif opcode == _OP_CHANNEL or opcode == _OP_SCHEMA:
+                reader = Channel if opcode == _OP_CHANNEL else Schema
                 record = reader.read(ReadDataStream(BytesIO(data[body:pos])))
                 if isinstance(record, Channel):
-                    self._channel_topic[record.id] = record.topic
+                    known[record.id] = record.topic
+                    if record.topic in self.topics:
+                        wanted.add(record.id)
+                    else:
+                        wanted.discard(record.id)
                 records.append(record)
         return records
 
@@ -505,6 +557,7 @@ class McapReplayDevice(Device):
         topics: dict[int, str] = {}
         last: Block | None = None
         records = iter(scanner)
+        decode, block_topic = fmt.decode_block, fmt.BLOCK_TOPIC  # locals: looked up per record
         while True:
             try:
                 record = next(records, None)
@@ -512,11 +565,11 @@ class McapReplayDevice(Device):
                 raise fmt.CorruptRecording(f"{err}; {self._read_so_far(last)}") from err
             if record is None:
                 return
-            if isinstance(record, Channel):
-                topics[record.id] = record.topic
-            elif isinstance(record, Message) and topics.get(record.channel_id) == fmt.BLOCK_TOPIC:
+            if isinstance(record, Message):  # the most of them, so asked first
+                if topics.get(record.channel_id) != block_topic:
+                    continue
                 try:
-                    block = fmt.decode_block(record.data)
+                    block = decode(record.data)
                 except FrameError as err:
                     raise fmt.CorruptRecording(
                         f"{self.path}: a block message in the chunk ending at byte "
@@ -524,6 +577,8 @@ class McapReplayDevice(Device):
                     ) from err
                 last = block
                 yield block
+            elif isinstance(record, Channel):
+                topics[record.id] = record.topic
 
     def _read_so_far(self, last: Block | None) -> str:
         if last is None:
@@ -565,7 +620,7 @@ class McapReplayDevice(Device):
         ``_pending``. A read error after the first block is raised by the next read, so that the
         blocks before it are handed over first."""
         limit = max(block.n_samples, round(self.join_s * block.fs_hz))
-        parts, n, end = [block], block.n_samples, block.next_sample
+        parts, n, end, scale = [block], block.n_samples, block.next_sample, block.scale
         while n < limit:
             try:
                 nxt = next(self._blocks, None)
@@ -574,12 +629,15 @@ class McapReplayDevice(Device):
                 break
             if nxt is None:
                 break
-            if (nxt.first_sample != end or n + nxt.n_samples > limit
-                    or not np.array_equal(nxt.scale, block.scale)):
+            m = nxt.counts.shape[1]
+            # the same scale: np.array_equal's test (shapes, then every element), less its
+            # conversions and dispatch (asked once a recorded block)
+            if (nxt.first_sample != end or n + m > limit or nxt.scale.shape != scale.shape
+                    or not (nxt.scale == scale).all()):
                 self._pending = nxt
                 break
             parts.append(nxt)
-            n, end = n + nxt.n_samples, nxt.next_sample
+            n, end = n + m, nxt.first_sample + m
         if len(parts) == 1:
             return block
         return Block(block.seq, block.first_sample, block.t0_ns, block.fs_hz,

@@ -95,6 +95,27 @@ def test_joined_blocks_are_the_same_samples_and_stop_at_a_gap(tmp_path):
         McapReplayDevice(path, pace="realtime", join_s=1.0)
 
 
+@pytest.mark.parametrize("compression", ["lz4", "none"])
+def test_every_compression_replays_the_same_blocks(tmp_path, compression):
+    """The replay's own chunk reader (zstd, none) and mcap's (lz4) give the blocks recorded,
+    and a flipped byte in an uncompressed chunk's records fails its CRC as in a zstd one."""
+    blocks = stream(12, seed=3)
+    path = tmp_path / f"{compression}.mcap"
+    _record(path, blocks, compression=compression)
+    _, back, _ = _replay(path)
+    assert len(back) == len(blocks) and all(a.same_as(b) for a, b in zip(back, blocks, strict=True))
+    if compression != "none":
+        return
+    with open(path, "rb") as f:
+        chunk = make_reader(f).get_summary().chunk_indexes[0]
+    raw = bytearray(path.read_bytes())
+    raw[chunk.chunk_start_offset + chunk.chunk_length - 5] ^= 0x01  # in its last record
+    path.write_bytes(bytes(raw))
+    with pytest.raises(RecordingError, match=r"damaged chunk at byte \d+ \(CRCValidationError: "
+                                             r"crc validation failed in Chunk"):
+        _replay(path)
+
+
 def test_readable_with_only_mcap_and_mcap_protobuf(tmp_path):
     """Another program needs nothing from ramdaq: mcap + mcap_protobuf's DecoderFactory."""
     path = tmp_path / "trial.mcap"

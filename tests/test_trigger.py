@@ -424,3 +424,19 @@ def test_what_a_rate_cannot_resolve_is_refused_when_built(kw, match):
         Trigger(info, TriggerSettings(**kw))
     Trigger(info, TriggerSettings.for_rate(50.0, **{k: v for k, v in kw.items()
                                                    if k != "ar_fit_s"}))
+
+
+def test_the_second_contact_scan_s_innovation_is_prediction_error_s_to_the_bit():
+    """The trigger runs the AR prediction-error filter as ``lfilter`` does (np.convolve row by
+    row) without its per-call overhead: the same numbers, bit for bit, or the detections of a
+    replay could move."""
+    from ramdaq.analysis.onset import ar_prediction_filter, prediction_error
+    from ramdaq.daq.trigger import _innovation
+
+    rng = np.random.default_rng(7)
+    t = np.arange(3000) / 2048.0
+    x = np.exp(-t) * np.sin(2 * np.pi * 13.0 * t) * rng.uniform(0.5, 2, (5, 1)) \
+        + 1e-3 * rng.standard_normal((5, t.size))
+    a = ar_prediction_filter(x[:, :400], 20)
+    for rows in (x, x[:1], x[:, :25]):
+        assert np.array_equal(_innovation(rows, a), prediction_error(rows, a))
