@@ -203,7 +203,10 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
     unexplained gap only there, is not told from that form error -- "none" (no effect; model
     form). So is an unexplained gap in the band of a mode the calibrated rig misses
     (``form_modes``: each such mode's frequency, Hz, and every gage where its shape differs
-    beyond chance) on gages among that mode's (:func:`in_form_mode`)."""
+    beyond chance) on gages among that mode's (:func:`in_form_mode`). A structural candidate is
+    held against the form its own update leaves (its ``form_gages``, when given: the rig
+    calibrated again with the effect on, :meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.form_with_update`):
+    a form error the effect explains is the effect, not the rig's form."""
     named = model or "none"
     c = next((c for c in candidates if c["name"] == named), None)
     if named == "unexplained" and in_form_mode(where, form_modes):
@@ -212,7 +215,8 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
         within = where is None or not where["gages"] or set(where["gages"]) <= form_gages
         if named == "unexplained" and within:
             named = "none"
-        elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= form_gages:
+        elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= set(
+                c.get("form_gages", form_gages)):
             named, c = "none", None
     loc = c["location"] if c else (where if named == "unexplained" else None)
     return Answer(named, "model", loc, c["closed_held"] if c else None)

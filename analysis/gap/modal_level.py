@@ -241,6 +241,16 @@ def modes_at_gages(form: ModalForm) -> ModelModesAtGages:
     return ModelModesAtGages(lam.imag / (2 * math.pi), -lam.real / np.abs(lam), form.gage_acc)
 
 
+def modes_of_set(lam: np.ndarray, shapes: np.ndarray) -> ModelModesAtGages:
+    """Modes given as eigenvalues ``lam`` (m,) 1/s and gage shapes ``shapes`` (n_gages, m)
+    complex, any scale per mode (the effect search's :class:`~ramdaq.analysis.gap.forward.ModeSet`:
+    ``lam``, ``A``), as :class:`ModelModesAtGages`; modes without a positive frequency (a
+    filter's real pole) are left out."""
+    keep = np.asarray(lam).imag > 0
+    lam = np.asarray(lam)[keep]
+    return ModelModesAtGages(lam.imag / (2 * math.pi), -lam.real / np.abs(lam), np.asarray(shapes)[:, keep])
+
+
 def mac(a: np.ndarray, b: np.ndarray) -> float:
     """Complex modal assurance criterion of two shapes, 0..1 (NaN if either is zero)."""
     na, nb = np.vdot(a, a).real, np.vdot(b, b).real
@@ -261,13 +271,15 @@ def body_mac(rig: Rig, a: np.ndarray, model_shape: np.ndarray, body: str) -> flo
     return mac(a[rows], m)
 
 
-def compare(tm: TrialModes, rig: Rig, *, top_hz: float | None = None) -> ModalComparison:
+def compare(tm: TrialModes, rig: Rig, *, top_hz: float | None = None,
+            model: ModelModesAtGages | None = None) -> ModalComparison:
     """Pair the identified modes ``tm`` with ``rig``'s model modes below ``top_hz`` (default:
     twice the highest identified mode): the assignment that minimises the summed
     ``(1 - MAC) + |ln(f_model / f_id)| / ln 2`` over pairs within :data:`MAX_PAIR_RATIO` in
     frequency whose cost stays below 1.2 (a pair sharing no shape and a factor 1.5 apart is no
-    pair)."""
-    mm = model_modes_at_gages(rig)
+    pair). ``model``: the modes to pair with, when not ``rig``'s own model's (a model with an
+    effect's update on it, :func:`modes_of_set`); ``rig`` then gives only the gages' bodies."""
+    mm = model_modes_at_gages(rig) if model is None else model
     top = top_hz if top_hz is not None else 2 * float(np.max(tm.f_hz, initial=0.0))
     cand = np.flatnonzero((mm.f_hz > 0) & (mm.f_hz < top))
     K = tm.n_modes

@@ -216,6 +216,7 @@ def run_one(sc: dict, workdir: str) -> dict:
     rig the model level, then the data-only checks and the effect search); the result as plain
     JSON."""
     from ...drivers.array_device import ArrayDevice
+    from ..gap_layers import candidate_records
     from ..record import record
     from .gap import run_gap
 
@@ -250,7 +251,7 @@ def run_one(sc: dict, workdir: str) -> dict:
         "verdict": d.verdict, "named": d.best.name if d.best else None,
         "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
         "zdetect": float(d.z_detect),
-        "candidates": [c.record() | {"location": c.location} for c in d.candidates],
+        "candidates": candidate_records(d),
         "signatures": [s.effect.name for s in d.signatures],
         "closed_held": d.best.closed_held if d.best else None,
         "location": d.best.location if d.best else None,
