@@ -71,7 +71,8 @@ def one_answer(d: Diagnosis) -> Answer:
     modes = d.model_level.form_modes() if d.model_level is not None else []
     cands = candidate_records(d)
     finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
-    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes)
+    splits = [s.to_json() for s in d.model_level.splits()] if d.model_level is not None else []
+    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes, splits)
 
 
 def with_structure(level: ModelLevel | None, cands: list) -> ModelLevel | None:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ramdaq.analysis.gap.layers import model_answer
-from ramdaq.analysis.gap.modal_level import TrialModes, model_modes_at_gages, modes_of_set
+from ramdaq.analysis.gap.modal_level import TrialModes, compare, model_modes_at_gages, modes_of_set, splits
 from ramdaq.analysis.gap.rigfit import ModelLevel, calibrate_to_modes, gages_of, with_updates
 from ramdaq.analysis.model.rig import HullMode, load_rig
 
@@ -99,3 +99,39 @@ def test_modes_of_a_mode_set_leave_out_real_poles():
     mm = modes_of_set(lam, shapes)
     assert np.allclose(mm.f_hz, [10.0, 30.0]) and mm.shapes.shape == (3, 2)
     assert mm.zeta[0] == pytest.approx(1.0 / abs(lam[0]))
+
+
+def split_copy(tm: TrialModes, k: int, rel: float) -> TrialModes:
+    """``tm`` with its mode ``k`` rung again ``rel`` higher, same shape (a mode split in two)."""
+    pick = lambda a: np.concatenate([a, a[..., k:k + 1]], axis=-1)   # noqa: E731
+    f = tm.f_hz.copy()
+    f = np.append(f, f[k] * (1 + rel))
+    o = np.argsort(f)
+    return replace(tm, f_hz=f[o], f_se_hz=pick(tm.f_se_hz)[o], zeta=pick(tm.zeta)[o],
+                   zeta_se=pick(tm.zeta_se)[o], shapes=pick(tm.shapes)[:, o],
+                   shape_se=pick(tm.shape_se)[:, o], n_seen=pick(tm.n_seen)[o])
+
+
+def test_a_mode_split_in_two_is_found_and_a_clean_rig_has_none():
+    rig = load_rig("albacore").with_medium("air")
+    tm = modes_of(rig)
+    assert splits(tm, compare(tm, rig)) == []
+    two = split_copy(tm, 1, 0.03)           # the 24.5 Hz mode, halves 3 % apart
+    (s,) = splits(two, compare(two, rig))
+    assert s.f_lo_hz == pytest.approx(tm.f_hz[1]) and s.f_hi_hz == pytest.approx(1.03 * tm.f_hz[1])
+    assert s.mac == pytest.approx(1.0) and s.gages
+    # further apart than the widest split: two modes of their own
+    far = split_copy(tm, 1, 0.15)
+    assert splits(far, compare(far, rig)) == []
+
+
+def test_an_unexplained_gap_with_a_split_answers_split_mode():
+    split = {"f_lo_hz": 23.2, "f_hi_hz": 23.7, "mac": 0.99, "gages": [1, 4, 6]}
+    cands = [{"name": "split_mode", "dbic": 30.0, "dbic_marginal": None, "closed_held": 0.01,
+              "closed_fit": 0.01, "location": {"gages": [2], "window": "early", "band_hz": 87.0}}]
+    a = model_answer("unexplained", cands, None, set(), (), [split])
+    assert a.named == "split_mode" and a.location["gages"] == [1, 4, 6] and a.location["window"] == "late"
+    assert a.closed_held == 0.01
+    # no gap beyond noise (no choice): a split the calibrated model reproduces in the time
+    # domain is no effect to name
+    assert model_answer(None, cands, None, set(), (), [split]).named == "none"

@@ -195,7 +195,8 @@ class Answer:
 
 
 def model_answer(model: str | None, candidates: list[dict], where: dict | None,
-                 form_gages: set[int], form_modes: Sequence[tuple[float, Sequence[int]]] = ()) -> Answer:
+                 form_gages: set[int], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
+                 splits: Sequence[dict] = ()) -> Answer:
     """The model layer's answer from its choice ``model`` (:func:`~ramdaq.analysis.gap.verdict.choose`:
     None for no gap, "unexplained", or a candidate's name), the candidates' records (with their
     ``location``), the unexplained gap's place ``where`` and the gages where the rig calibrated to
@@ -206,8 +207,12 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
     beyond chance) on gages among that mode's (:func:`in_form_mode`). A structural candidate is
     held against the form its own update leaves (its ``form_gages``, when given: the rig
     calibrated again with the effect on, :meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.form_with_update`):
-    a form error the effect explains is the effect, not the rig's form."""
+    a form error the effect explains is the effect, not the rig's form. An unexplained gap where the
+    model level found a mode split in two (``splits``, :meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits`
+    as JSON: two identified modes of one shape where the calibrated rig has one) is that split."""
     named = model or "none"
+    if named == "unexplained" and splits:
+        return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     c = next((c for c in candidates if c["name"] == named), None)
     if named == "unexplained" and in_form_mode(where, form_modes):
         named = "none"
@@ -220,6 +225,16 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
             named, c = "none", None
     loc = c["location"] if c else (where if named == "unexplained" else None)
     return Answer(named, "model", loc, c["closed_held"] if c else None)
+
+
+def split_answer(split: dict, candidates: list[dict]) -> Answer:
+    """The answer "split_mode" from the model level's split (as JSON), placed at its gages and
+    mode, late window (where the halves beat); its closure the effect search's split_mode's."""
+    f = 0.5 * (split["f_lo_hz"] + split["f_hi_hz"])
+    c = next((c for c in candidates if c["name"] == "split_mode"), None)
+    loc = {"gages": list(split["gages"]), "window": "late", "band_hz": f, "effect_mode_hz": f,
+           "band": f"{f:.1f} Hz"}
+    return Answer("split_mode", "model", loc, c["closed_held"] if c else None)
 
 
 def in_form_mode(where: dict | None, form_modes: Sequence[tuple[float, Sequence[int]]]) -> bool:
@@ -237,7 +252,8 @@ def in_form_mode(where: dict | None, form_modes: Sequence[tuple[float, Sequence[
 
 
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
-           findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = ()) -> Answer:
+           findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
+           splits: Sequence[dict] = ()) -> Answer:
     """The one report's answer (:class:`Answer`), what ``ramdaq gap`` prints and the benchmark
     scores: the model layer's (:func:`model_answer`), which a credible data-only finding
     (:func:`credible`) replaces when the model names no effect or blames a sensor (the data layer
@@ -249,7 +265,7 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     at 20.5x its chance level while the model named hull_coupling). Of several, the
     strongest against its chance level answers. ``form_modes``: the modes the calibrated rig
     still misses, as :func:`model_answer` reads them."""
-    out = model_answer(model, candidates, where, form_gages, form_modes)
+    out = model_answer(model, candidates, where, form_gages, form_modes, splits)
     named = out.named
     if named == "unexplained":
         finds = [f for f in overriding_unexplained(findings) if data_effect(f)]

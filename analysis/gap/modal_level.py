@@ -39,6 +39,14 @@ signal-to-noise), while the spurious poles of order selection land anywhere in t
 MAX_PAIR_RATIO = 2.0
 """A model mode and an identified one are paired only within a factor 2 in frequency: a rig
 whose stiffness or mass is off by a factor of 2 (a crude rig) moves its modes by sqrt(2)."""
+SPLIT_MAC = 0.95
+"""Two identified modes are one mode split in two when their shapes agree to this MAC (16
+gages: a shape agreeing to 0.95 is the same motion, while two modes of a linear structure are
+orthogonal in its mass and differ at the gages; the hull modes of a clean modal-family trial
+1-2 % apart came to 0.83-0.84)."""
+MAX_SPLIT_REL = 0.1
+"""The widest split, relative (as the effect search's ``split_mode.MAX_SPLIT``): further apart,
+two modes of one shape are modes of their own."""
 QUIET_BODY = 1e-3
 """A body whose gages carry less than this share of a model mode's shape norm is not predicted
 to move in that mode: its MAC there is not defined (NaN)."""
@@ -226,6 +234,48 @@ def _clusters(found: list[tuple], need: int) -> list[list[tuple[int, int]]]:
             used.update(group)
             rows.append(group)
     return rows
+
+
+@dataclass(frozen=True)
+class Split:
+    """Two identified modes ``f_lo_hz`` < ``f_hi_hz`` of one shape (``mac`` between them, at
+    least :data:`SPLIT_MAC`) where the rig model, calibrated to the trial's modes, has one mode
+    for them (at most one of them paired): a mode split in two (an absorber, an asymmetry),
+    what no calibration of the rig's constants makes. ``gages``: where the pair's shape is at
+    least half its largest entry, largest first."""
+
+    f_lo_hz: float
+    f_hi_hz: float
+    mac: float
+    gages: tuple[int, ...]
+
+    @property
+    def f_hz(self) -> float:
+        return 0.5 * (self.f_lo_hz + self.f_hi_hz)
+
+    def to_json(self) -> dict:
+        return {"f_lo_hz": self.f_lo_hz, "f_hi_hz": self.f_hi_hz, "mac": self.mac, "gages": list(self.gages)}
+
+
+def splits(tm: TrialModes, cmp: ModalComparison) -> list[Split]:
+    """The identified modes ``tm`` that are one mode split in two (:class:`Split`) against the
+    pairing ``cmp`` of the calibrated model: within :data:`MAX_SPLIT_REL` in frequency, shapes
+    agreeing to :data:`SPLIT_MAC`, and not both paired with model modes of their own."""
+    paired = {p.i_id for p in cmp.pairs}
+    out = []
+    for i in range(tm.n_modes):
+        for j in range(i + 1, tm.n_modes):
+            if tm.f_hz[j] > (1 + MAX_SPLIT_REL) * tm.f_hz[i] or (i in paired and j in paired):
+                continue
+            if not paired & {i, j}:
+                continue
+            m = mac(tm.shapes[:, i], tm.shapes[:, j])
+            if m >= SPLIT_MAC:
+                a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
+                big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
+                out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m,
+                                 tuple(tm.gage_numbers[k] for k in big)))
+    return out
 
 
 # -- the model's side ----------------------------------------------------------------------------

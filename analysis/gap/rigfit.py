@@ -49,10 +49,12 @@ from .calibrate import Stop
 from .modal_level import (
     ModalComparison,
     ModelModesAtGages,
+    Split,
     TrialModes,
     compare,
     model_modes_at_gages,
     modes_at_gages,
+    splits,
     trial_modes,
 )
 from .model_sensitivity import matrix_derivatives, mode_derivatives
@@ -750,6 +752,11 @@ class ModelLevel:
             return calibrate_to_modes(self.modes, start, bounds).form
         except (ValueError, np.linalg.LinAlgError, RigError):
             return None
+
+    def splits(self) -> list[Split]:
+        """Identified modes of one shape where the calibrated rig has one mode
+        (:func:`~ramdaq.analysis.gap.modal_level.splits`): a split no constant makes."""
+        return [] if self.fit is None or self.modes is None else splits(self.modes, self.fit.after)
 
     def candidate_form(self, name: str) -> dict:
         """What the answer reads of a candidate: ``{"form_gages": [...], "form_modes": [...]}``,

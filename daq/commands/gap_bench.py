@@ -261,7 +261,9 @@ def run_one(sc: dict, workdir: str) -> dict:
         "seconds": t_diag, "seconds_generate": t_gen, "cpu_seconds": time.process_time() - c0,
     } | ({"headline": d.headline, "min_closure": _min_closure(d),
           "form_gages": sorted(d.model_level.form_gages()) if d.model_level else [],
-          "form_modes": d.model_level.form_modes() if d.model_level else []} if perturb else {})
+          "form_modes": d.model_level.form_modes() if d.model_level else [],
+          "splits": [s.to_json() for s in d.model_level.splits()] if d.model_level else []}
+         if perturb else {})
 
 
 def _generate_truth(sc: dict) -> dict:
@@ -347,7 +349,7 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
         return "none"
     return model_answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"],
                         r.get("unexplained_where"), set(r.get("form_gages", [])),
-                        r.get("form_modes", [])).named
+                        r.get("form_modes", []), r.get("splits", [])).named
 
 
 LAYER_OF = {"gage_sensitivity": "sensor", "gage_alignment": "sensor", "time_skew": "sensor",
@@ -372,7 +374,7 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
         return {"named": "none", "by": "model", "location": None, "closed_held": None, "finding": None}
     return answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"], r.get("unexplained_where"),
                   set(r.get("form_gages", [])), r.get("data_findings") or [],
-                  r.get("form_modes", [])).to_json()
+                  r.get("form_modes", []), r.get("splits", [])).to_json()
 
 
 def _z(r: dict) -> float:
