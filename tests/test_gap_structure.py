@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ramdaq.analysis.gap.layers import model_answer
+from ramdaq.analysis.gap.layers import answer, model_answer
 from ramdaq.analysis.gap.modal_level import TrialModes, compare, model_modes_at_gages, modes_of_set, splits
 from ramdaq.analysis.gap.rigfit import ModelLevel, calibrate_to_modes, gages_of, with_updates
 from ramdaq.analysis.model.rig import HullMode, load_rig
@@ -129,9 +129,14 @@ def test_an_unexplained_gap_with_a_split_answers_split_mode():
     split = {"f_lo_hz": 23.2, "f_hi_hz": 23.7, "mac": 0.99, "gages": [1, 4, 6]}
     cands = [{"name": "split_mode", "dbic": 30.0, "dbic_marginal": None, "closed_held": 0.01,
               "closed_fit": 0.01, "location": {"gages": [2], "window": "early", "band_hz": 87.0}}]
-    a = model_answer("unexplained", cands, None, set(), (), [split])
+    a = answer("unexplained", cands, None, set(), [], (), [split])
     assert a.named == "split_mode" and a.location["gages"] == [1, 4, 6] and a.location["window"] == "late"
     assert a.closed_held == 0.01
     # no gap beyond noise (no choice): a split the calibrated model reproduces in the time
     # domain is no effect to name
-    assert model_answer(None, cands, None, set(), (), [split]).named == "none"
+    assert answer(None, cands, None, set(), [], (), [split]).named == "none"
+    # a data-only finding that overrides the model's "unexplained" (a double hit far above its
+    # chance level) comes first
+    hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
+           "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
+    assert answer("unexplained", cands, None, set(), [hit], (), [split]).named == "double_hit"

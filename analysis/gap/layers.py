@@ -195,8 +195,7 @@ class Answer:
 
 
 def model_answer(model: str | None, candidates: list[dict], where: dict | None,
-                 form_gages: set[int], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
-                 splits: Sequence[dict] = ()) -> Answer:
+                 form_gages: set[int], form_modes: Sequence[tuple[float, Sequence[int]]] = ()) -> Answer:
     """The model layer's answer from its choice ``model`` (:func:`~ramdaq.analysis.gap.verdict.choose`:
     None for no gap, "unexplained", or a candidate's name), the candidates' records (with their
     ``location``), the unexplained gap's place ``where`` and the gages where the rig calibrated to
@@ -207,12 +206,8 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
     beyond chance) on gages among that mode's (:func:`in_form_mode`). A structural candidate is
     held against the form its own update leaves (its ``form_gages``, when given: the rig
     calibrated again with the effect on, :meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.form_with_update`):
-    a form error the effect explains is the effect, not the rig's form. An unexplained gap where the
-    model level found a mode split in two (``splits``, :meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits`
-    as JSON: two identified modes of one shape where the calibrated rig has one) is that split."""
+    a form error the effect explains is the effect, not the rig's form."""
     named = model or "none"
-    if named == "unexplained" and splits:
-        return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     c = next((c for c in candidates if c["name"] == named), None)
     if named == "unexplained" and in_form_mode(where, form_modes):
         named = "none"
@@ -264,11 +259,17 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     1/amplitude or a frequency move with it (issue 17: a modal friction trial read Coulomb's law
     at 20.5x its chance level while the model named hull_coupling). Of several, the
     strongest against its chance level answers. ``form_modes``: the modes the calibrated rig
-    still misses, as :func:`model_answer` reads them."""
-    out = model_answer(model, candidates, where, form_gages, form_modes, splits)
+    still misses, as :func:`model_answer` reads them. ``splits``: the model level's modes split in
+    two (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits` as JSON: two identified modes of one
+    shape where the calibrated rig has one), which answer a gap the model leaves unexplained
+    (before the form error would make it "none") when no data-only finding overrides it."""
+    out = model_answer(model, candidates, where, form_gages, form_modes)
     named = out.named
+    overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
+    if model == "unexplained" and splits and not overriding:
+        return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     if named == "unexplained":
-        finds = [f for f in overriding_unexplained(findings) if data_effect(f)]
+        finds = overriding
     else:
         finds = [f for f in credible(findings) if data_effect(f)]
         laws = [f for f in finds if told_law(f) and strength(f) >= PRECEDENCE_STRENGTH]
