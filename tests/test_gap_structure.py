@@ -123,6 +123,15 @@ def test_a_mode_split_in_two_is_found_and_a_clean_rig_has_none():
     # further apart than the widest split: two modes of their own
     far = split_copy(tm, 1, 0.15)
     assert splits(far, compare(far, rig)) == []
+    # closer than the mode's damping ratio: no beat within the decay, one mode fitted twice
+    near = split_copy(tm, 1, 0.5 * tm.zeta[1])
+    assert splits(near, compare(near, rig)) == []
+    # three of one shape: a frequency that moves (friction, a crack, a wandering tone)
+    chain = split_copy(split_copy(tm, 1, 0.03), 1, 0.06)
+    assert splits(chain, compare(chain, rig)) == []
+    # the halves of a split decay alike
+    odd = replace(two, zeta=np.where(np.isclose(two.f_hz, 1.03 * tm.f_hz[1]), 3 * tm.zeta[1], two.zeta))
+    assert splits(odd, compare(odd, rig)) == []
 
 
 def test_an_unexplained_gap_with_a_split_answers_split_mode():

@@ -43,7 +43,16 @@ SPLIT_MAC = 0.95
 """Two identified modes are one mode split in two when their shapes agree to this MAC (16
 gages: a shape agreeing to 0.95 is the same motion, while two modes of a linear structure are
 orthogonal in its mass and differ at the gages; the hull modes of a clean modal-family trial
-1-2 % apart came to 0.83-0.84)."""
+1-2 % apart came to 0.83-0.84). Checked on development seeds only (modal 51000-60003)."""
+SPLIT_ZETA_RATIO = 1.5
+"""The halves of a split mode decay alike: damping ratios within this factor (the impacts'
+spread of an identified damping ratio is a few per cent; two unrelated modes' differ by any
+factor; a tone's decay window poles are near zero or negative)."""
+SPLIT_RESOLVED = 1.0
+"""Two halves at least their damping ratio apart (relative): the beat's period 1 / (f r) is then
+within 2 pi decay time constants 1 / (2 pi f zeta), and a decay that rings ~9 time constants to
+the noise (a ram blow's 1e4 signal-to-noise) shows it; closer, one identified mode is two poles
+fitted to one (the modal family's hull pair 0.9 % apart at 1.2 % damping)."""
 MAX_SPLIT_REL = 0.1
 """The widest split, relative (as the effect search's ``split_mode.MAX_SPLIT``): further apart,
 two modes of one shape are modes of their own."""
@@ -242,39 +251,65 @@ class Split:
     least :data:`SPLIT_MAC`) where the rig model, calibrated to the trial's modes, has one mode
     for them (at most one of them paired): a mode split in two (an absorber, an asymmetry),
     what no calibration of the rig's constants makes. ``gages``: where the pair's shape is at
-    least half its largest entry, largest first."""
+    least half its largest entry, largest first; ``zeta_lo``, ``zeta_hi`` their damping ratios."""
 
     f_lo_hz: float
     f_hi_hz: float
     mac: float
     gages: tuple[int, ...]
+    zeta_lo: float = float("nan")
+    zeta_hi: float = float("nan")
 
     @property
     def f_hz(self) -> float:
         return 0.5 * (self.f_lo_hz + self.f_hi_hz)
 
     def to_json(self) -> dict:
-        return {"f_lo_hz": self.f_lo_hz, "f_hi_hz": self.f_hi_hz, "mac": self.mac, "gages": list(self.gages)}
+        return {"f_lo_hz": self.f_lo_hz, "f_hi_hz": self.f_hi_hz, "mac": self.mac, "gages": list(self.gages),
+                "zeta": [self.zeta_lo, self.zeta_hi]}
+
+
+def _alike(tm: TrialModes) -> list[tuple[int, int, float]]:
+    """(i, j, MAC) of the identified modes i < j within :data:`MAX_SPLIT_REL` in frequency
+    whose shapes agree to :data:`SPLIT_MAC`."""
+    out = []
+    for i in range(tm.n_modes):
+        for j in range(i + 1, tm.n_modes):
+            if tm.f_hz[j] <= (1 + MAX_SPLIT_REL) * tm.f_hz[i]:
+                m = mac(tm.shapes[:, i], tm.shapes[:, j])
+                if m >= SPLIT_MAC:
+                    out.append((i, j, m))
+    return out
+
+
+def _a_split(tm: TrialModes, i: int, j: int) -> bool:
+    """Whether modes i < j ring as the two halves of one mode: both decaying, with the same
+    damping (within :data:`SPLIT_ZETA_RATIO`; the halves share the mode's), and resolved as a
+    beat: their distance at least their damping ratio (:data:`SPLIT_RESOLVED`)."""
+    zi, zj = float(tm.zeta[i]), float(tm.zeta[j])
+    if zi <= 0 or zj <= 0 or max(zi, zj) > SPLIT_ZETA_RATIO * min(zi, zj):
+        return False
+    return tm.f_hz[j] / tm.f_hz[i] - 1 >= SPLIT_RESOLVED * 0.5 * (zi + zj)
 
 
 def splits(tm: TrialModes, cmp: ModalComparison) -> list[Split]:
     """The identified modes ``tm`` that are one mode split in two (:class:`Split`) against the
-    pairing ``cmp`` of the calibrated model: within :data:`MAX_SPLIT_REL` in frequency, shapes
-    agreeing to :data:`SPLIT_MAC`, and not both paired with model modes of their own."""
+    pairing ``cmp`` of the calibrated model: two modes within :data:`MAX_SPLIT_REL` in
+    frequency, shapes agreeing to :data:`SPLIT_MAC`, one of them paired with a model mode and
+    the other not; alone (a chain of three or more modes of one shape is a frequency that moves
+    -- an amplitude-dependent stiffness, friction, a wandering tone -- not a split), and
+    decaying as halves of one mode do (:func:`_a_split`)."""
     paired = {p.i_id for p in cmp.pairs}
+    alike = _alike(tm)
+    count = np.bincount([k for i, j, _ in alike for k in (i, j)], minlength=tm.n_modes)
     out = []
-    for i in range(tm.n_modes):
-        for j in range(i + 1, tm.n_modes):
-            if tm.f_hz[j] > (1 + MAX_SPLIT_REL) * tm.f_hz[i] or (i in paired and j in paired):
-                continue
-            if not paired & {i, j}:
-                continue
-            m = mac(tm.shapes[:, i], tm.shapes[:, j])
-            if m >= SPLIT_MAC:
-                a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
-                big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
-                out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m,
-                                 tuple(tm.gage_numbers[k] for k in big)))
+    for i, j, m in alike:
+        if len(paired & {i, j}) != 1 or count[i] > 1 or count[j] > 1 or not _a_split(tm, i, j):
+            continue
+        a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
+        big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
+        out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m, tuple(tm.gage_numbers[k] for k in big),
+                         float(tm.zeta[i]), float(tm.zeta[j])))
     return out
 
 
