@@ -349,7 +349,7 @@ def _decide(r: dict, z_gap: float, bic_min: float, min_closure: float) -> str:
         return "none"
     return model_answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"],
                         r.get("unexplained_where"), set(r.get("form_gages", [])),
-                        r.get("form_modes", []), r.get("splits", [])).named
+                        r.get("form_modes", [])).named
 
 
 LAYER_OF = {"gage_sensitivity": "sensor", "gage_alignment": "sensor", "time_skew": "sensor",
