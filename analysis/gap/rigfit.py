@@ -694,10 +694,16 @@ class ModelLevel:
     """The form errors left with each structural candidate's update on the model, by the
     candidate's name (:func:`with_updates`): what that effect leaves unexplained."""
 
-    def statement(self) -> str:
-        """``model form: ...`` -- what the fitted rig still misses, or why it was not fitted."""
+    def statement(self, named: str | None = None) -> str:
+        """``model form: ...`` -- what the fitted rig still misses, or why it was not fitted;
+        with the ``named`` effect's update on it when one was made (:attr:`updates`): what
+        that effect leaves of the form error."""
         if self.fit is None:
             return f"model form: not assessed ({self.note})"
+        if named in self.updates:
+            left = ("; ".join(e.text() for e in self.updates[named])
+                    or "none beyond the identification's uncertainty")
+            return f"model form with {named}'s update on the rig: {left}"
         s = f"model form: {self.fit.form_text()}"
         if self.fit.stop is not Stop.CONVERGED or self.fit.at_bounds():
             s += f" (calibration to the modes {self.fit.solver_text()})"
