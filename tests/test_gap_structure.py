@@ -91,6 +91,10 @@ def test_the_answer_holds_a_structural_candidate_against_its_own_form(tiller_lev
     assert told[0]["form_gages"] == [] and model_answer("tiller", told, None, form).named == "tiller"
     # the wrong update leaves the stock gages' form: still "none"
     assert model_answer("hull_coupling", told, None, form).named == "none"
+    # the report says what each update leaves, and the statement for the named one
+    js = level.to_json()
+    assert js["form_left_with"]["tiller"] == [] and js["form_left_with"]["hull_coupling"]
+    assert level.statement("tiller").startswith("model form with tiller's update on the rig: none")
 
 
 def test_modes_of_a_mode_set_leave_out_real_poles():

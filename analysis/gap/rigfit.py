@@ -789,10 +789,15 @@ class ModelLevel:
                        "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
                        "mac_start": b.mac, "mac_fitted": p.mac}
                       for p, b in _matched(f.after, f.before)],
-            "form_errors": [{"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
-                             "gages": list(e.gages), "beyond_gages": list(e.beyond),
-                             "missing_in_model": e.missing} for e in f.form],
+            "form_errors": [_form_json(e) for e in f.form],
+            "form_left_with": {name: [_form_json(e) for e in form] for name, form in self.updates.items()},
+            "splits": [s.to_json() for s in self.splits()],
         }
+
+
+def _form_json(e: FormError) -> dict:
+    return {"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
+            "gages": list(e.gages), "beyond_gages": list(e.beyond), "missing_in_model": e.missing}
 
 
 def gages_of(form: tuple[FormError, ...]) -> set[int]:
