@@ -10,7 +10,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..analysis.gap.diagnose import Diagnosis, Settings, diagnose
+from ..analysis.gap.effects.base import rig_update
 from ..analysis.gap.layers import Answer, answer
+from ..analysis.gap.rigfit import ModelLevel, with_updates
 from ..analysis.gap.rigfit import model_level as rig_to_modes
 from ..analysis.gap.sensors import DataChecks, check_trial
 from ..analysis.gap.trialdata import TrialData
@@ -54,7 +56,7 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
         given.release_counts()
         lt.release_counts()
     d = diagnose(td, settings, progress)
-    d.model_level, d.data = level, data
+    d.model_level, d.data = with_structure(level, d.candidates), data
     if note:
         d.notes.append(note)
     d.answer = one_answer(d)
@@ -67,9 +69,31 @@ def one_answer(d: Diagnosis) -> Answer:
     to the trial's modes still misses them (model form), and a data-only finding's precedence."""
     form = d.model_level.form_gages() if d.model_level is not None else set()
     modes = d.model_level.form_modes() if d.model_level is not None else []
-    cands = [c.record() | {"location": c.location} for c in d.candidates]
+    cands = candidate_records(d)
     finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
-    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes)
+    splits = [s.to_json() for s in d.model_level.splits()] if d.model_level is not None else []
+    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes, splits)
+
+
+def with_structure(level: ModelLevel | None, cands: list) -> ModelLevel | None:
+    """The model level with the form error left by each structural candidate's update
+    (:func:`~ramdaq.analysis.gap.rigfit.with_updates`): those that change the rig and act only
+    where the calibrated rig misses the trial's modes, the only ones the form error could
+    swallow (:func:`~ramdaq.analysis.gap.layers.model_answer`)."""
+    if level is None or level.fit is None or not level.fit.form:
+        return level
+    form = level.form_gages()
+    ups = {c.name: up for c in cands
+           if set(c.location["gages"]) <= form and (up := rig_update(c.terms)) is not None}
+    return with_updates(level, ups) if ups else level
+
+
+def candidate_records(d: Diagnosis) -> list[dict]:
+    """The candidates as the answer reads them: :meth:`Candidate.record`, ``location``, and the
+    form error left with each structural one's update (``form_gages``, ``form_modes``)."""
+    lvl = d.model_level
+    return [c.record() | {"location": c.location} | (lvl.candidate_form(c.name) if lvl else {})
+            for c in d.candidates]
 
 
 def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,

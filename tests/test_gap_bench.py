@@ -338,7 +338,9 @@ def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
           "statistic": 239.0, "chance_level": 17.3, "more": {}, "text": "a 1.5 Hz high-pass on gage 14"}
     r = _rec(effect="highpass", expect="highpass", candidates=[], data_findings=[hp])
     where = r["unexplained_where"]
-    level = SimpleNamespace(form_gages=lambda: {12}, form_modes=lambda: [], statement=lambda: "model form: x")
+    level = SimpleNamespace(form_gages=lambda: {12}, form_modes=lambda: [],
+                            statement=lambda named=None: "model form: x",
+                            splits=lambda: [], candidate_form=lambda name: {})
     d = SimpleNamespace(verdict="unexplained", best=None, candidates=[], unexplained_where=where,
                         model_level=level,
                         data=SimpleNamespace(findings=[SimpleNamespace(to_json=lambda: hp)]))

@@ -222,8 +222,8 @@ class Diagnosis:
         when it leaves a gap), "unexplained: where ...", "explained" (the model's named effect)
         or the data-only layer's finding that answered; with a model level, the model's form
         error beside it ("no effect; model form: ...")."""
-        form = f"; {self.model_level.statement()}" if self.model_level is not None else ""
         a = self.answer
+        form = f"; {self.model_level.statement(a and a.named)}" if self.model_level is not None else ""
         if a is None:
             w = self.unexplained_where
             return (self.verdict if w is None else f"unexplained: {where_text(w)}") + form
@@ -236,6 +236,8 @@ class Diagnosis:
             f = a.finding or {}
             head = (f"explained by the data-only layer: {a.named} ({f.get('text', '')}; statistic "
                     f"{strength(f):.1f}x its chance level)")
+        elif self.best is None or a.named != self.best.name:
+            head = f"explained by the model level: {a.named} ({where_text(a.location)})"
         else:
             head = self.verdict
         return head + form

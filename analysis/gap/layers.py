@@ -203,7 +203,10 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
     unexplained gap only there, is not told from that form error -- "none" (no effect; model
     form). So is an unexplained gap in the band of a mode the calibrated rig misses
     (``form_modes``: each such mode's frequency, Hz, and every gage where its shape differs
-    beyond chance) on gages among that mode's (:func:`in_form_mode`)."""
+    beyond chance) on gages among that mode's (:func:`in_form_mode`). A structural candidate is
+    held against the form its own update leaves (its ``form_gages``, when given: the rig
+    calibrated again with the effect on, :meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.form_with_update`):
+    a form error the effect explains is the effect, not the rig's form."""
     named = model or "none"
     c = next((c for c in candidates if c["name"] == named), None)
     if named == "unexplained" and in_form_mode(where, form_modes):
@@ -212,10 +215,21 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
         within = where is None or not where["gages"] or set(where["gages"]) <= form_gages
         if named == "unexplained" and within:
             named = "none"
-        elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= form_gages:
+        elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= set(
+                c.get("form_gages", form_gages)):
             named, c = "none", None
     loc = c["location"] if c else (where if named == "unexplained" else None)
     return Answer(named, "model", loc, c["closed_held"] if c else None)
+
+
+def split_answer(split: dict, candidates: list[dict]) -> Answer:
+    """The answer "split_mode" from the model level's split (as JSON), placed at its gages and
+    mode, late window (where the halves beat); its closure the effect search's split_mode's."""
+    f = 0.5 * (split["f_lo_hz"] + split["f_hi_hz"])
+    c = next((c for c in candidates if c["name"] == "split_mode"), None)
+    loc = {"gages": list(split["gages"]), "window": "late", "band_hz": f, "effect_mode_hz": f,
+           "band": f"{f:.1f} Hz"}
+    return Answer("split_mode", "model", loc, c["closed_held"] if c else None)
 
 
 def in_form_mode(where: dict | None, form_modes: Sequence[tuple[float, Sequence[int]]]) -> bool:
@@ -233,7 +247,8 @@ def in_form_mode(where: dict | None, form_modes: Sequence[tuple[float, Sequence[
 
 
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
-           findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = ()) -> Answer:
+           findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
+           splits: Sequence[dict] = ()) -> Answer:
     """The one report's answer (:class:`Answer`), what ``ramdaq gap`` prints and the benchmark
     scores: the model layer's (:func:`model_answer`), which a credible data-only finding
     (:func:`credible`) replaces when the model names no effect or blames a sensor (the data layer
@@ -244,11 +259,17 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     1/amplitude or a frequency move with it (issue 17: a modal friction trial read Coulomb's law
     at 20.5x its chance level while the model named hull_coupling). Of several, the
     strongest against its chance level answers. ``form_modes``: the modes the calibrated rig
-    still misses, as :func:`model_answer` reads them."""
+    still misses, as :func:`model_answer` reads them. ``splits``: the model level's modes split in
+    two (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits` as JSON: two identified modes of one
+    shape where the calibrated rig has one), which answer a gap the model leaves unexplained
+    (before the form error would make it "none") when no data-only finding overrides it."""
     out = model_answer(model, candidates, where, form_gages, form_modes)
     named = out.named
+    overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
+    if model == "unexplained" and splits and not overriding:
+        return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     if named == "unexplained":
-        finds = [f for f in overriding_unexplained(findings) if data_effect(f)]
+        finds = overriding
     else:
         finds = [f for f in credible(findings) if data_effect(f)]
         laws = [f for f in finds if told_law(f) and strength(f) >= PRECEDENCE_STRENGTH]

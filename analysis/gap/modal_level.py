@@ -39,6 +39,23 @@ signal-to-noise), while the spurious poles of order selection land anywhere in t
 MAX_PAIR_RATIO = 2.0
 """A model mode and an identified one are paired only within a factor 2 in frequency: a rig
 whose stiffness or mass is off by a factor of 2 (a crude rig) moves its modes by sqrt(2)."""
+SPLIT_MAC = 0.95
+"""Two identified modes are one mode split in two when their shapes agree to this MAC (16
+gages: a shape agreeing to 0.95 is the same motion, while two modes of a linear structure are
+orthogonal in its mass and differ at the gages; the hull modes of a clean modal-family trial
+1-2 % apart came to 0.83-0.84). Checked on development seeds only (modal 51000-60003)."""
+SPLIT_ZETA_RATIO = 1.5
+"""The halves of a split mode decay alike: damping ratios within this factor (the impacts'
+spread of an identified damping ratio is a few per cent; two unrelated modes' differ by any
+factor; a tone's decay window poles are near zero or negative)."""
+SPLIT_RESOLVED = 1.0
+"""Two halves at least their damping ratio apart (relative): the beat's period 1 / (f r) is then
+within 2 pi decay time constants 1 / (2 pi f zeta), and a decay that rings ~9 time constants to
+the noise (a ram blow's 1e4 signal-to-noise) shows it; closer, one identified mode is two poles
+fitted to one (the modal family's hull pair 0.9 % apart at 1.2 % damping)."""
+MAX_SPLIT_REL = 0.1
+"""The widest split, relative (as the effect search's ``split_mode.MAX_SPLIT``): further apart,
+two modes of one shape are modes of their own."""
 QUIET_BODY = 1e-3
 """A body whose gages carry less than this share of a model mode's shape norm is not predicted
 to move in that mode: its MAC there is not defined (NaN)."""
@@ -228,6 +245,74 @@ def _clusters(found: list[tuple], need: int) -> list[list[tuple[int, int]]]:
     return rows
 
 
+@dataclass(frozen=True)
+class Split:
+    """Two identified modes ``f_lo_hz`` < ``f_hi_hz`` of one shape (``mac`` between them, at
+    least :data:`SPLIT_MAC`) where the rig model, calibrated to the trial's modes, has one mode
+    for them (at most one of them paired): a mode split in two (an absorber, an asymmetry),
+    what no calibration of the rig's constants makes. ``gages``: where the pair's shape is at
+    least half its largest entry, largest first; ``zeta_lo``, ``zeta_hi`` their damping ratios."""
+
+    f_lo_hz: float
+    f_hi_hz: float
+    mac: float
+    gages: tuple[int, ...]
+    zeta_lo: float = float("nan")
+    zeta_hi: float = float("nan")
+
+    @property
+    def f_hz(self) -> float:
+        return 0.5 * (self.f_lo_hz + self.f_hi_hz)
+
+    def to_json(self) -> dict:
+        return {"f_lo_hz": self.f_lo_hz, "f_hi_hz": self.f_hi_hz, "mac": self.mac, "gages": list(self.gages),
+                "zeta": [self.zeta_lo, self.zeta_hi]}
+
+
+def _alike(tm: TrialModes) -> list[tuple[int, int, float]]:
+    """(i, j, MAC) of the identified modes i < j within :data:`MAX_SPLIT_REL` in frequency
+    whose shapes agree to :data:`SPLIT_MAC`."""
+    out = []
+    for i in range(tm.n_modes):
+        for j in range(i + 1, tm.n_modes):
+            if tm.f_hz[j] <= (1 + MAX_SPLIT_REL) * tm.f_hz[i]:
+                m = mac(tm.shapes[:, i], tm.shapes[:, j])
+                if m >= SPLIT_MAC:
+                    out.append((i, j, m))
+    return out
+
+
+def _a_split(tm: TrialModes, i: int, j: int) -> bool:
+    """Whether modes i < j ring as the two halves of one mode: both decaying, with the same
+    damping (within :data:`SPLIT_ZETA_RATIO`; the halves share the mode's), and resolved as a
+    beat: their distance at least their damping ratio (:data:`SPLIT_RESOLVED`)."""
+    zi, zj = float(tm.zeta[i]), float(tm.zeta[j])
+    if zi <= 0 or zj <= 0 or max(zi, zj) > SPLIT_ZETA_RATIO * min(zi, zj):
+        return False
+    return tm.f_hz[j] / tm.f_hz[i] - 1 >= SPLIT_RESOLVED * 0.5 * (zi + zj)
+
+
+def splits(tm: TrialModes, cmp: ModalComparison) -> list[Split]:
+    """The identified modes ``tm`` that are one mode split in two (:class:`Split`) against the
+    pairing ``cmp`` of the calibrated model: two modes within :data:`MAX_SPLIT_REL` in
+    frequency, shapes agreeing to :data:`SPLIT_MAC`, one of them paired with a model mode and
+    the other not; alone (a chain of three or more modes of one shape is a frequency that moves
+    -- an amplitude-dependent stiffness, friction, a wandering tone -- not a split), and
+    decaying as halves of one mode do (:func:`_a_split`)."""
+    paired = {p.i_id for p in cmp.pairs}
+    alike = _alike(tm)
+    count = np.bincount([k for i, j, _ in alike for k in (i, j)], minlength=tm.n_modes)
+    out = []
+    for i, j, m in alike:
+        if len(paired & {i, j}) != 1 or count[i] > 1 or count[j] > 1 or not _a_split(tm, i, j):
+            continue
+        a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
+        big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
+        out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m, tuple(tm.gage_numbers[k] for k in big),
+                         float(tm.zeta[i]), float(tm.zeta[j])))
+    return out
+
+
 # -- the model's side ----------------------------------------------------------------------------
 def model_modes_at_gages(rig: Rig) -> ModelModesAtGages:
     """The rig model's modes (in the rig's medium) with their gage acceleration shapes."""
@@ -239,6 +324,16 @@ def modes_at_gages(form: ModalForm) -> ModelModesAtGages:
     form already made)."""
     lam = form.eigenvalues
     return ModelModesAtGages(lam.imag / (2 * math.pi), -lam.real / np.abs(lam), form.gage_acc)
+
+
+def modes_of_set(lam: np.ndarray, shapes: np.ndarray) -> ModelModesAtGages:
+    """Modes given as eigenvalues ``lam`` (m,) 1/s and gage shapes ``shapes`` (n_gages, m)
+    complex, any scale per mode (the effect search's :class:`~ramdaq.analysis.gap.forward.ModeSet`:
+    ``lam``, ``A``), as :class:`ModelModesAtGages`; modes without a positive frequency (a
+    filter's real pole) are left out."""
+    keep = np.asarray(lam).imag > 0
+    lam = np.asarray(lam)[keep]
+    return ModelModesAtGages(lam.imag / (2 * math.pi), -lam.real / np.abs(lam), np.asarray(shapes)[:, keep])
 
 
 def mac(a: np.ndarray, b: np.ndarray) -> float:
@@ -261,13 +356,15 @@ def body_mac(rig: Rig, a: np.ndarray, model_shape: np.ndarray, body: str) -> flo
     return mac(a[rows], m)
 
 
-def compare(tm: TrialModes, rig: Rig, *, top_hz: float | None = None) -> ModalComparison:
+def compare(tm: TrialModes, rig: Rig, *, top_hz: float | None = None,
+            model: ModelModesAtGages | None = None) -> ModalComparison:
     """Pair the identified modes ``tm`` with ``rig``'s model modes below ``top_hz`` (default:
     twice the highest identified mode): the assignment that minimises the summed
     ``(1 - MAC) + |ln(f_model / f_id)| / ln 2`` over pairs within :data:`MAX_PAIR_RATIO` in
     frequency whose cost stays below 1.2 (a pair sharing no shape and a factor 1.5 apart is no
-    pair)."""
-    mm = model_modes_at_gages(rig)
+    pair). ``model``: the modes to pair with, when not ``rig``'s own model's (a model with an
+    effect's update on it, :func:`modes_of_set`); ``rig`` then gives only the gages' bodies."""
+    mm = model_modes_at_gages(rig) if model is None else model
     top = top_hz if top_hz is not None else 2 * float(np.max(tm.f_hz, initial=0.0))
     cand = np.flatnonzero((mm.f_hz > 0) & (mm.f_hz < top))
     K = tm.n_modes

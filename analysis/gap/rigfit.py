@@ -34,7 +34,8 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.optimize
@@ -47,10 +48,13 @@ from ..model.surface import plane_field
 from .calibrate import Stop
 from .modal_level import (
     ModalComparison,
+    ModelModesAtGages,
+    Split,
     TrialModes,
     compare,
     model_modes_at_gages,
     modes_at_gages,
+    splits,
     trial_modes,
 )
 from .model_sensitivity import matrix_derivatives, mode_derivatives
@@ -370,13 +374,14 @@ def _model_at(start: Rig, params: list[FitParam], theta: np.ndarray,
     return rig, form
 
 
-def _differences(tm: TrialModes, rig: Rig, pr: _Pairs,
-                 form: ModalForm | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _differences(tm: TrialModes, rig: Rig, pr: _Pairs, form: ModalForm | None = None,
+                 model: ModelModesAtGages | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whitened differences of the paired modes: frequency (n_pairs,), damping ratio
     (n_pairs,; 0 where not fitted) and shape (n_gages, n_pairs) complex, the model's shape
     scaled by the complex factor that matches it best to the identified one. ``form``:
-    ``rig``'s modal form, when already made."""
-    mm = model_modes_at_gages(rig) if form is None else modes_at_gages(form)
+    ``rig``'s modal form, when already made; ``model``: the modes themselves, when they are
+    not ``rig``'s model's (an effect's update on it)."""
+    mm = model if model is not None else model_modes_at_gages(rig) if form is None else modes_at_gages(form)
     if len(mm.f_hz) <= pr.i_model.max(initial=-1) or np.any(mm.f_hz[pr.i_model] <= 0):
         raise ValueError("the model lost a paired mode")
     f = np.log(mm.f_hz[pr.i_model] / tm.f_hz[pr.i_id]) / pr.s_f
@@ -581,7 +586,7 @@ def form_errors(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> tuple[FormErr
     out = []
     if cmp.pairs:
         pr = _pairs(tm, cmp)
-        f, _, d = _differences(tm, rig, pr)
+        f, _, d = _differences(tm, rig, pr, model=cmp.model)
         n_tests = d.size + len(f)
         for k, p in enumerate(cmp.pairs):
             limit = significant(int(tm.n_seen[p.i_id]), n_tests)
@@ -685,11 +690,20 @@ class ModelLevel:
     modes: TrialModes | None
     fit: ModeFit | None
     note: str = ""
+    updates: Mapping[str, tuple[FormError, ...]] = field(default_factory=dict)
+    """The form errors left with each structural candidate's update on the model, by the
+    candidate's name (:func:`with_updates`): what that effect leaves unexplained."""
 
-    def statement(self) -> str:
-        """``model form: ...`` -- what the fitted rig still misses, or why it was not fitted."""
+    def statement(self, named: str | None = None) -> str:
+        """``model form: ...`` -- what the fitted rig still misses, or why it was not fitted;
+        with the ``named`` effect's update on it when one was made (:attr:`updates`): what
+        that effect leaves of the form error."""
         if self.fit is None:
             return f"model form: not assessed ({self.note})"
+        if named in self.updates:
+            left = ("; ".join(e.text() for e in self.updates[named])
+                    or "none beyond the identification's uncertainty")
+            return f"model form with {named}'s update on the rig: {left}"
         s = f"model form: {self.fit.form_text()}"
         if self.fit.stop is not Stop.CONVERGED or self.fit.at_bounds():
             s += f" (calibration to the modes {self.fit.solver_text()})"
@@ -699,16 +713,64 @@ class ModelLevel:
         """The gages where the fitted rig still misses the shape or frequency of a mode it has
         (empty: none). A mode the model lacks altogether is not counted: an extra mode or a
         steady tone is what the effect search's structural and excitation effects add."""
-        return set() if self.fit is None else {g for e in self.fit.form if not e.missing
-                                               for g in e.gages}
+        return set() if self.fit is None else gages_of(self.fit.form)
 
     def form_modes(self) -> list[tuple[float, list[int]]]:
         """Each identified mode the fitted rig has but still misses (its shape or frequency): its
         frequency (Hz) and every gage where its shape differs beyond chance (all of them, not
         only the worst four :meth:`form_gages` reads; none when only its frequency misses).
         Empty when nothing was fitted or no form error is left."""
-        return [] if self.fit is None else [(e.f_id_hz, list(e.beyond))
-                                            for e in self.fit.form if not e.missing]
+        return [] if self.fit is None else modes_of(self.fit.form)
+
+    def form_left(self, model: ModelModesAtGages) -> tuple[FormError, ...] | None:
+        """The form errors left when the trial's identified modes are held against ``model``
+        instead of the calibrated rig's own modes: the calibrated rig with a structural
+        effect's update on it (the effect search's refitted modes, as the gages see them,
+        :func:`~ramdaq.analysis.gap.modal_level.modes_of_set`). Issue 17: a structural effect is
+        a model update that must explain the modal differences calibration left; what it
+        explains is no longer the rig's form. None when nothing was fitted."""
+        if self.fit is None or self.modes is None:
+            return None
+        top = 2 * float(np.max(self.modes.f_hz, initial=0.0))
+        cmp = compare(self.modes, self.fit.rig, top_hz=top, model=model)
+        return form_errors(self.modes, self.fit.rig, cmp)
+
+    def form_with_update(self, update: Callable[[Rig], Rig]) -> tuple[FormError, ...] | None:
+        """The form errors left when a structural effect's update is carried into the model
+        and its constants are calibrated to the trial's modes again, from the rig given (the
+        perturbed start), within the same bounds: issue 17's "structural effects are model
+        updates that must explain the modal differences that remain". ``update`` maps the
+        calibrated rig to the rig with the effect (an effect's ``rig`` hook with its fitted
+        term); the modes it adds (a tiller, a hull structure's own mode) join the start rig with
+        their own frequency, modal mass and damping free, each within its kind's bounds. None
+        when nothing was fitted, the update adds no mode (it changes no constant the start rig
+        can carry), or the calibration with it fails."""
+        if self.fit is None or self.modes is None:
+            return None
+        rig = self.fit.rig
+        new = update(rig)
+        n0 = len(rig.hull_modes)
+        if len(new.hull_modes) <= n0 or new.hull_modes[:n0] != rig.hull_modes:
+            return None
+        start = replace(self.fit.start, hull_modes=self.fit.start.hull_modes + new.hull_modes[n0:])
+        bounds = {p.name: (p.lo, p.hi) for p in self.fit.params}
+        try:
+            return calibrate_to_modes(self.modes, start, bounds).form
+        except (ValueError, np.linalg.LinAlgError, RigError):
+            return None
+
+    def splits(self) -> list[Split]:
+        """Identified modes of one shape where the calibrated rig has one mode
+        (:func:`~ramdaq.analysis.gap.modal_level.splits`): a split no constant makes."""
+        return [] if self.fit is None or self.modes is None else splits(self.modes, self.fit.after)
+
+    def candidate_form(self, name: str) -> dict:
+        """What the answer reads of a candidate: ``{"form_gages": [...], "form_modes": [...]}``,
+        the form left with its update (:attr:`updates`), or {} when none was made for it."""
+        if name not in self.updates:
+            return {}
+        form = self.updates[name]
+        return {"form_gages": sorted(gages_of(form)), "form_modes": modes_of(form)}
 
     def to_json(self) -> dict:
         skipped = [] if self.modes is None else list(self.modes.skipped)
@@ -727,15 +789,40 @@ class ModelLevel:
                        "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
                        "mac_start": b.mac, "mac_fitted": p.mac}
                       for p, b in _matched(f.after, f.before)],
-            "form_errors": [{"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
-                             "gages": list(e.gages), "beyond_gages": list(e.beyond),
-                             "missing_in_model": e.missing} for e in f.form],
+            "form_errors": [_form_json(e) for e in f.form],
+            "form_left_with": {name: [_form_json(e) for e in form] for name, form in self.updates.items()},
+            "splits": [s.to_json() for s in self.splits()],
         }
+
+
+def _form_json(e: FormError) -> dict:
+    return {"f_id_hz": e.f_id_hz, "df_rel": e.df_rel, "one_minus_mac": e.one_minus_mac,
+            "gages": list(e.gages), "beyond_gages": list(e.beyond), "missing_in_model": e.missing}
+
+
+def gages_of(form: tuple[FormError, ...]) -> set[int]:
+    """The gages carrying the shape differences of the modes a model has but misses
+    (:meth:`ModelLevel.form_gages` of any form errors)."""
+    return {g for e in form if not e.missing for g in e.gages}
+
+
+def modes_of(form: tuple[FormError, ...]) -> list[tuple[float, list[int]]]:
+    """Each mode a model has but misses: its frequency (Hz) and every gage beyond chance
+    (:meth:`ModelLevel.form_modes` of any form errors)."""
+    return [(e.f_id_hz, list(e.beyond)) for e in form if not e.missing]
 
 
 def _matched(after: ModalComparison, before: ModalComparison) -> list:
     b = {p.i_id: p for p in before.pairs}
     return [(p, b[p.i_id]) for p in after.pairs if p.i_id in b]
+
+
+def with_updates(level: ModelLevel, updates: Mapping[str, Callable[[Rig], Rig]]) -> ModelLevel:
+    """``level`` with the form left by each named update (:meth:`ModelLevel.form_with_update`;
+    those it cannot make are left out)."""
+    done = {name: form for name, up in updates.items()
+            if (form := level.form_with_update(up)) is not None}
+    return replace(level, updates={**level.updates, **done})
 
 
 def model_level(td: TrialData, bounds: dict[str, tuple[float, float]] | None = None) -> ModelLevel:

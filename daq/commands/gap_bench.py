@@ -216,6 +216,7 @@ def run_one(sc: dict, workdir: str) -> dict:
     rig the model level, then the data-only checks and the effect search); the result as plain
     JSON."""
     from ...drivers.array_device import ArrayDevice
+    from ..gap_layers import candidate_records
     from ..record import record
     from .gap import run_gap
 
@@ -250,7 +251,7 @@ def run_one(sc: dict, workdir: str) -> dict:
         "verdict": d.verdict, "named": d.best.name if d.best else None,
         "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
         "zdetect": float(d.z_detect),
-        "candidates": [c.record() | {"location": c.location} for c in d.candidates],
+        "candidates": candidate_records(d),
         "signatures": [s.effect.name for s in d.signatures],
         "closed_held": d.best.closed_held if d.best else None,
         "location": d.best.location if d.best else None,
@@ -260,7 +261,9 @@ def run_one(sc: dict, workdir: str) -> dict:
         "seconds": t_diag, "seconds_generate": t_gen, "cpu_seconds": time.process_time() - c0,
     } | ({"headline": d.headline, "min_closure": _min_closure(d),
           "form_gages": sorted(d.model_level.form_gages()) if d.model_level else [],
-          "form_modes": d.model_level.form_modes() if d.model_level else []} if perturb else {})
+          "form_modes": d.model_level.form_modes() if d.model_level else [],
+          "splits": [s.to_json() for s in d.model_level.splits()] if d.model_level else []}
+         if perturb else {})
 
 
 def _generate_truth(sc: dict) -> dict:
@@ -371,7 +374,7 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
         return {"named": "none", "by": "model", "location": None, "closed_held": None, "finding": None}
     return answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"], r.get("unexplained_where"),
                   set(r.get("form_gages", [])), r.get("data_findings") or [],
-                  r.get("form_modes", [])).to_json()
+                  r.get("form_modes", []), r.get("splits", [])).to_json()
 
 
 def _z(r: dict) -> float:

@@ -18,6 +18,7 @@ A new effect is one new module in :mod:`ramdaq.analysis.gap.effects` defining a 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -28,7 +29,7 @@ from ..terms import Placement, Term, placement
 from ..trialdata import summed_spectrum
 
 __all__ = ["Effect", "Placement", "Term", "compared_modes", "gage_row", "placement", "residual_peaks",
-           "rudder_gages", "summed_spectrum", "whiten_fitted"]
+           "rig_update", "rudder_gages", "summed_spectrum", "whiten_fitted"]
 
 if TYPE_CHECKING:
     from ..calibrate import Calibration
@@ -120,6 +121,21 @@ class Effect:
         """Last word on the prediction; may return a mask (n_seg, n_g, n_s) of samples that
         still count."""
         return pred, None
+
+
+def rig_update(terms: list[Term]) -> Callable[[Rig], Rig] | None:
+    """The rig change of fitted ``terms`` (each one's :meth:`Effect.rig` hook, in turn) as one
+    function of the rig, or None when no term changes the rig (a sensor, a pulse, a change of
+    the model's matrices or modes only)."""
+    own = [t for t in terms if type(t.effect).rig is not Effect.rig]
+    if not own:
+        return None
+
+    def update(rig: Rig) -> Rig:
+        for t in own:
+            rig = t.effect.rig(rig, t)
+        return rig
+    return update
 
 
 def gage_row(fw: Forward, number: int) -> int:

@@ -1,0 +1,155 @@
+"""Issue 17's structure layer on a perturbed rig: a structural effect is a model update that must
+explain the modal differences calibration leaves; what it explains is the effect, not the rig's
+form error (``ModelLevel.form_with_update``), and the answer holds a structural candidate
+against the form its own update leaves (``layers.model_answer``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ramdaq.analysis.gap.layers import answer, model_answer
+from ramdaq.analysis.gap.modal_level import TrialModes, compare, model_modes_at_gages, modes_of_set, splits
+from ramdaq.analysis.gap.rigfit import ModelLevel, calibrate_to_modes, gages_of, with_updates
+from ramdaq.analysis.model.rig import HullMode, load_rig
+
+TOP_HZ = 150.0
+"""The modes 'identified': those below 150 Hz (ALBACORE in air is compared up to ~195 Hz)."""
+
+
+def with_tiller(rig, f_hz: float = 60.0):
+    """``rig`` with a steering gear as stiff as the stock in torsion and a tiller ringing at
+    ``f_hz`` on it (the gap effect's own form: an extra DOF turning the stock's top)."""
+    st = rig.stock
+    k = st.G_Pa * st.J_m4 / st.torsion_length_m
+    return replace(rig, hull_modes=rig.hull_modes + (
+        HullMode("tiller", f_hz, 0.02, k / (2 * math.pi * f_hz) ** 2, 0.0, 1.0, 0.0, moves_hull=False),))
+
+
+def far_hull_mode(rig):
+    """``rig`` with a local hull mode far from every mode the tiller moves (a wrong update)."""
+    return replace(rig, hull_modes=rig.hull_modes + (
+        HullMode("hull_coupling", 140.0, 0.02, 50.0, 1.0, 0.0, 0.0, moves_hull=True),))
+
+
+def modes_of(rig) -> TrialModes:
+    """``rig``'s model modes below :data:`TOP_HZ` as if identified on four impacts: frequencies
+    to 1e-5, damping to 1 %, shapes to 1e-4 of each entry (a ram blow's signal-to-noise)."""
+    mm = model_modes_at_gages(rig)
+    keep = np.flatnonzero((mm.f_hz > 0) & (mm.f_hz < TOP_HZ))
+    keep = keep[np.argsort(mm.f_hz[keep])]
+    sh = mm.shapes[:, keep]
+    big = np.argmax(np.abs(sh), axis=0)
+    ref = sh[big, np.arange(sh.shape[1])]
+    sh = sh * np.conj(ref) / (np.abs(ref) * np.linalg.norm(sh, axis=0))
+    f, z = mm.f_hz[keep], mm.zeta[keep]
+    return TrialModes(f, 1e-5 * f, z, 0.01 * z, sh, 1e-4 * np.abs(sh) + 1e-6, np.full(len(f), 4), 4,
+                      np.full(sh.shape[0], 1e-3), tuple(g.number for g in rig.gages_by_channel()))
+
+
+@pytest.fixture(scope="module")
+def tiller_level():
+    """A trial of ALBACORE in air with a soft tiller, held against the rig without one whose
+    stock torsion may move only +-25 %: calibration cannot reach the tiller's torsion mode."""
+    rig = load_rig("albacore").with_medium("air")
+    tm = modes_of(with_tiller(rig))
+    return rig, ModelLevel(tm, calibrate_to_modes(tm, rig, {"stock.J_m4": (0.8, 1.25)}))
+
+
+def test_calibration_alone_leaves_the_tiller_as_form_error(tiller_level):
+    _, level = tiller_level
+    # the tiller takes the stock's torsion mode 3 % down (24.5 -> 23.7 Hz) and adds its own
+    # mode: the rig without it misses both beyond the identification's errors
+    assert level.fit.form and {10, 11, 12} <= level.form_gages()
+
+
+def test_the_right_update_explains_the_form_error_and_a_wrong_one_does_not(tiller_level):
+    rig, level = tiller_level
+    explained = level.form_with_update(with_tiller)
+    assert explained is not None and gages_of(explained) == set() and not any(e.missing for e in explained)
+    wrong = level.form_with_update(far_hull_mode)
+    # a mode the data do not hold explains none of it: the stock gages still carry form error
+    assert wrong is not None and {10, 12} <= gages_of(wrong)
+    # an update that adds no mode is not a structural update the start rig can carry
+    assert level.form_with_update(lambda r: r) is None
+
+
+def test_the_answer_holds_a_structural_candidate_against_its_own_form(tiller_level):
+    _, level = tiller_level
+    level = with_updates(level, {"tiller": with_tiller, "hull_coupling": far_hull_mode})
+    form = level.form_gages()
+    cands = [{"name": n, "dbic": -1e5, "dbic_marginal": None, "closed_held": 0.9, "closed_fit": 0.9,
+              "location": {"gages": [12, 10], "window": "early", "band_hz": 23.7}}
+             for n in ("tiller", "hull_coupling")]
+    # without the update's form (results stored before it), an effect acting only on form gages is
+    # not told from the rig's form
+    assert model_answer("tiller", cands, None, form).named == "none"
+    told = [c | level.candidate_form(c["name"]) for c in cands]
+    assert told[0]["form_gages"] == [] and model_answer("tiller", told, None, form).named == "tiller"
+    # the wrong update leaves the stock gages' form: still "none"
+    assert model_answer("hull_coupling", told, None, form).named == "none"
+    # the report says what each update leaves, and the statement for the named one
+    js = level.to_json()
+    assert js["form_left_with"]["tiller"] == [] and js["form_left_with"]["hull_coupling"]
+    assert level.statement("tiller").startswith("model form with tiller's update on the rig: none")
+
+
+def test_modes_of_a_mode_set_leave_out_real_poles():
+    lam = np.array([-1.0 + 2j * math.pi * 10, -50.0 + 0j, -2.0 + 2j * math.pi * 30])
+    shapes = np.ones((3, 3), complex)
+    mm = modes_of_set(lam, shapes)
+    assert np.allclose(mm.f_hz, [10.0, 30.0]) and mm.shapes.shape == (3, 2)
+    assert mm.zeta[0] == pytest.approx(1.0 / abs(lam[0]))
+
+
+def split_copy(tm: TrialModes, k: int, rel: float) -> TrialModes:
+    """``tm`` with its mode ``k`` rung again ``rel`` higher, same shape (a mode split in two)."""
+    pick = lambda a: np.concatenate([a, a[..., k:k + 1]], axis=-1)   # noqa: E731
+    f = tm.f_hz.copy()
+    f = np.append(f, f[k] * (1 + rel))
+    o = np.argsort(f)
+    return replace(tm, f_hz=f[o], f_se_hz=pick(tm.f_se_hz)[o], zeta=pick(tm.zeta)[o],
+                   zeta_se=pick(tm.zeta_se)[o], shapes=pick(tm.shapes)[:, o],
+                   shape_se=pick(tm.shape_se)[:, o], n_seen=pick(tm.n_seen)[o])
+
+
+def test_a_mode_split_in_two_is_found_and_a_clean_rig_has_none():
+    rig = load_rig("albacore").with_medium("air")
+    tm = modes_of(rig)
+    assert splits(tm, compare(tm, rig)) == []
+    two = split_copy(tm, 1, 0.03)           # the 24.5 Hz mode, halves 3 % apart
+    (s,) = splits(two, compare(two, rig))
+    assert s.f_lo_hz == pytest.approx(tm.f_hz[1]) and s.f_hi_hz == pytest.approx(1.03 * tm.f_hz[1])
+    assert s.mac == pytest.approx(1.0) and s.gages
+    # further apart than the widest split: two modes of their own
+    far = split_copy(tm, 1, 0.15)
+    assert splits(far, compare(far, rig)) == []
+    # closer than the mode's damping ratio: no beat within the decay, one mode fitted twice
+    near = split_copy(tm, 1, 0.5 * tm.zeta[1])
+    assert splits(near, compare(near, rig)) == []
+    # three of one shape: a frequency that moves (friction, a crack, a wandering tone)
+    chain = split_copy(split_copy(tm, 1, 0.03), 1, 0.06)
+    assert splits(chain, compare(chain, rig)) == []
+    # the halves of a split decay alike
+    odd = replace(two, zeta=np.where(np.isclose(two.f_hz, 1.03 * tm.f_hz[1]), 3 * tm.zeta[1], two.zeta))
+    assert splits(odd, compare(odd, rig)) == []
+
+
+def test_an_unexplained_gap_with_a_split_answers_split_mode():
+    split = {"f_lo_hz": 23.2, "f_hi_hz": 23.7, "mac": 0.99, "gages": [1, 4, 6]}
+    cands = [{"name": "split_mode", "dbic": 30.0, "dbic_marginal": None, "closed_held": 0.01,
+              "closed_fit": 0.01, "location": {"gages": [2], "window": "early", "band_hz": 87.0}}]
+    a = answer("unexplained", cands, None, set(), [], (), [split])
+    assert a.named == "split_mode" and a.location["gages"] == [1, 4, 6] and a.location["window"] == "late"
+    assert a.closed_held == 0.01
+    # no gap beyond noise (no choice): a split the calibrated model reproduces in the time
+    # domain is no effect to name
+    assert answer(None, cands, None, set(), [], (), [split]).named == "none"
+    # a data-only finding that overrides the model's "unexplained" (a double hit far above its
+    # chance level) comes first
+    hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
+           "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
+    assert answer("unexplained", cands, None, set(), [hit], (), [split]).named == "double_hit"
