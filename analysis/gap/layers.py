@@ -180,7 +180,9 @@ class Answer:
     what the model misses is its form) or ``"unexplained"``; ``by`` "model" or "data" (the
     layer that answered); ``location`` as a candidate's (``gages``, ``window``, ...) or the
     unexplained gap's, None when there is nothing to place; ``closed_held`` the share of the
-    held-out impacts' gap the named effect closes (None when not measured); ``finding`` the
+    held-out impacts' gap the named effect closes -- the model's gap for the model's answer, the
+    data check's own residual for the data layer's (:func:`data_closure`; None when not
+    measured); ``finding`` the
     data-only finding (JSON) that answered, when the data layer did."""
 
     named: str
@@ -265,4 +267,18 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     cd = next((c for c in candidates if c["name"] == eff), None)
     loc = {"gages": list(f["gages"]), "window": DATA_WINDOW.get(f["window"], f["window"]), "band_hz": None,
            "effect_mode_hz": f["mode_hz"][0] if f["mode_hz"] else None}
-    return Answer(eff, "data", loc, cd["closed_held"] if cd else None, f)
+    return Answer(eff, "data", loc, data_closure(f, cd), f)
+
+
+def data_closure(f: dict, cd: dict | None) -> float | None:
+    """The closure a data-only finding (as JSON) answers with: its own -- the share of its
+    check's residual (the data layer's gap, not the rig model's) its correction, fitted on the
+    other impacts, closes on the held-out ones (:attr:`~ramdaq.analysis.gap.datamodel.Finding.closed_held`)
+    -- when measured; else the model candidate's of the same effect (``cd``, a check that
+    measures none, as the homogeneity's), else None. On a perturbed rig and a structure that is
+    not the simulator the model-level gap is the rig's form error, which a gain or a skew closes
+    ~0 % of (issue 17: the modal family's sensor layer read 0.9 % median)."""
+    own = f.get("closed_held")
+    if own is not None and math.isfinite(float(own)):
+        return float(own)
+    return cd["closed_held"] if cd else None
