@@ -151,3 +151,19 @@ def test_a_closure_is_the_share_of_the_gap_beyond_the_noise():
     # the model layer's split: every third impact held out, the last when none is
     assert held_out(6).tolist() == [False, False, True, False, False, True]
     assert held_out(2).tolist() == [False, True] and not held_out(1).any()
+
+
+def test_a_flat_top_answers_an_unexplained_trial_beside_a_nonlinearity():
+    # modal check seed 153001: clipping on gages 4 and 6 (8 against 3.04), the homogeneity
+    # check's slope on the hull's gages 9, 13, 14 (25.5 against 4.06), the model unexplained
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    clip = Finding(check="clipping", layer=Layer.SENSOR, gages=(6,), statistic=8.0, chance_level=3.04,
+                   size=1.7, unit="m/s^2", text="flat", window="peaks").to_json()
+    skew = Finding(check="time_skew", layer=Layer.SENSOR, gages=(12,), statistic=205.1, chance_level=17.34,
+                   size=0.00136, unit="s", text="skew", window="decay").to_json()
+    slope = _law("slope", 25.5)
+    a = answer("unexplained", [], None, set(), [clip, slope])
+    assert a.named == "clipping" and a.by == "data" and a.location["gages"] == [6]
+    # a shape check the nonlinearity bends stays set aside: the model's unexplained stands
+    assert answer("unexplained", [], None, set(), [skew, slope]).named == "unexplained"
