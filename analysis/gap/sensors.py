@@ -294,19 +294,24 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
 
 def _rigid_modes(fm: FreeModal, G: dict, rows: list[int]) -> np.ndarray:
     """(K,) bool: the modes (not steady) in which the body's gages ``rows`` move as one rigid
-    body, or do so with one of them left out: the largest gain z of the others (each predicted
-    from the rest, that mode's entries only) within the normal's two-sided chance level,
-    Bonferroni over the gages and modes."""
+    body, or do so with one and the same gage left out: in each mode alone, the largest gain z
+    of the others (each predicted from the rest) within the normal's two-sided chance level,
+    Bonferroni over the gages and modes. A gain is one gage's at every mode, so the modes kept
+    are those of the gage whose removal leaves the most modes rigid (a bent mode may look rigid
+    but for another gage, where its bending is largest)."""
     a, se = _real_modes(fm)
     k_all = np.flatnonzero(~fm.steady)
     level = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(rows) * max(1, k_all.size))))
-    out = np.zeros(fm.n_modes, dtype=bool)
+    whole = np.zeros(fm.n_modes, dtype=bool)
+    but = np.zeros((len(rows), fm.n_modes), dtype=bool)
     for k in k_all:
         only = np.ones(fm.n_modes, dtype=bool)
         only[k] = False
-        spreads = [_spread_without(a, se, G, rows, c, only) for c in rows]
-        out[k] = min(spreads, default=math.inf) <= level
-    return out
+        es = [_gain_of(a, se, G, i, [r for r in rows if r != i], only) for i in rows]
+        whole[k] = all(e is not None and abs(e[0] - 1) / e[1] <= level for e in es)
+        but[:, k] = [_spread_without(a, se, G, rows, c, only) <= level for c in rows]
+    best = int(np.argmax(np.sum(but | whole, axis=1)))
+    return whole | but[best]
 
 
 def _body_gains_on(fm: FreeModal, gages: Sequence[Gage], rows: list[int], G: dict,
