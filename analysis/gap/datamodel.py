@@ -89,8 +89,11 @@ class Finding:
     """The share of the data layer's own gap -- the residual of this check's reference (the
     rigid-body reconstruction of a gage, the phases of the free modal model, its fit of the
     peaks, the one-blow early window) beyond its noise expectation -- that the finding's
-    correction, fitted on the other impacts, closes on the held-out impacts (:func:`closure_of`;
-    NaN when not measured: no held-out impact, or no gap there)."""
+    correction closes on impacts it was not fitted on (:func:`closure_of`): the shape checks
+    (gain, skew, high-pass) hold each impact out in turn, fitted on the others (a weak held-out
+    blow has no entry they can read); clipping and the double hit read the blows not
+    :func:`held_out` and measure on those that are. NaN when not measured: no held-out impact,
+    or no gap there."""
     closed_held_ci: tuple[float, float] = (float("nan"), float("nan"))
     """Its 95 % bootstrap interval (over the held-out entries the residual is summed over)."""
 

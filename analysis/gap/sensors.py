@@ -36,7 +36,7 @@ import numpy as np
 import scipy.stats
 
 from ..model.rig import Gage
-from .datamodel import P_CHANCE, Finding, FreeModal, Layer, closure_of, free_modal_model, held_out
+from .datamodel import P_CHANCE, Finding, FreeModal, Layer, closure_of, free_modal_model
 from .features import rigid_projector
 from .homogeneity import homogeneity
 from .signal_checks import clip_closure, dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
@@ -160,9 +160,9 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
     fault it is chi-square with 1 degree of freedom (one parameter fitted), so its chance level is
     that distribution's ``P_CHANCE / (2 n_g)`` quantile (two models, every gage). A skew or a
     corner is reported only when it turns some measured mode by :data:`PHASE_MIN_RAD`. Its
-    closure: the same model fitted on the impacts not held out (:func:`held_out`), the share of
-    the held-out impacts' phase chi-square beyond its noise expectation (one a well-measured
-    entry) it takes out (:func:`_chain_closure`)."""
+    closure: the share of the phase chi-square beyond its noise expectation (one a
+    well-measured entry) the same model takes out on impacts it was not fitted on
+    (:func:`_chain_closure`)."""
     dep, se = _departures(fm)
     level = float(scipy.stats.chi2.isf(P_CHANCE / (2 * len(numbers)), 1))
     out = []
@@ -216,22 +216,24 @@ def _chain_costs(phi: np.ndarray, w: np.ndarray, f_hz: np.ndarray,
 
 def _chain_closure(phi: np.ndarray, w: np.ndarray, ok: np.ndarray, f_hz: np.ndarray, fs_hz: float,
                    skew: bool) -> tuple[float, tuple[float, float]]:
-    """The share of the held-out impacts' phase chi-square (beyond one per measured entry) that a
-    skew (``skew``) or a high-pass fitted on the other impacts takes out (:func:`closure_of`,
-    units the held-out entries); NaN when no impact is held out or none is measured there."""
-    held = held_out(phi.shape[0])
-    if not held.any() or not ok[held].any() or not ok[~held].any():
-        return math.nan, (math.nan, math.nan)
-    c_tau, c_fc = _chain_costs(phi[~held], w[~held], f_hz, fs_hz)
+    """The share of the phase chi-square (beyond one per measured entry) that a skew (``skew``)
+    or a high-pass takes out on impacts it was not fitted on: each impact in turn held out, the
+    model fitted on the others (:func:`closure_of`, units the held-out entries); NaN when no
+    held-out impact has a measured entry."""
     f = f_hz[None, :]
-    if skew:
-        model = -2 * math.pi * f * TAU_GRID_SAMPLES[int(np.argmin(c_tau))] / fs_hz
-    else:
-        model = np.arctan(FC_GRID_HZ[int(np.argmin(c_fc))] / f)
-    m = ok[held]
-    before = (w * phi**2)[held][m]
-    after = (w * _wrap(phi - model) ** 2)[held][m]
-    return closure_of(before, after, np.ones_like(before))
+    before, after = [], []
+    for j in range(phi.shape[0]):
+        rest = np.arange(phi.shape[0]) != j
+        if not ok[j].any() or not ok[rest].any():
+            continue
+        c_tau, c_fc = _chain_costs(phi[rest], w[rest], f_hz, fs_hz)
+        if skew:
+            model = -2 * math.pi * f[0] * TAU_GRID_SAMPLES[int(np.argmin(c_tau))] / fs_hz
+        else:
+            model = np.arctan(FC_GRID_HZ[int(np.argmin(c_fc))] / f[0])
+        before += list((w[j] * phi[j] ** 2)[ok[j]])
+        after += list((w[j] * _wrap(phi[j] - model) ** 2)[ok[j]])
+    return closure_of(np.array(before), np.array(after), np.ones(len(before)))
 
 
 def _finding(check: str, num: int, stat: float, level: float, size: float, unit: str,
@@ -307,11 +309,26 @@ def _rigid_modes(fm: FreeModal, G: dict, rows: list[int]) -> np.ndarray:
     for k in k_all:
         only = np.ones(fm.n_modes, dtype=bool)
         only[k] = False
-        es = [_gain_of(a, se, G, i, [r for r in rows if r != i], only) for i in rows]
-        whole[k] = all(e is not None and abs(e[0] - 1) / e[1] <= level for e in es)
-        but[:, k] = [_spread_without(a, se, G, rows, c, only) <= level for c in rows]
+        whole[k] = _largest_z(a, se, G, rows, only) <= level
+        but[:, k] = [_largest_z(a, se, G, [r for r in rows if r != c], only) <= level for c in rows]
     best = int(np.argmax(np.sum(but | whole, axis=1)))
     return whole | but[best]
+
+
+def _largest_z(a: np.ndarray, se: np.ndarray, G: dict, rows: list[int], skip: np.ndarray) -> float:
+    """The largest gain z among ``rows``, each predicted from the others on the modes not in
+    ``skip``; a gage whose entries are too weak to read there (:data:`MIN_ENTRY_SNR`) is passed
+    over (in one low mode a gage near its node is), infinite when one is not determined by the
+    others' rigid-body motion or fewer than three are read."""
+    zs = []
+    for i in rows:
+        others = [r for r in rows if r != i]
+        if _prediction(a, se, G, i, others, skip) is None:
+            return math.inf
+        e = _gain_of(a, se, G, i, others, skip)
+        if e is not None:
+            zs.append(abs(e[0] - 1) / e[1])
+    return max(zs) if len(zs) >= 3 else math.inf
 
 
 def _body_gains_on(fm: FreeModal, gages: Sequence[Gage], rows: list[int], G: dict,
@@ -411,18 +428,24 @@ def _prediction(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int
 
 def _gain_closure(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
                   steady: np.ndarray) -> tuple[float, tuple[float, float]]:
-    """The share of the held-out impacts' rigid-body misfit of row ``i`` (``a - p`` over its
-    standard error, beyond one per entry) that its gain fitted on the other impacts takes out
-    (:func:`closure_of`, units the held-out entries); NaN when not measured."""
-    held = held_out(a.shape[0])
+    """The share of row ``i``'s rigid-body misfit (``a - p`` over its standard error, beyond one
+    per entry) that its gain takes out on impacts it was not fitted on: each impact in turn
+    held out, the gain fitted on the others (:func:`closure_of`, units the entries; a held-out
+    impact whose entries are too weak to read adds none -- a weak blow of four, the model
+    layer's one held out, often has none). NaN when not measured."""
     pred = _prediction(a, se, G, i, others, steady)
-    g = _gain_of(a, se, G, i, others, steady, impacts=~held) if held.any() else None
-    if pred is None or g is None:
+    if pred is None or a.shape[0] < 2:
         return math.nan, (math.nan, math.nan)
     p, var, ok = pred
-    m = ok & held[:, None]
     y = a[:, i, :]
-    return closure_of(((y - p) ** 2 / var)[m], ((y - g[0] * p) ** 2 / var)[m], np.ones(int(m.sum())))
+    before, after = [], []
+    for j in range(a.shape[0]):
+        g = _gain_of(a, se, G, i, others, steady, impacts=np.arange(a.shape[0]) != j)
+        if g is None or not ok[j].any():
+            continue
+        before += list(((y[j] - p[j]) ** 2 / var[j])[ok[j]])
+        after += list(((y[j] - g[0] * p[j]) ** 2 / var[j])[ok[j]])
+    return closure_of(np.array(before), np.array(after), np.ones(len(before)))
 
 
 def _mode_spread(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
