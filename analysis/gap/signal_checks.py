@@ -471,16 +471,17 @@ CLIP_BLOCK_S = 0.1
 
 def clip_closure(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray,
                  fm: FreeModal) -> tuple[float, tuple[float, float]]:
-    """How much of a clipped gage's misfit by the free modal model a clipping at the rails read
-    on the other blows closes on the held-out blows (:func:`closure_of`). Per held-out blow,
-    from ``EARLY_FROM_S`` after the onset to the free model's decay window's end, the free
-    model's poles (each with free amplitudes, and a mean) are fitted to the record ``v`` (m/s^2)
-    as it is, and, with the correction, to the samples off the rails only, their prediction cut
-    at the rails (the highest and lowest values of the blows not held out, less one converter
-    step). Units: :data:`CLIP_BLOCK_S` stretches; the noise expectation the gage's noise before
-    the blows."""
-    held = held_out(len(onsets_s))
-    if not held.any() or fm.n_modes == 0:
+    """How much of a clipped gage's misfit by the free modal model at its peaks a clipping at the
+    rails read on the other blows closes (:func:`closure_of`), each blow held out in turn. Per
+    blow, from ``EARLY_FROM_S`` after the onset to the free model's decay window's end, the
+    free model's poles (each with free amplitudes, and a mean) are fitted to the record ``v``
+    (m/s^2) as it is, and, with the correction, to the samples off the rails only, their
+    prediction cut at the rails (the highest and lowest values of the other blows, less one
+    converter step). Units: the :data:`CLIP_BLOCK_S` stretches that reach the rails (the
+    finding's window, the peaks: a blow too weak to clip, or the stretches after its peaks,
+    hold the model's own misfit of the early window, which no clipping explains); the noise
+    expectation the gage's noise before the blows. NaN when no blow reaches the others' rails."""
+    if len(onsets_s) < 2 or fm.n_modes == 0:
         return math.nan, (math.nan, math.nan)
     a0 = np.rint((np.asarray(onsets_s) + EARLY_FROM_S) * fs_hz).astype(int)
     n = int((DECAY_START_S - EARLY_FROM_S) * fs_hz) + fm.n_s
@@ -488,20 +489,24 @@ def clip_closure(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray,
         return math.nan, (math.nan, math.nan)
     seg = np.stack([v[a:a + n] for a in a0])
     q = _step(seg)
-    hi, lo = float(np.max(seg[~held])) - q, float(np.min(seg[~held])) + q
     e = np.exp(np.multiply.outer(np.arange(n) / fs_hz, fm.poles[~fm.steady]))
     A = np.column_stack([e.real, e.imag, np.ones(n)])
     sig2 = max(_pre_noise(v, fs_hz, onsets_s, 1.0) ** 2, 1e-300)
     blk = max(1, int(CLIP_BLOCK_S * fs_hz))
+    m = n // blk * blk
     before, after = [], []
-    for y in seg[held]:
-        c0, *_ = np.linalg.lstsq(A, y, rcond=None)
+    for j, y in enumerate(seg):
+        rest = np.delete(seg, j, axis=0)
+        hi, lo = float(np.max(rest)) - q, float(np.min(rest)) + q
         free = (y < hi) & (y > lo)
+        railed = (~free[:m]).reshape(-1, blk).any(axis=1)
+        if not railed.any():
+            continue
+        c0, *_ = np.linalg.lstsq(A, y, rcond=None)
         c1, *_ = np.linalg.lstsq(A[free], y[free], rcond=None)
         r0, r1 = (y - A @ c0) ** 2, (y - np.clip(A @ c1, lo, hi)) ** 2
-        m = n // blk * blk
-        before += list(r0[:m].reshape(-1, blk).sum(axis=1) / sig2)
-        after += list(r1[:m].reshape(-1, blk).sum(axis=1) / sig2)
+        before += list(r0[:m].reshape(-1, blk).sum(axis=1)[railed] / sig2)
+        after += list(r1[:m].reshape(-1, blk).sum(axis=1)[railed] / sig2)
     return closure_of(np.array(before), np.array(after), np.full(len(before), float(blk)))
 
 
