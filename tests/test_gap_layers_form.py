@@ -165,5 +165,9 @@ def test_a_flat_top_answers_an_unexplained_trial_beside_a_nonlinearity():
     slope = _law("slope", 25.5)
     a = answer("unexplained", [], None, set(), [clip, slope])
     assert a.named == "clipping" and a.by == "data" and a.location["gages"] == [6]
+    # the same when the model's gap is its form ("none"): the slope names no cause, the flat
+    # top does; a told law (Coulomb's: friction) still outranks it, the stronger answering
+    assert answer(None, [], None, set(), [clip, slope]).named == "clipping"
+    assert answer(None, [], None, set(), [clip, _law("coulomb", 25.5)]).named == "friction"
     # a shape check the nonlinearity bends stays set aside: the model's unexplained stands
     assert answer("unexplained", [], None, set(), [skew, slope]).named == "unexplained"
