@@ -4,6 +4,12 @@ that form error ("none": no effect; model form), not a cause."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
 from ramdaq.analysis.gap.layers import answer, in_form_mode, model_answer
 from ramdaq.analysis.gap.rigfit import FormError, ModelLevel
 
@@ -110,3 +116,58 @@ def test_an_unexplained_answer_of_the_data_layer_is_placed_in_words():
     assert a.named == "unexplained" and a.by == "data"
     assert where_text(a.location) == "gages 1, 4, 8, band 23.9 Hz, late window"
     assert where_text(WHERE).endswith("excess 1.4e+08 noise variances (cell z up to 37.0)")
+
+
+def test_a_data_layer_answer_closes_its_own_gap_not_the_models():
+    # issue 17, modal check seed 151001: a 1.4x gain on gage 2 of a flexible rudder on a rig off
+    # by up to 25 %; the model's gage_sensitivity closed 1 % of the model-level gap (the rig's
+    # form error), the data check's gain 100 % of the rigid-body misfit on the held-out impact
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    cand = {"name": "gage_sensitivity", "dbic": -30.0, "closed_held": 0.01, "closed_fit": 0.02,
+            "location": {"gages": [2], "window": "late"}}
+    gain = Finding(check="gain", layer=Layer.SENSOR, gages=(2,), statistic=194.0, chance_level=3.76,
+                   size=1.397, unit="ratio", text="gain", closed_held=0.998, closed_held_ci=(0.99, 1.0))
+    a = answer("unexplained", [cand], None, set(), [gain.to_json()])
+    assert a.named == "gage_sensitivity" and a.by == "data" and a.closed_held == pytest.approx(0.998)
+    assert gain.to_json()["closed_held_ci"] == [0.99, 1.0]
+    # a finding whose check measures no closure of its own falls back on the model's
+    unmeasured = replace(gain, closed_held=float("nan")).to_json()
+    assert unmeasured["closed_held"] is None
+    assert answer("unexplained", [cand], None, set(), [unmeasured]).closed_held == pytest.approx(0.01)
+
+
+def test_a_closure_is_the_share_of_the_gap_beyond_the_noise():
+    from ramdaq.analysis.gap.datamodel import closure_of, held_out
+
+    one = np.ones(8)
+    # a gap of 9 noise variances per unit, all closed but the noise: 1; none closed: 0
+    assert closure_of(10 * one, one, one)[0] == pytest.approx(1.0)
+    assert closure_of(10 * one, 10 * one, one)[0] == pytest.approx(0.0)
+    frac, (lo, hi) = closure_of(10 * one, 5.5 * one, one)
+    assert frac == pytest.approx(0.5) and lo == pytest.approx(0.5) and hi == pytest.approx(0.5)
+    # nothing beyond the noise: no gap to close
+    assert math.isnan(closure_of(one, one, one)[0])
+    # the model layer's split: every third impact held out, the last when none is
+    assert held_out(6).tolist() == [False, False, True, False, False, True]
+    assert held_out(2).tolist() == [False, True] and not held_out(1).any()
+
+
+def test_a_flat_top_answers_an_unexplained_trial_beside_a_nonlinearity():
+    # modal check seed 153001: clipping on gages 4 and 6 (8 against 3.04), the homogeneity
+    # check's slope on the hull's gages 9, 13, 14 (25.5 against 4.06), the model unexplained
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    clip = Finding(check="clipping", layer=Layer.SENSOR, gages=(6,), statistic=8.0, chance_level=3.04,
+                   size=1.7, unit="m/s^2", text="flat", window="peaks").to_json()
+    skew = Finding(check="time_skew", layer=Layer.SENSOR, gages=(12,), statistic=205.1, chance_level=17.34,
+                   size=0.00136, unit="s", text="skew", window="decay").to_json()
+    slope = _law("slope", 25.5)
+    a = answer("unexplained", [], None, set(), [clip, slope])
+    assert a.named == "clipping" and a.by == "data" and a.location["gages"] == [6]
+    # the same when the model's gap is its form ("none"): the slope names no cause, the flat
+    # top does; a told law (Coulomb's: friction) still outranks it, the stronger answering
+    assert answer(None, [], None, set(), [clip, slope]).named == "clipping"
+    assert answer(None, [], None, set(), [clip, _law("coulomb", 25.5)]).named == "friction"
+    # a shape check the nonlinearity bends stays set aside: the model's unexplained stands
+    assert answer("unexplained", [], None, set(), [skew, slope]).named == "unexplained"

@@ -30,16 +30,16 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.stats
 
 from ..model.rig import Gage
-from .datamodel import P_CHANCE, Finding, FreeModal, Layer, free_modal_model
+from .datamodel import P_CHANCE, Finding, FreeModal, Layer, closure_of, free_modal_model
 from .features import rigid_projector
 from .homogeneity import homogeneity
-from .signal_checks import dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
+from .signal_checks import clip_closure, dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
 
 PHASE_FLOOR_RAD = 0.02
 """Phase scatter accepted on top of each estimate's standard error: the free shapes of a real
@@ -91,6 +91,7 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     gone = {g for f in found if f.check in ("dead", "clipping") for g in f.gages}
     rows = tuple(i for i, n in enumerate(numbers) if n in gone)
     fm = free_modal_model(x, fs_hz, onsets_s, pre_s=pre_s, exclude_rows=rows)
+    found = [_with_clip_closure(f, x, fs_hz, onsets_s, numbers, fm) for f in found]
     timing = [f for f in chain_phase(fm, numbers) if not set(f.gages) & gone]
     found += timing + rigid_gain(fm, gages, skip=gone | {g for f in timing for g in f.gages})
     found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s)
@@ -100,6 +101,16 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     return DataChecks(modal=fm, findings=found,
                       looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
                               "ambient_tone", "double_hit", "homogeneity"))
+
+
+def _with_clip_closure(f: Finding, x: np.ndarray, fs_hz: float, onsets_s: np.ndarray,
+                       numbers: Sequence[int], fm: FreeModal) -> Finding:
+    """A clipping finding with its closure on the held-out blows (:func:`clip_closure`); any
+    other finding as it is."""
+    if f.check != "clipping":
+        return f
+    closed, ci = clip_closure(x[numbers.index(f.gages[0])], fs_hz, onsets_s, fm)
+    return replace(f, closed_held=closed, closed_held_ci=ci)
 
 
 def _rows(x: np.ndarray, rows: list[int]) -> np.ndarray:
@@ -148,9 +159,11 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
     ``1/SNR`` with :data:`PHASE_FLOOR_RAD`) when the better-fitting of the two is added; under no
     fault it is chi-square with 1 degree of freedom (one parameter fitted), so its chance level is
     that distribution's ``P_CHANCE / (2 n_g)`` quantile (two models, every gage). A skew or a
-    corner is reported only when it turns some measured mode by :data:`PHASE_MIN_RAD`."""
+    corner is reported only when it turns some measured mode by :data:`PHASE_MIN_RAD`. Its
+    closure: the share of the phase chi-square beyond its noise expectation (one a
+    well-measured entry) the same model takes out on impacts it was not fitted on
+    (:func:`_chain_closure`)."""
     dep, se = _departures(fm)
-    f = fm.f_hz[None, :]
     level = float(scipy.stats.chi2.isf(P_CHANCE / (2 * len(numbers)), 1))
     out = []
     for g, num in enumerate(numbers):
@@ -161,10 +174,9 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
         w = np.where(ok, 1.0 / s**2, 0.0)
         phi = np.where(ok, phi, 0.0)
         chi0 = float(np.sum(w * phi**2))
-        tau_s = TAU_GRID_SAMPLES / fm.fs_hz
-        c_tau = np.array([np.sum(w * _wrap(phi + 2 * math.pi * f * t) ** 2) for t in tau_s])
-        c_fc = np.array([np.sum(w * _wrap(phi - np.arctan(fc / f)) ** 2) for fc in FC_GRID_HZ])
+        c_tau, c_fc = _chain_costs(phi, w, fm.f_hz, fm.fs_hz)
         i, k = int(np.argmin(c_tau)), int(np.argmin(c_fc))
+        tau_s = TAU_GRID_SAMPLES / fm.fs_hz
         f_ok = fm.f_hz[np.any(ok, axis=0)]
         # a skew or a corner too small to turn any measured mode by PHASE_MIN_RAD is not told
         # from the shapes' own complexity
@@ -174,17 +186,54 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
         modes = tuple(float(v) for v in f_ok)
         if max(drop_tau, drop_fc) <= level:
             continue
-        if drop_tau >= drop_fc:
+        skew = drop_tau >= drop_fc
+        closed = _chain_closure(phi, w, ok, fm.f_hz, fm.fs_hz, skew)
+        if skew:
             tau = float(tau_s[i])
-            out.append(_finding("time_skew", num, drop_tau, level, tau, "s", modes,
-                                f"gage {num} runs {1e3 * tau:+.2f} ms ({tau * fm.fs_hz:+.1f} samples) "
-                                "off the other gages: its phase is linear in frequency over the modes"))
+            found = _finding("time_skew", num, drop_tau, level, tau, "s", modes,
+                             f"gage {num} runs {1e3 * tau:+.2f} ms ({tau * fm.fs_hz:+.1f} samples) "
+                             "off the other gages: its phase is linear in frequency over the modes")
         else:
             fc = float(FC_GRID_HZ[k])
-            out.append(_finding("highpass", num, drop_fc, level, fc, "Hz", modes,
-                                f"gage {num} leads the other gages as a first-order high-pass at "
-                                f"{fc:.2f} Hz would (AC coupling or drift filter)"))
+            found = _finding("highpass", num, drop_fc, level, fc, "Hz", modes,
+                             f"gage {num} leads the other gages as a first-order high-pass at "
+                             f"{fc:.2f} Hz would (AC coupling or drift filter)")
+        out.append(replace(found, closed_held=closed[0], closed_held_ci=closed[1]))
     return out
+
+
+def _chain_costs(phi: np.ndarray, w: np.ndarray, f_hz: np.ndarray,
+                 fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """The phases' chi-square ``sum w (phi - model)^2`` for every skew of
+    :data:`TAU_GRID_SAMPLES` and every corner of :data:`FC_GRID_HZ`; ``phi``, ``w`` (n_imp, K)
+    (rad, 1/rad^2; weight 0 where not measured)."""
+    f = f_hz[None, :]
+    tau_s = TAU_GRID_SAMPLES / fs_hz
+    c_tau = np.array([np.sum(w * _wrap(phi + 2 * math.pi * f * t) ** 2) for t in tau_s])
+    c_fc = np.array([np.sum(w * _wrap(phi - np.arctan(fc / f)) ** 2) for fc in FC_GRID_HZ])
+    return c_tau, c_fc
+
+
+def _chain_closure(phi: np.ndarray, w: np.ndarray, ok: np.ndarray, f_hz: np.ndarray, fs_hz: float,
+                   skew: bool) -> tuple[float, tuple[float, float]]:
+    """The share of the phase chi-square (beyond one per measured entry) that a skew (``skew``)
+    or a high-pass takes out on impacts it was not fitted on: each impact in turn held out, the
+    model fitted on the others (:func:`closure_of`, units the held-out entries); NaN when no
+    held-out impact has a measured entry."""
+    f = f_hz[None, :]
+    before, after = [], []
+    for j in range(phi.shape[0]):
+        rest = np.arange(phi.shape[0]) != j
+        if not ok[j].any() or not ok[rest].any():
+            continue
+        c_tau, c_fc = _chain_costs(phi[rest], w[rest], f_hz, fs_hz)
+        if skew:
+            model = -2 * math.pi * f[0] * TAU_GRID_SAMPLES[int(np.argmin(c_tau))] / fs_hz
+        else:
+            model = np.arctan(FC_GRID_HZ[int(np.argmin(c_fc))] / f[0])
+        before += list((w[j] * phi[j] ** 2)[ok[j]])
+        after += list((w[j] * _wrap(phi[j] - model) ** 2)[ok[j]])
+    return closure_of(np.array(before), np.array(after), np.ones(len(before)))
 
 
 def _finding(check: str, num: int, stat: float, level: float, size: float, unit: str,
@@ -227,18 +276,75 @@ def _real_modes(fm: FreeModal) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[Finding]:
+    """A body's gain findings over all its modes (:func:`_body_gains_on`); when the body deforms
+    in some of them (a flexible-body finding), again on the modes in which it moves rigidly
+    but for one gage (:func:`_rigid_modes`), when two or more are: the hull's low modes carry
+    the rudder along as one rigid body however its own modes bend it (the modal family's
+    rudder moves as one in its hull modes), and a gain is one ratio at every mode, so those
+    modes tell it. The flexible-body finding stays (the body's form in its other modes)."""
     G = {i: np.concatenate([gages[i].direction, np.cross(gages[i].position_m, gages[i].direction)])
          for i in rows}
+    out = _body_gains_on(fm, gages, rows, G, fm.steady)
+    if not any(f.check == "flex" for f in out):
+        return out
+    rigid = _rigid_modes(fm, G, rows)
+    if rigid.sum() < 2 or rigid.sum() == (~fm.steady).sum():
+        return out
+    gains = [f for f in _body_gains_on(fm, gages, rows, G, ~rigid) if f.check == "gain"]
+    return gains + out
+
+
+def _rigid_modes(fm: FreeModal, G: dict, rows: list[int]) -> np.ndarray:
+    """(K,) bool: the modes (not steady) in which the body's gages ``rows`` move as one rigid
+    body, or do so with one and the same gage left out: in each mode alone, the largest gain z
+    of the others (each predicted from the rest) within the normal's two-sided chance level,
+    Bonferroni over the gages and modes. A gain is one gage's at every mode, so the modes kept
+    are those of the gage whose removal leaves the most modes rigid (a bent mode may look rigid
+    but for another gage, where its bending is largest)."""
+    a, se = _real_modes(fm)
+    k_all = np.flatnonzero(~fm.steady)
+    level = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(rows) * max(1, k_all.size))))
+    whole = np.zeros(fm.n_modes, dtype=bool)
+    but = np.zeros((len(rows), fm.n_modes), dtype=bool)
+    for k in k_all:
+        only = np.ones(fm.n_modes, dtype=bool)
+        only[k] = False
+        whole[k] = _largest_z(a, se, G, rows, only) <= level
+        but[:, k] = [_largest_z(a, se, G, [r for r in rows if r != c], only) <= level for c in rows]
+    best = int(np.argmax(np.sum(but | whole, axis=1)))
+    return whole | but[best]
+
+
+def _largest_z(a: np.ndarray, se: np.ndarray, G: dict, rows: list[int], skip: np.ndarray) -> float:
+    """The largest gain z among ``rows``, each predicted from the others on the modes not in
+    ``skip``; a gage whose entries are too weak to read there (:data:`MIN_ENTRY_SNR`) is passed
+    over (in one low mode a gage near its node is), infinite when one is not determined by the
+    others' rigid-body motion or fewer than three are read."""
+    zs = []
+    for i in rows:
+        others = [r for r in rows if r != i]
+        if _prediction(a, se, G, i, others, skip) is None:
+            return math.inf
+        e = _gain_of(a, se, G, i, others, skip)
+        if e is not None:
+            zs.append(abs(e[0] - 1) / e[1])
+    return max(zs) if len(zs) >= 3 else math.inf
+
+
+def _body_gains_on(fm: FreeModal, gages: Sequence[Gage], rows: list[int], G: dict,
+                   skip_modes: np.ndarray) -> list[Finding]:
+    """A body's gain, rigid-body and flexible-body findings read on the modes not in
+    ``skip_modes`` ((K,) bool; the steady poles at least)."""
     a, se = _real_modes(fm)
     out, live = [], list(rows)
     while len(live) > 2:
-        res = {i: e for i in live if (e := _gain_of(a, se, G, i, [r for r in live if r != i], fm.steady))}
+        res = {i: e for i in live if (e := _gain_of(a, se, G, i, [r for r in live if r != i], skip_modes))}
         if not res:
             return out
         level = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(res))))
         if max(abs(g - 1) / s for g, s in res.values()) <= level:
             return out
-        rest = {c: _spread_without(a, se, G, live, c, fm.steady) for c in res}
+        rest = {c: _spread_without(a, se, G, live, c, skip_modes) for c in res}
         i = min(rest, key=rest.get)
         g, s = res[i]
         z = abs(g - 1) / s
@@ -250,21 +356,23 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
             # (its statistic the others' largest gain z, else -- a pair only each other checks --
             # the suspect's own)
             stat = rest[i] if math.isfinite(rest[i]) else z
-            return out + [_flex_finding(fm, gages, live, stat, level)]
+            return out + [_flex_finding(fm, gages, live, stat, level, skip_modes)]
         num = gages[i].number
         live.remove(i)
-        spread, spread_level = _mode_spread(a, se, G, i, live, fm.steady)
+        spread, spread_level = _mode_spread(a, se, G, i, live, skip_modes)
         if not math.isfinite(spread):  # one mode: a gain is not told from the body's shape
-            return out + [_flex_finding(fm, gages, live + [i], z, level)]
+            return out + [_flex_finding(fm, gages, live + [i], z, level, skip_modes)]
         if spread > spread_level:      # a gain is one ratio at every mode; this is the body's shape
-            out.append(_rigid_finding(fm, gages[i], spread, spread_level))
+            out.append(_rigid_finding(fm, gages[i], spread, spread_level, skip_modes))
             continue
         what = f"gain x{g:.3f} against its body's rigid-body motion"
         if g < 0:
             what += " (its polarity reversed)"
         elif g < 1:            # a tilted gage reads cos(tilt) of its axis where nothing sees across it
             what += f" (or its axis tilted {math.degrees(math.acos(g)):.0f} deg)"
-        out.append(_gain_finding(fm, num, z, level, g, f"gage {num}: {what} (se {s:.3f})"))
+        found = _gain_finding(fm, num, z, level, g, f"gage {num}: {what} (se {s:.3f})", skip_modes)
+        closed, ci = _gain_closure(a, se, G, i, live, skip_modes)
+        out.append(replace(found, closed_held=closed, closed_held_ci=ci))
     return out
 
 
@@ -283,9 +391,29 @@ def _spread_without(a: np.ndarray, se: np.ndarray, G: dict, live: list[int], c: 
 
 
 def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
-             steady: np.ndarray, min_entries: int = 2) -> tuple[float, float] | None:
+             steady: np.ndarray, min_entries: int = 2,
+             impacts: np.ndarray | None = None) -> tuple[float, float] | None:
     """(gain, its standard error) of row ``i`` against its prediction from the rows ``others``,
-    or None when they do not determine its rigid-body motion. Steady poles are left out."""
+    or None when they do not determine its rigid-body motion. Steady poles are left out; so are
+    the impacts not in ``impacts`` ((n_imp,) bool, default all)."""
+    pred = _prediction(a, se, G, i, others, steady)
+    if pred is None:
+        return None
+    p, var, ok = pred
+    if impacts is not None:
+        ok = ok & impacts[:, None]
+    if ok.sum() < min_entries:
+        return None
+    w = np.where(ok, 1.0 / var, 0.0)
+    den = float(np.sum(w * p**2))
+    return float(np.sum(w * p * a[:, i, :]) / den), math.sqrt(1.0 / den)
+
+
+def _prediction(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
+                steady: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Row ``i``'s real mode shapes predicted from the rows ``others`` by rigid-body kinematics
+    (n_imp, K) m/s^2, the variance of ``a[:, i] - p`` and the entries well measured (not steady,
+    :data:`MIN_ENTRY_SNR`); None when ``others`` do not determine ``i``'s rigid-body motion."""
     Go = np.array([G[r] for r in others])
     rank = np.linalg.matrix_rank
     if not others or rank(np.vstack([Go, G[i]]), tol=1e-9) > rank(Go, tol=1e-9):
@@ -295,11 +423,29 @@ def _gain_of(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
     var = se[:, i, :] ** 2 + np.einsum("o,jok->jk", h**2, se[:, others, :] ** 2)
     var = var + (GAIN_FLOOR * p) ** 2
     ok = (p**2 >= MIN_ENTRY_SNR**2 * var) & ~steady[None, :]
-    if ok.sum() < min_entries:
-        return None
-    w = np.where(ok, 1.0 / var, 0.0)
-    den = float(np.sum(w * p**2))
-    return float(np.sum(w * p * a[:, i, :]) / den), math.sqrt(1.0 / den)
+    return p, var, ok
+
+
+def _gain_closure(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
+                  steady: np.ndarray) -> tuple[float, tuple[float, float]]:
+    """The share of row ``i``'s rigid-body misfit (``a - p`` over its standard error, beyond one
+    per entry) that its gain takes out on impacts it was not fitted on: each impact in turn
+    held out, the gain fitted on the others (:func:`closure_of`, units the entries; a held-out
+    impact whose entries are too weak to read adds none -- a weak blow of four, the model
+    layer's one held out, often has none). NaN when not measured."""
+    pred = _prediction(a, se, G, i, others, steady)
+    if pred is None or a.shape[0] < 2:
+        return math.nan, (math.nan, math.nan)
+    p, var, ok = pred
+    y = a[:, i, :]
+    before, after = [], []
+    for j in range(a.shape[0]):
+        g = _gain_of(a, se, G, i, others, steady, impacts=np.arange(a.shape[0]) != j)
+        if g is None or not ok[j].any():
+            continue
+        before += list(((y[j] - p[j]) ** 2 / var[j])[ok[j]])
+        after += list(((y[j] - g[0] * p[j]) ** 2 / var[j])[ok[j]])
+    return closure_of(np.array(before), np.array(after), np.ones(len(before)))
 
 
 def _mode_spread(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[int],
@@ -324,13 +470,13 @@ def _mode_spread(a: np.ndarray, se: np.ndarray, G: dict, i: int, others: list[in
     return float(np.sum(w * (gk - mean) ** 2)), float(scipy.stats.chi2.isf(P_CHANCE, len(gk) - 1))
 
 
-def _rigid_finding(fm: FreeModal, gage: Gage, stat: float, level: float) -> Finding:
+def _rigid_finding(fm: FreeModal, gage: Gage, stat: float, level: float, skip: np.ndarray) -> Finding:
     """A gage its body's other gages do not predict by rigid-body kinematics with one gain for
     all modes: the rig's rigid body is not what moves there (a flexible part, a wrong position
     or body in the rig file), a model-form finding, not a sensor's."""
     return Finding(check="rigid_body", layer=Layer.MODEL_FORM, gages=(gage.number,),
                    statistic=stat, chance_level=level, size=float("nan"), unit="",
-                   window="decay", mode_hz=tuple(float(f) for f in fm.f_hz[~fm.steady]),
+                   window="decay", mode_hz=tuple(float(f) for f in fm.f_hz[~skip]),
                    text=f"gage {gage.number} does not move with the {gage.body}'s other gages as one "
                         "rigid body, and not by one gain at every mode (a flexible part, or its "
                         "position or body in the rig)",
@@ -338,7 +484,7 @@ def _rigid_finding(fm: FreeModal, gage: Gage, stat: float, level: float) -> Find
 
 
 def _flex_finding(fm: FreeModal, gages: Sequence[Gage], rows: list[int], stat: float,
-                  level: float) -> Finding:
+                  level: float, skip: np.ndarray) -> Finding:
     """A body whose gages no rigid-body motion fits with one faulty gage taken out (or, with one
     measured mode, whose misfit no gain is told from): its shapes bend, the rig's rigid body is
     the model's form there, not a sensor fault. ``stat`` a gain z beyond the normal's chance
@@ -347,15 +493,16 @@ def _flex_finding(fm: FreeModal, gages: Sequence[Gage], rows: list[int], stat: f
     nums = tuple(sorted(gages[r].number for r in rows))
     return Finding(check="flex", layer=Layer.MODEL_FORM, gages=nums, statistic=float(stat),
                    chance_level=level, size=float("nan"), unit="", window="decay",
-                   mode_hz=tuple(float(f) for f in fm.f_hz[~fm.steady]),
+                   mode_hz=tuple(float(f) for f in fm.f_hz[~skip]),
                    text=f"the {body}'s gages {', '.join(map(str, nums))} do not move as one rigid body "
                         "and no single gage's removal makes them: the body deforms in its modes "
                         "(model form of the rigid-body assumption, not a sensor fault)",
                    null="normal (largest gain z of the others, one gage left out)")
 
 
-def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str) -> Finding:
+def _gain_finding(fm: FreeModal, num: int, z: float, level: float, g: float, text: str,
+                  skip: np.ndarray) -> Finding:
     return Finding(check="gain", layer=Layer.SENSOR, gages=(num,), statistic=float(z),
                    chance_level=level, size=g, unit="ratio", text=text, window="decay",
-                   mode_hz=tuple(float(f) for f in fm.f_hz), p_chance=P_CHANCE,
+                   mode_hz=tuple(float(f) for f in fm.f_hz[~skip]), p_chance=P_CHANCE,
                    null="normal (gain estimate over its standard error)")

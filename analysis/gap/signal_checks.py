@@ -19,7 +19,7 @@ import scipy.signal
 import scipy.stats
 
 from .contact import early_poles, rss, second_blow
-from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer
+from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer, closure_of, held_out
 
 CLIP_SPAN_S = 2.0
 """How long after each onset flat tops are looked for, s (the ringing is largest early)."""
@@ -366,8 +366,8 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
     poles = fm.poles[~fm.steady]                   # a second blow does not start a tone again
     # with the early window's own poles (modes damped out before the free model's decay window,
     # which the scan would otherwise fit with a second blow: contact.early_poles)
-    best = [_double_hit_scan(x, fs_hz, t, np.concatenate([poles, early_poles(x, fs_hz, t, poles, sig)]), sig)
-            for t in onsets_s]
+    every = [np.concatenate([poles, early_poles(x, fs_hz, t, poles, sig)]) for t in onsets_s]
+    best = [_double_hit_scan(x, fs_hz, t, p, sig) for t, p in zip(onsets_s, every, strict=True)]
     n_d = best[0][3]
     chance = float(scipy.stats.chi2.isf(P_CHANCE / (n_d * len(onsets_s)), 2))
     hits = [(j, b) for j, b in enumerate(best) if b[0] > chance and b[2] >= RHO_MIN]
@@ -377,8 +377,10 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
     d, rho, contact = _measured(x, fs_hz, onsets_s, poles, sig, hits)
     blows = ", ".join(str(j + 1) for j, _ in hits)
     held = f"; contact {1e3 * contact:.1f} ms" if math.isfinite(contact) else ""
+    closed, ci = double_hit_closure(x, fs_hz, onsets_s, every, sig, best, chance)
     return [Finding(
         check="double_hit", layer=Layer.EXCITATION, gages=tuple(numbers), statistic=stat,
+        closed_held=closed, closed_held_ci=ci,
         chance_level=chance, size=rho, unit="ratio", window="early",
         mode_hz=tuple(float(v) for v in fm.f_hz),
         text=f"a second blow {1e3 * d:.1f} ms after the first at {100 * rho:.0f} % of it "
@@ -458,3 +460,88 @@ def _refined_size(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray
                                          bounds=(rho / step, rho * step), method="bounded",
                                          options={"xatol": 1e-3 * rho})
     return float(res.x)
+
+
+# ---------------------------------------------------------------- closures on held-out blows
+
+CLIP_BLOCK_S = 0.1
+"""The units of a clipping closure's bootstrap: stretches of this length of the held-out blows."""
+
+
+
+def clip_closure(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray,
+                 fm: FreeModal) -> tuple[float, tuple[float, float]]:
+    """How much of a clipped gage's misfit by the free modal model at its peaks a clipping at the
+    rails read on the other blows closes (:func:`closure_of`), each blow held out in turn. Per
+    blow, from ``EARLY_FROM_S`` after the onset to the free model's decay window's end, the
+    free model's poles (each with free amplitudes, and a mean) are fitted to the record ``v``
+    (m/s^2) as it is, and, with the correction, to the samples off the rails only, their
+    prediction cut at the rails (the highest and lowest values of the other blows, less one
+    converter step). Units: the :data:`CLIP_BLOCK_S` stretches that reach the rails (the
+    finding's window, the peaks: a blow too weak to clip, or the stretches after its peaks,
+    hold the model's own misfit of the early window, which no clipping explains); the noise
+    expectation the gage's noise before the blows. NaN when no blow reaches the others' rails."""
+    if len(onsets_s) < 2 or fm.n_modes == 0:
+        return math.nan, (math.nan, math.nan)
+    a0 = np.rint((np.asarray(onsets_s) + EARLY_FROM_S) * fs_hz).astype(int)
+    n = int((DECAY_START_S - EARLY_FROM_S) * fs_hz) + fm.n_s
+    if a0.min() < 0 or a0.max() + n > v.size:
+        return math.nan, (math.nan, math.nan)
+    seg = np.stack([v[a:a + n] for a in a0])
+    q = _step(seg)
+    e = np.exp(np.multiply.outer(np.arange(n) / fs_hz, fm.poles[~fm.steady]))
+    A = np.column_stack([e.real, e.imag, np.ones(n)])
+    sig2 = max(_pre_noise(v, fs_hz, onsets_s, 1.0) ** 2, 1e-300)
+    blk = max(1, int(CLIP_BLOCK_S * fs_hz))
+    m = n // blk * blk
+    before, after = [], []
+    for j, y in enumerate(seg):
+        rest = np.delete(seg, j, axis=0)
+        hi, lo = float(np.max(rest)) - q, float(np.min(rest)) + q
+        free = (y < hi) & (y > lo)
+        railed = (~free[:m]).reshape(-1, blk).any(axis=1)
+        if not railed.any():
+            continue
+        c0, *_ = np.linalg.lstsq(A, y, rcond=None)
+        c1, *_ = np.linalg.lstsq(A[free], y[free], rcond=None)
+        r0, r1 = (y - A @ c0) ** 2, (y - np.clip(A @ c1, lo, hi)) ** 2
+        before += list(r0[:m].reshape(-1, blk).sum(axis=1)[railed] / sig2)
+        after += list(r1[:m].reshape(-1, blk).sum(axis=1)[railed] / sig2)
+    return closure_of(np.array(before), np.array(after), np.full(len(before), float(blk)))
+
+
+def double_hit_closure(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, poles: list[np.ndarray],
+                       sig: np.ndarray, best: list, chance: float) -> tuple[float, tuple[float, float]]:
+    """How much of the held-out blows' early-window misfit by one blow (the free model's and the
+    early poles ``poles[j]`` of blow ``j``, whitened by each gage's noise ``sig``) a second blow
+    read on the other blows closes (:func:`closure_of`): its delay and size the median of the
+    scans (``best``, :func:`_double_hit_scan` per blow) of the blows not held out that show one
+    beyond ``chance`` of :data:`RHO_MIN` or more. Units: the gages of the held-out blows; the
+    noise expectation one per sample less the gage's share of the fitted amplitudes."""
+    held = held_out(len(onsets_s))
+    seen = [b for j, b in enumerate(best) if not held[j] and b[0] > chance and b[2] >= RHO_MIN]
+    if not held.any() or not seen:
+        return math.nan, (math.nan, math.nan)
+    d, rho = float(np.median([b[1] for b in seen])), float(np.median([b[2] for b in seen]))
+    before, after, expect = [], [], []
+    for j in np.flatnonzero(held):
+        a = int(round((onsets_s[j] + EARLY_FROM_S) * fs_hz))
+        b = int(round((onsets_s[j] + EARLY_TO_S) * fs_hz))
+        y = (x[:, a:b] / sig[:, None]).T
+        if y.shape[0] < 16 or not np.all(np.isfinite(y)):
+            continue
+        tau = (a + np.arange(y.shape[0])) / fs_hz - onsets_s[j]
+        e1 = np.exp(np.multiply.outer(tau, poles[j]))
+        e2 = np.where((tau >= d - 0.5 / fs_hz)[:, None], np.exp(np.multiply.outer(tau - d, poles[j])), 0)
+        before += list(_rss_by_gage(e1, y))
+        after += list(_rss_by_gage(e1 + rho * e2, y))
+        expect += [y.shape[0] - (2 * poles[j].size + 1)] * y.shape[1]
+    return closure_of(np.array(before), np.array(after), np.array(expect, dtype=float))
+
+
+def _rss_by_gage(e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Each column's residual sum of squares of ``y`` (N, n_g) on the real basis of the complex
+    columns ``e`` (N, K) and a constant (as :func:`~ramdaq.analysis.gap.contact.rss`), (n_g,)."""
+    A = np.column_stack([e.real, e.imag, np.ones(e.shape[0])])
+    Q, _ = np.linalg.qr(A)
+    return np.sum(y**2, axis=0) - np.sum((Q.T @ y) ** 2, axis=0)

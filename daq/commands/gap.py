@@ -168,8 +168,11 @@ def data_lines(d: Diagnosis) -> list[str]:
     if not dc.findings:
         return out + ["    nothing beyond chance (" + ", ".join(dc.looked) + ")"]
     for f in dc.findings:
+        closes = (f"; closes {_pct(f.closed_held)} of its check's residual on held-out impacts "
+                  f"(95 % {_pct(f.closed_held_ci[0])} .. {_pct(f.closed_held_ci[1])})"
+                  if np.isfinite(f.closed_held) else "")
         out.append(f"    [{f.layer}] {f.text} ({f.window} window; statistic {f.statistic:.4g} > "
-                   f"{f.chance_level:.3g})")
+                   f"{f.chance_level:.3g}{closes})")
     return out
 
 def _headline(d: Diagnosis) -> str:
