@@ -190,8 +190,12 @@ at 0 Hz, reads too low: a clean truth-simulator trial showed a 1.5 Hz "line" jus
 chance level)."""
 LINGER = 1e-4
 """A pole still rings in a pre window when this fraction of its amplitude is left there."""
-LEVEL_HALF_WIDTH_HZ = 5.0
-"""Half-width of the neighbourhood the noise level is read from, Hz (coloured noise)."""
+LEVEL_HALF_WIDTH_HZ = 15.0
+"""Half-width of the neighbourhood the noise level is read from, Hz: wide, as the noise's broad
+shape is taken out first (:func:`line_level`), so the median reads enough independent values
+(:func:`level_bins`) for a chance level near Gamma's."""
+LEVEL_GUARD_RES = 2.0
+"""Resolutions either side of a bin left out of its level: a Hann window's main lobe."""
 
 
 def pre_windows(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, fm: FreeModal,
@@ -270,13 +274,15 @@ def pre_trigger_lines(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers
 
 
 def level_bins(window_s: float) -> float:
-    """Independent frequencies the running median of :func:`line_level` reads a level from: its
-    width over the resolution ``1/T``. Measured on the truth generator's coloured noise (16
-    gages, four 1-s pre windows, 150 trials: 2400 gage maxima over the band), the maximum
-    exceeded ``n F(2n, 2nm)``'s quantile for a per-gage probability of 10, 3 and 1 % in 8.3,
-    2.9 and 0.96 % of the gages with this ``m`` (9.9); Gamma(n, 1)'s (a level known exactly) in
-    32, 18 and 8 %."""
-    return max(1.0, 2 * LEVEL_HALF_WIDTH_HZ * window_s)
+    """Independent values the running median of :func:`line_level` reads a level from: the
+    resolutions in its window outside the guard band, over a Hann window's noise bandwidth (1.5
+    resolutions: neighbouring bins are correlated), times a median's efficiency against a mean
+    (2/pi): 11.0 for a 1 s window. Measured on the truth generator's coloured noise (16 gages,
+    four 1-s pre windows, 100 trials: 1600 gage maxima over the band), the maximum passed
+    ``n F(2n, 2nm)``'s quantile for a per-gage probability of 10, 3 and 1 % in 10.4, 3.2 and
+    0.8 % of the gages at m = 10 and 12.9, 4.9 and 1.4 % at m = 12; Gamma(n, 1)'s (a level
+    known exactly) in 42, 20 and 10 %."""
+    return max(1.0, 2 * (LEVEL_HALF_WIDTH_HZ * window_s - LEVEL_GUARD_RES) / 1.5 * 2 / math.pi)
 
 
 def _in_first(first: np.ndarray, T: np.ndarray, grp: list[tuple[int, int]], m: float, n_imp: int,
@@ -301,44 +307,65 @@ TREND_CLIP = math.log(4.0)
 and is left out of the next fit (a noise bin's median scatters by about +-0.5)."""
 
 
-def line_level(S: np.ndarray, f: np.ndarray, band: np.ndarray, n_sum: int, fs_hz: float) -> np.ndarray:
+def line_level(S: np.ndarray, f: np.ndarray, band: np.ndarray, n_sum: int, fs_hz: float,
+               res_hz: float | None = None) -> np.ndarray:
     """The noise level under a summed periodogram ``S`` (n_g, n_f) of ``n_sum`` windows: the
     mean power of one window at each frequency of ``band`` (n_f,) bool (1 elsewhere), so that
     with no line ``S / level`` is Gamma(n_sum, 1).
 
     The broad shape is taken out first (least squares of ``log S`` on a polynomial of order
-    :data:`TREND_ORDER` in ``log f`` over the band); the running median over
-    +-:data:`LEVEL_HALF_WIDTH_HZ` of what is left, mirrored at the band's ends, is divided by
-    the median of Gamma(n_sum, 1). A running median of the raw spectrum reads a 1/f noise's level
-    too low at the band's low end (the window reaches down to where the spectrum is 2-3x higher
-    on one side and, past 0 Hz, onto padding) and, taken as the mean of an exponential (over
-    ``ln 2``), a sum of four windows' 1.3x too high: on coloured noise alone the lines' test
-    exceeded its 1 % level in 9 % of the bins at 2-2.6 Hz and 0.1 % above 5 Hz (issue 17: a
-    1.77 Hz "line" at 1.1-1.2x its chance level on clean ALBACORE trials)."""
+    :data:`TREND_ORDER` in ``log f`` over the band, bins a line fills left out); the running
+    median of what is left over +-:data:`LEVEL_HALF_WIDTH_HZ`, reflected at the band's ends,
+    without the :data:`LEVEL_GUARD_RES` resolutions ``res_hz`` (default four padded bins, as
+    :func:`pre_trigger_lines` pads) either side of the bin itself (a line's own Hann main lobe:
+    a strong line at the band's edge, reflected, filled nearly half the window and read its own
+    level; SAMPSON's 2.18 Hz), is divided by the median of Gamma(n_sum, 1).
+
+    A running median of the raw spectrum read a 1/f noise's level too low at the band's low
+    end (its window reached down to where the spectrum is 2-3x higher, and past 0 Hz onto
+    padding) and, taken as an exponential's mean (over ``ln 2``), a sum of four windows' 1.3x
+    too high: on coloured noise alone the lines' test passed its 1 % level in 9 % of the bins
+    at 2-2.6 Hz and 0.1 % above 5 Hz (issue 17: a 1.77 Hz "line" at 1.1-1.2x its chance level
+    on clean ALBACORE trials)."""
     level = np.ones_like(S)
     if band.sum() < 2 * TREND_ORDER + 2:
         return level
     lf = np.log(f[band])
     ls = np.log(np.maximum(S[:, band], 1e-300))
+    res = 4 * float(f[1] - f[0]) if res_hz is None else res_hz
     # the shape read from the medians of log-spaced bins, each bin one point: the few bins of
     # the lowest octaves, where a 1/f part bends most, weigh as much as the many above
-    edges = np.linspace(lf[0], lf[-1] + 1e-9, TREND_BINS + 1)
-    which = np.searchsorted(edges, lf, side="right") - 1
+    fb = f[band]
+    edges = [float(fb[0])]
+    step = (fb[-1] / fb[0]) ** (1 / TREND_BINS)
+    while edges[-1] <= fb[-1]:
+        edges.append(edges[-1] * step)
+    which = np.searchsorted(np.log(edges), lf, side="right") - 1
     pts = [(float(lf[which == b].mean()), np.median(ls[:, which == b], axis=1))
-           for b in range(TREND_BINS) if np.any(which == b)]
+           for b in range(len(edges)) if np.any(which == b)]
     u0, du = lf.mean(), max(float(np.ptp(lf)), 1e-12)
     order = min(TREND_ORDER, len(pts) - 1)
     V = np.vander([(p[0] - u0) / du for p in pts], order + 1)        # (n_pts, order + 1)
     Y = np.stack([p[1] for p in pts])                                  # (n_pts, n_g)
     keep = np.ones(Y.shape, bool)
-    for _ in range(3):      # a bin a line fills (the lowest hold a few frequencies) is left out
-        c = np.stack([np.linalg.lstsq(V[keep[:, g]], Y[keep[:, g], g], rcond=None)[0]
+    # a bin a line fills (the lowest hold a few frequencies each) is left out: found first against
+    # a quadratic, which cannot bend into a line at the band's edge, then against the full order
+    for o in (min(2, order), order, order):
+        Vo = V[:, order - o:]
+        c = np.stack([np.linalg.lstsq(Vo[keep[:, g]], Y[keep[:, g], g], rcond=None)[0]
                       for g in range(Y.shape[1])], axis=1)
-        keep = (Y - V @ c <= TREND_CLIP) | (np.sum(keep, axis=0) <= order + 2)[None, :]
+        keep = (Y - Vo @ c <= TREND_CLIP) | (np.sum(keep, axis=0) <= order + 2)[None, :]
     trend = np.exp(np.vander((lf - u0) / du, order + 1) @ c).T      # (n_g, n_band)
-    half = max(3, int(LEVEL_HALF_WIDTH_HZ * 2 * (f.size - 1) / fs_hz))
-    med = scipy.ndimage.median_filter(S[:, band] / trend, size=(1, 2 * half + 1), mode="mirror")
-    level[:, band] = med * trend / float(scipy.stats.gamma.median(n_sum))
+    df = float(f[1] - f[0])
+    guard = int(round(LEVEL_GUARD_RES * res / df))
+    half = max(guard + 3, int(round(LEVEL_HALF_WIDTH_HZ / df)))
+    W = S[:, band] / trend
+    if W.shape[1] <= half:
+        return level
+    win = np.lib.stride_tricks.sliding_window_view(np.pad(W, ((0, 0), (half, half)), mode="reflect"),
+                                                   2 * half + 1, axis=1)
+    beside = np.r_[0:half - guard + 1, half + guard:2 * half + 1]     # the guard band left out
+    level[:, band] = np.median(win[..., beside], axis=-1) * trend / float(scipy.stats.gamma.median(n_sum))
     return level
 
 
