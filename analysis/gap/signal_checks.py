@@ -348,13 +348,19 @@ def line_level(S: np.ndarray, f: np.ndarray, band: np.ndarray, n_sum: int, fs_hz
     V = np.vander([(p[0] - u0) / du for p in pts], order + 1)        # (n_pts, order + 1)
     Y = np.stack([p[1] for p in pts])                                  # (n_pts, n_g)
     keep = np.ones(Y.shape, bool)
-    # a bin a line fills (the lowest hold a few frequencies each) is left out: found first against
-    # a quadratic, which cannot bend into a line at the band's edge, then against the full order
-    for o in (min(2, order), order, order):
+    # a bin a line fills (the lowest hold a few frequencies each) is left out for good: found
+    # first against a quadratic, which cannot bend into a line at the band's edge, then against
+    # the full order; the last fit is on the bins left
+    for o in (min(2, order), min(2, order), order, order):
         Vo = V[:, order - o:]
         c = np.stack([np.linalg.lstsq(Vo[keep[:, g]], Y[keep[:, g], g], rcond=None)[0]
                       for g in range(Y.shape[1])], axis=1)
-        keep = (Y - Vo @ c <= TREND_CLIP) | (np.sum(keep, axis=0) <= order + 2)[None, :]
+        if o < order:
+            c = np.concatenate([np.zeros((order - o, c.shape[1])), c])
+        nxt = keep & (Y - V @ c <= TREND_CLIP)
+        keep = np.where((np.sum(nxt, axis=0) > order + 2)[None, :], nxt, keep)
+    c = np.stack([np.linalg.lstsq(V[keep[:, g]], Y[keep[:, g], g], rcond=None)[0]
+                  for g in range(Y.shape[1])], axis=1)
     trend = np.exp(np.vander((lf - u0) / du, order + 1) @ c).T      # (n_g, n_band)
     df = float(f[1] - f[0])
     guard = int(round(LEVEL_GUARD_RES * res / df))
