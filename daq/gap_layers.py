@@ -15,7 +15,7 @@ from ..analysis.gap.layers import Answer, answer
 from ..analysis.gap.rigfit import ModelLevel, with_updates
 from ..analysis.gap.rigfit import model_level as rig_to_modes
 from ..analysis.gap.sensors import DataChecks, check_trial
-from ..analysis.gap.trialdata import TrialData
+from ..analysis.gap.trialdata import TrialData, declared_lines
 from .gap_trial import LoadedTrial, trial_data
 
 FORM_MIN_CLOSURE = 0.5
@@ -104,6 +104,7 @@ def data_only(lt: LoadedTrial, td: TrialData, pre_s: float = 1.0,
     blows)."""
     (progress or (lambda s: None))("data-only checks (free modal model, sensors, blows, ambient)")
     try:
-        return check_trial(lt.x, lt.fs_hz, td.onsets_s, lt.rig.gages_by_channel(), pre_s=pre_s), None
+        return check_trial(lt.x, lt.fs_hz, td.onsets_s, lt.rig.gages_by_channel(), pre_s=pre_s,
+                           declared=declared_lines(lt.rig)), None
     except (ValueError, np.linalg.LinAlgError) as exc:
         return None, f"data-only checks not run: {exc}"

@@ -97,6 +97,9 @@ def sampson_case():
 
 
 def test_sampson_tone_is_named_and_localised(sampson_case):
+    # the model layer alone: its nominal rig leaves the declared tone out (strip_ambient), so it
+    # fits and names it. The one report (layers.answer) then answers "none": the data layer finds
+    # the line as the rig's [[ambient]] declares it (declared_ambient; test_ambient_lines)
     rig, d = sampson_case
     assert d.verdict == "explained"
     assert d.best.name == "ambient_tone"

@@ -254,6 +254,16 @@ def in_form_mode(where: dict | None, form_modes: Sequence[tuple[float, Sequence[
     return any(lo <= f < hi and set(where["gages"]) <= set(g) for f, g in form_modes)
 
 
+def declared_tone(findings: list[dict], location: dict | None) -> dict | None:
+    """The data layer's ``declared_ambient`` note (a line the rig's ``[[ambient]]`` declares,
+    present as declared) at the model's ambient tone (its frequency within 1 Hz, the pre
+    window's resolution, when the model placed one): that tone is the user's stated environment,
+    not an effect. None when there is none."""
+    f = (location or {}).get("effect_mode_hz")
+    return next((d for d in findings if d["check"] == "declared_ambient"
+                 and (f is None or not d["mode_hz"] or abs(d["mode_hz"][0] - f) <= 1.0)), None)
+
+
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
            findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
            splits: Sequence[dict] = ()) -> Answer:
@@ -273,6 +283,8 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     (before the form error would make it "none") when no data-only finding overrides it."""
     out = model_answer(model, candidates, where, form_gages, form_modes)
     named = out.named
+    if named == "ambient_tone" and (d := declared_tone(findings, out.location)):
+        return Answer("none", "data", out.location, None, d)    # the environment the rig declares
     overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
     if model == "unexplained" and splits and not overriding:
         return split_answer(max(splits, key=lambda s: s["mac"]), candidates)

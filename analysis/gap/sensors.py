@@ -39,7 +39,14 @@ from ..model.rig import Gage
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer, closure_of, free_modal_model
 from .features import rigid_projector
 from .homogeneity import homogeneity
-from .signal_checks import clip_closure, dead_or_noisy, double_hits, flat_tops, pre_trigger_lines
+from .signal_checks import (
+    DeclaredLine,
+    clip_closure,
+    dead_or_noisy,
+    double_hits,
+    flat_tops,
+    pre_trigger_lines,
+)
 
 PHASE_FLOOR_RAD = 0.02
 """Phase scatter accepted on top of each estimate's standard error: the free shapes of a real
@@ -77,12 +84,14 @@ class DataChecks:
 
 
 def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequence[Gage], *,
-                pre_s: float = 1.0) -> DataChecks:
+                pre_s: float = 1.0, declared: Sequence[DeclaredLine] = ()) -> DataChecks:
     """Every data-only check of a trial. A dead or clipped gage is left out of the poles'
     identification and of every shape check (its harmonics are no modes, its shapes are cut);
     a gage with a timing or high-pass finding is left out of the rigid-body reconstruction of
     its neighbours (its complex shapes would bend theirs). A double hit is looked for on the
-    gages that are not clipped."""
+    gages that are not clipped. ``declared``: the lines the rig declares (its ``[[ambient]]``),
+    reported as present when the data show them as declared
+    (:func:`~ramdaq.analysis.gap.signal_checks.declared_match`)."""
     numbers = tuple(g.number for g in gages)
     found = dead_or_noisy(x, fs_hz, onsets_s, numbers, pre_s=pre_s)
     dead = {g for f in found if f.check == "dead" for g in f.gages}
@@ -94,7 +103,7 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     found = [_with_clip_closure(f, x, fs_hz, onsets_s, numbers, fm) for f in found]
     timing = [f for f in chain_phase(fm, numbers) if not set(f.gages) & gone]
     found += timing + rigid_gain(fm, gages, skip=gone | {g for f in timing for g in f.gages})
-    found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s)
+    found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s, declared=declared)
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(_rows(x, keep), fs_hz, onsets_s, [numbers[i] for i in keep], fm)
     found += homogeneity(x, fm, numbers, skip_rows=rows)

@@ -22,9 +22,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
-from ..model.response import impact_amplitudes, modal_form, predominant_mode
+from ..model.response import ambient_gage_amplitudes, impact_amplitudes, modal_form, predominant_mode
 from ..model.rig import Rig
 from ..model.structure import build_model
+from .signal_checks import DeclaredLine
 
 DEC_ORDER = 8
 """Order of the decimation low-pass (applied forward and back: 16 in magnitude)."""
@@ -129,6 +130,20 @@ def strip_ambient(rig: Rig) -> Rig:
     """The rig without its ``[[ambient]]`` tone: the nominal model the diagnosis starts from."""
     from dataclasses import replace
     return replace(rig, ambient=())
+
+
+def declared_lines(rig: Rig) -> list[DeclaredLine]:
+    """The steady lines ``rig`` declares (its ``[[ambient]]``), each with the amplitude the rig's
+    model gives every gage, m/s^2, in DAQ channel order: what the data-only layer reports as the
+    user's environment, present as declared, rather than as an ambient-tone effect. Empty for a
+    rig without a declaration or without a structure (a channels-only rig)."""
+    if not rig.ambient or rig.rudder is None:
+        return []
+    model = build_model(rig)
+    rows = [model.gage_numbers.index(g.number) for g in rig.gages_by_channel()]
+    return [DeclaredLine(a.frequency_hz, np.abs(ambient_gage_amplitudes(model, a.hull_mode, a.frequency_hz,
+                                                                     a.v_b_amplitude_m))[rows])
+            for a in rig.ambient]
 
 
 def sos_response(sos: np.ndarray, f_hz: np.ndarray, fs_hz: float) -> np.ndarray:
