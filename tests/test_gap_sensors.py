@@ -267,6 +267,16 @@ def test_a_flexible_rudder_is_model_form_not_a_gage_fault():
     assert rigid_gain(*_rudder_modal(bend=0.0)) == []
 
 
+def test_a_reversed_gage_is_said_to_be_its_wiring_or_the_rig_files_axis():
+    """A new user's rig gave gage 4 the axis -y where it reads +y: the data layer read a
+    confident 'polarity reversed' sensor fault. The data cannot tell the two apart, so the
+    finding names both: the gage wired backwards, or its axis in the rig file of the wrong sign."""
+    (f,) = rigid_gain(*_rudder_modal(bend=0.0, gain=-1.0))
+    assert f.check == "gain" and f.gages == (3,) and f.size == pytest.approx(-1.0, rel=1e-3)
+    assert ("(its polarity reversed: the gage wired backwards, or its axis in the rig file of the "
+            "wrong sign)") in f.text
+
+
 def test_a_gain_on_a_flexible_rudder_is_read_on_the_modes_that_carry_it_rigidly():
     # issue 17, modal check seeds 151000/151001: the modal family's rudder bends in its own
     # modes and rides the hull's as one body; a 1.1-1.4x gain was only ever "flex". Two hull

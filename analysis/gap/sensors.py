@@ -376,7 +376,10 @@ def _body_gains_on(fm: FreeModal, gages: Sequence[Gage], rows: list[int], G: dic
             continue
         what = f"gain x{g:.3f} against its body's rigid-body motion"
         if g < 0:
-            what += " (its polarity reversed)"
+            # the data cannot tell a gage wired backwards from a rig file giving its axis the
+            # wrong sign (a new user's rig with gage 4 on -y was read as a confident sensor fault)
+            what += (" (its polarity reversed: the gage wired backwards, or its axis in the rig "
+                     "file of the wrong sign)")
         elif g < 1:            # a tilted gage reads cos(tilt) of its axis where nothing sees across it
             what += f" (or its axis tilted {math.degrees(math.acos(g)):.0f} deg)"
         found = _gain_finding(fm, num, z, level, g, f"gage {num}: {what} (se {s:.3f})", skip_modes)
