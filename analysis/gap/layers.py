@@ -302,7 +302,7 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     if not finds:
         return out
     f = max(finds, key=strength)
-    raw = [g for g in finds if g["layer"] == Layer.SENSOR and g["check"] not in LINEAR_SHAPE_CHECKS
+    raw = [g for g in finds if g.get("layer") == Layer.SENSOR and g.get("check") not in LINEAR_SHAPE_CHECKS
            and strength(g) >= PRECEDENCE_STRENGTH]
     if data_effect(f) == "unexplained" and not told_law(f) and raw:
         # a slope across the blows whose law the decays did not tell names no cause; a flat top
