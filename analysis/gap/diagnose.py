@@ -591,14 +591,13 @@ def _calibrated(td: TrialData, settings: Settings, say: Callable[[str], None]
     ratio = (fw.W / W_old)[td.fitted].ravel()
     first = base
     base = _kept(fw, calibrate(fw, theta0=base.theta, max_iter=settings.refit_iter,
-                               jac0=first.jac * ratio[:, None]), settings, first.jac * ratio[:, None])
+                               jac0=first.jac * ratio[:, None]), settings)
     first.drop_jacobian()
     made = _Replicates(fw, first, noise, W_old, settings)
     return fw, theta_pre, base, reps, bands, cell_energies(fw, reps, bands), made
 
 
-def _kept(fw: Forward, cal: Calibration, settings: Settings,
-          jac0: np.ndarray | None = None) -> Calibration:
+def _kept(fw: Forward, cal: Calibration, settings: Settings) -> Calibration:
     """``cal``, the time-history calibration, unless it moved the model's modes away from the
     trial's identified ones (``settings.reference_modes``) where the modal-level constants (the
     rig as calibrated to them, ``theta = 0``) stay close: then the model at those constants, its
@@ -610,9 +609,9 @@ def _kept(fw: Forward, cal: Calibration, settings: Settings,
     why = departs_from_modes(fw, cal.theta, zero, settings.reference_modes)
     if why is None:
         return cal
-    kept = calibrate(fw, theta0=zero, max_iter=0, jac0=jac0)
-    kept.cache["kept_modal"] = why
     cal.drop_jacobian()
+    kept = calibrate(fw, theta0=zero, max_iter=0)
+    kept.cache["kept_modal"] = why
     return kept
 
 
