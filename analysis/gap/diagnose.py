@@ -4,7 +4,9 @@ unmodelled effect causes it, and how far adding that effect closes the gap on he
 Steps (:func:`diagnose`):
 
 1. **Calibrate** the nominal model's constants on the fitted impacts (every third impact is
-   held out) -- :mod:`ramdaq.analysis.gap.calibrate`.
+   held out) -- :mod:`ramdaq.analysis.gap.calibrate`; when the rig was first calibrated to the
+   trial's identified modes (``Settings.reference_modes``), a time-history calibration that
+   moves the model's modes away from them is not kept (:func:`_kept`).
 2. **Where**: the gap map (gage x band x window) of the calibrated model, standardised by
    repeated simulations of that model with the trial's own noise and a model-form tolerance --
    :mod:`ramdaq.analysis.gap.evidence`. From then on every fit weighs each gage x window by what it
@@ -19,6 +21,10 @@ Steps (:func:`diagnose`):
    and the two strongest together; each is charged for its extra parameters by the Bayesian
    information criterion, its chi-square gain deflated map cell by map cell by the replicates'
    own excess there (``dBIC = -sum_cells dE / kappa_cell + k ln N + 2 ln n_placements``).
+   The candidate to be named is credited only beyond what re-calibration earns by itself
+   (:func:`_credited`): not named when its size sits at its null, nor when the base refitted
+   without any effect from its constants closes as much (the calibration was not at its
+   optimum: a better base is adopted when it keeps the identified modes).
 4. **How far**: the gap (energy beyond the noise expectation, summed over the map cells that
    both the fitted and the held-out impacts show) before and after, on the fitted and on the
    held-out impacts, with a bootstrap interval over gages.
