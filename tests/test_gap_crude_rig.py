@@ -12,6 +12,7 @@ trial."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -144,3 +145,18 @@ def test_a_candidate_is_credited_only_beyond_what_recalibration_closes():
     assert _beyond(0.8, 0.0) == 0.8 and _beyond(0.8, -0.3) == 0.8
     # closing what the null refit closes is no credit at all
     assert _beyond(0.69, 0.69) == pytest.approx(0.0)
+
+
+def test_a_candidate_not_credited_is_not_chosen():
+    from ramdaq.analysis.gap.diagnose import Candidate
+    from ramdaq.analysis.gap.verdict import choose
+
+    c = Candidate(terms=[], cal=None, dbic=-1000.0, gap_fit=1.0, gap_held=1.0, closed_fit=0.8,
+                  closed_held=0.8, closed_held_ci=(0.7, 0.9), location={})
+    # measured beyond a null refit that closed 60 % (dBIC -100): half of what it leaves
+    r = replace(c, null=(-100.0, 0.6, 0.6)).record()
+    assert r["dbic"] == pytest.approx(-900.0) and r["closed_held"] == pytest.approx(0.5)
+    assert choose([r | {"name": "x"}], True, 10.0, 0.0) == "x"
+    # re-calibration earned it all (tester8: a 8e-5 Hz high-pass credited with 69 %): no evidence
+    r = replace(c, null=(-990.0, 0.79, 0.79), no_credit="re-calibration").record()
+    assert r["dbic"] == 0.0 and choose([r | {"name": "x"}], True, 10.0, 0.0) == "unexplained"
