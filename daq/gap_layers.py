@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..analysis.gap.calibrate import ModeRef
 from ..analysis.gap.diagnose import Diagnosis, Settings, diagnose
 from ..analysis.gap.effects.base import rig_update
 from ..analysis.gap.layers import Answer, answer
@@ -48,6 +49,9 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
         if level.fit is not None:
             lt = replace(lt, rig=level.fit.rig)
             td = trial_data(lt, **prep)
+            tm = level.modes    # the time-history calibration must not move the modes away from them
+            settings = replace(settings, reference_modes=tuple(
+                ModeRef(*map(float, m)) for m in zip(tm.f_hz, tm.f_se_hz, tm.zeta, tm.zeta_se, strict=True)))
             if level.fit.form:
                 settings = replace(settings, min_closure=max(settings.min_closure, FORM_MIN_CLOSURE))
         say(level.statement())

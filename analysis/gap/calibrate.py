@@ -451,3 +451,67 @@ def _normal_equations(J: np.ndarray, r: np.ndarray, scale: np.ndarray) -> tuple[
         A += Js.T @ Js
         g += Js.T @ r[a:a + NORMAL_ROWS]
     return A, g
+
+
+@dataclass(frozen=True)
+class ModeRef:
+    """A mode identified on the trial (:class:`~ramdaq.analysis.gap.modal_level.TrialModes`):
+    damped frequency ``f_hz`` and damping ratio ``zeta`` with their standard errors."""
+
+    f_hz: float
+    f_se_hz: float
+    zeta: float
+    zeta_se: float
+
+
+F_FLOOR = 0.01
+"""The least relative frequency error a mode's misfit is measured in (the rig calibrated to the
+modes leaves 1-2 % as its form: a crude rig cannot do better, and a time fit is not blamed for
+what the model level left)."""
+ZETA_FLOOR = 0.2
+"""The least relative damping-ratio error a mode's misfit is measured in (damping ratios
+identified from 3-6 blows scatter by 10-20 %)."""
+WORSE_PER_MODE = 9.0
+"""How much a time fit's mode misfit (a sum of squared standardised errors) may exceed the
+modal-level constants' before it is said to have moved the modes away: three standard errors
+per identified mode."""
+
+
+def mode_misfit(fw: Forward, theta: np.ndarray, refs: tuple[ModeRef, ...]) -> float:
+    """Sum over the identified modes ``refs`` of the squared standardised errors of the model's
+    nearest mode (in log frequency) at base constants ``theta``: frequency and damping ratio,
+    each over its standard error floored at :data:`F_FLOOR` / :data:`ZETA_FLOOR` relative.
+    Infinite when the model cannot be built there."""
+    try:
+        lam = fw.modes(theta).lam
+    except (ValueError, np.linalg.LinAlgError):
+        return math.inf
+    lam = lam[lam.imag > 0]
+    if not len(lam) or not refs:
+        return math.inf if refs else 0.0
+    f, zeta = lam.imag / (2 * math.pi), -lam.real / np.abs(lam)
+    total = 0.0
+    for m in refs:
+        i = int(np.argmin(np.abs(np.log(f / m.f_hz))))
+        zf = (f[i] - m.f_hz) / max(m.f_se_hz, F_FLOOR * m.f_hz)
+        zz = (zeta[i] - m.zeta) / max(m.zeta_se, ZETA_FLOOR * m.zeta)
+        total += zf * zf + zz * zz
+    return float(total)
+
+
+def departs_from_modes(fw: Forward, theta_time: np.ndarray, theta_modal: np.ndarray,
+                       refs: tuple[ModeRef, ...]) -> str | None:
+    """Why the time-history calibration's constants ``theta_time`` are not kept over the
+    modal-level ones ``theta_modal``: the identified modes ``refs`` (:func:`mode_misfit`) fit
+    worse by more than :data:`WORSE_PER_MODE` per mode. One line, or None (keep the time fit)."""
+    if not refs:
+        return None
+    m_time = mode_misfit(fw, theta_time, refs)
+    m_modal = mode_misfit(fw, theta_modal, refs)
+    if not m_time > m_modal + WORSE_PER_MODE * len(refs):
+        return None
+    bound = [p.name for p, t in zip(fw.params, theta_time, strict=True) if abs(t) >= 0.999 * p.bound]
+    at = f"; at their bounds: {', '.join(bound)}" if bound else ""
+    return (f"the time-history calibration moved the model's modes away from the identified ones "
+            f"(misfit {m_time:.0f} against {m_modal:.0f} at the modal-level constants{at}): the "
+            "modal-level constants are kept")

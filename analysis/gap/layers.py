@@ -296,9 +296,18 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
         if named in {data_effect(f) for f in finds}:
             return out
         if named != "none" and named.split("+")[0] not in SENSOR_EFFECTS | {"gage_alignment"}:
-            if not laws:
+            # a named effect a data-only check looked for and did not find (its counterpart
+            # check ran: the data layer answered) does not beat a strong finding on other gages
+            # (issue 17: split_mode+double_hit on gages 12, 10, 15, the double hit not found,
+            # over gage 3's gain at 37x its chance level)
+            unconf = findings and any(COUNTERPART.get(e) not in {None, *(f["check"] for f in findings)}
+                                      for e in named.split("+"))
+            on = set((out.location or {}).get("gages") or [])
+            strong = [f for f in finds if unconf and strength(f) >= PRECEDENCE_STRENGTH
+                      and not set(f["gages"]) & on]
+            if not laws and not strong:
                 return out
-            finds = laws
+            finds = laws or strong
     if not finds:
         return out
     f = max(finds, key=strength)
