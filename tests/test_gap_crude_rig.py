@@ -95,7 +95,8 @@ def gain3():
     return _diagnosed(*make_trial(gain_g3=1.2))
 
 
-@pytest.mark.slow
+# issue 17's done-when ("a crude rig ... never a confident sensor fault on a clean trial"): in
+# the default run (each trial ~9 s on a quiet machine, measured)
 def test_a_clean_trial_with_a_crude_rig_is_no_effect_and_model_form(clean):
     assert clean.data is not None and clean.data.findings == [], [f.text for f in clean.data.findings]
     assert clean.answer.named == "none", clean.headline
@@ -104,7 +105,6 @@ def test_a_clean_trial_with_a_crude_rig_is_no_effect_and_model_form(clean):
     assert clean.best is None or clean.answer.named == "none"
 
 
-@pytest.mark.slow
 def test_a_gain_on_gage_3_with_a_crude_rig_is_gage_3s_sensitivity(gain3):
     assert gain3.answer.named == "gage_sensitivity", gain3.headline
     assert gain3.answer.location["gages"] == [3]
