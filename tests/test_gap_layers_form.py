@@ -89,15 +89,28 @@ def test_a_told_law_well_above_chance_outranks_a_named_linear_effect():
     assert answer("hull_coupling", [cand], None, set(), [_law("coulomb", 6.2)]).named == "hull_coupling"
 
 
+def _skew_of_gage_12() -> dict:
+    """Modal check seed 157000's phase finding: a 2.8-sample skew of gage 12 at 11.8x chance."""
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    return Finding(check="time_skew", layer=Layer.SENSOR, gages=(12,), statistic=205.1,
+                   chance_level=17.34, size=0.00136, unit="s", text="skew", window="decay").to_json()
+
+
+def _flat_top(gage: int, statistic: float, chance: float, size: float) -> dict:
+    """A clipping finding on one gage (flat tops at the peaks)."""
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+
+    return Finding(check="clipping", layer=Layer.SENSOR, gages=(gage,), statistic=statistic,
+                   chance_level=chance, size=size, unit="m/s^2", text="flat", window="peaks").to_json()
+
+
 def test_a_trial_not_homogeneous_sets_the_linear_shape_checks_aside():
     # modal check seed 157000: friction on a 12.7 Hz mode; the phases read a 2.8-sample skew of
     # gage 12 at 11.8x its chance level, the homogeneity check a slope at 11.3x
-    from ramdaq.analysis.gap.datamodel import Finding, Layer
 
-    skew = Finding(check="time_skew", layer=Layer.SENSOR, gages=(12,), statistic=205.1, chance_level=17.34,
-                   size=0.00136, unit="s", text="skew", window="decay").to_json()
-    clip = Finding(check="clipping", layer=Layer.SENSOR, gages=(3,), statistic=40.0, chance_level=3.0,
-                   size=1.0, unit="m/s^2", text="flat", window="peaks").to_json()
+    skew = _skew_of_gage_12()
+    clip = _flat_top(3, 40.0, 3.0, 1.0)
     slope = _law("slope", 46.07)
     a = answer(None, [], None, set(), [skew, slope])
     assert a.named == "unexplained" and a.finding["check"] == "homogeneity"
@@ -156,12 +169,9 @@ def test_a_closure_is_the_share_of_the_gap_beyond_the_noise():
 def test_a_flat_top_answers_an_unexplained_trial_beside_a_nonlinearity():
     # modal check seed 153001: clipping on gages 4 and 6 (8 against 3.04), the homogeneity
     # check's slope on the hull's gages 9, 13, 14 (25.5 against 4.06), the model unexplained
-    from ramdaq.analysis.gap.datamodel import Finding, Layer
 
-    clip = Finding(check="clipping", layer=Layer.SENSOR, gages=(6,), statistic=8.0, chance_level=3.04,
-                   size=1.7, unit="m/s^2", text="flat", window="peaks").to_json()
-    skew = Finding(check="time_skew", layer=Layer.SENSOR, gages=(12,), statistic=205.1, chance_level=17.34,
-                   size=0.00136, unit="s", text="skew", window="decay").to_json()
+    clip = _flat_top(6, 8.0, 3.04, 1.7)
+    skew = _skew_of_gage_12()
     slope = _law("slope", 25.5)
     a = answer("unexplained", [], None, set(), [clip, slope])
     assert a.named == "clipping" and a.by == "data" and a.location["gages"] == [6]
