@@ -145,6 +145,14 @@ gain and alignment, the phases' timing and high-pass) or a linear one-blow respo
 hit): an amplitude-dependent structure bends what they read."""
 
 
+def reads_recorded_values(f: dict) -> bool:
+    """Whether finding ``f`` (as JSON) is a sensor finding read on the recorded values
+    themselves (a flat top, a dead gage), not on the linear model's shapes
+    (:data:`LINEAR_SHAPE_CHECKS`): a nonlinearity elsewhere does not bend it. A finding without
+    a layer (stored before layers) is none."""
+    return f.get("layer") == Layer.SENSOR and f.get("check") not in LINEAR_SHAPE_CHECKS
+
+
 def credible(findings: list[dict]) -> list[dict]:
     """The data-only findings (as JSON) that may answer for the trial: none of
     :data:`LINEAR_SHAPE_CHECKS` when the same trial is found not homogeneous across blows
@@ -175,8 +183,7 @@ def overriding_unexplained(findings: list[dict]) -> list[dict]:
         # a nonlinearity elsewhere does not bend it, as :func:`credible` keeps it (modal check
         # seed 153001: clipping on gages 4 and 6 at 2-2.6x chance, a slope on the hull's
         # gages beside it, was left "unexplained")
-        return [f for f in strong if is_friction(f) or (f["layer"] == Layer.SENSOR
-                                                        and f["check"] not in LINEAR_SHAPE_CHECKS)]
+        return [f for f in strong if is_friction(f) or reads_recorded_values(f)]
     return [f for f in strong if f["layer"] == Layer.SENSOR or f["check"] in OVERRIDING_EXCITATION]
 
 
@@ -311,8 +318,7 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     if not finds:
         return out
     f = max(finds, key=strength)
-    raw = [g for g in finds if g.get("layer") == Layer.SENSOR and g.get("check") not in LINEAR_SHAPE_CHECKS
-           and strength(g) >= PRECEDENCE_STRENGTH]
+    raw = [g for g in finds if reads_recorded_values(g) and strength(g) >= PRECEDENCE_STRENGTH]
     if data_effect(f) == "unexplained" and not told_law(f) and raw:
         # a slope across the blows whose law the decays did not tell names no cause; a flat top
         # well above chance is one, read on the recorded values (modal check seed 153001:

@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import tomllib
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -81,7 +82,8 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
     rows = gaps = missing = 0
     try:
         with McapReplayDevice(src) as dev, open(body, "w", encoding="utf-8", newline="\n") as f:
-            info, events, rig = dev.info, dev.events(), _rig_name(dev.rig_toml)
+            info, events = dev.info, dev.events()
+            rig = _rig_name(info, dev.rig_toml)
             div = _divisors(info, units)
             last = t_zero = None
             for block in dev:
@@ -116,9 +118,13 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
     return CsvExport(out, rows, info.n_channels, gaps, missing, len(events))
 
 
-def _rig_name(rig_toml: str) -> str:
-    for line in rig_toml.splitlines():
-        key, _, value = line.partition("=")
-        if key.strip() == "name":
-            return value.strip().strip('"')
-    return "(none recorded)"
+def _rig_name(info, rig_toml: str) -> str:
+    """The rig's name as the device recorded it (``StreamInfo.extra["rig_name"]``), else the
+    name its recorded TOML gives (top level or ``[rig]``)."""
+    if info.extra.get("rig_name"):
+        return str(info.extra["rig_name"])
+    try:
+        doc = tomllib.loads(rig_toml)
+    except tomllib.TOMLDecodeError:
+        return "(unreadable)"
+    return str(doc.get("name") or doc.get("rig", {}).get("name") or "(none recorded)")
