@@ -114,8 +114,10 @@ def cmd_record(args: argparse.Namespace) -> int:
     print(f"recording {device.info.device} ({device.info.n_channels} ch at "
           f"{device.info.fs_hz:g} Hz) into {out}; Ctrl-C ends it cleanly", flush=True)
     try:
+        # the device's faults as they come, on standard output as a trial's are: standard
+        # error holds only the one line of a failure
         s = record(device, out, readout=not args.quiet, overwrite=args.overwrite,
-                   say=lambda line: print(line, file=sys.stderr, flush=True))
+                   say=lambda line: print(line, flush=True))
     except DeviceError as err:  # the recorder finished the file before this got here
         raise DeviceError(f"{err}; {out} holds what came before, finished") from err
     print(f"{'interrupted: ' if s.interrupted else ''}wrote {out}: {s.duration_s:.2f} s, "
