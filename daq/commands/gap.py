@@ -62,6 +62,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
            f"{int((~td.fitted).sum())} held out), {td.n_gages} gages, compared up to "
            f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
            f"verdict: {_headline(d)}"]
+    out += rig_check_lines(d)
     out += answer_lines(d)
     zf = float(np.max(d.map_fit.z))
     held = (f", {float(np.max(d.map_held.z)):.1f} held out; the largest the held-out impacts reproduce "
@@ -115,6 +116,15 @@ def summary_lines(d: Diagnosis) -> list[str]:
         out.append(f"  with {d.best.name}:    {ms}")
     out += [f"  note: {n}" for n in d.notes]
     return out
+
+
+def rig_check_lines(d: Diagnosis) -> list[str]:
+    """One line when the rig's rudder mass is far from what the trial's modes imply
+    (:class:`~ramdaq.analysis.gap.rigfit.MassScale`): a unit or value error of the rig file,
+    which no bound of the calibration reaches; none otherwise."""
+    ml = d.model_level
+    scale = None if ml is None or ml.fit is None else ml.fit.scale
+    return [f"CHECK THE RIG: {scale.text()}"] if scale is not None and scale.absurd else []
 
 
 def model_level_lines(d: Diagnosis) -> list[str]:

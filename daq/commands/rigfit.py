@@ -106,8 +106,11 @@ def fit_lines(mf: ModeFit, path: Path) -> list[str]:
                    + ("  AT BOUND" if p.at_bound else ""))
     if mf.misfit_scale > 1:
         out.append(f"  (sds widened x{mf.misfit_scale:.3g}: the modes differ from the fitted model by "
-                   "that much more than the identification's standard errors say)")
+                   "that much more than the identification's standard errors say; the damping "
+                   "constants' sds are from the damping ratios alone, fitted after the others)")
     out.append(f"solver: {mf.solver_text()}")
     out.append(f"model form left: {mf.form_text()}")
+    if mf.scale is not None and mf.scale.absurd:
+        out.append(f"CHECK THE RIG: {mf.scale.text()}")
     out.append(f"wrote {path}")
     return out
