@@ -351,13 +351,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 def cmd_gap(args: argparse.Namespace) -> int:
     """Sim-to-real gap diagnosis of a recording (``ramdaq gap-benchmark`` proves it)."""
     from ...analysis.gap.diagnose import Settings
-    from ...analysis.gap.effects import get_effect
+    from .gap import parse_effects, run_gap, summary_lines, write_report
     from .progress import progress_bar
 
-    effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
-    for e in effects or ():
-        get_effect(e)
-    from .gap import run_gap, summary_lines, write_report
+    effects = parse_effects(args.effects)
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
@@ -790,7 +787,9 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
     gp.add_argument("--out", help="output folder (default FILE_gap/)")
     gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
+    gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered); "
+                    "'none': no library effect, only the data-only checks and the rig's model form "
+                    "(gap-benchmark's 'none' is its class of trials made without an effect)")
     gp.add_argument("--pre-s", type=float, default=1.0, help="pre-trigger window, s (default 1)")
     gp.add_argument("--post-s", type=float, default=4.0, help="longest decay compared, s (default 4)")
     gp.add_argument("--held-out-every", type=int, default=3,
