@@ -265,12 +265,13 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
 def _print_outcome(outcome, args: argparse.Namespace, rig_toml: str = "") -> None:
     """The trial summary on the terminal, its motions named as the stream's rig names them
     (``rig_toml``), and, with ``--json``, the per-hit results in a file."""
-    from .analyze import json_default, summary_table
+    from .analyze import json_default, motions_not_used, summary_table
 
     surface = parse_rig(rig_toml, "rig").surface if rig_toml else Surface()
     for k, why in outcome.summary["rejected"].items():
         print(f"hit {k} rejected: {why}")
-    print("\n".join(summary_table(surface.relabel(outcome.summary), args.units)))
+    print("\n".join(summary_table(surface.relabel(outcome.summary), args.units)
+                    + motions_not_used(outcome.results_json(), outcome.summary)))
     load = outcome.load
     print(f"analyzer: {load.looks_shown} first looks shown while ringing, {load.looks_skipped} "
           f"skipped because it was busy; {load.finals_coarse} final(s) coarse, "
@@ -338,7 +339,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(msg, flush=True)
 
     plots = plot_kinds(args.plots, off=args.no_plots)  # checked before the analysis
-    rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None)
+    rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None, mode_hz=args.mode_hz)
     air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
     if air is not None:
         check_air_twin(rig, air[0], args.air)
@@ -771,6 +772,10 @@ def build_parser() -> argparse.ArgumentParser:
     a = sub.add_parser("analyze", help="trial report: frequency, decrement, Report 1836 chain")
     a.add_argument("file", help="a recording (.mcap) that carries its rig")
     a.add_argument("--impact", type=int, help="analyse only this hit (0-based)")
+    a.add_argument("--mode-hz", type=float, metavar="F",
+                   help="run the report's chain (motions, Eq 14-17) on the identified mode nearest F Hz "
+                   "instead of the most energetic one; an error if none is within the decay's "
+                   "resolution (1 / its length) of F")
     a.add_argument("--air", help="the same rudder's in-air recording, for Eq 18 (file is in water)")
     a.add_argument("--out", help="output folder (default FILE_analysis/)")
     a.add_argument("--units", choices=("si", "report"), default="si",
