@@ -802,16 +802,17 @@ def _fit_damping(tm: TrialModes, mf: ModeFit, params: list[FitParam], top: float
 
 def _damping_sd(tm: TrialModes, rig: Rig, sub: list[FitParam], pz: _Pairs, theta: np.ndarray) -> np.ndarray:
     """The posterior sd of the damping constants' log multipliers from the damping ratios
-    alone (as :func:`_posterior`, widened by their own misfit only)."""
+    alone (as :func:`_posterior`, but not widened by the misfit left: each ratio's standard
+    error already holds :data:`FORM_ZETA`, and a law held short of the ratios by its bounds
+    would otherwise read as not informed by them, and be held at its start instead of at
+    the bound the ratios push it to)."""
     k = len(pz.i_id)
     use = np.isfinite(pz.s_zeta)
-    r = _data_residual(tm, rig, sub, pz, theta)[k:2 * k][use]
     try:
         jac = np.nan_to_num(_data_jacobian(tm, rig, sub, pz, theta))[k:2 * k][use]
     except (ValueError, np.linalg.LinAlgError):
-        jac = np.zeros((len(r), len(sub)))
-    s2 = max(1.0, float(r @ r) / max(len(r) - len(sub), 1))
-    cov = np.linalg.pinv(jac.T @ jac / s2 + np.diag(_pull(sub) ** 2))
+        jac = np.zeros((int(use.sum()), len(sub)))
+    cov = np.linalg.pinv(jac.T @ jac + np.diag(_pull(sub) ** 2))
     return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
