@@ -66,12 +66,12 @@ def test_damping_constants_are_fitted_to_the_measured_damping_ratios(water):
 
 
 def test_a_damping_law_held_by_its_bounds_names_the_misfit_per_mode(water):
-    """The same start with the damping constants bounded to +-5 %: the law cannot reach the
-    measured ratios, and the model-form list names each mode's damping misfit (measured +- its
-    standard error against the fitted rig's) and why."""
+    """The same start with the damping constants bounded to [0.8, 1.25]: the law cannot reach
+    the measured ratios (2.5x the start), and the model-form list names each mode's damping
+    misfit (measured +- its standard error against the fitted rig's) and why."""
     tm, rig = water
     start = _damped(rig, 0.4)
-    mf = calibrate_to_modes(tm, start, {n: (0.95, 1.05) for n in _damping_names(rig)})
+    mf = calibrate_to_modes(tm, start, {n: (0.8, 1.25) for n in _damping_names(rig)})
     assert len(mf.damping) == len(mf.after.pairs) >= 2
     for m in mf.damping:
         assert m.zeta_model < m.zeta_id   # 0.4x the damping: every mode underdamped
@@ -82,7 +82,7 @@ def test_a_damping_law_held_by_its_bounds_names_the_misfit_per_mode(water):
     m = mf.damping[0]
     assert "damping.water.C_N_s_per_m" in m.at_bounds and "at their bounds" in text
     p = {q.name: q for q in mf.params}["damping.water.C_N_s_per_m"]
-    assert p.pinned and p.at_bound and p.factor > 1.04
+    assert p.pinned and p.at_bound and p.factor > 1.2
 
 
 def _mass(rig, k: float):
