@@ -109,3 +109,22 @@ def test_an_absurd_rudder_mass_is_named_in_one_line(water, k):
     assert len(check) == 1 and "what the modes imply: check the rig's units/values" in check[0]
     assert not any(line.startswith("CHECK THE RIG") for line in fit_lines(calibrate_to_modes(tm, rig),
                                                                           Path("x.toml")))
+
+
+
+def test_a_pair_of_unlike_shapes_is_no_damping_misfit():
+    """tester8's 100x rig paired a 43 Hz mode with a model mode of MAC 0.01, and the damping
+    fit pushed the hull's damping to its bound for it (its one alike mode left at 7.9 % against
+    3.0 % measured). The damping of a model mode that is not the identified one says nothing of
+    the damping law: such a pair is neither fitted nor named; an alike pair as far off is."""
+    from types import SimpleNamespace
+
+    from ramdaq.analysis.gap.rigfit import DAMPING_MIN_MAC, damping_misfits
+
+    def pair(f, mac):
+        return SimpleNamespace(f_id_hz=f, zeta_id=0.015, zeta_id_se=1e-4, zeta_model=0.0018, mac=mac)
+
+    mf = SimpleNamespace(params=(), after=SimpleNamespace(pairs=(pair(43.0, 0.01), pair(15.8, 0.9))))
+    named = damping_misfits(mf)
+    assert [m.f_id_hz for m in named] == [15.8]
+    assert 0.01 < DAMPING_MIN_MAC <= 0.9

@@ -182,6 +182,12 @@ DAMPING_SE = 3.0
 identification's, from the impacts' spread, and :data:`FORM_ZETA` of the ratio) is a damping
 misfit: ~1 chance in 370 for a Gaussian error."""
 
+DAMPING_MIN_MAC = 0.5
+"""A pair whose shapes share less than this (MAC) is not used to fit or judge damping: the
+damping ratio of a model mode that is not the identified one says nothing of the damping law
+(a rig 100x too heavy paired a 43 Hz mode with one of MAC 0.01, and fitting its ratio pushed
+the hull's damping to its bound at the cost of the one mode both had)."""
+
 MASS_SCALE_LIMIT = 3.0
 """A rudder mass more than this factor from what the modes imply (either way) is named as a
 likely unit or value error of the rig: the default bounds reach a factor 2 on the inertias and
@@ -745,15 +751,16 @@ def _is_damping(name: str) -> bool:
 
 
 def damping_misfits(mf: ModeFit) -> tuple[DampingMisfit, ...]:
-    """The paired modes of ``mf.after`` whose fitted damping ratio differs from the identified
-    one by more than :data:`DAMPING_SE` combined standard errors (the identification's and
+    """The paired modes of ``mf.after`` (shapes alike, :data:`DAMPING_MIN_MAC`) whose fitted
+    damping ratio differs from the identified one by more than :data:`DAMPING_SE` combined
+    standard errors (the identification's and
     :data:`FORM_ZETA` of the ratio). The fit has already taken the damping constants as close
     as their bounds let it (:func:`_fit_damping`): what is left, the law cannot reach."""
     bound = tuple(p.name for p in mf.params if _is_damping(p.name) and p.at_bound)
     held = tuple(p.name for p in mf.params if _is_damping(p.name) and not p.pinned)
     out = []
     for p in mf.after.pairs:
-        if not (math.isfinite(p.zeta_id) and math.isfinite(p.zeta_model)):
+        if not (math.isfinite(p.zeta_id) and math.isfinite(p.zeta_model)) or not p.mac >= DAMPING_MIN_MAC:
             continue
         se = math.hypot(p.zeta_id_se if math.isfinite(p.zeta_id_se) else 0.0, FORM_ZETA * abs(p.zeta_id))
         if abs(p.zeta_model - p.zeta_id) > DAMPING_SE * se:
@@ -764,7 +771,8 @@ def damping_misfits(mf: ModeFit) -> tuple[DampingMisfit, ...]:
 def _fit_damping(tm: TrialModes, mf: ModeFit, params: list[FitParam], top: float,
                  max_nfev: int) -> ModeFit:
     """``mf`` with its damping constants (:func:`_is_damping`) fitted again to the identified
-    damping ratios alone, every other constant at its fitted value. Fitted with the frequencies
+    damping ratios alone (of the pairs whose shapes are alike, :data:`DAMPING_MIN_MAC`), every
+    other constant at its fitted value. Fitted with the frequencies
     and shapes, they are judged against the shapes' misfit too (widened by it, issue 17: a crude
     rig left every damping constant "not pinned" and its modes at 0.27-2.13 % against 1.0-3.0 %
     measured); the ratios pin them by themselves. Pinned as :data:`PINNED`, on this fit's own
@@ -775,9 +783,11 @@ def _fit_damping(tm: TrialModes, mf: ModeFit, params: list[FitParam], top: float
     if not idx or not mf.after.pairs or not damping_misfits(mf):
         return replace(mf, damping=damping_misfits(mf))
     pr = _pairs(tm, mf.after)
-    if not np.isfinite(pr.s_zeta).any():
+    alike = np.array([p.mac >= DAMPING_MIN_MAC for p in mf.after.pairs])
+    pz = replace(pr, s_f=np.full_like(pr.s_f, np.inf), s_shape=np.full_like(pr.s_shape, np.inf),
+                 s_zeta=np.where(alike, pr.s_zeta, np.nan))
+    if not np.isfinite(pz.s_zeta).any():
         return replace(mf, damping=damping_misfits(mf))
-    pz = replace(pr, s_f=np.full_like(pr.s_f, np.inf), s_shape=np.full_like(pr.s_shape, np.inf))
     sub = [params[k] for k in idx]
     theta = np.array([math.log(p.factor) for p in mf.params])
     th, how = _solve(tm, mf.rig, sub, pz, theta[idx], max_nfev)
