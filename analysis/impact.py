@@ -343,7 +343,7 @@ def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list
 def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
                   onset_s: float = 0.0, decay_start_s: float = 0.0,
                   adc_full_scale: float | None = None, pre: np.ndarray | None = None,
-                  pre_fs_hz: float | None = None) -> ImpactAnalysis:
+                  pre_fs_hz: float | None = None, mode_hz: float | None = None) -> ImpactAnalysis:
     """Analyse one free decay.
 
     Parameters
@@ -364,6 +364,10 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         The same channels before the blow (m/s^2, at ``pre_fs_hz``, default ``fs_hz``): a mode
         already ringing there (:func:`~ramdaq.analysis.modal.before_blow.ambient_modes`) is
         not taken as the predominant mode, and a note says so.
+    mode_hz : float, optional
+        The mode the report's chain is run on, chosen by the user (:func:`chosen_mode`)
+        instead of the most energetic one; ValueError when no identified mode is within the
+        decay's resolution of it.
     """
     notes: list[str] = []
     judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale)
@@ -380,6 +384,8 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     k = predominant_mode(table, [j for j, i in enumerate(good)
                                  if rig.gage(gage_numbers[i]).body == "rudder"],
                          exclude=[a for a, _ in ambient])
+    if mode_hz is not None:
+        k = chosen_mode(table, mode_hz, x.shape[1] / fs_hz, k, notes)
     notes += [f"{table.frequency_hz[a]:.2f} Hz rang before the blow at {r:.0%} of its amplitude "
               "at the decay's start: an ambient line, not the blow's free decay (not taken as "
               "the predominant mode; its decrement is no damping measure)" for a, r in ambient]
@@ -434,6 +440,23 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     return {"motions": motions, "relative": {name: fits[name][0] for name in relative},
             "alpha1_over_gamma1": ratio, "damping": damping, "stock_lengths": lengths,
             "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
+
+
+def chosen_mode(table: ModeTable, mode_hz: float, duration_s: float, k: int, notes: list[str]) -> int:
+    """Index in ``table`` of the mode nearest ``mode_hz`` (the user's choice of the mode the
+    chain is run on), when within the resolution ``1 / duration_s`` of the decay; a note when it
+    is not the predominant mode ``k``. Raises ValueError naming the modes identified when no
+    mode is that close."""
+    res = 1.0 / duration_s
+    i = int(np.argmin(np.abs(table.frequency_hz - mode_hz)))
+    if not abs(table.frequency_hz[i] - mode_hz) <= res:
+        raise ValueError(f"mode_hz {mode_hz:g}: no identified mode within {res:.3g} Hz (the resolution "
+                         f"of the {duration_s:.2f} s decay); modes identified: "
+                         + ", ".join(f"{f:.3f}" for f in table.frequency_hz) + " Hz")
+    if i != k:
+        notes.append(f"the chain runs on the {table.frequency_hz[i]:.3f} Hz mode chosen by mode_hz "
+                     f"{mode_hz:g} (the most energetic on the rudder is {table.frequency_hz[k]:.3f} Hz)")
+    return i
 
 
 def predominant_mode(table: ModeTable, rudder_rows: list[int], exclude: Sequence[int] = ()) -> int:

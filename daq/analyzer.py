@@ -167,9 +167,10 @@ def coarsen(x: np.ndarray, fs_hz: float, coarse: Coarse,
 
 
 def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
-                  coarse: Coarse | None = None) -> HitResult:
+                  coarse: Coarse | None = None, mode_hz: float | None = None) -> HitResult:
     """Judge and analyse one trigger event that carries its record; with ``coarse``, on the
-    shorter, decimated decay it describes (:func:`coarsen`)."""
+    shorter, decimated decay it describes (:func:`coarsen`); with ``mode_hz``, the chain on the
+    mode nearest it (:func:`~ramdaq.analysis.impact.chosen_mode`)."""
     if event.not_analysable:
         return HitResult(index, event, False,
                          f"{NOT_ANALYSABLE}: {event.not_analysable}", None)
@@ -206,7 +207,7 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
         result = analyze_decay(x, fs, rig, tuple(info.gages[i] for i in gage_rows),
                                onset_s=event.onset_s, decay_start_s=start / info.fs_hz,
                                adc_full_scale=_full_scale(info, scale), pre=pre,
-                               pre_fs_hz=info.fs_hz)
+                               pre_fs_hz=info.fs_hz, mode_hz=mode_hz)
     except ValueError as err:
         return HitResult(index, event, False, f"no usable decay: {err}", None, text)
     if event.end_reason == "gap":  # the record, not the ringing, ended: say where and why
@@ -217,11 +218,11 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
 
 
 def judge_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
-                coarse: Coarse | None = None) -> HitResult:
+                coarse: Coarse | None = None, mode_hz: float | None = None) -> HitResult:
     """:func:`analyze_event`; if the analysis raises, the hit is rejected as "analysis failed:
     <exception>": a blow the trigger saw never vanishes from the trial."""
     try:
-        return analyze_event(index, event, info, rig, coarse)
+        return analyze_event(index, event, info, rig, coarse, mode_hz)
     except Exception as err:  # any failure is this hit's verdict, not the end of the trial
         return HitResult(index, event, False,
                          f"analysis failed: {type(err).__name__}: {err}", None,

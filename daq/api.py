@@ -99,10 +99,11 @@ def decay_samples(h: HitResult, rig: Rig) -> np.ndarray:
 
 def analyze_hits(rec: Recording, *, impact: int | None = None,
                  progress: Callable[[str], None] | None = None,
-                 done: Callable[[HitResult], None] | None = None) -> list[HitResult]:
+                 done: Callable[[HitResult], None] | None = None,
+                 mode_hz: float | None = None) -> list[HitResult]:
     """Judge and analyse each of ``rec.impacts`` (or only hit ``impact``, the others marked "not
     requested") as a live trial does; ``progress`` hears of each hit before its analysis,
-    ``done`` gets each analysed hit."""
+    ``done`` gets each analysed hit; ``mode_hz``: the mode the report's chain is run on."""
     rig = rig_or_fail(rec)
     if impact is not None and not 0 <= impact < len(rec.impacts):
         raise ValueError(f"{rec.path}: impact {impact} asked for, but {len(rec.impacts)} impacts found")
@@ -116,7 +117,7 @@ def analyze_hits(rec: Recording, *, impact: int | None = None,
                 if ev.end_reason == "gap" else ""
             progress(f"impact {k} at {ev.onset_s:.3f} s: analysing "
                      f"{(ev.last_sample - ev.onset_sample) / rec.fs_hz:.1f} s of decay{cut}")
-        hits.append(judge_event(k, ev, rec.info, rig))
+        hits.append(judge_event(k, ev, rec.info, rig, mode_hz=mode_hz))
         if done:
             done(hits[-1])
     return hits

@@ -527,7 +527,7 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
                      kappa_cells=cell_inflation(fw, rep_cells, bands, td.fitted), m_fit=m_fit,
                      m_held=m_held, n_eff=basis.r.size, rng=np.random.default_rng(settings.seed),
                      say=say, notes=notes)
-    names = settings.effects or tuple(EFFECTS)
+    names = tuple(EFFECTS) if settings.effects is None else settings.effects  # (): none
     say(f"scoring {len(names)} candidate effects")
     sigs = _by_z(signature_scores(fw, base, basis, EFFECTS[n]) for n in names)
     # (N, k) and the replicates whitened: a second effect's basis is made anew; the replicates

@@ -10,6 +10,7 @@ trial (:func:`ramdaq.daq.api.analyze_hits`).
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from collections.abc import Callable, Collection
@@ -38,17 +39,31 @@ UNITS = {"f_hz": "Hz", "delta": "1", "C": "N s/m", "c": "N m s/rad", "length": "
 
 def run_analysis(path: str | Path, *, impact: int | None = None,
                  progress: Callable[[str], None] | None = None,
-                 bars: bool | None = False) -> tuple[Rig, list[HitResult]]:
+                 bars: bool | None = False, mode_hz: float | None = None) -> tuple[Rig, list[HitResult]]:
     """Read ``path`` through the trigger and analyse each hit (or only hit ``impact``); with
     ``bars`` (``None``: when standard error is a terminal) a progress bar over the reading and
-    one over the hits."""
+    one over the hits. ``mode_hz`` (``--mode-hz``): the report's chain on the mode nearest it
+    in each hit instead of the most energetic one; ValueError, in one line, when it is
+    within the resolution of no identified mode in any hit (a hit where only it fails is
+    rejected with the reason)."""
+    if mode_hz is not None and not (math.isfinite(mode_hz) and mode_hz > 0):
+        raise ValueError(f"--mode-hz {mode_hz:g}: a frequency in Hz above 0")
     name = Path(path).name
     with bytes_bar(f"reading {name}", Path(path).stat().st_size, show=bars) as update:
         rec = read_recording(path, progress=update)
     rig = rig_or_fail(rec)
     n = len(rec.impacts) if impact is None else 1
     with progress_bar(f"analysing {name}", n, unit="hits", show=bars if n > 1 else False) as advance:
-        return rig, analyze_hits(rec, impact=impact, progress=progress, done=lambda h: advance())
+        hits = analyze_hits(rec, impact=impact, progress=progress, done=lambda h: advance(),
+                            mode_hz=mode_hz)
+    if mode_hz is None:
+        return rig, hits
+    key = f"mode_hz {mode_hz:g}: "
+    missed = [h for h in hits if not h.accepted and key in (h.reason or "")]
+    if missed and not any(h.accepted for h in hits):
+        raise ValueError(f"--mode-hz {mode_hz:g}: in no hit of {name}: "
+                         + (missed[0].reason or "").split(key, 1)[1])
+    return rig, hits
 
 
 def virtual_inertias(rig: Rig, f_air_hz: float | None = None,
@@ -176,6 +191,7 @@ def format_summary(report: dict, units: str = "si") -> str:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
                          f"{imp['reason']}")
     lines += summary_table(report["summary"], units)
+    lines += motions_not_used(report["impacts"], report["summary"])
     for s in report.get("skipped", []):
         lines.append(f"skipped: {s['step']}: {s['reason']}")
     vi = report["virtual_inertias"]
@@ -196,6 +212,56 @@ def format_summary(report: dict, units: str = "si") -> str:
                      f"{vi['f_water_hz']:.3f} Hz): {conv(vi['m_vir_eq18_kg'], 'mass'):.4g} {mu},"
                      f" {vi['eq18_vs_eq19_pct']:+.1f} % against Eq 19")
     return "\n".join(lines)
+
+
+HULL_MOTION_GAGES = {"alpha_b": (13, 14), "v_b": (13, 14), "gamma_b": (5, 13)}
+"""The gages each hull motion is computed from (the analysis' hull motions: alpha_b by Eq 8 from
+13 and 14, v_b at the stock's attachment from 13 and alpha_b, gamma_b from 5 and 13);
+:data:`~ramdaq.analysis.impact.MOTION_GAGES` gives the rudder motions'."""
+
+
+def motions_not_used(impacts: list[dict], summary: dict) -> list[str]:
+    """For each motion the summary averages over fewer than all accepted hits (tester8:
+    ``delta_alpha_b`` with n = 1 of 5 and no word why): the hits it was not taken from, each
+    with the hit's own note on that motion (no decrement of the mode, its fit failed, a gage
+    unusable) or that the hit records none, and the verdicts of the gages it rests on.
+    ``impacts``: the per-hit results as written (``report.json``'s, ``--json``'s);
+    ``summary``: the trial summary with the hits' own motion names."""
+    from ...analysis.impact import MOTION_GAGES
+
+    ok = [i for i in impacts if i.get("accepted") and i.get("analysis")]
+    hull = summary.get("delta_hull_motion") or summary.get("delta_fixed_portion_motion") or {}
+    out = []
+    for key, rows, rests in (("motions", summary.get("delta_motion") or {}, MOTION_GAGES),
+                             ("hull_motions", hull, HULL_MOTION_GAGES)):
+        for m, d in rows.items():
+            if d.get("n", 0) >= len(ok) or not any(m in (i["analysis"].get(key) or {}) or _note_on(i, m)
+                                                   for i in ok):
+                continue
+            why: dict[str, list[str]] = {}   # the same reason in several hits: said once
+            for i in ok:
+                if ((i["analysis"].get(key) or {}).get(m) or {}).get("delta") is None:
+                    why.setdefault(_why_not(i, key, m, rests.get(m, ())), []).append(str(i["index"]))
+            out.append(f"  delta_{m}: n = {d.get('n', 0)} of {len(ok)} accepted hits; not from "
+                       + "; ".join(f"hit{'s' if len(h) > 1 else ''} {', '.join(h)}: {w}"
+                                   for w, h in why.items()))
+    return out
+
+
+def _note_on(imp: dict, m: str) -> str | None:
+    """The hit's note on motion ``m`` (what follows ``m: ``), or None."""
+    return next((n.split(": ", 1)[1] for n in imp["analysis"].get("notes", ()) if n.startswith(f"{m}: ")),
+                None)
+
+
+def _why_not(imp: dict, key: str, m: str, gages: tuple[int, ...]) -> str:
+    """Why hit ``imp`` has no decrement of motion ``m``, with its gages' verdicts."""
+    why = _note_on(imp, m) or ("computed, but no decrement recorded and no note why"
+                               if m in (imp["analysis"].get(key) or {}) else
+                               "not computed from its gages (the hit records no note why)")
+    v = imp["analysis"].get("verdicts") or {}
+    gv = ", ".join(f"g{g:02d} {v[f'g{g:02d}']['verdict']}" for g in gages if f"g{g:02d}" in v)
+    return why + (f" (gages: {gv})" if gv else "")
 
 
 def _fmt(v: float | None, spec: str = ".4f") -> str:

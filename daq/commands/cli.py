@@ -265,12 +265,13 @@ def _run_session(device, args: argparse.Namespace, record_path: Path | None, rrd
 def _print_outcome(outcome, args: argparse.Namespace, rig_toml: str = "") -> None:
     """The trial summary on the terminal, its motions named as the stream's rig names them
     (``rig_toml``), and, with ``--json``, the per-hit results in a file."""
-    from .analyze import json_default, summary_table
+    from .analyze import json_default, motions_not_used, summary_table
 
     surface = parse_rig(rig_toml, "rig").surface if rig_toml else Surface()
     for k, why in outcome.summary["rejected"].items():
         print(f"hit {k} rejected: {why}")
-    print("\n".join(summary_table(surface.relabel(outcome.summary), args.units)))
+    print("\n".join(summary_table(surface.relabel(outcome.summary), args.units)
+                    + motions_not_used(outcome.results_json(), outcome.summary)))
     load = outcome.load
     print(f"analyzer: {load.looks_shown} first looks shown while ringing, {load.looks_skipped} "
           f"skipped because it was busy; {load.finals_coarse} final(s) coarse, "
@@ -338,7 +339,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(msg, flush=True)
 
     plots = plot_kinds(args.plots, off=args.no_plots)  # checked before the analysis
-    rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None)
+    rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None, mode_hz=args.mode_hz)
     air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
     if air is not None:
         check_air_twin(rig, air[0], args.air)
@@ -351,13 +352,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 def cmd_gap(args: argparse.Namespace) -> int:
     """Sim-to-real gap diagnosis of a recording (``ramdaq gap-benchmark`` proves it)."""
     from ...analysis.gap.diagnose import Settings
-    from ...analysis.gap.effects import get_effect
+    from .gap import parse_effects, run_gap, summary_lines, write_report
     from .progress import progress_bar
 
-    effects = tuple(e.strip() for e in args.effects.split(",")) if args.effects else None
-    for e in effects or ():
-        get_effect(e)
-    from .gap import run_gap, summary_lines, write_report
+    effects = parse_effects(args.effects)
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
@@ -774,6 +772,10 @@ def build_parser() -> argparse.ArgumentParser:
     a = sub.add_parser("analyze", help="trial report: frequency, decrement, Report 1836 chain")
     a.add_argument("file", help="a recording (.mcap) that carries its rig")
     a.add_argument("--impact", type=int, help="analyse only this hit (0-based)")
+    a.add_argument("--mode-hz", type=float, metavar="F",
+                   help="run the report's chain (motions, Eq 14-17) on the identified mode nearest F Hz "
+                   "instead of the most energetic one; an error if none is within the decay's "
+                   "resolution (1 / its length) of F")
     a.add_argument("--air", help="the same rudder's in-air recording, for Eq 18 (file is in water)")
     a.add_argument("--out", help="output folder (default FILE_analysis/)")
     a.add_argument("--units", choices=("si", "report"), default="si",
@@ -790,7 +792,9 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
     gp.add_argument("--out", help="output folder (default FILE_gap/)")
     gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered)")
+    gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered); "
+                    "'none': no library effect, only the data-only checks and the rig's model form "
+                    "(gap-benchmark's 'none' is its class of trials made without an effect)")
     gp.add_argument("--pre-s", type=float, default=1.0, help="pre-trigger window, s (default 1)")
     gp.add_argument("--post-s", type=float, default=4.0, help="longest decay compared, s (default 4)")
     gp.add_argument("--held-out-every", type=int, default=3,

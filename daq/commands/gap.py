@@ -37,6 +37,32 @@ def run_gap(path: str | Path, *, rig: str | Path | None = None, settings: Settin
                           data_checks=data_checks, model_level=model_level, keep_counts=False, **prep)
 
 
+NO_EFFECTS = "none"
+"""``ramdaq gap --effects none``: no candidate effect of the library is scored or refitted; the
+diagnosis is the data-only checks, the model level (the rig calibrated to the trial's modes and
+its form error) and the map of what the calibrated rig leaves (``gap-benchmark --effects none``
+is another thing: the generators' trials made without an effect)."""
+
+
+def parse_effects(text: str | None) -> tuple[str, ...] | None:
+    """``--effects``: comma-separated candidate effects as a tuple (None: every registered one;
+    ``()`` for :data:`NO_EFFECTS`). Raises KeyError naming an unknown effect and the known
+    ones, ValueError when ``none`` is given with effects."""
+    from ...analysis.gap.effects import get_effect
+
+    if not text or not text.strip():
+        return None
+    names = tuple(e.strip() for e in text.split(",") if e.strip())
+    if NO_EFFECTS in (n.lower() for n in names):
+        if len(names) > 1:
+            raise ValueError(f"--effects {text!r}: '{NO_EFFECTS}' (no candidate effect) cannot be "
+                             "given with effects")
+        return ()
+    for e in names:
+        get_effect(e)
+    return names
+
+
 def trimming(progress: Callable[[str], None] | None) -> Callable[[str], None]:
     """``progress`` that first hands the C heap's free pages back to the OS
     (:func:`~ramdaq.daq.heap.release_free_memory`, milliseconds): the diagnosis says what it
@@ -62,6 +88,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
            f"{int((~td.fitted).sum())} held out), {td.n_gages} gages, compared up to "
            f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
            f"verdict: {_headline(d)}"]
+    out += rig_check_lines(d)
     out += answer_lines(d)
     zf = float(np.max(d.map_fit.z))
     held = (f", {float(np.max(d.map_held.z)):.1f} held out; the largest the held-out impacts reproduce "
@@ -93,10 +120,14 @@ def summary_lines(d: Diagnosis) -> list[str]:
         lo, hi = b.closed_held_ci
         out.append(f"  gap closed: {_pct(b.closed_fit)} on fitted impacts, {_pct(b.closed_held)} on "
                    f"held-out (95 % {_pct(lo)} .. {_pct(hi)}); dBIC {b.dbic:.0f}")
-    elif d.verdict == "unexplained":
+    elif d.verdict == "unexplained" and d.signatures:
         out.append("  no candidate in the library explains it (none beats the calibrated model "
                    "by the BIC margin and shrinks the held-out gap)")
-    out.append("  ranking (signature z, then refit dBIC; negative is better):")
+    if not d.signatures:
+        out.append("  no candidate effect scored (--effects none): the gap is what the calibrated "
+                   "rig leaves, read with the data-only checks and the model form")
+    else:
+        out.append("  ranking (signature z, then refit dBIC; negative is better):")
     refit = {c.name: c for c in d.candidates}
     for s in d.signatures[:6]:
         c = refit.get(s.effect.name)
@@ -115,6 +146,15 @@ def summary_lines(d: Diagnosis) -> list[str]:
         out.append(f"  with {d.best.name}:    {ms}")
     out += [f"  note: {n}" for n in d.notes]
     return out
+
+
+def rig_check_lines(d: Diagnosis) -> list[str]:
+    """One line when the rig's rudder mass is far from what the trial's modes imply
+    (:class:`~ramdaq.analysis.gap.rigfit.MassScale`): a unit or value error of the rig file,
+    which no bound of the calibration reaches; none otherwise."""
+    ml = d.model_level
+    scale = None if ml is None or ml.fit is None else ml.fit.scale
+    return [f"CHECK THE RIG: {scale.text()}"] if scale is not None and scale.absurd else []
 
 
 def model_level_lines(d: Diagnosis) -> list[str]:

@@ -69,17 +69,18 @@ def _f(v: float, fmt: str) -> str:
 
 def mode_table(before: ModalComparison, after: ModalComparison) -> list[str]:
     """The identified modes beside the start and the fitted model's: frequency, damping ratio
-    (percent, as ``analyze`` and ``rig`` print it), MAC over all gages and per body."""
+    (percent, as ``analyze`` and ``rig`` print it; the identified ones with their standard
+    errors), MAC over all gages and per body."""
     tm = before.trial
     out = [f"modes identified on {tm.n_impacts} impacts (+- standard error from their spread) "
            "against the start rig and the fitted one:",
-           "   identified               |  start rig                  |  fitted rig",
-           "   f (Hz)   +-     zeta %    |  f (Hz)   df % zeta %  MAC  |  f (Hz)   df % zeta %  MAC"
-           "   MAC rudder/hull"]
+           f"{'identified':>13s}{'':23s}|  start rig                  |  fitted rig",
+           f"{'f (Hz)':>9s} {'+-':>7s} {'zeta %':>7s} {'+-':>7s}   |  f (Hz)   df % zeta %  MAC  |"
+           "  f (Hz)   df % zeta %  MAC   MAC rudder/hull"]
     b = {p.i_id: p for p in before.pairs}
     a = {p.i_id: p for p in after.pairs}
     for i in range(tm.n_modes):
-        row = f"{tm.f_hz[i]:9.4f} {tm.f_se_hz[i]:7.1e} {100 * tm.zeta[i]:7.3f}   |"
+        row = f"{tm.f_hz[i]:9.4f} {tm.f_se_hz[i]:7.1e} {100 * tm.zeta[i]:7.3f} {100 * tm.zeta_se[i]:7.1e}   |"
         for p in (b.get(i), a.get(i)):
             if p is None:
                 row += "  (no model mode pairs with it)  |"
@@ -106,8 +107,11 @@ def fit_lines(mf: ModeFit, path: Path) -> list[str]:
                    + ("  AT BOUND" if p.at_bound else ""))
     if mf.misfit_scale > 1:
         out.append(f"  (sds widened x{mf.misfit_scale:.3g}: the modes differ from the fitted model by "
-                   "that much more than the identification's standard errors say)")
+                   "that much more than the identification's standard errors say; the damping "
+                   "constants' sds are from the damping ratios alone, fitted after the others)")
     out.append(f"solver: {mf.solver_text()}")
     out.append(f"model form left: {mf.form_text()}")
+    if mf.scale is not None and mf.scale.absurd:
+        out.append(f"CHECK THE RIG: {mf.scale.text()}")
     out.append(f"wrote {path}")
     return out

@@ -1,0 +1,83 @@
+"""``ramdaq analyze`` at a new user's edges (tester8's list): a motion averaged over fewer hits
+than were accepted says which hits and why, and ``--mode-hz`` picks the mode the report's chain
+runs on. On the shipped ALBACORE-in-water recording (3 blows)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ramdaq.daq.commands.analyze import motions_not_used
+from ramdaq.daq.commands.cli import main
+
+WATER = Path(__file__).resolve().parents[1] / "recordings" / "albacore-water.mcap"
+
+
+@pytest.fixture(scope="module")
+def water_run(tmp_path_factory):
+    """`ramdaq analyze` of the 3 blows as a user runs it (no plots): its output and report."""
+    out = tmp_path_factory.mktemp("an")
+    import contextlib
+    import io
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["analyze", str(WATER), "--no-plots", "--out", str(out)]) == 0
+    return buf.getvalue(), json.loads((out / "report.json").read_text())
+
+
+def test_a_motion_not_taken_from_every_hit_says_which_and_why(water_run):
+    """tester8: delta_alpha_b came with n = 1 of 5 and no word why. In water the hull's roll
+    at the stock does not stand out of the noise at the predominant mode in any hit: the
+    summary says so, for which hits, with the verdicts of gages 13 and 14 it rests on."""
+    text, rep = water_run
+    assert rep["summary"]["delta_hull_motion"]["alpha_b"]["n"] == 0
+    line = next(ln for ln in text.splitlines() if ln.startswith("  delta_alpha_b: n = "))
+    assert line.startswith("  delta_alpha_b: n = 0 of 3 accepted hits; not from hits 0, 1, 2: ")
+    assert "no decrement of the 13 Hz mode" in line and "(gages: g13 ok, g14 ok)" in line
+    # every motion the table averages over all 3 hits gets no such line
+    full = [m for m, d in rep["summary"]["delta_motion"].items() if d["n"] == 3]
+    assert full and not any(ln.startswith(f"  delta_{m}: n = ") for m in full for ln in text.splitlines())
+
+
+def test_a_hit_without_a_note_is_said_to_have_none():
+    """A motion missing from a hit that records no reason for it is not passed over: the line
+    says the hit gives none (and a gage's verdict where the motion rests on it)."""
+    imp = [{"index": 0, "accepted": True,
+            "analysis": {"motions": {"gamma": {"delta": 0.1}}, "hull_motions": {}, "notes": [],
+                         "verdicts": {"g04": {"verdict": "ok"}, "g08": {"verdict": "ok"}}}},
+           {"index": 1, "accepted": True,
+            "analysis": {"motions": {}, "hull_motions": {},
+                         "notes": ["gamma: not computed, gage(s) [8] unusable"],
+                         "verdicts": {"g04": {"verdict": "ok"}, "g08": {"verdict": "no_decay"}}}},
+           {"index": 2, "accepted": True,
+            "analysis": {"motions": {"gamma": {"delta": None}}, "hull_motions": {}, "notes": [],
+                         "verdicts": {"g04": {"verdict": "ok"}, "g08": {"verdict": "ok"}}}}]
+    s = {"delta_motion": {"gamma": {"n": 1}}, "delta_hull_motion": {}}
+    (line,) = motions_not_used(imp, s)
+    assert line.startswith("  delta_gamma: n = 1 of 3 accepted hits; not from ")
+    assert "hit 1: not computed, gage(s) [8] unusable (gages: g04 ok, g08 no_decay)" in line
+    assert "hit 2: computed, but no decrement recorded and no note why" in line
+
+
+def test_mode_hz_runs_the_chain_on_the_chosen_mode(tmp_path, capsys):
+    """No option chose the predominant mode. --mode-hz 59.8 runs the chain on the 59.83 Hz mode
+    (the most energetic on the rudder is 13.0 Hz), and each hit's note says so."""
+    out = tmp_path / "an"
+    assert main(["analyze", str(WATER), "--impact", "0", "--no-plots", "--out", str(out),
+                 "--mode-hz", "59.8"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    a = rep["impacts"][0]["analysis"]
+    assert abs(a["f_hz"] - 59.83) < 0.05           # the identified mode, not the number asked
+    assert any("chosen by mode_hz 59.8" in n and "13.003 Hz" in n for n in a["notes"])
+    assert "f = 59.834 Hz" in capsys.readouterr().out
+
+
+def test_mode_hz_near_no_mode_is_one_line(tmp_path, capsys):
+    """30 Hz is no mode of this rudder: one line naming the resolution and the modes there are."""
+    assert main(["analyze", str(WATER), "--impact", "0", "--no-plots", "--out", str(tmp_path / "a"),
+                 "--mode-hz", "30"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("ramdaq analyze: --mode-hz 30: in no hit of ")
+    assert "no identified mode within" in err and "13.003" in err

@@ -1,0 +1,89 @@
+"""``ramdaq gap`` at a new user's edges (tester8's list): ``--effects none`` accepted (the
+data-only checks and the rig's model form, no library effect), and a rig whose rudder is ten
+times too heavy named in one CHECK THE RIG line. On the shipped ALBACORE-in-water recording
+(3 blows: with no effect to refit, a diagnosis of a few seconds)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from ramdaq.daq.commands.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+WATER = ROOT / "recordings" / "albacore-water.mcap"
+ALBACORE = ROOT / "recordings" / "rigs" / "albacore.toml"
+
+
+def test_effects_none_with_an_effect_is_refused_in_one_line(capsys):
+    assert main(["gap", str(WATER), "--effects", "none,friction"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot be given with effects" in err and "'none'" in err
+
+
+def _scaled(text: str, k: float) -> str:
+    """The rig file's rudder mass and inertias times ``k``."""
+    def times(m: re.Match) -> str:
+        return f"{m[1]} = {float(m[2]) * k!r}"
+    return re.sub(r"^(mass_kg|Iz_kg_m2|Ix_kg_m2|Ixz_kg_m2) = (-?[\d.e+]+)", times, text, flags=re.M)
+
+
+@pytest.fixture(scope="module")
+def heavy_none(tmp_path_factory):
+    """One diagnosis (the two tests below read it: one run of a few CPU seconds): the rig file
+    with the rudder's mass and inertias x10, ``--effects none``. Its exit code, standard output
+    and gap.json."""
+    tmp = tmp_path_factory.mktemp("heavy")
+    rig = tmp / "heavy.toml"
+    rig.write_text(_scaled(ALBACORE.read_text(), 10.0))
+    out = tmp / "g"
+    with _Captured() as cap:
+        code = main(["gap", str(WATER), "--rig", str(rig), "--effects", "none", "--no-plots",
+                     "--out", str(out)])
+    return code, cap.text, json.loads((out / "gap.json").read_text()) if code == 0 else None
+
+
+class _Captured:
+    """Standard output captured outside pytest's per-test capsys (a module fixture's)."""
+
+    def __enter__(self):
+        self._buf = io.StringIO()
+        self._cm = contextlib.redirect_stdout(self._buf)
+        self._cm.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self._cm.__exit__(*exc)
+        self.text = self._buf.getvalue()
+
+
+def test_effects_none_diagnoses_with_no_library_effect(heavy_none):
+    """gap-benchmark accepted 'none' and gap refused it as an unknown effect. Now it scores no
+    candidate, says so, and still gives the verdict, the data-only checks and the model form."""
+    code, text, rep = heavy_none
+    assert code == 0, text
+    assert "scoring 0 candidate effects" in text
+    assert "no candidate effect scored (--effects none)" in text
+    assert "verdict: " in text and "model form" in text and "data-only" in text
+    assert "ranking (" not in text                     # no empty ranking table
+    assert rep["verdict"] in ("no gap beyond noise", "unexplained")   # never an effect's name
+
+
+def test_a_rudder_ten_times_too_heavy_gets_one_line(heavy_none):
+    """tester8: an absurd mass was never hinted at. The rig file with the rudder's mass and
+    inertias x10: `ramdaq gap` prints one CHECK THE RIG line naming it (~10x), and gap.json
+    carries the ratio; no traceback."""
+    code, text, rep = heavy_none
+    assert code == 0, text
+    lines = [ln for ln in text.splitlines() if ln.startswith("CHECK THE RIG")]
+    assert len(lines) == 1, text
+    m = re.search(r"rudder mass ([\d.]+)x what the modes imply: check the rig's units/values", lines[0])
+    # 3 blows, the rig's own form otherwise exact: within 25 % of x10 (test_rigfit_edges)
+    assert m and 8.0 < float(m[1]) < 12.5, lines[0]
+    assert "Traceback" not in text
+    assert json.dumps(rep).count('"absurd": true') == 1
