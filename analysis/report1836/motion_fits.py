@@ -127,10 +127,19 @@ def _significant(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray) -> n
     return (amp2 * env2[:, None] / noise2[None, :]).T > _SIGNIFICANT
 
 
+_GRAM_MIN_FRACTION = 1e-4  # Grams only while rss >= 1e-4 y^T y (<~ 4 of 16 digits lost), as varpro
+
+
 class _Held:
     """The signals' least squares with the modes ``free`` moving and the others (and the trend)
     held at their joint poles: the held columns are projected out of the signals once (one QR
-    shared by every signal and step), so that a step touches only the free modes' columns."""
+    shared by every signal and step), so that a step touches only the free modes' columns.
+
+    A step's terms come from Grams (:meth:`_gram_terms`): the free modes' columns and their time
+    derivative columns W meet the samples in three products (W W^T, W Q, W y), the projected
+    columns, residual and P_perp T are never formed; where the Grams would lose digits (a
+    residual below 1e-4 of the signal's sum of squares, a projected column or Schur complement
+    nearly cancelled), the explicit path (:meth:`_explicit_terms`) as before."""
 
     def __init__(self, t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray,
                  free: np.ndarray, trend: int) -> None:
@@ -141,6 +150,7 @@ class _Held:
         rd = np.abs(np.diag(R))
         self.QT = np.ascontiguousarray(Q[:, rd > 1e-10 * rd.max()].T) if rd.size else None
         self.Yp = Y if self.QT is None else Y - (Y @ self.QT.T) @ self.QT
+        self.yy = np.einsum("ij,ij->i", self.Yp, self.Yp)
 
     def _perp(self, A: np.ndarray) -> np.ndarray:
         """A (n, c) with the held columns projected out."""
@@ -150,6 +160,44 @@ class _Held:
               ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """Signal ``s``'s (rss, M, T^T r, H) with the free modes at poles (f, d) (as
         :func:`_gauss_newton_terms` on all columns: the held ones profiled out)."""
+        got = self._gram_terms(s, f, d)
+        return got if got is not None else self._explicit_terms(s, f, d)
+
+    def _gram_terms(self, s: int, f: np.ndarray, d: np.ndarray
+                    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray] | None:
+        """:meth:`terms` from Grams, or None where they would lose digits. With W = [Phi^T;
+        (t Phi)^T] (2c, n), Yp and the projected columns orthogonal to the held ones Q: the
+        projected Gram is G = W W^T - (W Q)(W Q)^T; b = G_pp^-1 (W y)_p, rss = y^T y - (W y)_p^T b,
+        T^T r = (W y)_T - G_Tp b and M = G_TT - G_Tp G_pp^-1 G_pT."""
+        c = 2 * f.size
+        W = np.empty((2 * c, self.t.size))
+        damped_basis(self.t, f, d, 0, self.grid, out=W[:c])
+        np.multiply(W[:c], self.t[None, :], out=W[c:])
+        G0 = W @ W.T
+        G = G0
+        if self.QT is not None:
+            WQ = W @ self.QT.T
+            G = G0 - WQ @ WQ.T
+        if not (G.diagonal() >= 1e-6 * G0.diagonal()).all():
+            return None
+        proj = Projector(None, gram=G[:c, :c])
+        if proj.cho is None:
+            return None
+        wy = W @ self.Yp[s]
+        b = proj.coef_from(wy[:c, None])
+        rss = float(self.yy[s] - wy[:c] @ b[:, 0])
+        if not rss >= _GRAM_MIN_FRACTION * self.yy[s]:
+            return None
+        PtT, TT = G[:c, c:], G[c:, c:]
+        V = proj.whitened(PtT)
+        M = TT - V.T @ V
+        if not (M.diagonal() > 1e-8 * TT.diagonal()).all():
+            return None
+        return rss, M, wy[c:] - PtT.T @ b[:, 0], kaufman_weights(b, f, d)[..., 0]
+
+    def _explicit_terms(self, s: int, f: np.ndarray, d: np.ndarray
+                        ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`terms` on the projected columns and residual themselves."""
         phi = damped_basis(self.t, f, d, 0, self.grid)
         c = phi.shape[1]
         T = phi * self.t[:, None]
