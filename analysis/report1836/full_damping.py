@@ -80,7 +80,7 @@ import numpy as np
 import scipy.signal
 
 from ..modal.table import ModeTable
-from ..modal.varpro import damped_basis, uniform_grid
+from ..modal.varpro import Projector, damped_basis, uniform_grid
 from ..model.geometry import gage_geometry
 from ..model.rig import Daq, Rig
 from .damping import C_translational_full, c_rotational_full, stock_stiffness_k_s
@@ -220,16 +220,31 @@ def amplitude_covariance(n_samples: int, fs_hz: float, f_hz: np.ndarray, delta: 
     t = np.arange(n_samples) / fs_hz
     Phi = damped_basis(t, np.asarray(f_hz, dtype=float), np.asarray(delta, dtype=float),
                        trend_terms, uniform_grid(t))
-    cols = Phi[:, 2 * k: 2 * k + 2]
-    # the mode's two columns with every other column projected out: the Schur complement
-    others = np.delete(Phi, [2 * k, 2 * k + 1], axis=1)
-    resid = cols
-    if others.shape[1]:
-        Q, _ = np.linalg.qr(others)
-        resid = cols - Q @ (Q.T @ cols)
     flip = np.diag([1.0, -1.0])  # the basis is (e cos, e sin): a = b_cos - j b_sin
-    unit = flip @ np.linalg.inv(resid.T @ resid) @ flip
+    unit = flip @ np.linalg.inv(_schur_complement(Phi, k)) @ flip
     return np.asarray(noise_std, dtype=float)[:, None, None] ** 2 * unit[None, :, :]
+
+
+def _schur_complement(Phi: np.ndarray, k: int) -> np.ndarray:
+    """(2, 2): mode ``k``'s two columns of ``Phi`` (n, P) with every other column projected
+    out, R^T R for R = P_perp cols. From the Gram Phi^T Phi (one pass over the samples) while
+    its other columns' Cholesky and the complement keep their digits (as varpro's Projector:
+    cond below ~1e5, diagonal not cancelled below 1e-8); else from a QR of the others."""
+    cols = [2 * k, 2 * k + 1]
+    rest = np.delete(np.arange(Phi.shape[1]), cols)
+    if rest.size == 0:
+        return Phi[:, cols].T @ Phi[:, cols]
+    G = Phi.T @ Phi
+    G_cc = G[np.ix_(cols, cols)]
+    proj = Projector(None, gram=G[np.ix_(rest, rest)])
+    if proj.cho is not None:
+        V = proj.whitened(G[np.ix_(rest, cols)])
+        S = G_cc - V.T @ V
+        if (S.diagonal() > 1e-8 * G_cc.diagonal()).all():
+            return S
+    Q, _ = np.linalg.qr(Phi[:, rest])
+    resid = Phi[:, cols] - Q @ (Q.T @ Phi[:, cols])
+    return resid.T @ resid
 
 
 def filtered_noise_factor(daq: Daq, fs_hz: float, f_hz: float) -> float:
