@@ -88,7 +88,7 @@ def accuracy(medium: str, seeds: int, decay_s: float) -> None:
     so the bound for that noise is SE x sqrt(colour): the spread against it is printed too."""
     from ramdaq.analysis.model.rig_modes import modes_in
 
-    rig, xs, fs, _ = records(medium, seeds, decay_s)
+    rig, xs, fs, gages = records(medium, seeds, decay_s)
     truth = modes_in(rig, medium).table
     got = [identify_modes(x, fs, per_channel=False) for x in xs]
     colour = float(np.mean([t.info["noise_colour"] for t in got]))
@@ -109,6 +109,37 @@ def accuracy(medium: str, seeds: int, decay_s: float) -> None:
               f"{(d.mean() - d0) / se:+.2f} SE (± {d.std(ddof=1) / np.sqrt(d.size) / se:.2f}), "
               f"spread / SE {d.std(ddof=1) / se:.2f}, / (SE sqrt(colour)) "
               f"{d.std(ddof=1) / (se * np.sqrt(colour)):.2f}")
+    motion_accuracy(rig, xs, fs, gages, truth)
+
+
+def motion_accuracy(rig, xs: list[np.ndarray], fs: float, gages: tuple[int, ...], truth) -> None:
+    """Each motion signal's own decrement of the predominant mode (analyze_decay's motion fits,
+    Eq 1-3b, 8, 10-13) over the same records: its spread, in units of the rig's decrement (to
+    compare runs on the same seeds: a change of the estimator moves it by more than the
+    Monte-Carlo noise only if it moves the estimates themselves), and against the mean standard
+    error the fits report."""
+    got: dict[str, list[tuple[float, float]]] = {}
+    d0 = np.nan
+    for x in xs:
+        a = analyze_decay(x, fs, rig, gages, onset_s=ONSET_S, decay_start_s=ONSET_S + SKIP_S)
+        k = int(np.argmin(np.abs(truth.frequency_hz - a.modes.frequency_hz[a.predominant])))
+        d0 = float(truth.decrement[k])
+        for group in (a.motions, a.relative, a.hull_motions):
+            for name, dec in group.items():
+                got.setdefault(name, []).append((dec.delta, dec.delta_se))
+    print(f"  motion fits' decrements of the predominant mode (rig's delta {d0:.5f}): "
+          "name: found, bias / SE, spread (% of delta), spread / SE")
+    cells = []
+    for name, v in got.items():
+        d, se = np.array(v).T
+        d, se = d[np.isfinite(d)], float(np.nanmean(se))
+        if d.size < 2:
+            cells.append(f"{name}: found {d.size}")
+            continue
+        cells.append(f"{name}: {d.size}, {(d.mean() - d0) / se:+.2f}, "
+                     f"{100 * d.std(ddof=1) / d0:.3f} %, {d.std(ddof=1) / se:.2f}")
+    for i in range(0, len(cells), 3):
+        print("    " + "; ".join(cells[i:i + 3]))
 
 
 def report(medium: str, hits: int, decay_s: float) -> None:

@@ -11,7 +11,13 @@ import pytest
 
 from ramdaq.analysis.modal.crb import crb_damped_sinusoid
 from ramdaq.analysis.modal.identify import identify_modes
-from ramdaq.analysis.modal.signal import damped_sinusoids, decimate_valid, decimated_index
+from ramdaq.analysis.modal.signal import (
+    damped_sinusoids,
+    decimate_valid,
+    decimated_index,
+    fir_gain,
+    fir_noise_variance_factor,
+)
 from ramdaq.analysis.modal.varpro import _Problem
 from ramdaq.analysis.modal.verdicts import Verdict, assess_decay, assess_decay_jointly
 
@@ -730,3 +736,31 @@ def test_decimate_valid_up_to_max_outputs_equals_the_whole_records_first_outputs
     assert np.array_equal(yp, y[:, :k]) and np.array_equal(idxp, idx[:k])
     assert np.array_equal(tapsp, taps)
     assert np.array_equal(decimated_index(x.shape[1], 2048.0, factor, 270.0), idx)
+
+
+@pytest.mark.parametrize("factor, band, n", [(2, 270.0, 3000), (2, 270.0, 3001), (3, 200.0, 3002)])
+def test_decimate_from_first_is_exact_on_damped_sinusoids_from_the_first_sample(factor, band, n):
+    """from_first (the NLS data of long records): outputs at samples 0, factor, ... up to the
+    last whose window the record holds, each exactly the damped sum times fir_gain of the
+    returned taps (to rounding, 1e-13 of the amplitude: a sum of ~20-40 products), the same
+    noise spectrum as the linear-phase filter (fir_noise_variance_factor within 1e-5: the
+    minimum-phase design matches |H| to ~1e-6), and the first outputs of a record read only
+    as far as max_outputs equal the whole record's to the bit."""
+    fs = 2048.0
+    t = np.arange(n) / fs
+    s = np.array([-0.1 * 13 + 2j * np.pi * 13, -0.02 * 60 + 2j * np.pi * 60])
+    a = np.array([1 + 0.5j, 0.3 - 0.2j])
+    x = np.vstack([np.real(a @ np.exp(s[:, None] * t)),
+                   np.random.default_rng(2).standard_normal(n)])
+    y, idx, taps = decimate_valid(x, fs, factor, band, from_first=True)
+    n_taps = (taps.size + 1) // 2
+    assert idx[0] == 0 and np.all(np.diff(idx) == factor)
+    assert idx[-1] + n_taps <= n < idx[-1] + factor + n_taps  # every window inside, none left
+    model = np.real((a * fir_gain(taps, np.exp(s / fs))) @ np.exp(s[:, None] * idx / fs))
+    assert np.max(np.abs(y[0] - model)) < 1e-13 * np.sum(np.abs(a))
+    _, _, lin = decimate_valid(x, fs, factor, band)
+    f = np.array([13.0, 60.0, 0.9 * band])
+    np.testing.assert_allclose(fir_noise_variance_factor(taps, factor, f, fs),
+                               fir_noise_variance_factor(lin, factor, f, fs), rtol=1e-5)
+    yp, idxp, _ = decimate_valid(x, fs, factor, band, max_outputs=40, from_first=True)
+    assert np.array_equal(yp, y[:, :40]) and np.array_equal(idxp, idx[:40])

@@ -89,3 +89,44 @@ def test_bad_inputs_are_named():
         fit_signals_at_poles(np.zeros((1, 100)), FS, F, D[:1])
     with pytest.raises(ValueError, match="n_samples"):
         fit_signals_at_poles(np.zeros((1, 8)), FS, F, D)
+
+
+def test_a_steps_terms_from_grams_equal_the_explicit_ones(gages):
+    """A Gauss-Newton step's terms (rss, Schur complement, T^T r, Kaufman weights) from Grams
+    equal those from the projected columns and residual to rounding (1e-9 relative: the Grams
+    lose at most ~4 of 16 digits, kept so by the rss >= 1e-4 y^T y gate), one mode free and the
+    other held; and a signal the modes fit too closely for the Grams (rss under 1e-4 of y^T y)
+    takes the explicit path."""
+    from ramdaq.analysis.report1836.motion_fits import _Held
+
+    t = np.arange(N) / FS
+    held = _Held(t, gages, F, D, np.array([1]), 1)
+    f, d = F[1:] * (1 + 1e-4), D[1:] * (1 + 0.02)  # off the joint poles, as a step lands
+    for s in range(gages.shape[0]):
+        gram, explicit = held._gram_terms(s, f, d), held._explicit_terms(s, f, d)
+        assert gram is not None, f"signal {s}: noise 0.01 on amplitudes ~1 keeps rss > 1e-4 y^T y"
+        assert gram[0] == pytest.approx(explicit[0], rel=1e-9)
+        for a, b in zip(gram[1:], explicit[1:], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    clean = _Held(t, _decays(np.random.default_rng(1), np.array([[1.0, 1.0]]), 1e-6), F, D,
+                  np.array([1]), 1)
+    assert clean._gram_terms(0, F[1:], D[1:]) is None  # rss ~ 1e-12 y^T y: the Grams refuse
+    assert clean.terms(0, F[1:], D[1:])[0] == pytest.approx(clean._explicit_terms(0, F[1:], D[1:])[0])
+
+
+def test_signals_fitted_on_the_joint_fits_decimated_data_keep_their_estimates(gages):
+    """With the joint fit's decimation (by 2 within a 100 Hz band, from the first sample): the
+    amplitudes are the input rate's (the filter's gain at each pole divided out: equal to the
+    undecimated fit's within 2e-3 of their size, noise 0.01 on amplitudes ~1 and half the
+    samples), the decrements within 0.3 standard errors of the undecimated ones (the two
+    estimates differ by the noise above the band and the samples' weighting, a small part of
+    one standard error), and the standard errors scaled by the filter's noise factor: within
+    10 % of the undecimated ones (white noise here: the factor is |H|^2 / (2 sum h^2) ~ 1.1)."""
+    full = fit_signals_at_poles(gages, FS, F, D)
+    dec = fit_signals_at_poles(gages, FS, F, D, decimation=2, band_hz=100.0)
+    for a, b in zip(full, dec, strict=True):
+        assert np.max(np.abs(b.amplitude - a.amplitude)) < 2e-3 * np.max(np.abs(a.amplitude))
+        assert np.all(np.abs(b.delta - a.delta) <= 0.3 * a.delta_se)
+        np.testing.assert_allclose(b.delta_se, a.delta_se, rtol=0.1)
+    with pytest.raises(ValueError, match="band_hz"):
+        fit_signals_at_poles(gages, FS, F, D, decimation=2)

@@ -540,7 +540,7 @@ def _nls_data(Xa: np.ndarray, fs_hz: float, band_hi: float,
             band_hi = min(band_hi, 1.25 * f_range_hz[1])
         d_nls = max(1, min(int(np.ceil(Xa.size / max_samples)), int(fs_hz // (2.5 * band_hi))))
         if d_nls > 1:
-            Y, idx, taps = decimate_valid(Xa, fs_hz, d_nls, band_hi)
+            Y, idx, taps = decimate_valid(Xa, fs_hz, d_nls, band_hi, from_first=True)
             t = idx / fs_hz
         n_keep = max(max_samples // Xa.shape[0], 64)
         Y, t = Y[:, :n_keep], t[:n_keep]

@@ -306,10 +306,27 @@ def _fir_taps(factor: int, band_hz: float, fs_hz: float) -> np.ndarray:
     return h / h.sum()
 
 
+def _first_sample_taps(factor: int, band_hz: float, fs_hz: float) -> np.ndarray:
+    """The minimum-phase FIR of :func:`_fir_taps`' magnitude (homomorphic, same length; |H|
+    equal within 1e-6), unit DC gain: its largest taps come first, so run backwards in time it
+    weighs an output's first samples most."""
+    g = signal.minimum_phase(_fir_taps(factor, band_hz, fs_hz), method="homomorphic", half=False)
+    return g / g.sum()
+
+
 def decimate_valid(
-    x: ArrayLike, fs_hz: float, factor: int, band_hz: float, max_outputs: int | None = None
+    x: ArrayLike, fs_hz: float, factor: int, band_hz: float, max_outputs: int | None = None,
+    *, from_first: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Low-pass and decimate, returning only outputs whose filter window lies inside the record.
+
+    With ``from_first`` the filter is the minimum-phase one of the same magnitude run backwards
+    in time (output n = Σ_k g_k x[n + k]) and the outputs are those at samples 0, factor, …:
+    a free decay's first samples, its strongest, weigh in fully (the linear-phase outputs start
+    centred on the FIR's half length, 11 samples at a factor of 2 and a 270 Hz band, and weigh
+    the first samples by its smallest taps: ~1 % of a 14 s 16-gage decay's decrement variance
+    lost). Every output is still exactly Σ gain(z) zⁿ on a sum of damped exponentials zⁿ
+    (:func:`fir_gain` of the returned taps), with the same noise spectrum.
 
     Parameters
     ----------
@@ -332,7 +349,9 @@ def decimate_valid(
     n_index : numpy.ndarray, shape (n_out,)
         Index into the original samples that each output is centred on (time = n_index / fs_hz).
     taps : numpy.ndarray
-        The zero-phase FIR taps (centre at len // 2), for :func:`fir_gain`.
+        The zero-phase FIR taps (centre at len // 2), for :func:`fir_gain`; with
+        ``from_first``, the reversed minimum-phase taps followed by as many zeros less one (so
+        that the centre convention of :func:`fir_gain` gives Σ_k g_k z^k).
     """
     a = np.atleast_2d(np.asarray(x, dtype=float))
     factor = int(factor)
@@ -342,6 +361,8 @@ def decimate_valid(
         return a, np.arange(a.shape[-1]), np.ones(1)
     if not 0 < band_hz < 0.5 * fs_hz / factor:
         raise ValueError(f"band_hz ({band_hz}) must lie in (0, {0.5 * fs_hz / factor})")
+    if from_first:
+        return _decimate_from_first(a, fs_hz, factor, band_hz, max_outputs)
     h = _fir_taps(factor, band_hz, fs_hz)
     c = (h.size - 1) // 2
     if max_outputs is not None:  # output j reads samples j - (taps - 1) ... j
@@ -353,6 +374,27 @@ def decimate_valid(
     if not np.any(keep):
         raise ValueError(f"record ({a.shape[-1]} samples) is shorter than the FIR ({h.size})")
     return full[:, keep], j[keep] - c, h
+
+
+def _decimate_from_first(a: np.ndarray, fs_hz: float, factor: int, band_hz: float,
+                         max_outputs: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`decimate_valid` with ``from_first``: outputs n = 0, factor, … ≤ n_samples − L
+    (L taps), output n = Σ_k g_k a[n + k] (the convolution with g reversed, at n + L − 1)."""
+    hc = _first_sample_taps(factor, band_hz, fs_hz)[::-1]
+    L = hc.size
+    if max_outputs is not None:
+        a = a[:, : (L - 1) + (max(int(max_outputs), 1) - 1) * factor + 1]
+    n_out = (a.shape[-1] - L) // factor + 1
+    if n_out < 1:
+        raise ValueError(f"record ({a.shape[-1]} samples) is shorter than the FIR ({L})")
+    # upfirdn keeps convolution indices 0, factor, …: zeros put before the record (they reach
+    # no output kept) bring index L − 1, output 0, among them.
+    pad = (-(L - 1)) % factor
+    b = np.concatenate([np.zeros((a.shape[0], pad)), a], axis=1) if pad else a
+    full = signal.upfirdn(hc, b, up=1, down=factor, axis=-1)
+    first = (L - 1 + pad) // factor
+    return full[:, first : first + n_out], np.arange(n_out) * factor, np.concatenate(
+        [hc, np.zeros(L - 1)])
 
 
 def decimated_index(n_samples: int, fs_hz: float, factor: int, band_hz: float) -> np.ndarray:

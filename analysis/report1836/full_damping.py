@@ -80,7 +80,7 @@ import numpy as np
 import scipy.signal
 
 from ..modal.table import ModeTable
-from ..modal.varpro import damped_basis, uniform_grid
+from ..modal.varpro import Projector, damped_basis, uniform_grid
 from ..model.geometry import gage_geometry
 from ..model.rig import Daq, Rig
 from .damping import C_translational_full, c_rotational_full, stock_stiffness_k_s
@@ -157,21 +157,41 @@ def motions_from_gages(amp: Mapping[int, complex], rig: Rig, ell: float) -> Mode
     """The motions of one mode from its complex amplitudes at gages :data:`GAGES` (any one unit
     for all: displacement, or acceleration, which differs by the common factor λ²), with the
     stock's hull attachment ``ell`` (m) above the rudder attachment."""
-    missing = [n for n in GAGES if n not in amp]
-    if missing:
-        raise ValueError(f"Eq 14/15 need gages {GAGES}; missing {missing}")
-    geom = gage_geometry(rig)
-    K = geometry_constants(geom)
-    p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
-    alpha_b = (amp[13] - amp[14]) / geom.L_P
-    return ModeMotions(
-        v=K["K3"] * (amp[2] + K["K4"] * amp[6]),
-        gamma=K["K1"] * (amp[4] - amp[8]),
-        alpha=K["K2"] * (amp[6] - amp[2]),
-        v_b=amp[13] + (p13[2] - rig.rudder.attach_z_m - ell) * alpha_b,
-        alpha_b=alpha_b,
-        gamma_b=(amp[13] - amp[5]) / (p13[0] - p5[0]),
-    )
+    return _GageFrame.of(rig, ell).motions(amp)
+
+
+@dataclass(frozen=True)
+class _GageFrame:
+    """What :func:`motions_from_gages` reads from the rig (its geometry constants K1-K4, L_P,
+    the lever from gage 13 to the stock's attachment, gage 13 to 5 along x, m), once for the
+    many evaluations of a standard error's differences."""
+
+    K: Mapping[str, float]
+    L_P: float
+    lever_13: float
+    dx_13_5: float
+
+    @classmethod
+    def of(cls, rig: Rig, ell: float) -> _GageFrame:
+        geom = gage_geometry(rig)
+        p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
+        return cls(geometry_constants(geom), geom.L_P, p13[2] - rig.rudder.attach_z_m - ell,
+                   p13[0] - p5[0])
+
+    def motions(self, amp: Mapping[int, complex]) -> ModeMotions:
+        missing = [n for n in GAGES if n not in amp]
+        if missing:
+            raise ValueError(f"Eq 14/15 need gages {GAGES}; missing {missing}")
+        K = self.K
+        alpha_b = (amp[13] - amp[14]) / self.L_P
+        return ModeMotions(
+            v=K["K3"] * (amp[2] + K["K4"] * amp[6]),
+            gamma=K["K1"] * (amp[4] - amp[8]),
+            alpha=K["K2"] * (amp[6] - amp[2]),
+            v_b=amp[13] + self.lever_13 * alpha_b,
+            alpha_b=alpha_b,
+            gamma_b=(amp[13] - amp[5]) / self.dx_13_5,
+        )
 
 
 def eq14_15(m: ModeMotions, f_hz: float, delta: float, m_y: float, I_z: float, I_xz: float,
@@ -200,16 +220,31 @@ def amplitude_covariance(n_samples: int, fs_hz: float, f_hz: np.ndarray, delta: 
     t = np.arange(n_samples) / fs_hz
     Phi = damped_basis(t, np.asarray(f_hz, dtype=float), np.asarray(delta, dtype=float),
                        trend_terms, uniform_grid(t))
-    cols = Phi[:, 2 * k: 2 * k + 2]
-    # the mode's two columns with every other column projected out: the Schur complement
-    others = np.delete(Phi, [2 * k, 2 * k + 1], axis=1)
-    resid = cols
-    if others.shape[1]:
-        Q, _ = np.linalg.qr(others)
-        resid = cols - Q @ (Q.T @ cols)
     flip = np.diag([1.0, -1.0])  # the basis is (e cos, e sin): a = b_cos - j b_sin
-    unit = flip @ np.linalg.inv(resid.T @ resid) @ flip
+    unit = flip @ np.linalg.inv(_schur_complement(Phi, k)) @ flip
     return np.asarray(noise_std, dtype=float)[:, None, None] ** 2 * unit[None, :, :]
+
+
+def _schur_complement(Phi: np.ndarray, k: int) -> np.ndarray:
+    """(2, 2): mode ``k``'s two columns of ``Phi`` (n, P) with every other column projected
+    out, R^T R for R = P_perp cols. From the Gram Phi^T Phi (one pass over the samples) while
+    its other columns' Cholesky and the complement keep their digits (as varpro's Projector:
+    cond below ~1e5, diagonal not cancelled below 1e-8); else from a QR of the others."""
+    cols = [2 * k, 2 * k + 1]
+    rest = np.delete(np.arange(Phi.shape[1]), cols)
+    if rest.size == 0:
+        return Phi[:, cols].T @ Phi[:, cols]
+    G = Phi.T @ Phi
+    G_cc = G[np.ix_(cols, cols)]
+    proj = Projector(None, gram=G[np.ix_(rest, rest)])
+    if proj.cho is not None:
+        V = proj.whitened(G[np.ix_(rest, cols)])
+        S = G_cc - V.T @ V
+        if (S.diagonal() > 1e-8 * G_cc.diagonal()).all():
+            return S
+    Q, _ = np.linalg.qr(Phi[:, rest])
+    resid = Phi[:, cols] - Q @ (Q.T @ Phi[:, cols])
+    return resid.T @ resid
 
 
 def filtered_noise_factor(daq: Daq, fs_hz: float, f_hz: float) -> float:
@@ -284,9 +319,10 @@ def full_damping(amp: Mapping[int, complex], f_hz: float, delta: float, rig: Rig
     I_xz and stock, and bending length ``ell`` (m). ``amp_cov``: each gage's (2, 2) covariance
     of ``[Re a, Im a]`` (:func:`amplitude_covariance`), for the standard errors."""
     stock = stock_constants(rig, ell)
+    frame = _GageFrame.of(rig, ell)  # the rig's geometry once, not at each of the 29 evaluations
 
     def constants(a: Mapping[int, complex]) -> np.ndarray:
-        return np.array(eq14_15(motions_from_gages(a, rig, ell), f_hz, delta, m_y, I_z,
+        return np.array(eq14_15(frame.motions(a), f_hz, delta, m_y, I_z,
                                 rig.rudder.Ixz_kg_m2, stock))
 
     C, c = constants(amp)

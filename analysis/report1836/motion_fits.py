@@ -29,13 +29,14 @@ Times in s, frequencies in Hz, decrements per period; signals in any one unit (m
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import linalg
 from scipy.linalg import LinAlgError, lapack
 from scipy.special import chdtri
 
+from ..modal.signal import decimate_valid, fir_gain, fir_noise_variance_factor
 from ..modal.varpro import Projector, damped_basis, fit_modes_varpro, kaufman_weights, uniform_grid
 
 __all__ = ["SignalModes", "fit_signals_at_poles"]
@@ -127,10 +128,19 @@ def _significant(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray) -> n
     return (amp2 * env2[:, None] / noise2[None, :]).T > _SIGNIFICANT
 
 
+_GRAM_MIN_FRACTION = 1e-4  # Grams only while rss >= 1e-4 y^T y (<~ 4 of 16 digits lost), as varpro
+
+
 class _Held:
     """The signals' least squares with the modes ``free`` moving and the others (and the trend)
     held at their joint poles: the held columns are projected out of the signals once (one QR
-    shared by every signal and step), so that a step touches only the free modes' columns."""
+    shared by every signal and step), so that a step touches only the free modes' columns.
+
+    A step's terms come from Grams (:meth:`_gram_terms`): the free modes' columns and their time
+    derivative columns W meet the samples in three products (W W^T, W Q, W y), the projected
+    columns, residual and P_perp T are never formed; where the Grams would lose digits (a
+    residual below 1e-4 of the signal's sum of squares, a projected column or Schur complement
+    nearly cancelled), the explicit path (:meth:`_explicit_terms`) as before."""
 
     def __init__(self, t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray,
                  free: np.ndarray, trend: int) -> None:
@@ -141,6 +151,7 @@ class _Held:
         rd = np.abs(np.diag(R))
         self.QT = np.ascontiguousarray(Q[:, rd > 1e-10 * rd.max()].T) if rd.size else None
         self.Yp = Y if self.QT is None else Y - (Y @ self.QT.T) @ self.QT
+        self.yy = np.einsum("ij,ij->i", self.Yp, self.Yp)
 
     def _perp(self, A: np.ndarray) -> np.ndarray:
         """A (n, c) with the held columns projected out."""
@@ -150,6 +161,44 @@ class _Held:
               ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """Signal ``s``'s (rss, M, T^T r, H) with the free modes at poles (f, d) (as
         :func:`_gauss_newton_terms` on all columns: the held ones profiled out)."""
+        got = self._gram_terms(s, f, d)
+        return got if got is not None else self._explicit_terms(s, f, d)
+
+    def _gram_terms(self, s: int, f: np.ndarray, d: np.ndarray
+                    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray] | None:
+        """:meth:`terms` from Grams, or None where they would lose digits. With W = [Phi^T;
+        (t Phi)^T] (2c, n), Yp and the projected columns orthogonal to the held ones Q: the
+        projected Gram is G = W W^T - (W Q)(W Q)^T; b = G_pp^-1 (W y)_p, rss = y^T y - (W y)_p^T b,
+        T^T r = (W y)_T - G_Tp b and M = G_TT - G_Tp G_pp^-1 G_pT."""
+        c = 2 * f.size
+        W = np.empty((2 * c, self.t.size))
+        damped_basis(self.t, f, d, 0, self.grid, out=W[:c])
+        np.multiply(W[:c], self.t[None, :], out=W[c:])
+        G0 = W @ W.T
+        G = G0
+        if self.QT is not None:
+            WQ = W @ self.QT.T
+            G = G0 - WQ @ WQ.T
+        if not (G.diagonal() >= 1e-6 * G0.diagonal()).all():
+            return None
+        proj = Projector(None, gram=G[:c, :c])
+        if proj.cho is None:
+            return None
+        wy = W @ self.Yp[s]
+        b = proj.coef_from(wy[:c, None])
+        rss = float(self.yy[s] - wy[:c] @ b[:, 0])
+        if not rss >= _GRAM_MIN_FRACTION * self.yy[s]:
+            return None
+        PtT, TT = G[:c, c:], G[c:, c:]
+        V = proj.whitened(PtT)
+        M = TT - V.T @ V
+        if not (M.diagonal() > 1e-8 * TT.diagonal()).all():
+            return None
+        return rss, M, wy[c:] - PtT.T @ b[:, 0], kaufman_weights(b, f, d)[..., 0]
+
+    def _explicit_terms(self, s: int, f: np.ndarray, d: np.ndarray
+                        ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`terms` on the projected columns and residual themselves."""
         phi = damped_basis(self.t, f, d, 0, self.grid)
         c = phi.shape[1]
         T = phi * self.t[:, None]
@@ -164,7 +213,8 @@ class _Held:
 
 def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
                          delta: np.ndarray, *, modes: tuple[int, ...] | None = None,
-                         trend_terms: int = 1) -> list[SignalModes]:
+                         trend_terms: int = 1, decimation: int = 1,
+                         band_hz: float | None = None) -> list[SignalModes]:
     """Each signal's own estimate of the modes ``modes`` (indices; None: all) among the joint
     modes (``f_hz``, ``delta``), where significant in it; the other modes held at their joint
     poles, their amplitudes fitted.
@@ -181,6 +231,13 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
         The modes each signal estimates on its own (e.g. the predominant one); None: all.
     trend_terms : int
         Trend columns (Legendre P0 ...) of the joint fit, fitted with each signal's modes.
+    decimation, band_hz : int, float, optional
+        The joint fit's decimation of its data and the band it kept (its table's
+        ``info["decimation"]``, ``info["band_hz"]``): the signals are fitted on the same kind
+        of data, decimated from their first sample
+        (:func:`~ramdaq.analysis.modal.signal.decimate_valid` ``from_first``); amplitudes
+        divided by the filter's gain at each joint pole, standard errors scaled by its noise
+        factor (as the joint fit's), so both are the input rate's.
 
     Returns
     -------
@@ -194,6 +251,21 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
         raise ValueError(f"signals (shape {Y.shape}) must be finite, (n_signals, n_samples)")
     if f.size == 0 or f.shape != d.shape:
         raise ValueError(f"f_hz ({f.size}) and delta ({d.size}) must hold the same modes, >= 1")
+    if decimation > 1:
+        if band_hz is None:
+            raise ValueError(f"decimation {decimation} needs the band kept (band_hz)")
+        Yd, _, taps = decimate_valid(Y, fs_hz, decimation, band_hz, from_first=True)
+        fits = _fit_at_poles(Yd, fs_hz / decimation, f, d, modes, trend_terms)
+        gain = fir_gain(taps, np.exp((-d * f + 2j * np.pi * f) / fs_hz))
+        se = np.sqrt(fir_noise_variance_factor(taps, decimation, f, fs_hz))
+        return [replace(m, f_se_hz=m.f_se_hz * se, delta_se=m.delta_se * se,
+                        amplitude=m.amplitude / gain) for m in fits]
+    return _fit_at_poles(Y, fs_hz, f, d, modes, trend_terms)
+
+
+def _fit_at_poles(Y: np.ndarray, fs_hz: float, f: np.ndarray, d: np.ndarray,
+                  modes: tuple[int, ...] | None, trend_terms: int) -> list[SignalModes]:
+    """:func:`fit_signals_at_poles` on the signals ``Y`` (n_signals, n_samples) as they are."""
     n = Y.shape[1]
     if n <= 4 * f.size + trend_terms + 2:
         raise ValueError(f"n_samples ({n}) too small for {f.size} modes")
