@@ -308,9 +308,7 @@ def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable,
         return {}
     S = np.array(list(signals.values()))
     fits = fit_signals_at_poles(S, fs_hz, table.frequency_hz, table.delta, modes=(k,),
-                                trend_terms=int(table.info.get("trend_terms", 1)),
-                                decimation=int(table.info.get("decimation", 1)),
-                                band_hz=table.info.get("band_hz"))
+                                trend_terms=int(table.info.get("trend_terms", 1)))
     f = float(table.frequency_hz[k])
     peaks = _peak_decrements(S, fs_hz, f)
     out = {}

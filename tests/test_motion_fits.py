@@ -112,21 +112,3 @@ def test_a_steps_terms_from_grams_equal_the_explicit_ones(gages):
                   np.array([1]), 1)
     assert clean._gram_terms(0, F[1:], D[1:]) is None  # rss ~ 1e-12 y^T y: the Grams refuse
     assert clean.terms(0, F[1:], D[1:])[0] == pytest.approx(clean._explicit_terms(0, F[1:], D[1:])[0])
-
-
-def test_signals_fitted_on_the_joint_fits_decimated_data_keep_their_estimates(gages):
-    """With the joint fit's decimation (by 2 within a 100 Hz band, from the first sample): the
-    amplitudes are the input rate's (the filter's gain at each pole divided out: equal to the
-    undecimated fit's within 2e-3 of their size, noise 0.01 on amplitudes ~1 and half the
-    samples), the decrements within 0.3 standard errors of the undecimated ones (the two
-    estimates differ by the noise above the band and the samples' weighting, a small part of
-    one standard error), and the standard errors scaled by the filter's noise factor: within
-    10 % of the undecimated ones (white noise here: the factor is |H|^2 / (2 sum h^2) ~ 1.1)."""
-    full = fit_signals_at_poles(gages, FS, F, D)
-    dec = fit_signals_at_poles(gages, FS, F, D, decimation=2, band_hz=100.0)
-    for a, b in zip(full, dec, strict=True):
-        assert np.max(np.abs(b.amplitude - a.amplitude)) < 2e-3 * np.max(np.abs(a.amplitude))
-        assert np.all(np.abs(b.delta - a.delta) <= 0.3 * a.delta_se)
-        np.testing.assert_allclose(b.delta_se, a.delta_se, rtol=0.1)
-    with pytest.raises(ValueError, match="band_hz"):
-        fit_signals_at_poles(gages, FS, F, D, decimation=2)

@@ -29,14 +29,13 @@ Times in s, frequencies in Hz, decrements per period; signals in any one unit (m
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg
 from scipy.linalg import LinAlgError, lapack
 from scipy.special import chdtri
 
-from ..modal.signal import decimate_valid, fir_gain, fir_noise_variance_factor
 from ..modal.varpro import Projector, damped_basis, fit_modes_varpro, kaufman_weights, uniform_grid
 
 __all__ = ["SignalModes", "fit_signals_at_poles"]
@@ -213,8 +212,7 @@ class _Held:
 
 def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
                          delta: np.ndarray, *, modes: tuple[int, ...] | None = None,
-                         trend_terms: int = 1, decimation: int = 1,
-                         band_hz: float | None = None) -> list[SignalModes]:
+                         trend_terms: int = 1) -> list[SignalModes]:
     """Each signal's own estimate of the modes ``modes`` (indices; None: all) among the joint
     modes (``f_hz``, ``delta``), where significant in it; the other modes held at their joint
     poles, their amplitudes fitted.
@@ -231,13 +229,6 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
         The modes each signal estimates on its own (e.g. the predominant one); None: all.
     trend_terms : int
         Trend columns (Legendre P0 ...) of the joint fit, fitted with each signal's modes.
-    decimation, band_hz : int, float, optional
-        The joint fit's decimation of its data and the band it kept (its table's
-        ``info["decimation"]``, ``info["band_hz"]``): the signals are fitted on the same kind
-        of data, decimated from their first sample
-        (:func:`~ramdaq.analysis.modal.signal.decimate_valid` ``from_first``); amplitudes
-        divided by the filter's gain at each joint pole, standard errors scaled by its noise
-        factor (as the joint fit's), so both are the input rate's.
 
     Returns
     -------
@@ -251,21 +242,6 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
         raise ValueError(f"signals (shape {Y.shape}) must be finite, (n_signals, n_samples)")
     if f.size == 0 or f.shape != d.shape:
         raise ValueError(f"f_hz ({f.size}) and delta ({d.size}) must hold the same modes, >= 1")
-    if decimation > 1:
-        if band_hz is None:
-            raise ValueError(f"decimation {decimation} needs the band kept (band_hz)")
-        Yd, _, taps = decimate_valid(Y, fs_hz, decimation, band_hz, from_first=True)
-        fits = _fit_at_poles(Yd, fs_hz / decimation, f, d, modes, trend_terms)
-        gain = fir_gain(taps, np.exp((-d * f + 2j * np.pi * f) / fs_hz))
-        se = np.sqrt(fir_noise_variance_factor(taps, decimation, f, fs_hz))
-        return [replace(m, f_se_hz=m.f_se_hz * se, delta_se=m.delta_se * se,
-                        amplitude=m.amplitude / gain) for m in fits]
-    return _fit_at_poles(Y, fs_hz, f, d, modes, trend_terms)
-
-
-def _fit_at_poles(Y: np.ndarray, fs_hz: float, f: np.ndarray, d: np.ndarray,
-                  modes: tuple[int, ...] | None, trend_terms: int) -> list[SignalModes]:
-    """:func:`fit_signals_at_poles` on the signals ``Y`` (n_signals, n_samples) as they are."""
     n = Y.shape[1]
     if n <= 4 * f.size + trend_terms + 2:
         raise ValueError(f"n_samples ({n}) too small for {f.size} modes")
