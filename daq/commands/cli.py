@@ -411,6 +411,7 @@ def _import_file(args: argparse.Namespace) -> int:
         info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
     exact = sum(c["method"] != "requantised" for c in chans)
+    stated = sum(c["method"] == "stated" for c in chans)
     worst = {u: max(c["max_error_si"] for c in chans if c["si_unit"] == u)
              for u in sorted({c["si_unit"] for c in chans}, reverse=True)}
     with progress_bar(f"writing {out.name}", imp.get("rows"), unit="samples") as advance:
@@ -420,7 +421,7 @@ def _import_file(args: argparse.Namespace) -> int:
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
     for line in _read_notes(imp):
-        print(line)
+        print(line, file=sys.stderr if line.startswith("warning:") else sys.stdout)
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
     for unit, rig_unit in sorted({(u, r) for _, u, r in odd}):  # one line per disagreement
@@ -428,7 +429,8 @@ def _import_file(args: argparse.Namespace) -> int:
         print(f"warning: {_channels_are(names, most=4)} in {unit} by the file's header, but rig "
               f"{info.extra.get('rig_name')!r} says {rig_unit}: the header's unit was applied",
               file=sys.stderr)
-    print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
+    print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step"
+          + (f" ({stated} at the scale the file states)" if stated else "") + ", "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     left = _not_recorded(options["rig"], info.channels)
@@ -439,8 +441,9 @@ def _import_file(args: argparse.Namespace) -> int:
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given; "
-              f"medium {options['rig'].medium}" + ("" if args.medium else ", --medium water for a "
-                                                    "flooded trial") + f"); ramdaq analyze {out} "
+              f"medium {device.rig.medium}" + ("" if args.medium or device.rig.medium == "water"
+                                               else ", --medium water for a flooded trial")
+              + f"); ramdaq analyze {out} "
               "gives each gage's frequency and decrement")
     return EXIT_OK
 
@@ -474,6 +477,13 @@ def _read_notes(imp: dict) -> list[str]:
         n, a, b = skipped["count"], skipped["first"], skipped["last"]
         out.append(f"skipped {n} line{'s' if n > 1 else ''} above the column names (line"
                    f"{f's {a}-{b}' if b > a else f' {a}'}: a header block, not data)")
+    stated = imp.get("medium_stated")
+    if stated and stated["by"] == "file" and stated["file"] != stated["rig"]:
+        out.append(f"medium {stated['file']}, as the file's header states (the rig says "
+                   f"{stated['rig']}; --medium overrides)")
+    elif stated and stated["by"] == "given" and stated["file"] != stated["applied"]:
+        out.append(f"warning: medium {stated['applied']} as --medium gives, but the file's "
+                   f"header states {stated['file']}")
     if imp.get("decimal") == ",":
         out.append(f"read decimal commas as decimal points (the delimiter is "
                    f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")
@@ -499,7 +509,7 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                                     or args.force_channel)
     made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                        units=args.units, force_channel=force,
-                       medium=args.medium or "air", file_units=found.units)
+                       medium=args.medium or found.medium or "air", file_units=found.units)
     for unit in sorted({u for _, u in made.overridden}):
         names = [c for c, u in made.overridden if u == unit]
         print(f"warning: {_channels_are(names)} in "

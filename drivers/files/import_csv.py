@@ -162,7 +162,7 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
         units = [u or c or None for u, c in zip(units, cells, strict=True)]
     else:
         lines.pos, lines.number = mark, header_no
-    notes: dict = {"delimiter": delim, "time_column": names[0]}
+    notes: dict = {"delimiter": delim, "time_column": names[0], **_stated_header(text, name)}
     if skipped:
         notes["skipped_lines"] = skipped
     if delim != "," and "," in text[lines.pos:]:  # a decimal comma: ',' is no delimiter here
@@ -179,6 +179,42 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
                        t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
                        notes={**notes, **grid},
                        where=lambda r: f"line {line_of_row[r]}")
+
+
+_MEDIUM_LINE = re.compile(r"^#\s*medium:\s*(\S+)", re.MULTILINE)
+_SCALE_LINE = re.compile(r"^#\s*scale \[SI unit per count\]:(.*)$", re.MULTILINE)
+
+
+def _stated_header(text: str, name: str) -> dict:
+    """What the ``#`` lines at the top of the file state for a re-import, as ``ramdaq
+    export-csv`` writes them: ``{"medium": "water"}`` from ``# medium: water`` and
+    ``{"scales": {"g01": 1.2e-4, ...}}`` (SI unit per count) from ``# scale [SI unit per
+    count]: g01=..., ...``; empty when they are not there. A stated medium other than air or
+    water, or a scale that is not a positive number, is refused naming it."""
+    end = 0
+    while end < len(text) and (text.startswith("#", end) or text[end] in "\r\n"):
+        nl = text.find("\n", end)
+        end = len(text) if nl < 0 else nl + 1
+    top, out = text[:end], {}
+    m = _MEDIUM_LINE.search(top)
+    if m and m.group(1) != "(none":
+        if m.group(1) not in ("air", "water"):
+            raise ImportFormatError(f"{name}: '# medium: {m.group(1)}': expected air or water")
+        out["medium"] = m.group(1)
+    m = _SCALE_LINE.search(top)
+    if m:
+        scales = {}
+        for item in filter(None, (i.strip() for i in m.group(1).split(","))):
+            key, _, value = item.rpartition("=")
+            try:
+                scales[key.strip()] = float(value)
+            except ValueError:
+                scales[key.strip()] = math.nan
+            if not key.strip() or not 0 < scales[key.strip()] < math.inf:
+                raise ImportFormatError(f"{name}: '# scale' line: {item!r} is not CHANNEL=SCALE "
+                                        f"with a positive scale")
+        out["scales"] = scales
+    return out
 
 
 def _time_unit(column: str, stated: str | None, given: str | None, name: str) -> str:
