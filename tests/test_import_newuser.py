@@ -278,3 +278,21 @@ def test_a_tsv_file_is_read_as_csv(tmp_path, capsys):
     assert rc == 0, err
     assert _run(["import", tmp_path / "b.csv", "--out", tmp_path / "c.mcap"], capsys)[0] == 0
     assert np.array_equal(_values(tmp_path / "b.mcap"), _values(tmp_path / "c.mcap"))
+
+
+def test_allow_gaps_says_which_good_values_went_with_the_gap(tmp_path, capsys):
+    """tester9: 60 NaNs on one channel of three dropped those rows on every channel without a
+    word (120 good values lost). A recording's gap is stream-wide (a block has no per-channel
+    hole), so the rows still go, but one line says how many good values on which channels."""
+    src = _archive_b(tmp_path / "nan.csv", "m/s^2", names=("A1", "A2", "A3"))
+    lines = src.read_text().splitlines()
+    for i in range(101, 161):  # data rows 100..159 (line 0 is the header): A2 empty
+        cells = lines[i].split(",")
+        cells[2] = "nan"
+        lines[i] = ",".join(cells)
+    src.write_text("\n".join(lines) + "\n")
+    rc, out, err = _run(["import", src, "--allow-gaps"], capsys)
+    assert rc == 0, err
+    assert ("warning: --allow-gaps: 120 good values on 'A1' (60), 'A3' (60) were dropped with "
+            "the gaps, the rows where 'A2' (60) had no value") in err
+    assert "1 gaps (60 samples missing)" in out

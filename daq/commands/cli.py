@@ -469,6 +469,13 @@ def _channels_are(names: list[str], most: int | None = None) -> str:
     return f"channels {shown} are" if len(names) > 1 else f"channel {shown} is"
 
 
+def _counted(per_channel: dict[str, int], most: int = 4) -> str:
+    """``'a' (60), 'b' (60)``, naming at most ``most`` channels (then "and N more")."""
+    items = list(per_channel.items())
+    text = ", ".join(f"{n!r} ({k})" for n, k in items[:most])
+    return text + (f" and {len(items) - most} more" if len(items) > most else "")
+
+
 def _read_notes(imp: dict) -> list[str]:
     """What the CSV reader made of the file's dialect: lines skipped, decimal commas."""
     out = []
@@ -484,6 +491,12 @@ def _read_notes(imp: dict) -> list[str]:
     elif stated and stated["by"] == "given" and stated["file"] != stated["applied"]:
         out.append(f"warning: medium {stated['applied']} as --medium gives, but the file's "
                    f"header states {stated['file']}")
+    dropped = imp.get("dropped_with_gaps", {})
+    if dropped.get("good"):
+        good, lost = dropped["good"], dropped["missing"]
+        out.append(f"warning: --allow-gaps: {sum(good.values())} good values on {_counted(good)} "
+                   f"were dropped with the gaps, the rows where {_counted(lost)} had no value: "
+                   f"a recording's gap is on every channel (no value is invented for it)")
     if imp.get("decimal") == ",":
         out.append(f"read decimal commas as decimal points (the delimiter is "
                    f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")

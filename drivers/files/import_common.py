@@ -23,7 +23,11 @@ Counts and scale, per channel, in the file's own unit:
 ``StreamInfo.extra["import"]["channels"]["g01"]`` says which, with the step, the scale, the
 measured largest error and the guaranteed bound (in the channel's SI unit, ``si_unit``). A missing
 value (NaN, empty) is an error naming where it is, unless ``allow_gaps``: then its row is not
-streamed, the blocks split there, a gap the recording keeps, never interpolated. Units: m/s^2 and
+streamed, the blocks split there, a gap the recording keeps, never interpolated. A recording's
+gap is on every channel (a block has no per-channel hole, and a sentinel count would be an
+invented sample), so the other channels' good values on that row go too:
+``extra["import"]["dropped_with_gaps"]`` counts them per channel, and ``ramdaq import`` says so.
+Units: m/s^2 and
 g (9.80665 m/s^2) for a gage (the file's stated unit wins over the rig's; where they differ
 ``"rig_unit_not_applied"`` says so); N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
 the stream by its rig name, unit ``"N"``, gage 0); anything else is refused naming the channel.
@@ -446,6 +450,22 @@ def quantise(x: np.ndarray, factor: float, scale: float | None = None
                                                   False)
 
 
+def _dropped_with_gaps(missing: np.ndarray, nan_rows: list[np.ndarray],
+                       names: list[str]) -> dict:
+    """``{"dropped_with_gaps": {"missing": {channel: n}, "good": {channel: n}}}``: a row
+    missing a value on some channels is a gap on every channel (a recording's gaps are
+    stream-wide; a block has no per-channel hole), so the other channels' good values on those
+    rows go with it; the counts say how many, per source channel. Empty when no row misses a
+    value."""
+    if not missing.any():
+        return {}
+    lost = {n: int(np.count_nonzero(nan)) for n, nan in zip(names, nan_rows, strict=True)}
+    good = {n: int(np.count_nonzero(missing & ~nan)) for n, nan in zip(names, nan_rows,
+                                                                       strict=True)}
+    return {"dropped_with_gaps": {"missing": {n: k for n, k in lost.items() if k},
+                                  "good": {n: k for n, k in good.items() if k}}}
+
+
 def snap_rate(fs_hz: float, rel_tol: float) -> float:
     """The value with the fewest significant digits within ``rel_tol`` of ``fs_hz``, Hz.
 
@@ -582,7 +602,7 @@ class FileImportDevice(Device):
                              self.force_channel, src.aliases)
         counts = np.empty((len(picks), idx.size), np.int32)
         missing = np.zeros(idx.size, bool)
-        scales, notes = [], {}
+        scales, notes, nan_rows = [], {}, []
         for row, pick in enumerate(picks):
             i = pick.index
             x = np.asarray(src.read(i), dtype=np.float64)
@@ -606,7 +626,8 @@ class FileImportDevice(Device):
                 counts[row], q = quantise(x, factor, stated_scales.get(src.names[i]))
             except ValueError as err:
                 raise ImportFormatError(f"{what}: {err}") from None
-            missing |= np.isnan(x)
+            nan_rows.append(np.isnan(x))
+            missing |= nan_rows[-1]
             scales.append(q.scale)
             assumed = self.rig.force(pick.name).unit if pick.is_force else \
                 self.rig.gage(pick.gage).unit
@@ -629,7 +650,8 @@ class FileImportDevice(Device):
                   "rows": int(idx.size), "fs_hz": src.fs_hz, "t0_s": t0,
                   "first_sample": int(self._idx[0]), "segments": len(self._segments),
                   "missing_samples": int(idx[-1] - idx[0] + 1 - self._idx.size),
-                  "channels": notes, **medium_note}
+                  "channels": notes, **medium_note,
+                  **_dropped_with_gaps(missing, nan_rows, [src.names[p.index] for p in picks])}
         self._blocks = self._iter_blocks()
         return StreamInfo(
             device=f"{self.kind}://{self.path}", fs_hz=fs,
