@@ -497,6 +497,14 @@ def _read_notes(imp: dict) -> list[str]:
         out.append(f"warning: --allow-gaps: {sum(good.values())} good values on {_counted(good)} "
                    f"were dropped with the gaps, the rows where {_counted(lost)} had no value: "
                    f"a recording's gap is on every channel (no value is invented for it)")
+    if "time_column" in imp and imp["time_column"] is None:
+        out.append(f"no time column (no column is named like time, t [s], time_s): every column "
+                   f"is a channel, the rows are samples at {imp.get('fs_hz'):g} Hz as --fs "
+                   f"states, time 0 at the first row")
+    if imp.get("time_resolution_s"):
+        res, fs = imp["time_resolution_s"], imp.get("fs_hz")
+        out.append(f"the time column is printed to {res:g} s ({res * fs:.2f} sample at {fs:g} "
+                   f"Hz): each row is placed on the {fs:g} Hz grid within that rounding")
     if imp.get("decimal") == ",":
         out.append(f"read decimal commas as decimal points (the delimiter is "
                    f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")
