@@ -166,7 +166,7 @@ def format_summary(report: dict, units: str = "si") -> str:
                       f"{_fmt(d['zeta'], '.4%')} +- {_pct(d['zeta_se'])}"
                       for g, d in a["gages"].items()]
             if len(a["modes"]) > 1:  # the gage rows are the predominant mode's: list every mode
-                lines += [f"    mode {i + 1}{' (predominant)' if i == a['predominant_mode'] else ''}"
+                lines += [f"    mode {i}{' (predominant)' if i == a['predominant_mode'] else ''}"
                           f", all gages: f = {_fmt(m['f_hz'], '.4f')} +- {_fmt(m['f_se_hz'], '.2g')}"
                           f" Hz, delta = {_fmt(m['delta'])} +- {_fmt(m['delta_se'], '.2g')}, zeta = "
                           f"{_fmt(m['zeta'], '.4%')} +- {_pct(m['zeta_se'])}"
