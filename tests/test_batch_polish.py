@@ -112,3 +112,15 @@ def test_the_table_says_rig_medium_units_channels_and_numbers_modes_as_report_js
             assert x["predominant"] == (x["mode"] == a["predominant_mode"])
             assert x["channel"] == f"g{x['gage']:02d}" and x["source_channel"] == ""
     assert any(x["fitted"] for x in rows)
+
+
+def test_a_small_file_read_shows_kilobytes_not_0_of_0_mb(capsys):
+    """tester9: reading a 0.3 MB recording showed "0/0 MB". Below 1 MB the bar counts kB, above
+    it MB to one decimal."""
+    from ramdaq.daq.commands.progress import bytes_bar
+
+    for size, want in ((300_000, "293/293 kB"), (3_500_000, "3.3/3.3 MB")):
+        with bytes_bar("reading x", size, show=True) as update:
+            update(size, size)
+        err = capsys.readouterr().err
+        assert want in err and "0/0" not in err

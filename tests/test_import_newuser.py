@@ -345,3 +345,14 @@ def test_times_rounded_to_their_printed_resolution_are_one_grid(tmp_path, capsys
     assert "printed to 0.0001 s (0.20 sample at 2048 Hz)" in out
     got = _values(tmp_path / "round4.mcap")
     assert np.max(np.abs(got - x[:, keep])) <= 1e-7 * np.max(np.abs(x))
+
+
+def test_the_anti_alias_line_names_the_rig_once_quoted(tmp_path, capsys):
+    """tester9: "rig 'albacore-like''s anti-alias corner" (a doubled quote)."""
+    t, x = _decay(1000.0, 2, dur=0.5)  # 1000 Hz: Nyquist 500 Hz, below the rig's 800 Hz corner
+    src = tmp_path / "slow.csv"
+    src.write_text("time_s,g01,g02\n" + "\n".join(f"{t[i]:.6f},{x[0, i]:.9e},{x[1, i]:.9e}"
+                                                  for i in range(t.size)) + "\n")
+    rig = Path(__file__).resolve().parents[1] / "recordings" / "rigs" / "albacore.toml"
+    rc, out, err = _run(["import", src, "--rig", rig, "--fs", "1000"], capsys)
+    assert rc == 1 and "the anti-alias corner of rig 'albacore-like' (" in err and "''" not in err

@@ -707,8 +707,8 @@ class FileImportDevice(Device):
                                         f"({option('fs_hz=', '--fs')})")
             corner = self.rig.daq.anti_alias_hz
             if corner >= fs / 2:  # NaN (a channels-only rig that names no filter) passes
-                raise ImportFormatError(f"{name}: at {fs:g} Hz rig {self.rig.name!r}'s "
-                                        f"anti-alias corner ({corner:g} Hz, daq.anti_alias_hz) "
+                raise ImportFormatError(f"{name}: at {fs:g} Hz the anti-alias corner of rig "
+                                        f"{self.rig.name!r} ({corner:g} Hz, daq.anti_alias_hz) "
                                         f"lies above Nyquist: the rig cannot describe this "
                                         f"record; use a rig of this rate")
             return
