@@ -377,7 +377,34 @@ def cmd_import(args: argparse.Namespace) -> int:
     from ...drivers.files.import_common import cli_option_names
 
     with cli_option_names():
-        return _import_file(args)
+        if len(args.file) == 1 and not Path(args.file[0]).is_dir():
+            return _import_file(argparse.Namespace(**{**vars(args), "file": args.file[0]}))
+        return _import_many(args)
+
+
+def _import_many(args: argparse.Namespace) -> int:
+    """Several files, folders or globs: each file imported as ``_import_file`` does, beside it
+    or into the folder ``--out``; a file that fails is one line and the others go on; a last
+    line counts them. Exit 1 if any failed."""
+    from .bulk_import import bulk_outputs, import_sources
+
+    files = import_sources(args.file)
+    out_dir = Path(args.out) if args.out else None
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    outs = bulk_outputs(files, out_dir)
+    failed = []
+    for k, (src, out) in enumerate(zip(files, outs, strict=True)):
+        print(f"[{k + 1}/{len(files)}] {src}")
+        try:
+            _import_file(argparse.Namespace(**{**vars(args), "file": str(src), "out": str(out)}))
+        except _FAILURES as err:
+            failed.append(src)
+            print(f"ramdaq import: {_one_line(err)}", file=sys.stderr)
+    print(f"imported {len(files) - len(failed)} of {len(files)} files"
+          + (f"; {len(failed)} failed: {', '.join(f.name for f in failed[:5])}"
+             + (" ..." if len(failed) > 5 else "") if failed else ""))
+    return EXIT_FAILED if failed else EXIT_OK
 
 
 def _import_file(args: argparse.Namespace) -> int:
@@ -844,14 +871,17 @@ def build_parser() -> argparse.ArgumentParser:
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
-    m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
+    m.add_argument("file", nargs="+", help="FILE.csv, FILE.uff/.unv or FILE.tdms; several "
+                   "files, folders (their .csv/.tsv/.txt/.uff/.unv/.tdms files) or globs import "
+                   "each one, beside it or into the folder --out")
     m.add_argument("--rig", help="rig file (TOML) of the trial; without it, a channels-only rig "
                    "(the file's channels, units and rate) is written beside the output as "
                    "OUT.rig.toml")
     m.add_argument("--units", choices=("g", "m/s^2"), help="without --rig: the unit of the "
                    "acceleration channels whose file states none (a unit the file states wins, "
                    "with a warning where they differ)")
-    m.add_argument("--out", help="output recording (default FILE.mcap)")
+    m.add_argument("--out", help="output recording (default FILE.mcap); with several files, the "
+                   "folder their recordings go to")
     m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")
