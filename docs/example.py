@@ -5,15 +5,23 @@ it against its rig's model, and draw the figures -- what a notebook does, as a s
 
 ``tests/test_example.py`` runs it. Every step is one call of the API (``ramdaq.read_recording``,
 ``ramdaq.analyze``, ``ramdaq.diagnose``); the figures are matplotlib ``Figure`` objects, shown
-inline by a notebook, saved here.
+inline by a notebook, saved here. It needs only ``pip install -e .`` (the README's first set-up):
+the tables are the API's typed rows written with :mod:`csv`; with pandas (``pip install
+'ramdaq[notebook]'``) ``rec.to_dataframe()``, ``res.to_dataframe()`` and ``gap.to_dataframe()``
+give the same as DataFrames.
 """
 
 from __future__ import annotations
 
+import csv
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 import ramdaq  # before numpy: one BLAS thread, the command line's digits
+
+# isort: split
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RECORDINGS = HERE.parent / "recordings"
@@ -27,28 +35,36 @@ def main(out: Path) -> None:
     print(f"{rec.path}: {rec.values.shape[0]} channels x {rec.n_samples} samples at {rec.fs_hz:g} Hz "
           f"({rec.duration_s:.1f} s), rig {rec.rig.name} in {rec.rig.medium}, "
           f"{len(rec.impacts)} blows at " + ", ".join(f"{ev.onset_s:.3f}" for ev in rec.impacts) + " s")
-    df = rec.to_dataframe()  # pandas: index time_s, a column per channel
-    print(f"gage 4 peak {df['g04'].abs().max():.3f} {df.attrs['units']['g04']}")
+    g04 = rec.channels.index("g04")  # rec.values: channels x samples, NaN where missing
+    print(f"gage 4 peak {np.nanmax(np.abs(rec.values[g04])):.3f} {rec.units[g04]}")
 
-    # 2. the trial report's numbers: one row per hit x gage x mode
+    # 2. the trial report's numbers: one row per hit x gage x mode (hits and modes from 0)
     res = ramdaq.analyze(rec)
-    table = res.to_dataframe()
-    table.to_csv(out / "modes.csv", index=False)
-    pred = table[table.predominant]
+    rows = res.rows()
+    write_csv(out / "modes.csv", [asdict(r) for r in rows])
+    pred = np.array([(r.f_hz, r.delta) for r in rows if r.predominant])
     print(f"predominant mode over {len(res.analyses)} accepted hits: "
-          f"f = {pred.f_hz.mean():.3f} Hz, delta = {pred.delta.mean():.4f} "
-          f"(+- {pred.delta.std():.4f} over gages and hits)")
+          f"f = {pred[:, 0].mean():.3f} Hz, delta = {pred[:, 1].mean():.4f} "
+          f"(+- {pred[:, 1].std(ddof=1):.4f} over gages and hits)")
     for kind, fig in res.figures(0).items():
         fig.savefig(out / f"impact0_{kind}.png", dpi=150)
 
     # 3. the gap between the rig's model and a trial, and what explains it
     gap = ramdaq.diagnose(RECORDINGS / "sampson-water.mcap")
-    gap.to_dataframe().to_csv(out / "gap_candidates.csv", index=False)
+    write_csv(out / "gap_candidates.csv", [asdict(c) for c in gap.candidates()])
     print(f"gap diagnosis of sampson-water: {gap.verdict}"
           + (f", named effect: {gap.effect}" if gap.effect else ""))
     for kind, fig in gap.figures().items():
         fig.savefig(out / f"gap_{kind}.png", dpi=150)
     print(f"figures and tables in {out}/")
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    """``rows`` (dicts with the same keys) as a CSV file with a header."""
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
 
 
 if __name__ == "__main__":

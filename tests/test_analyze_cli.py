@@ -122,3 +122,16 @@ def test_a_gage_no_hit_took_is_said_with_its_reason(air_report):
     assert set(s["delta_gage"]) | set(s["gages_not_used"]) == {f"g{g:02d}" for g in range(1, 17)}
     text = format_summary(rep)
     assert "  g15 not used in any accepted hit: no_decay: " in text
+
+
+def test_hits_not_requested_are_not_analysed_nor_counted(air_report):
+    """tester9: ``--impact 1`` printed the other hits as "REJECTED not requested" and "1 of 3
+    hits accepted": they were never judged. They read "not analysed (not requested)" and the
+    count is of the requested hits."""
+    from ramdaq.daq.commands.analyze import format_summary
+
+    _, rep = air_report
+    text = format_summary(rep)
+    assert "REJECTED" not in text
+    assert text.count("not analysed (not requested)") == 2
+    assert "1 of 1 requested hits accepted (2 more not analysed)" in text

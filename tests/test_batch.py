@@ -137,7 +137,8 @@ def test_local_cluster_batch(client, fleet, serial_sampson, tmp_path):
     assert _equal(_rows_of(rows, "sampson-water.mcap"), serial_sampson)
     assert _equal(_rows_of(rows, "sampson-copy.mcap"), serial_sampson)
     # the table agrees with the report folder each task wrote
-    for r in (r for r in rows if r["status"] == "ok" and r["accepted"] and r["gage"] == 1 and r["mode"] >= 0):
+    for r in (r for r in rows if r["status"] == "ok" and r["accepted"] and r["gage"] == 1
+              and r["fitted"]):
         doc = json.loads((Path(r["folder"]) / "report.json").read_text())
         assert doc["impacts"][r["hit"]]["analysis"]["modes"][r["mode"]]["delta"] == r["mode_delta"]
     assert outcome.table.num_rows == len(rows)

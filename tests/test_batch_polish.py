@@ -74,3 +74,53 @@ def test_one_worker_is_singular(archive, tmp_path):
     finish(outcome)
     lines = summary_lines(outcome)
     assert "batch analyze of 1 recording:" in lines[0] and "  on 1 worker at" in lines[1]
+
+
+def test_the_table_says_rig_medium_units_channels_and_numbers_modes_as_report_json(tmp_path):
+    """tester9: analyze.parquet had an empty ``rig`` column and no medium, no flag for a decay
+    cut short, no units, no channel names, and gages with no decay had mode = -1 while the CLI
+    printed 1-based modes. Now: ``rig_name`` and ``medium``; ``decay_cut`` as report.json's
+    flags.too_short; a unit for every column; hits and modes from 0 as report.json (and the
+    CLI's ``mode 0``), ``mode`` null and ``fitted`` False where no mode was fitted."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from ramdaq.daq.commands.batch import results_table, write_table
+
+    p = ROOT / "recordings" / "albacore-water.mcap"
+    r = analyze_task(TaskSpec(str(p), "x", str(tmp_path / "rep"), False))
+    assert r.status == "ok", r.status_reason
+    write_table(results_table([r], "analyze"), tmp_path / "analyze.parquet", partial=False,
+                pending=0)
+    t = pq.read_table(tmp_path / "analyze.parquet")
+    rows = t.to_pylist()
+    assert {x["rig_name"] for x in rows} == {"albacore-like"} and {x["medium"] for x in rows} \
+        == {"water"}
+    units = json.loads(t.schema.metadata[b"ramdaq.units"])
+    assert set(units) == set(t.schema.names)
+    assert units["f_hz"] == "Hz" and units["amplitude"] == "m/s^2" and units["mode"] == \
+        "index from 0"
+    assert all(f.metadata[b"unit"] for f in t.schema)
+    doc = json.loads((tmp_path / "rep" / "report.json").read_text())
+    for x in rows:
+        assert (x["mode"] is None) == (not x["fitted"])
+        assert x["decay_cut"] == doc["impacts"][x["hit"]]["flags"]["too_short"]
+        if x["fitted"]:
+            a = doc["impacts"][x["hit"]]["analysis"]
+            assert a["modes"][x["mode"]]["f_hz"] == pytest.approx(x["mode_f_hz"], rel=1e-12)
+            assert x["predominant"] == (x["mode"] == a["predominant_mode"])
+            assert x["channel"] == f"g{x['gage']:02d}" and x["source_channel"] == ""
+    assert any(x["fitted"] for x in rows)
+
+
+def test_a_small_file_read_shows_kilobytes_not_0_of_0_mb(capsys):
+    """tester9: reading a 0.3 MB recording showed "0/0 MB". Below 1 MB the bar counts kB, above
+    it MB to one decimal."""
+    from ramdaq.daq.commands.progress import bytes_bar
+
+    for size, want in ((300_000, "293/293 kB"), (3_500_000, "3.3/3.3 MB")):
+        with bytes_bar("reading x", size, show=True) as update:
+            update(size, size)
+        err = capsys.readouterr().err
+        assert want in err and "0/0" not in err

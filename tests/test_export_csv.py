@@ -100,3 +100,36 @@ def test_an_existing_output_is_refused(albacore, tmp_path, capsys):
     assert main(["export-csv", str(path)]) == 1
     assert "exists" in capsys.readouterr().err
     assert path.with_suffix(".csv").read_text() == "keep me"
+
+
+def test_a_water_trial_comes_back_in_water_with_its_own_scale(albacore, tmp_path, capsys):
+    """tester9: a water trial exported and imported with ``--rig albacore`` (an air rig) came
+    back in air without a word (the damping chain changes ~4x), and each channel's scale came
+    back 1e-10 off. The header states the medium and the scale (repr of the float): the import
+    applies both, says where the rig disagreed, and a contrary --medium is warned of."""
+    path = tmp_path / "wet.mcap"
+    record(SimDevice(albacore.with_medium("water"), duration_s=1.0, impacts=[0.3], seed=2), path,
+           readout=False)
+    assert main(["export-csv", str(path)]) == 0
+    csv = path.with_suffix(".csv")
+    assert "# medium: water" in csv.read_text()[:4000].splitlines()
+    back = tmp_path / "back.mcap"
+    rig = str(RIGS / "albacore.toml")
+    capsys.readouterr()
+    assert main(["import", str(csv), "--rig", rig, "--out", str(back)]) == 0
+    out = capsys.readouterr().out
+    assert "medium water, as the file's header states (the rig says air" in out
+    (_, a), (info_b, b) = _blocks(path), _blocks(back)
+    assert info_b.extra["medium"] == "water"
+    # bit for bit: the very counts and the very float scale
+    assert np.array_equal(np.concatenate([k.counts for k in a], 1),
+                          np.concatenate([k.counts for k in b], 1))
+    assert all(np.array_equal(k.scale, a[0].scale) for k in b)
+    assert main(["import", str(csv), "--rig", rig, "--medium", "air", "--out",
+                 str(tmp_path / "dry.mcap")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: medium air as --medium gives, but the file's header states water" in err
+    assert _blocks(tmp_path / "dry.mcap")[0].extra["medium"] == "air"
+    assert main(["import", str(csv), "--out", str(tmp_path / "norig.mcap")]) == 0
+    assert "medium = \"water\"" in (tmp_path / "norig.rig.toml").read_text()
+    assert _blocks(tmp_path / "norig.mcap")[0].extra["medium"] == "water"

@@ -278,3 +278,81 @@ def test_a_tsv_file_is_read_as_csv(tmp_path, capsys):
     assert rc == 0, err
     assert _run(["import", tmp_path / "b.csv", "--out", tmp_path / "c.mcap"], capsys)[0] == 0
     assert np.array_equal(_values(tmp_path / "b.mcap"), _values(tmp_path / "c.mcap"))
+
+
+def test_allow_gaps_says_which_good_values_went_with_the_gap(tmp_path, capsys):
+    """tester9: 60 NaNs on one channel of three dropped those rows on every channel without a
+    word (120 good values lost). A recording's gap is stream-wide (a block has no per-channel
+    hole), so the rows still go, but one line says how many good values on which channels."""
+    src = _archive_b(tmp_path / "nan.csv", "m/s^2", names=("A1", "A2", "A3"))
+    lines = src.read_text().splitlines()
+    for i in range(101, 161):  # data rows 100..159 (line 0 is the header): A2 empty
+        cells = lines[i].split(",")
+        cells[2] = "nan"
+        lines[i] = ",".join(cells)
+    src.write_text("\n".join(lines) + "\n")
+    rc, out, err = _run(["import", src, "--allow-gaps"], capsys)
+    assert rc == 0, err
+    assert ("warning: --allow-gaps: 120 good values on 'A1' (60), 'A3' (60) were dropped with "
+            "the gaps, the rows where 'A2' (60) had no value") in err
+    assert "1 gaps (60 samples missing)" in out
+
+
+def _accel_rows(n: int, fs: float) -> np.ndarray:
+    """(3, n) decaying sines, m/s^2 (the shape of tester9's 'Accel 1..3' files)."""
+    _, x = _decay(fs, 3, dur=n / fs)
+    return x
+
+
+def test_no_time_column_with_fs_reads_every_column_as_a_channel(tmp_path, capsys):
+    """tester9: headers 'Accel 1..3' and --fs 2048: 'Accel 1' was taken as time (and refused
+    for saying no unit). With --fs and no column named like a time, the rows are samples at
+    --fs and every column a channel, said in one line; without --fs the refusal names --fs."""
+    x = _accel_rows(4096, 2048.0)
+    src = tmp_path / "notime.csv"
+    src.write_text("Accel 1,Accel 2,Accel 3\n" + "\n".join(
+        ",".join(f"{v:.9e}" for v in x[:, i]) for i in range(x.shape[1])) + "\n")
+    rc, out, err = _run(["import", src, "--units", "m/s^2"], capsys)
+    assert rc == 1 and "a file without a time column: give its rate, --fs HZ" in err
+    rc, out, err = _run(["import", src, "--units", "m/s^2", "--fs", "2048"], capsys)
+    assert rc == 0, err
+    assert "no time column" in out and "samples at 2048 Hz as --fs states" in out
+    got = _values(tmp_path / "notime.mcap")
+    assert got.shape == x.shape  # three channels, every row a sample
+    # 10-digit text requantised to 24 bits: 6e-8 of the peak (import_common's bound)
+    assert np.max(np.abs(got - x)) <= 1e-7 * np.max(np.abs(x))
+
+
+@pytest.mark.parametrize("fs_flag", [None, "2048"])
+def test_times_rounded_to_their_printed_resolution_are_one_grid(tmp_path, capsys, fs_flag):
+    """tester9: 2048 Hz printed to 0.1 ms (steps 0.0005 / 0.0004 s) was refused as
+    non-uniform, and --fs 2048 refused too (median step 0.0005 s = 2000 Hz). A time rounded to
+    0.1 ms lies up to 0.05 ms = 0.10 sample off its sample, so each row is placed within that
+    more; the rate comes from the whole span; a 10-row gap stays a gap."""
+    fs, n = 2048.0, 16384
+    x = _accel_rows(n, fs)
+    keep = np.ones(n, bool)
+    keep[9000:9010] = False
+    t = np.arange(n) / fs
+    src = tmp_path / "round4.csv"
+    src.write_text("time_s,A1,A2,A3\n" + "\n".join(
+        f"{t[i]:.4f}," + ",".join(f"{v:.9e}" for v in x[:, i]) for i in np.flatnonzero(keep))
+        + "\n")
+    argv = ["import", src, "--units", "m/s^2"] + (["--fs", fs_flag] if fs_flag else [])
+    rc, out, err = _run(argv, capsys)
+    assert rc == 0, err
+    assert "3 ch at 2048 Hz" in out and "1 gaps (10 samples missing)" in out
+    assert "printed to 0.0001 s (0.20 sample at 2048 Hz)" in out
+    got = _values(tmp_path / "round4.mcap")
+    assert np.max(np.abs(got - x[:, keep])) <= 1e-7 * np.max(np.abs(x))
+
+
+def test_the_anti_alias_line_names_the_rig_once_quoted(tmp_path, capsys):
+    """tester9: "rig 'albacore-like''s anti-alias corner" (a doubled quote)."""
+    t, x = _decay(1000.0, 2, dur=0.5)  # 1000 Hz: Nyquist 500 Hz, below the rig's 800 Hz corner
+    src = tmp_path / "slow.csv"
+    src.write_text("time_s,g01,g02\n" + "\n".join(f"{t[i]:.6f},{x[0, i]:.9e},{x[1, i]:.9e}"
+                                                  for i in range(t.size)) + "\n")
+    rig = Path(__file__).resolve().parents[1] / "recordings" / "rigs" / "albacore.toml"
+    rc, out, err = _run(["import", src, "--rig", rig, "--fs", "1000"], capsys)
+    assert rc == 1 and "the anti-alias corner of rig 'albacore-like' (" in err and "''" not in err

@@ -206,6 +206,11 @@ def test_missing_values_and_rows_are_gaps_not_interpolated(sim, tmp_path):
     assert np.array_equal(got, counts[:, :n][:, present])
     assert extra["segments"] == 4 and extra["missing_samples"] == 16
     assert extra["time_gaps"] == 1
+    # 10 rows lose g03 and one g06: every other channel's values on those rows are dropped
+    # with them, and counted
+    assert extra["dropped_with_gaps"]["missing"] == {"g03": 10, "g06": 1}
+    good = {f"g{g:02d}": 11 for g in gages if g not in (3, 6)} | {"g03": 1, "g06": 10}
+    assert extra["dropped_with_gaps"]["good"] == good
 
 
 def test_a_decay_cut_by_a_gap_says_so(sim, tmp_path):

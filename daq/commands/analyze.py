@@ -181,12 +181,15 @@ def format_summary(report: dict, units: str = "si") -> str:
                       f"{_fmt(d['zeta'], '.4%')} +- {_pct(d['zeta_se'])}"
                       for g, d in a["gages"].items()]
             if len(a["modes"]) > 1:  # the gage rows are the predominant mode's: list every mode
-                lines += [f"    mode {i + 1}{' (predominant)' if i == a['predominant_mode'] else ''}"
+                lines += [f"    mode {i}{' (predominant)' if i == a['predominant_mode'] else ''}"
                           f", all gages: f = {_fmt(m['f_hz'], '.4f')} +- {_fmt(m['f_se_hz'], '.2g')}"
                           f" Hz, delta = {_fmt(m['delta'])} +- {_fmt(m['delta_se'], '.2g')}, zeta = "
                           f"{_fmt(m['zeta'], '.4%')} +- {_pct(m['zeta_se'])}"
                           for i, m in enumerate(a["modes"])]
             lines += [f"    note: {n}" for n in a.get("notes", ())]
+        elif imp["reason"] == "not requested":  # --impact named another hit
+            lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  not analysed "
+                         f"(not requested)")
         else:
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  REJECTED   "
                          f"{imp['reason']}")
@@ -290,8 +293,10 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
         lines.append(f"{arming} blow(s) came before the trigger's long-term average was full: "
                      "not analysable live or in a replay (the trial's own trigger); "
                      "`ramdaq analyze` arms on the whole record and analyses them")
-    lines += [f"\n{s['accepted']} of {s['hits']} hits accepted. Mean over accepted hits "
-              f"(+- std, n):", "  quantity          mean        std     n"]
+    skipped = sum(r == "not requested" for r in s.get("rejected", {}).values())
+    lines += [f"\n{s['accepted']} of {s['hits'] - skipped} {'requested ' if skipped else ''}hits "
+              f"accepted{f' ({skipped} more not analysed)' if skipped else ''}. Mean over "
+              f"accepted hits (+- std, n):", "  quantity          mean        std     n"]
 
     def row(name: str, d: dict, fmt: str = "{:.4f}") -> None:
         if d["mean"] is None:

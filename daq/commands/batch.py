@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import glob
 import hashlib
+import json
 import logging
 import os
 import signal
@@ -41,6 +42,7 @@ from typing import TYPE_CHECKING, get_args, get_type_hints
 from .batch_tasks import (
     ROWS,
     TASKS,
+    UNITS,
     TaskResult,
     TaskSpec,
     file_sha256,
@@ -143,8 +145,15 @@ def arrow_schema(kind: str) -> pa.Schema:
         t = hints[name]
         args = [a for a in get_args(t) if a is not type(None)]
         base = args[0] if args and t not in arrow else t
-        cols.append(pa.field(name, arrow[base], nullable=True))
+        cols.append(pa.field(name, arrow[base], nullable=True,
+                             metadata={b"unit": column_unit(name, base).encode()}))
     return pa.schema(cols)
+
+
+def column_unit(name: str, kind: type = float) -> str:
+    """A column's unit (:data:`~ramdaq.daq.commands.batch_tasks.UNITS`); ``"-"`` for text,
+    flags and identities, ``"1"`` for another number."""
+    return UNITS.get(name, "1" if kind in (float, int) and name not in _HEAD else "-")
 
 
 def _records(r: TaskResult, kind: str) -> list[dict]:
@@ -181,7 +190,11 @@ def write_table(table: pa.Table, path: Path, *, partial: bool, pending: int) -> 
 
     meta = {b"ramdaq.partial": b"true" if partial else b"false", b"ramdaq.pending": str(pending).encode(),
             b"ramdaq.method": method_digest().encode(),
-            b"ramdaq.written": time.strftime("%Y-%m-%dT%H:%M:%S%z").encode()}
+            b"ramdaq.written": time.strftime("%Y-%m-%dT%H:%M:%S%z").encode(),
+            b"ramdaq.units": json.dumps({f.name: f.metadata[b"unit"].decode()
+                                         for f in table.schema if f.metadata}).encode(),
+            b"ramdaq.numbering": b"hit and mode from 0 (report.json and the CLI alike); gage: "
+                                b"the rig's number; mode null where none was fitted"}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}")
     pq.write_table(table.replace_schema_metadata(meta), tmp)

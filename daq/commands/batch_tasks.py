@@ -15,7 +15,7 @@ import math
 import os
 import socket
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -75,13 +75,70 @@ class GapRow:
 
 
 @dataclass(frozen=True)
+class AnalyzeRow(ModeEstimate):
+    """A row of ``analyze.parquet``: a :class:`~ramdaq.daq.mode_table.ModeEstimate` (one mode
+    on one gage of one hit; the same numbers as ``ramdaq.analyze(...).rows()``) and what the
+    table needs besides.
+
+    Numbering, one convention in the CLI, this table and report.json: hits and modes count from
+    0 (``hit`` is report.json's ``impacts[i].index`` and ``--impact``; ``mode`` is the index
+    into report.json's ``analysis.modes`` and the CLI's ``mode 0``), gages by their rig numbers.
+    ``mode`` is null where no mode was fitted (a gage with no decay, a hit not analysed) --
+    ``fitted`` is False and ``reason`` says why -- where ``ModeEstimate`` holds -1.
+    ``channel``: the recorded channel's name in the stream (``g01``, "" for a hit's row);
+    ``source_channel``: its name in the file it was imported from ("" if not imported).
+    ``decay_cut``: the hit's decay record was cut before the analysis window the trigger wants
+    (report.json ``flags.too_short``: the next blow, a gap or the end of the record);
+    ``decay_end``: what ended it (``decayed``, ``next_impact``, ``gap``, ``end``)."""
+
+    mode: int | None
+    fitted: bool = False
+    channel: str = ""
+    source_channel: str = ""
+    decay_cut: bool = False
+    decay_end: str = ""
+
+
+UNITS = {"onset_s": "s", "f_hz": "Hz", "f_se_hz": "Hz", "mode_f_hz": "Hz", "mode_f_se_hz": "Hz",
+         "delta": "1", "delta_se": "1", "zeta": "1", "zeta_se": "1", "mode_delta": "1",
+         "mode_delta_se": "1", "mode_zeta": "1", "mode_zeta_se": "1", "amplitude": "m/s^2",
+         "phase_rad": "rad", "seconds": "s (wall)", "detection_z": "1 (z-score)",
+         "gap_fitted": "noise variances", "gap_held_out": "noise variances",
+         "closed_fitted": "1 (share)", "closed_held_out": "1 (share)",
+         "closed_held_out_lo": "1 (share)", "closed_held_out_hi": "1 (share)", "dbic": "1",
+         "hit": "index from 0", "mode": "index from 0", "gage": "rig gage number",
+         "hits_found": "count", "hits_accepted": "count", "impacts": "count"}
+"""Each numeric column's unit (schema metadata ``ramdaq.unit.COLUMN``); a column not here is
+text, a flag or an identity (unit ``-``)."""
+
+
+def analyze_rows(h, channels: tuple[str, ...], sources: dict[str, str]) -> tuple[AnalyzeRow, ...]:
+    """The table rows of one hit: :func:`~ramdaq.daq.mode_table.mode_rows` with the mode's
+    numbering as :class:`AnalyzeRow` says, the recorded ``channels`` (the stream's names) and
+    the import's ``sources`` (stream name -> source name)."""
+    ev = h.event
+    out = []
+    for r in mode_rows(h):
+        d = asdict(r)
+        fitted = d["mode"] >= 0
+        name = f"g{r.gage:02d}" if r.gage and f"g{r.gage:02d}" in channels else ""
+        d.update(mode=d["mode"] if fitted else None, fitted=fitted, channel=name,
+                 source_channel=sources.get(name, ""), decay_cut=bool(ev.too_short),
+                 decay_end=str(getattr(ev, "end_reason", "") or ""))
+        out.append(AnalyzeRow(**d))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
 class TaskResult:
     """What one task gives back: the recording's identity (``recording`` path, content
     ``sha256``, ``method`` digest of the code that ran, ``plots``, the ``rig`` given and its
     ``rig_sha256``, both ``""`` for the recording's own), its ``status``
     (:data:`STATUSES`) with a one-line ``status_reason`` when not ok, the report ``folder``, which
     ``worker`` ran it (host:pid) in ``seconds`` (wall, s), its ``hits_found`` and
-    ``hits_accepted`` (for gap: impacts found and compared), and its ``rows``
+    ``hits_accepted`` (for gap: impacts found and compared), the ``rig_name`` and ``medium`` it
+    was analysed with (the rig the recording carries, as report.json's ``rig`` and ``medium``;
+    for gap the rig held), and its ``rows``
     (:class:`~ramdaq.daq.mode_table.ModeEstimate` for analyze, :class:`GapRow` for gap)."""
 
     recording: str
@@ -97,6 +154,8 @@ class TaskResult:
     seconds: float = 0.0
     hits_found: int = 0
     hits_accepted: int = 0
+    rig_name: str = ""
+    medium: str = ""
     rows: tuple = field(default=())
 
     @classmethod
@@ -172,9 +231,21 @@ def analyze_task(spec: TaskSpec) -> TaskResult:
         write_analysis(spec.path, rig, hits, Path(spec.folder), plots=spec.plots)
     except Exception as exc:  # a recording that breaks the analysis is a row, not a crash
         return _finish(spec, t0, status="failed", status_reason=failure_reason(exc, spec.path))
-    rows = tuple(r for h in hits for r in mode_rows(h))
+    channels, sources = _stream_names(spec.path)
+    rows = tuple(r for h in hits for r in analyze_rows(h, channels, sources))
     return _finish(spec, t0, status="ok", hits_found=len(hits),
-                   hits_accepted=sum(h.accepted for h in hits), rows=rows)
+                   hits_accepted=sum(h.accepted for h in hits), rig_name=rig.name,
+                   medium=rig.medium, rows=rows)
+
+
+def _stream_names(path: str) -> tuple[tuple[str, ...], dict[str, str]]:
+    """The recording's channel names and, for an import, each one's source channel name."""
+    from ...drivers.mcap_replay import McapReplayDevice
+
+    with McapReplayDevice(path) as dev:
+        info = dev.info
+    imported = info.extra.get("import", {}).get("channels", {})
+    return info.channels, {k: str(v.get("source", "")) for k, v in imported.items()}
 
 
 def gap_task(spec: TaskSpec) -> TaskResult:
@@ -216,5 +287,5 @@ def gap_row(d: Diagnosis, n_findings: int = 5) -> GapRow:
 
 TASKS = {"analyze": analyze_task, "gap": gap_task}
 """The task of each ``ramdaq batch`` kind."""
-ROWS = {"analyze": ModeEstimate, "gap": GapRow}
+ROWS = {"analyze": AnalyzeRow, "gap": GapRow}
 """The row type of each kind."""

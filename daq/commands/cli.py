@@ -375,7 +375,34 @@ def cmd_import(args: argparse.Namespace) -> int:
     from ...drivers.files.import_common import cli_option_names
 
     with cli_option_names():
-        return _import_file(args)
+        if len(args.file) == 1 and not Path(args.file[0]).is_dir():
+            return _import_file(argparse.Namespace(**{**vars(args), "file": args.file[0]}))
+        return _import_many(args)
+
+
+def _import_many(args: argparse.Namespace) -> int:
+    """Several files, folders or globs: each file imported as ``_import_file`` does, beside it
+    or into the folder ``--out``; a file that fails is one line and the others go on; a last
+    line counts them. Exit 1 if any failed."""
+    from .bulk_import import bulk_outputs, import_sources
+
+    files = import_sources(args.file)
+    out_dir = Path(args.out) if args.out else None
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    outs = bulk_outputs(files, out_dir)
+    failed = []
+    for k, (src, out) in enumerate(zip(files, outs, strict=True)):
+        print(f"[{k + 1}/{len(files)}] {src}")
+        try:
+            _import_file(argparse.Namespace(**{**vars(args), "file": str(src), "out": str(out)}))
+        except _FAILURES as err:
+            failed.append(src)
+            print(f"ramdaq import: {_one_line(err)}", file=sys.stderr)
+    print(f"imported {len(files) - len(failed)} of {len(files)} files"
+          + (f"; {len(failed)} failed: {', '.join(f.name for f in failed[:5])}"
+             + (" ..." if len(failed) > 5 else "") if failed else ""))
+    return EXIT_FAILED if failed else EXIT_OK
 
 
 def _import_file(args: argparse.Namespace) -> int:
@@ -409,6 +436,7 @@ def _import_file(args: argparse.Namespace) -> int:
         info, imp = device.info, device.info.extra.get("import", {})
     chans = imp.get("channels", {}).values()
     exact = sum(c["method"] != "requantised" for c in chans)
+    stated = sum(c["method"] == "stated" for c in chans)
     worst = {u: max(c["max_error_si"] for c in chans if c["si_unit"] == u)
              for u in sorted({c["si_unit"] for c in chans}, reverse=True)}
     with progress_bar(f"writing {out.name}", imp.get("rows"), unit="samples") as advance:
@@ -418,7 +446,7 @@ def _import_file(args: argparse.Namespace) -> int:
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
     for line in _read_notes(imp):
-        print(line)
+        print(line, file=sys.stderr if line.startswith("warning:") else sys.stdout)
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
     for unit, rig_unit in sorted({(u, r) for _, u, r in odd}):  # one line per disagreement
@@ -426,7 +454,8 @@ def _import_file(args: argparse.Namespace) -> int:
         print(f"warning: {_channels_are(names, most=4)} in {unit} by the file's header, but rig "
               f"{info.extra.get('rig_name')!r} says {rig_unit}: the header's unit was applied",
               file=sys.stderr)
-    print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step, "
+    print(f"counts: {exact} channel{' kept its' if exact == 1 else 's kept their'} source step"
+          + (f" ({stated} at the scale the file states)" if stated else "") + ", "
           f"{info.n_channels - exact} requantised to 24 bits; largest error "
           + ", ".join(f"{e:.3g} {u}" for u, e in worst.items()))
     left = _not_recorded(options["rig"], info.channels)
@@ -437,8 +466,9 @@ def _import_file(args: argparse.Namespace) -> int:
     if rig_out is not None:
         rig_out.write_text(options["rig"].text)
         print(f"wrote the channels-only rig it was imported with to {rig_out} (no --rig given; "
-              f"medium {options['rig'].medium}" + ("" if args.medium else ", --medium water for a "
-                                                    "flooded trial") + f"); ramdaq analyze {out} "
+              f"medium {device.rig.medium}" + ("" if args.medium or device.rig.medium == "water"
+                                               else ", --medium water for a flooded trial")
+              + f"); ramdaq analyze {out} "
               "gives each gage's frequency and decrement")
     return EXIT_OK
 
@@ -464,6 +494,13 @@ def _channels_are(names: list[str], most: int | None = None) -> str:
     return f"channels {shown} are" if len(names) > 1 else f"channel {shown} is"
 
 
+def _counted(per_channel: dict[str, int], most: int = 4) -> str:
+    """``'a' (60), 'b' (60)``, naming at most ``most`` channels (then "and N more")."""
+    items = list(per_channel.items())
+    text = ", ".join(f"{n!r} ({k})" for n, k in items[:most])
+    return text + (f" and {len(items) - most} more" if len(items) > most else "")
+
+
 def _read_notes(imp: dict) -> list[str]:
     """What the CSV reader made of the file's dialect: lines skipped, decimal commas."""
     out = []
@@ -472,6 +509,27 @@ def _read_notes(imp: dict) -> list[str]:
         n, a, b = skipped["count"], skipped["first"], skipped["last"]
         out.append(f"skipped {n} line{'s' if n > 1 else ''} above the column names (line"
                    f"{f's {a}-{b}' if b > a else f' {a}'}: a header block, not data)")
+    stated = imp.get("medium_stated")
+    if stated and stated["by"] == "file" and stated["file"] != stated["rig"]:
+        out.append(f"medium {stated['file']}, as the file's header states (the rig says "
+                   f"{stated['rig']}; --medium overrides)")
+    elif stated and stated["by"] == "given" and stated["file"] != stated["applied"]:
+        out.append(f"warning: medium {stated['applied']} as --medium gives, but the file's "
+                   f"header states {stated['file']}")
+    dropped = imp.get("dropped_with_gaps", {})
+    if dropped.get("good"):
+        good, lost = dropped["good"], dropped["missing"]
+        out.append(f"warning: --allow-gaps: {sum(good.values())} good values on {_counted(good)} "
+                   f"were dropped with the gaps, the rows where {_counted(lost)} had no value: "
+                   f"a recording's gap is on every channel (no value is invented for it)")
+    if "time_column" in imp and imp["time_column"] is None:
+        out.append(f"no time column (no column is named like time, t [s], time_s): every column "
+                   f"is a channel, the rows are samples at {imp.get('fs_hz'):g} Hz as --fs "
+                   f"states, time 0 at the first row")
+    if imp.get("time_resolution_s"):
+        res, fs = imp["time_resolution_s"], imp.get("fs_hz")
+        out.append(f"the time column is printed to {res:g} s ({res * fs:.2f} sample at {fs:g} "
+                   f"Hz): each row is placed on the {fs:g} Hz grid within that rounding")
     if imp.get("decimal") == ",":
         out.append(f"read decimal commas as decimal points (the delimiter is "
                    f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")
@@ -497,7 +555,7 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                                     or args.force_channel)
     made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                        units=args.units, force_channel=force,
-                       medium=args.medium or "air", file_units=found.units)
+                       medium=args.medium or found.medium or "air", file_units=found.units)
     for unit in sorted({u for _, u in made.overridden}):
         names = [c for c, u in made.overridden if u == unit]
         print(f"warning: {_channels_are(names)} in "
@@ -817,14 +875,17 @@ def build_parser() -> argparse.ArgumentParser:
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
-    m.add_argument("file", help="FILE.csv, FILE.uff/.unv or FILE.tdms")
+    m.add_argument("file", nargs="+", help="FILE.csv, FILE.uff/.unv or FILE.tdms; several "
+                   "files, folders (their .csv/.tsv/.txt/.uff/.unv/.tdms files) or globs import "
+                   "each one, beside it or into the folder --out")
     m.add_argument("--rig", help="rig file (TOML) of the trial; without it, a channels-only rig "
                    "(the file's channels, units and rate) is written beside the output as "
                    "OUT.rig.toml")
     m.add_argument("--units", choices=("g", "m/s^2"), help="without --rig: the unit of the "
                    "acceleration channels whose file states none (a unit the file states wins, "
                    "with a warning where they differ)")
-    m.add_argument("--out", help="output recording (default FILE.mcap)")
+    m.add_argument("--out", help="output recording (default FILE.mcap); with several files, the "
+                   "folder their recordings go to")
     m.add_argument("--channels", help="source channel to gage map, e.g. 'Accel 1=g01,Accel 2=2'"
                    " (default: names like g01, gage 1, 1)")
     m.add_argument("--format", choices=("csv", "uff", "tdms"), help="instead of the file suffix")

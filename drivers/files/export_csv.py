@@ -8,7 +8,10 @@
 The file:
 
 * ``#`` comment lines first: the source, the rig's name, the rate, the samples written and the
-  gaps, the force channel if any; then each event the recording holds (device faults,
+  gaps, ``# medium: water`` (the recording's medium, which ``ramdaq import`` applies), ``# scale
+  [SI unit per count]: g01=0.000116..., ...`` (each channel's scale as ``repr`` of the float,
+  so the importer makes the recorded counts and scale again, exactly), the force channel if
+  any; then each event the recording holds (device faults,
   interruptions) at its stream time (s from sample 0, the time column's clock), so nothing the
   recording says about its samples is lost on the way out;
 * a header ``time [s],g01 [m/s^2],...,force [N]``: time first, one column per channel under its
@@ -85,7 +88,7 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
             info, events = dev.info, dev.events()
             rig = _rig_name(info, dev.rig_toml)
             div = _divisors(info, units)
-            last = t_zero = None
+            last = t_zero = scales = None
             for block in dev:
                 if t_zero is None:  # the device clock's reading at sample 0, ns
                     t_zero = block.t0_ns - sample_time_ns(block.first_sample, block.fs_hz)
@@ -93,6 +96,7 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
                     gaps += 1
                     missing += block.first_sample - last
                 last = block.next_sample
+                scales = _same_scale(scales, block.scale)
                 t = np.arange(block.first_sample, block.next_sample) / block.fs_hz
                 table = np.column_stack([t, (block.values() / div[:, None]).T])
                 np.savetxt(f, table, fmt=["%.7f"] + ["%.9g"] * info.n_channels, delimiter=",")
@@ -106,6 +110,11 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
             force = [c for c, u in zip(info.channels, info.units, strict=True) if u != "m/s^2"]
             if force:
                 f.write(f"# force channel(s): {', '.join(force)} (ramdaq import --force-channel)\n")
+            f.write(f"# medium: {info.extra.get('medium') or '(none recorded)'}\n")
+            if scales is not None and len(scales):
+                f.write("# scale [SI unit per count]: " + ", ".join(
+                    f"{c}={s!r}" for c, s in zip(info.channels, scales.tolist(), strict=True)
+                    if s == s) + "\n")
             for e in events:
                 at = (e["t_ns"] - (t_zero or 0)) / 1e9
                 f.write(f"# event {e['kind']} at {at:.6f} s: "
@@ -116,6 +125,14 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
         body.unlink(missing_ok=True)
     os.replace(tmp, out)
     return CsvExport(out, rows, info.n_channels, gaps, missing, len(events))
+
+
+def _same_scale(seen: np.ndarray | None, scale: np.ndarray) -> np.ndarray:
+    """Each channel's scale (SI per count) if every block so far had the same one, else NaN."""
+    scale = np.asarray(scale, np.float64)
+    if seen is None:
+        return scale.copy()
+    return np.where(seen == scale, seen, np.nan)
 
 
 def _rig_name(info, rig_toml: str) -> str:

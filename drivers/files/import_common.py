@@ -23,7 +23,11 @@ Counts and scale, per channel, in the file's own unit:
 ``StreamInfo.extra["import"]["channels"]["g01"]`` says which, with the step, the scale, the
 measured largest error and the guaranteed bound (in the channel's SI unit, ``si_unit``). A missing
 value (NaN, empty) is an error naming where it is, unless ``allow_gaps``: then its row is not
-streamed, the blocks split there, a gap the recording keeps, never interpolated. Units: m/s^2 and
+streamed, the blocks split there, a gap the recording keeps, never interpolated. A recording's
+gap is on every channel (a block has no per-channel hole, and a sentinel count would be an
+invented sample), so the other channels' good values on that row go too:
+``extra["import"]["dropped_with_gaps"]`` counts them per channel, and ``ramdaq import`` says so.
+Units: m/s^2 and
 g (9.80665 m/s^2) for a gage (the file's stated unit wins over the rig's; where they differ
 ``"rig_unit_not_applied"`` says so); N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
 the stream by its rig name, unit ``"N"``, gage 0); anything else is refused naming the channel.
@@ -315,8 +319,9 @@ class Quantisation:
 
     Attributes
     ----------
-    method : {"quantised", "requantised", "zero"}
-        Source step detected; 24-bit requantisation; or an all-zero channel.
+    method : {"stated", "quantised", "requantised", "zero"}
+        The scale the file states (``# scale`` line) fits every value; source step detected;
+        24-bit requantisation; or an all-zero channel.
     step : float
         The step in the file's unit (``nan`` when requantised).
     scale : float
@@ -392,8 +397,14 @@ def detect_step(v: np.ndarray) -> tuple[float, bool] | None:
     return None
 
 
-def quantise(x: np.ndarray, factor: float) -> tuple[np.ndarray, Quantisation]:
+def quantise(x: np.ndarray, factor: float, scale: float | None = None
+             ) -> tuple[np.ndarray, Quantisation]:
     """Counts (int32, 0 where ``x`` is not finite) and how they were made.
+
+    ``scale`` (SI per count), when the file states it (``ramdaq export-csv``'s ``# scale``
+    line), is taken as it is, bit for bit, if every value lies within ``STEP_TOLERANCE`` of its
+    grid (``x * factor / scale`` near whole counts that fit int32); otherwise the step is found
+    as for any file (``method`` says ``"quantised"``, not ``"stated"``).
 
     Parameters
     ----------
@@ -415,8 +426,15 @@ def quantise(x: np.ndarray, factor: float) -> tuple[np.ndarray, Quantisation]:
     peak = float(np.max(np.abs(v))) * factor
     if not _TINY <= peak <= _HUGE:
         raise ValueError(f"its largest value {peak:g} m/s^2 is out of range")
-    found = detect_step(v)
     xf = np.where(finite, x, 0.0)
+    if scale is not None and scale > 0 and peak / scale < _INT32_MAX - 1:
+        counts = np.rint(xf * factor / scale)
+        err = float(np.max(np.abs(counts * scale - xf * factor)))
+        if err <= STEP_TOLERANCE * scale:
+            exact = bool(np.array_equal(counts * scale, xf * factor))
+            return counts.astype(np.int32), Quantisation("stated", scale / factor, scale, err,
+                                                          max(err, STEP_TOLERANCE * scale), exact)
+    found = detect_step(v)
     if found is not None and found[0] * factor >= _TINY:
         step, exact = found
         scale = step * factor
@@ -430,6 +448,22 @@ def quantise(x: np.ndarray, factor: float) -> tuple[np.ndarray, Quantisation]:
     err = float(np.max(np.abs(counts * scale - xs)))
     return counts.astype(np.int32), Quantisation("requantised", math.nan, scale, err, scale / 2,
                                                   False)
+
+
+def _dropped_with_gaps(missing: np.ndarray, nan_rows: list[np.ndarray],
+                       names: list[str]) -> dict:
+    """``{"dropped_with_gaps": {"missing": {channel: n}, "good": {channel: n}}}``: a row
+    missing a value on some channels is a gap on every channel (a recording's gaps are
+    stream-wide; a block has no per-channel hole), so the other channels' good values on those
+    rows go with it; the counts say how many, per source channel. Empty when no row misses a
+    value."""
+    if not missing.any():
+        return {}
+    lost = {n: int(np.count_nonzero(nan)) for n, nan in zip(names, nan_rows, strict=True)}
+    good = {n: int(np.count_nonzero(missing & ~nan)) for n, nan in zip(names, nan_rows,
+                                                                       strict=True)}
+    return {"dropped_with_gaps": {"missing": {n: k for n, k in lost.items() if k},
+                                  "good": {n: k for n, k in good.items() if k}}}
 
 
 def snap_rate(fs_hz: float, rel_tol: float) -> float:
@@ -530,6 +564,7 @@ class FileImportDevice(Device):
         self.path = Path(path)
         rig = rig if isinstance(rig, Rig) else load_rig(rig)
         self.rig = rig.with_medium(medium) if medium else rig
+        self.medium_given, self._rig_medium = medium, rig.medium
         self.channels = dict(channels) if channels is not None else None
         self.block_s = float(block_s)
         self.fs_hz = None if fs_hz is None else float(fs_hz)
@@ -561,11 +596,13 @@ class FileImportDevice(Device):
             raise ImportFormatError(f"{name}: sample rate {fs:g} Hz, start {t0:g} s or length "
                                     f"{int(idx[-1]) + 1} samples is out of range")
         self._check_rate(fs, name)
+        medium_note = self._apply_stated_medium(src.notes.get("medium"), name)
+        stated_scales = src.notes.get("scales", {})
         picks = map_channels(src.names, self.rig, self._channel_map(src.names, name), name,
                              self.force_channel, src.aliases)
         counts = np.empty((len(picks), idx.size), np.int32)
         missing = np.zeros(idx.size, bool)
-        scales, notes = [], {}
+        scales, notes, nan_rows = [], {}, []
         for row, pick in enumerate(picks):
             i = pick.index
             x = np.asarray(src.read(i), dtype=np.float64)
@@ -586,10 +623,11 @@ class FileImportDevice(Device):
                       else unit_factor(src.units[i] if _stated(src.units[i])
                                        else self.rig.gage(pick.gage).unit, src.names[i], name))
             try:
-                counts[row], q = quantise(x, factor)
+                counts[row], q = quantise(x, factor, stated_scales.get(src.names[i]))
             except ValueError as err:
                 raise ImportFormatError(f"{what}: {err}") from None
-            missing |= np.isnan(x)
+            nan_rows.append(np.isnan(x))
+            missing |= nan_rows[-1]
             scales.append(q.scale)
             assumed = self.rig.force(pick.name).unit if pick.is_force else \
                 self.rig.gage(pick.gage).unit
@@ -612,7 +650,8 @@ class FileImportDevice(Device):
                   "rows": int(idx.size), "fs_hz": src.fs_hz, "t0_s": t0,
                   "first_sample": int(self._idx[0]), "segments": len(self._segments),
                   "missing_samples": int(idx[-1] - idx[0] + 1 - self._idx.size),
-                  "channels": notes}
+                  "channels": notes, **medium_note,
+                  **_dropped_with_gaps(missing, nan_rows, [src.names[p.index] for p in picks])}
         self._blocks = self._iter_blocks()
         return StreamInfo(
             device=f"{self.kind}://{self.path}", fs_hz=fs,
@@ -621,6 +660,25 @@ class FileImportDevice(Device):
             gages=tuple(p.gage for p in picks), rig_toml=self.rig.text,
             extra={"medium": self.rig.medium, "rig_name": self.rig.name,
                    "block_samples": self._block_n, "import": report})
+
+    def _apply_stated_medium(self, stated: str | None, name: str) -> dict:
+        """The medium the file states (``# medium: water``) applied to the rig unless
+        ``medium`` was given; ``{"medium_stated": {...}}`` says what was stated, the rig's, the
+        one applied and why, for the importer's caller to print (empty if the file states none)."""
+        if stated is None:
+            return {}
+        if self.medium_given is not None:
+            applied, why = self.medium_given, "given"
+        else:
+            applied, why = stated, "file"
+            if stated != self._rig_medium:
+                try:
+                    self.rig = self.rig.with_medium(stated)
+                except ValueError as err:
+                    raise ImportFormatError(f"{name}: the file states medium {stated}, which rig "
+                                            f"{self.rig.name!r} cannot take ({err})") from None
+        return {"medium_stated": {"file": stated, "rig": self._rig_medium, "applied": applied,
+                                  "by": why}}
 
     def _channel_map(self, names: list[str], name: str) -> Mapping[str, int] | None:
         """The map given, else the source channels the rig was written for (a channels-only
@@ -649,8 +707,8 @@ class FileImportDevice(Device):
                                         f"({option('fs_hz=', '--fs')})")
             corner = self.rig.daq.anti_alias_hz
             if corner >= fs / 2:  # NaN (a channels-only rig that names no filter) passes
-                raise ImportFormatError(f"{name}: at {fs:g} Hz rig {self.rig.name!r}'s "
-                                        f"anti-alias corner ({corner:g} Hz, daq.anti_alias_hz) "
+                raise ImportFormatError(f"{name}: at {fs:g} Hz the anti-alias corner of rig "
+                                        f"{self.rig.name!r} ({corner:g} Hz, daq.anti_alias_hz) "
                                         f"lies above Nyquist: the rig cannot describe this "
                                         f"record; use a rig of this rate")
             return

@@ -16,7 +16,10 @@ UTF-8 text (a byte-order mark is allowed), lines ending in LF or CRLF:
   skipped and counted in ``notes["skipped_lines"]``;
 * a header of column names separated by ``,``, ``;`` or a tab (the most frequent of the three
   in the header is the delimiter); the **first column is time**, the others are channels named
-  like gages (``g01``, ``gage 1``, ``1``) unless ``channels=`` maps them;
+  like gages (``g01``, ``gage 1``, ``1``) unless ``channels=`` maps them. A file without a time
+  column: with ``fs_hz=`` (``--fs``) and a first column not named like a time (``time``, ``t``,
+  ``Zeit``, ``timestamp``, any name with a time unit), every column is a channel and row ``k``
+  is sample ``k`` (``notes["time_column"]`` is None);
 * units either in the names, ``"g01 [m/s^2]"`` or ``"g01 (g)"``, or in a row right after the
   header whose first cell is not a number (``s,m/s^2,g,...``). Time is in s, ms or us, stated
   there or by the column's name (``time_s``, ``t_ms``), else given as ``time_unit=``
@@ -34,7 +37,10 @@ The rate fitted to the time column must be the rig's ``daq.sample_rate_hz`` unle
 
 The times must lie on one sample grid: the rate is fitted to them and snapped to the value
 with the fewest digits that keeps every row within 0.1 sample of its grid point (times printed
-with six decimals at 2048 Hz give 2048.0 exactly). A step of a whole number of samples is a gap
+with six decimals at 2048 Hz give 2048.0 exactly). Times rounded to a coarser printed step
+(0.1 ms at 2048 Hz: 0.20 sample) may lie half that step further from their grid point
+(``notes["time_resolution_s"]``), the rate fitted over the whole span.
+A step of a whole number of samples is a gap
 (those samples are missing); a time off the grid, repeated or going back is refused naming the
 line, as are a row with too few or too many fields and a cell that is not a number.
 
@@ -162,7 +168,7 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
         units = [u or c or None for u, c in zip(units, cells, strict=True)]
     else:
         lines.pos, lines.number = mark, header_no
-    notes: dict = {"delimiter": delim, "time_column": names[0]}
+    notes: dict = {"delimiter": delim, "time_column": names[0], **_stated_header(text, name)}
     if skipped:
         notes["skipped_lines"] = skipped
     if delim != "," and "," in text[lines.pos:]:  # a decimal comma: ',' is no delimiter here
@@ -171,14 +177,82 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
     table, line_of_row = _parse_rows(text, lines.pos, lines.number, delim, names, name)
     if table.shape[0] == 0:
         raise ImportFormatError(f"{name}: no data rows after the header")
-    t = table[:, 0] * _TIME_UNITS[_time_unit(names[0], units[0], time_unit, name)]
-    index, fs, grid = sample_grid(t, fs_hz, lambda r: f"line {line_of_row[r]}", name,
-                                  rate_hint=rate_hint)
-    channel_units = units[1:]
-    return SourceTable(names=names[1:], units=channel_units, sample_index=index, fs_hz=fs,
+    where = lambda r: f"line {line_of_row[r]}"  # noqa: E731
+    if fs_hz is not None and time_unit is None and not _time_like(names[0], units[0]):
+        # no column names a time: every column is a channel, the rows are samples at --fs
+        notes["time_column"] = None
+        return SourceTable(names=names, units=units, sample_index=np.arange(table.shape[0]),
+                           fs_hz=float(fs_hz), t0_s=0.0, read=lambda i: table[:, i], fmt="csv",
+                           notes={**notes, "time_gaps": 0}, where=where)
+    scale = _TIME_UNITS[_time_unit(names[0], units[0], time_unit, name)]
+    t = table[:, 0] * scale
+    res = printed_resolution(table[:, 0]) * scale
+    index, fs, grid = sample_grid(t, fs_hz, where, name, rate_hint=rate_hint, resolution_s=res)
+    return SourceTable(names=names[1:], units=units[1:], sample_index=index, fs_hz=fs,
                        t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
-                       notes={**notes, **grid},
-                       where=lambda r: f"line {line_of_row[r]}")
+                       notes={**notes, **grid}, where=where)
+
+
+_TIME_LIKE = re.compile(r"^(?:t|time|times|zeit|timestamp|time[\s_\-]?stamp|sec|seconds)"
+                        r"(?:[\s_\-/.].*)?$", re.IGNORECASE)
+
+
+def _time_like(column: str, unit: str | None) -> bool:
+    """The first column is a time: its unit is a time unit, or its name is a time's
+    (``time``, ``t``, ``Zeit``, ``timestamp``, ``time_s``, ...)."""
+    if unit is not None and unit.strip().lower() in _TIME_UNITS:
+        return True
+    return bool(_TIME_LIKE.match(column.strip()))
+
+
+def printed_resolution(t: np.ndarray) -> float:
+    """The step the times were printed to, in their own unit: the largest power of ten (1e-9
+    .. 1) that every value is a multiple of (within 1e-6 of it); 0.0 when none is, i.e. the
+    times were printed with more than 9 decimals (full precision)."""
+    if t.size == 0:
+        return 0.0
+    sample = t if t.size <= 100_000 else t[:: -(-t.size // 100_000)]
+    for d in range(10):
+        x = sample * 10.0**d
+        if np.all(np.abs(x - np.rint(x)) < 1e-6 * np.maximum(1.0, 1e-9 * np.abs(x))):
+            return 10.0**-d
+    return 0.0
+
+
+_MEDIUM_LINE = re.compile(r"^#\s*medium:\s*(\S+)", re.MULTILINE)
+_SCALE_LINE = re.compile(r"^#\s*scale \[SI unit per count\]:(.*)$", re.MULTILINE)
+
+
+def _stated_header(text: str, name: str) -> dict:
+    """What the ``#`` lines at the top of the file state for a re-import, as ``ramdaq
+    export-csv`` writes them: ``{"medium": "water"}`` from ``# medium: water`` and
+    ``{"scales": {"g01": 1.2e-4, ...}}`` (SI unit per count) from ``# scale [SI unit per
+    count]: g01=..., ...``; empty when they are not there. A stated medium other than air or
+    water, or a scale that is not a positive number, is refused naming it."""
+    end = 0
+    while end < len(text) and (text.startswith("#", end) or text[end] in "\r\n"):
+        nl = text.find("\n", end)
+        end = len(text) if nl < 0 else nl + 1
+    top, out = text[:end], {}
+    m = _MEDIUM_LINE.search(top)
+    if m and m.group(1) != "(none":
+        if m.group(1) not in ("air", "water"):
+            raise ImportFormatError(f"{name}: '# medium: {m.group(1)}': expected air or water")
+        out["medium"] = m.group(1)
+    m = _SCALE_LINE.search(top)
+    if m:
+        scales = {}
+        for item in filter(None, (i.strip() for i in m.group(1).split(","))):
+            key, _, value = item.rpartition("=")
+            try:
+                scales[key.strip()] = float(value)
+            except ValueError:
+                scales[key.strip()] = math.nan
+            if not key.strip() or not 0 < scales[key.strip()] < math.inf:
+                raise ImportFormatError(f"{name}: '# scale' line: {item!r} is not CHANNEL=SCALE "
+                                        f"with a positive scale")
+        out["scales"] = scales
+    return out
 
 
 def _time_unit(column: str, stated: str | None, given: str | None, name: str) -> str:
@@ -198,9 +272,11 @@ def _time_unit(column: str, stated: str | None, given: str | None, name: str) ->
                                     f"unit given is {given!r}")
         return unit
     if given is None:
+        hint = "" if _time_like(column, None) else (
+            f"; a file without a time column: give its rate, {option('fs_hz=', '--fs')} HZ")
         raise ImportFormatError(f"{name}: time column {column!r} does not say its unit; name it "
                                 f"like time_s, 't [ms]', 'time (us)', or give "
-                                f"{option('time_unit=', '--time-unit')} s|ms|us")
+                                f"{option('time_unit=', '--time-unit')} s|ms|us{hint}")
     return given
 
 
@@ -356,7 +432,8 @@ def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
 
 
 def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
-                name: str, rate_hint: float | None = None) -> tuple[np.ndarray, float, dict]:
+                name: str, rate_hint: float | None = None, resolution_s: float = 0.0
+                ) -> tuple[np.ndarray, float, dict]:
     """Place rows with times ``t`` (s) on one sample grid; refuse a non-uniform clock.
 
     Parameters
@@ -373,6 +450,11 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
     rate_hint : float, optional
         A rate, Hz, taken instead of the snapped one when it keeps every row as close to its
         grid point (a short file's times allow many rates; the rig's is the one meant).
+    resolution_s : float
+        The step the times were printed to, s (:func:`printed_resolution`): a time rounded to
+        it lies up to half of it off its sample, so where a row is off its grid point by more
+        than 0.1 sample, rows may lie that much further (0.1 ms at 2048 Hz: 0.10 sample more).
+        Refused when that leaves no room to tell neighbouring samples apart.
 
     Returns
     -------
@@ -381,7 +463,8 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
     fs_hz : float
         The rate, Hz.
     notes : dict
-        ``{"time_gaps": n}``.
+        ``{"time_gaps": n}``, and ``"time_resolution_s"`` when the rounding of the times
+        widened the grid tolerance.
     """
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # odd times: refused
         bad = ~np.isfinite(t)
@@ -396,44 +479,28 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
                                     f"after the previous row's {float(t[r - 1])!r} s")
         rel = t - t[0]
         if fs_hz is None:
-            if t.size < 2:
-                raise ImportFormatError(f"{name}: one data row gives no sample rate; give "
-                                        f"{option('fs_hz=', '--fs')}")
-            fs_fit = 1.0 / float(np.median(dt))
-            if rel[-1] * fs_fit > 2**40:
-                raise ImportFormatError(f"{name}: the time column spans {rel[-1] * fs_fit:.3g} samples")
-            # printed times round each step (6 decimals at 2048 Hz: 0.000488 or 0.000489 s), so
-            # the median step is off by up to ~1e-3: good for a few hundred rows, not for a whole
-            # trial. Fit on a stretch short enough to count its samples right, then on one 8x
-            # longer with that rate, until the whole column is counted.
-            k = 256
-            while True:
-                m = min(k, rel.size)
-                n = np.rint(rel[:m] * fs_fit)
-                if np.dot(rel[:m], rel[:m]) > 0:
-                    fs_fit = float(np.dot(n, rel[:m]) / np.dot(rel[:m], rel[:m]))
-                if m == rel.size:
-                    break
-                k *= 8
-            if not 1e-3 <= fs_fit <= 1e9:
-                raise ImportFormatError(f"{name}: the time column gives a sample rate of "
-                                        f"{fs_fit:g} Hz")
-            tol = 0.5 * _GRID_TOL / max(float(rel[-1] * fs_fit), 1.0)
-            fs = rate_hint if rate_hint and abs(rate_hint / fs_fit - 1) <= tol else \
-                snap_rate(fs_fit, tol)
+            fs = _fitted_rate(rel, dt, name, rate_hint, resolution_s)
         else:
             fs = float(fs_hz)
             if not fs > 0:
                 raise ValueError(f"fs_hz ({fs_hz}) must be positive")
-            if dt.size and abs(fs * float(np.median(dt)) - 1) > 0.01:  # printed steps: ~1e-3
+            if dt.size and abs(fs * _mean_step(dt) - 1) > 0.01:  # printed steps: ~1e-3
                 raise ImportFormatError(f"{name}: the time column's sample rate is "
-                                        f"{1 / float(np.median(dt)):.6g} Hz, not the {fs:g} Hz "
+                                        f"{1 / _mean_step(dt):.6g} Hz, not the {fs:g} Hz "
                                         f"stated ({option('fs_hz=', '--fs')})")
         pos = rel * fs
         if pos[-1] > 2**40:
             raise ImportFormatError(f"{name}: the time column spans {pos[-1]:.3g} samples")
         n = np.rint(pos)
-        off = np.abs(pos - n) > _GRID_TOL
+        grid_tol = _GRID_TOL
+        off = np.abs(pos - n) > grid_tol
+        if off.any() and resolution_s * fs > 0.01:  # rows off by their printed rounding?
+            grid_tol = _GRID_TOL + 0.5 * resolution_s * fs
+            if grid_tol >= 0.4:
+                raise ImportFormatError(f"{name}: the times are printed to {resolution_s:g} s, "
+                                        f"{resolution_s * fs:.2f} samples at {fs:g} Hz: too "
+                                        f"coarse to place each row on its sample")
+            off = np.abs(pos - n) > grid_tol
         if off.any():
             r = int(np.argmax(off))
             raise ImportFormatError(f"{name}: {where(r)}: time {float(t[r])!r} s is "
@@ -445,4 +512,48 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
             r = int(np.argmax(dn < 1)) + 1
             raise ImportFormatError(f"{name}: {where(r)}: time {float(t[r])!r} s falls on the "
                                     f"same sample as the previous row at {fs:g} Hz")
-        return index, fs, {"time_gaps": int(np.count_nonzero(dn > 1))}
+        notes = {"time_gaps": int(np.count_nonzero(dn > 1))}
+        if grid_tol > _GRID_TOL:  # rounding that widened the tolerance: said
+            notes["time_resolution_s"] = resolution_s
+        return index, fs, notes
+
+
+def _fitted_rate(rel: np.ndarray, dt: np.ndarray, name: str, rate_hint: float | None,
+                 resolution_s: float) -> float:
+    """The rate, Hz, fitted to the times ``rel`` (s from the first row; steps ``dt``) and
+    snapped (see :func:`sample_grid`)."""
+    if rel.size < 2:
+        raise ImportFormatError(f"{name}: one data row gives no sample rate; give "
+                                f"{option('fs_hz=', '--fs')}")
+    fs_fit = 1.0 / _mean_step(dt)
+    if rel[-1] * fs_fit > 2**40:
+        raise ImportFormatError(f"{name}: the time column spans {rel[-1] * fs_fit:.3g} samples")
+    # printed times round each step (6 decimals at 2048 Hz: 0.000488 or 0.000489 s), so
+    # the mean step is off by up to a rounding over its run: good for a stretch, not for a
+    # whole trial with gaps. Fit on a stretch short enough to count its samples right, then on one 8x
+    # longer with that rate, until the whole column is counted.
+    k = 256
+    while True:
+        m = min(k, rel.size)
+        n = np.rint(rel[:m] * fs_fit)
+        if np.dot(rel[:m], rel[:m]) > 0:
+            fs_fit = float(np.dot(n, rel[:m]) / np.dot(rel[:m], rel[:m]))
+        if m == rel.size:
+            break
+        k *= 8
+    if not 1e-3 <= fs_fit <= 1e9:
+        raise ImportFormatError(f"{name}: the time column gives a sample rate of "
+                                f"{fs_fit:g} Hz")
+    tol = 0.5 * (_GRID_TOL + 0.5 * resolution_s * fs_fit) / max(float(rel[-1] * fs_fit),
+                                                                  1.0)
+    return rate_hint if rate_hint and abs(rate_hint / fs_fit - 1) <= tol else \
+        snap_rate(fs_fit, tol)
+
+
+def _mean_step(dt: np.ndarray) -> float:
+    """The sampling step, s, from the steps ``dt`` (s) between rows: the mean over the steps
+    below 1.5 median (a gap's step left out). Times rounded as printed round each step, but the
+    mean over a run of steps is its span over its count, exact up to one rounding: the median
+    step (0.0005 s for 2048 Hz printed to 0.1 ms) is not."""
+    small = dt[dt < 1.5 * float(np.median(dt))]
+    return float(np.mean(small)) if small.size else float(np.median(dt))

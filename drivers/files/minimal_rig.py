@@ -35,12 +35,14 @@ class MinimalRig:
 @dataclass(frozen=True)
 class SourceChannels:
     """What a file says of its channels: names, units as stated (None: not stated) and its
-    sample rate, Hz (from a CSV's time column, UFF's abscissa or TDMS's wf_increment)."""
+    sample rate, Hz (from a CSV's time column, UFF's abscissa or TDMS's wf_increment), and
+    the medium it states (``# medium: water`` from ``ramdaq export-csv``; None: not stated)."""
 
     names: list[str]
     units: list[str | None]
     fs_hz: float
     aliases: dict[str, str] | None = None
+    medium: str | None = None
 
 
 def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
@@ -65,7 +67,8 @@ def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
             src.close()
     else:
         raise ImportFormatError(f"{path}: format {fmt!r} is not csv, uff or tdms")
-    return SourceChannels(list(src.names), list(src.units), float(src.fs_hz), dict(src.aliases))
+    return SourceChannels(list(src.names), list(src.units), float(src.fs_hz), dict(src.aliases),
+                          src.notes.get("medium"))
 
 
 def source_channel_names(path: Path, fmt: str, *, time_unit: str | None = None) -> list[str]:
