@@ -7,9 +7,7 @@ gives the same numbers as one call on the whole record.
 
 * :func:`recursive_sta_lta` -- the recursive short-term / long-term average ratio of
   Withers et al. (1998), as ObsPy's ``recursive_sta_lta``, on every row of ``x`` at once through
-  :func:`exp_average` (blocked matrix products, as fast as ``lfilter``; numpy only, so the
-  trigger does not import ``scipy.signal``). :func:`recursive_sta_lta_ref` is its plain-loop
-  reference twin.
+  ``lfilter`` (C speed). :func:`recursive_sta_lta_ref` is its plain-loop reference twin.
   Unlike ObsPy, sample 0 is used (ObsPy's loop starts at 1); like ObsPy the ratio is 0 until
   ``nlta`` samples have been seen.
 * :func:`exp_average` -- the recursion itself, ``y[i] = y[i-1] + (x[i] - y[i-1]) / n``.
@@ -31,12 +29,11 @@ gives the same numbers as one call on the whole record.
 
 from __future__ import annotations
 
-import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy import signal
 
 __all__ = [
     "CONTACT_FRACTION", "StaLtaState", "aic", "aic_pick", "ar_prediction_filter",
@@ -52,65 +49,14 @@ def _check_n(name: str, n: int) -> int:
     return int(n)
 
 
-_CHUNK, _CHUNKS = 16, 128
-""":func:`exp_average`'s blocks: chunks of 16 samples, 128 chunks (2048 samples) a matrix
-product (so that a second of 16 gages at 2048 Hz costs what ``lfilter`` did, each value a sum
-of at most 16 products within its chunk plus one over the chunks before it)."""
-
-
-@functools.lru_cache(maxsize=32)
-def _exp_kernel(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For :func:`exp_average` over ``n`` samples (``a = 1 - 1/n``): a chunk's response from
-    a zero state, ``within[t, j] = a**(j-t) / n`` (``t <= j``, else 0; shape (16, 16)); the
-    state's decay into a chunk, ``a**(j+1)`` (shape (16,)); and the state before each chunk
-    from the one before the first and the chunks' ends, ``across[i, k] = a**(16 (k-i))``
-    (``i <= k``, else 0; shape (128, 128)). Weights below 1e-200 are 0 (no subnormals)."""
-    log_a = math.log1p(-1.0 / n)
-
-    def powers(size: int, step: float) -> np.ndarray:
-        lag = np.arange(size)[None, :] - np.arange(size)[:, None]
-        w = np.where(lag >= 0, np.exp(step * np.maximum(lag, 0)), 0.0)
-        w[w < 1e-200] = 0.0
-        return w
-
-    decay = np.exp(log_a * np.arange(1, _CHUNK + 1))
-    decay[decay < 1e-200] = 0.0
-    return powers(_CHUNK, log_a) / n, decay, powers(_CHUNKS, log_a * _CHUNK)
-
-
-def _exp_block(x: np.ndarray, n: int, prev: np.ndarray, out: np.ndarray) -> None:
-    """:func:`exp_average` of ``x`` (..., at most 2048 samples) from the state ``prev``, into
-    ``out`` (shape like ``x``)."""
-    within, decay, across = _exp_kernel(n)
-    lead, m = x.shape[:-1], x.shape[-1]
-    chunks = -(-m // _CHUNK)
-    if m % _CHUNK:
-        padded = np.zeros(lead + (chunks * _CHUNK,))
-        padded[..., :m] = x
-        x = padded
-    y = np.matmul(x.reshape(lead + (chunks, _CHUNK)), within)
-    ends = np.empty(lead + (chunks,))  # the state before the first chunk, then chunks' ends
-    ends[..., 0] = prev
-    ends[..., 1:] = y[..., :-1, -1]
-    y += np.matmul(ends, across[:chunks, :chunks])[..., None] * decay
-    out[...] = y.reshape(lead + (chunks * _CHUNK,))[..., :m]
-
-
 def exp_average(x: np.ndarray, n: int, last: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Recursive (exponential) average along the last axis: ``y[i] = y[i-1] + (x[i]-y[i-1])/n``.
 
-    Computed in chunks of 16 samples, numpy only (:func:`_exp_block`): every chunk's response
-    from a zero state in one matrix product, the states between chunks in another. Each value
-    is within 16 units in the last place of the exact recursion (the plain loop ``y = x/n +
-    (1 - 1/n) y``, as ``scipy.signal.lfilter`` runs it, drifts up to ~600 units from it over
-    long averages by its own roundings); a split of ``x`` into calls moves the values only
-    that much.
-
     Parameters
     ----------
     x : numpy.ndarray, shape (..., n_samples)
-        Input, float64, finite (typically squared samples, so units^2).
+        Input, float64 (typically squared samples, so units^2).
     n : int
         Averaging length in samples (time constant ~ ``n`` samples), >= 1.
     last : numpy.ndarray, shape (...), optional
@@ -121,33 +67,14 @@ def exp_average(x: np.ndarray, n: int, last: np.ndarray | None = None
     y : numpy.ndarray, shape like ``x``
     last : numpy.ndarray, shape (...)
         ``y[..., -1]``, to pass to the next call (unchanged for an empty ``x``).
-
-    Raises
-    ------
-    ValueError
-        ``n`` is not a whole number >= 1, or ``x`` or ``last`` is not finite.
     """
-    n = _check_n("n", n)
+    c = 1.0 / _check_n("n", n)
     x = np.asarray(x, dtype=np.float64)
-    lead, m = x.shape[:-1], x.shape[-1]
-    prev = np.zeros(lead) if last is None else np.asarray(last, dtype=np.float64)
-    if m == 0:
+    prev = np.zeros(x.shape[:-1]) if last is None else np.asarray(last, dtype=np.float64)
+    if x.shape[-1] == 0:
         return x.copy(), prev.copy()
-    if n == 1:  # y = x: no memory
-        y = x.copy()
-        if not np.isfinite(y).all():
-            raise ValueError("exp_average: x holds values that are not finite")
-    else:
-        y = np.empty(x.shape)
-        step = _CHUNK * _CHUNKS
-        for i in range(0, m, step):
-            _exp_block(x[..., i:i + step], n, prev, y[..., i:i + step])
-            prev = y[..., min(i + step, m) - 1]
-    end = y[..., -1].copy()
-    if not np.isfinite(end).all():  # a non-finite input reaches the end of the call
-        raise ValueError(f"exp_average: x or last holds values that are not finite "
-                         f"(the average ends at {end.ravel()[:4]})")
-    return y, end
+    y, _ = signal.lfilter([c, 0.0], [1.0, c - 1.0], x, axis=-1, zi=((1.0 - c) * prev)[..., None])
+    return y, y[..., -1].copy()
 
 
 @dataclass(frozen=True)
@@ -452,9 +379,6 @@ def ar_prediction_filter(x: ArrayLike, order: int, noise_var: ArrayLike | None =
 def prediction_error(x: ArrayLike, a: np.ndarray) -> np.ndarray:
     """Innovation ``e = lfilter(a, 1, x)`` on every row, valid samples only.
 
-    Each row through ``np.convolve(a, row)``, which gives ``scipy.signal.lfilter``'s FIR
-    numbers to the bit (the trigger's test checks it), without importing ``scipy.signal``.
-
     Parameters
     ----------
     x : array_like, shape (..., n_samples)
@@ -467,24 +391,17 @@ def prediction_error(x: ArrayLike, a: np.ndarray) -> np.ndarray:
         ``e[..., j]`` is the error at sample ``j + order`` of ``x``; it depends on ``x`` only
         (no filter state), so any split of a record gives the same numbers.
     """
-    a = np.asarray(a, dtype=np.float64)
-    x = np.asarray(x, dtype=np.float64)
-    order, n = len(a) - 1, x.shape[-1]
-    rows = x.reshape(-1, n)
-    e = np.empty((rows.shape[0], max(n - order, 0)))
-    for i, row in enumerate(rows):
-        e[i] = np.convolve(a, row)[order:n]
-    return e.reshape(x.shape[:-1] + (e.shape[-1],))
+    order = len(a) - 1
+    return signal.lfilter(a, [1.0], np.asarray(x, dtype=np.float64), axis=-1)[..., order:]
 
 
 def butterworth_delay_s(order: int, corner_hz: float, fs_hz: float) -> float:
     """Low-frequency group delay of a digital Butterworth low-pass (bilinear, pre-warped), s.
 
     A rising edge comes out of such a filter late by this delay, so an onset picked on the
-    filtered signal minus it is the onset at the filter's input. Exact at 0 Hz for the filter
-    ``scipy.signal.butter(order, corner_hz, fs=fs_hz)`` (its poles ``p``, its zeros at -1):
-    ``sum(Re(p / (1 - p))) + order / 2`` samples; for ``corner_hz`` well below ``fs_hz / 2``
-    it tends to the analogue ``1 / (2 pi corner_hz sin(pi / (2 order)))``.
+    filtered signal minus it is the onset at the filter's input. Computed numerically for the
+    filter ``scipy.signal.butter(order, corner_hz, fs=fs_hz)``; for ``corner_hz`` well below
+    ``fs_hz / 2`` it tends to the analogue ``1 / (2 pi corner_hz sin(pi / (2 order)))``.
 
     Raises
     ------
@@ -493,11 +410,9 @@ def butterworth_delay_s(order: int, corner_hz: float, fs_hz: float) -> float:
     """
     if not 0 < corner_hz < fs_hz / 2:
         raise ValueError(f"corner_hz ({corner_hz}) must lie between 0 and fs_hz/2 ({fs_hz / 2})")
-    order = _check_n("order", order)
-    warped = 4.0 * math.tan(math.pi * corner_hz / fs_hz)  # butter's pre-warp, the rate as 2
-    analogue = -np.exp(1j * np.pi * np.arange(1 - order, order, 2) / (2 * order)) * warped
-    poles = (4.0 + analogue) / (4.0 - analogue)  # the bilinear transform
-    return float(np.sum((poles / (1.0 - poles)).real) + order / 2) / fs_hz
+    b, a = signal.butter(_check_n("order", order), corner_hz, fs=fs_hz)
+    _, gd = signal.group_delay((b, a), w=[1e-6 * fs_hz], fs=fs_hz)
+    return float(gd[0]) / fs_hz
 
 
 CONTACT_FRACTION = 0.05
