@@ -28,6 +28,9 @@ is nearest to the program's own cost). Printed, each with issue 19's target:
   state plus a stated start-up cost: both are printed, and the start-up's share of
   ``scipy.signal`` (timed with it stubbed out) with the modules that still import it.
 
+The steady state is the command's CPU less the start-up: it includes the interpreter's exit
+(freeing what the session held, ~0.1-0.2 s), which no part below counts.
+
 One core: a CPU figure is every thread of the process summed (``RUSAGE_CHILDREN``), so a
 replay that spread its work over threads would show more CPU, not less; ``ramdaq replay`` runs
 each final on the stream's own thread (``Session.finals_inline``), and its wall time is
