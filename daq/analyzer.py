@@ -19,6 +19,7 @@ stream's health is known, its gaps and the time the trigger was blind.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -195,12 +196,13 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
                          f"(< {MIN_DECAY_S} s, ended by {event.end_reason})", None)
     gage_rows = [i for i, g in enumerate(info.gages) if g]
     scale = rec.scale[gage_rows]
+    # the gage rows as a view where they are contiguous (no copy of the counts before scaling)
+    lo, hi = (gage_rows[0], gage_rows[-1] + 1) if gage_rows else (0, 0)
+    counts = (rec.counts[lo:hi, i0:] if gage_rows == list(range(lo, hi))
+              else rec.counts[gage_rows, i0:])
     if coarse is None:
-        x, fs, text = rec.counts[gage_rows, i0:] * scale[:, None], info.fs_hz, ""
-    else:  # the gage rows as a view where they are contiguous (no full-rate copy at all)
-        lo, hi = (gage_rows[0], gage_rows[-1] + 1) if gage_rows else (0, 0)
-        counts = (rec.counts[lo:hi, i0:] if gage_rows == list(range(lo, hi))
-                  else rec.counts[gage_rows, i0:])
+        x, fs, text = counts * scale[:, None], info.fs_hz, ""
+    else:  # no full-rate copy at all
         x, fs, text = coarsen(counts, info.fs_hz, coarse, scale)
     pre = rec.counts[gage_rows, :max(event.onset_sample - rec.first_sample, 0)] * scale[:, None]
     try:
@@ -316,16 +318,19 @@ def gages_not_used(ok: list) -> dict[str, str]:
 def finite_json(obj: object) -> object:
     """``obj`` (dicts, lists, tuples, numbers, strings) with every number a plain Python one and
     every NaN or infinity ``None``, so that the JSON written is valid (``allow_nan=False``)."""
+    kind = type(obj)  # the plain types first (most of the ~700 values of a hit), no isinstance
+    if kind is float:
+        return obj if math.isfinite(obj) else None
+    if kind is str or kind is int or obj is None:
+        return obj
     if isinstance(obj, dict):
         return {k: finite_json(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [finite_json(v) for v in obj]
-    if isinstance(obj, bool | np.bool_):
-        return bool(obj)
-    if isinstance(obj, int | np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, bool | np.bool_ | int | np.integer):
+        return bool(obj) if isinstance(obj, bool | np.bool_) else int(obj)
+    if isinstance(obj, float | np.floating):  # numpy's, and float subclasses
+        return float(obj) if math.isfinite(obj) else None
     return obj
 
 
