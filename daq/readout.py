@@ -24,6 +24,24 @@ marked "unsure" (a gage at the noise level); the session shows a look only when 
 is within it (``session.LOOK_REL_SE``)."""
 
 
+def accepted_line(index: int, onset_s: float, a, v_label: str = "v") -> str:
+    """A hit's one-line headline once its final analysis is in: the predominant mode's
+    frequency and decrement from the joint fit over every gage, each with its standard error,
+    its damping ratio in %, the report's modal decrement (Eq 7: the mean over the rudder gages)
+    and the decrement of the rudder's translation ``v`` (gages 2-6; ``w`` on a stern plane)
+    where the layout has it. ``a`` is an :class:`~ramdaq.analysis.impact.ImpactAnalysis`."""
+    m, k = a.modes, a.predominant
+    d, d_se = float(m.delta[k]), float(m.delta_se[k])
+    text = (f"hit {index} at {onset_s:.3f} s accepted: mode {k}, f = {a.f_hz:.3f} Hz "
+            f"(se {float(m.frequency_se_hz[k]):.2g}), delta = {d:.4f} (se {d_se:.2g}), "
+            f"zeta {100 * float(m.zeta[k]):.2f} %; delta_modal (Eq 7) = "
+            f"{a.damping['delta_modal']:.4f}")
+    v = a.motions.get("v_2_6")  # no motions on a channels-only rig
+    if v is not None:
+        text += f", delta_{v_label} (motion {v_label}) = {v.delta:.4f} (se {v.delta_se:.2g})"
+    return text
+
+
 class LiveReadout:
     """Accumulates per-channel statistics block by block and shows them.
 
@@ -57,6 +75,7 @@ class LiveReadout:
         self.queue = 0
         self.overflows = 0
         self.results: dict[str, tuple[float, float, str]] = {}  # channel -> (f, delta, status)
+        self.results_of = ""  # which hit and which look the f / delta columns show
         self.hits: list[str] = []
         self._next_print = every_s
         self.every_s = every_s
@@ -104,25 +123,38 @@ class LiveReadout:
     def set_result(self, channel: str, f_hz: float, delta: float, final: bool,
                    delta_se: float = np.nan) -> None:
         """Show a gage's latest frequency (Hz) and decrement; ``final`` once the decay ended.
-        ``delta_se``, the decrement's standard error so far, is shown beside "so far" (a gage
-        at the noise level reads a number with an error as large as itself)."""
+        ``delta_se``, the decrement's standard error, is shown beside "so far" or "final" in %
+        of the decrement (a gage at the noise level reads a number with an error as large as
+        itself: "unsure"; a decrement <= 0 is no decay and is "unsure" whatever its error)."""
         status = "final" if final else "so far"
-        if not final and np.isfinite(delta_se) and delta:  # short: an 80-column table
+        if np.isfinite(delta_se) and delta:  # short: an 80-column table
             rel = abs(delta_se / delta)
-            status = f"{'unsure' if rel > UNSURE_REL_SE else 'so far'} ±{100 * rel:.0f}%"
+            if not final and (rel > UNSURE_REL_SE or delta < 0):
+                status = "unsure"
+            status = f"{status} ±{100 * rel:.0f}%"
         self.results[channel] = (f_hz, delta, status)
         self._refresh()
 
-    def look(self, after_s: float, gages: dict[str, tuple[float, float, float]]) -> None:
+    def showing(self, text: str) -> None:
+        """Say which hit (and which look of it) the f and delta columns show, e.g. "hit 2, first
+        look 0.42 s into the decay" or "hit 2, final"."""
+        self.results_of = text
+        self._refresh()
+
+    def look(self, after_s: float, gages: dict[str, tuple[float, float, float]],
+             hit: int | None = None) -> None:
         """Show a first look taken ``after_s`` seconds into a decay: each gage's (f Hz, δ, δ's
         standard error). On a terminal the table shows them; otherwise one plain line says
         the median frequency and decrement over the gages whose decrement is sure to
-        :data:`UNSURE_REL_SE`, and how many were not."""
+        :data:`UNSURE_REL_SE` (and positive), and how many were not. ``hit``, the blow's index,
+        heads the table's result column."""
+        if hit is not None:
+            self.results_of = f"hit {hit}: look {after_s:.2f} s in"
         for name, (f, d, se) in gages.items():
             self.set_result(name, f, d, final=False, delta_se=se)
         if self._live is not None:
             return
-        sure = [(f, d) for f, d, se in gages.values() if d and abs(se / d) <= UNSURE_REL_SE]
+        sure = [(f, d) for f, d, se in gages.values() if d > 0 and se / d <= UNSURE_REL_SE]
         if not sure:
             return
         f_med, d_med = np.median(np.array(sure), axis=0)
@@ -138,9 +170,11 @@ class LiveReadout:
         self.results[channel] = (np.nan, np.nan, f"not used: {why}")
         self._refresh()
 
-    def clear_results(self) -> None:
-        """A new hit rings: the previous hit's per-gage numbers are no longer the ones shown."""
+    def clear_results(self, text: str = "") -> None:
+        """A new hit rings: the previous hit's per-gage numbers are no longer the ones shown;
+        ``text`` says what the columns will show (:meth:`showing`)."""
         self.results.clear()
+        self.results_of = text
         self._refresh()
 
     def hit(self, text: str) -> None:
@@ -194,7 +228,7 @@ class LiveReadout:
         table.add_column("clipped", justify="right")
         table.add_column("f (Hz)", justify="right")
         table.add_column("delta", justify="right")
-        table.add_column("result", justify="left")
+        table.add_column(self.results_of or "result", justify="left")
         rms = self.rms
         for i, name in enumerate(self.info.channels):
             clip = str(int(self.clipped[i])) if self.clipped[i] else ""

@@ -73,7 +73,7 @@ from .analyzer import (
 )
 from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .jobqueue import Admission, JobQueue, QueuePolicy
-from .readout import UNSURE_REL_SE, LiveReadout
+from .readout import UNSURE_REL_SE, LiveReadout, accepted_line
 from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 if TYPE_CHECKING:  # the recorder (the MCAP writer) is imported only by a session that records
@@ -477,8 +477,9 @@ class Session:
         flags = [f for f, on in (("not analysable", ev.not_analysable is not None),
                                  ("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
                                  ("short", ev.too_short)) if on]
-        self._say(f"hit {k} at {ev.onset_s:.3f} s detected ({ev.snr_db:.0f} dB"
-                  + (", " + ", ".join(flags) if flags else "") + "): analysing")
+        self._say(f"hit {k} at {ev.onset_s:.3f} s: decay ended (peak {ev.snr_db:.0f} dB over the"
+                  " noise before the blow" + (", " + ", ".join(flags) if flags else "")
+                  + "): final analysis")
         if self.view is not None:
             self.view.log_impact(k, ev.onset_s, _flags(ev), None)
         self._queued[ev.onset_sample] = time.monotonic()
@@ -503,7 +504,7 @@ class Session:
             self._onsets[self._n_events] = onset / self.info.fs_hz
             self._say(f"hit {self._n_events} at {onset / self.info.fs_hz:.3f} s: ringing")
             if self.readout:
-                self.readout.clear_results()
+                self.readout.clear_results(f"hit {self._n_events}: ringing")
             self._look_cycles = self._start_cycles
             self._next_look = start + round(self._look_cycles * self._period_n)
             self._look_sure, self._look_first_sure, self._look_unsure = False, None, 0.0
@@ -619,7 +620,8 @@ class Session:
         self.shown.append(Shown(-1 if self._ringing_hit is None else self._ringing_hit, "look",
                                 onset / self.info.fs_hz, time.monotonic()))
         if self.readout:
-            self.readout.look(look.duration_s, {f"g{n:02d}": v for n, v in look.gages.items()})
+            self.readout.look(look.duration_s, {f"g{n:02d}": v for n, v in look.gages.items()},
+                              hit=self._ringing_hit)
         if self.view is not None:
             t = onset / self.info.fs_hz + look.duration_s
             for n, (f, d, _) in look.gages.items():
@@ -651,13 +653,13 @@ class Session:
         if a is None:
             self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s REJECTED: {hit.reason}")
         else:
-            v = (f", delta_{self.rig.surface.label('v')} = {a.motions['v_2_6'].delta:.4f}"
-                 if "v_2_6" in a.motions else "")  # no motions on a channels-only rig
-            self._say(f"hit {hit.index} at {hit.event.onset_s:.3f} s accepted: f = {a.f_hz:.3f} Hz,"
-                      f" delta_modal = {a.damping['delta_modal']:.4f}{v}")
+            self._say(accepted_line(hit.index, hit.event.onset_s, a,
+                                    self.rig.surface.label("v")))
             if self.readout and self._ringing_hit in (None, hit.index):
+                self.readout.showing(f"hit {hit.index}: final")
                 for n, g in a.gages.items():
-                    self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True)
+                    self.readout.set_result(f"g{n:02d}", g.f_hz, g.delta, final=True,
+                                            delta_se=g.delta_se)
                 for n, v in a.verdicts.items():  # a look showed numbers the final did not take
                     if not v.ok:
                         self.readout.set_unused(f"g{n:02d}", v.code.text)

@@ -101,3 +101,29 @@ def test_plain_line_ranks_each_unit_on_its_own(albacore):
     accel, force = line.split("|")[1:]
     assert accel.strip().startswith("rms m/s^2: ") and info.channels[-1] not in accel
     assert force.strip().startswith(f"rms N: {info.channels[-1]} ")  # its level when printed (t = 2 s)
+
+
+def test_the_result_column_says_which_hit_and_look_it_shows(albacore):
+    """A new analyst could not tell which blow the f / delta columns belonged to while the next
+    hit rang and the last one's final was pending; the column's head says it, a final keeps its
+    standard error, and a first look's decrement <= 0 (no decay) is unsure whatever its error."""
+    view = _feed(Console(file=io.StringIO(), force_terminal=True, width=200), albacore)
+    view.clear_results("hit 2: ringing")
+    assert "hit 2: ringing" in _table_text(view)
+    view.look(0.42, {"g04": (24.50, 0.0580, 0.0029), "g12": (24.40, -0.1085, 0.0200)}, hit=2)
+    text = _table_text(view)
+    assert "hit 2: look 0.42 s in" in text
+    row12 = next(line for line in text.splitlines() if " g12 " in line)
+    assert "unsure ±18%" in row12  # 0.0200 / 0.1085: sure by its error, but not a decay
+    view.showing("hit 2: final")
+    view.set_result("g04", 24.503, 0.0581, final=True, delta_se=0.0012)
+    text = _table_text(view)
+    row4 = next(line for line in text.splitlines() if " g04 " in line)
+    assert "hit 2: final" in text and "final ±2%" in row4
+
+
+def test_a_look_with_a_negative_decrement_is_left_out_of_the_plain_line(albacore):
+    out = io.StringIO()
+    view = _feed(Console(file=out, force_terminal=False, width=300), albacore)
+    view.look(0.45, {"g01": (13.01, 0.0950, 0.004), "g02": (13.03, -0.0990, 0.006)})
+    assert out.getvalue().splitlines()[-1].endswith("(median of 1 gage, 0.0950-0.0950); 1 unsure")

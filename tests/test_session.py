@@ -193,3 +193,19 @@ def test_a_look_is_shown_when_the_blow_was_first_seen_before_its_onset_was_refin
     assert first_seen[0] != first_seen[1]  # the detection sample, then the refined onset
     assert session.first_looks >= 1
     assert {s.onset_s for s in session.shown} == {first_seen[1] / dev.info.fs_hz}
+
+
+def test_a_hits_headline_gives_its_mode_errors_and_damping_ratio(live):
+    """The analyst's line at each accepted hit: which mode, f and delta with their standard
+    errors from the joint fit, zeta in %, Eq 7's modal decrement and the v motion's."""
+    from ramdaq.daq.readout import accepted_line
+
+    _, outcome = live
+    hit = outcome.hits[0]
+    a = hit.analysis
+    k = a.predominant
+    line = accepted_line(hit.index, hit.event.onset_s, a)
+    assert line.startswith(f"hit 0 at 2.500 s accepted: mode {k}, f = {a.f_hz:.3f} Hz (se ")
+    assert f"zeta {100 * a.modes.zeta[k]:.2f} %" in line
+    assert f"delta_modal (Eq 7) = {a.damping['delta_modal']:.4f}" in line
+    assert f"delta_v (motion v) = {a.motions['v_2_6'].delta:.4f} (se " in line
