@@ -153,21 +153,3 @@ def test_an_unexplained_gap_with_a_split_answers_split_mode():
     hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
            "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
     assert answer("unexplained", cands, None, set(), [hit], (), [split]).named == "double_hit"
-
-
-def test_a_mode_sharing_no_shape_with_the_models_is_not_paired_by_frequency():
-    rig = load_rig("albacore").with_medium("air")
-    tm = modes_of(rig)
-    assert len(compare(tm, rig).pairs) == tm.n_modes      # the rig's own modes pair one to one
-    # the 24.5 Hz mode identified with a shape orthogonal to the model's (a hull-coupling
-    # mode 0-7 % from a rudder mode): frequency alone does not pair it
-    k = 1
-    other = tm.shapes[:, k] - np.vdot(tm.shapes[:, 0], tm.shapes[:, k]) * tm.shapes[:, 0]
-    own = tm.shapes[:, k]
-    flip = other - np.vdot(own, other) / np.vdot(own, own) * own
-    shapes = tm.shapes.copy()
-    shapes[:, k] = flip / np.linalg.norm(flip)
-    odd = replace(tm, shapes=shapes)
-    cmp = compare(odd, rig)
-    assert k in cmp.unpaired_id and all(p.i_id != k for p in cmp.pairs)
-    assert all(p.mac >= 1 / tm.shapes.shape[0] for p in cmp.pairs)

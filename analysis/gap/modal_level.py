@@ -56,16 +56,6 @@ fitted to one (the modal family's hull pair 0.9 % apart at 1.2 % damping)."""
 MAX_SPLIT_REL = 0.1
 """The widest split, relative (as the effect search's ``split_mode.MAX_SPLIT``): further apart,
 two modes of one shape are modes of their own."""
-def chance_mac(n_gages: int) -> float:
-    """The MAC two unrelated shapes over ``n_gages`` gages reach on average: ``1 / n`` (the
-    squared cosine of two random directions in n dimensions, Beta(1/2, (n - 1) / 2), has mean
-    1/n). A model mode and an identified one whose shapes agree less than that share no motion
-    at all: frequency alone does not make them one mode (issue 17: the modal family's
-    hull-coupling mode at 31.9 Hz, MAC 0.005 with the rig's rudder mode 7 % above it, was read as
-    that mode's form error instead of a mode the model lacks)."""
-    return 1.0 / max(n_gages, 1)
-
-
 QUIET_BODY = 1e-3
 """A body whose gages carry less than this share of a model mode's shape norm is not predicted
 to move in that mode: its MAC there is not defined (NaN)."""
@@ -372,20 +362,18 @@ def compare(tm: TrialModes, rig: Rig, *, top_hz: float | None = None,
     twice the highest identified mode): the assignment that minimises the summed
     ``(1 - MAC) + |ln(f_model / f_id)| / ln 2`` over pairs within :data:`MAX_PAIR_RATIO` in
     frequency whose cost stays below 1.2 (a pair sharing no shape and a factor 1.5 apart is no
-    pair) and whose shapes agree beyond what unrelated shapes do (:func:`chance_mac`).
-    ``model``: the modes to pair with, when not ``rig``'s own model's (a model with an
+    pair). ``model``: the modes to pair with, when not ``rig``'s own model's (a model with an
     effect's update on it, :func:`modes_of_set`); ``rig`` then gives only the gages' bodies."""
     mm = model_modes_at_gages(rig) if model is None else model
     top = top_hz if top_hz is not None else 2 * float(np.max(tm.f_hz, initial=0.0))
     cand = np.flatnonzero((mm.f_hz > 0) & (mm.f_hz < top))
     K = tm.n_modes
-    floor = chance_mac(tm.shapes.shape[0])
     cost = np.full((K, len(cand)), 1e6)
     for i in range(K):
         for c, m in enumerate(cand):
             ratio = abs(math.log(mm.f_hz[m] / tm.f_hz[i]))
-            if ratio <= math.log(MAX_PAIR_RATIO) and (a := mac(tm.shapes[:, i], mm.shapes[:, m])) >= floor:
-                cost[i, c] = (1 - a) + ratio / math.log(2)
+            if ratio <= math.log(MAX_PAIR_RATIO):
+                cost[i, c] = (1 - mac(tm.shapes[:, i], mm.shapes[:, m])) + ratio / math.log(2)
     pairs = []
     if K and len(cand):
         rows, cols = scipy.optimize.linear_sum_assignment(cost)
