@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..analysis.impact import FirstLook, ImpactAnalysis, analyze_decay, first_look
+from ..analysis.impact import FirstLook, ImpactAnalysis, NoSuchMode, analyze_decay, first_look
 from ..analysis.model.rig import Rig
 from ..analysis.onset import contact_duration_s
 from ..drivers.block import StreamInfo
@@ -210,8 +210,9 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
                                onset_s=event.onset_s, decay_start_s=start / info.fs_hz,
                                adc_full_scale=_full_scale(info, scale), pre=pre,
                                pre_fs_hz=info.fs_hz, mode_hz=mode_hz)
-    except ValueError as err:
-        return HitResult(index, event, False, f"no usable decay: {err}", None, text)
+    except ValueError as err:  # NoSuchMode: the decay is fine, the mode asked for is not in it
+        why = str(err) if isinstance(err, NoSuchMode) else f"no usable decay: {err}"
+        return HitResult(index, event, False, why, None, text)
     if event.end_reason == "gap":  # the record, not the ringing, ended: say where and why
         result = replace(result, notes=(*result.notes, (
             f"decay cut by a gap in the stream at {(event.last_sample + 1) / info.fs_hz:.3f} s: "

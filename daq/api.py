@@ -106,7 +106,8 @@ def analyze_hits(rec: Recording, *, impact: int | None = None,
     ``done`` gets each analysed hit; ``mode_hz``: the mode the report's chain is run on."""
     rig = rig_or_fail(rec)
     if impact is not None and not 0 <= impact < len(rec.impacts):
-        raise ValueError(f"{rec.path}: impact {impact} asked for, but {len(rec.impacts)} impacts found")
+        raise ValueError(f"{rec.path}: impact {impact} asked for, but {len(rec.impacts)} impacts found"
+                         + (f" (numbered 0 to {len(rec.impacts) - 1})" if rec.impacts else ""))
     hits = []
     for k, ev in enumerate(rec.impacts):
         if impact is not None and k != impact:

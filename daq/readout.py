@@ -131,7 +131,7 @@ class LiveReadout:
             rel = abs(delta_se / delta)
             if not final and (rel > UNSURE_REL_SE or delta < 0):
                 status = "unsure"
-            status = f"{status} ±{100 * rel:.0f}%"
+            status = f"{status} ±{100 * rel:.2g}%"  # the decrement's standard error, % of it
         self.results[channel] = (f_hz, delta, status)
         self._refresh()
 
@@ -159,8 +159,9 @@ class LiveReadout:
             return
         f_med, d_med = np.median(np.array(sure), axis=0)
         d_all = [d for _, d in sure]
+        who = "  " if hit is None else f"  hit {hit}: "
         self.console.print(
-            f"  first look {after_s:.2f} s into the decay: f {f_med:.3f} Hz, delta {d_med:.4f} "
+            f"{who}first look {after_s:.2f} s into the decay: f {f_med:.3f} Hz, delta {d_med:.4f} "
             f"(median of {len(sure)} gage{'s' if len(sure) != 1 else ''}, "
             f"{min(d_all):.4f}-{max(d_all):.4f}); {len(gages) - len(sure)} unsure", highlight=False)
 
@@ -180,8 +181,9 @@ class LiveReadout:
     def hit(self, text: str) -> None:
         """Report a hit's status (detected, preliminary, accepted, rejected and why)."""
         self.hits.append(text)
-        if self._live is None:
-            self.console.print(text, highlight=False)
+        # on a terminal too: printed above the live table, wrapped and kept in the scrollback
+        # (the table's last lines alone cropped a long line and lost it at the next blow)
+        self.console.print(text, highlight=False)
         self._refresh()
 
     def _refresh(self) -> None:
@@ -238,4 +240,4 @@ class LiveReadout:
                           "" if not np.isfinite(f) else f"{f:.3f}",
                           "" if not np.isfinite(d) else f"{d:.4f}",
                           status)
-        return Group(table, Text("\n".join(self.hits[-3:])), Text(health))
+        return Group(table, Text(health))

@@ -477,7 +477,7 @@ class Session:
         flags = [f for f, on in (("not analysable", ev.not_analysable is not None),
                                  ("double hit", ev.double_hit), ("clipped", bool(ev.clipped)),
                                  ("short", ev.too_short)) if on]
-        self._say(f"hit {k} at {ev.onset_s:.3f} s: decay ended (peak {ev.snr_db:.0f} dB over the"
+        self._say(f"hit {k} at {ev.onset_s:.3f} s: {record_end(ev)} (peak {ev.snr_db:.0f} dB over the"
                   " noise before the blow" + (", " + ", ".join(flags) if flags else "")
                   + "): final analysis")
         if self.view is not None:
@@ -712,6 +712,20 @@ def _model_period_s(rig: Rig) -> float | None:
     except (ValueError, ArithmeticError, np.linalg.LinAlgError):
         return None
     return 1.0 / f if np.isfinite(f) and f > 0 else None
+
+
+_ENDS = {"decayed": "decay at the noise floor after {:.1f} s",
+         "max_length": "record at its longest, {:.1f} s",
+         "next_impact": "record cut by the next blow after {:.1f} s",
+         "gap": "record cut by a gap in the stream after {:.1f} s",
+         "flush": "stream ended {:.1f} s after the blow"}
+
+
+def record_end(ev: ImpactEvent) -> str:
+    """Why and when a hit's record closed, in a few words: its decay reached the noise floor,
+    or the next blow, a gap, the record's longest or the stream's end cut it (s after onset)."""
+    after_s = (ev.last_sample + 1) / ev.fs_hz - ev.onset_s
+    return _ENDS.get(ev.end_reason, ev.end_reason + " after {:.1f} s").format(after_s)
 
 
 def look_is_sure(look: FirstLook) -> bool:

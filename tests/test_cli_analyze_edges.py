@@ -81,3 +81,15 @@ def test_mode_hz_near_no_mode_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("ramdaq analyze: --mode-hz 30: in no hit of ")
     assert "no identified mode within" in err and "13.003" in err
+
+
+def test_mode_hz_a_few_percent_off_takes_the_mode_on_every_hit(tmp_path, capsys):
+    """tester10: --mode-hz 13.15 (1.1 % above the 13.003 Hz mode) rejected the 8 s decays as
+    "no usable decay" (0.15 Hz beyond their 0.125 Hz resolution) and took the 5 s one: a mode
+    within 5 % of the frequency asked for is the one meant, on every hit alike."""
+    out = tmp_path / "a"
+    assert main(["analyze", str(WATER), "--no-plots", "--out", str(out), "--mode-hz", "13.15"]) == 0
+    a = json.loads((out / "report.json").read_text())
+    hits = a["impacts"]
+    assert hits and all(h["accepted"] for h in hits), [h.get("reason") for h in hits]
+    assert all(abs(h["analysis"]["f_hz"] - 13.003) < 0.01 for h in hits)

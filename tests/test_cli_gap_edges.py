@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from ramdaq.analysis.model.rig import load_rig
 from ramdaq.daq.commands.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,8 +83,13 @@ def test_a_rudder_ten_times_too_heavy_gets_one_line(heavy_none):
     assert code == 0, text
     lines = [ln for ln in text.splitlines() if ln.startswith("CHECK THE RIG")]
     assert len(lines) == 1, text
-    m = re.search(r"rudder mass ([\d.]+)x what the modes imply: check the rig's units/values", lines[0])
+    m = re.search(r"rudder mass ([\d.]+)x what the modes imply \((\d+) kg in the rig against ~(\d+) kg\): "
+                  r"check the rig's units/values", lines[0])
     # 3 blows, the rig's own form otherwise exact: within 25 % of x10 (test_rigfit_edges)
     assert m and 8.0 < float(m[1]) < 12.5, lines[0]
+    # the rig's mass is the shipped rudder's x10; the implied one is it over the ratio (to the
+    # printed digits: the ratio rounded to a whole number, the masses to a kilogram)
+    assert int(m[2]) == round(10 * load_rig(ALBACORE).rudder.mass_kg)
+    assert int(m[3]) == pytest.approx(int(m[2]) / float(m[1]), rel=0.05)
     assert "Traceback" not in text
     assert json.dumps(rep).count('"absurd": true') == 1

@@ -119,7 +119,7 @@ def test_the_result_column_says_which_hit_and_look_it_shows(albacore):
     view.set_result("g04", 24.503, 0.0581, final=True, delta_se=0.0012)
     text = _table_text(view)
     row4 = next(line for line in text.splitlines() if " g04 " in line)
-    assert "hit 2: final" in text and "final ±2%" in row4
+    assert "hit 2: final" in text and "final ±2.1%" in row4
 
 
 def test_a_look_with_a_negative_decrement_is_left_out_of_the_plain_line(albacore):

@@ -209,3 +209,16 @@ def test_a_hits_headline_gives_its_mode_errors_and_damping_ratio(live):
     assert f"zeta {100 * a.modes.zeta[k]:.2f} %" in line
     assert f"delta_modal (Eq 7) = {a.damping['delta_modal']:.4f}" in line
     assert f"delta_v (motion v) = {a.motions['v_2_6'].delta:.4f} (se " in line
+
+
+def test_a_hits_record_says_why_it_closed(live):
+    """tester10: every hit read "decay ended" though the next blow had cut its record. The blows
+    2.5 s apart in air (24.5 Hz, delta 0.058: ~14 s to the floor) cut hit 0's record at the next
+    blow; the stream's end closes the last one."""
+    from ramdaq.daq.session import record_end
+
+    _, outcome = live
+    first, last = outcome.hits[0].event, outcome.hits[-1].event
+    assert first.end_reason == "next_impact"
+    assert record_end(first).startswith("record cut by the next blow after 2.")
+    assert last.end_reason == "flush" and record_end(last).startswith("stream ended ")

@@ -226,6 +226,8 @@ class MassScale:
 
     ratio: float
     modes_hz: tuple[float, ...]
+    rig_mass_kg: float = float("nan")
+    """The rig file's rudder mass, kg (the implied one is ``rig_mass_kg / ratio``)."""
 
     @property
     def absurd(self) -> bool:
@@ -235,7 +237,9 @@ class MassScale:
     def text(self) -> str:
         """The one line ``rig fit`` and ``gap`` print when :attr:`absurd`."""
         r = f"{self.ratio:.0f}" if self.ratio >= 10 else f"{self.ratio:.2g}"
-        return (f"rudder mass {r}x what the modes imply: check the rig's units/values "
+        kg = (f" ({self.rig_mass_kg:.0f} kg in the rig against ~{self.rig_mass_kg / self.ratio:.0f} kg)"
+              if math.isfinite(self.rig_mass_kg) else "")
+        return (f"rudder mass {r}x what the modes imply{kg}: check the rig's units/values "
                 f"(rudder modes {', '.join(f'{f:.2f}' for f in self.modes_hz)} Hz against the rig's, paired "
                 "by shape, the rudder's mass and inertias scaled together; modes weigh mass against "
                 f"stiffness only, so it may be the stock's stiffnesses {1 / self.ratio:.2g}x)")
@@ -742,7 +746,7 @@ def mass_scale(tm: TrialModes, rig: Rig, *, min_mac: float = 0.8, min_share: flo
                                            method="bounded", options={"xatol": 1e-3}).x
             for i, c in zip(i_id, i_m, strict=True)]
     return MassScale(ratio=float(math.exp(-np.median(each))),
-                     modes_hz=tuple(sorted(float(tm.f_hz[i]) for i in i_id)))
+                     modes_hz=tuple(sorted(float(tm.f_hz[i]) for i in i_id)), rig_mass_kg=r.mass_kg)
 
 
 def _is_damping(name: str) -> bool:

@@ -345,7 +345,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         check_air_twin(rig, air[0], args.air)
     report, files = write_analysis(src, rig, hits, out, plots=plots, air=air)
     print(format_summary(report, args.units))
-    print(f"\nwrote {len(files)} files to {out}/ (report.json with every number, SI units)")
+    plural = "s" if len(files) != 1 else ""
+    print(f"\nwrote {len(files)} file{plural} to {out}/ (report.json with every number, SI units)")
     return EXIT_OK
 
 
@@ -365,7 +366,8 @@ def cmd_gap(args: argparse.Namespace) -> int:
                             post_max_s=args.post_s, held_out_every=args.held_out_every)
     files = write_report(d, out, plots=not args.no_plots, source=str(src))
     print("\n".join(summary_lines(d)))
-    print(f"\nwrote {len(files)} files to {out}/ (gap.json with every number)")
+    plural = "s" if len(files) != 1 else ""
+    print(f"\nwrote {len(files)} file{plural} to {out}/ (gap.json with every number)")
     return EXIT_OK
 
 
