@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ramdaq.analysis.gap.datamodel import Finding, FreeModal, Layer
-from ramdaq.analysis.gap.invariance import gain_invariance, line_persistence
+from ramdaq.analysis.gap.invariance import gain_invariance, line_persistence, one_gage_lines
 from ramdaq.analysis.gap.layers import PRECEDENCE_STRENGTH, answer
 
 FS = 1024.0
@@ -99,6 +99,26 @@ def test_a_line_switched_on_by_the_blows_is_found_and_a_steady_one_is_not():
     # a line there throughout (an ambient tone: the pre-trigger check's) and the modes ring on
     x, on = _trial((3, 4), switched=False)
     assert line_persistence(x, _fm_of(x, on), on, numbers) == []
+
+
+def test_an_early_line_on_one_gage_alone_is_found_and_a_modes_is_not():
+    # a gage's own mount ringing at 90 Hz (zeta 0.05: gone by the decay window) after each blow
+    numbers = list(range(1, N_G + 1))
+    x, on = _trial((), switched=False, seed=4)
+    fm = _fm_of(x, on)
+    t = np.arange(x.shape[1]) / FS
+    rung = x.copy()
+    for t0 in on:
+        u = np.clip(t - t0, 0, None)
+        rung[5] += 0.2 * np.exp(-0.05 * 2 * math.pi * 90.0 * u) * np.sin(2 * math.pi * 90.0 * u) * (t >= t0)
+    (f,) = one_gage_lines(rung, fm, on, numbers)
+    assert f.check == "one_gage_line" and f.gages == (6,) and f.window == "early"
+    assert abs(f.mode_hz[0] - 90.0) < 3.0 and f.statistic > f.chance_level
+    # the same heavily damped ring as a mode of the structure (on every gage): coherent, no finding
+    shape = np.random.default_rng(5).uniform(0.5, 1.0, N_G)
+    moded = x + np.outer(shape, rung[5] - x[5])
+    assert one_gage_lines(moded, fm, on, numbers) == []
+    assert one_gage_lines(x, fm, on, numbers) == []
 
 
 def _finding(check: str, gages: tuple[int, ...], ratio: float, layer: Layer = Layer.SENSOR) -> dict:

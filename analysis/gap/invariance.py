@@ -24,7 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.stats
 
-from .datamodel import P_CHANCE, Finding, FreeModal, Layer
+from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer
+from .signal_checks import EARLY_FROM_S, early_lines
 
 MIN_ENTRY_SNR = 20.0
 """A shape entry enters the gain test when its amplitude is this many standard errors (as the
@@ -227,3 +228,51 @@ def _persistence(x: np.ndarray, fm: FreeModal, k: int, a0: np.ndarray, n_pre: in
     var = fm.amp_se[:-1, :, k] ** 2 + se**2 + (PERSIST_FLOOR * carry) ** 2
     z = np.sum(carry - meas, axis=0) / np.sqrt(np.sum(var, axis=0))
     return z, np.sum(meas, axis=0) / np.maximum(np.sum(carry, axis=0), 1e-300)
+
+
+# ------------------------------------------------------------------ spatial coherence, early window
+
+ONE_GAGE_RATIO = 10.0
+"""A line of the early window lives on one gage alone when its power there (over that gage's
+noise) is at least this many times its power at every other gage and no other gage shows it
+beyond chance: no structure moves one gage alone -- a mode of the rudder or the hull shows at
+every gage of its body that is not at its node, and a body carries six. Stated a priori (10 dB)."""
+ONE_GAGE_MIN_HZ = 5.0
+"""Early lines below this are not read: a gage's own high-pass recovery after the blow (the
+library's ``highpass``) lives below a few Hz."""
+
+
+def one_gage_lines(x: np.ndarray, fm: FreeModal, onsets_s: np.ndarray, numbers: Sequence[int],
+                   skip_rows: Sequence[int] = ()) -> list[Finding]:
+    """Lines of the early windows the free modal model lacks
+    (:func:`~ramdaq.analysis.gap.signal_checks.early_lines`: each gage's Hann periodogram over
+    its noise variance, summed over the blows) that live on one gage alone: beyond the chance
+    level there (``Gamma(n_imp, 1) / n_imp``, Bonferroni over the gages and independent bins at
+    ``P_CHANCE``) and at no other gage, and :data:`ONE_GAGE_RATIO` times the next gage's. The
+    statistic is the line's ratio at its gage against that chance level. One finding, the
+    strongest such line (its gage; the other lines' gages listed after it)."""
+    f, W, a0 = early_lines(x, fm.fs_hz, onsets_s, fm, skip_rows=skip_rows)
+    if f.size == 0:
+        return []
+    # early_lines' own chance level: the early window's independent bins below 0.45 fs
+    n_bins = max(1, int(0.45 * (DECAY_START_S - EARLY_FROM_S) * fm.fs_hz))
+    chance = float(scipy.stats.gamma.isf(P_CHANCE / (n_bins * W.shape[0]), a0.size)) / a0.size
+    hits = []
+    for i, fk in enumerate(f):
+        o = np.argsort(-W[:, i])
+        best, second = W[o[0], i], W[o[1], i]
+        alone = second <= chance and best >= ONE_GAGE_RATIO * max(second, 1.0)
+        if fk >= ONE_GAGE_MIN_HZ and best > chance and alone:
+            hits.append((best / chance, float(fk), int(o[0]), float(best), float(second)))
+    if not hits:
+        return []
+    hits.sort(reverse=True)
+    _, fk, g, best, second = hits[0]
+    gages = tuple(dict.fromkeys(numbers[h[2]] for h in hits))
+    text = (f"a line at {fk:.1f} Hz in the early window on gage {numbers[g]} alone ({best:.3g} times its "
+            f"noise, the next gage {second:.2g}): no structure moves one gage alone -- the gage's own "
+            "mount or signal chain rings; no library effect does")
+    return [Finding("one_gage_line", Layer.SENSOR, gages, best, chance, best / max(second, 1.0),
+                    "power ratio", text, window="early", mode_hz=tuple(h[1] for h in hits),
+                    null=("early-window line power over the noise, summed over the blows: Gamma(n_imp, 1) / "
+                          f"n_imp, Bonferroni over {W.shape[0]} gages x {n_bins} bins"))]

@@ -88,7 +88,8 @@ benchmark seeds."""
 DATA_EFFECT = {"gain": "gage_sensitivity", "dead": "gage_sensitivity", "rigid_body": "gage_alignment",
                "time_skew": "time_skew", "highpass": "highpass", "clipping": "clipping",
                "ambient_tone": "ambient_tone", "double_hit": "double_hit",
-               "gain_invariance": "unexplained", "line_persistence": "unexplained"}
+               "gain_invariance": "unexplained", "line_persistence": "unexplained",
+               "one_gage_line": "unexplained"}
 """The library effect each data-only check's finding names (a homogeneity finding: friction when
 its decays follow Coulomb's law, "unexplained" otherwise -- an amplitude-dependent stiffness the
 library does not hold, or a law the decays did not tell: :func:`data_effect`)."""
@@ -100,10 +101,11 @@ OVERRIDING_EXCITATION = frozenset({"double_hit", "line_persistence"})
 tone: a line before the blows is also what an effect outside the library (mains pickup) leaves."""
 
 
-NOT_LTI = frozenset({"gain_invariance", "line_persistence"})
-"""Data-only checks of time invariance (:mod:`ramdaq.analysis.gap.invariance`): a gage's gain
-changing between impacts, a line switched on by the blows. No library effect and no linear model
-update explains either; well above chance (:data:`PRECEDENCE_STRENGTH`) they answer "unexplained"
+NOT_LTI = frozenset({"gain_invariance", "line_persistence", "one_gage_line"})
+"""Data-only checks of a linear, time-invariant, spatially coherent measurement
+(:mod:`ramdaq.analysis.gap.invariance`): a gage's gain changing between impacts, a line switched
+on by the blows, an early line on one gage alone. No library effect and no linear model
+update explains any of them; well above chance (:data:`PRECEDENCE_STRENGTH`) they answer "unexplained"
 at their gages, below it they answer nothing."""
 
 
