@@ -116,9 +116,7 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     found += homogeneity(x, fm, numbers, skip_rows=rows)
     found += gain_invariance(fm, numbers, skip_rows=rows)
     found += line_persistence(x, fm, onsets_s, numbers, pre_s=pre_s, skip_rows=rows)
-    chain = {g for f in timing for g in f.gages}      # a high-pass's recovery is its own line
-    found += one_gage_lines(x, fm, onsets_s, numbers, skip_rows=rows + tuple(
-        i for i, n in enumerate(numbers) if n in chain))
+    found += one_gage_lines(x, fm, onsets_s, numbers, skip_rows=rows)
     return DataChecks(modal=fm, findings=found,
                       looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
                               "ambient_tone", "double_hit", "homogeneity", "gain_invariance",
