@@ -85,8 +85,9 @@ def impact_gains(fm: FreeModal, rows: Sequence[int]) -> tuple[np.ndarray, np.nda
         w[:, list(rows)] = 1.0 / np.maximum(se[:, list(rows)], 1e-300) ** 2
         c, phi = rank_one(a, w)
         pred = np.outer(c, phi)
-        r = np.real(a / np.where(np.abs(pred) > 0, pred, np.nan)) - 1.0
-        s2 = (se / np.maximum(np.abs(pred), 1e-300)) ** 2 + GAIN_FLOOR**2
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # a row left out: 0 / 0
+            r = np.real(a / np.where(np.abs(pred) > 0, pred, np.nan)) - 1.0
+            s2 = (se / np.maximum(np.abs(pred), 1e-300)) ** 2 + GAIN_FLOOR**2
         ok = (w > 0) & (np.abs(pred) >= MIN_ENTRY_SNR * se) & np.isfinite(r)
         r, s2 = np.where(ok, r, 0.0), np.where(ok, s2, np.inf)
         num += r / s2
