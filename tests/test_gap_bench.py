@@ -224,9 +224,17 @@ def _rec(**kw) -> dict:
 def test_an_outside_effect_scores_as_unexplained_in_its_own_class():
     from ramdaq.daq.commands.gap_bench import decision
 
-    r = _rec()
-    d = decision(r, 8.0, 10.0, 0.0)
+    # the model's map alone, on a rig that still misses modes (gage 12), is the rig's form;
+    # with no form error left it stands, where the gap is
+    assert decision(_rec(), 8.0, 10.0, 0.0)["named"] == "none"
+    d = decision(_rec(form_gages=[]), 8.0, 10.0, 0.0)
     assert d["named"] == "unexplained" and d["location"]["gages"] == [3]
+    # a data-only failure of time invariance well above chance answers, at its own gages
+    drift = {"check": "gain_invariance", "layer": "sensor", "gages": [3], "window": "decay",
+             "mode_hz": [13.0], "statistic": 80.0, "chance_level": 20.0, "more": {}, "text": "drift"}
+    r = _rec(data_findings=[drift])
+    d = decision(r, 8.0, 10.0, 0.0)
+    assert d["named"] == "unexplained" and d["by"] == "data" and d["location"]["gages"] == [3]
     # unexplained only where the calibrated rig still misses its modes is the model's form
     assert decision(_rec(form_gages=[3, 12]), 8.0, 10.0, 0.0)["named"] == "none"
     s = score([r, _rec(effect="none", expect="none", size=0.0, zdetect=2.0)], {}, 8.0, 10.0, 0.0)
@@ -269,7 +277,10 @@ def test_a_strong_data_sensor_finding_outranks_the_models_unexplained():
     d = decision(r, 8.0, 10.0, 0.0)
     assert d["named"] == "highpass" and d["by"] == "data" and d["location"]["gages"] == [14]
     weak = hp | {"statistic": 20.0}
-    assert decision(_rec(candidates=[], data_findings=[weak]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    # (the model's map kept: no form error left; with one, the rig's form -- either way not the sensor)
+    kept = _rec(candidates=[], data_findings=[weak], form_gages=[])
+    assert decision(kept, 8.0, 10.0, 0.0)["named"] == "unexplained"
+    assert decision(_rec(candidates=[], data_findings=[weak]), 8.0, 10.0, 0.0)["named"] == "none"
     hom = {"check": "homogeneity", "layer": "nonlinearity", "gages": [1], "window": "decay",
            "mode_hz": [13.0], "statistic": 46.0, "chance_level": 4.0,
            "more": {"decrement_per_doubling": {"value": -0.3}}}
@@ -317,10 +328,13 @@ def test_friction_told_from_a_crack_or_rattle_answers_the_models_unexplained():
     d = decision(_rec(effect="friction", expect="friction", data_findings=[fr]), 8.0, 10.0, 0.0)
     assert d["named"] == "friction" and d["by"] == "data" and d["location"]["gages"] == [4, 6]
     stiff = fr | {"more": {"stiffness_law_z": {"value": -22.0}, "frequency_change": {"value": -0.05}}}
+    # the crack's stiffness law answers "unexplained" itself, at the gages it was read on (the
+    # model's map cell on a rig with form error left is not the place: unexpl8)
     d = decision(_rec(data_findings=[stiff]), 8.0, 10.0, 0.0)
-    assert d["named"] == "unexplained" and d["by"] == "model" and d["location"]["gages"] == [3]
+    assert d["named"] == "unexplained" and d["by"] == "data" and d["location"]["gages"] == [4, 6]
     weak = fr | {"statistic": 6.0}
-    assert decision(_rec(data_findings=[weak]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    assert decision(_rec(data_findings=[weak], form_gages=[]), 8.0, 10.0, 0.0)["named"] == "unexplained"
+    assert decision(_rec(data_findings=[weak]), 8.0, 10.0, 0.0)["named"] == "none"
 
 
 def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
@@ -351,10 +365,16 @@ def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
     head = Diagnosis.headline.fget(d)
     assert head.startswith("explained by the data-only layer: highpass") and head.endswith("; model form: x")
     assert "takes precedence" in answer_lines(d)[0]
-    # without the data-only finding both say unexplained, where the gap is
+    # without the data-only finding both say what the model's map says: with the rig's form
+    # error left (gage 12) and nothing in the data, model form (issue 17, unexpl8); with no form
+    # error left, unexplained, where the gap is
     d.data = SimpleNamespace(findings=[])
     d.answer = one_answer(d)
     assert d.answer.to_json() == decision(r | {"data_findings": []}, 8.0, 10.0, 0.0)
+    assert Diagnosis.headline.fget(d).startswith("no effect named, the gap is the rig model's form")
+    level.form_gages = lambda: set()
+    d.answer = one_answer(d)
+    assert d.answer.to_json() == decision(r | {"data_findings": [], "form_gages": []}, 8.0, 10.0, 0.0)
     assert Diagnosis.headline.fget(d).startswith("unexplained: gages 3") and answer_lines(d) == []
 
 

@@ -261,6 +261,9 @@ class Diagnosis:
                     else "no effect named, the gap is the rig model's form")
         elif a.named == "unexplained":
             head = f"unexplained: {where_text(a.location)}" if a.location else "unexplained"
+            if a.by == "data" and a.finding:     # what the data-only check found, how big
+                head += (f" -- {a.finding.get('text', '')} (statistic {strength(a.finding):.1f}x its "
+                         "chance level)")
         elif a.by == "data":
             f = a.finding or {}
             head = (f"explained by the data-only layer: {a.named} ({f.get('text', '')}; statistic "

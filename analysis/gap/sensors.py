@@ -20,6 +20,12 @@ objects, each with its statistic and the level the statistic exceeds by chance w
   size relative to the first;
 - :func:`~ramdaq.analysis.gap.homogeneity.homogeneity` -- the same modes, frequencies and damping
   at blows of different force: friction, amplitude-dependent damping or stiffness.
+- :func:`~ramdaq.analysis.gap.invariance.gain_invariance` -- time invariance: each gage's gain,
+  impact by impact, the same over every mode;
+- :func:`~ramdaq.analysis.gap.invariance.line_persistence` -- a line steady through the decays
+  but gone before the next blow (neither a mode nor an ambient line);
+- :func:`~ramdaq.analysis.gap.invariance.one_gage_lines` -- spatial coherence: a line of the
+  early window on one gage alone (no structure moves one gage alone).
 
 Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate, gages in DAQ channel order; ``gages`` the
 rig's :class:`~ramdaq.analysis.model.rig.Gage` per row.
@@ -39,6 +45,7 @@ from ..model.rig import Gage
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer, closure_of, free_modal_model
 from .features import rigid_projector
 from .homogeneity import homogeneity
+from .invariance import gain_invariance, line_persistence, one_gage_lines
 from .signal_checks import (
     DeclaredLine,
     clip_closure,
@@ -107,9 +114,13 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(_rows(x, keep), fs_hz, onsets_s, [numbers[i] for i in keep], fm)
     found += homogeneity(x, fm, numbers, skip_rows=rows)
+    found += gain_invariance(fm, numbers, skip_rows=rows)
+    found += line_persistence(x, fm, onsets_s, numbers, pre_s=pre_s, skip_rows=rows)
+    found += one_gage_lines(x, fm, onsets_s, numbers, skip_rows=rows)
     return DataChecks(modal=fm, findings=found,
                       looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
-                              "ambient_tone", "double_hit", "homogeneity"))
+                              "ambient_tone", "double_hit", "homogeneity", "gain_invariance",
+                              "line_persistence", "one_gage_line"))
 
 
 def _with_clip_closure(f: Finding, x: np.ndarray, fs_hz: float, onsets_s: np.ndarray,

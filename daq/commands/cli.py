@@ -693,7 +693,7 @@ def cmd_gap_benchmark(args: argparse.Namespace) -> int:
 
     kw = dict(per_class=args.per_class, seeds=seeds, jobs=args.jobs, effects=effects, rescore=args.rescore,
               thresholds=args.thresholds, family=args.family, blows=args.blows,
-              perturb=(0.0 if seeds == "dev" else 0.25) if args.perturb is None else args.perturb,
+              perturb=(0.0 if args.dev else 0.25) if args.perturb is None else args.perturb,
               progress=lambda m: print(m, flush=True),
               bar=lambda n: progress_bar("gap benchmark", n, unit="scenarios"))
     out = Path(args.out or "gap_benchmark")
@@ -756,7 +756,8 @@ def _batch_parsers(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--perturb", type=float, default=None, metavar="FRACTION",
                    help="hand the diagnosis rigs whose masses, inertias and stiffnesses are off by up "
                         "to this fraction (0.25: +-25 %%), calibrated to each trial's modes first "
-                        "(default 0.25, issue 17; 0 with --dev, which tunes on the generator's rigs)")
+                        "(default 0.25, issue 17; 0 with --dev, which tunes on the generator's rigs; "
+                        "--seeds dev with a perturbation runs every family and tunes nothing)")
     g.add_argument("--family", choices=("truth", "modal", "all"), default="all",
                    help="generator family: truth (the richer simulator), modal (free modal superposition "
                         "sharing nothing with the diagnosis's model), all (default)")
