@@ -432,7 +432,9 @@ def test_the_score_prints_its_confidence_intervals():
     bound, and what the run's size can show."""
     from ramdaq.daq.commands.gap_bench import format_score
 
-    rs = [_rec(), _rec(effect="none", expect="none", size=0.0, zdetect=2.0)]
+    # form_gages empty: the map's unexplained cell stands (on a rig with form error left it is
+    # model form, test_an_outside_effect_scores_as_unexplained_in_its_own_class)
+    rs = [_rec(form_gages=[]), _rec(effect="none", expect="none", size=0.0, zdetect=2.0)]
     lines = format_score(score(rs, {}, 8.0, 10.0, 0.0), {})
     text = "\n".join(lines)
     assert "(1 of 1; 95 % interval 21-100 %)" in text          # top-1, Wilson of 1 of 1
