@@ -82,7 +82,7 @@ def test_analyze(trial, truth, capsys):
 def test_replay_and_trial(trial, capsys):
     tmp, mcap = trial
     assert main(["replay", str(mcap), "--json", str(tmp / "replay.json")]) == 0
-    assert "delta_w = " in capsys.readouterr().out
+    assert "delta_w (motion w) = " in capsys.readouterr().out
     replayed = json.loads((tmp / "replay.json").read_text())
     live = tmp / "live.mcap"
     assert main(["trial", "--rig", "stern_plane", "--duration", "8.5", "--impacts",
