@@ -93,3 +93,11 @@ def test_a_rudder_ten_times_too_heavy_gets_one_line(heavy_none):
     assert int(m[3]) == pytest.approx(int(m[2]) / float(m[1]), rel=0.05)
     assert "Traceback" not in text
     assert json.dumps(rep).count('"absurd": true') == 1
+
+
+def test_gap_json_names_the_rig_it_was_held_against(heavy_none):
+    """tester10: gap.json said the mass was absurd but not which rig file it was held against."""
+    code, text, rep = heavy_none
+    assert code == 0, text
+    assert rep["rig"]["from"].endswith("heavy.toml") and rep["rig"]["medium"] == "water"
+    assert rep["rig"]["name"] == load_rig(ALBACORE).name

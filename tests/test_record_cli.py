@@ -2,6 +2,7 @@
 and the command line as a user runs it."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -73,6 +74,27 @@ def test_cli_rig_prints_eq18_beside_model_added_mass(albacore, tmp_path):
     report_gap = 0.2240 / 0.2735 - 1
     assert abs(c.difference - report_gap) < 0.05
     assert np.isfinite(c.difference)
+    assert "warning: Eq 18" not in r.stdout  # the shipped rig's -18 % is the report's own
+
+
+def test_cli_rig_warns_when_eq18_is_far_off_the_models_added_mass(tmp_path):
+    """tester10: a rig with the rudder's mass x10 and its dashpots x0.2 printed "Eq 18 is +67036 %
+    off" and nothing else (the air trial's predominant mode became another mode than the water
+    one's): beyond 2x (the report's own gap is -18 %) one line points at the rig's masses."""
+    text = (RIGS / "albacore.toml").read_text()
+
+    def times(k: float):
+        return lambda m: f"{m[1]}{k * float(m[2])!r}"
+
+    spoiled = re.sub(r"(?m)^(mass_kg\s*=\s*)([0-9.eE+-]+)", times(10.0), text, count=1)
+    spoiled = re.sub(r"(?m)^((?:C_N_s_per_m|c_N_m_s_per_rad|c_alpha_N_m_s_per_rad)\s*=\s*)([0-9.eE+-]+)",
+                     times(0.2), spoiled)
+    assert spoiled.count("\n") == text.count("\n") and spoiled != text
+    (tmp_path / "heavy.toml").write_text(spoiled)
+    r = _ramdaq("rig", str(tmp_path / "heavy.toml"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    warn = [ln for ln in r.stdout.splitlines() if ln.startswith("warning: Eq 18 is ")]
+    assert len(warn) == 1 and "check the rig's masses" in warn[0]
 
 
 @pytest.mark.parametrize(("option", "value"), [("--duration", "-5"), ("--impact-every", "0"),

@@ -252,12 +252,13 @@ def gap_task(spec: TaskSpec) -> TaskResult:
     """``ramdaq gap`` of one recording with the default settings, held against ``spec.rig`` (or
     the rig it carries): its report folder (gap.json, plots) written, its :class:`GapRow`
     returned. A recording that cannot be diagnosed is a ``failed`` result naming why."""
-    from .gap import run_gap, write_report
+    from .gap import rig_record, run_gap, write_report
 
     t0 = time.perf_counter()
     try:
         lt, td, d = run_gap(spec.path, rig=spec.rig or None)
-        write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path)
+        write_report(d, Path(spec.folder), plots=spec.plots, source=spec.path,
+                     rig=rig_record(lt, spec.rig or None))
         row = gap_row(d)
     except Exception as exc:  # a recording that breaks the diagnosis is a row, not a crash
         return _finish(spec, t0, status="failed", status_reason=failure_reason(exc, spec.path))

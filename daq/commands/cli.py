@@ -353,7 +353,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 def cmd_gap(args: argparse.Namespace) -> int:
     """Sim-to-real gap diagnosis of a recording (``ramdaq gap-benchmark`` proves it)."""
     from ...analysis.gap.diagnose import Settings
-    from .gap import parse_effects, run_gap, summary_lines, write_report
+    from .gap import parse_effects, rig_record, run_gap, summary_lines, write_report
     from .progress import progress_bar
 
     effects = parse_effects(args.effects)
@@ -364,7 +364,7 @@ def cmd_gap(args: argparse.Namespace) -> int:
         lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
                             progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
                             post_max_s=args.post_s, held_out_every=args.held_out_every)
-    files = write_report(d, out, plots=not args.no_plots, source=str(src))
+    files = write_report(d, out, plots=not args.no_plots, source=str(src), rig=rig_record(lt, args.rig))
     print("\n".join(summary_lines(d)))
     plural = "s" if len(files) != 1 else ""
     print(f"\nwrote {len(files)} file{plural} to {out}/ (gap.json with every number)")
@@ -640,6 +640,10 @@ def cmd_rig(args: argparse.Namespace) -> int:
               f" the predominant mode couples v with alpha and gamma, whose added inertias "
               f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
               f"0.2735 ton s^2/ft, -18 %).")
+        if abs(c.difference) > 1.0:  # beyond the report's own -18 % by far: the rig, not Eq 18
+            print(f"warning: Eq 18 is {abs(c.difference) + 1:.3g}x off the model's own added mass: "
+                  "check the rig's masses, inertias and their units (the air and water modes "
+                  "compared may not be the same mode)")
     return EXIT_OK
 
 

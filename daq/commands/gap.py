@@ -258,12 +258,22 @@ def feature_lines(d: Diagnosis, n: int = 5) -> list[str]:
     return out
 
 
-def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "") -> list[Path]:
+def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "",
+                 rig: dict | None = None) -> list[Path]:
+    """gap.json (and the plots) in ``out``; ``source`` the recording, ``rig`` the rig it was held
+    against (:func:`rig_record`)."""
     out.mkdir(parents=True, exist_ok=True)
-    doc = d.to_json() | {"source": source}
+    doc = d.to_json() | {"source": source, "rig": rig}
     files = [out / "gap.json"]
     files[0].write_text(json.dumps(finite_json(doc), indent=1, allow_nan=False))  # NaN: null
     if plots:
         from ..reports.gap_plots import plot_diagnosis
         files += plot_diagnosis(d, out)
     return files
+
+
+def rig_record(lt: LoadedTrial, given: str | Path | None) -> dict:
+    """The rig a diagnosis was held against, for gap.json: its name, medium and where it came
+    from (the file given with ``--rig``, or the one the recording carries)."""
+    return {"name": lt.rig.name, "medium": lt.rig.medium,
+            "from": str(given) if given else "the recording's own rig"}
