@@ -366,8 +366,8 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         not taken as the predominant mode, and a note says so.
     mode_hz : float, optional
         The mode the report's chain is run on, chosen by the user (:func:`chosen_mode`)
-        instead of the most energetic one; ValueError when no identified mode is within the
-        decay's resolution of it.
+        instead of the most energetic one; :class:`NoSuchMode` (a ValueError) when no
+        identified mode is near it (:func:`chosen_mode`).
     """
     notes: list[str] = []
     judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale)
@@ -456,8 +456,8 @@ def chosen_mode(table: ModeTable, mode_hz: float, duration_s: float, k: int, not
     chain is run on), when within :data:`MODE_HZ_TOL` of it or the resolution ``1 / duration_s``
     of the decay, whichever is wider (a frequency typed from memory or another trial is a few %
     off; the resolution alone took 13.15 for 13.00 Hz on a 5 s decay and refused it on an 8 s
-    one); a note when it is not the predominant mode ``k``. Raises ValueError naming the modes
-    identified when no mode is that close."""
+    one); a note when it is not the predominant mode ``k``. Raises :class:`NoSuchMode` naming the
+    modes identified when no mode is that close."""
     tol = max(1.0 / duration_s, MODE_HZ_TOL * mode_hz)
     i = int(np.argmin(np.abs(table.frequency_hz - mode_hz)))
     if not abs(table.frequency_hz[i] - mode_hz) <= tol:

@@ -24,6 +24,12 @@ marked "unsure" (a gage at the noise level); the session shows a look only when 
 is within it (``session.LOOK_REL_SE``)."""
 
 
+def is_sure(delta: float, delta_se: float) -> bool:
+    """A decrement worth showing as a gage's number so far: a decay (``delta`` > 0) whose
+    standard error is within :data:`UNSURE_REL_SE` of it (False for a NaN error)."""
+    return bool(delta > 0 and delta_se / delta <= UNSURE_REL_SE)
+
+
 def accepted_line(index: int, onset_s: float, a, v_label: str = "v") -> str:
     """A hit's one-line headline once its final analysis is in: the predominant mode's
     frequency and decrement from the joint fit over every gage, each with its standard error,
@@ -76,7 +82,6 @@ class LiveReadout:
         self.overflows = 0
         self.results: dict[str, tuple[float, float, str]] = {}  # channel -> (f, delta, status)
         self.results_of = ""  # which hit and which look the f / delta columns show
-        self.hits: list[str] = []
         self._next_print = every_s
         self.every_s = every_s
         self._live: Live | None = None
@@ -128,16 +133,15 @@ class LiveReadout:
         itself: "unsure"; a decrement <= 0 is no decay and is "unsure" whatever its error)."""
         status = "final" if final else "so far"
         if np.isfinite(delta_se) and delta:  # short: an 80-column table
-            rel = abs(delta_se / delta)
-            if not final and (rel > UNSURE_REL_SE or delta < 0):
+            if not final and not is_sure(delta, delta_se):
                 status = "unsure"
-            status = f"{status} ±{100 * rel:.2g}%"  # the decrement's standard error, % of it
+            status = f"{status} ±{100 * abs(delta_se / delta):.2g}%"  # its SE, in % of it
         self.results[channel] = (f_hz, delta, status)
         self._refresh()
 
     def showing(self, text: str) -> None:
-        """Say which hit (and which look of it) the f and delta columns show, e.g. "hit 2, first
-        look 0.42 s into the decay" or "hit 2, final"."""
+        """Say which hit (and which look of it) the f and delta columns show, e.g. "hit 2: look
+        0.42 s in" or "hit 2: final"."""
         self.results_of = text
         self._refresh()
 
@@ -154,7 +158,7 @@ class LiveReadout:
             self.set_result(name, f, d, final=False, delta_se=se)
         if self._live is not None:
             return
-        sure = [(f, d) for f, d, se in gages.values() if d > 0 and se / d <= UNSURE_REL_SE]
+        sure = [(f, d) for f, d, se in gages.values() if is_sure(d, se)]
         if not sure:
             return
         f_med, d_med = np.median(np.array(sure), axis=0)
@@ -180,7 +184,6 @@ class LiveReadout:
 
     def hit(self, text: str) -> None:
         """Report a hit's status (detected, preliminary, accepted, rejected and why)."""
-        self.hits.append(text)
         # on a terminal too: printed above the live table, wrapped and kept in the scrollback
         # (the table's last lines alone cropped a long line and lost it at the next blow)
         self.console.print(text, highlight=False)
