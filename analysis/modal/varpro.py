@@ -211,6 +211,18 @@ def linear_amplitudes(
     return amp, off, rss
 
 
+def projected_gram(W: np.ndarray, QT: np.ndarray | None) -> np.ndarray | None:
+    """The Gram of ``W``'s rows (k, n) with their part in the span of ``QT``'s orthonormal rows
+    removed, ``W W^T - (W Q)(W Q)^T`` (k, k); None where a diagonal entry lost more than all but
+    1e-6 of ``W W^T``'s to the subtraction (a row nearly in Q's span: its digits are gone)."""
+    G0 = W @ W.T
+    G = G0
+    if QT is not None:
+        WQ = W @ QT.T
+        G = G0 - WQ @ WQ.T
+    return G if (G.diagonal() >= 1e-6 * G0.diagonal()).all() else None
+
+
 class Projector:
     """Least squares on the basis Φ: Cholesky of the column-scaled Gram, QR if ill-conditioned.
 
@@ -341,12 +353,8 @@ class _Problem:
         damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
                      out=W[:P])
         np.multiply(W[: 2 * K], self.t[None, :], out=W[P:])
-        G0 = W @ W.T
-        G = G0
-        if self.QfT is not None:
-            WQ = W @ self.QfT.T
-            G = G0 - WQ @ WQ.T
-        if not (G.diagonal() >= 1e-6 * G0.diagonal()).all():
+        G = projected_gram(W, self.QfT)
+        if G is None:
             if len(self._pool) < 4:
                 self._pool.append(W)
             return None

@@ -36,7 +36,14 @@ from scipy import linalg
 from scipy.linalg import LinAlgError, lapack
 from scipy.special import chdtri
 
-from ..modal.varpro import Projector, damped_basis, fit_modes_varpro, kaufman_weights, uniform_grid
+from ..modal.varpro import (
+    Projector,
+    damped_basis,
+    fit_modes_varpro,
+    kaufman_weights,
+    projected_gram,
+    uniform_grid,
+)
 
 __all__ = ["SignalModes", "fit_signals_at_poles"]
 
@@ -173,12 +180,8 @@ class _Held:
         W = np.empty((2 * c, self.t.size))
         damped_basis(self.t, f, d, 0, self.grid, out=W[:c])
         np.multiply(W[:c], self.t[None, :], out=W[c:])
-        G0 = W @ W.T
-        G = G0
-        if self.QT is not None:
-            WQ = W @ self.QT.T
-            G = G0 - WQ @ WQ.T
-        if not (G.diagonal() >= 1e-6 * G0.diagonal()).all():
+        G = projected_gram(W, self.QT)
+        if G is None:
             return None
         proj = Projector(None, gram=G[:c, :c])
         if proj.cho is None:
