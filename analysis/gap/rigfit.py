@@ -234,8 +234,13 @@ class MassScale:
         """Beyond :data:`MASS_SCALE_LIMIT` either way."""
         return not 1 / MASS_SCALE_LIMIT <= self.ratio <= MASS_SCALE_LIMIT
 
+    def check_lines(self) -> list[str]:
+        """The one "CHECK THE RIG" line ``rig fit`` and ``gap`` print when :attr:`absurd`, else
+        none."""
+        return [f"CHECK THE RIG: {self.text()}"] if self.absurd else []
+
     def text(self) -> str:
-        """The one line ``rig fit`` and ``gap`` print when :attr:`absurd`."""
+        """The line's text (:meth:`check_lines`)."""
         r = f"{self.ratio:.0f}" if self.ratio >= 10 else f"{self.ratio:.2g}"
         kg = (f" ({self.rig_mass_kg:.0f} kg in the rig against ~{self.rig_mass_kg / self.ratio:.0f} kg)"
               if math.isfinite(self.rig_mass_kg) else "")

@@ -154,7 +154,7 @@ def rig_check_lines(d: Diagnosis) -> list[str]:
     which no bound of the calibration reaches; none otherwise."""
     ml = d.model_level
     scale = None if ml is None or ml.fit is None else ml.fit.scale
-    return [f"CHECK THE RIG: {scale.text()}"] if scale is not None and scale.absurd else []
+    return [] if scale is None else scale.check_lines()
 
 
 def model_level_lines(d: Diagnosis) -> list[str]:

@@ -111,7 +111,7 @@ def fit_lines(mf: ModeFit, path: Path) -> list[str]:
                    "constants' sds are from the damping ratios alone, fitted after the others)")
     out.append(f"solver: {mf.solver_text()}")
     out.append(f"model form left: {mf.form_text()}")
-    if mf.scale is not None and mf.scale.absurd:
-        out.append(f"CHECK THE RIG: {mf.scale.text()}")
+    if mf.scale is not None:
+        out += mf.scale.check_lines()
     out.append(f"wrote {path}")
     return out
