@@ -284,7 +284,7 @@ def declared_tone(findings: list[dict], location: dict | None) -> dict | None:
 
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
            findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
-           splits: Sequence[dict] = ()) -> Answer:
+           splits: Sequence[dict] = (), coupled: Sequence[dict] = ()) -> Answer:
     """The one report's answer (:class:`Answer`), what ``ramdaq gap`` prints and the benchmark
     scores: the model layer's (:func:`model_answer`), which a credible data-only finding
     (:func:`credible`) replaces when the model names no effect or blames a sensor (the data layer
@@ -298,7 +298,31 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     still misses, as :func:`model_answer` reads them. ``splits``: the model level's modes split in
     two (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits` as JSON: two identified modes of one
     shape where the calibrated rig has one), which answer a gap the model leaves unexplained
-    (before the form error would make it "none") when no data-only finding overrides it."""
+    (before the form error would make it "none") when no data-only finding overrides it.
+    ``coupled``: the model level's hull modes the rudder does not ride rigidly
+    (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.coupled` as JSON), which answer "hull_coupling"
+    where the layers would otherwise say "none" (model form) or "unexplained" on a trial with a
+    gap (:func:`coupled_answer`)."""
+    out = _answer(model, candidates, where, form_gages, findings, form_modes, splits)
+    if model is not None and coupled and out.named in ("none", "unexplained") and out.by == "model":
+        return coupled_answer(max(coupled, key=lambda c: c["statistic"] / c["chance_level"]), candidates)
+    return out
+
+
+def coupled_answer(c: dict, candidates: list[dict]) -> Answer:
+    """The answer "hull_coupling" from the model level's coupled mode (as JSON), placed at its
+    gages and mode, all windows (the mode rings through the decay); its closure the effect
+    search's hull_coupling's."""
+    cd = next((x for x in candidates if x["name"] == "hull_coupling"), None)
+    f = c["f_hz"]
+    loc = {"gages": list(c["gages"]), "window": "all", "band_hz": f, "effect_mode_hz": f,
+           "band": f"{f:.1f} Hz"}
+    return Answer("hull_coupling", "model", loc, cd["closed_held"] if cd else None)
+
+
+def _answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
+            findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]],
+            splits: Sequence[dict]) -> Answer:
     out = model_answer(model, candidates, where, form_gages, form_modes)
     named = out.named
     if named == "ambient_tone" and (d := declared_tone(findings, out.location)):

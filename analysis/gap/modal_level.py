@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 import scipy.optimize
+import scipy.stats
 
 from ..modal.identify import identify_modes
 from ..model.response import ModalForm, modal_form
@@ -395,3 +396,91 @@ def _pair(tm: TrialModes, mm: ModelModesAtGages, rig: Rig, i: int, m: int) -> Mo
                     f_model_hz=float(mm.f_hz[m]), zeta_id=float(tm.zeta[i]),
                     zeta_id_se=float(tm.zeta_se[i]), zeta_model=float(mm.zeta[m]),
                     mac=mac(a, b), mac_rudder=by["rudder"], mac_stock=by["stock"], mac_hull=by["hull"])
+
+
+# -- a hull mode the rudder does not ride rigidly: coupling --------------------------------------
+HULL_MODE_SHARE = 0.5
+"""A mode is the hull's when at least half its shape's energy (sum of |phi|^2) is on hull gages."""
+COUPLED_NONRIGID = 0.05
+"""The least share of the rudder's and stock's shape energy off a rigid-body motion that reads
+as their own deformation taking part in a hull mode: gage positions off by up to 5 cm on a
+rudder of 2-3 m span move a rigid motion's fit by ~2 % of amplitude (~0.1 % of energy), and the
+clean modal-family trials' hull modes, which carry the rudder rigidly, came to 0.000-0.015 (dev
+seeds 51000-51003). A coupled mode's rudder deformation is a share of order one."""
+COUPLED_P = 1e-3
+"""Chance level of the rigid-ride test: the chi-square quantile at 1 - P (Bonferroni over the
+trial's modes) of the residual's degrees of freedom."""
+
+
+@dataclass(frozen=True)
+class Coupled:
+    """An identified mode at ``f_hz`` (damping ``zeta``) that moves the hull (``hull_share`` of
+    its shape energy on hull gages) while the rudder and stock do not ride it as one rigid body
+    (``nonrigid``: the share of their shape energy off the best rigid-body motion; ``statistic``
+    that residual over its noise expectation, against ``chance`` its chi-square quantile) and the
+    calibrated rig has no mode of that shape: the rudder's own flexibility takes part in a hull
+    mode -- hull coupling -- which no constant of a rig whose hull modes carry the rudder as a
+    passenger makes. ``gages``: where its shape is at least half its largest entry, largest first."""
+
+    f_hz: float
+    zeta: float
+    hull_share: float
+    nonrigid: float
+    statistic: float
+    chance: float
+    gages: tuple[int, ...]
+
+    def to_json(self) -> dict:
+        return {"f_hz": self.f_hz, "zeta": self.zeta, "hull_share": self.hull_share,
+                "nonrigid": self.nonrigid, "statistic": self.statistic, "chance_level": self.chance,
+                "gages": list(self.gages)}
+
+
+def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray) -> tuple[float, float, float]:
+    """How far a shape's entries at athwartship gages of one assembly (``pos`` (n, 3) m) are from
+    a rigid-body motion (a translation and the two rotations that move them athwartship: basis
+    1, x, z): (share of the shape energy off it, residual over its noise expectation from the
+    entries' standard errors ``se``, the chi-square chance level of that ratio at
+    :data:`COUPLED_P`). NaNs when fewer than five gages leave the test no freedom."""
+    n = len(shape)
+    if n < 5:
+        return float("nan"), float("nan"), float("nan")
+    A = np.c_[np.ones(n), pos[:, 0], pos[:, 2]]
+    coef, *_ = np.linalg.lstsq(A, shape, rcond=None)
+    r = shape - A @ coef
+    energy = float(np.vdot(shape, shape).real)
+    off = float(np.vdot(r, r).real)
+    dof = 2 * (n - 3)        # complex entries: two per gage, less the three complex coefficients
+    noise = max(float(np.sum(se**2)) * (n - 3) / n, 1e-30)
+    chance = float(scipy.stats.chi2.ppf(1 - COUPLED_P, dof) / dof)
+    return off / max(energy, 1e-30), off / noise / dof, chance
+
+
+def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
+    """The identified modes that are hull coupling (:class:`Coupled`) against the pairing ``cmp``
+    of the calibrated rig: decaying, found in three quarters of the impacts or more, the hull's
+    (:data:`HULL_MODE_SHARE`), unpaired or paired below chance (MAC under 1 / n_gages, what two
+    unrelated shapes give), and the rudder's and stock's athwartship gages off a rigid ride by at
+    least :data:`COUPLED_NONRIGID` of their energy and beyond the test's chance level."""
+    gs = rig.gages_by_channel()
+    body = np.array([g.body for g in gs])
+    ride = np.array([g.body != "hull" and "z" not in g.axis for g in gs])
+    pos = np.array([g.position_m for g in gs], float)
+    good = {p.i_id for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
+    out = []
+    for i in range(tm.n_modes):
+        if i in good or tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts:
+            continue
+        s = tm.shapes[:, i]
+        e = np.abs(s) ** 2
+        hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
+        if hull < HULL_MODE_SHARE:
+            continue
+        share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride])
+        if not (share >= COUPLED_NONRIGID and stat > chance):
+            continue
+        a = np.abs(s)
+        big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
+        out.append(Coupled(float(tm.f_hz[i]), float(tm.zeta[i]), hull, share, stat, chance,
+                           tuple(tm.gage_numbers[k] for k in big)))
+    return out
