@@ -206,6 +206,9 @@ def test_a_coupled_mode_answers_hull_coupling_where_the_model_says_form_or_unexp
     a = answer("unexplained", cands, None, {8, 4}, [], (), [], [c])
     assert a.named == "hull_coupling" and a.location["gages"] == [5, 9, 13, 14] and a.closed_held == 0.2
     assert answer("unexplained", cands, None, {8, 4}, [], (), [], []).named == "none"
+    # the effect search's own hull_coupling at a residual peak elsewhere: placed at the mode
+    b = answer("hull_coupling", cands, None, set(), [], (), [], [c])
+    assert b.named == "hull_coupling" and b.location["gages"] == [5, 9, 13, 14] and b.closed_held == 0.2
     # no gap beyond noise: nothing to name
     assert answer(None, cands, None, set(), [], (), [], [c]).named == "none"
     # a data-only finding that answers (a double hit well above chance) stands

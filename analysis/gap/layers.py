@@ -302,9 +302,13 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     ``coupled``: the model level's hull modes the rudder does not ride rigidly
     (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.coupled` as JSON), which answer "hull_coupling"
     where the layers would otherwise say "none" (model form) or "unexplained" on a trial with a
-    gap (:func:`coupled_answer`)."""
+    gap, and place the model's own hull_coupling at that mode (:func:`coupled_answer`)."""
     out = _answer(model, candidates, where, form_gages, findings, form_modes, splits)
-    if model is not None and coupled and out.named in ("none", "unexplained") and out.by == "model":
+    if model is not None and coupled and out.by == "model" and out.named in ("none", "unexplained",
+                                                                             "hull_coupling"):
+        # the effect search's own hull_coupling may sit at a residual peak the rig's form leaves
+        # (modal dev 59000: named at 22.7 Hz on rudder gages, the coupled mode at 6.0 Hz on the
+        # hull's): the identified coupled mode says where the coupling is
         return coupled_answer(max(coupled, key=lambda c: c["statistic"] / c["chance_level"]), candidates)
     return out
 
