@@ -54,7 +54,6 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
                 ModeRef(*map(float, m)) for m in zip(tm.f_hz, tm.f_se_hz, tm.zeta, tm.zeta_se, strict=True)))
             if level.fit.form:
                 settings = replace(settings, min_closure=max(settings.min_closure, FORM_MIN_CLOSURE))
-            settings = replace(settings, mode_hints=tuple(("hull_coupling", c.f_hz) for c in level.coupled()))
         say(level.statement())
     data, note = data_only(lt, td, prep.get("pre_s", 1.0), progress) if data_checks else (None, None)
     if not keep_counts:

@@ -117,10 +117,6 @@ class Settings:
     """The trial's identified modes when the rig was calibrated to them first (the model level):
     a time-history calibration that moves the model's modes away from them is not kept
     (:func:`~ramdaq.analysis.gap.calibrate.departs_from_modes`). Empty: no such check."""
-    mode_hints: tuple[tuple[str, float], ...] = ()
-    """(effect name, Hz): identified modes the model level read as that structural effect (a
-    hull mode the rudder does not ride rigidly: hull_coupling), where its search places the
-    effect's mode besides the residual's peaks (``Forward.cache["mode_hints"]``)."""
 
 
 @dataclass(frozen=True)
@@ -589,7 +585,6 @@ def _calibrated(td: TrialData, settings: Settings, say: Callable[[str], None]
     fit0 = fw0.fit(np.zeros(len(fw0.params)))
     sigma = noise_model(fw0, fit0.resid).sigma
     fw = Forward(td, np.maximum(sigma, 1e-12))
-    fw.cache["mode_hints"] = settings.mode_hints
     say(f"calibrating {len(fw.params)} constants on {int(td.fitted.sum())} of {td.n_seg} impacts")
     theta_pre = prefit_frequencies(fw)
     base = _kept(fw, calibrate(fw, theta0=theta_pre), settings)

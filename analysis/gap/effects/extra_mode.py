@@ -60,12 +60,8 @@ class _ExtraMode(Effect):
     def placements(self, fw, fit) -> list[Placement]:
         avoid = [f for _, f in compared_modes(fw, fit)]
         peaks = residual_peaks(fw, fit, ("early", "late"), 3, avoid_hz=avoid)
-        # identified modes the model level read as this effect (a mode the calibrated rig lacks,
-        # at a frequency the residual's strongest peaks may not reach): placed there too
-        hints = [f for name, f in fw.cache.get("mode_hints", ()) if name == self.name
-                 and all(abs(f - p) > 0.04 * p for p in peaks)]
         if not self.above_band:
-            return [self._placement(fw, [f], 0.75 * f, 1.25 * f) for f in peaks + hints]
+            return [self._placement(fw, [f], 0.75 * f, 1.25 * f) for f in peaks]
         # a stiff gear on a light tiller rings far above the compared band, where only its
         # compliance shows (the stock's top turns): one placement spans both, started at the
         # residual's peaks and above the band
