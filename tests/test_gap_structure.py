@@ -164,6 +164,11 @@ def test_an_unexplained_gap_with_a_split_answers_split_mode():
     hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
            "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
     assert answer("unexplained", cands, None, set(), [hit], (), [split]).named == "double_hit"
+    # blows of different force that ring differently (an amplitude-dependent stiffness the decays
+    # did not name): two poles of one shape are its two stiffnesses, not a split
+    slope = {"check": "homogeneity", "layer": "nonlinearity", "gages": [1, 4], "window": "decay",
+             "statistic": 30.0, "chance_level": 3.0, "mode_hz": [23.4], "more": {}}
+    assert answer("unexplained", cands, None, set(), [slope], (), [split]).named != "split_mode"
 
 
 def with_hull_mode(tm: TrialModes, rig, f_hz: float, ride: np.ndarray) -> TrialModes:

@@ -298,7 +298,8 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     still misses, as :func:`model_answer` reads them. ``splits``: the model level's modes split in
     two (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits` as JSON: two identified modes of one
     shape where the calibrated rig has one), which answer a gap the model leaves unexplained
-    (before the form error would make it "none") when no data-only finding overrides it.
+    (before the form error would make it "none") when no data-only finding overrides it and the
+    trial is homogeneous across blows (:func:`not_homogeneous`).
     ``coupled``: the model level's hull modes the rudder does not ride rigidly
     (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.coupled` as JSON), which answer "hull_coupling"
     where the layers would otherwise say "none" (model form) or "unexplained" on a trial with a
@@ -332,7 +333,10 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
     if named == "ambient_tone" and (d := declared_tone(findings, out.location)):
         return Answer("none", "data", out.location, None, d)    # the environment the rig declares
     overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
-    if model == "unexplained" and splits and not overriding:
+    if model == "unexplained" and splits and not overriding and not not_homogeneous(findings):
+        # a split is two modes of a linear structure; where the blows of different force show
+        # an amplitude-dependent structure, two poles of one shape are its two stiffnesses (a
+        # crack open and closed: modal dev 61000's 11.5 Hz pair 18.7 % apart)
         return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     if named == "unexplained":
         finds = overriding or data_unexplained(findings)
