@@ -353,21 +353,34 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 def cmd_gap(args: argparse.Namespace) -> int:
     """Sim-to-real gap diagnosis of a recording (``ramdaq gap-benchmark`` proves it)."""
     from ...analysis.gap.diagnose import Settings
-    from .gap import parse_effects, rig_record, run_gap, summary_lines, write_report
+    from .gap import (
+        earlier_report,
+        parse_effects,
+        remove_stale,
+        rig_record,
+        run_gap,
+        summary_lines,
+        write_report,
+    )
     from .progress import progress_bar
 
     effects = parse_effects(args.effects)
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
+    earlier = earlier_report(out, args.overwrite)  # refused before the minutes of the diagnosis
     with progress_bar(f"gap diagnosis of {src.name}", None):  # steps unknown: spinner and time
         lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
                             progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
                             post_max_s=args.post_s, held_out_every=args.held_out_every)
     files = write_report(d, out, plots=not args.no_plots, source=str(src), rig=rig_record(lt, args.rig))
+    stale = remove_stale(earlier, files)
     print("\n".join(summary_lines(d)))
     plural = "s" if len(files) != 1 else ""
-    print(f"\nwrote {len(files)} file{plural} to {out}/ (gap.json with every number)")
+    print(f"\nwrote {len(files)} file{plural} to {out}/ (gap.json with every number)"
+          + (f", replacing the earlier diagnosis there ({len(stale)} of its files not written again "
+             f"removed: {', '.join(p.name for p in stale)})" if stale else
+             ", replacing the earlier diagnosis there" if earlier else ""))
     return EXIT_OK
 
 
@@ -857,6 +870,8 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
     gp.add_argument("--out", help="output folder (default FILE_gap/)")
     gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    gp.add_argument("--overwrite", action="store_true",
+                    help="replace an earlier diagnosis in the --out folder (refused without it)")
     gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered); "
                     "'none': no library effect, only the data-only checks and the rig's model form "
                     "(gap-benchmark's 'none' is its class of trials made without an effect)")

@@ -272,6 +272,31 @@ def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "
     return files
 
 
+def earlier_report(out: Path, overwrite: bool) -> list[Path]:
+    """The files an earlier ``ramdaq gap`` left in ``out`` (gap.json, gap_*.png), checked before
+    the minutes of a diagnosis: FileExistsError naming the folder and ``--overwrite`` when there
+    are any and ``overwrite`` is not set (as ``ramdaq trial`` refuses an existing recording).
+    NotADirectoryError when ``out`` is a file."""
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, "is not a folder; --out takes the folder gap.json goes in", str(out))
+    found = sorted([*out.glob("gap.json"), *out.glob("gap_*.png")]) if out.is_dir() else []
+    if found and not overwrite:
+        raise FileExistsError(f"{out}/ holds an earlier gap diagnosis ({found[0].name}"
+                              + (f" and {len(found) - 1} more" if len(found) > 1 else "")
+                              + "); --overwrite replaces it")
+    return found
+
+
+def remove_stale(earlier: list[Path], written: list[Path]) -> list[Path]:
+    """Delete the earlier run's files this run did not write again (its plots after a
+    ``--no-plots`` run), so that the folder holds one diagnosis; returns them, for the line
+    that says so."""
+    stale = [p for p in earlier if p not in set(written) and p.exists()]
+    for p in stale:
+        p.unlink()
+    return stale
+
+
 def rig_record(lt: LoadedTrial, given: str | Path | None) -> dict:
     """The rig a diagnosis was held against, for gap.json: its name, medium and where it came
     from (the file given with ``--rig``, or the one the recording carries)."""
