@@ -128,3 +128,23 @@ def test_overwrite_replaces_the_earlier_diagnosis_and_says_so(heavy_none):
     assert not (out / "gap_map.png").exists()
     assert text.rstrip().splitlines()[-1].endswith(
         "replacing the earlier diagnosis there (1 of its files not written again removed: gap_map.png)")
+
+
+def test_the_verdict_is_a_short_first_line_and_the_model_form_follows_once(heavy_none):
+    """tester10: the verdict was one ~900-character line with the model form in it, whose
+    calibration outcome the model level's line said again. Now the answer is a first line of
+    at most ~120 characters, each form error its own line, none of it printed twice; gap.json's
+    headline keeps the whole statement."""
+    code, text, rep, _ = heavy_none
+    assert code == 0, text
+    lines = text.splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("verdict: "))
+    assert len(lines[i]) <= 120 and "model form" not in lines[i], lines[i]
+    assert lines[i + 1].startswith("  model form")
+    form = lines[i + 2:]
+    form = form[:next(k for k, ln in enumerate(form) if not ln.startswith("    "))]
+    assert form, lines[i + 1]            # the x10 rudder leaves form errors, one line each
+    for ln in form:
+        assert text.count(ln.strip()) == 1 and ln.strip() in rep["headline"], ln
+    assert "(calibration to the modes" not in text         # the model level's line says it
+    assert "(calibration to the modes" in rep["headline"]  # gap.json as it was
