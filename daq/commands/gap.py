@@ -174,7 +174,7 @@ def model_level_lines(d: Diagnosis) -> list[str]:
     text = ", ".join(f"{p.name} x{p.factor:.3f}"
                      + (f" +-{100 * p.sd:.1f} %" if math.isfinite(p.sd) else "")
                      + (" AT ITS BOUND" if p.at_bound else "") for p in moved)
-    out = [f"{head} calibrated to the trial's modes ({ml.fit.stop.value}): "
+    out = [f"{head} calibrated to the trial's modes ({ml.fit.outcome()}): "
            f"{text or 'no constant moved beyond 1 %'}"]
     if held:
         out.append(f"    held at the rig's values (the modes do not pin them): {', '.join(held)}")
