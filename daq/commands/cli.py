@@ -460,7 +460,7 @@ def _import_file(args: argparse.Namespace) -> int:
     print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
-    for line in _read_notes(imp):
+    for line in _read_notes(imp, rig_given=rig_out is None):
         print(line, file=sys.stderr if line.startswith("warning:") else sys.stdout)
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
@@ -516,21 +516,38 @@ def _counted(per_channel: dict[str, int], most: int = 4) -> str:
     return text + (f" and {len(items) - most} more" if len(items) > most else "")
 
 
-def _read_notes(imp: dict) -> list[str]:
-    """What the CSV reader made of the file's dialect: lines skipped, decimal commas."""
+def _medium_lines(imp: dict, rig_given: bool) -> list[str]:
+    """The medium the import applied and what decided it, in one line: the file (its CSV
+    header, TDMS property, UFF header: where), ``--medium``, or the rig when the file states
+    none (not said for a channels-only rig, whose line names its medium)."""
+    stated = imp.get("medium_stated")
+    if not stated:
+        return []
+    where = imp.get("medium_where") or "the file's header"
+    if stated["file"] is None:
+        if stated["by"] == "given":
+            return [f"medium {stated['applied']} as --medium gives (the file states none)"]
+        return [f"medium {stated['applied']}, the rig's: the file states none (--medium overrides)"] \
+            if rig_given else []
+    if stated["by"] == "file" and stated["file"] != stated["rig"]:
+        return [f"medium {stated['file']}, as {where} states (the rig says {stated['rig']}; "
+                "--medium overrides)"]
+    if stated["by"] == "given" and stated["file"] != stated["applied"]:
+        return [f"warning: medium {stated['applied']} as --medium gives, but {where} states "
+                f"{stated['file']}"]
+    return [f"medium {stated['file']}, as {where} states"]
+
+
+def _read_notes(imp: dict, rig_given: bool = True) -> list[str]:
+    """What the reader made of the file: the medium (:func:`_medium_lines`); the CSV
+    dialect: lines skipped, decimal commas."""
     out = []
     skipped = imp.get("skipped_lines")
     if skipped:
         n, a, b = skipped["count"], skipped["first"], skipped["last"]
         out.append(f"skipped {n} line{'s' if n > 1 else ''} above the column names (line"
                    f"{f's {a}-{b}' if b > a else f' {a}'}: a header block, not data)")
-    stated = imp.get("medium_stated")
-    if stated and stated["by"] == "file" and stated["file"] != stated["rig"]:
-        out.append(f"medium {stated['file']}, as the file's header states (the rig says "
-                   f"{stated['rig']}; --medium overrides)")
-    elif stated and stated["by"] == "given" and stated["file"] != stated["applied"]:
-        out.append(f"warning: medium {stated['applied']} as --medium gives, but the file's "
-                   f"header states {stated['file']}")
+    out += _medium_lines(imp, rig_given)
     dropped = imp.get("dropped_with_gaps", {})
     if dropped.get("good"):
         good, lost = dropped["good"], dropped["missing"]
