@@ -587,7 +587,11 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                                     or args.force_channel)
     made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                        units=args.units, force_channel=force,
-                       medium=args.medium or found.medium or "air", file_units=found.units)
+                       medium=args.medium or found.medium or "air", file_units=found.units,
+                       anti_alias=found.anti_alias)
+    if found.anti_alias is not None:
+        print(f"anti-alias filter order {found.anti_alias[0]} at {found.anti_alias[1]:g} Hz, as the "
+              f"file states: written into {rig_out.name}, so onsets have its delay removed")
     for unit in sorted({u for _, u in made.overridden}):
         names = [c for c, u in made.overridden if u == unit]
         print(f"warning: {_channels_are(names)} in "
