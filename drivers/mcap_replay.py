@@ -702,6 +702,13 @@ class McapReplayDevice(Device):
         return self._scanner.good_bytes if self._scanner is not None else 0
 
     @property
+    def chunks_read(self) -> tuple[int, int]:
+        """Chunks read so far by the block iterator: decompressed, and stepped over unread (the
+        summary's chunk index says they hold no block)."""
+        scanner = self._scanner
+        return (scanner.chunks, scanner.skipped) if scanner is not None else (0, 0)
+
+    @property
     def rig_toml(self) -> str:
         """The rig file recorded with the stream (``""`` if none)."""
         return self.info.rig_toml
