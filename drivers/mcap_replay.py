@@ -583,7 +583,8 @@ class McapReplayDevice(Device):
             )
         self._meta = dict(meta[fmt.STREAM_METADATA])
         self._channels = {i: ch.topic for i, ch in summary.channels.items()}
-        if _data_crc(f, end):  # stepped over only where the data section's CRC checks them
+        if end.summary_ok and _data_crc(f, end):  # only where a CRC checks the chunk index that
+            # says which chunks hold no block, and the data section's CRC the chunks stepped over
             self._no_blocks = _chunks_without(summary, fmt.BLOCK_TOPIC)
         try:
             return fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())

@@ -285,3 +285,31 @@ def test_impossible_stream_metadata_is_refused(tmp_path, key, value, what):
     meta = {**fmt.stream_info_to_metadata(stream_info()), key: value}
     with pytest.raises(NotARamdaqRecording, match=what):
         fmt.stream_info_from_metadata(meta)
+
+
+def test_chunks_are_stepped_over_only_where_crcs_check_the_index_and_their_bytes(tmp_path):
+    """A file whose summary and data section carry no CRC (another writer's): nothing would
+    check the chunk index that says which chunks hold no block, nor the chunks stepped over,
+    so every chunk is read, and the blocks come back the same."""
+    blocks = stream(6, SEED, n_samples=N_SAMPLES)
+    paths = {}
+    for crcs in (True, False):
+        paths[crcs] = path = tmp_path / f"crcs-{crcs}.mcap"
+        with open(path, "wb") as f:
+            w = Writer(f, enable_crcs=crcs, enable_data_crcs=crcs)
+            w.start()
+            w.add_metadata(fmt.STREAM_METADATA, fmt.stream_info_to_metadata(stream_info()))
+            ch = w.register_channel(fmt.BLOCK_TOPIC, "protobuf", w.register_schema(
+                fmt.BLOCK_SCHEMA_NAME, "protobuf", fmt.block_schema_data()))
+            view = w.register_channel("/ramdaq/gages", "json", w.register_schema("g", "jsonschema", b"{}"))
+            for b in blocks:
+                w.add_message(ch, log_time=b.t0_ns, data=fmt.encode_block(b), publish_time=b.t0_ns)
+                w.flush()  # a chunk of the block, then one of the view
+                w.add_message(view, log_time=b.t0_ns, data=b"{}", publish_time=b.t0_ns)
+                w.flush()
+            w.finish()
+    for crcs, stepped in ((True, 6), (False, 0)):
+        with McapReplayDevice(paths[crcs]) as dev:
+            got = list(dev)
+            assert dev.chunks_read == (12 - stepped, stepped)
+        assert all(a.same_as(b) for a, b in zip(got, blocks, strict=True))
