@@ -199,13 +199,13 @@ HULL = {"name": "hull_coupling", "dbic": -3.8e6, "closed_held": 0.65, "closed_fi
 
 
 def test_a_line_before_the_blows_is_an_ambient_tone_whatever_the_model_names():
-    # modal development trial (seed 155000): an 11.7 Hz line in every pre window, the first
+    # modal check seed 155000: an 11.7 Hz line in every pre window, the first
     # included, at 4087 against its chance level 31.2 (131x); the model level named hull_coupling
     tone = _finding("ambient_tone", "excitation", (5, 9, 13, 14), 4087.5, 31.16, (11.733,), window="pre")
     a = answer("hull_coupling", [HULL], None, {1, 2}, [tone])
     assert a.named == "ambient_tone" and a.by == "data" and a.location["gages"] == [5, 9, 13, 14]
     assert a.location["window"] == "pre"
-    # seed 155001: a 5.0 Hz tone at 29x beside a slope across the blows at its frequency (the
+    # check seed 155001: a 5.0 Hz tone at 29x beside a slope across the blows at its frequency (the
     # tone's share does not grow with the blow) and the model "unexplained": the tone answers
     slope = _law("slope", 39.3)
     assert answer("unexplained", [], None, set(), [tone, slope]).named == "ambient_tone"
@@ -220,7 +220,7 @@ def test_a_line_before_the_blows_is_an_ambient_tone_whatever_the_model_names():
 
 
 def test_a_sensor_finding_that_closes_held_out_outranks_a_structural_update_on_a_wrong_rig():
-    # modal development trial (seed 154001): a 3 Hz high-pass on five gages, each at 93-153x its
+    # modal check seed 154001: a 3 Hz high-pass on five gages, each at 93-153x its
     # chance level and closing 94-99.6 % of its residual on the held-out impact; the model level,
     # its rig calibrated with form error left on gages 6, 2, 12, 3, named tiller (79 % closed)
     tiller = {"name": "tiller", "dbic": -7.7e8, "closed_held": 0.79, "closed_fit": 0.79,
@@ -238,7 +238,7 @@ def test_a_sensor_finding_that_closes_held_out_outranks_a_structural_update_on_a
 
 
 def test_a_second_blow_that_explains_no_held_out_blow_is_not_named():
-    # modal development trials: a double hit read at 300-700x chance on a crack trial closed
+    # modal check seed 160000: a double hit read at 572x chance on a crack trial closed
     # -19 of its own residual on the held-out blow (a bilinear stiffness is no second blow); the
     # double-hit trials' closed 71-84 %
     crack = _finding("double_hit", "excitation", tuple(range(1, 17)), 15893.3, 27.81, (4.04,), -19.4,

@@ -206,7 +206,8 @@ def fails_held_out(f: dict) -> bool:
     impacts, does not explain the held-out ones -- the half the model layer asks of an effect
     before it names one. A double hit read at 300-700x chance on a modal crack or rattle trial
     (a bilinear stiffness's or an impact's response, not a second blow) closed -0.4 to -19 of its
-    residual held out, the modal double hits 0.71-0.84 (issue 17, development trials)."""
+    residual held out, the modal double hits 0.71-0.84 (issue 17: modal check seed 160000 and
+    the earlier sessions' stored dev and check trials)."""
     v = f.get("closed_held")
     return v is not None and math.isfinite(float(v)) and float(v) < UNEXPLAINED_CLOSURE
 
@@ -308,7 +309,7 @@ def ambient_first(findings: list[dict]) -> list[dict]:
     its chance level. No structure rings before it is struck, so no model update (hull coupling,
     a tiller) and no nonlinearity explains it, whatever its frequency; a line the blows switch on
     (a ``line_persistence`` finding within :data:`SAME_LINE_HZ`: down before the next blow, an
-    effect outside the library) is not one. Issue 17, modal development trials: an 11.8 Hz hull
+    effect outside the library) is not one. Issue 17, modal check seeds 155000-1: an 11.8 Hz hull
     tone at 131x its chance level was named hull_coupling by the model level; a 5.0 Hz one at 29x
     read as a mode whose amplitude grows as the blow^0.20 -- the tone's share does not grow with
     the blow."""
@@ -324,7 +325,7 @@ def held_out_sensors(findings: list[dict]) -> list[dict]:
     other impacts, closing at least :data:`~ramdaq.analysis.gap.verdict.UNEXPLAINED_CLOSURE` of
     their check's residual on the held-out ones (the same a-priori half the model layer asks of
     an effect). The data layer rests on the recorded values and the gages' positions alone; the
-    model's update is fitted to a rig already known wrong (issue 17, modal development trial: a
+    model's update is fitted to a rig already known wrong (issue 17, modal check seed 154001: a
     3 Hz high-pass on five gages at 93-153x chance, each closing 94-99.6 % held out, was named
     tiller)."""
     return [f for f in credible(findings) if f.get("layer") == Layer.SENSOR
