@@ -219,7 +219,7 @@ def test_a_line_before_the_blows_is_an_ambient_tone_whatever_the_model_names():
     assert answer("hull_coupling", [HULL], None, set(), [weak]).named == "hull_coupling"
 
 
-def test_a_sensor_finding_that_closes_held_out_outranks_a_structural_update_on_a_wrong_rig():
+def test_a_data_finding_that_closes_held_out_outranks_a_structural_update_on_a_wrong_rig():
     # modal check seed 154001: a 3 Hz high-pass on five gages, each at 93-153x its
     # chance level and closing 94-99.6 % of its residual on the held-out impact; the model level,
     # its rig calibrated with form error left on gages 6, 2, 12, 3, named tiller (79 % closed)
@@ -235,6 +235,14 @@ def test_a_sensor_finding_that_closes_held_out_outranks_a_structural_update_on_a
     assert answer("tiller", [tiller], None, set(), hp).named == "tiller"
     poor = [_finding("highpass", "sensor", (5,), 1606.0, 17.34, (7.1,), 0.3)]
     assert answer("tiller", [tiller], None, form, poor).named == "tiller"
+    # a second blow likewise (modal development seed 57001: 18 ms after the first, 916x its
+    # chance level, closing 74 % held out, named hull_coupling, 54 % closed, by the model)
+    hull = {"name": "hull_coupling", "dbic": -2.1e5, "closed_held": 0.54, "closed_fit": 0.54,
+            "location": {"gages": [6, 8], "window": "early"}}
+    dh = _finding("double_hit", "excitation", tuple(range(1, 17)), 25473.0, 27.81, (4.35,), 0.736,
+                  window="early")
+    assert answer("hull_coupling", [hull], None, {4, 6, 9, 10}, [dh]).named == "double_hit"
+    assert answer("hull_coupling", [hull], None, set(), [dh]).named == "hull_coupling"
 
 
 def test_a_second_blow_that_explains_no_held_out_blow_is_not_named():

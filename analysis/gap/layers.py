@@ -318,20 +318,29 @@ def ambient_first(findings: list[dict]) -> list[dict]:
             and f["mode_hz"] and not any(abs(f["mode_hz"][0] - h) <= SAME_LINE_HZ for h in switched)]
 
 
-def held_out_sensors(findings: list[dict]) -> list[dict]:
-    """The credible data-only sensor findings (as JSON, :func:`credible`) that outrank a model
-    layer's structural update on a rig that carries form error: at least
-    :data:`PRECEDENCE_STRENGTH` times their chance level, and their own correction, fitted on the
-    other impacts, closing at least :data:`~ramdaq.analysis.gap.verdict.UNEXPLAINED_CLOSURE` of
-    their check's residual on the held-out ones (the same a-priori half the model layer asks of
-    an effect). The data layer rests on the recorded values and the gages' positions alone; the
-    model's update is fitted to a rig already known wrong (issue 17, modal check seed 154001: a
-    3 Hz high-pass on five gages at 93-153x chance, each closing 94-99.6 % held out, was named
-    tiller)."""
-    return [f for f in credible(findings) if f.get("layer") == Layer.SENSOR
+def held_out_data(findings: list[dict]) -> list[dict]:
+    """The credible data-only findings (as JSON, :func:`credible`) of a sensor or a second blow
+    (:data:`HELD_OUT_EXCITATION`) that outrank a model layer's structural update on a rig that
+    carries form error: at least :data:`PRECEDENCE_STRENGTH` times their chance level, and their
+    own correction, fitted on the other impacts, closing at least
+    :data:`~ramdaq.analysis.gap.verdict.UNEXPLAINED_CLOSURE` of their check's residual on the
+    held-out ones (the same a-priori half the model layer asks of an effect). The data layer
+    rests on the recorded values and the gages' positions alone; the model's update is fitted to
+    a rig already known wrong (issue 17: modal check seed 154001, a 3 Hz high-pass on five gages
+    at 93-153x chance, each closing 94-99.6 % held out, was named tiller; modal development seed
+    57001, a second blow 18 ms after the first at 916x chance closing 74 % held out, was named
+    hull_coupling)."""
+    return [f for f in credible(findings)
+            if (f.get("layer") == Layer.SENSOR or f["check"] in HELD_OUT_EXCITATION)
             and data_effect(f) not in (None, "unexplained") and strength(f) >= PRECEDENCE_STRENGTH
             and f.get("closed_held") is not None and math.isfinite(float(f["closed_held"]))
             and float(f["closed_held"]) >= UNEXPLAINED_CLOSURE]
+
+
+HELD_OUT_EXCITATION = frozenset({"double_hit"})
+"""Data-only excitation checks that measure their own held-out closure and name a library
+effect (a second blow): with the sensor checks, what :func:`held_out_data` weighs against a
+structural update."""
 
 
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
@@ -391,7 +400,7 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
             on = set((out.location or {}).get("gages") or [])
             strong = [f for f in finds if unconf and strength(f) >= PRECEDENCE_STRENGTH
                       and not set(f["gages"]) & on]
-            held = held_out_sensors(findings) if form_gages else []
+            held = held_out_data(findings) if form_gages else []
             if not laws and not strong and not held:
                 return out
             finds = laws or strong or held
