@@ -355,7 +355,11 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     (:func:`told_law`) well above chance: no linear model update makes a decrement grow as
     1/amplitude or a frequency move with it (issue 17: a modal friction trial read Coulomb's law
     at 20.5x its chance level while the model named hull_coupling). Of several, the
-    strongest against its chance level answers. ``form_modes``: the modes the calibrated rig
+    strongest against its chance level answers. Before all of these, a line found before the
+    blows well above chance answers ambient_tone (:func:`ambient_first`); on a rig left with form
+    error (``form_gages``), a sensor finding or a second blow whose own correction closes half its
+    residual held out outranks a structural update (:func:`held_out_data`); a second blow that
+    does not is not credible (:func:`fails_held_out`). ``form_modes``: the modes the calibrated rig
     still misses, as :func:`model_answer` reads them. ``splits``: the model level's modes split in
     two (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits` as JSON: two identified modes of one
     shape where the calibrated rig has one), which answer a gap the model leaves unexplained
