@@ -256,3 +256,22 @@ def test_a_second_blow_that_explains_no_held_out_blow_is_not_named():
     assert answer("unexplained", [], None, set(), [real]).named == "double_hit"
     assert answer("unexplained", [], None, set(), [crack]).named == "unexplained"
     assert answer(None, [], None, set(), [crack]).named == "none"
+
+
+def test_a_models_gage_fault_on_a_body_the_data_find_flexible_and_sound_is_model_form():
+    # modal check seed 150005, a clean trial on a rig off by up to 25 %: the model level named
+    # gage_sensitivity on gages 6, 3 (57 % closed); the data layer's rigid-body check found both
+    # bodies' gages flexible and no gage at fault
+    cand = {"name": "gage_sensitivity", "dbic": -2.6e6, "closed_held": 0.57, "closed_fit": 0.57,
+            "location": {"gages": [6, 3, 1], "window": "early", "effect_gages": [6, 3]}}
+    rudder = _finding("flex", "model form", (1, 2, 3, 4, 6, 8), 56.9, 3.77)
+    hull = _finding("flex", "model form", (5, 9, 13, 14, 15, 16), 13.0, 3.77)
+    form = {2, 3, 5, 6, 7, 9, 13, 14}
+    a = answer("gage_sensitivity", [cand], None, form, [rudder, hull])
+    assert a.named == "none" and a.by == "model"
+    # the data's own gain on a blamed gage confirms the model; a rig reproducing the trial's
+    # modes (no form error), or a body the check did not find flexible, leaves the model's answer
+    gain = _finding("gain", "sensor", (6,), 40.0, 3.77, (), 0.99)
+    assert answer("gage_sensitivity", [cand], None, form, [rudder, gain]).named == "gage_sensitivity"
+    assert answer("gage_sensitivity", [cand], None, set(), [rudder, hull]).named == "gage_sensitivity"
+    assert answer("gage_sensitivity", [cand], None, form, [hull]).named == "gage_sensitivity"

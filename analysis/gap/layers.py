@@ -343,6 +343,30 @@ effect (a second blow): with the sensor checks, what :func:`held_out_data` weigh
 structural update."""
 
 
+RIGID_BODY_EFFECTS = frozenset({"gage_sensitivity", "gage_alignment"})
+"""The model's sensor effects the data layer's rigid-body redundancy check (its ``gain`` and
+``rigid_body`` findings) tests each gage of a body for."""
+
+
+def form_not_sensor(out: Answer, findings: list[dict], form_gages: set[int]) -> bool:
+    """Whether the model layer's sensor attribution ``out`` (a gage's sensitivity or alignment)
+    is the rig's form instead: the rig carries form error (``form_gages``), the data layer's
+    rigid-body redundancy check ran on the body of every gage the model blames (a ``flex``
+    finding holds them: that body deforms in its modes) and found no sensor fault on any of them
+    (no credible sensor finding there). The data layer's check rests on the gages' positions and
+    axes alone and reads a gain on the modes the body carries rigidly; the model's attribution
+    leans on a rig already known wrong (issue 17: "gage 3 sensitivity" named in 16 of 48 trials
+    whatever the truth; modal check seed 150005, a clean trial, named gage_sensitivity on gages
+    6, 3, 1 where the data found only the rudder's flexible shapes)."""
+    if out.by != "model" or out.named.split("+")[0] not in RIGID_BODY_EFFECTS or not form_gages:
+        return False
+    loc = out.location or {}
+    gages = set(loc.get("effect_gages") or loc.get("gages") or [])
+    flex = {g for f in findings if f["check"] == "flex" for g in f["gages"]}
+    faulty = {g for f in credible(findings) if f.get("layer") == Layer.SENSOR for g in f["gages"]}
+    return bool(gages) and gages <= flex and not gages & faulty
+
+
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
            findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
            splits: Sequence[dict] = ()) -> Answer:
@@ -370,6 +394,8 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
         return Answer("none", "data", out.location, None, d)    # the environment the rig declares
     if (tones := ambient_first(findings)) and named.split("+")[0] != "ambient_tone":
         return _data_answer(max(tones, key=strength), candidates)
+    if form_not_sensor(out, findings, form_gages):
+        out, named = Answer("none", "model", None, None), "none"
     overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
     if model == "unexplained" and splits and not overriding:
         return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
