@@ -54,7 +54,7 @@ from ...analysis.model.rig import RigError, load_rig, parse_rig
 from ...analysis.model.surface import Surface
 from ...drivers.errors import DeviceError
 from ..errors import RecordingError, ViewError
-from .gap_bench import BLOWS, MIN_BLOWS, PER_CLASS, SEED_SETS
+from .gap_sizes import BLOWS, MIN_BLOWS, PER_CLASS, SEED_SETS
 
 RECORDINGS = Path("recordings")
 DESCRIPTION = """\
