@@ -223,10 +223,28 @@ class ImpactAnalysis:
     """The hull section's (a stern plane's fixed portion's) own motions at the stock and their
     decrements: ``alpha_b`` (Eq 8), ``gamma_b`` (from gages 5 and 13 when level), ``v_b``."""
     skipped: tuple[SkippedStep, ...] = ()
+    chosen: int | None = None
+    """Index in ``modes`` of the mode the user chose (``mode_hz``, :func:`chosen_mode`) for the
+    report's chain; None when none was asked (the chain then runs on ``predominant``, the most
+    energetic mode on the rudder, which this field never replaces)."""
+    mode_hz: float | None = None
+    """The frequency asked for (Hz) that chose ``chosen``; None when none was asked."""
+
+    @property
+    def chain_mode(self) -> int:
+        """Index in ``modes`` of the mode the report's chain ran on: ``chosen`` when the user
+        chose one, else ``predominant``. The per-gage and motion decrements are its."""
+        return self.predominant if self.chosen is None else self.chosen
+
+    def mode_tag(self, k: int) -> str:
+        """What mode ``k`` of ``modes`` is, for a label: ``" (predominant)"``, ``" (asked:
+        mode_hz 59.8)"``, both, or ``""``."""
+        return mode_tag(k, self.predominant, self.chosen, self.mode_hz)
 
     @property
     def f_hz(self) -> float:
-        return float(self.modes.frequency_hz[self.predominant])
+        """Frequency of the mode the chain ran on (:attr:`chain_mode`), Hz."""
+        return float(self.modes.frequency_hz[self.chain_mode])
 
     @property
     def active_gages(self) -> tuple[int, ...]:
@@ -384,6 +402,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     k = predominant_mode(table, [j for j, i in enumerate(good)
                                  if rig.gage(gage_numbers[i]).body == "rudder"],
                          exclude=[a for a, _ in ambient])
+    pred = k
     if mode_hz is not None:
         k = chosen_mode(table, mode_hz, x.shape[1] / fs_hz, k, notes)
     notes += [f"{table.frequency_hz[a]:.2f} Hz rang before the blow at {r:.0%} of its amplitude "
@@ -403,8 +422,9 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
                    {s.step for s in skipped}, notes)
     return ImpactAnalysis(
         onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
-        modes=table, predominant=k, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
-        gages=gages, **chain, notes=tuple(notes), skipped=skipped)
+        modes=table, predominant=pred, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
+        gages=gages, **chain, notes=tuple(notes), skipped=skipped,
+        chosen=None if mode_hz is None else k, mode_hz=mode_hz)
 
 
 def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
@@ -440,6 +460,16 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     return {"motions": motions, "relative": {name: fits[name][0] for name in relative},
             "alpha1_over_gamma1": ratio, "damping": damping, "stock_lengths": lengths,
             "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
+
+
+def mode_tag(k: int, predominant: int, chosen: int | None, mode_hz: float | None) -> str:
+    """The label of mode ``k`` given the ``predominant`` one's index and the one ``chosen`` by
+    ``mode_hz`` (None: none asked): ``" (predominant)"``, ``" (asked: mode_hz 59.8)"``, both
+    (``" (predominant; asked: mode_hz 13)"``) or ``""``. report.json readers call it with its
+    ``predominant_mode``, ``chosen_mode`` and ``mode_hz_asked``."""
+    tags = (["predominant"] if k == predominant else []) \
+        + ([f"asked: mode_hz {mode_hz:g}"] if chosen is not None and k == chosen else [])
+    return f" ({'; '.join(tags)})" if tags else ""
 
 
 class NoSuchMode(ValueError):

@@ -1,6 +1,6 @@
 """CPU cost of one hit's analysis, and where it goes.
 
-Run:  python benchmarks/hit_cost.py [--hits 5] [--medium water|air] [--seconds 6 14]
+Run:  python benchmarks/hit_cost.py [--hits 5] [--medium water|air] [--seconds 6 14] [--ragged]
 
 A simulated ALBACORE trial (16 gages, 2048 Hz, noise as the rig states, one blow per record) gives
 ``--hits`` records of free decay for each length in ``--seconds`` (6 s, and 14 s: the decays of
@@ -17,7 +17,9 @@ the automatic order's cost against a fit of the order it found, given (``n_modes
 :func:`~ramdaq.analysis.modal.verdicts.assess_decay_jointly`, the fit it starts with (its motion
 fits, Eq 4-13; the peak decrements; the stock lengths; the damping constants). Issue 19's
 targets: a whole 16-gage hit in <= 0.2 s CPU at unchanged accuracy; automatic order no dearer
-than 2x a fit of known order. The machine is shared: the
+than 2x a fit of known order. ``--ragged`` gives the records arbitrary lengths, as a replay's
+finals see them (12 288 and 28 672 samples are FFT-fast; a length with a large prime factor
+is not, and a hit takes ~9 Kaiser periodograms of it and its parts). The machine is shared: the
 figures grow with its load (printed).
 """
 
@@ -41,18 +43,28 @@ from ramdaq.drivers.sim import SimDevice  # noqa: E402
 ONSET_S, DECAY_S, SKIP_S = 1.0, 6.0, 0.03
 
 
-def records(medium: str, hits: int, decay_s: float = DECAY_S
+RAGGED_MAX = 600
+"""``--ragged``: a record is up to this many samples longer than ``decay_s`` (0.3 s at 2048 Hz)."""
+
+
+def records(medium: str, hits: int, decay_s: float = DECAY_S, ragged: bool = False
             ) -> tuple[object, list[np.ndarray], float, tuple[int, ...]]:
     """The rig, ``hits`` free decays (n_gages, n) of ``decay_s`` seconds in m/s^2, the rate (Hz)
-    and the gage per row."""
+    and the gage per row. ``ragged``: each record 1 to :data:`RAGGED_MAX` samples longer (drawn
+    from its seed), as a replay's or a live trial's are (a record closes where its decay reaches
+    the noise floor: its length is arbitrary, 28 672 = 2^12 x 7 samples the exception; the FFT
+    of a length with a large prime factor costs several times more)."""
     rig = load_rig("albacore").with_medium(medium)
     out = []
     for seed in range(hits):
-        with SimDevice(rig, duration_s=ONSET_S + SKIP_S + decay_s, impacts=[ONSET_S], seed=seed) as dev:
+        extra = int(np.random.default_rng(seed).integers(1, RAGGED_MAX + 1)) if ragged else 0
+        with SimDevice(rig, duration_s=ONSET_S + SKIP_S + decay_s + (RAGGED_MAX + 1) * ragged
+                       / rig.daq.sample_rate_hz, impacts=[ONSET_S], seed=seed) as dev:
             x = np.hstack([b.values() for b in dev])
             gages = dev.info.gages
         fs = rig.daq.sample_rate_hz
-        out.append(x[:, round((ONSET_S + SKIP_S) * fs):])
+        i0 = round((ONSET_S + SKIP_S) * fs)
+        out.append(x[:, i0:i0 + round(decay_s * fs) + extra])
     return rig, out, fs, gages
 
 
@@ -70,9 +82,12 @@ def main() -> None:
                     help="decay lengths, s (default 6 14)")
     ap.add_argument("--accuracy", type=int, default=0, metavar="SEEDS",
                     help="also the joint fit's decrements against the rig's over SEEDS records")
+    ap.add_argument("--ragged", action="store_true",
+                    help=f"records 1-{RAGGED_MAX} samples longer than --seconds, of arbitrary length "
+                    "as a replay's are (the default lengths, 12 288 and 28 672, FFT fast)")
     args = ap.parse_args()
     for decay_s in args.seconds:
-        report(args.medium, args.hits, decay_s)
+        report(args.medium, args.hits, decay_s, args.ragged)
         if args.accuracy:
             accuracy(args.medium, args.accuracy, decay_s)
 
@@ -142,16 +157,18 @@ def motion_accuracy(rig, xs: list[np.ndarray], fs: float, gages: tuple[int, ...]
         print("    " + "; ".join(cells[i:i + 3]))
 
 
-def report(medium: str, hits: int, decay_s: float) -> None:
-    """The figures for ``hits`` decays of ``decay_s`` seconds."""
-    rig, xs, fs, gages = records(medium, hits, decay_s)
+def report(medium: str, hits: int, decay_s: float, ragged: bool = False) -> None:
+    """The figures for ``hits`` decays of ``decay_s`` seconds (``ragged``: :func:`records`)."""
+    rig, xs, fs, gages = records(medium, hits, decay_s, ragged)
+    lengths = sorted({x.shape[1] for x in xs})
     whole = [cpu(lambda x=x: analyze_decay(x, fs, rig, gages, onset_s=ONSET_S,
                                            decay_start_s=ONSET_S + SKIP_S)) for x in xs]
     verdicts = [cpu(lambda x=x: assess_decay(x, fs)) for x in xs]
     jointly = [cpu(lambda x=x: assess_decay_jointly(x, fs)) for x in xs]
     own = [assess_decay_jointly(x, fs).own_searches for x in xs]
     joint = [cpu(lambda x=x: identify_modes(x, fs, per_channel=True)) for x in xs]
-    print(f"ALBACORE in {medium}, {decay_s:g} s decays: {len(gages)} gages x {xs[0].shape[1]} samples "
+    print(f"ALBACORE in {medium}, {decay_s:g} s decays: {len(gages)} gages x "
+          f"{'-'.join(str(n) for n in (lengths[0], lengths[-1])[:len(lengths)])} samples "
           f"at {fs:g} Hz, {hits} hits; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"  analyze_decay  median {np.median(whole):.3f} s CPU, max {np.max(whole):.3f} s (target 0.2)")
     print(f"  of which, run alone: verdicts (assess_decay) {np.median(verdicts):.3f} s "

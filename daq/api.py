@@ -66,13 +66,16 @@ class TrialAnalysis:
         return [h.analysis for h in self.hits if h.accepted and h.analysis is not None]
 
     def rows(self) -> list[ModeEstimate]:
-        """One :class:`ModeEstimate` per hit x gage x mode (a rejected hit: one row)."""
+        """One :class:`ModeEstimate` per hit x gage x mode (a rejected hit: one row); ``mode`` None
+        and ``fitted`` False where no mode was fitted, as in ``ramdaq batch analyze``'s table."""
         return [r for h in self.hits for r in mode_rows(h)]
 
     def to_dataframe(self) -> Any:
-        """:meth:`rows` as a ``pandas.DataFrame``, one column per :class:`ModeEstimate` field."""
+        """:meth:`rows` as a ``pandas.DataFrame``, one column per :class:`ModeEstimate` field;
+        ``mode`` a nullable integer column (``<NA>`` where none was fitted)."""
         pd = optional_import("pandas")
-        return pd.DataFrame([r.__dict__ for r in self.rows()])
+        df = pd.DataFrame([r.__dict__ for r in self.rows()])
+        return df.astype({"mode": "Int64"}) if len(df) else df
 
     def summary(self) -> dict:
         """The trial summary of ``report.json`` (means and scatter over accepted hits)."""

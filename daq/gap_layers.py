@@ -54,7 +54,10 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
                 ModeRef(*map(float, m)) for m in zip(tm.f_hz, tm.f_se_hz, tm.zeta, tm.zeta_se, strict=True)))
             if level.fit.form:
                 settings = replace(settings, min_closure=max(settings.min_closure, FORM_MIN_CLOSURE))
-        say(level.statement())
+        n_form = 0 if level.fit is None else len(level.fit.form) + len(level.fit.damping)
+        say(level.statement() if level.fit is None else  # the summary lists the form errors once
+            f"model level: rig calibrated to the modes, {n_form} form error(s) left "
+            "(listed under the verdict)")
     data, note = data_only(lt, td, prep.get("pre_s", 1.0), progress) if data_checks else (None, None)
     if not keep_counts:
         given.release_counts()

@@ -113,6 +113,8 @@ class JobQueue:
 
     ``fs_hz`` is the stream's rate and ``skip_n`` the samples from an onset to its free decay
     (:func:`~ramdaq.daq.analyzer.decay_skip_s`), to cut coarse finals' records on arrival.
+    ``trim``: give the C heap's free pages back after each final (:meth:`done`); a replay that
+    runs its finals one after another on one thread keeps them for the next instead.
     """
 
     def __init__(self, policy: QueuePolicy, fs_hz: float, skip_n: int) -> None:
@@ -125,6 +127,7 @@ class JobQueue:
         self._cond = threading.Condition()
         self.peak_bytes = 0
         self.peak_finals = 0
+        self.trim = True
 
     # -- the acquisition side -------------------------------------------------------------------
     def put_look(self, job: LookJob) -> bool:
@@ -214,7 +217,7 @@ class JobQueue:
                 self._held -= job_bytes(job)
                 self._running[kind] = None
             self._cond.notify_all()
-        if kind is FinalJob:
+        if kind is FinalJob and self.trim:
             release_free_memory()
 
     # -- inside the lock ------------------------------------------------------------------------

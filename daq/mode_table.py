@@ -26,17 +26,25 @@ class ModeEstimate:
     ``mode_zeta_se``: the same of the fit shared by all gages (one value per mode, repeated on
     each gage's row; what ``ramdaq batch analyze``'s table holds). ``amplitude`` the mode's
     amplitude on the gage at the decay's start (m/s^2), ``phase_rad`` its phase against the
-    gage where the mode is largest (the mode shape's). ``verdict`` is the gage's
+    gage where the mode is largest (the mode shape's). ``predominant``: the mode is the most
+    energetic on the rudder (report.json ``predominant_mode``); ``chosen``: the mode ``mode_hz``
+    asked for (report.json ``chosen_mode``; False on every row when none was asked), on which
+    the report's chain then ran instead of the predominant one. ``verdict`` is the gage's
     (``ok`` or what is wrong with its decay) and ``reason`` the hit's when it was rejected, else
-    the gage's. A rejected hit has one row, gage 0 and mode -1, numbers NaN.
+    the gage's. ``mode`` is the index into report.json's ``analysis.modes`` (from 0, as the CLI's
+    ``mode 0``); where no mode was fitted -- a rejected or unrequested hit (one row, gage 0), a
+    gage with no usable decay -- it is None, ``fitted`` is False and ``reason`` says why, the
+    numbers NaN: the convention of ``ramdaq batch analyze``'s table (null + ``fitted``).
     """
 
     hit: int
     onset_s: float
     accepted: bool
     gage: int
-    mode: int
+    mode: int | None
+    fitted: bool
     predominant: bool
+    chosen: bool
     f_hz: float
     f_se_hz: float
     delta: float
@@ -66,15 +74,16 @@ def mode_rows(h: HitResult) -> Iterator[ModeEstimate]:
     nan = float("nan")
     a = h.analysis
     if not h.accepted or a is None:
-        yield ModeEstimate(h.index, h.event.onset_s, False, 0, -1, False, *[nan] * 14, "", h.reason)
+        yield ModeEstimate(h.index, h.event.onset_s, False, 0, None, False, False, False, *[nan] * 14,
+                           "", h.reason)
         return
     m = a.modes
     row = {n: j for j, n in enumerate(a.active_gages)}
     for n in a.gage_numbers:
         v = a.verdicts[n]
         if n not in row:
-            yield ModeEstimate(h.index, a.onset_s, True, n, -1, False, *[nan] * 14, str(v.code),
-                               v.reason)
+            yield ModeEstimate(h.index, a.onset_s, True, n, None, False, False, False, *[nan] * 14,
+                               str(v.code), v.reason)
             continue
         j = row[n]
         for k in range(len(m.frequency_hz)):
@@ -82,7 +91,7 @@ def mode_rows(h: HitResult) -> Iterator[ModeEstimate]:
             z, zse = zeta_with_se(d, dse)
             shared = (m.frequency_hz[k], m.frequency_se_hz[k], m.delta[k], m.delta_se[k], m.zeta[k],
                       m.zeta_se[k])
-            yield ModeEstimate(h.index, a.onset_s, True, n, k, k == a.predominant,
+            yield ModeEstimate(h.index, a.onset_s, True, n, k, True, k == a.predominant, k == a.chosen,
                                float(m.channel_frequency_hz[j, k]),
                                float(m.channel_frequency_se_hz[j, k]), d, dse, z, zse,
                                *(float(x) for x in shared), float(abs(m.complex_amplitude[j, k])),

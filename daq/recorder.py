@@ -19,7 +19,8 @@ Nothing is lost silently:
 * the file is always finished (summary and footer) when the ``with`` block ends, by an exception
   too; and each chunk (at most ``chunk_seconds`` of samples, or one block if longer, or
   ``chunk_seconds`` of wall time) goes straight to the operating system when it is complete, so a
-  SIGKILL or a crash of Python loses at most the chunk being filled and the blocks still queued.
+  SIGKILL or a crash of Python loses at most the chunk being filled and the blocks still queued
+  (and the derived topics' messages of that chunk's time, which follow it in chunks of their own).
   ``ramdaq recover`` (:func:`ramdaq.daq.recover.recover`) turns such a file into a finished one.
 
 Events and JSON messages share the queue with blocks so the file keeps the order they were given
@@ -150,7 +151,9 @@ class Recorder:
         Replace an existing file.
     derived : bool
         Also write ``/ramdaq/gages`` and ``/ramdaq/gages/trace`` (:mod:`ramdaq.daq.topics`):
-        each channel in SI per block and decimated, for Foxglove's Plot panel.
+        each channel in SI per block and decimated, for Foxglove's Plot panel. They are written
+        in chunks of their own, each after the chunk of blocks of the same time (see
+        :mod:`ramdaq.drivers.mcap_format`, *Chunks*).
 
     Times: each record's ``publish_time`` is the device time of what it holds (a block's first
     sample, an event's ``t_ns``; clamped at 0); its ``log_time`` is UTC, ns since 1970: the wall
@@ -229,6 +232,8 @@ class Recorder:
         )
         self._chunk_opened: float | None = None  # monotonic time of the open chunk's first message
         self._chunk_samples = 0
+        self._view: list[tuple[int, int, int, bytes]] = []  # the derived topics' messages of the
+        # open chunk (channel, device ns, log ns, JSON), written as chunks of their own after it
         self._thread = threading.Thread(target=self._run, name="ramdaq-recorder", daemon=True)
         self._thread.start()
 
@@ -417,6 +422,7 @@ class Recorder:
                 if self._dropped:
                     self._write_overflow_events()
             self._write_overflow_events()
+            self._flush_chunk()  # the derived topics' last messages before finish() closes the file
         except BaseException as err:  # handed to the caller by put() and close()
             self._error = err
 
@@ -435,8 +441,20 @@ class Recorder:
                                  sequence=sequence)
         if self._file.tell() != before:  # the writer's byte limit finished a chunk
             self._chunk_opened, self._chunk_samples = None, 0
+            self._write_view()
         elif self._chunk_opened is None:
             self._chunk_opened = time.monotonic()
+
+    def _write_view(self) -> None:
+        """The derived topics' messages held since the last chunk, as chunks of their own (the
+        writer closes one at its byte limit too), so that a reader of the blocks steps over them
+        by the chunk index without decompressing them (they are most of a recording's bytes)."""
+        view, self._view = self._view, []
+        for channel, t_ns, log_ns, data in view:
+            self._writer.add_message(channel, log_time=log_ns, data=data,
+                                     publish_time=max(t_ns, 0), sequence=0)
+        if view:
+            self._writer.flush()
 
     def _write_block(self, block: Block) -> None:
         data = fmt.encode_block(block)
@@ -454,12 +472,13 @@ class Recorder:
             self._flush_chunk()
 
     def _write_derived(self, block: Block) -> None:
+        """Hold the derived topics' messages of ``block`` for :meth:`_write_view`."""
         gages = self._json_channel(topics.GAGES_TOPIC)
-        self._add(gages, block.t0_ns, self._log_ns(block.t0_ns),
-                  fmt.encode_json(self._summary.block(block)))
+        self._view.append((gages, max(int(block.t0_ns), 0), self._log_ns(block.t0_ns),
+                           fmt.encode_json(self._summary.block(block))))
         trace = self._json_channel(topics.TRACE_TOPIC)
         for t_ns, msg in self._summary.trace(block):
-            self._add(trace, t_ns, self._log_ns(t_ns), fmt.encode_json(msg))
+            self._view.append((trace, int(t_ns), self._log_ns(t_ns), fmt.encode_json(msg)))
 
     def _write_json(self, item: _Json) -> None:
         self._add(self._json_channel(item.topic), item.t_ns, item.log_ns, item.data)
@@ -489,3 +508,4 @@ class Recorder:
     def _flush_chunk(self) -> None:
         self._writer.flush()  # finishes the chunk; _OsFile already handed every byte to the OS
         self._chunk_opened, self._chunk_samples = None, 0
+        self._write_view()

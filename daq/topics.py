@@ -67,8 +67,13 @@ RESULTS_JSON_SCHEMA: dict[str, Any] = {
             "properties": {
                 "onset_s": {**_NUM, "description": "s since the stream's first sample"},
                 "decay_start_s": _NUM, "decay_duration_s": _NUM,
-                "predominant_mode": {"type": "integer"},
-                "f_hz": {**_NUM, "description": "the predominant mode's frequency, Hz"},
+                "predominant_mode": {"type": "integer", "description": "index in modes of the "
+                                     "most energetic mode on the rudder"},
+                "chosen_mode": {"type": ["integer", "null"], "description": "index in modes of "
+                                "the mode mode_hz chose for the chain (null: none asked)"},
+                "mode_hz_asked": {**_NUM_OR_NULL, "description": "the mode_hz asked for, Hz"},
+                "f_hz": {**_NUM, "description": "frequency of the mode the chain ran on (the "
+                         "chosen one, else the predominant one), Hz"},
                 "modes": {"type": "array", "items": {
                     "type": "object",
                     "properties": {k: _NUM_OR_NULL for k in

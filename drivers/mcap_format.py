@@ -9,7 +9,11 @@ Attachment   ``rig.toml`` (media type ``application/toml``): ``StreamInfo.rig_to
 Chunks       zstd-compressed (by default), each closed after ``chunk_seconds`` (0.25 s) of
              samples, one block if a block is longer, or ``chunk_seconds`` of wall time, and
              handed to the OS at once: a killed recorder loses at most the open chunk.
-             Each chunk carries the CRC-32 of its uncompressed records.
+             Each chunk carries the CRC-32 of its uncompressed records. The live view's
+             topics (``/ramdaq/gages``, ``/ramdaq/gages/trace``: three quarters of the
+             bytes) have chunks of their own, each written after the chunk of blocks of the
+             same time, so that a replay steps over them by the chunk index (summary)
+             without decompressing them; recordings made before mix them with the blocks.
 DataEnd      the CRC-32 of the whole data section (header, metadata, attachment, chunks and
              their indexes; 0 means none); the footer, the CRC-32 of the summary. Readers
              check every one (:mod:`ramdaq.drivers.mcap_replay`, *Integrity*).

@@ -18,7 +18,10 @@ Integrity
 ---------
 Every check the file offers is made, on every read: each chunk's CRC (of its uncompressed
 records), each attachment's CRC, the summary's CRC (in the footer) and, for files that carry one,
-the data section's CRC (which also covers the metadata records). A record that fails one, or
+the data section's CRC (which also covers the metadata records). A replay steps over the chunks
+that the summary's chunk index says hold no block (the live view's topics, in chunks of their
+own since they were written so: three quarters of a recording's bytes) without decompressing
+them: their bytes are read for the data section's CRC, which is what checks them. A record that fails one, or
 does not parse, raises :class:`~ramdaq.drivers.mcap_format.CorruptRecording` naming the file,
 the byte where the damaged record starts and the last block read before it; no sample of a
 damaged chunk is ever handed out. :class:`RecordScanner` is the reader under it: strict for
@@ -227,6 +230,12 @@ class RecordScanner:
         Offset just past the last intact record.
     chunks : int
         Intact chunks read.
+    skip : frozenset of int
+        Offsets of chunks to step over without decompressing them (a reader that knows, from
+        the summary's chunk index, that they hold none of :attr:`topics`): only the data
+        section's CRC checks them.
+    skipped : int
+        Chunks stepped over so.
     damage : list of Damage
         The damaged stretches stepped over.
     data_crc_ok : bool or None
@@ -234,12 +243,14 @@ class RecordScanner:
     """
 
     def __init__(self, f: BinaryIO, path: str | PathLike, *, strict: bool = False,
-                 topics: frozenset[str] | None = None) -> None:
+                 topics: frozenset[str] | None = None, skip: frozenset[int] = frozenset()) -> None:
         check_mcap_magic(f, path)
         self._f = f
         self.path = path
         self.strict = strict
         self.topics = topics  # messages of these topics only (None: all), see _chunk_records
+        self.skip = skip  # offsets of chunks stepped over unread (none of their topics is read)
+        self.skipped = 0
         self._channel_topic: dict[int, str] = {}
         self._wanted: set[int] = set()  # ids of the channels of ``topics``
         self._zstd: zstandard.ZstdDecompressor | None = None
@@ -266,7 +277,10 @@ class RecordScanner:
                 return
             try:
                 opcode, raw = self._record_at(pos)
-                records = self._parse(opcode, raw)
+                if opcode == Opcode.CHUNK and pos in self.skip:
+                    records, self.skipped = [], self.skipped + 1
+                else:
+                    records = self._parse(opcode, raw)
             except _Bad as bad:
                 if self.strict:
                     raise fmt.CorruptRecording(
@@ -298,9 +312,11 @@ class RecordScanner:
         self.data_crc_ok = data_end.data_section_crc == crc
         if self.data_crc_ok:
             return
+        where = ("a record outside the chunks (metadata, attachment or index) is damaged"
+                 if not self.skipped else "a record outside the chunks (metadata, attachment or "
+                 f"index) or one of the {self.skipped} chunks of topics not read is damaged")
         reason = (f"the data section fails its CRC (expected {data_end.data_section_crc}, "
-                  f"calculated {crc}) although every chunk passed its own: a record outside the "
-                  f"chunks (metadata, attachment or index) is damaged")
+                  f"calculated {crc}) although every chunk read passed its own: {where}")
         if self.strict:
             raise fmt.CorruptRecording(f"{self.path}: {reason}")
         self.damage.append(Damage(len(fmt.MCAP_MAGIC), pos, "data section", reason))
@@ -452,6 +468,24 @@ class RecordScanner:
         return opcode == Opcode.CHUNK
 
 
+def _data_crc(f: BinaryIO, end: FileEnd) -> int:
+    """The data section's CRC that the ``DataEnd`` record holds (0: none, or no such record)."""
+    if end.data_end is None:
+        return 0
+    f.seek(end.data_end + _HEAD.size)
+    raw = f.read(4)
+    return struct.unpack("<I", raw)[0] if len(raw) == 4 else 0
+
+
+def _chunks_without(summary: Any, topic: str) -> frozenset[int]:
+    """Offsets of the chunks that the summary's chunk index (checked by the summary's CRC) says
+    hold no message of ``topic``: every channel its message indexes name is of another topic
+    (a chunk indexed without them is not among them)."""
+    other = {i for i, ch in summary.channels.items() if ch.topic != topic}
+    return frozenset(c.chunk_start_offset for c in summary.chunk_indexes
+                     if c.message_index_offsets and other.issuperset(c.message_index_offsets))
+
+
 # -- the device ---------------------------------------------------------------------------------
 class McapReplayDevice(Device):
     """A recorded ramdaq MCAP file, streamed back as blocks.
@@ -500,6 +534,8 @@ class McapReplayDevice(Device):
         self._start: tuple[float, int] | None = None  # (monotonic time, first sample) of block 0
         self._scanner: RecordScanner | None = None
         self._meta: dict[str, str] = {}
+        self._channels: dict[int, str] = {}  # the summary's channels: id -> topic
+        self._no_blocks: frozenset[int] = frozenset()  # offsets of the chunks without a block
 
     # -- Device hooks ------------------------------------------------------------------------
     def _open(self) -> StreamInfo:
@@ -509,7 +545,7 @@ class McapReplayDevice(Device):
         try:
             info = self._read_info(f)
             self._scanner = RecordScanner(f, self.path, strict=True,
-                                          topics=frozenset({fmt.BLOCK_TOPIC}))
+                                          topics=frozenset({fmt.BLOCK_TOPIC}), skip=self._no_blocks)
             self._blocks = self._iter_blocks(self._scanner, info.fs_hz)
         except BaseException:
             f.close()
@@ -546,6 +582,10 @@ class McapReplayDevice(Device):
                 f"or no {fmt.BLOCK_TOPIC} topic)"
             )
         self._meta = dict(meta[fmt.STREAM_METADATA])
+        self._channels = {i: ch.topic for i, ch in summary.channels.items()}
+        if end.summary_ok and _data_crc(f, end):  # only where a CRC checks the chunk index that
+            # says which chunks hold no block, and the data section's CRC the chunks stepped over
+            self._no_blocks = _chunks_without(summary, fmt.BLOCK_TOPIC)
         try:
             return fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())
         except (fmt.NotARamdaqRecording, UnicodeDecodeError) as err:
@@ -554,7 +594,7 @@ class McapReplayDevice(Device):
     def _iter_blocks(self, scanner: RecordScanner, fs_hz: float) -> Iterator[Block]:
         """The block messages of the data section, in file order; a damaged record raises
         ``CorruptRecording`` saying which block was the last good one."""
-        topics: dict[int, str] = {}
+        topics = dict(self._channels)  # the summary's: a skipped chunk may hold a Channel record
         last: Block | None = None
         records = iter(scanner)
         decode, block_topic = fmt.decode_block, fmt.BLOCK_TOPIC  # locals: looked up per record
@@ -661,6 +701,13 @@ class McapReplayDevice(Device):
     def bytes_read(self) -> int:
         """Bytes of the file read so far by the block iterator (for a progress bar)."""
         return self._scanner.good_bytes if self._scanner is not None else 0
+
+    @property
+    def chunks_read(self) -> tuple[int, int]:
+        """Chunks read so far by the block iterator: decompressed, and stepped over unread (the
+        summary's chunk index says they hold no block)."""
+        scanner = self._scanner
+        return (scanner.chunks, scanner.skipped) if scanner is not None else (0, 0)
 
     @property
     def rig_toml(self) -> str:

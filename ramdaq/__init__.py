@@ -22,16 +22,10 @@ BLAS calls run faster on one thread (``docs/estimators.md``, "Threads").
 import os
 import sys
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 if "numpy" not in sys.modules:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-try:
-    __version__ = version("ramdaq")
-except PackageNotFoundError:  # imported from a source tree that was never installed
-    __version__ = "0+unknown"
 
 _LAZY = {  # public name -> module that defines it
     "read_recording": "ramdaq.daq.recording", "Recording": "ramdaq.daq.recording",
@@ -43,7 +37,21 @@ _LAZY = {  # public name -> module that defines it
 __all__ = ["__version__", *_LAZY]
 
 
+def _version() -> str:
+    """The installed distribution's version; ``importlib.metadata`` (~40 ms) is imported only
+    when it is asked for (``--version``, a recording's header), not by every command."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ramdaq")
+    except PackageNotFoundError:  # imported from a source tree that was never installed
+        return "0+unknown"
+
+
 def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        globals()[name] = value = _version()
+        return value
     if name in _LAZY:
         value = getattr(import_module(_LAZY[name]), name)
         globals()[name] = value

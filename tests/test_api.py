@@ -105,20 +105,27 @@ def test_analyze_rows_match_the_analysis(analysed: ramdaq.TrialAnalysis) -> None
                 assert r.delta == a.gages[r.gage].delta and r.delta_se == a.gages[r.gage].delta_se
                 assert r.f_hz == a.gages[r.gage].f_hz
                 assert r.verdict == "ok"
-            if r.mode >= 0:  # zeta = delta / sqrt(4 pi^2 + delta^2), exactly
+            if r.fitted:  # zeta = delta / sqrt(4 pi^2 + delta^2), exactly
                 assert r.zeta == pytest.approx(r.delta / np.sqrt(4 * np.pi**2 + r.delta**2), rel=1e-12)
     pytest.importorskip("pandas")
     df = analysed.to_dataframe()
     assert len(df) == len(rows)
     assert {"f_hz", "f_se_hz", "delta", "delta_se", "zeta", "zeta_se", "verdict"} <= set(df.columns)
+    assert str(df["mode"].dtype) == "Int64" and df["fitted"].dtype == bool
 
 
 def test_analyze_one_hit_marks_the_others(water: ramdaq.Recording) -> None:
     res = ramdaq.analyze(water, impact=1)
     assert [h.accepted for h in res.hits] == [False, True, False]
     skipped = [r for r in res.rows() if not r.accepted]
-    assert [(r.hit, r.gage, r.mode, r.reason) for r in skipped] == [(0, 0, -1, "not requested"),
-                                                                     (2, 0, -1, "not requested")]
+    # tester10: rows() said mode -1 where the Parquet table says null and fitted false
+    assert [(r.hit, r.gage, r.mode, r.fitted, r.reason) for r in skipped] == \
+        [(0, 0, None, False, "not requested"), (2, 0, None, False, "not requested")]
+    from ramdaq.daq.commands.batch_tasks import analyze_rows
+    table = [t for h in res.hits for t in analyze_rows(h, tuple(water.channels), {})]
+    assert [(r.hit, r.gage, r.mode, r.fitted) for r in res.rows()] == \
+        [(t.hit, t.gage, t.mode, t.fitted) for t in table]       # one convention, row for row
+    assert all((r.mode is None) == (not r.fitted) for r in res.rows())
     with pytest.raises(ValueError, match="impact 5 asked for, but 3 impacts found"):
         ramdaq.analyze(water, impact=5)
 
@@ -127,7 +134,7 @@ def test_shared_mode_columns_repeat_the_mode_table(analysed: ramdaq.TrialAnalysi
     """mode_* columns are the fit shared by all gages: one value per hit and mode."""
     h = analysed.hits[0]
     m = h.analysis.modes
-    for r in (r for r in analysed.rows() if r.hit == 0 and r.mode >= 0):
+    for r in (r for r in analysed.rows() if r.hit == 0 and r.fitted):
         assert (r.mode_f_hz, r.mode_delta, r.mode_zeta_se) == (
             m.frequency_hz[r.mode], m.delta[r.mode], m.zeta_se[r.mode])
         assert -np.pi <= r.phase_rad <= np.pi and r.amplitude > 0

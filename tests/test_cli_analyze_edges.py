@@ -71,7 +71,18 @@ def test_mode_hz_runs_the_chain_on_the_chosen_mode(tmp_path, capsys):
     a = rep["impacts"][0]["analysis"]
     assert abs(a["f_hz"] - 59.83) < 0.05           # the identified mode, not the number asked
     assert any("chosen by mode_hz 59.8" in n and "13.003 Hz" in n for n in a["notes"])
-    assert "f = 59.834 Hz" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "f = 59.834 Hz (asked: mode_hz 59.8)" in text
+    # tester10: the chosen mode was labelled "(predominant)" and was report.json's
+    # predominant_mode; the predominant one stays the 13 Hz mode, the chosen one is named so
+    modes = [m["f_hz"] for m in a["modes"]]
+    assert abs(modes[a["predominant_mode"]] - 13.003) < 0.01
+    assert a["chosen_mode"] != a["predominant_mode"] and modes[a["chosen_mode"]] == a["f_hz"]
+    assert a["mode_hz_asked"] == 59.8
+    lines = [ln for ln in text.splitlines() if ln.startswith("    mode ")]
+    assert sum(ln.startswith(f"    mode {a['predominant_mode']} (predominant), ") for ln in lines) == 1
+    assert sum(ln.startswith(f"    mode {a['chosen_mode']} (asked: mode_hz 59.8), ") for ln in lines) == 1
+    assert sum("(predominant" in ln for ln in lines) == 1
 
 
 def test_mode_hz_near_no_mode_is_one_line(tmp_path, capsys):

@@ -36,17 +36,20 @@ def _scaled(text: str, k: float) -> str:
 
 @pytest.fixture(scope="module")
 def heavy_none(tmp_path_factory):
-    """One diagnosis (the two tests below read it: one run of a few CPU seconds): the rig file
-    with the rudder's mass and inertias x10, ``--effects none``. Its exit code, standard output
-    and gap.json."""
+    """One diagnosis (the tests below read it: one run of a few CPU seconds): the rig file
+    with the rudder's mass and inertias x10, ``--effects none``. Its exit code, standard output,
+    gap.json and its folder, where an earlier diagnosis was replaced (``--overwrite``)."""
     tmp = tmp_path_factory.mktemp("heavy")
     rig = tmp / "heavy.toml"
     rig.write_text(_scaled(ALBACORE.read_text(), 10.0))
     out = tmp / "g"
+    out.mkdir()  # an earlier diagnosis there, with a plot this --no-plots run does not write
+    (out / "gap.json").write_text("{}")
+    (out / "gap_map.png").write_bytes(b"an earlier run's plot")
     with _Captured() as cap:
         code = main(["gap", str(WATER), "--rig", str(rig), "--effects", "none", "--no-plots",
-                     "--out", str(out)])
-    return code, cap.text, json.loads((out / "gap.json").read_text()) if code == 0 else None
+                     "--out", str(out), "--overwrite"])
+    return code, cap.text, json.loads((out / "gap.json").read_text()) if code == 0 else None, out
 
 
 class _Captured:
@@ -66,7 +69,7 @@ class _Captured:
 def test_effects_none_diagnoses_with_no_library_effect(heavy_none):
     """gap-benchmark accepted 'none' and gap refused it as an unknown effect. Now it scores no
     candidate, says so, and still gives the verdict, the data-only checks and the model form."""
-    code, text, rep = heavy_none
+    code, text, rep, _ = heavy_none
     assert code == 0, text
     assert "scoring 0 candidate effects" in text
     assert "no candidate effect scored (--effects none)" in text
@@ -79,7 +82,7 @@ def test_a_rudder_ten_times_too_heavy_gets_one_line(heavy_none):
     """tester8: an absurd mass was never hinted at. The rig file with the rudder's mass and
     inertias x10: `ramdaq gap` prints one CHECK THE RIG line naming it (~10x), and gap.json
     carries the ratio; no traceback."""
-    code, text, rep = heavy_none
+    code, text, rep, _ = heavy_none
     assert code == 0, text
     lines = [ln for ln in text.splitlines() if ln.startswith("CHECK THE RIG")]
     assert len(lines) == 1, text
@@ -97,7 +100,51 @@ def test_a_rudder_ten_times_too_heavy_gets_one_line(heavy_none):
 
 def test_gap_json_names_the_rig_it_was_held_against(heavy_none):
     """tester10: gap.json said the mass was absurd but not which rig file it was held against."""
-    code, text, rep = heavy_none
+    code, text, rep, _ = heavy_none
     assert code == 0, text
     assert rep["rig"]["from"].endswith("heavy.toml") and rep["rig"]["medium"] == "water"
     assert rep["rig"]["name"] == load_rig(ALBACORE).name
+
+
+def test_a_second_gap_into_the_same_folder_is_refused_in_one_line(heavy_none, capsys):
+    """tester10: `ramdaq gap` run twice into one folder replaced the first diagnosis silently.
+    Without --overwrite it is refused in one line naming the folder and --overwrite, before any
+    work, and gap.json is left as it was."""
+    code, _, _, out = heavy_none
+    assert code == 0
+    before = (out / "gap.json").read_bytes()
+    assert main(["gap", str(WATER), "--effects", "none", "--no-plots", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{out}/ holds an earlier gap diagnosis (gap.json)" in err
+    assert err.rstrip().endswith("--overwrite replaces it")
+    assert (out / "gap.json").read_bytes() == before
+
+
+def test_overwrite_replaces_the_earlier_diagnosis_and_says_so(heavy_none):
+    """With --overwrite the folder holds one diagnosis: the earlier run's plot that this
+    --no-plots run did not write again is removed, and the last line says so."""
+    code, text, rep, out = heavy_none
+    assert code == 0 and rep["verdict"]                  # the new gap.json, not the "{}" there
+    assert not (out / "gap_map.png").exists()
+    assert text.rstrip().splitlines()[-1].endswith(
+        "replacing the earlier diagnosis there (1 of its files not written again removed: gap_map.png)")
+
+
+def test_the_verdict_is_a_short_first_line_and_the_model_form_follows_once(heavy_none):
+    """tester10: the verdict was one ~900-character line with the model form in it, whose
+    calibration outcome the model level's line said again. Now the answer is a first line of
+    at most ~120 characters, each form error its own line, none of it printed twice; gap.json's
+    headline keeps the whole statement."""
+    code, text, rep, _ = heavy_none
+    assert code == 0, text
+    lines = text.splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("verdict: "))
+    assert len(lines[i]) <= 120 and "model form" not in lines[i], lines[i]
+    assert lines[i + 1].startswith("  model form")
+    form = lines[i + 2:]
+    form = form[:next(k for k, ln in enumerate(form) if not ln.startswith("    "))]
+    assert form, lines[i + 1]            # the x10 rudder leaves form errors, one line each
+    for ln in form:
+        assert text.count(ln.strip()) == 1 and ln.strip() in rep["headline"], ln
+    assert "(calibration to the modes" not in text         # the model level's line says it
+    assert "(calibration to the modes" in rep["headline"]  # gap.json as it was

@@ -133,3 +133,26 @@ def test_a_water_trial_comes_back_in_water_with_its_own_scale(albacore, tmp_path
     assert main(["import", str(csv), "--out", str(tmp_path / "norig.mcap")]) == 0
     assert "medium = \"water\"" in (tmp_path / "norig.rig.toml").read_text()
     assert _blocks(tmp_path / "norig.mcap")[0].extra["medium"] == "water"
+
+
+def test_a_channels_only_reimport_keeps_the_onsets(tmp_path, capsys):
+    """tester10: the shipped water trial exported and imported without --rig started hit 0's
+    decay one sample late: the channels-only rig named no anti-alias filter, so the trigger
+    removed no front-end delay (0.47 sample, 4th order at 800 Hz, 2048 Hz) and the refined onset
+    3.00037 s rounded to the next sample. The CSV states the recorded rig's filter and the
+    channels-only rig names it: every onset is the original's, to the digit."""
+    from pathlib import Path
+
+    import ramdaq
+
+    water = Path(__file__).resolve().parents[1] / "recordings" / "albacore-water.mcap"
+    csv = tmp_path / "water.csv"
+    assert main(["export-csv", str(water), "--out", str(csv)]) == 0
+    assert "# anti-alias: order 4, 800.0 Hz" in csv.read_text()[:4000].splitlines()
+    back = tmp_path / "water.mcap"
+    assert main(["import", str(csv), "--out", str(back)]) == 0
+    assert "anti-alias filter order 4 at 800 Hz, as the file states" in capsys.readouterr().out
+    assert "anti_alias_hz = 800.0\nanti_alias_order = 4" in (tmp_path / "water.rig.toml").read_text()
+    a, b = ramdaq.read_recording(water).impacts, ramdaq.read_recording(back).impacts
+    assert len(a) == len(b) == 3
+    assert [(e.onset_sample, e.onset_s) for e in a] == [(e.onset_sample, e.onset_s) for e in b]

@@ -4,6 +4,7 @@ finals left unanalysed -- every one counted in the summary and written as an eve
 import json
 import tracemalloc
 from collections import Counter
+from pathlib import Path
 
 import pytest
 
@@ -13,6 +14,8 @@ from ramdaq.daq.session import SUMMARY_TOPIC, Session
 from ramdaq.daq.trigger import Trigger
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.sim import SimDevice
+
+WATER = Path(__file__).parent.parent / "recordings" / "albacore-water.mcap"
 
 
 def _events(rig, fs_hz: float, impacts: list[float], duration_s: float):
@@ -191,3 +194,26 @@ def test_a_source_that_can_wait_never_sheds(albacore):
     out = Session(dev, readout=False, queue_policy=policy).run()
     assert [h.coarse for h in out.hits] == ["", "", ""]
     assert out.load.finals_unanalysed == 0 and out.load.peak_finals == 1
+
+
+def test_a_replay_flat_out_keeps_the_heap_between_finals_and_a_live_trial_trims_it(
+        albacore, monkeypatch):
+    """The heap's free pages go back to the OS after each final of a live trial (its RSS follows
+    what it holds); a replay that runs its finals one after another on one thread keeps them for
+    the next final (giving them back and faulting them in again was most of its system CPU)."""
+    from ramdaq.daq import jobqueue
+
+    trims = []
+    monkeypatch.setattr(jobqueue, "release_free_memory", lambda: trims.append(1) or True)
+    queue = JobQueue(QueuePolicy(), 2048.0, 0)
+    assert queue.trim  # the default: a live trial's
+    queue.done(FinalJob)  # no job running: only the trim
+    queue.done(LookJob)  # never after a look
+    queue.trim = False
+    queue.done(FinalJob)
+    assert trims == [1]
+    trims.clear()
+    replay = Session(McapReplayDevice(WATER, pace="fast"), readout=False)
+    outcome = replay.run()
+    assert replay.finals_inline and len(outcome.hits) == 3 and trims == []
+    assert not Session(SimDevice(albacore, medium="water", duration_s=1.0), readout=False).finals_inline

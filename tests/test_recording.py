@@ -151,13 +151,21 @@ def test_readable_with_only_mcap_and_mcap_protobuf(tmp_path):
 
 def test_chunks_hold_at_most_chunk_seconds(tmp_path):
     """A kill loses at most the open chunk: each chunk spans < 0.25 s of block start times
-    (5 blocks of 50 ms: the recorder finishes a chunk as soon as 0.25 s of samples are in it)."""
+    (5 blocks of 50 ms: the recorder finishes a chunk as soon as 0.25 s of samples are in it).
+    The live view's topics are in chunks of their own, each right after the blocks' chunk of
+    the same time (a replay steps over them unread)."""
     path = tmp_path / "trial.mcap"
     _record(path, stream(40, seed=3, full_range=False), chunk_seconds=0.25)
     with open(path, "rb") as f:
-        chunks = make_reader(f).get_summary().chunk_indexes
+        summary = make_reader(f).get_summary()
+    topic = {i: ch.topic for i, ch in summary.channels.items()}
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
     spans = [(c.message_end_time - c.message_start_time) / 1e9 for c in chunks]
-    assert len(chunks) == 8 and max(spans) < 0.25
+    held = [sorted(topic[i] for i in c.message_index_offsets) for c in chunks]
+    assert len(chunks) == 16 and max(spans) < 0.25
+    assert held == [["/ramdaq/block"], ["/ramdaq/gages", "/ramdaq/gages/trace"]] * 8
+    pairs = zip(chunks[::2], chunks[1::2], strict=True)
+    assert all(v.message_start_time == b.message_start_time for b, v in pairs)
 
 
 def test_overflow_drops_counts_and_logs(tmp_path):

@@ -27,20 +27,30 @@ pytestmark = pytest.mark.timeout(120)
 
 SEED = 31
 N_SAMPLES = 512  # per block: 20 ms at 25.6 kHz
-CHUNK_S = 0.05  # 0.05 s of samples a chunk: 3 blocks, so a 60-block file has 20 chunks
+CHUNK_S = 0.05  # 0.05 s of samples a chunk: 3 blocks, so a 60-block file has 20 chunks of blocks
+
+
+def _chunks(path, blocks=True):
+    """The chunk indexes of ``path`` in file order: those holding blocks (``blocks``), or those
+    of the live view's topics, which the recorder writes in chunks of their own."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    ids = {i for i, ch in summary.channels.items() if ch.topic == fmt.BLOCK_TOPIC}
+    return sorted((c for c in summary.chunk_indexes if blocks == bool(ids & set(c.message_index_offsets))),
+                  key=lambda c: c.chunk_start_offset)
 
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
-    """A finished recording of 60 blocks in 20 chunks, its blocks, and its chunk indexes."""
+    """A finished recording of 60 blocks in 20 chunks (and 20 of the live view's topics, each
+    after the blocks' chunk of its time), its blocks, and the block chunks' indexes."""
     path = tmp_path_factory.mktemp("damage") / "trial.mcap"
     blocks = stream(60, SEED, full_range=False, n_samples=N_SAMPLES)
     with Recorder(path, stream_info(), chunk_seconds=CHUNK_S) as rec:
         for b in blocks:
             assert rec.put(b)
-    with open(path, "rb") as f:
-        chunks = make_reader(f).get_summary().chunk_indexes
-    assert len(chunks) == 20
+    chunks = _chunks(path)
+    assert len(chunks) == 20 and len(_chunks(path, blocks=False)) == 20
     return path, blocks, chunks
 
 
@@ -131,7 +141,9 @@ def test_info_locates_damage_and_does_not_call_it_a_missing_footer(recording, tm
     assert d.footer and d.complete and d.summary_ok
     assert [(x.start, x.what, x.after_seq) for x in d.damaged] == [
         (c.chunk_start_offset, "chunk", lost[0] - 1)]
-    assert d.damaged[0].end == chunks[8].chunk_start_offset  # the next chunk read on
+    view = _chunks(bad, blocks=False)[7]  # the live view's chunk of chunk 7's time, right after it
+    assert c.chunk_start_offset < view.chunk_start_offset < chunks[8].chunk_start_offset
+    assert d.damaged[0].end == view.chunk_start_offset  # the next chunk read on
     assert d.blocks == 60 - len(lost) and d.gaps == [
         (lost[0] - 1, len(lost), len(lost) * N_SAMPLES)]
     text = format_info(d)
@@ -164,6 +176,26 @@ def test_recover_steps_over_16_bad_bytes_and_keeps_everything_after(recording, t
     d = describe_recording(dst)
     assert not d.damaged and d.recovery["damaged"][0]["after_seq"] == lost[0] - 1
     assert "damaged chunk left out by recover" in format_info(d)
+
+
+def test_a_flip_in_a_chunk_replay_steps_over_is_caught_by_the_data_section_crc(recording, tmp_path):
+    """A replay does not decompress the live view's chunks (the summary's chunk index says they
+    hold no block): every block comes back, bit-identical, and then the data section's CRC,
+    which covers those chunks' bytes, stops it with one line saying what may be damaged; ``info``
+    reads every chunk and locates it."""
+    path, blocks, _ = recording
+    got, err = _replay_until_error(path)
+    assert err is None and all(a.same_as(b) for a, b in zip(got, blocks, strict=True))
+    with McapReplayDevice(path) as dev:
+        assert len(list(dev)) == 60 and dev.chunks_read == (20, 20)
+    view = _chunks(path, blocks=False)[7]
+    bad = _damaged(recording, tmp_path, [(_chunk_data(view), 0x10)])
+    got, err = _replay_until_error(bad)
+    assert len(got) == 60 and all(a.same_as(b) for a, b in zip(got, blocks, strict=True))
+    assert isinstance(err, CorruptRecording) and "data section fails its CRC" in str(err)
+    assert "one of the 20 chunks of topics not read is damaged" in str(err) and "\n" not in str(err)
+    d = describe_recording(bad)
+    assert [(x.start, x.what) for x in d.damaged] == [(view.chunk_start_offset, "chunk")]
 
 
 def test_damage_outside_the_records_keeps_every_sample_and_says_so(recording, tmp_path):
@@ -253,3 +285,31 @@ def test_impossible_stream_metadata_is_refused(tmp_path, key, value, what):
     meta = {**fmt.stream_info_to_metadata(stream_info()), key: value}
     with pytest.raises(NotARamdaqRecording, match=what):
         fmt.stream_info_from_metadata(meta)
+
+
+def test_chunks_are_stepped_over_only_where_crcs_check_the_index_and_their_bytes(tmp_path):
+    """A file whose summary and data section carry no CRC (another writer's): nothing would
+    check the chunk index that says which chunks hold no block, nor the chunks stepped over,
+    so every chunk is read, and the blocks come back the same."""
+    blocks = stream(6, SEED, n_samples=N_SAMPLES)
+    paths = {}
+    for crcs in (True, False):
+        paths[crcs] = path = tmp_path / f"crcs-{crcs}.mcap"
+        with open(path, "wb") as f:
+            w = Writer(f, enable_crcs=crcs, enable_data_crcs=crcs)
+            w.start()
+            w.add_metadata(fmt.STREAM_METADATA, fmt.stream_info_to_metadata(stream_info()))
+            ch = w.register_channel(fmt.BLOCK_TOPIC, "protobuf", w.register_schema(
+                fmt.BLOCK_SCHEMA_NAME, "protobuf", fmt.block_schema_data()))
+            view = w.register_channel("/ramdaq/gages", "json", w.register_schema("g", "jsonschema", b"{}"))
+            for b in blocks:
+                w.add_message(ch, log_time=b.t0_ns, data=fmt.encode_block(b), publish_time=b.t0_ns)
+                w.flush()  # a chunk of the block, then one of the view
+                w.add_message(view, log_time=b.t0_ns, data=b"{}", publish_time=b.t0_ns)
+                w.flush()
+            w.finish()
+    for crcs, stepped in ((True, 6), (False, 0)):
+        with McapReplayDevice(paths[crcs]) as dev:
+            got = list(dev)
+            assert dev.chunks_read == (12 - stepped, stepped)
+        assert all(a.same_as(b) for a, b in zip(got, blocks, strict=True))

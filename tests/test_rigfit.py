@@ -117,7 +117,7 @@ def test_what_no_constant_explains_is_model_form(albacore_air, nominal_modes):
     assert worst.f_id_hz == pytest.approx(24.5, rel=0.01)
     assert abs(worst.df_rel) > 0.01
     assert "24.51 Hz: df" in mf.form_text()
-    assert "at their bounds" in mf.solver_text()
+    assert mf.solver_text().startswith("bound-limited: ") and mf.at_bounds()
 
 
 def test_bounds_are_checked_and_read_from_the_rig_file(albacore_air):
@@ -247,8 +247,9 @@ def test_gap_with_a_perturbed_rig_says_no_effect_and_model_form(perturbed_trial,
     out = tmp / "gap20"
     assert main(["gap", str(mcap), "--rig", str(rig), "--no-plots", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    verdict = next(line for line in text.splitlines() if line.startswith("verdict: "))
-    assert verdict.startswith("verdict: NO EFFECT; model form: "), verdict
+    lines = text.splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith("verdict: "))
+    assert lines[i] == "verdict: NO EFFECT" and lines[i + 1].startswith("  model form"), lines[i:i + 2]
     doc = json.loads((out / "gap.json").read_text())
     assert doc["verdict"] == "no gap beyond noise" and doc["effect"] is None
     level = doc["model_level"]
@@ -272,13 +273,17 @@ def test_gap_with_a_crude_rig_states_its_form_error(perturbed_trial, capsys):
     out = tmp / "gap_crude"
     assert main(["gap", str(mcap), "--rig", str(rig), "--no-plots", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    verdict = next(line for line in text.splitlines() if line.startswith("verdict: "))
+    lines = text.splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith("verdict: "))
     # either the time-domain calibration takes up what the modes' bounds left ("no effect") or
     # the gap is put down to the model's form: never an effect, always the form's statement
-    heads = ("verdict: NO EFFECT; model form: ",
-             "verdict: NO EFFECT NAMED, THE GAP IS THE RIG MODEL'S FORM; model form: ")
-    assert verdict.startswith(heads), verdict
-    assert "Hz: df " in verdict and "at their bounds: " in verdict
+    # (the answer on the verdict's line, each form error on its own line after it)
+    heads = ("verdict: NO EFFECT", "verdict: NO EFFECT NAMED, THE GAP IS THE RIG MODEL'S FORM")
+    assert lines[i] in heads and lines[i + 1] == "  model form:", lines[i:i + 2]
+    assert lines[i + 2].startswith("    ") and "Hz: df " in lines[i + 2]
+    # the calibration to the modes ended with constants at their bounds: bound-limited, said once
+    level = next(line for line in lines if line.startswith("  model level: rig "))
+    assert "calibrated to the trial's modes (bound-limited): " in level and "AT ITS BOUND" in level
     doc = json.loads((out / "gap.json").read_text())
     assert doc["effect"] is None
     assert doc["model_level"]["form_errors"]

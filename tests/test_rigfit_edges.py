@@ -108,6 +108,12 @@ def test_an_absurd_rudder_mass_is_named_in_one_line(water, k):
     check = [line for line in lines if line.startswith("CHECK THE RIG")]
     assert len(check) == 1 and "what the modes imply (" in check[0]
     assert " kg): check the rig's units/values" in check[0]
+    # tester10: the fit then pushed the stiffnesses to their bounds and said "converged"; now
+    # the solver line names each constant at its bound and calls the result bound-limited
+    (solver,) = [line for line in lines if line.startswith("solver: ")]
+    assert mf.at_bounds() and "converged" not in solver, solver
+    assert solver.startswith("solver: bound-limited: ") and "not a fit of the modes" in solver
+    assert all(f"{p.name} x{p.factor:.3g}" in solver for p in mf.at_bounds())
     assert not any(line.startswith("CHECK THE RIG") for line in fit_lines(calibrate_to_modes(tm, rig),
                                                                           Path("x.toml")))
 

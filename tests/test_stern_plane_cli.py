@@ -100,7 +100,7 @@ def test_gap(trial, truth, capsys):
     f_true, d_true = truth
     assert main(["gap", str(mcap), "--out", str(tmp / "gap"), "--no-plots"]) == 0
     out = capsys.readouterr().out  # the model recorded itself: no gap, and no form error left
-    assert "verdict: NO EFFECT; model form: none beyond the identification's uncertainty" in out
+    assert "verdict: NO EFFECT\n  model form: none beyond the identification's uncertainty\n" in out
     doc = json.loads((tmp / "gap" / "gap.json").read_text())
     first = doc["modes"][0]
     assert abs(first["f_hz"] / 20.0 - 1) < 0.02

@@ -294,14 +294,25 @@ class ModeFit:
             return "none beyond the identification's uncertainty"
         return "; ".join([f.text() for f in self.form] + [d.text() for d in self.damping])
 
+    def outcome(self) -> str:
+        """How the fit ended, in a word: ``bound-limited`` when it left constants at their
+        bounds (the bounds set the result, not the modes), else the solver's stop
+        (``converged``, ...)."""
+        return "bound-limited" if self.at_bounds() else self.stop.value
+
     def solver_text(self) -> str:
-        """How the solver ended, and the constants it left at their bounds."""
+        """How the solver ended, and the constants it left at their bounds: a fit that ends
+        with any there is "bound-limited" and names them, never "converged"."""
         s = ("converged" if self.stop is Stop.CONVERGED else
              f"{self.stop.value} after {self.nfev} evaluations ({self.message}): the constants are "
              "where it stopped, not a minimum shown to be one")
         b = self.at_bounds()
         if b:
-            s += "; at their bounds: " + ", ".join(f"{p.name} x{p.factor:.3g}" for p in b)
+            s = ("bound-limited: " + ", ".join(f"{p.name} x{p.factor:.3g}" for p in b)
+                 + f" ended at {'its bound' if len(b) == 1 else 'their bounds'}, so the result is "
+                 "where the bounds stopped it, not a fit of the modes (check the rig's values, or "
+                 "widen the bounds with --bound)"
+                 + ("" if self.stop is Stop.CONVERGED else f"; the solver: {s}"))
         h = self.held()
         if h:
             s += ("; held at their start, not pinned by these modes: "

@@ -191,9 +191,11 @@ def decrements_from_peaks(
 ) -> list[PeakDecrement | ValueError]:
     """:func:`decrement_from_peaks` of each row of ``x`` (n_signals, n_samples), same
     parameters: the noise estimates and the band-pass run on all rows at once (the same
-    operations row by row, so equal to the bit: a hit's gages and motions, one call instead of
-    one each, whose filter start-up and checks cost more than the filtering). A row whose
-    decrement cannot be read gets the ValueError :func:`decrement_from_peaks` raises for it.
+    operations row by row, so equal to the bit but for the noise estimates' transforms at the
+    lengths :func:`~ramdaq.analysis.modal.signal.rfft_rows` packs, equal to rounding: a hit's
+    gages and motions, one call instead of one each, whose filter start-up and checks cost more
+    than the filtering). A row whose decrement cannot be read gets the ValueError
+    :func:`decrement_from_peaks` raises for it.
     ``noise_std`` (n_signals,): each row's noise std where the caller has it already (the
     verdicts' periodograms of a hit's gages: ~7 ms of a 14 s hit's 16 gages), else estimated."""
     Y = np.asarray(x, dtype=float)

@@ -93,8 +93,58 @@ def _kaiser14(n: int) -> tuple[np.ndarray, float]:
 def kaiser_periodogram(x: np.ndarray) -> np.ndarray:
     """Kaiser (β = 14, sidelobes ≈ −110 dB) periodogram; white noise of variance σ² has mean σ²."""
     w, w2 = _kaiser14(x.shape[-1])
-    X = np.fft.rfft((x - x.mean(axis=-1, keepdims=True)) * w, axis=-1)
+    X = rfft_rows((x - x.mean(axis=-1, keepdims=True)) * w)
     return np.abs(X) ** 2 / w2
+
+
+_FAST_PRIMES = 7
+"""Largest prime factor of a length that pocketfft transforms by its own radices (2 to 7):
+beyond, it runs Bluestein's algorithm, whose real transform costs as much as a complex one (a
+decay's record length is arbitrary: 16 rows of 29 138 = 2 x 17 x 857 samples took 30 ms, of
+28 672 = 2^12 x 7 samples 2.5 ms)."""
+
+
+_PACK_FROM = 2048
+"""Shortest length :func:`rfft_rows` packs (below, the unpacking costs what it saves)."""
+
+
+@functools.lru_cache(maxsize=64)
+def _largest_prime_factor(n: int) -> int:
+    p, k = 1, 2
+    while k * k <= n:
+        while n % k == 0:
+            p, n = k, n // k
+        k += 1
+    return max(p, n)
+
+
+def rfft_rows(a: np.ndarray) -> np.ndarray:
+    """``np.fft.rfft(a, axis=-1)`` of a real (n_rows, n) ``a``. Where n has a prime factor over
+    :data:`_FAST_PRIMES`, two rows go through one complex transform (z = a_i + j a_(i+1),
+    Z = FFT(z): A_k = (Z_k + conj Z_(n-k)) / 2, B_k = (Z_k - conj Z_(n-k)) / 2j), 1.5-2x
+    faster at such lengths and equal to the rfft to rounding (~3e-15 of the larger row's norm:
+    a row's last digits then depend on the row it is paired with); otherwise, or for one row,
+    ``np.fft.rfft`` itself, equal to the bit (also under :data:`_PACK_FROM` samples)."""
+    n = a.shape[-1]
+    pairs = a.shape[0] // 2 if a.ndim == 2 else 0
+    if pairs == 0 or n < _PACK_FROM or _largest_prime_factor(n) <= _FAST_PRIMES:
+        return np.fft.rfft(a, axis=-1)
+    m = n // 2 + 1
+    z = np.empty((pairs, n), dtype=complex)
+    z.real, z.imag = a[0:2 * pairs:2], a[1:2 * pairs:2]
+    Z = np.fft.fft(z, axis=-1)
+    mirror = np.empty((pairs, m), dtype=complex)  # conj Z_(n-k), k = 0 .. n // 2
+    mirror[:, 0] = Z[:, 0]
+    mirror[:, 1:] = Z[:, n - 1:n - m:-1]
+    np.conjugate(mirror, out=mirror)
+    out = np.empty((a.shape[0], m), dtype=complex)
+    np.add(Z[:, :m], mirror, out=out[0:2 * pairs:2])
+    out[0:2 * pairs:2] *= 0.5
+    np.subtract(Z[:, :m], mirror, out=out[1:2 * pairs:2])
+    out[1:2 * pairs:2] *= -0.5j
+    if a.shape[0] % 2:
+        out[-1] = np.fft.rfft(a[-1])
+    return out
 
 
 def estimate_noise_std(x: ArrayLike) -> np.ndarray:

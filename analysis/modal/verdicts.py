@@ -181,7 +181,8 @@ class JointAssessment:
         own search: noise only, which shaped the joint fit's modes by no more than noise.
     noise_std : numpy.ndarray, shape (n_channels,) or None
         Each input channel's white-noise std from its whole-record periodogram (in its unit;
-        :func:`~ramdaq.analysis.modal.signal.estimate_noise_std`, equal to the bit), NaN for a
+        :func:`~ramdaq.analysis.modal.signal.estimate_noise_std`, equal to the bit or, at the
+        lengths :func:`~ramdaq.analysis.modal.signal.rfft_rows` packs, to rounding), NaN for a
         channel the cheap checks (dead, clipped, too short) set aside: for the hit's peak
         decrements, which need it too.
     """

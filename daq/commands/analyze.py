@@ -14,10 +14,12 @@ import math
 import os
 import re
 from collections.abc import Callable, Collection
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from ...analysis.impact import mode_tag
 from ...analysis.model.geometry import gage_geometry
 from ...analysis.model.rig import Rig
 from ...analysis.model.structure import added_mass
@@ -174,14 +176,17 @@ def format_summary(report: dict, units: str = "si") -> str:
     for imp in report["impacts"]:
         a = imp["analysis"]
         if a:
+            tag = partial(mode_tag, predominant=a["predominant_mode"], chosen=a.get("chosen_mode"),
+                          mode_hz=a.get("mode_hz_asked"))
+            asked = "" if a.get("chosen_mode") is None else tag(a["chosen_mode"])
             lines.append(f"  hit {imp['index']} at {imp['onset_s']:8.3f} s  accepted   "
-                         f"f = {a['f_hz']:.3f} Hz  delta_modal = {_fmt(a['damping']['delta_modal'])}")
+                         f"f = {a['f_hz']:.3f} Hz{asked}  delta_modal = {_fmt(a['damping']['delta_modal'])}")
             lines += [f"    {g}: f = {_fmt(d['f_hz'], '.4f')} +- {_fmt(d['f_se_hz'], '.2g')} Hz, "
                       f"delta = {_fmt(d['delta'])} +- {_fmt(d['delta_se'], '.2g')}, zeta = "
                       f"{_fmt(d['zeta'], '.4%')} +- {_pct(d['zeta_se'])}"
                       for g, d in a["gages"].items()]
-            if len(a["modes"]) > 1:  # the gage rows are the predominant mode's: list every mode
-                lines += [f"    mode {i}{' (predominant)' if i == a['predominant_mode'] else ''}"
+            if len(a["modes"]) > 1:  # the gage rows are the chain's mode's: list every mode
+                lines += [f"    mode {i}{tag(i)}"
                           f", all gages: f = {_fmt(m['f_hz'], '.4f')} +- {_fmt(m['f_se_hz'], '.2g')}"
                           f" Hz, delta = {_fmt(m['delta'])} +- {_fmt(m['delta_se'], '.2g')}, zeta = "
                           f"{_fmt(m['zeta'], '.4%')} +- {_pct(m['zeta_se'])}"

@@ -183,6 +183,13 @@ def results_table(results: Sequence[TaskResult], kind: str, carried: pa.Table | 
     return t.sort_by([(k, "ascending") for k in key])
 
 
+COLUMN_MEANINGS = ("predominant: the mode is the most energetic on the rudder gages (report.json "
+                   "predominant_mode); chosen: the mode --mode-hz asked for, on which the report's "
+                   "chain ran (report.json chosen_mode; batch analyze asks none, so false); the "
+                   "per-gage decrements (f_hz ... zeta_se) are each mode's own on that gage")
+"""What the mode flags of ``analyze.parquet`` mean (schema metadata ``ramdaq.columns``)."""
+
+
 def write_table(table: pa.Table, path: Path, *, partial: bool, pending: int) -> None:
     """Write the table at once (a temporary file replaced into place), with ``ramdaq.partial``
     and ``ramdaq.pending`` (recordings not done) in its schema metadata."""
@@ -195,6 +202,8 @@ def write_table(table: pa.Table, path: Path, *, partial: bool, pending: int) -> 
                                          for f in table.schema if f.metadata}).encode(),
             b"ramdaq.numbering": b"hit and mode from 0 (report.json and the CLI alike); gage: "
                                 b"the rig's number; mode null where none was fitted"}
+    if "predominant" in table.column_names:  # analyze.parquet's mode flags
+        meta[b"ramdaq.columns"] = COLUMN_MEANINGS.encode()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}")
     pq.write_table(table.replace_schema_metadata(meta), tmp)

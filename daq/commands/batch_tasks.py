@@ -84,15 +84,13 @@ class AnalyzeRow(ModeEstimate):
     0 (``hit`` is report.json's ``impacts[i].index`` and ``--impact``; ``mode`` is the index
     into report.json's ``analysis.modes`` and the CLI's ``mode 0``), gages by their rig numbers.
     ``mode`` is null where no mode was fitted (a gage with no decay, a hit not analysed) --
-    ``fitted`` is False and ``reason`` says why -- where ``ModeEstimate`` holds -1.
+    ``fitted`` is False and ``reason`` says why -- as in ``ModeEstimate``.
     ``channel``: the recorded channel's name in the stream (``g01``, "" for a hit's row);
     ``source_channel``: its name in the file it was imported from ("" if not imported).
     ``decay_cut``: the hit's decay record was cut before the analysis window the trigger wants
     (report.json ``flags.too_short``: the next blow, a gap or the end of the record);
     ``decay_end``: what ended it (``decayed``, ``next_impact``, ``gap``, ``end``)."""
 
-    mode: int | None
-    fitted: bool = False
     channel: str = ""
     source_channel: str = ""
     decay_cut: bool = False
@@ -113,17 +111,15 @@ text, a flag or an identity (unit ``-``)."""
 
 
 def analyze_rows(h, channels: tuple[str, ...], sources: dict[str, str]) -> tuple[AnalyzeRow, ...]:
-    """The table rows of one hit: :func:`~ramdaq.daq.mode_table.mode_rows` with the mode's
-    numbering as :class:`AnalyzeRow` says, the recorded ``channels`` (the stream's names) and
-    the import's ``sources`` (stream name -> source name)."""
+    """The table rows of one hit: :func:`~ramdaq.daq.mode_table.mode_rows` with the recorded
+    ``channels`` (the stream's names) and the import's ``sources`` (stream name -> source
+    name)."""
     ev = h.event
     out = []
     for r in mode_rows(h):
         d = asdict(r)
-        fitted = d["mode"] >= 0
         name = f"g{r.gage:02d}" if r.gage and f"g{r.gage:02d}" in channels else ""
-        d.update(mode=d["mode"] if fitted else None, fitted=fitted, channel=name,
-                 source_channel=sources.get(name, ""), decay_cut=bool(ev.too_short),
+        d.update(channel=name, source_channel=sources.get(name, ""), decay_cut=bool(ev.too_short),
                  decay_end=str(getattr(ev, "end_reason", "") or ""))
         out.append(AnalyzeRow(**d))
     return tuple(out)

@@ -54,7 +54,7 @@ from ...analysis.model.rig import RigError, load_rig, parse_rig
 from ...analysis.model.surface import Surface
 from ...drivers.errors import DeviceError
 from ..errors import RecordingError, ViewError
-from .gap_bench import BLOWS, MIN_BLOWS, PER_CLASS, SEED_SETS
+from .gap_sizes import BLOWS, MIN_BLOWS, PER_CLASS, SEED_SETS
 
 RECORDINGS = Path("recordings")
 DESCRIPTION = """\
@@ -353,21 +353,34 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 def cmd_gap(args: argparse.Namespace) -> int:
     """Sim-to-real gap diagnosis of a recording (``ramdaq gap-benchmark`` proves it)."""
     from ...analysis.gap.diagnose import Settings
-    from .gap import parse_effects, rig_record, run_gap, summary_lines, write_report
+    from .gap import (
+        earlier_report,
+        parse_effects,
+        remove_stale,
+        rig_record,
+        run_gap,
+        summary_lines,
+        write_report,
+    )
     from .progress import progress_bar
 
     effects = parse_effects(args.effects)
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_gap")
+    earlier = earlier_report(out, args.overwrite)  # refused before the minutes of the diagnosis
     with progress_bar(f"gap diagnosis of {src.name}", None):  # steps unknown: spinner and time
         lt, td, d = run_gap(src, rig=args.rig, settings=Settings(effects=effects),
                             progress=lambda m: print(m, flush=True), pre_s=args.pre_s,
                             post_max_s=args.post_s, held_out_every=args.held_out_every)
     files = write_report(d, out, plots=not args.no_plots, source=str(src), rig=rig_record(lt, args.rig))
+    stale = remove_stale(earlier, files)
     print("\n".join(summary_lines(d)))
     plural = "s" if len(files) != 1 else ""
-    print(f"\nwrote {len(files)} file{plural} to {out}/ (gap.json with every number)")
+    print(f"\nwrote {len(files)} file{plural} to {out}/ (gap.json with every number)"
+          + (f", replacing the earlier diagnosis there ({len(stale)} of its files not written again "
+             f"removed: {', '.join(p.name for p in stale)})" if stale else
+             ", replacing the earlier diagnosis there" if earlier else ""))
     return EXIT_OK
 
 
@@ -447,7 +460,7 @@ def _import_file(args: argparse.Namespace) -> int:
     print(f"imported {src} ({imp.get('format')}, {info.n_channels} ch at {info.fs_hz:g} Hz) into "
           f"{out}: {s.duration_s:.2f} s, {s.blocks} blocks, {s.gaps} gaps "
           f"({imp.get('missing_samples', 0)} samples missing)")
-    for line in _read_notes(imp):
+    for line in _read_notes(imp, rig_given=rig_out is None):
         print(line, file=sys.stderr if line.startswith("warning:") else sys.stdout)
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
@@ -503,21 +516,38 @@ def _counted(per_channel: dict[str, int], most: int = 4) -> str:
     return text + (f" and {len(items) - most} more" if len(items) > most else "")
 
 
-def _read_notes(imp: dict) -> list[str]:
-    """What the CSV reader made of the file's dialect: lines skipped, decimal commas."""
+def _medium_lines(imp: dict, rig_given: bool) -> list[str]:
+    """The medium the import applied and what decided it, in one line: the file (its CSV
+    header, TDMS property, UFF header: where), ``--medium``, or the rig when the file states
+    none (not said for a channels-only rig, whose line names its medium)."""
+    stated = imp.get("medium_stated")
+    if not stated:
+        return []
+    where = imp.get("medium_where") or "the file's header"
+    if stated["file"] is None:
+        if stated["by"] == "given":
+            return [f"medium {stated['applied']} as --medium gives (the file states none)"]
+        return [f"medium {stated['applied']}, the rig's: the file states none (--medium overrides)"] \
+            if rig_given else []
+    if stated["by"] == "file" and stated["file"] != stated["rig"]:
+        return [f"medium {stated['file']}, as {where} states (the rig says {stated['rig']}; "
+                "--medium overrides)"]
+    if stated["by"] == "given" and stated["file"] != stated["applied"]:
+        return [f"warning: medium {stated['applied']} as --medium gives, but {where} states "
+                f"{stated['file']}"]
+    return [f"medium {stated['file']}, as {where} states"]
+
+
+def _read_notes(imp: dict, rig_given: bool = True) -> list[str]:
+    """What the reader made of the file: the medium (:func:`_medium_lines`); the CSV
+    dialect: lines skipped, decimal commas."""
     out = []
     skipped = imp.get("skipped_lines")
     if skipped:
         n, a, b = skipped["count"], skipped["first"], skipped["last"]
         out.append(f"skipped {n} line{'s' if n > 1 else ''} above the column names (line"
                    f"{f's {a}-{b}' if b > a else f' {a}'}: a header block, not data)")
-    stated = imp.get("medium_stated")
-    if stated and stated["by"] == "file" and stated["file"] != stated["rig"]:
-        out.append(f"medium {stated['file']}, as the file's header states (the rig says "
-                   f"{stated['rig']}; --medium overrides)")
-    elif stated and stated["by"] == "given" and stated["file"] != stated["applied"]:
-        out.append(f"warning: medium {stated['applied']} as --medium gives, but the file's "
-                   f"header states {stated['file']}")
+    out += _medium_lines(imp, rig_given)
     dropped = imp.get("dropped_with_gaps", {})
     if dropped.get("good"):
         good, lost = dropped["good"], dropped["missing"]
@@ -557,7 +587,11 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                                     or args.force_channel)
     made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                        units=args.units, force_channel=force,
-                       medium=args.medium or found.medium or "air", file_units=found.units)
+                       medium=args.medium or found.medium or "air", file_units=found.units,
+                       anti_alias=found.anti_alias)
+    if found.anti_alias is not None:
+        print(f"anti-alias filter order {found.anti_alias[0]} at {found.anti_alias[1]:g} Hz, as the "
+              f"file states: written into {rig_out.name}, so onsets have its delay removed")
     for unit in sorted({u for _, u in made.overridden}):
         names = [c for c, u in made.overridden if u == unit]
         print(f"warning: {_channels_are(names)} in "
@@ -857,6 +891,8 @@ def build_parser() -> argparse.ArgumentParser:
     gp.add_argument("--rig", help="rig file, if the recording carries none (or to hold it against another)")
     gp.add_argument("--out", help="output folder (default FILE_gap/)")
     gp.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    gp.add_argument("--overwrite", action="store_true",
+                    help="replace an earlier diagnosis in the --out folder (refused without it)")
     gp.add_argument("--effects", help="comma-separated candidate effects (default: all registered); "
                     "'none': no library effect, only the data-only checks and the rig's model form "
                     "(gap-benchmark's 'none' is its class of trials made without an effect)")

@@ -87,7 +87,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
     out = [f"gap diagnosis of {td.n_seg} impacts ({int(td.fitted.sum())} fitted, "
            f"{int((~td.fitted).sum())} held out), {td.n_gages} gages, compared up to "
            f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
-           f"verdict: {_headline(d)}"]
+           *verdict_lines(d)]
     out += rig_check_lines(d)
     out += answer_lines(d)
     zf = float(np.max(d.map_fit.z))
@@ -174,7 +174,7 @@ def model_level_lines(d: Diagnosis) -> list[str]:
     text = ", ".join(f"{p.name} x{p.factor:.3f}"
                      + (f" +-{100 * p.sd:.1f} %" if math.isfinite(p.sd) else "")
                      + (" AT ITS BOUND" if p.at_bound else "") for p in moved)
-    out = [f"{head} calibrated to the trial's modes ({ml.fit.stop.value}): "
+    out = [f"{head} calibrated to the trial's modes ({ml.fit.outcome()}): "
            f"{text or 'no constant moved beyond 1 %'}"]
     if held:
         out.append(f"    held at the rig's values (the modes do not pin them): {', '.join(held)}")
@@ -215,12 +215,51 @@ def data_lines(d: Diagnosis) -> list[str]:
                    f"{f.chance_level:.3g}{closes})")
     return out
 
-def _headline(d: Diagnosis) -> str:
-    """The verdict's words in capitals up to its first colon or parenthesis; what follows (a
-    finding's text: gage numbers, Hz, x-1.000) and the model level's statement as they are."""
-    verdict, _, form = d.headline.partition("; ")
-    cut = min((i for i in (verdict.find(":"), verdict.find(" (")) if i >= 0), default=len(verdict))
-    return verdict[:cut].upper() + verdict[cut:] + (f"; {form}" if form else "")
+VERDICT_WIDTH = 120
+"""The verdict's first line is at most about this long: the answer; what it rests on follows."""
+
+
+def verdict_lines(d: Diagnosis) -> list[str]:
+    """The verdict: a short first line, the answer (its words in capitals up to the first colon
+    or parenthesis; what follows -- gage numbers, Hz, an effect's name -- as it is); the
+    answer's finding on the next line when the first would be longer than
+    :data:`VERDICT_WIDTH`; then the model form (:func:`form_lines`). The same words as
+    :attr:`Diagnosis.headline` (gap.json's ``headline``), each said once."""
+    head = d.headline
+    if d.model_level is not None:  # the headline is the answer, "; ", the model level's statement
+        head = head.removesuffix("; " + d.model_level.statement(d.answer and d.answer.named))
+    cut = min((i for i in (head.find(":"), head.find(" (")) if i >= 0), default=len(head))
+    head = head[:cut].upper() + head[cut:]
+    out = [f"verdict: {head}"]
+    if len(out[0]) > VERDICT_WIDTH:
+        at = [i for i in (head.find(" -- "), head.find(" (", cut)) if i >= 0]
+        if at:
+            i = min(at)
+            detail = head[i:].removeprefix(" -- ").strip()
+            if detail.startswith("(") and detail.endswith(")"):
+                detail = detail[1:-1]
+            out = [f"verdict: {head[:i]}", f"  finding: {detail}"]
+    return out + form_lines(d)
+
+
+def form_lines(d: Diagnosis) -> list[str]:
+    """The model level's statement (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.statement`),
+    one line per form error: what the rig calibrated to the trial's modes still misses (with
+    the named effect's update on it when one was made), or why it was not calibrated. How the
+    calibration ended is the model level's line (:func:`model_level_lines`), not repeated."""
+    ml = d.model_level
+    if ml is None:
+        return []
+    if ml.fit is None:
+        return [f"  model form: not assessed ({ml.note})"]
+    named = d.answer and d.answer.named
+    if named in ml.updates:
+        head, items = f"model form with {named}'s update on the rig", [e.text() for e in ml.updates[named]]
+    else:
+        head, items = "model form", [f.text() for f in ml.fit.form] + [m.text() for m in ml.fit.damping]
+    if not items:
+        return [f"  {head}: none beyond the identification's uncertainty"]
+    return [f"  {head}:"] + [f"    {t}" for t in items]
 
 
 def feature_lines(d: Diagnosis, n: int = 5) -> list[str]:
@@ -270,6 +309,31 @@ def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "
         from ..reports.gap_plots import plot_diagnosis
         files += plot_diagnosis(d, out)
     return files
+
+
+def earlier_report(out: Path, overwrite: bool) -> list[Path]:
+    """The files an earlier ``ramdaq gap`` left in ``out`` (gap.json, gap_*.png), checked before
+    the minutes of a diagnosis: FileExistsError naming the folder and ``--overwrite`` when there
+    are any and ``overwrite`` is not set (as ``ramdaq trial`` refuses an existing recording).
+    NotADirectoryError when ``out`` is a file."""
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, "is not a folder; --out takes the folder gap.json goes in", str(out))
+    found = sorted([*out.glob("gap.json"), *out.glob("gap_*.png")]) if out.is_dir() else []
+    if found and not overwrite:
+        raise FileExistsError(f"{out}/ holds an earlier gap diagnosis ({found[0].name}"
+                              + (f" and {len(found) - 1} more" if len(found) > 1 else "")
+                              + "); --overwrite replaces it")
+    return found
+
+
+def remove_stale(earlier: list[Path], written: list[Path]) -> list[Path]:
+    """Delete the earlier run's files this run did not write again (its plots after a
+    ``--no-plots`` run), so that the folder holds one diagnosis; returns them, for the line
+    that says so."""
+    stale = [p for p in earlier if p not in set(written) and p.exists()]
+    for p in stale:
+        p.unlink()
+    return stale
 
 
 def rig_record(lt: LoadedTrial, given: str | Path | None) -> dict:

@@ -264,11 +264,11 @@ def decay_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float,
         if g is not None and np.isfinite(g.delta):
             title += f": δ = {g.delta:.4f} ± {g.delta_se:.1g} at {g.f_hz:.2f} Hz"
         else:  # not a number: said, never drawn as zero
-            title += ": δ of the predominant mode not measured"
+            title += f": δ of the {a.f_hz:.2f} Hz mode not measured"
         # y given: the title is not moved clear of top tick labels (there are none), which
         # measured every tick label of the panel and was a third of the figure's drawing
         ax.set_title(title, fontsize=9, y=1.0)
-    labels = [f"{f:.2f} Hz, δ = {d:.4f}{' (predominant)' if k == a.predominant else ''}"
+    labels = [f"{f:.2f} Hz, δ = {d:.4f}{a.mode_tag(k)}"
               for k, (f, d) in enumerate(zip(m.frequency_hz, m.delta, strict=True))]
     proxies = [Line2D([], [], color=c) for c in colours]
     fig.legend(proxies, labels, loc="upper right", bbox_to_anchor=(0.99, 1.0), ncols=len(labels),
@@ -360,9 +360,9 @@ def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) ->
     keep = (f >= lo) & (f <= hi)
     ax.loglog(f[keep], p[keep], lw=0.8, color="0.2")
     for k, (fk, dk) in enumerate(zip(fm, a.modes.delta, strict=True)):
-        pred = k == a.predominant
+        pred = k == a.chain_mode  # the mode the chain ran on stands out
         ax.axvline(fk, color="C3" if pred else f"C{k % 3}", ls="--", lw=1.2 if pred else 0.8,
-                   label=f"{k + 1}: {fk:.2f} Hz, δ = {dk:.4f}{' (predominant)' if pred else ''}")
+                   label=f"{k + 1}: {fk:.2f} Hz, δ = {dk:.4f}{a.mode_tag(k)}")
         ax.annotate(str(k + 1), (fk, 1.0), xycoords=("data", "axes fraction"), xytext=(3, -12),
                     textcoords="offset points", fontsize=9)
     top = float(np.max(p[keep]))
@@ -381,10 +381,12 @@ def _reference(shape: dict[int, complex]) -> complex:
 
 
 def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
-    """The predominant mode at the decay's start: left, each athwartship gage's amplitude in
-    phase with the reference gage (m/s^2) against its height, seen from aft; right, every used
-    gage's amplitude (m/s^2) with its phase against the reference, one row per gage."""
-    m, p = a.modes, a.predominant
+    """The mode the chain ran on (:attr:`~ramdaq.analysis.impact.ImpactAnalysis.chain_mode`:
+    the predominant one unless ``mode_hz`` chose another) at the decay's start: left, each
+    athwartship gage's amplitude in phase with the reference gage (m/s^2) against its height,
+    seen from aft; right, every used gage's amplitude (m/s^2) with its phase against the
+    reference, one row per gage."""
+    m, p = a.modes, a.chain_mode
     amp = dict(zip(a.active_gages, m.complex_amplitude[:, p], strict=True))
     ref = _reference(amp)
     turn = np.conj(ref) / abs(ref)
@@ -426,7 +428,7 @@ def modeshape_figure(a: ImpactAnalysis, rig: Rig) -> Figure:
     bars.margins(x=0.15)
     bars.set_xlabel("amplitude (m/s²); label: phase against the reference gage")
     bars.set_title("every used gage", fontsize=10, y=1.0)
-    fig.suptitle(f"Mode at {a.f_hz:.3f} Hz, δ = {m.delta[p]:.4f}, at the decay's start")
+    fig.suptitle(f"Mode at {a.f_hz:.3f} Hz{a.mode_tag(p)}, δ = {m.delta[p]:.4f}, at the decay's start")
     return fig
 
 

@@ -86,7 +86,7 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
     try:
         with McapReplayDevice(src) as dev, open(body, "w", encoding="utf-8", newline="\n") as f:
             info, events = dev.info, dev.events()
-            rig = _rig_name(info, dev.rig_toml)
+            rig, anti_alias = _rig_name(info, dev.rig_toml), _anti_alias(dev.rig_toml)
             div = _divisors(info, units)
             last = t_zero = scales = None
             for block in dev:
@@ -111,6 +111,8 @@ def export_csv(src: str | PathLike, out: str | PathLike, *, units: str = "m/s^2"
             if force:
                 f.write(f"# force channel(s): {', '.join(force)} (ramdaq import --force-channel)\n")
             f.write(f"# medium: {info.extra.get('medium') or '(none recorded)'}\n")
+            if anti_alias is not None:  # a channels-only re-import removes its delay from onsets
+                f.write(f"# anti-alias: order {anti_alias[0]}, {anti_alias[1]!r} Hz\n")
             if scales is not None and len(scales):
                 f.write("# scale [SI unit per count]: " + ", ".join(
                     f"{c}={s!r}" for c, s in zip(info.channels, scales.tolist(), strict=True)
@@ -133,6 +135,17 @@ def _same_scale(seen: np.ndarray | None, scale: np.ndarray) -> np.ndarray:
     if seen is None:
         return scale.copy()
     return np.where(seen == scale, seen, np.nan)
+
+
+def _anti_alias(rig_toml: str) -> tuple[int, float] | None:
+    """The recorded rig's anti-alias filter, ``(order, corner Hz)`` from its ``[daq]``; None
+    when it names none or cannot be read (then the CSV states none)."""
+    try:
+        daq = tomllib.loads(rig_toml).get("daq", {})
+        order, hz = int(daq["anti_alias_order"]), float(daq["anti_alias_hz"])
+    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+    return (order, hz) if order > 0 and 0 < hz < float("inf") else None
 
 
 def _rig_name(info, rig_toml: str) -> str:

@@ -18,7 +18,7 @@ The file holds, in this order (all SI: m, s, m/s^2):
   ``delta = -Re(lambda)/f``. Each gage's complex shape entry (normalised to 1 at the
   largest) sits on its sensing axis, the other two are zero; gages left out of the fit are left
   out of the record. Load case = hit index + 1, mode number = mode index + 1; ID line 1 gives f,
-  delta and zeta in full, and marks the predominant mode.
+  delta and zeta in full, and marks the predominant mode (and the one ``mode_hz`` asked for).
 * **UFF 58** per accepted hit and gage: the free-decay record the analysis used (function type 1,
   time response; ordinate acceleration in m/s^2, spec data type 12; response node = gage,
   direction = its sensing axis; even abscissa from the decay start, increment 1/fs). Load case =
@@ -156,7 +156,7 @@ def _mode_sets(index: int, a: ImpactAnalysis, rig: Rig, ids: dict) -> list[dict]
             r = np.hstack([r, v])
         if not nodes:
             continue
-        mark = ", predominant" if k == a.predominant else ""
+        mark = a.mode_tag(k).replace(" (", ", ").rstrip(")")
         out.append({
             "type": 55, "id1": f"mode {k + 1} of hit {index}: f {f:.6f} Hz, delta {delta:.6f}, "
                                f"zeta {zeta:.6f}{mark}"[:80],

@@ -466,6 +466,29 @@ def _dropped_with_gaps(missing: np.ndarray, nan_rows: list[np.ndarray],
                                   "good": {n: k for n, k in good.items() if k}}}
 
 
+MEDIA = ("air", "water")
+
+
+def stated_medium(found: list[tuple[str, object]], source: str) -> dict:
+    """The medium a file states, from ``(where, value)`` pairs (a TDMS ``medium`` property, a
+    UFF header's ``medium: water``): ``{"medium": "water", "medium_where": where}`` for
+    :attr:`SourceTable.notes`, ``{}`` when the file states none. ImportFormatError, naming
+    where, when a value is not air or water or two places disagree."""
+    media: dict[str, str] = {}
+    for where, v in found:
+        m = str(v).strip().lower()
+        if m not in MEDIA:
+            raise ImportFormatError(f"{source}: {where} states medium {v!r}: expected air or water")
+        media.setdefault(m, where)
+    if len(media) > 1:
+        (a, wa), (b, wb) = media.items()
+        raise ImportFormatError(f"{source}: {wa} states medium {a} but {wb} states {b}")
+    if not media:
+        return {}
+    ((m, where),) = media.items()
+    return {"medium": m, "medium_where": where}
+
+
 def snap_rate(fs_hz: float, rel_tol: float) -> float:
     """The value with the fewest significant digits within ``rel_tol`` of ``fs_hz``, Hz.
 
@@ -662,11 +685,14 @@ class FileImportDevice(Device):
                    "block_samples": self._block_n, "import": report})
 
     def _apply_stated_medium(self, stated: str | None, name: str) -> dict:
-        """The medium the file states (``# medium: water``) applied to the rig unless
-        ``medium`` was given; ``{"medium_stated": {...}}`` says what was stated, the rig's, the
-        one applied and why, for the importer's caller to print (empty if the file states none)."""
+        """The medium the file states (``# medium: water``, a TDMS ``medium`` property, a UFF
+        header's ``medium: water``) applied to the rig unless ``medium`` was given;
+        ``{"medium_stated": {...}}`` says what was stated (``file``, None when nothing), the
+        rig's, the one applied and why (``given``, ``file`` or ``rig``), for the importer's
+        caller to print."""
         if stated is None:
-            return {}
+            return {"medium_stated": {"file": None, "rig": self._rig_medium, "applied": self.rig.medium,
+                                      "by": "rig" if self.medium_given is None else "given"}}
         if self.medium_given is not None:
             applied, why = self.medium_given, "given"
         else:

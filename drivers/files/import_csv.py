@@ -220,6 +220,7 @@ def printed_resolution(t: np.ndarray) -> float:
 
 
 _MEDIUM_LINE = re.compile(r"^#\s*medium:\s*(\S+)", re.MULTILINE)
+_ANTI_ALIAS_LINE = re.compile(r"^#\s*anti-alias:\s*order\s+(\S+),\s*(\S+)\s*Hz", re.MULTILINE)
 _SCALE_LINE = re.compile(r"^#\s*scale \[SI unit per count\]:(.*)$", re.MULTILINE)
 
 
@@ -227,7 +228,9 @@ def _stated_header(text: str, name: str) -> dict:
     """What the ``#`` lines at the top of the file state for a re-import, as ``ramdaq
     export-csv`` writes them: ``{"medium": "water"}`` from ``# medium: water`` and
     ``{"scales": {"g01": 1.2e-4, ...}}`` (SI unit per count) from ``# scale [SI unit per
-    count]: g01=..., ...``; empty when they are not there. A stated medium other than air or
+    count]: g01=..., ...``, ``{"anti_alias": (4, 800.0)}`` from ``# anti-alias: order 4, 800.0
+    Hz`` (the recorded rig's filter, which a channels-only rig then names); empty when they
+    are not there. A stated medium other than air or
     water, or a scale that is not a positive number, is refused naming it."""
     end = 0
     while end < len(text) and (text.startswith("#", end) or text[end] in "\r\n"):
@@ -239,6 +242,15 @@ def _stated_header(text: str, name: str) -> dict:
         if m.group(1) not in ("air", "water"):
             raise ImportFormatError(f"{name}: '# medium: {m.group(1)}': expected air or water")
         out["medium"] = m.group(1)
+    m = _ANTI_ALIAS_LINE.search(top)
+    if m:
+        try:
+            order, hz = int(m.group(1)), float(m.group(2))
+        except ValueError:
+            order, hz = 0, math.nan
+        if not (0 < order <= 16 and 0 < hz < math.inf):
+            raise ImportFormatError(f"{name}: '{m.group(0)}': expected '# anti-alias: order N, F Hz'")
+        out["anti_alias"] = (order, hz)
     m = _SCALE_LINE.search(top)
     if m:
         scales = {}

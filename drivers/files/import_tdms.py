@@ -11,7 +11,9 @@ channel name (``"group/channel"`` where two groups share a name), mapped to gage
 columns. The time axis comes from the waveform properties ``wf_increment`` (s per sample) and
 ``wf_start_offset`` (s), which all channels must share, with equal lengths; a file without them
 needs a channel named ``time`` (s), placed on a sample grid as a CSV time column is. The unit is
-the channel's ``unit_string`` (m/s^2 or g; none is taken as m/s^2). NaN samples are gaps.
+the channel's ``unit_string`` (m/s^2 or g; none is taken as m/s^2). NaN samples are gaps. A
+``medium`` property (any case) of the file, a group or an imported channel states the medium
+(air or water; :func:`~ramdaq.drivers.files.import_common.stated_medium`).
 
 The file is opened for streaming (``TdmsFile.open``): only the mapped channels are read. Before
 nptdms sees it, the chain of segment lead-ins is walked, so a file cut short (a segment that
@@ -30,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ...analysis.model.rig import Rig
-from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate, stated_medium
 from .import_csv import sample_grid
 
 __all__ = ["TdmsImportDevice", "check_tdms_segments"]
@@ -209,6 +211,7 @@ def _describe(tdms, path: Path, group: str | None, collect: _Collect, n_segments
         raise ImportFormatError(f"{path}: channel {missing!r} has no wf_increment and the file "
                                 f"has no time channel")
     units = [str(p["unit_string"]) if "unit_string" in p else None for p in props]
+    notes |= tdms_medium(tdms, groups, data, path)
     start = props[0].get("wf_start_time")
     notes |= {"tdms_segments": n_segments, "groups": sorted({g for g, _ in data}),
               "wf_start_time": None if start is None else str(start),
@@ -224,6 +227,16 @@ def _describe(tdms, path: Path, group: str | None, collect: _Collect, n_segments
 
     return SourceTable(names=names, units=units, sample_index=index, fs_hz=fs, t0_s=t0,
                        read=read, fmt="tdms", notes=notes, close=close)
+
+
+def tdms_medium(tdms, groups: list, data: list, path: Path) -> dict:
+    """The medium the file's, its groups' or the imported channels' ``medium`` property states
+    (the name in any case; :func:`~ramdaq.drivers.files.import_common.stated_medium`)."""
+    levels = [("the file's", tdms.properties)] + [(f"group {g.name!r}'s", g.properties) for g in groups] \
+        + [(f"channel {c.name!r}'s", c.properties) for _, c in data]
+    found = [(f"{what} property {k!r}", v) for what, props in levels for k, v in props.items()
+             if str(k).strip().lower() == "medium"]
+    return stated_medium(found, str(path))
 
 
 def _number(v: object, path: Path, channel: str, prop: str) -> float:

@@ -26,15 +26,20 @@ ADC still give their exact counts.
 
 The file is read with pyuff; anything pyuff cannot read, a record whose point count disagrees
 with its data (a truncated file), and a file without type 58 records are refused in one line.
+
+The medium is read where the file states it (:func:`~ramdaq.drivers.files.import_common.stated_medium`):
+``medium: water`` (or ``= air``) in a 151 or 164 header's text or a 58 record's ID line, or
+ramdaq's own export's ID line 2, ``ramdaq rig NAME in water``.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 
-from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate, stated_medium
 
 __all__ = ["UffImportDevice", "read_uff_table"]
 
@@ -98,6 +103,7 @@ def read_uff_table(path: Path) -> SourceTable:
     if not tail.endswith(b"    -1"):
         raise ImportFormatError(f"{path}: truncated: the last record lacks its closing -1 line")
     wanted = [i for i, t in enumerate(types) if t == 58]
+    texts: list[tuple[str, str]] = []
     if not wanted:
         raise ImportFormatError(f"{path}: no type 58 (function at nodal DOF) records; the file "
                                 f"holds types {', '.join(str(t) for t in sorted(set(types)))}")
@@ -109,7 +115,35 @@ def read_uff_table(path: Path) -> SourceTable:
             raise ImportFormatError(f"{path}: record {i + 1} (type 58) is unreadable "
                                     f"({type(err).__name__}: {err})") from err
         records.append(_check_record(d, i + 1, path))
-    return _table(records, path, len(types))
+        texts += [(f"UFF record {i + 1} (type 58) ID line {k[-1]}", str(d.get(k, ""))) for k in _ID_LINES]
+    texts += [(f"UFF record {i + 1} (type {types[i]}) {k}", str(v)) for i in range(len(types))
+              if types[i] in (151, 164) for k, v in _read_header(uff, i).items()]
+    table = _table(records, path, len(types))
+    table.notes |= stated_medium(_media(texts), str(path))
+    return table
+
+
+_ID_LINES = ("id1", "id2", "id3", "id4", "id5")
+_STATED = re.compile(r"\bmedium\s*[:=]\s*([A-Za-z]+)", re.IGNORECASE)
+_OWN_ID2 = re.compile(r"^ramdaq rig .* in (air|water)$")  # ramdaq export_uff's ID line 2
+
+
+def _read_header(uff, i: int) -> dict:
+    """The text fields of header record ``i`` (151: model, description, program...; 164: the
+    units' description); {} when pyuff cannot read it (a header is not what is imported)."""
+    try:
+        d = uff.read_sets(i)
+    except Exception:  # noqa: BLE001 - only its medium is looked for
+        return {}
+    return {k: v for k, v in d.items() if isinstance(v, str) and k != "type"}
+
+
+def _media(texts: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """Each ``(where, medium)`` a UFF file's header texts state: ``medium: water`` (or
+    ``medium = air``) in any of them, or ramdaq's own ``ramdaq rig NAME in water`` ID line 2."""
+    out = [(w, m[1]) for w, t in texts for m in _STATED.finditer(t)]
+    out += [(w, m[1]) for w, t in texts if w.endswith(" ID line 2") and (m := _OWN_ID2.match(t.strip()))]
+    return out
 
 
 def _check_record(d: dict, number: int, path: Path) -> _Record:

@@ -43,6 +43,9 @@ class SourceChannels:
     fs_hz: float
     aliases: dict[str, str] | None = None
     medium: str | None = None
+    anti_alias: tuple[int, float] | None = None
+    """The anti-alias filter the file states, (order, corner Hz) (``# anti-alias:`` from
+    ``ramdaq export-csv``; None: not stated)."""
 
 
 def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
@@ -68,7 +71,7 @@ def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
     else:
         raise ImportFormatError(f"{path}: format {fmt!r} is not csv, uff or tdms")
     return SourceChannels(list(src.names), list(src.units), float(src.fs_hz), dict(src.aliases),
-                          src.notes.get("medium"))
+                          src.notes.get("medium"), src.notes.get("anti_alias"))
 
 
 def source_channel_names(path: Path, fmt: str, *, time_unit: str | None = None) -> list[str]:
@@ -78,7 +81,8 @@ def source_channel_names(path: Path, fmt: str, *, time_unit: str | None = None) 
 
 def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
                 force_channel: str | None = None, force_unit: str = "N",
-                medium: str = "air", file_units: list[str | None] | None = None) -> MinimalRig:
+                medium: str = "air", file_units: list[str | None] | None = None,
+                anti_alias: tuple[int, float] | None = None) -> MinimalRig:
     """A channels-only rig for source channels ``names``.
 
     Each gage records the unit its samples are in: the file's own where ``file_units`` states
@@ -105,6 +109,11 @@ def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
     medium : {"air", "water"}
     file_units : list of (str or None), optional
         The unit each of ``names`` states in the file.
+    anti_alias : (int, float), optional
+        The filter the samples passed, (order, corner Hz), where the file states it: written
+        into ``[daq]`` so that the trigger removes its delay from onsets, as for the recording
+        the file was exported from (without it the onset is the filtered edge's, ~0.5 sample
+        later at 2048 Hz for a 4th-order 800 Hz filter).
 
     Raises
     ------
@@ -139,6 +148,8 @@ def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
              f"its samples are in.",
              f"name = {json.dumps(name)}", 'units = "SI"', f"medium = {json.dumps(medium)}", "",
              "[daq]", f"sample_rate_hz = {float(fs_hz)!r}"]
+    if anti_alias is not None:
+        lines += [f"anti_alias_hz = {float(anti_alias[1])!r}", f"anti_alias_order = {int(anti_alias[0])}"]
     for k, (src, gage) in enumerate(channels.items()):
         lines += ["", f"[[gages]]  # source channel {json.dumps(src)}", f"number = {gage}",
                   f"channel = {k}", f"unit = {json.dumps(applied[src])}"]
