@@ -79,7 +79,8 @@ def one_answer(d: Diagnosis) -> Answer:
     cands = candidate_records(d)
     finds = [f.to_json() for f in d.data.findings] if d.data is not None else []
     splits = [s.to_json() for s in d.model_level.splits()] if d.model_level is not None else []
-    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes, splits)
+    coupled = [c.to_json() for c in d.model_level.coupled()] if d.model_level is not None else []
+    return answer(d.model_choice(), cands, d.unexplained_where, form, finds, modes, splits, coupled)
 
 
 def with_structure(level: ModelLevel | None, cands: list) -> ModelLevel | None:

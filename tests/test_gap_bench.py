@@ -354,7 +354,7 @@ def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
     where = r["unexplained_where"]
     level = SimpleNamespace(form_gages=lambda: {12}, form_modes=lambda: [],
                             statement=lambda named=None: "model form: x",
-                            splits=lambda: [], candidate_form=lambda name: {})
+                            splits=lambda: [], coupled=lambda: [], candidate_form=lambda name: {})
     d = SimpleNamespace(verdict="unexplained", best=None, candidates=[], unexplained_where=where,
                         model_level=level,
                         data=SimpleNamespace(findings=[SimpleNamespace(to_json=lambda: hp)]))

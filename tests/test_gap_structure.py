@@ -12,7 +12,14 @@ import numpy as np
 import pytest
 
 from ramdaq.analysis.gap.layers import answer, model_answer
-from ramdaq.analysis.gap.modal_level import TrialModes, compare, model_modes_at_gages, modes_of_set, splits
+from ramdaq.analysis.gap.modal_level import (
+    TrialModes,
+    compare,
+    coupled_modes,
+    model_modes_at_gages,
+    modes_of_set,
+    splits,
+)
 from ramdaq.analysis.gap.rigfit import ModelLevel, calibrate_to_modes, gages_of, with_updates
 from ramdaq.analysis.model.rig import HullMode, load_rig
 
@@ -124,8 +131,12 @@ def test_a_mode_split_in_two_is_found_and_a_clean_rig_has_none():
     (s,) = splits(two, compare(two, rig))
     assert s.f_lo_hz == pytest.approx(tm.f_hz[1]) and s.f_hi_hz == pytest.approx(1.03 * tm.f_hz[1])
     assert s.mac == pytest.approx(1.0) and s.gages
+    # a split wider than the effect search fits (10 %), as an absorber of a few per cent makes
+    wide = split_copy(tm, 1, 0.15)
+    (w,) = splits(wide, compare(wide, rig))
+    assert w.f_hi_hz == pytest.approx(1.15 * tm.f_hz[1])
     # further apart than the widest split: two modes of their own
-    far = split_copy(tm, 1, 0.15)
+    far = split_copy(tm, 1, 0.3)
     assert splits(far, compare(far, rig)) == []
     # closer than the mode's damping ratio: no beat within the decay, one mode fitted twice
     near = split_copy(tm, 1, 0.5 * tm.zeta[1])
@@ -153,3 +164,63 @@ def test_an_unexplained_gap_with_a_split_answers_split_mode():
     hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
            "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
     assert answer("unexplained", cands, None, set(), [hit], (), [split]).named == "double_hit"
+    # blows of different force that ring differently (an amplitude-dependent stiffness the decays
+    # did not name): two poles of one shape are its two stiffnesses, not a split
+    slope = {"check": "homogeneity", "layer": "nonlinearity", "gages": [1, 4], "window": "decay",
+             "statistic": 30.0, "chance_level": 3.0, "mode_hz": [23.4], "more": {}}
+    assert answer("unexplained", cands, None, set(), [slope], (), [split]).named != "split_mode"
+
+
+def with_hull_mode(tm: TrialModes, rig, f_hz: float, ride: np.ndarray) -> TrialModes:
+    """``tm`` with one more identified mode at ``f_hz`` that moves the hull gages (athwartship 1,
+    varying linearly along the hull; vertical 0.3) and the rudder's and stock's gages by ``ride``
+    (n_gages,; only their entries are read), identified as the others are."""
+    gs = rig.gages_by_channel()
+    s = np.array([(1.0 + 0.2 * g.position_m[0] if "z" not in g.axis else 0.3) if g.body == "hull" else r
+                  for g, r in zip(gs, ride, strict=True)], complex)
+    s /= np.linalg.norm(s)
+    k = int(np.searchsorted(tm.f_hz, f_hz))
+    ins = lambda a, v: np.insert(a, k, v)     # noqa: E731
+    col = lambda a, v: np.concatenate([a[:, :k], v[:, None], a[:, k:]], axis=1)     # noqa: E731
+    return replace(tm, f_hz=ins(tm.f_hz, f_hz), f_se_hz=ins(tm.f_se_hz, 1e-5 * f_hz), zeta=ins(tm.zeta, 0.02),
+                   zeta_se=ins(tm.zeta_se, 2e-4), shapes=col(tm.shapes, s),
+                   shape_se=col(tm.shape_se, 1e-4 * np.abs(s) + 1e-6), n_seen=ins(tm.n_seen, 4))
+
+
+def test_a_hull_mode_the_rudder_does_not_ride_rigidly_is_coupling():
+    rig = load_rig("albacore").with_medium("air")
+    gs = rig.gages_by_channel()
+    tm = modes_of(rig)
+    assert coupled_modes(tm, rig, compare(tm, rig)) == []     # the rig's own hull modes: none
+    # a hull mode the rig lacks that carries the rudder as a passenger (one rigid ride): model
+    # form, the rig's hull description -- not coupling
+    rigid = with_hull_mode(tm, rig, 9.0, np.full(len(gs), 0.3))
+    assert coupled_modes(rigid, rig, compare(rigid, rig)) == []
+    # the same hull motion with the stock swaying 6x the rudder, which lags: the rudder's own
+    # flexibility takes part in the hull's mode
+    rng = np.random.default_rng(1)
+    sway = np.array([0.3 if g.body == "stock" else 0.05 for g in gs]) * rng.uniform(0.7, 1.0, len(gs))
+    moved = with_hull_mode(tm, rig, 9.0, sway)
+    (c,) = coupled_modes(moved, rig, compare(moved, rig))
+    assert c.f_hz == 9.0 and c.hull_share > 0.5 and c.nonrigid > 0.05 and c.statistic > c.chance
+    hull = {g.number for g in gs if g.body == "hull"}
+    assert set(c.gages) <= hull and c.gages
+
+
+def test_a_coupled_mode_answers_hull_coupling_where_the_model_says_form_or_unexplained():
+    c = {"f_hz": 6.03, "zeta": 0.02, "hull_share": 0.92, "nonrigid": 0.17, "statistic": 40.0,
+         "chance_level": 2.0, "gages": [5, 9, 13, 14]}
+    cands = [{"name": "hull_coupling", "dbic": 30.0, "dbic_marginal": None, "closed_held": 0.2,
+              "closed_fit": 0.2, "location": {"gages": [8, 4], "window": "pre", "band_hz": 7.8}}]
+    a = answer("unexplained", cands, None, {8, 4}, [], (), [], [c])
+    assert a.named == "hull_coupling" and a.location["gages"] == [5, 9, 13, 14] and a.closed_held == 0.2
+    assert answer("unexplained", cands, None, {8, 4}, [], (), [], []).named == "none"
+    # the effect search's own hull_coupling at a residual peak elsewhere: placed at the mode
+    b = answer("hull_coupling", cands, None, set(), [], (), [], [c])
+    assert b.named == "hull_coupling" and b.location["gages"] == [5, 9, 13, 14] and b.closed_held == 0.2
+    # no gap beyond noise: nothing to name
+    assert answer(None, cands, None, set(), [], (), [], [c]).named == "none"
+    # a data-only finding that answers (a double hit well above chance) stands
+    hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
+           "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
+    assert answer("unexplained", cands, None, set(), [hit], (), [], [c]).named == "double_hit"

@@ -369,7 +369,7 @@ def form_not_sensor(out: Answer, findings: list[dict], form_gages: set[int]) -> 
 
 def answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
            findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]] = (),
-           splits: Sequence[dict] = ()) -> Answer:
+           splits: Sequence[dict] = (), coupled: Sequence[dict] = ()) -> Answer:
     """The one report's answer (:class:`Answer`), what ``ramdaq gap`` prints and the benchmark
     scores: the model layer's (:func:`model_answer`), which a credible data-only finding
     (:func:`credible`) replaces when the model names no effect or blames a sensor (the data layer
@@ -387,7 +387,36 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     still misses, as :func:`model_answer` reads them. ``splits``: the model level's modes split in
     two (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.splits` as JSON: two identified modes of one
     shape where the calibrated rig has one), which answer a gap the model leaves unexplained
-    (before the form error would make it "none") when no data-only finding overrides it."""
+    (before the form error would make it "none") when no data-only finding overrides it and the
+    trial is homogeneous across blows (:func:`not_homogeneous`).
+    ``coupled``: the model level's hull modes the rudder does not ride rigidly
+    (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.coupled` as JSON), which answer "hull_coupling"
+    where the layers would otherwise say "none" (model form) or "unexplained" on a trial with a
+    gap, and place the model's own hull_coupling at that mode (:func:`coupled_answer`)."""
+    out = _answer(model, candidates, where, form_gages, findings, form_modes, splits)
+    if model is not None and coupled and out.by == "model" and out.named in ("none", "unexplained",
+                                                                             "hull_coupling"):
+        # the effect search's own hull_coupling may sit at a residual peak the rig's form leaves
+        # (modal dev 59000: named at 22.7 Hz on rudder gages, the coupled mode at 6.0 Hz on the
+        # hull's): the identified coupled mode says where the coupling is
+        return coupled_answer(max(coupled, key=lambda c: c["statistic"] / c["chance_level"]), candidates)
+    return out
+
+
+def coupled_answer(c: dict, candidates: list[dict]) -> Answer:
+    """The answer "hull_coupling" from the model level's coupled mode (as JSON), placed at its
+    gages and mode, all windows (the mode rings through the decay); its closure the effect
+    search's hull_coupling's."""
+    cd = next((x for x in candidates if x["name"] == "hull_coupling"), None)
+    f = c["f_hz"]
+    loc = {"gages": list(c["gages"]), "window": "all", "band_hz": f, "effect_mode_hz": f,
+           "band": f"{f:.1f} Hz"}
+    return Answer("hull_coupling", "model", loc, cd["closed_held"] if cd else None)
+
+
+def _answer(model: str | None, candidates: list[dict], where: dict | None, form_gages: set[int],
+            findings: list[dict], form_modes: Sequence[tuple[float, Sequence[int]]],
+            splits: Sequence[dict]) -> Answer:
     out = model_answer(model, candidates, where, form_gages, form_modes)
     named = out.named
     if named == "ambient_tone" and (d := declared_tone(findings, out.location)):
@@ -397,7 +426,10 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     if form_not_sensor(out, findings, form_gages):
         out, named = Answer("none", "model", None, None), "none"
     overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
-    if model == "unexplained" and splits and not overriding:
+    if model == "unexplained" and splits and not overriding and not not_homogeneous(findings):
+        # a split is two modes of a linear structure; where the blows of different force show
+        # an amplitude-dependent structure, two poles of one shape are its two stiffnesses (a
+        # crack open and closed: modal dev 61000's 11.5 Hz pair 18.7 % apart)
         return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     if named == "unexplained":
         finds = overriding or data_unexplained(findings)

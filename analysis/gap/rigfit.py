@@ -47,11 +47,13 @@ from ..model.structure import build_model
 from ..model.surface import plane_field
 from .calibrate import Stop
 from .modal_level import (
+    Coupled,
     ModalComparison,
     ModelModesAtGages,
     Split,
     TrialModes,
     compare,
+    coupled_modes,
     model_modes_at_gages,
     modes_at_gages,
     splits,
@@ -1002,6 +1004,13 @@ class ModelLevel:
         (:func:`~ramdaq.analysis.gap.modal_level.splits`): a split no constant makes."""
         return [] if self.fit is None or self.modes is None else splits(self.modes, self.fit.after)
 
+    def coupled(self) -> list[Coupled]:
+        """Identified hull modes the rudder does not ride rigidly, which the calibrated rig lacks
+        (:func:`~ramdaq.analysis.gap.modal_level.coupled_modes`): hull coupling."""
+        if self.fit is None or self.modes is None:
+            return []
+        return coupled_modes(self.modes, self.fit.rig, self.fit.after)
+
     def candidate_form(self, name: str) -> dict:
         """What the answer reads of a candidate: ``{"form_gages": [...], "form_modes": [...]}``,
         the form left with its update (:attr:`updates`), or {} when none was made for it."""
@@ -1035,6 +1044,7 @@ class ModelLevel:
                 "ratio": f.scale.ratio, "modes_hz": list(f.scale.modes_hz), "absurd": f.scale.absurd},
             "form_left_with": {name: [_form_json(e) for e in form] for name, form in self.updates.items()},
             "splits": [s.to_json() for s in self.splits()],
+            "coupled": [c.to_json() for c in self.coupled()],
         }
 
 

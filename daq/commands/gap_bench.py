@@ -234,7 +234,8 @@ def run_one(sc: dict, workdir: str) -> dict:
     } | ({"headline": d.headline, "min_closure": _min_closure(d),
           "form_gages": sorted(d.model_level.form_gages()) if d.model_level else [],
           "form_modes": d.model_level.form_modes() if d.model_level else [],
-          "splits": [s.to_json() for s in d.model_level.splits()] if d.model_level else []}
+          "splits": [s.to_json() for s in d.model_level.splits()] if d.model_level else [],
+          "coupled": [c.to_json() for c in d.model_level.coupled()] if d.model_level else []}
          if perturb else {})
 
 
@@ -346,7 +347,7 @@ def decision(r: dict, z_gap: float, bic_min: float, min_closure: float) -> dict:
         return {"named": "none", "by": "model", "location": None, "closed_held": None, "finding": None}
     return answer(_model_choice(r, z_gap, bic_min, min_closure), r["candidates"], r.get("unexplained_where"),
                   set(r.get("form_gages", [])), r.get("data_findings") or [],
-                  r.get("form_modes", []), r.get("splits", [])).to_json()
+                  r.get("form_modes", []), r.get("splits", []), r.get("coupled", [])).to_json()
 
 
 def _z(r: dict) -> float:
