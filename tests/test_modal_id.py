@@ -790,3 +790,18 @@ def test_rfft_rows_equals_numpys_rfft(rows, n):
         pair = np.maximum(norm, norm[np.minimum(np.arange(rows) ^ 1, rows - 1)])  # with its partner
         assert np.max(np.abs(got - want) / pair[:, None]) < 1e-14
         assert not np.array_equal(got, want)  # the packed path ran
+
+
+def test_fast_length_below_is_the_longest_7_smooth_length():
+    """The longest length <= n with no prime factor over 7, against a plain downward search
+    (every n to 5000 and a replay's decay lengths); n itself when it is one; bad n refused."""
+    from ramdaq.analysis.modal.signal import _largest_prime_factor, fast_length_below
+
+    for n in [*range(1, 5000), 28_860, 29_138, 29_578, 28_672, 1_000_000]:
+        m = n
+        while _largest_prime_factor(m) > 7:
+            m -= 1
+        assert fast_length_below(n) == m, n
+    assert fast_length_below(29_578) == 29_400  # 2^3 3 5^2 7^2: 178 samples dropped
+    with pytest.raises(ValueError, match="length 0"):
+        fast_length_below(0)
