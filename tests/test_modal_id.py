@@ -805,3 +805,24 @@ def test_fast_length_below_is_the_longest_7_smooth_length():
     assert fast_length_below(29_578) == 29_400  # 2^3 3 5^2 7^2: 178 samples dropped
     with pytest.raises(ValueError, match="length 0"):
         fast_length_below(0)
+
+
+def test_identify_modes_given_the_verdicts_noise_equals_its_own():
+    """The verdicts' screen hands ``identify_modes`` its periodograms and the noise std read
+    from them (one median a channel, not taken again): the table equals the one computed without
+    the noise std, to the bit (one channel flat: left out by both)."""
+    from ramdaq.analysis.modal.identify import channel_periodograms
+    from ramdaq.analysis.modal.signal import noise_std_from_periodogram
+
+    rng = np.random.default_rng(3)
+    n = 4_285  # a length rfft_rows packs
+    x = damped_sinusoids(FS_HZ, n, [13.0, 45.0], [0.12, 0.10], rng.normal(size=(4, 2)))
+    x = x + 0.01 * rng.standard_normal(x.shape)
+    x[2] = 0.0
+    pg = channel_periodograms(x)
+    sig = noise_std_from_periodogram(pg[n])
+    a = identify_modes(x, FS_HZ, periodograms=pg)
+    b = identify_modes(x, FS_HZ, periodograms=pg, noise_std=sig)
+    assert len(a) == 2
+    for name in ("frequency_hz", "delta", "delta_se", "complex_amplitude", "channel_delta", "noise_std"):
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
