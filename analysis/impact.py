@@ -29,6 +29,7 @@ import numpy as np
 from .modal.before_blow import ambient_modes
 from .modal.identify import identify_modes
 from .modal.peaks import decrements_from_peaks
+from .modal.signal import fast_length_below
 from .modal.table import ModeTable
 from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_decay_jointly
 from .model.geometry import gage_geometry, stock_pair
@@ -48,6 +49,17 @@ from .report1836.motions import (
     v_from_2_6,
     v_from_4_8,
 )
+
+CROP_MAX_FRACTION = 0.03
+"""Largest share of a decay's samples :func:`analyze_decay` drops from its end to reach an
+FFT-fast length (:func:`fast_length_below`: at most 2.8 % from 4096 samples on, 0.4 % on
+average at a replayed decay's ~29 000; between 2048 and 4096 a few lengths, e.g. 3341-3359,
+would lose more and are analysed whole): the decay's end is the noise-floor rule's estimate, so
+the cropped tail is at the floor and carries next to none of the decay's information."""
+
+CROP_FROM = 2048
+"""Shortest decay (samples) :func:`analyze_decay` crops: shorter ones are cheap to transform
+at any length, and each of their samples weighs more in the fit."""
 
 MOTIONS = ("gamma", "alpha", "v_2_6", "v_4_8")
 """Rudder motions of Eq 1, 2, 3a, 3b, whose decrements are Eq 4, 5, 6a, 6b."""
@@ -229,6 +241,13 @@ class ImpactAnalysis:
     energetic mode on the rudder, which this field never replaces)."""
     mode_hz: float | None = None
     """The frequency asked for (Hz) that chose ``chosen``; None when none was asked."""
+    record_samples: int | None = None
+    """Samples of the decay handed to :func:`analyze_decay` (``duration_s`` at the sample rate);
+    None when not known."""
+    analysed_samples: int | None = None
+    """Leading samples of the decay every fit used: ``record_samples``, or fewer when its tail was
+    cropped to an FFT-fast length (:data:`CROP_MAX_FRACTION`; a note says how much and how far
+    the predominant mode was there above the noise); None when not known."""
 
     @property
     def chain_mode(self) -> int:
@@ -388,6 +407,8 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
         identified mode is near it (:func:`chosen_mode`).
     """
     notes: list[str] = []
+    n_record = x.shape[1]
+    x = x[:, :fast_crop_length(n_record)]
     judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale)
     verdicts = {gage_numbers[a.channel]: GageVerdict.of(a) for a in judged.verdicts}
     good = [i for i, n in enumerate(gage_numbers) if verdicts[n].ok]
@@ -417,14 +438,42 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
                                         f_se_hz=float(table.channel_frequency_se_hz[j, k]))
              for j, i in enumerate(good)}
     amp = {gage_numbers[i]: table.complex_amplitude[j, k] for j, i in enumerate(good)}
+    if x.shape[1] < n_record:
+        notes.append(crop_note(x.shape[1], n_record, fs_hz, table, pred,
+                               judged.noise_std[good]))
     skipped = skipped_steps(rig, tuple(gage_numbers))
     chain = _chain(x, fs_hz, rig, gage_numbers, verdicts, table, k, gages, amp,
                    {s.step for s in skipped}, notes)
     return ImpactAnalysis(
-        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=x.shape[1] / fs_hz,
+        onset_s=onset_s, decay_start_s=decay_start_s, duration_s=n_record / fs_hz,
         modes=table, predominant=pred, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
         gages=gages, **chain, notes=tuple(notes), skipped=skipped,
-        chosen=None if mode_hz is None else k, mode_hz=mode_hz)
+        chosen=None if mode_hz is None else k, mode_hz=mode_hz, record_samples=n_record,
+        analysed_samples=x.shape[1])
+
+
+def fast_crop_length(n: int) -> int:
+    """How many leading samples of an ``n``-sample decay :func:`analyze_decay` analyses: the
+    longest FFT-fast length <= n (:func:`~ramdaq.analysis.modal.signal.fast_length_below`) when
+    that drops at most :data:`CROP_MAX_FRACTION` of the samples and n >= :data:`CROP_FROM`,
+    else n. A decay's end is arbitrary (where it reached the noise floor) and at such lengths
+    every periodogram, decimation and filter of the fits ran Bluestein's algorithm."""
+    m = fast_length_below(n) if n >= CROP_FROM else n
+    return m if n - m <= CROP_MAX_FRACTION * n else n
+
+
+def crop_note(n_used: int, n_record: int, fs_hz: float, table: ModeTable, k: int,
+              noise_std: np.ndarray) -> str:
+    """The note that the last ``n_record - n_used`` samples were cropped, with the predominant
+    mode ``k``'s fitted amplitude at the crop on its strongest gage over that gage's noise
+    standard deviation (``noise_std`` per row of ``table``'s amplitudes)."""
+    t = n_used / fs_hz
+    env = np.abs(table.complex_amplitude[:, k]) * np.exp(-table.delta[k] * table.frequency_hz[k] * t)
+    j = int(np.argmax(np.abs(table.complex_amplitude[:, k])))
+    drop = n_record - n_used
+    return (f"analysed {n_used:,} of {n_record:,} samples: the last {drop:,} "
+            f"({drop / fs_hz:.3f} s; the predominant mode there at {env[j] / noise_std[j]:.2g}x "
+            "the noise on its strongest gage) cropped to an FFT-fast length").replace(",", " ")
 
 
 def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],

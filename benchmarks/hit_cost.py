@@ -89,29 +89,50 @@ def main() -> None:
     for decay_s in args.seconds:
         report(args.medium, args.hits, decay_s, args.ragged)
         if args.accuracy:
-            accuracy(args.medium, args.accuracy, decay_s)
+            accuracy(args.medium, args.accuracy, decay_s, args.ragged)
 
 
-def accuracy(medium: str, seeds: int, decay_s: float) -> None:
-    """The joint fit's decrement of each of the rig's modes over ``seeds`` simulated decays: its
-    bias from the rig's decrement and its spread, both in units of the mean standard error the
-    fit reports (the Cramér-Rao bound where the estimator is efficient, as the decrement
-    benchmark shows it is): at the bound, spread / SE ~ 1 (sampling s.e. 1 / sqrt(2 (seeds - 1)))
-    and |bias| / SE within ~2 / sqrt(seeds). The SE assumes white noise of the whole band's
-    variance; the converter's roll-off makes the noise denser in the band by the fit's
-    ``noise_colour`` (~1.3 on the record, ~1.1 on 14 s decays' data decimated within the band),
-    so the bound for that noise is SE x sqrt(colour): the spread against it is printed too."""
+def accuracy(medium: str, seeds: int, decay_s: float, ragged: bool = False) -> None:
+    """The joint fit's decrement of each of the rig's modes over ``seeds`` simulated decays
+    (``ragged``: of arbitrary lengths, :func:`records`): its bias from the rig's decrement and
+    its spread, both in units of the mean standard error the fit reports (the Cramér-Rao bound
+    where the estimator is efficient, as the decrement benchmark shows it is): at the bound,
+    spread / SE ~ 1 (sampling s.e. 1 / sqrt(2 (seeds - 1))) and |bias| / SE within
+    ~2 / sqrt(seeds). The SE assumes white noise of the whole band's variance; the converter's
+    roll-off makes the noise denser in the band by the fit's ``noise_colour`` (~1.3 on the
+    record, ~1.1 on 14 s decays' data decimated within the band), so the bound for that noise
+    is SE x sqrt(colour): the spread against it is printed too. The same for the modes of
+    :func:`~ramdaq.analysis.impact.analyze_decay` (the final's: on the usable gages, and on a
+    decay cropped to an FFT-fast length where it crops one)."""
     from ramdaq.analysis.model.rig_modes import modes_in
 
-    rig, xs, fs, gages = records(medium, seeds, decay_s)
+    rig, xs, fs, gages = records(medium, seeds, decay_s, ragged)
     truth = modes_in(rig, medium).table
     got = [identify_modes(x, fs, per_channel=False) for x in xs]
     colour = float(np.mean([t.info["noise_colour"] for t in got]))
-    print(f"  accuracy over {seeds} records of {decay_s:g} s (joint fit; rig's modes; spread s.e. "
-          f"{1 / np.sqrt(2 * (seeds - 1)):.2f}; noise colour {colour:.2f}):")
+    lengths = [x.shape[1] for x in xs]
+    print(f"  accuracy over {seeds} records of {decay_s:g} s ({min(lengths)}-{max(lengths)} samples;"
+          f" rig's modes; spread s.e. {1 / np.sqrt(2 * (seeds - 1)):.2f}; noise colour {colour:.2f}):")
+    finals = [analyze_decay(x, fs, rig, gages, onset_s=ONSET_S, decay_start_s=ONSET_S + SKIP_S)
+              for x in xs]
+    used = [a.analysed_samples if getattr(a, "analysed_samples", None) else x.shape[1]
+            for a, x in zip(finals, xs, strict=True)]
+    for label, tables in (("joint fit of the whole record (identify_modes)", got),
+                          (f"analyze_decay's modes ({sum(u < n for u, n in zip(used, lengths, strict=True))}"
+                           f" of {seeds} records cropped, {100 * (1 - sum(used) / sum(lengths)):.2f} % "
+                           "of the samples)", [a.modes for a in finals])):
+        print(f"   {label}:")
+        mode_accuracy(tables, truth, colour)
+    motion_accuracy(finals, truth)
+
+
+def mode_accuracy(tables: list, truth, colour: float) -> None:
+    """Per mode of ``truth`` (the rig's): how often ``tables`` found it, and the bias and spread
+    of their decrements in units of their mean standard error (:func:`accuracy`)."""
+    seeds = len(tables)
     for f0, d0 in zip(truth.frequency_hz, truth.decrement, strict=True):
         d, se = [], []
-        for t in got:
+        for t in tables:
             k = int(np.argmin(np.abs(t.frequency_hz - f0))) if len(t) else -1
             if k >= 0 and abs(t.frequency_hz[k] / f0 - 1) < 0.02:
                 d.append(t.delta[k])
@@ -124,19 +145,17 @@ def accuracy(medium: str, seeds: int, decay_s: float) -> None:
               f"{(d.mean() - d0) / se:+.2f} SE (± {d.std(ddof=1) / np.sqrt(d.size) / se:.2f}), "
               f"spread / SE {d.std(ddof=1) / se:.2f}, / (SE sqrt(colour)) "
               f"{d.std(ddof=1) / (se * np.sqrt(colour)):.2f}")
-    motion_accuracy(rig, xs, fs, gages, truth)
 
 
-def motion_accuracy(rig, xs: list[np.ndarray], fs: float, gages: tuple[int, ...], truth) -> None:
+def motion_accuracy(finals: list, truth) -> None:
     """Each motion signal's own decrement of the predominant mode (analyze_decay's motion fits,
-    Eq 1-3b, 8, 10-13) over the same records: its spread, in units of the rig's decrement (to
-    compare runs on the same seeds: a change of the estimator moves it by more than the
-    Monte-Carlo noise only if it moves the estimates themselves), and against the mean standard
-    error the fits report."""
+    Eq 1-3b, 8, 10-13) over the records ``finals`` (their analyses): its spread, in units of
+    the rig's decrement (to compare runs on the same seeds: a change of the estimator moves it
+    by more than the Monte-Carlo noise only if it moves the estimates themselves), and against
+    the mean standard error the fits report."""
     got: dict[str, list[tuple[float, float]]] = {}
     d0 = np.nan
-    for x in xs:
-        a = analyze_decay(x, fs, rig, gages, onset_s=ONSET_S, decay_start_s=ONSET_S + SKIP_S)
+    for a in finals:
         k = int(np.argmin(np.abs(truth.frequency_hz - a.modes.frequency_hz[a.predominant])))
         d0 = float(truth.decrement[k])
         for group in (a.motions, a.relative, a.hull_motions):

@@ -127,3 +127,39 @@ def test_eq_14_on_estimated_motions(water_clean):
         "C_eq14_N_s_per_m", "c_eq15_N_m_s_per_rad", "k_s_N_per_m", "ell_m",
         "C_eq14_se_N_s_per_m", "c_eq15_se_N_m_s_per_rad"]
     assert a.damping["C_eq14_N_s_per_m"] == a.damping.full.C_eq14_N_s_per_m
+
+
+def test_a_ragged_decay_is_analysed_at_an_fft_fast_length_and_says_so(water_decay, water_clean):
+    """The fixture's 12 227-sample decay is analysed on its first 12 150 (2 x 3^5 x 5^2) samples:
+    the fields record both counts, a note says how much was cropped, the decay's duration keeps
+    the record's; and the analysis equals that of the record cropped beforehand (which, of a
+    fast length already, is not cropped again and has no note) to the bit."""
+    from ramdaq.analysis.impact import CROP_MAX_FRACTION, fast_crop_length
+
+    rig, x, fs, gages = water_decay
+    _, a = water_clean
+    n, m = x.shape[1], fast_crop_length(x.shape[1])
+    assert (n, m) == (12_227, 12_150) and n - m <= CROP_MAX_FRACTION * n
+    assert (a.record_samples, a.analysed_samples) == (n, m)
+    assert a.duration_s == n / fs
+    note = [t for t in a.notes if t.startswith("analysed 12 150 of 12 227 samples: the last 77 (0.038 s;")]
+    assert len(note) == 1 and note[0].endswith("cropped to an FFT-fast length")
+    b = analyze_decay(x[:, :m], fs, rig, gages, onset_s=1.0, decay_start_s=1.03)
+    assert (b.record_samples, b.analysed_samples) == (m, m)
+    assert not any(t.startswith("analysed ") for t in b.notes)
+    assert np.array_equal(a.modes.delta, b.modes.delta)
+    assert np.array_equal(a.modes.complex_amplitude, b.modes.complex_amplitude)
+    assert a.damping.to_json() == b.damping.to_json()
+    assert [t for t in a.notes if not t.startswith("analysed ")] == list(b.notes)
+
+
+def test_short_or_far_from_fast_lengths_are_not_cropped():
+    """Below CROP_FROM samples, or where the nearest fast length lies more than
+    CROP_MAX_FRACTION below, a decay is analysed whole."""
+    from ramdaq.analysis.impact import CROP_FROM, fast_crop_length
+
+    assert fast_crop_length(CROP_FROM - 1) == CROP_FROM - 1  # 2047 = 23 x 89: not cropped
+    assert fast_crop_length(2_059) == 2_058  # 2 x 3 x 7^3
+    assert fast_crop_length(3_359) == 3_359  # 3 240 (2^3 3^4 5) would drop 3.5 %
+    assert fast_crop_length(28_672) == 28_672
+    assert all(n - fast_crop_length(n) <= 0.03 * n for n in range(CROP_FROM, 40_000, 7))

@@ -790,3 +790,39 @@ def test_rfft_rows_equals_numpys_rfft(rows, n):
         pair = np.maximum(norm, norm[np.minimum(np.arange(rows) ^ 1, rows - 1)])  # with its partner
         assert np.max(np.abs(got - want) / pair[:, None]) < 1e-14
         assert not np.array_equal(got, want)  # the packed path ran
+
+
+def test_fast_length_below_is_the_longest_7_smooth_length():
+    """The longest length <= n with no prime factor over 7, against a plain downward search
+    (every n to 5000 and a replay's decay lengths); n itself when it is one; bad n refused."""
+    from ramdaq.analysis.modal.signal import _largest_prime_factor, fast_length_below
+
+    for n in [*range(1, 5000), 28_860, 29_138, 29_578, 28_672, 1_000_000]:
+        m = n
+        while _largest_prime_factor(m) > 7:
+            m -= 1
+        assert fast_length_below(n) == m, n
+    assert fast_length_below(29_578) == 29_400  # 2^3 3 5^2 7^2: 178 samples dropped
+    with pytest.raises(ValueError, match="length 0"):
+        fast_length_below(0)
+
+
+def test_identify_modes_given_the_verdicts_noise_equals_its_own():
+    """The verdicts' screen hands ``identify_modes`` its periodograms and the noise std read
+    from them (one median a channel, not taken again): the table equals the one computed without
+    the noise std, to the bit (one channel flat: left out by both)."""
+    from ramdaq.analysis.modal.identify import channel_periodograms
+    from ramdaq.analysis.modal.signal import noise_std_from_periodogram
+
+    rng = np.random.default_rng(3)
+    n = 4_285  # a length rfft_rows packs
+    x = damped_sinusoids(FS_HZ, n, [13.0, 45.0], [0.12, 0.10], rng.normal(size=(4, 2)))
+    x = x + 0.01 * rng.standard_normal(x.shape)
+    x[2] = 0.0
+    pg = channel_periodograms(x)
+    sig = noise_std_from_periodogram(pg[n])
+    a = identify_modes(x, FS_HZ, periodograms=pg)
+    b = identify_modes(x, FS_HZ, periodograms=pg, noise_std=sig)
+    assert len(a) == 2
+    for name in ("frequency_hz", "delta", "delta_se", "complex_amplitude", "channel_delta", "noise_std"):
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name

@@ -210,6 +210,7 @@ def identify_modes(
     start: tuple[ArrayLike, ArrayLike] | None = None,
     search_max_samples: int = 60_000,
     periodograms: dict[int, np.ndarray] | None = None,
+    noise_std: np.ndarray | None = None,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -256,6 +257,9 @@ def identify_modes(
     periodograms : dict, optional
         The channels' Kaiser periodograms of step 2 where the caller has them already
         (:func:`channel_periodograms` of ``x``): not computed again.
+    noise_std : numpy.ndarray, shape (n_channels,), optional
+        With ``periodograms``: ``noise_std_from_periodogram`` of their whole-record one, where
+        the caller has it (the verdicts' screen): not computed again (equal to the bit).
 
     Returns
     -------
@@ -272,7 +276,9 @@ def identify_modes(
     pg = (channel_periodograms(Xa) if periodograms is None  # the band test's; P0: the noise
           else {m: P[active] for m, P in periodograms.items()})  # estimate's when not decimated
     P0 = pg[n]
-    sig0 = noise_std_from_periodogram(P0)  # the band test's, and the search's when not decimated
+    sig0 = (noise_std_from_periodogram(P0) if noise_std is None or periodograms is None
+            else np.asarray(noise_std, dtype=float)[active])  # the band test's, and the
+    # search's when not decimated
     band = _band(Xa, fs_hz, false_alarm, P0, pg, sig0)
     if band is None and n_modes is None:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})

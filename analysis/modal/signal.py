@@ -118,6 +118,27 @@ def _largest_prime_factor(n: int) -> int:
     return max(p, n)
 
 
+def fast_length_below(n: int) -> int:
+    """The longest length <= ``n`` whose prime factors are all <= :data:`_FAST_PRIMES` (7-smooth:
+    pocketfft's own radices, no Bluestein), e.g. 29 578 -> 29 400; ``n`` itself when it is one.
+    The downward counterpart of ``scipy.fft.next_fast_len`` (which pads): for cropping a record
+    whose end is arbitrary. ValueError for ``n`` < 1."""
+    if n < 1:
+        raise ValueError(f"fast_length_below: length {n} < 1")
+    best = 1
+    p7 = 1
+    while p7 <= n:
+        p5 = p7
+        while p5 <= n:
+            p3 = p5
+            while p3 <= n:
+                best = max(best, p3 << ((n // p3).bit_length() - 1))  # times the largest 2^k fitting
+                p3 *= 3
+            p5 *= 5
+        p7 *= 7
+    return best
+
+
 def rfft_rows(a: np.ndarray) -> np.ndarray:
     """``np.fft.rfft(a, axis=-1)`` of a real (n_rows, n) ``a``. Where n has a prime factor over
     :data:`_FAST_PRIMES`, two rows go through one complex transform (z = a_i + j a_(i+1),

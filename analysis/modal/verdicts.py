@@ -261,7 +261,8 @@ def assess_decay_jointly(
     if rows:
         sel = [rest.index(c) for c in rows]
         table = identify_modes(X[list(rows)], fs_hz, false_alarm=false_alarm, per_channel=True,
-                               periodograms={m: P[sel] for m, P in pg.items()})
+                               periodograms={m: P[sel] for m, P in pg.items()},
+                               noise_std=sigma[list(rows)])
         for j, c in enumerate(rows):
             got = _judge_from_joint(c, j, table, min_cycles, min_delta, false_alarm)
             if got is not None:
