@@ -341,6 +341,7 @@ def analysis_to_json(a: ImpactAnalysis) -> dict:
     m = a.modes
     return {
         "onset_s": a.onset_s, "decay_start_s": a.decay_start_s, "decay_duration_s": a.duration_s,
+        "record_samples": a.record_samples, "analysed_samples": a.analysed_samples,
         "predominant_mode": a.predominant, "chosen_mode": a.chosen, "mode_hz_asked": a.mode_hz,
         "f_hz": a.f_hz,
         "modes": [{"f_hz": finite_json(m.frequency_hz[i]), "f_se_hz": finite_json(m.frequency_se_hz[i]),

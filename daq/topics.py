@@ -67,6 +67,11 @@ RESULTS_JSON_SCHEMA: dict[str, Any] = {
             "properties": {
                 "onset_s": {**_NUM, "description": "s since the stream's first sample"},
                 "decay_start_s": _NUM, "decay_duration_s": _NUM,
+                "record_samples": {"type": ["integer", "null"], "description": "samples of the "
+                                   "decay record, from decay_start_s"},
+                "analysed_samples": {"type": ["integer", "null"], "description": "leading samples "
+                                     "of the record every fit used (fewer where the tail at the "
+                                     "noise floor was cropped to an FFT-fast length; a note says)"},
                 "predominant_mode": {"type": "integer", "description": "index in modes of the "
                                      "most energetic mode on the rudder"},
                 "chosen_mode": {"type": ["integer", "null"], "description": "index in modes of "
