@@ -19,6 +19,11 @@ stiffness is not (the answer is "unexplained", with where and how big). Coulomb'
 judged with an error that allows for the cycles' shared noise (:func:`correlated_cycles`) and
 named only from a size (:data:`COULOMB_MIN`), as the stiffness law from :data:`STIFF_MIN`.
 
+A stiffness that acts only at large amplitude (a crack opening, a stop at half the blow's
+amplitude) may be gone before the decay window: :func:`early_shift` compares each mode's
+frequency refitted on the early window (from the contact's end to the decay window) with the
+decay window's first stretch, blow by blow (chi-square over the blows, Bonferroni over the modes).
+
 Shapes: ``x`` (n_g, n) m/s^2 at the recorded rate; :class:`~ramdaq.analysis.gap.datamodel.FreeModal`
 as made by :func:`~ramdaq.analysis.gap.datamodel.free_modal_model` on the same ``x``.
 """
@@ -308,8 +313,9 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     (:func:`_level_slopes`), and each mode's backbone and damping curve within the decays
     (:func:`decay_laws`), each as z = slope / its standard error; a finding when the largest
     |z| passes its chance level (two-sided normal, Bonferroni over every slope at
-    ``P_CHANCE``), naming the law it follows (:func:`_law_finding`). Empty with fewer than
-    three impacts."""
+    ``P_CHANCE``), naming the law it follows (:func:`_law_finding`). One finding: a stiffness
+    law of the decays, else a frequency shift early in the blows (:func:`early_shift`), else
+    Coulomb's law, else the strongest slope. Empty with fewer than three impacts."""
     snr = np.median(fm.snr(), axis=0)                                   # (n_g, K)
     snr[list(skip_rows)] = 0
     weakest = np.min(np.max(np.delete(fm.snr(), list(skip_rows), axis=1), axis=1), axis=0)
