@@ -330,7 +330,8 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     laws += early_laws(x, fm, numbers, skip_rows)
     n_tests = len(slopes) + 2 * len(laws)
     if n_tests == 0:
-        return []
+        shift = early_shift(x, fm, numbers, skip_rows)
+        return [shift] if shift is not None else []
     chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * n_tests)))
     null = ("slope z of a linear structure's poles, amplitudes and per-cycle frequency and decrement "
             f"on the amplitude: standard normal, Bonferroni over {n_tests} slopes")
