@@ -275,3 +275,20 @@ def test_a_models_gage_fault_on_a_body_the_data_find_flexible_and_sound_is_model
     assert answer("gage_sensitivity", [cand], None, form, [rudder, gain]).named == "gage_sensitivity"
     assert answer("gage_sensitivity", [cand], None, set(), [rudder, hull]).named == "gage_sensitivity"
     assert answer("gage_sensitivity", [cand], None, form, [hull]).named == "gage_sensitivity"
+
+
+def test_a_frequency_moving_with_the_amplitude_answers_before_a_split_mode():
+    # issue 17, modal dev seed 61000: a crack on a 62.6 Hz mode (its frequency 2.6 % lower early
+    # in the bigger blows, 10x chance) beside a pair of 13.6 Hz poles of one shape
+    split = {"f_lo_hz": 13.56, "f_hi_hz": 13.61, "mac": 0.99, "gages": [6, 8, 12]}
+    stiff = _law("stiffness", 43.0)
+    a = answer("unexplained", [], None, set(), [stiff], (), [split])
+    assert a.named == "unexplained" and a.by == "data" and a.location["gages"] == [1, 4, 8]
+    # Coulomb's law keeps the frequency: it says nothing against two linear poles; nor does a
+    # stiffness law under PRECEDENCE_STRENGTH (1.5x its chance level)
+    assert answer("unexplained", [], None, set(), [_law("stiffness", 6.2)], (), [split]).named == "split_mode"
+    # on the model's high-pass with a stiffness law beside it, the law answers (the high-pass
+    # reads the linear model's phases, which the nonlinearity bends)
+    hp = {"name": "highpass", "dbic": -40.0, "closed_held": 0.08, "closed_fit": 0.1,
+          "location": {"gages": [13], "window": "late"}}
+    assert answer("highpass", [hp], None, set(), [stiff]).named == "unexplained"
