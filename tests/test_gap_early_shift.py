@@ -7,20 +7,17 @@ keep their frequency."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
-import scipy.signal
 
 from ramdaq.analysis.gap.datamodel import free_modal_model
 from ramdaq.analysis.gap.homogeneity import SHIFT_MIN, early_late_shifts, early_shift, homogeneity
 from ramdaq.analysis.gap.layers import data_effect, is_friction, told_law
-from ramdaq.analysis.truth import modal_family as mf
+from tests.blow_helpers import FS_HZ, ONSETS_S, rung_mode, unit_amplitude
 
 F_HZ, ZETA = 60.0, 0.01
 """The struck mode: 60 Hz at 1 % (its envelope down to 39 % when the decay window opens)."""
-Q0 = 2 * 0.004 / math.pi / (2 * math.pi * F_HZ)
+Q0 = unit_amplitude(F_HZ)
 """The unit blow's displacement amplitude: impulse / w."""
 LAWS = {"linear": {}, "friction": {"coulomb": 5e-4},
         "crack": {"crack_at": 0.5 * Q0, "crack_drop": 0.15}}
@@ -31,20 +28,12 @@ Coulomb friction that stops the unit blow's ringing in about a second."""
 def _blows(law: dict, seed: int = 0):
     """Three gages of the 60 Hz mode and a linear 25 Hz one, six blows of 0.5-2x, through the
     modal family's own integrator; white noise at 1e-4 of the largest peak."""
-    fs, dt = 1024.0, 1 / 1024.0
-    onsets = 1.0 + 3.0 * np.arange(6)
-    peaks = np.array([1.0, 0.5, 2.0, 0.7, 1.4, 1.0])
-    t = np.arange(int(19.0 * fs)) * dt
-    force = mf.half_sine(onsets, peaks, 0.004, t)
-    if law:
-        q, _ = mf.nonlinear_mode(F_HZ, ZETA, force, dt, **law)
-    else:
-        q = scipy.signal.lfilter(*mf.mode_filter(F_HZ, ZETA, dt), force)
-    q2 = scipy.signal.lfilter(*mf.mode_filter(25.0, 0.005, dt), force)
+    q = rung_mode(F_HZ, ZETA, law)
+    q2 = rung_mode(25.0, 0.005)
     q2 *= 0.5 * np.abs(q).max() / np.abs(q2).max()
     x = np.outer([1.0, 0.6, -0.4], q) + np.outer([0.3, 1.0, 0.8], q2)
     x += 1e-4 * np.abs(x).max() * np.random.default_rng(seed).standard_normal(x.shape)
-    return x, fs, onsets
+    return x, FS_HZ, ONSETS_S
 
 
 @pytest.mark.parametrize("law", list(LAWS))

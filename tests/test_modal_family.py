@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from ramdaq.analysis.truth import modal_family as mf
+from tests.blow_helpers import FS_HZ, ONSETS_S, rung_mode, unit_amplitude
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG = (ROOT / "recordings" / "rigs" / "albacore.toml").read_text()
@@ -90,7 +91,7 @@ def test_bad_input_is_refused():
         mf.gages_from_toml("name = 'x'\n")
 
 
-Q0 = 2 * 0.004 / math.pi / (2 * math.pi * 20.0)
+Q0 = unit_amplitude(20.0)
 """The unit blow's displacement amplitude of :func:`_blows`' mode: impulse / w."""
 
 
@@ -98,19 +99,10 @@ def _blows(law: dict, seed: int = 0):
     """Three gages of one 20 Hz mode (zeta 1 %) rung by six blows of 0.5-2x, through the modal
     family's own integrator with ``law`` (:func:`~ramdaq.analysis.truth.modal_family.nonlinear_mode`'s
     keywords; linear when empty); white noise at 1e-4 of the largest peak."""
-    fs, dt = 1024.0, 1 / 1024.0
-    onsets = 1.0 + 3.0 * np.arange(6)
-    peaks = np.array([1.0, 0.5, 2.0, 0.7, 1.4, 1.0])
-    t = np.arange(int(19.0 * fs)) * dt
-    force = mf.half_sine(onsets, peaks, 0.004, t)
-    if law:
-        q, _ = mf.nonlinear_mode(20.0, 0.01, force, dt, **law)
-    else:
-        import scipy.signal
-        q = scipy.signal.lfilter(*mf.mode_filter(20.0, 0.01, dt), force)
+    q = rung_mode(20.0, 0.01, law)
     x = np.outer([1.0, 0.6, -0.4], q)
     x += 1e-4 * np.abs(x).max() * np.random.default_rng(seed).standard_normal(x.shape)
-    return x, fs, onsets
+    return x, FS_HZ, ONSETS_S
 
 
 LAWS = {"linear": {}, "friction": {"coulomb": 2e-4},
