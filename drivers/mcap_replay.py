@@ -111,11 +111,14 @@ class FileEnd:
         when the writer wrote no CRC.
     data_end : int or None
         Byte offset of the ``DataEnd`` record the footer points to (``None`` if unknown).
+    data_crc : int
+        The data section's CRC that record holds (0: none written, or no such record).
     """
 
     footer: bool
     summary_ok: bool | None
     data_end: int | None
+    data_crc: int = 0
 
 
 def check_mcap_magic(f: BinaryIO, path: str | PathLike) -> None:
@@ -149,9 +152,11 @@ def read_file_end(f: BinaryIO, size: int) -> FileEnd:
         summary_ok = zlib.crc32(f.read(footer_at + _FOOTER.size - 4 - start)) == crc
     data_end = start - _DATA_END_BYTES
     f.seek(data_end)
-    opcode, length = _HEAD.unpack(f.read(_HEAD.size))
-    ok = opcode == Opcode.DATA_END and length == _DATA_END_BYTES - _HEAD.size
-    return FileEnd(True, summary_ok, data_end if ok else None)
+    raw = f.read(_DATA_END_BYTES)
+    opcode, length = _HEAD.unpack_from(raw)
+    if opcode != Opcode.DATA_END or length != _DATA_END_BYTES - _HEAD.size:
+        return FileEnd(True, summary_ok, None)
+    return FileEnd(True, summary_ok, data_end, struct.unpack_from("<I", raw, _HEAD.size)[0])
 
 
 # -- the tolerant, CRC-checking front-to-back reader --------------------------------------------
@@ -468,15 +473,6 @@ class RecordScanner:
         return opcode == Opcode.CHUNK
 
 
-def _data_crc(f: BinaryIO, end: FileEnd) -> int:
-    """The data section's CRC that the ``DataEnd`` record holds (0: none, or no such record)."""
-    if end.data_end is None:
-        return 0
-    f.seek(end.data_end + _HEAD.size)
-    raw = f.read(4)
-    return struct.unpack("<I", raw)[0] if len(raw) == 4 else 0
-
-
 def _chunks_without(summary: Any, topic: str) -> frozenset[int]:
     """Offsets of the chunks that the summary's chunk index (checked by the summary's CRC) says
     hold no message of ``topic``: every channel its message indexes name is of another topic
@@ -583,7 +579,7 @@ class McapReplayDevice(Device):
             )
         self._meta = dict(meta[fmt.STREAM_METADATA])
         self._channels = {i: ch.topic for i, ch in summary.channels.items()}
-        if end.summary_ok and _data_crc(f, end):  # only where a CRC checks the chunk index that
+        if end.summary_ok and end.data_crc:  # only where a CRC checks the chunk index that
             # says which chunks hold no block, and the data section's CRC the chunks stepped over
             self._no_blocks = _chunks_without(summary, fmt.BLOCK_TOPIC)
         try:
