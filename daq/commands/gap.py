@@ -330,7 +330,8 @@ def remove_stale(earlier: list[Path], written: list[Path]) -> list[Path]:
     """Delete the earlier run's files this run did not write again (its plots after a
     ``--no-plots`` run), so that the folder holds one diagnosis; returns them, for the line
     that says so."""
-    stale = [p for p in earlier if p not in set(written) and p.exists()]
+    kept = set(written)
+    stale = [p for p in earlier if p not in kept and p.exists()]
     for p in stale:
         p.unlink()
     return stale
