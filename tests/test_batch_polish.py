@@ -111,6 +111,10 @@ def test_the_table_says_rig_medium_units_channels_and_numbers_modes_as_report_js
             assert a["modes"][x["mode"]]["f_hz"] == pytest.approx(x["mode_f_hz"], rel=1e-12)
             assert x["predominant"] == (x["mode"] == a["predominant_mode"])
             assert x["channel"] == f"g{x['gage']:02d}" and x["source_channel"] == ""
+            # the samples the analysis used, as report.json says (the crop to an FFT-fast length)
+            assert (x["record_samples"], x["analysed_samples"]) == (a["record_samples"],
+                                                                    a["analysed_samples"])
+            assert units["record_samples"] == "samples"
     assert any(x["fitted"] for x in rows)
 
 

@@ -89,12 +89,17 @@ class AnalyzeRow(ModeEstimate):
     ``source_channel``: its name in the file it was imported from ("" if not imported).
     ``decay_cut``: the hit's decay record was cut before the analysis window the trigger wants
     (report.json ``flags.too_short``: the next blow, a gap or the end of the record);
-    ``decay_end``: what ended it (``decayed``, ``next_impact``, ``gap``, ``end``)."""
+    ``decay_end``: what ended it (``decayed``, ``next_impact``, ``gap``, ``end``);
+    ``record_samples`` / ``analysed_samples``: the hit's decay record and the leading part of it
+    the analysis used (report.json's; the rest cropped to an FFT-fast length), null where the hit
+    was not analysed."""
 
     channel: str = ""
     source_channel: str = ""
     decay_cut: bool = False
     decay_end: str = ""
+    record_samples: int | None = None
+    analysed_samples: int | None = None
 
 
 UNITS = {"onset_s": "s", "f_hz": "Hz", "f_se_hz": "Hz", "mode_f_hz": "Hz", "mode_f_se_hz": "Hz",
@@ -105,7 +110,8 @@ UNITS = {"onset_s": "s", "f_hz": "Hz", "f_se_hz": "Hz", "mode_f_hz": "Hz", "mode
          "closed_fitted": "1 (share)", "closed_held_out": "1 (share)",
          "closed_held_out_lo": "1 (share)", "closed_held_out_hi": "1 (share)", "dbic": "1",
          "hit": "index from 0", "mode": "index from 0", "gage": "rig gage number",
-         "hits_found": "count", "hits_accepted": "count", "impacts": "count"}
+         "hits_found": "count", "hits_accepted": "count", "impacts": "count",
+         "record_samples": "samples", "analysed_samples": "samples"}
 """Each numeric column's unit (schema metadata ``ramdaq.unit.COLUMN``); a column not here is
 text, a flag or an identity (unit ``-``)."""
 
@@ -120,7 +126,9 @@ def analyze_rows(h, channels: tuple[str, ...], sources: dict[str, str]) -> tuple
         d = asdict(r)
         name = f"g{r.gage:02d}" if r.gage and f"g{r.gage:02d}" in channels else ""
         d.update(channel=name, source_channel=sources.get(name, ""), decay_cut=bool(ev.too_short),
-                 decay_end=str(getattr(ev, "end_reason", "") or ""))
+                 decay_end=str(getattr(ev, "end_reason", "") or ""),
+                 record_samples=getattr(h.analysis, "record_samples", None),
+                 analysed_samples=getattr(h.analysis, "analysed_samples", None))
         out.append(AnalyzeRow(**d))
     return tuple(out)
 
