@@ -209,7 +209,8 @@ def report(medium: str, hits: int, decay_s: float, ragged: bool = False,
 
 STAGES = (  # (module, public name as that module calls it, label); nested ones count in both
     ("ramdaq.analysis.impact", "assess_decay_jointly", "verdicts and joint fit (assess_decay_jointly)"),
-    ("ramdaq.analysis.modal.identify", "kaiser_periodogram", "  Kaiser periodograms (band tests, NLS and search data)"),
+    ("ramdaq.analysis.modal.identify", "kaiser_periodogram",
+     "  Kaiser periodograms (band tests, NLS, search data)"),
     ("ramdaq.analysis.modal.verdicts", "peak_above_noise", "  each gage's band test"),
     ("ramdaq.analysis.modal.verdicts", "identify_modes", "  joint fit (identify_modes)"),
     ("ramdaq.analysis.modal.identify", "decimate_valid", "    decimations (NLS data, search copy, starts)"),
