@@ -22,7 +22,9 @@ Pipeline
    none and ``n_modes=None`` → no modes.
 3. Records over ``max_samples`` (channels × samples) are FIR-decimated, keeping only outputs whose
    filter window lies inside the record (no edge transient; amplitudes are corrected by the
-   filter's complex gain at each pole, standard errors by the noise-density ratio).
+   filter's complex gain at each pole, standard errors by the noise-density ratio): by the
+   least factor that brings them within it, or (``band_decimation``, a final's) by the whole
+   factor the band allows.
 4. Start: the data are decimated to ~4× the band, cropped to 2000 samples, whitened, compressed to
    at most 8 principal channels, and the Matrix Pencil is run with a generous order. Poles with
    |ζ| ≤ ``zeta_max`` inside the band become candidates, ranked by whitened energy.
