@@ -373,8 +373,8 @@ def _usable_fit(x: np.ndarray, fs_hz: float, judged: JointAssessment, good: list
         return tab
     if tab is not None and len(tab) and set(judged.rows) - set(good) <= set(judged.quiet_rows):
         return identify_modes(x[good], fs_hz, per_channel=True, n_modes=len(tab),
-                              start=(tab.frequency_hz, tab.delta))
-    return identify_modes(x[good], fs_hz, per_channel=True)
+                              start=(tab.frequency_hz, tab.delta), band_decimation=True)
+    return identify_modes(x[good], fs_hz, per_channel=True, band_decimation=True)
 
 
 def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
@@ -409,7 +409,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
     notes: list[str] = []
     n_record = x.shape[1]
     x = x[:, :fast_crop_length(n_record)]
-    judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale)
+    judged = assess_decay_jointly(x, fs_hz, adc_full_scale=adc_full_scale, band_decimation=True)
     verdicts = {gage_numbers[a.channel]: GageVerdict.of(a) for a in judged.verdicts}
     good = [i for i, n in enumerate(gage_numbers) if verdicts[n].ok]
     if not good:

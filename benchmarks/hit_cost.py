@@ -1,6 +1,7 @@
 """CPU cost of one hit's analysis, and where it goes.
 
 Run:  python benchmarks/hit_cost.py [--hits 5] [--medium water|air] [--seconds 6 14] [--ragged]
+      [--stages] [--accuracy SEEDS]
 
 A simulated ALBACORE trial (16 gages, 2048 Hz, noise as the rig states, one blow per record) gives
 ``--hits`` records of free decay for each length in ``--seconds`` (6 s, and 14 s: the decays of
@@ -19,7 +20,8 @@ fits, Eq 4-13; the peak decrements; the stock lengths; the damping constants). I
 targets: a whole 16-gage hit in <= 0.2 s CPU at unchanged accuracy; automatic order no dearer
 than 2x a fit of known order. ``--ragged`` gives the records arbitrary lengths, as a replay's
 finals see them (12 288 and 28 672 samples are FFT-fast; a length with a large prime factor
-is not, and a hit takes ~9 Kaiser periodograms of it and its parts). The machine is shared: the
+is not, and a hit takes ~9 Kaiser periodograms of it and its parts). ``--stages``: where
+analyze_decay's CPU goes, stage by stage (:func:`stage_split`). The machine is shared: the
 figures grow with its load (printed).
 """
 
@@ -85,9 +87,11 @@ def main() -> None:
     ap.add_argument("--ragged", action="store_true",
                     help=f"records 1-{RAGGED_MAX} samples longer than --seconds, of arbitrary length "
                     "as a replay's are (the default lengths, 12 288 and 28 672, FFT fast)")
+    ap.add_argument("--stages", action="store_true",
+                    help="also where analyze_decay's CPU goes, stage by stage (stage_split)")
     args = ap.parse_args()
     for decay_s in args.seconds:
-        report(args.medium, args.hits, decay_s, args.ragged)
+        report(args.medium, args.hits, decay_s, args.ragged, args.stages)
         if args.accuracy:
             accuracy(args.medium, args.accuracy, decay_s, args.ragged)
 
@@ -176,27 +180,92 @@ def motion_accuracy(finals: list, truth) -> None:
         print("    " + "; ".join(cells[i:i + 3]))
 
 
-def report(medium: str, hits: int, decay_s: float, ragged: bool = False) -> None:
+def report(medium: str, hits: int, decay_s: float, ragged: bool = False,
+           stages: bool = False) -> None:
     """The figures for ``hits`` decays of ``decay_s`` seconds (``ragged``: :func:`records`)."""
     rig, xs, fs, gages = records(medium, hits, decay_s, ragged)
     lengths = sorted({x.shape[1] for x in xs})
     whole = [cpu(lambda x=x: analyze_decay(x, fs, rig, gages, onset_s=ONSET_S,
                                            decay_start_s=ONSET_S + SKIP_S)) for x in xs]
     verdicts = [cpu(lambda x=x: assess_decay(x, fs)) for x in xs]
-    jointly = [cpu(lambda x=x: assess_decay_jointly(x, fs)) for x in xs]
-    own = [assess_decay_jointly(x, fs).own_searches for x in xs]
-    joint = [cpu(lambda x=x: identify_modes(x, fs, per_channel=True)) for x in xs]
+    jointly = [cpu(lambda x=x: assess_decay_jointly(x, fs, band_decimation=True)) for x in xs]
+    own = [assess_decay_jointly(x, fs, band_decimation=True).own_searches for x in xs]
+    joint = [cpu(lambda x=x: identify_modes(x, fs, per_channel=True, band_decimation=True))
+             for x in xs]
     print(f"ALBACORE in {medium}, {decay_s:g} s decays: {len(gages)} gages x "
           f"{'-'.join(str(n) for n in (lengths[0], lengths[-1])[:len(lengths)])} samples "
           f"at {fs:g} Hz, {hits} hits; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"  analyze_decay  median {np.median(whole):.3f} s CPU, max {np.max(whole):.3f} s (target 0.2)")
     print(f"  of which, run alone: verdicts (assess_decay) {np.median(verdicts):.3f} s "
           f"({np.mean(own):.1f} gage(s) a hit searched on their own), "
-          f"joint fit (identify_modes) {np.median(joint):.3f} s")
+          f"joint fit (identify_modes, band_decimation as a final's) {np.median(joint):.3f} s")
     print(f"  the rest of analyze_decay after its verdicts (assess_decay_jointly {np.median(jointly):.3f} s):"
           f" per-gage peak decrements and the report's chain (motion fits, stock lengths, damping) "
           f"{np.median(np.subtract(whole, jointly)):.3f} s (a difference of runs: noisy under load)")
     auto_known(xs, fs)
+    if stages:
+        stage_split(rig, xs, fs, gages)
+
+
+STAGES = (  # (module, public name as that module calls it, label); nested ones count in both
+    ("ramdaq.analysis.impact", "assess_decay_jointly", "verdicts and joint fit (assess_decay_jointly)"),
+    ("ramdaq.analysis.modal.identify", "kaiser_periodogram",
+     "  Kaiser periodograms (band tests, NLS, search data)"),
+    ("ramdaq.analysis.modal.verdicts", "peak_above_noise", "  each gage's band test"),
+    ("ramdaq.analysis.modal.verdicts", "identify_modes", "  joint fit (identify_modes)"),
+    ("ramdaq.analysis.modal.identify", "decimate_valid", "    decimations (NLS data, search copy, starts)"),
+    ("ramdaq.analysis.modal.order", "ModeSelector.try_add", "    order search: candidates tried"),
+    ("ramdaq.analysis.modal.order", "ModeSelector.prune", "    order search: pruning"),
+    ("ramdaq.analysis.modal.order", "ModeSelector.refit", "    full refits (search's, the NLS data's)"),
+    ("ramdaq.analysis.modal.identify", "fit_channels_varpro", "    16 single-gage fits (per_channel)"),
+    ("ramdaq.analysis.impact", "identify_modes", "usable gages' refit (when a gage is left out)"),
+    ("ramdaq.analysis.impact", "decrements_from_peaks", "peak decrements (gages and motions)"),
+    ("ramdaq.analysis.impact", "fit_signals_at_poles", "motion fits (Eq 4-13)"),
+    ("ramdaq.analysis.impact", "table_amplitude_covariance", "amplitude covariance (Eq 14/15 SE)"),
+    ("ramdaq.analysis.impact", "full_damping", "Eq 14/15 with standard errors"),
+)
+
+
+def stage_split(rig, xs: list[np.ndarray], fs: float, gages: tuple[int, ...]) -> None:
+    """Median CPU a hit of each stage of :data:`STAGES` (a wrapper timing each call of that
+    name where the module calls it; a stage nested in another counts in both), over ``xs``."""
+    import importlib
+
+    spent: dict[str, list[float]] = {label: [] for _, _, label in STAGES}
+    now: dict[str, float] = {}
+    saved = []
+    for mod_name, name, label in STAGES:
+        owner = importlib.import_module(mod_name)
+        *path, name = name.split(".")  # "ModeSelector.try_add": a method, patched on its class
+        for part in path:
+            owner = getattr(owner, part)
+        fn = getattr(owner, name)
+        saved.append((owner, name, fn))
+
+        def timed(*a, _fn=fn, _label=label, **k):
+            t0 = time.process_time()
+            try:
+                return _fn(*a, **k)
+            finally:
+                now[_label] = now.get(_label, 0.0) + time.process_time() - t0
+
+        setattr(owner, name, timed)
+    whole = []
+    try:
+        for x in xs:
+            now.clear()
+            t0 = time.process_time()
+            analyze_decay(x, fs, rig, gages, onset_s=ONSET_S, decay_start_s=ONSET_S + SKIP_S)
+            whole.append(time.process_time() - t0)
+            for label in spent:
+                spent[label].append(now.get(label, 0.0))
+    finally:
+        for owner, name, fn in saved:
+            setattr(owner, name, fn)
+    print(f"  where analyze_decay's {np.median(whole):.3f} s CPU goes (median a hit of each stage, "
+          "timed by wrappers: ~1 us a call more; nested stages indented):")
+    for label, v in spent.items():
+        print(f"    {label:58s} {1e3 * np.median(v):7.1f} ms")
 
 
 def auto_known(xs: list[np.ndarray], fs: float) -> None:

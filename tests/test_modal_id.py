@@ -826,3 +826,26 @@ def test_identify_modes_given_the_verdicts_noise_equals_its_own():
     assert len(a) == 2
     for name in ("frequency_hz", "delta", "delta_se", "complex_amplitude", "channel_delta", "noise_std"):
         assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
+
+
+def test_band_decimation_decimates_as_far_as_the_band_allows_at_the_same_estimates():
+    """band_decimation (a final's): a record over max_samples decimated by the whole factor its
+    band allows (3 here: 2048 Hz, band up to ~250 Hz), not the least that fits (2), and the
+    order search run on those data cropped (search_decimation set: not the whole NLS data).
+    Both are efficient estimators of the same record, so they differ by a small fraction of a
+    standard error (measured ~0.05 SE on simulated 14 s hits; 0.5 SE bounds it with margin),
+    and their standard errors by the FIRs' noise factors only (a few %)."""
+    rng = np.random.default_rng(19)
+    n = 30_000
+    x = damped_sinusoids(FS_HZ, n, [13.0, 200.0], [0.10, 0.02], [[1.0, 0.3], [0.5, 0.8]],
+                         [[0.0, 1.0], [2.0, 3.0]]) + 0.01 * rng.standard_normal((2, n))
+    kw = {"max_samples": 30_000, "search_max_samples": 8_000, "per_channel": False}
+    least = identify_modes(x, FS_HZ, **kw)
+    band = identify_modes(x, FS_HZ, band_decimation=True, **kw)
+    assert least.info["decimation"] == 2
+    assert band.info["decimation"] == int(FS_HZ // (2.5 * band.info["band_hz"])) == 3
+    assert band.info["search_decimation"] == 3
+    assert len(band) == len(least) == 2
+    assert np.all(np.abs(band.delta - least.delta) < 0.5 * least.delta_se)
+    assert np.all(np.abs(band.frequency_hz - least.frequency_hz) < 0.5 * least.frequency_se_hz)
+    np.testing.assert_allclose(band.delta_se, least.delta_se, rtol=0.1)

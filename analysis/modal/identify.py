@@ -22,7 +22,9 @@ Pipeline
    none and ``n_modes=None`` → no modes.
 3. Records over ``max_samples`` (channels × samples) are FIR-decimated, keeping only outputs whose
    filter window lies inside the record (no edge transient; amplitudes are corrected by the
-   filter's complex gain at each pole, standard errors by the noise-density ratio).
+   filter's complex gain at each pole, standard errors by the noise-density ratio): by the
+   least factor that brings them within it, or (``band_decimation``, a final's) by the whole
+   factor the band allows.
 4. Start: the data are decimated to ~4× the band, cropped to 2000 samples, whitened, compressed to
    at most 8 principal channels, and the Matrix Pencil is run with a generous order. Poles with
    |ζ| ≤ ``zeta_max`` inside the band become candidates, ranked by whitened energy.
@@ -211,6 +213,7 @@ def identify_modes(
     search_max_samples: int = 60_000,
     periodograms: dict[int, np.ndarray] | None = None,
     noise_std: np.ndarray | None = None,
+    band_decimation: bool = False,
 ) -> ModeTable:
     """Identify damped modes shared by all channels of a free decay.
 
@@ -260,6 +263,13 @@ def identify_modes(
     noise_std : numpy.ndarray, shape (n_channels,), optional
         With ``periodograms``: ``noise_std_from_periodogram`` of their whole-record one, where
         the caller has it (the verdicts' screen): not computed again (equal to the bit).
+    band_decimation : bool
+        A record over ``max_samples`` decimated by the whole factor its band allows, not just
+        as far as brings it within ``max_samples`` (a final's 16 gages x 14 s at 2048 Hz with
+        a 270 Hz band: by 3, not 2, so every fit on the NLS data touches a third fewer
+        samples; the FIR keeps the band and its noise, the estimates' accuracy is unchanged:
+        :func:`_nls_data`); the order search then runs on the NLS data themselves, cropped as
+        its own decimated copy would be. ``analyze_decay`` (a final) sets it.
 
     Returns
     -------
@@ -284,7 +294,8 @@ def identify_modes(
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "no spectral peak above noise"})
     band_hi = 0.45 * fs_hz if band is None else min(1.25 * band + 3 * fs_hz / n, 0.45 * fs_hz)
 
-    Y, t, d_nls, taps, band_hi = _nls_data(Xa, fs_hz, band_hi, f_range_hz, max_samples)
+    Y, t, d_nls, taps, band_hi = _nls_data(Xa, fs_hz, band_hi, f_range_hz, max_samples,
+                                           band_decimation)
     fs_nls = fs_hz / d_nls
     duration = t[-1] - t[0] + 1.0 / fs_nls
     f_lo = 1.0 / duration
@@ -296,7 +307,8 @@ def identify_modes(
     # refitted on the data themselves, so the estimates are those of the full record.
     # (one channel with its order given: one fit, converged at once on the data themselves)
     data = (full if n_modes is not None and Xa.shape[0] == 1
-            else _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples))
+            else _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples,
+                              crop_full=band_decimation))
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
     start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
                                                 for v in start)
@@ -394,14 +406,17 @@ class _Data:
 
 
 def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi: float,
-                 max_samples: int) -> _Data:
+                 max_samples: int, crop_full: bool = False) -> _Data:
     """The data the order search runs on: ``full`` (the NLS data, ``Xa`` decimated by ``d_nls``)
     decimated within ``band_hi`` when it holds over ``max_samples`` (channels x samples) or its
     channels over ``_SEARCH_MAX_LENGTH`` samples (then to about ``_SEARCH_LENGTH``), and the
     band allows a total factor of 2 or more above ``d_nls``; else ``full`` itself. Where the
     NLS data are decimated already, the search's copy is decimated from the record ``Xa``
     (rate ``fs_hz``) by the whole factor the band allows, over the same span (a factor of the
-    NLS data's would have to be a multiple of ``d_nls``: 2 of 3 allowed, 14 s decays)."""
+    NLS data's would have to be a multiple of ``d_nls``: 2 of 3 allowed, 14 s decays).
+    ``crop_full``: where the NLS data are decimated as far as the band allows already
+    (``band_decimation``), a several-channel copy over 1.5 x ``max_samples`` is the NLS data
+    cropped as a decimated copy would be (:func:`_search_crop`), not the NLS data whole."""
     if full.Y.size <= max_samples and full.Y.shape[1] <= _SEARCH_MAX_LENGTH:
         return full
 
@@ -420,7 +435,7 @@ def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi:
     else:
         d = min(need(Xa), d_max)
         if d <= d_nls:
-            return full
+            return _cropped_search(full, d_nls, max_samples) if crop_full else full
         # Outputs within the NLS data's span (they may be cropped). A several-channel copy still
         # over 1.5 x max_samples where the band allows no more decimation (16 gages x 14 s at a
         # 270 Hz band) is cropped to _search_crop samples, its tail (weakest) left out of the
@@ -442,6 +457,16 @@ def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi:
         keep = _search_crop(Ys.shape[0], max_samples)
         Ys, t = Ys[:, :keep], t[:keep]
     return _Data(Ys, t, fs_hz / d, full.false_alarm, d, full.band_hz)
+
+
+def _cropped_search(full: _Data, d_nls: int, max_samples: int) -> _Data:
+    """``full`` (the NLS data, decimated by ``d_nls``) as the search's data: cropped to
+    :func:`_search_crop` samples where it holds several channels and over ``_SEARCH_CROP`` x
+    ``max_samples`` (as a decimated copy is), else itself."""
+    if full.Y.shape[0] == 1 or full.Y.size <= _SEARCH_CROP * max_samples:
+        return full
+    keep = _search_crop(full.Y.shape[0], max_samples)
+    return _Data(full.Y[:, :keep], full.t[:keep], full.fs, full.false_alarm, d_nls, full.band_hz)
 
 
 def _search_crop(n_channels: int, max_samples: int) -> int:
@@ -535,17 +560,25 @@ def _checked(x: ArrayLike, fs_hz: float, *, n_modes: int | None,
 
 
 def _nls_data(Xa: np.ndarray, fs_hz: float, band_hi: float,
-              f_range_hz: tuple[float, float] | None, max_samples: int
+              f_range_hz: tuple[float, float] | None, max_samples: int,
+              band_decimation: bool = False
               ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, float]:
     """The data the NLS fits, (Y, t s, decimation, FIR taps, band_hi Hz): ``Xa`` as it is unless
     it holds over ``max_samples`` (channels x samples), then decimated within the band (limited
-    to 1.25 times ``f_range_hz``'s top) and cropped."""
+    to 1.25 times ``f_range_hz``'s top) and cropped: by as little as brings it within
+    ``max_samples``, or with ``band_decimation`` by the whole factor the band allows (the
+    minimum-phase FIR from the first sample, :func:`decimate_valid`: in-band content and noise
+    kept, amplitudes corrected by its gain at each pole, standard errors by its noise factor;
+    30 simulated ALBACORE 14 s water hits, 16 gages, d = 3 against 2: every mode's bias and
+    spread within 0.02 SE of before, the decimation noise's colour 1.10 -> 1.02)."""
     d_nls, taps = 1, np.ones(1)
     Y, t = Xa, np.arange(Xa.shape[1]) / fs_hz
     if Xa.size > max_samples:
         if f_range_hz is not None:
             band_hi = min(band_hi, 1.25 * f_range_hz[1])
-        d_nls = max(1, min(int(np.ceil(Xa.size / max_samples)), int(fs_hz // (2.5 * band_hi))))
+        d_band = int(fs_hz // (2.5 * band_hi))
+        d_nls = max(1, d_band if band_decimation else min(int(np.ceil(Xa.size / max_samples)),
+                                                          d_band))
         if d_nls > 1:
             Y, idx, taps = decimate_valid(Xa, fs_hz, d_nls, band_hi, from_first=True)
             t = idx / fs_hz

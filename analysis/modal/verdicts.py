@@ -222,6 +222,7 @@ def assess_decay_jointly(
     clip_run: int = 3,
     false_alarm: float = 1e-4,
     max_samples: int = 8000,
+    band_decimation: bool = False,
 ) -> JointAssessment:
     """:func:`assess_decay` (same parameters and verdicts), with the joint fit it read.
 
@@ -236,6 +237,7 @@ def assess_decay_jointly(
     from the joint fit: a channel with no significant mode there, a failed own fit, or any
     other verdict is judged again on its own (the channel's own order search, as each verdict
     was reached before), so that no channel's fault is borrowed from, or hidden by, the others.
+    ``band_decimation``: the joint fit's (:func:`~ramdaq.analysis.modal.identify.identify_modes`).
     """
     X = np.atleast_2d(np.asarray(x, dtype=float))
     if X.ndim != 2:
@@ -262,7 +264,7 @@ def assess_decay_jointly(
         sel = [rest.index(c) for c in rows]
         table = identify_modes(X[list(rows)], fs_hz, false_alarm=false_alarm, per_channel=True,
                                periodograms={m: P[sel] for m, P in pg.items()},
-                               noise_std=sigma[list(rows)])
+                               noise_std=sigma[list(rows)], band_decimation=band_decimation)
         for j, c in enumerate(rows):
             got = _judge_from_joint(c, j, table, min_cycles, min_delta, false_alarm)
             if got is not None:
