@@ -441,12 +441,14 @@ class Coupled:
                 "gages": list(self.gages)}
 
 
-def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray) -> tuple[float, float, float]:
+def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray,
+               n_tests: int = 1) -> tuple[float, float, float]:
     """How far a shape's entries at athwartship gages of one assembly (``pos`` (n, 3) m) are from
     a rigid-body motion (a translation and the two rotations that move them athwartship: basis
     1, x, z): (share of the shape energy off it, residual over its noise expectation from the
     entries' standard errors ``se``, the chi-square chance level of that ratio at
-    :data:`COUPLED_P`). NaNs when fewer than five gages leave the test no freedom."""
+    :data:`COUPLED_P` over ``n_tests``, the modes tested, Bonferroni). NaNs when fewer than five
+    gages leave the test no freedom."""
     n = len(shape)
     if n < 5:
         return float("nan"), float("nan"), float("nan")
@@ -457,7 +459,7 @@ def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray) -> tuple[floa
     off = float(np.vdot(r, r).real)
     dof = 2 * (n - 3)        # complex entries: two per gage, less the three complex coefficients
     noise = max(float(np.sum(se**2)) * (n - 3) / n, 1e-30)
-    chance = float(scipy.stats.chi2.ppf(1 - COUPLED_P, dof) / dof)
+    chance = float(scipy.stats.chi2.ppf(1 - COUPLED_P / max(n_tests, 1), dof) / dof)
     return off / max(energy, 1e-30), off / noise / dof, chance
 
 
@@ -493,7 +495,7 @@ def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Couple
         hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
         if hull < HULL_MODE_SHARE:
             continue
-        share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride])
+        share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride], tm.n_modes)
         if not (share >= COUPLED_NONRIGID and stat > chance):
             continue
         if i in good and not rides_rigidly(cmp.model.shapes[ride, good[i]], pos[ride]):
