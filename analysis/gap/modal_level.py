@@ -441,12 +441,14 @@ class Coupled:
                 "gages": list(self.gages)}
 
 
-def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray) -> tuple[float, float, float]:
+def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray,
+               n_tests: int = 1) -> tuple[float, float, float]:
     """How far a shape's entries at athwartship gages of one assembly (``pos`` (n, 3) m) are from
     a rigid-body motion (a translation and the two rotations that move them athwartship: basis
     1, x, z): (share of the shape energy off it, residual over its noise expectation from the
     entries' standard errors ``se``, the chi-square chance level of that ratio at
-    :data:`COUPLED_P`). NaNs when fewer than five gages leave the test no freedom."""
+    :data:`COUPLED_P` over ``n_tests``, the modes tested, Bonferroni). NaNs when fewer than five
+    gages leave the test no freedom."""
     n = len(shape)
     if n < 5:
         return float("nan"), float("nan"), float("nan")
@@ -457,32 +459,46 @@ def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray) -> tuple[floa
     off = float(np.vdot(r, r).real)
     dof = 2 * (n - 3)        # complex entries: two per gage, less the three complex coefficients
     noise = max(float(np.sum(se**2)) * (n - 3) / n, 1e-30)
-    chance = float(scipy.stats.chi2.ppf(1 - COUPLED_P, dof) / dof)
+    chance = float(scipy.stats.chi2.ppf(1 - COUPLED_P / max(n_tests, 1), dof) / dof)
     return off / max(energy, 1e-30), off / noise / dof, chance
+
+
+def rides_rigidly(model_shape: np.ndarray, pos: np.ndarray) -> bool:
+    """Whether a model mode's shape at athwartship gages of one assembly (``pos`` (n, 3) m)
+    carries them as one rigid body: less than :data:`COUPLED_NONRIGID` of its energy off the
+    best rigid-body motion (:func:`rigid_ride`; a model's shape has no noise to test against)."""
+    share = rigid_ride(model_shape, np.zeros(len(model_shape)), pos)[0]
+    return not share >= COUPLED_NONRIGID
 
 
 def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
     """The identified modes that are hull coupling (:class:`Coupled`) against the pairing ``cmp``
     of the calibrated rig: decaying, found in three quarters of the impacts or more, the hull's
-    (:data:`HULL_MODE_SHARE`), unpaired or paired below chance (MAC under 1 / n_gages, what two
-    unrelated shapes give), and the rudder's and stock's athwartship gages off a rigid ride by at
-    least :data:`COUPLED_NONRIGID` of their energy and beyond the test's chance level."""
+    (:data:`HULL_MODE_SHARE`), the rudder's and stock's athwartship gages off a rigid ride by at
+    least :data:`COUPLED_NONRIGID` of their energy and beyond the test's chance level, and the
+    calibrated rig without that participation: the mode unpaired, paired below chance (MAC
+    under 1 / n_gages, what two unrelated shapes give), or paired with a model mode that carries
+    the rudder and stock as one rigid body (:func:`rides_rigidly`: the rig has the hull mode, but
+    with the rudder as a passenger in it, so no constant of it makes the rudder's deformation; a
+    pair at MAC >= 1 / n_gages was skipped before, whatever the rudder did in it)."""
     gs = rig.gages_by_channel()
     body = np.array([g.body for g in gs])
     ride = np.array([g.body != "hull" and "z" not in g.axis for g in gs])
     pos = np.array([g.position_m for g in gs], float)
-    good = {p.i_id for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
+    good = {p.i_id: p.i_model for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
     out = []
     for i in range(tm.n_modes):
-        if i in good or tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts:
+        if tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts:
             continue
         s = tm.shapes[:, i]
         e = np.abs(s) ** 2
         hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
         if hull < HULL_MODE_SHARE:
             continue
-        share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride])
+        share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride], tm.n_modes)
         if not (share >= COUPLED_NONRIGID and stat > chance):
+            continue
+        if i in good and not rides_rigidly(cmp.model.shapes[ride, good[i]], pos[ride]):
             continue
         a = np.abs(s)
         big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
