@@ -186,7 +186,8 @@ CHAIN_CHECKS = frozenset({"time_skew", "highpass"})
 credible (:func:`fails_held_out`): a skew or a corner fitted on the other impacts that does not
 explain the held-out impact's phases is no fixed law of the channel (issue 17, modal development
 seed 51001, a clean trial: gage 15 read as a 0.93 Hz high-pass at 4x its chance level, closing
-34 % held out; development high-passes and skews of both families close 93-100 %)."""
+34 % held out; the right gages of modal high-passes, dev and check seeds, close 59-100 %, skews of
+both families 98-100 %; the same a-priori half the model layer asks of an effect)."""
 
 
 def overriding_unexplained(findings: list[dict]) -> list[dict]:
