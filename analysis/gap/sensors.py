@@ -354,24 +354,28 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
     out = _body_gains_on(fm, gages, rows, G, fm.steady)
     if not any(f.check == "flex" for f in out):
         return out
-    rigid = _rigid_modes(fm, G, rows, RIDE_SNR)
+    low, bent = _rigid_modes(fm, G, rows, RIDE_SNR)
+    first_bent = float(fm.f_hz[bent].min()) if bent.any() else math.inf
+    # a body rides rigidly, quasi-statically, below its first own mode: a weakly read mode above
+    # the lowest one it is measured to bend in that passes as rigid at RIDE_SNR is not kept
+    # (modal check seed 151000: a 228 Hz rudder mode, weak on its gages, passed as rigid and its
+    # bending was read as gage 4's gain varying by mode); one rigid at MIN_ENTRY_SNR too stays
+    rigid = low & ((fm.f_hz < first_bent) | _rigid_modes(fm, G, rows)[0])
     if rigid.sum() < 2 or rigid.sum() == (~fm.steady).sum():
         return out
     gains = [f for f in _body_gains_on(fm, gages, rows, G, ~rigid, RIDE_SNR) if f.check == "gain"]
     return gains + out
 
 
-def _rigid_modes(fm: FreeModal, G: dict, rows: list[int], min_snr: float = MIN_ENTRY_SNR) -> np.ndarray:
-    """(K,) bool: the modes (not steady) in which the body's gages ``rows`` move as one rigid
+def _rigid_modes(fm: FreeModal, G: dict, rows: list[int],
+                 min_snr: float = MIN_ENTRY_SNR) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) bool each: the modes (not steady) in which the body's gages ``rows`` move as one rigid
     body, or do so with one and the same gage left out: in each mode alone, the largest gain z
     of the others (each predicted from the rest) within the normal's two-sided chance level,
     Bonferroni over the gages and modes. A gain is one gage's at every mode, so the modes kept
     are those of the gage whose removal leaves the most modes rigid (a bent mode may look rigid
-    but for another gage, where its bending is largest). A body rides rigidly only below its
-    first own mode (quasi-statically): a mode above the lowest one it is measured to bend in (some
-    z finite and beyond the level with every gage in turn left out) is not kept, however weakly
-    it is read (modal check seed 151000: a 228 Hz rudder mode, weak on its gages, passed as rigid
-    at an entry SNR of 10 and its bending was read as gage 4's gain varying by mode)."""
+    but for another gage, where its bending is largest); and the modes it is measured to bend in
+    (the largest z finite and beyond the level whichever gage is left out)."""
     a, se = _real_modes(fm)
     k_all = np.flatnonzero(~fm.steady)
     level = float(scipy.stats.norm.isf(P_CHANCE / (2 * len(rows) * max(1, k_all.size))))
@@ -387,8 +391,7 @@ def _rigid_modes(fm: FreeModal, G: dict, rows: list[int], min_snr: float = MIN_E
         but[:, k] = [v <= level for v in z[1:]]
         bent[k] = min(z) > level and math.isfinite(min(z))
     best = int(np.argmax(np.sum(but | whole, axis=1)))
-    first_bent = fm.f_hz[bent].min() if bent.any() else math.inf
-    return (whole | but[best]) & (fm.f_hz < first_bent)
+    return whole | but[best], bent
 
 
 def _largest_z(a: np.ndarray, se: np.ndarray, G: dict, rows: list[int], skip: np.ndarray,
