@@ -368,8 +368,24 @@ def own_amplitudes(fm: FreeModal) -> np.ndarray:
     return amp
 
 
+LINE_HZ = 1.0
+"""A mode within this of a line found before the blows (Hz: the resolution of the 1 s pre window
+:func:`~ramdaq.analysis.gap.signal_checks.pre_trigger_lines` reads) carries that line's steady
+share, which the blows do not scale."""
+
+
+def off_lines(fm: FreeModal, ks: np.ndarray, lines_hz: Sequence[float]) -> np.ndarray:
+    """The modes ``ks`` not within :data:`LINE_HZ` of any line found before the blows
+    (``lines_hz``, Hz): a steady line adds the same amplitude to every blow's decay, a larger
+    share of a small blow than of a big one, so its mode's amplitude, decrement and frequency read
+    per blow move with the blow's level in a linear structure (issue 17: an ambient-tone trial
+    read "decrement changes by +36 % per doubling of the blow" at its 6.24 Hz line). Those modes
+    are not judged by the homogeneity check: it cannot tell the line's share from the mode's."""
+    return np.array([k for k in ks if all(abs(fm.f_hz[k] - h) > LINE_HZ for h in lines_hz)], dtype=int)
+
+
 def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
-                skip_rows: Sequence[int] = ()) -> list[Finding]:
+                skip_rows: Sequence[int] = (), lines_hz: Sequence[float] = ()) -> list[Finding]:
     """The homogeneity check: per excited mode, the slope of frequency and of decrement against
     the blow's level (per doubling of the blow), and every other mode's amplitude against it
     (:func:`_level_slopes`), and each mode's backbone and damping curve within the decays
@@ -377,14 +393,15 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     |z| passes its chance level (two-sided normal, Bonferroni over every slope at
     ``P_CHANCE``), naming the law it follows (:func:`_law_finding`). One finding: a stiffness
     law of the decays, else a frequency shift early in the blows (:func:`early_shift`), else
-    Coulomb's law, else the strongest slope. Empty with fewer than three impacts."""
+    Coulomb's law, else the strongest slope. Empty with fewer than three impacts. Modes on a
+    line found before the blows (``lines_hz``, Hz) are not judged (:func:`off_lines`)."""
     snr = np.median(fm.snr(), axis=0)                                   # (n_g, K)
     snr[list(skip_rows)] = 0
     weakest = np.min(np.max(np.delete(fm.snr(), list(skip_rows), axis=1), axis=1), axis=0)
-    ks = np.flatnonzero(~fm.steady & (weakest >= MIN_SNR))
+    ks = off_lines(fm, np.flatnonzero(~fm.steady & (weakest >= MIN_SNR)), lines_hz)
     # the decay laws read a mode wherever some blows ring it: friction stops the small blows'
     # ringing of its mode first (the weakest blow may not measure it at all)
-    kl = np.flatnonzero(~fm.steady & (snr.max(axis=0) >= MIN_SNR))
+    kl = off_lines(fm, np.flatnonzero(~fm.steady & (snr.max(axis=0) >= MIN_SNR)), lines_hz)
     if fm.amp.shape[0] < 3 or kl.size == 0:
         return []
     slopes = _level_slopes(x, fm, ks, snr) if ks.size else []
