@@ -59,3 +59,17 @@ def test_a_mode_on_a_line_before_the_blows_is_not_judged():
     kept = off_lines(fm, np.arange(3), [4.99])
     assert kept.tolist() == [1, 2]                           # 6.1 Hz is 1.1 Hz off the line (LINE_HZ 1 Hz)
     assert off_lines(fm, np.arange(3), []).tolist() == [0, 1, 2]
+
+
+def test_coulombs_slope_with_a_moving_frequency_is_not_friction():
+    """Modal check seed 160000: a crack's 112 Hz mode read Coulomb's slope just past chance with
+    its frequency +1.3 % over the decays; Coulomb friction keeps the frequency."""
+    from ramdaq.analysis.gap.homogeneity import STIFF_MIN, _law_finding
+
+    fm = _fm([112.2, 60.0])
+    snr = np.array([[50.0, 60.0], [40.0, 5.0]])
+    moving = DecayLaw(112.23, 6, 40, 2.0, 1.3 * STIFF_MIN, 4.2, 0.204, 6.5)
+    f = _law_finding(fm, [moving], snr, (6, 8), 4.1, "null").to_json()
+    assert not is_friction(f) and data_effect(f) == "unexplained" and set(f["gages"]) == {6, 8}
+    kept = DecayLaw(112.23, 6, 40, 2.0, 0.3 * STIFF_MIN, 4.2, 0.204, 6.5)
+    assert is_friction(_law_finding(fm, [kept], snr, (6, 8), 4.1, "null").to_json())
