@@ -73,3 +73,18 @@ def test_coulombs_slope_with_a_moving_frequency_is_not_friction():
     assert not is_friction(f) and data_effect(f) == "unexplained" and set(f["gages"]) == {6, 8}
     kept = DecayLaw(112.23, 6, 40, 2.0, 0.3 * STIFF_MIN, 4.2, 0.204, 6.5)
     assert is_friction(_law_finding(fm, [kept], snr, (6, 8), 4.1, "null").to_json())
+
+
+def test_a_friction_the_decays_contradict_is_unexplained():
+    """The model's friction on a trial whose decays tell a law that is not Coulomb's (the
+    frequency moves with the amplitude) answers "unexplained" at the decays' mode and gages."""
+    from ramdaq.analysis.gap.layers import answer
+
+    moving = {"check": "homogeneity", "layer": "nonlinearity", "gages": [3, 6], "window": "decay",
+              "statistic": 4.2, "chance_level": 4.1, "mode_hz": [112.2], "closed_held": None,
+              "more": {"coulomb_law_z": {"value": 4.2}, "stiffness_law_z": {"value": 2.0}}}
+    cand = [{"name": "friction", "closed_held": 0.6, "location": {"gages": [3, 6], "window": "late"}}]
+    out = answer("friction", cand, None, set(), [moving])
+    assert out.named == "unexplained" and out.by == "data" and out.location["gages"] == [3, 6]
+    coulomb = moving | {"more": {"coulomb_law_z": {"value": 4.2}}}
+    assert answer("friction", cand, None, set(), [coulomb]).named == "friction"
