@@ -120,7 +120,9 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s, declared=declared)
     keep = [i for i in range(len(numbers)) if i not in rows]
     found += double_hits(_rows(x, keep), fs_hz, onsets_s, [numbers[i] for i in keep], fm)
-    found += homogeneity(x, fm, numbers, skip_rows=rows)
+    found += homogeneity(x, fm, numbers, skip_rows=rows,
+                         lines_hz=[f.mode_hz[0] for f in found
+                                   if f.check in ("ambient_tone", "declared_ambient") and f.mode_hz])
     found += gain_invariance(fm, numbers, skip_rows=rows)
     found += line_persistence(x, fm, onsets_s, numbers, pre_s=pre_s, skip_rows=rows)
     found += one_gage_lines(x, fm, onsets_s, numbers, skip_rows=rows)
