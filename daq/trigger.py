@@ -949,6 +949,10 @@ class Trigger:
         seg = slice(pos - b0, limit - b0)
         levels, nlta, s = self._levels, self._len.lta, self.settings
         lta_last, m0 = levels.lta, levels.n
+        if self._fidx is None and m0 >= 20 * nlta and self._quiet(sta[:, seg], lta_last):
+            levels.lta = ons.exp_average_last(x2[:, seg], nlta, lta_last)
+            levels.n = m0 + (limit - pos)
+            return None
         lta = levels.advance_lta(x2[:, seg], nlta)
         if self._fidx is None:
             hit = (sta[:, seg] > np.multiply(s.on, lta, out=lta)).sum(axis=0) >= self._k
@@ -964,6 +968,16 @@ class Trigger:
             x2[:, seg.start:seg.start + j], nlta, lta_last)[1]
         levels.n = m0 + j
         return pos + j
+
+    def _quiet(self, sta: np.ndarray, lta: np.ndarray) -> bool:
+        """True when no sample of ``sta`` (the voters' STA, units^2, (n_voters, m)) can have
+        ``k`` voters above ``on`` times the LTA, which is ``lta`` before the first of them and
+        (a recursive mean of squares, past its start-up) falls no faster than ``(1 - 1/n)`` a
+        sample: the LTA's trace is then not needed, only its last value (the bound is lowered
+        by 1e-9 relative against rounding)."""
+        m = sta.shape[1]
+        low = self.settings.on * (1 - 1e-9) * math.exp(m * math.log1p(-1 / self._len.lta))
+        return not ((sta > (low * lta)[:, None]).sum(axis=0) >= self._k).any()
 
     def _force_hits(self, pos: int, limit: int) -> np.ndarray:
         """Where the ram force (or its slope) is at the trigger level in ``pos .. limit-1``,

@@ -458,12 +458,14 @@ def test_exp_average_last_is_exp_average_s_last_value(n):
 
 
 def test_the_trigger_s_shortcuts_change_no_event(albacore, monkeypatch):
-    """Two shortcuts skip a recursion's trace where its test cannot pass: the contact scan's
+    """Three shortcuts skip a recursion's trace where its test cannot pass: the contact scan's
     innovation reference in a block where no sample passes ``double_on`` over the fit's
-    variance alone (Trigger._no_contact), and the envelope while a responding gage is still
-    too loud to have decayed (Trigger._still_loud). The events, a double hit and a blow into
-    the last one's ringing among them, are those without the shortcuts: the onsets to the
-    sample and within 1e-9 s, the records' ends and decays to the sample."""
+    variance alone (Trigger._no_contact), the envelope while a responding gage is still
+    too loud to have decayed (Trigger._still_loud), and the armed detector's LTA in a block
+    where no STA passes ``on`` times the least the LTA can fall to (Trigger._quiet). The
+    events, a double hit and a blow into the last one's ringing among them, are those without
+    the shortcuts: the onsets to the sample and within 1e-9 s, the records' ends and decays
+    to the sample."""
     from ramdaq.daq.trigger import Trigger as Trig
 
     water = rig_at_snr(albacore.with_medium("water"), 20)  # decays within the stream
@@ -471,14 +473,16 @@ def test_the_trigger_s_shortcuts_change_no_event(albacore, monkeypatch):
                                  blow(albacore, 4.1, 0.8)], 8.0, seed=3),
                stream(water, [blow(water, 2.3)], 10.0, seed=3)]
     fast = [e for dev, blocks in streams for e in run(dev.info, blocks)]
-    taken = {"contact": [], "envelope": []}
-    no_contact, still_loud = Trig._no_contact, Trig._still_loud
+    taken = {"contact": [], "envelope": [], "lta": []}
+    no_contact, still_loud, quiet = Trig._no_contact, Trig._still_loud, Trig._quiet
     monkeypatch.setattr(Trig, "_no_contact",
                         lambda self, *a: taken["contact"].append(no_contact(self, *a)) and False)
     monkeypatch.setattr(Trig, "_still_loud",
                         lambda self, *a: taken["envelope"].append(still_loud(self, *a)) and 0)
+    monkeypatch.setattr(Trig, "_quiet",
+                        lambda self, *a: taken["lta"].append(quiet(self, *a)) and False)
     full = [e for dev, blocks in streams for e in run(dev.info, blocks)]
-    assert any(taken["contact"]) and any(taken["envelope"]), "a shortcut never taken: untested"
+    assert all(any(t) for t in taken.values()), f"a shortcut never taken, untested: {taken}"
     assert [e.end_reason for e in fast] == ["next_impact", "flush", "decayed"]
     assert fast[0].double_hit and fast[2].decay_s is not None
     assert len(fast) == len(full)
