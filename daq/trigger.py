@@ -949,10 +949,6 @@ class Trigger:
         seg = slice(pos - b0, limit - b0)
         levels, nlta, s = self._levels, self._len.lta, self.settings
         lta_last, m0 = levels.lta, levels.n
-        if self._fidx is None and m0 >= 20 * nlta and self._quiet(sta[:, seg], lta_last):
-            levels.lta = ons.exp_average_last(x2[:, seg], nlta, lta_last)
-            levels.n = m0 + (limit - pos)
-            return None
         lta = levels.advance_lta(x2[:, seg], nlta)
         if self._fidx is None:
             hit = (sta[:, seg] > np.multiply(s.on, lta, out=lta)).sum(axis=0) >= self._k
@@ -968,16 +964,6 @@ class Trigger:
             x2[:, seg.start:seg.start + j], nlta, lta_last)[1]
         levels.n = m0 + j
         return pos + j
-
-    def _quiet(self, sta: np.ndarray, lta: np.ndarray) -> bool:
-        """True when no sample of ``sta`` (the voters' STA, units^2, (n_voters, m)) can have
-        ``k`` voters above ``on`` times the LTA, which is ``lta`` before the first of them and
-        (a recursive mean of squares, past its start-up) falls no faster than ``(1 - 1/n)`` a
-        sample: the LTA's trace is then not needed, only its last value (the bound is lowered
-        by 1e-9 relative against rounding)."""
-        m = sta.shape[1]
-        low = self.settings.on * (1 - 1e-9) * math.exp(m * math.log1p(-1 / self._len.lta))
-        return not ((sta > (low * lta)[:, None]).sum(axis=0) >= self._k).any()
 
     def _force_hits(self, pos: int, limit: int) -> np.ndarray:
         """Where the ram force (or its slope) is at the trigger level in ``pos .. limit-1``,
@@ -1160,15 +1146,7 @@ class Trigger:
         if w.decayed is not None or limit <= w.pos:
             return w.decayed
         a, n = w.pos, self._len
-        x2 = self._squares(a, limit)
-        skip = self._still_loud(ev, w.level, limit - a)
-        if skip:  # not back near the pre-event level there: the envelope's state alone
-            w.level, w.hold = ons.exp_average_last(x2[:, :skip], n.envelope, w.level), 0
-            a, x2 = a + skip, x2[:, skip:]
-            if a == limit:
-                w.pos = a
-                return None
-        env, last = ons.exp_average(x2, n.envelope, w.level)
+        env, last = ons.exp_average(self._squares(a, limit), n.envelope, w.level)
         ok = (env[ev.voters] / ev.pre[ev.voters, None]).max(axis=0) < self.settings.rearm_ratio
         ok[:max(0, ev.onset + n.envelope - a)] = False
         j, w.hold = ons.first_hold(ok, n.hold, w.hold)
@@ -1177,19 +1155,6 @@ class Trigger:
             return None
         w.level, w.pos, w.decayed = env[:, j].copy(), a + j + 1, a + j
         return a + j
-
-    def _still_loud(self, ev: _Event, level: np.ndarray, m: int) -> int:
-        """How many of the next ``m`` samples the envelope (``level`` before them, units^2)
-        cannot be back near the pre-event level on every responding gage: a recursive mean
-        of squares falls no faster than ``(1 - 1/n)`` a sample, so a gage ``r`` times above
-        ``rearm_ratio`` stays above it for ``ln r / -ln(1 - 1/n)`` samples, less one for
-        rounding (a margin of ``1/n`` relative, 2e-3 at 2048 Hz, far above it)."""
-        v = ev.voters
-        ratio = float(np.max(level[v] / ev.pre[v])) / self.settings.rearm_ratio
-        if not ratio > 1.0 or self._len.envelope == 1:
-            return 0
-        k = math.log(ratio) / -math.log1p(-1.0 / self._len.envelope)
-        return int(min(m, max(0, math.floor(k) - 1)))
 
     def _scan_sharp(self, ev: _Event, limit: int) -> int | None:
         """Next sharp onset (second contact) in ``scan.pos .. limit-1``, with hysteresis."""
