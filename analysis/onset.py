@@ -10,7 +10,8 @@ gives the same numbers as one call on the whole record.
   ``lfilter`` (C speed). :func:`recursive_sta_lta_ref` is its plain-loop reference twin.
   Unlike ObsPy, sample 0 is used (ObsPy's loop starts at 1); like ObsPy the ratio is 0 until
   ``nlta`` samples have been seen.
-* :func:`exp_average` -- the recursion itself, ``y[i] = y[i-1] + (x[i] - y[i-1]) / n``.
+* :func:`exp_average` -- the recursion itself, ``y[i] = y[i-1] + (x[i] - y[i-1]) / n``;
+  :func:`exp_average_last` its last value alone (a matrix-vector product, no recursion).
 * :func:`aic` / :func:`aic_pick` -- Maeda's (1985) Akaike information criterion picker, summed
   over channels (independent Gaussian channels add their log-likelihoods).
 * :func:`hinge_onset` -- a sub-sample onset: every channel is fitted, in one least-squares
@@ -29,6 +30,7 @@ gives the same numbers as one call on the whole record.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +40,7 @@ from scipy import signal
 __all__ = [
     "CONTACT_FRACTION", "StaLtaState", "aic", "aic_pick", "ar_prediction_filter",
     "butterworth_delay_s", "contact_duration_s",
-    "exp_average", "first_hold", "hinge_onset", "next_trigger", "prediction_error",
+    "exp_average", "exp_average_last", "first_hold", "hinge_onset", "next_trigger", "prediction_error",
     "recursive_sta_lta", "recursive_sta_lta_ref",
 ]
 
@@ -75,6 +77,39 @@ def exp_average(x: np.ndarray, n: int, last: np.ndarray | None = None
         return x.copy(), prev.copy()
     y, _ = signal.lfilter([c, 0.0], [1.0, c - 1.0], x, axis=-1, zi=((1.0 - c) * prev)[..., None])
     return y, y[..., -1].copy()
+
+
+def exp_average_last(x: np.ndarray, n: int, last: np.ndarray | None = None) -> np.ndarray:
+    """The last value of :func:`exp_average` ``(x, n, last)`` without its trace, for a caller
+    that needs only the state: ``(1-c)**m last + c sum_i (1-c)**(m-1-i) x[..., i]`` with ``c =
+    1/n`` over the ``m`` samples, one matrix-vector product (a fifth of the recursion's CPU at
+    2048 samples; the same number to rounding, ~1e-15 relative).
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (..., m)
+        Input, float64 (units^2 for squared samples).
+    n : int
+        Averaging length in samples, >= 1.
+    last : numpy.ndarray, shape (...), optional
+        The average before ``x[..., 0]``; zeros if omitted.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        The average at ``x[..., -1]`` (``last`` for an empty ``x``).
+    """
+    c = 1.0 / _check_n("n", n)
+    x = np.asarray(x, dtype=np.float64)
+    m = x.shape[-1]
+    prev = np.zeros(x.shape[:-1]) if last is None else np.asarray(last, dtype=np.float64)
+    if m == 0:
+        return prev.copy()
+    if c == 1.0:  # n == 1: the average is the last sample
+        return x[..., -1].copy()
+    log_keep = math.log1p(-c)
+    w = c * np.exp(np.arange(m - 1, -1, -1) * log_keep)
+    return x @ w + math.exp(m * log_keep) * prev
 
 
 @dataclass(frozen=True)

@@ -1170,9 +1170,12 @@ class Trigger:
             e = _innovation(x, scan.whitener.a)
             e2 = e * e
             p, last = ons.exp_average(e2, n.innovation, scan.level)
+            kk = min(self._k, len(ev.voters))
+            if self._no_contact(scan, p, e2, kk, max(0, scan.dead_until - a)):
+                scan.pos, scan.level = limit, last
+                return None
             ratio = self._innovation_ref(scan, e2)
             np.divide(p, ratio, out=ratio)  # p / level, in the level's array
-            kk = min(self._k, len(ev.voters))
             on = (ratio > self._double_on(kk)).sum(axis=0) >= kk
             off = (ratio > s.off).sum(axis=0) < kk
         dead = max(0, scan.dead_until - a)  # one contact cannot trigger twice
@@ -1188,6 +1191,25 @@ class Trigger:
             scan.ref = scan.ref_trace[:, j].copy()
         scan.dead_until = a + j + n.guard
         return a + j
+
+    def _no_contact(self, scan: _ContactScan, p: np.ndarray, e2: np.ndarray, kk: int,
+                    dead: int) -> bool:
+        """True, with the innovation's reference mean carried to the block's end, when the scan
+        cannot find a contact in this block: it is off (no end of a contact to find), and after
+        ``dead`` no sample has ``kk`` gages whose innovation STA ``p`` passes the ratio over the
+        fit's variance alone. The ratio :meth:`_scan_sharp` tests divides by the larger of that
+        variance and the reference, so it cannot pass where this does not: the reference's
+        trace (a recursion over every sample) is then not needed, only its last value."""
+        if scan.on:
+            return False
+        var = scan.whitener.var
+        bound = p[:, dead:] > self._double_on(kk) * var[:, None]
+        if (bound.sum(axis=0) >= kk).any():
+            return False
+        n = max(self._len.envelope, _REF_STA * self._len.innovation)  # as _innovation_ref
+        scan.ref = ons.exp_average_last(e2, n, var if scan.ref is None else scan.ref)
+        scan.ref_trace = None
+        return True
 
     def _double_on(self, kk: int) -> float:
         """The innovation ratio ``kk`` voting gages must pass for a second contact: the

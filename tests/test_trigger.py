@@ -440,3 +440,44 @@ def test_the_second_contact_scan_s_innovation_is_prediction_error_s_to_the_bit()
     a = ar_prediction_filter(x[:, :400], 20)
     for rows in (x, x[:1], x[:, :25]):
         assert np.array_equal(_innovation(rows, a), prediction_error(rows, a))
+
+
+@pytest.mark.parametrize("n", [1, 6, 512, 4096])
+def test_exp_average_last_is_exp_average_s_last_value(n):
+    """The state alone (a matrix-vector product) is the recursion's last value. Tolerance: both
+    sum at most m + 1 positive terms (squares), each rounded once, so they differ by at most
+    ~m eps relative (6.7e-13 at m = 3000): 1e-11."""
+    rng = np.random.default_rng(n)
+    for m in (0, 1, 5, 3000):
+        x2 = rng.standard_normal((3, m)) ** 2 * rng.uniform(1e-6, 1e3, (3, 1))
+        for last in (None, rng.uniform(0, 10, 3)):
+            want = ons.exp_average(x2, n, last)[1]
+            got = ons.exp_average_last(x2, n, last)
+            assert got.shape == (3,)
+            np.testing.assert_allclose(got, want, rtol=1e-11, atol=0)
+
+
+def test_contact_scan_s_shortcut_changes_no_event(albacore, monkeypatch):
+    """A block where no sample passes ``double_on`` over the fit's variance alone skips the
+    innovation reference's trace (Trigger._no_contact): the events, a double hit and a blow
+    into the last one's ringing among them, are those of the scan without the shortcut, the
+    onsets to the sample and within 1e-9 s."""
+    from ramdaq.daq.trigger import Trigger as Trig
+
+    fs = albacore.daq.sample_rate_hz
+    blows = [blow(albacore, 2.3), blow(albacore, 2.38, 0.6), blow(albacore, 4.1, 0.8)]
+    dev, blocks = stream(albacore, blows, 7.0, seed=3)
+    fast = run(dev.info, blocks)
+    skipped = []
+    inner = Trig._no_contact
+    monkeypatch.setattr(Trig, "_no_contact",
+                        lambda self, *a: skipped.append(inner(self, *a)) and False)
+    full = run(dev.info, blocks)
+    assert any(skipped), "the shortcut was never taken: nothing tested"
+    assert len(fast) == 2 and fast[0].end_reason == "next_impact" and fast[0].double_hit
+    assert len(fast) == len(full)
+    for f, g in zip(fast, full, strict=True):
+        assert (f.onset_sample, f.second_onset_sample, f.last_sample, f.end_reason) == \
+            (g.onset_sample, g.second_onset_sample, g.last_sample, g.end_reason)
+        assert abs(f.onset_s - g.onset_s) <= 1e-9 and abs(f.onset_s * fs - round(f.onset_s * fs)) < 1
+        assert f.second_onset_s is None or abs(f.second_onset_s - g.second_onset_s) <= 1e-9
