@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .datamodel import Finding, Layer
+from .evidence import GAP_CELL_Z
 from .verdict import UNEXPLAINED_CLOSURE
 
 SENSOR_EFFECTS = frozenset({"gage_sensitivity", "gage_alignment", "clipping", "time_skew", "highpass"})
@@ -435,7 +436,7 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
         return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     if named == "unexplained":
         finds = overriding or data_unexplained(findings)
-        if not finds and form_gages:
+        if not finds and (form_gages or blows_tail(where)):
             # the model level's gap sits in the rig's form error and nothing in the data says
             # the trial is not linear, time-invariant and coherent: model form, not an effect
             # (issue 17: a clean modal trial's map cell at its 37.05 cap on gages 6, 3)
@@ -479,6 +480,32 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
         # "unexplained"; the same check's slope reaches 2.5x on a clean modal trial)
         f = max(raw, key=strength)
     return _data_answer(f, candidates)
+
+
+TAIL_SHARE = 0.5
+"""A pre-window gap is the blows' own ringing when the first segment's pre window -- before any
+blow -- holds less than half the fitted segments' mean excess per segment at its cells (and
+nothing beyond chance, :data:`~ramdaq.analysis.gap.evidence.GAP_CELL_Z`): a line or noise the
+blows do not make is in every pre window alike (share ~1, its scatter small for a gap that is
+beyond ``z_gap``), a decay carried over from the previous blow is in none before the first
+(share ~0). Half is the a-priori midpoint, not tuned."""
+
+
+def blows_tail(where: dict | None) -> bool:
+    """Whether an unexplained gap (:func:`~ramdaq.analysis.gap.verdict.gap_where`) is the
+    previous blows' ringing mis-modelled in the next segment's pre window: in the pre window,
+    and absent before the first blow (``before_blows``: cell z within chance and under
+    :data:`TAIL_SHARE` of the per-segment excess). Seconds after a blow a mode's tail is
+    ``exp(-zeta w t)`` of its start: a damping ratio off by 5 %
+    (:data:`~ramdaq.analysis.gap.rigfit.FORM_ZETA`, what a decrement is read to) at
+    ``zeta w t = 4`` is a 20 % error of the tail, at a blow's signal-to-noise thousands of
+    noise variances -- the rig's damping law (model form), not an
+    effect (issue 17: a clean truth-family trial "unexplained: band 87.4 Hz, pre window, excess
+    9.4e5 noise variances" while the model level left no shape or frequency form error).
+    A gap stored without ``before_blows`` is not one."""
+    b = (where or {}).get("before_blows")
+    return (bool(b) and where["window"] == "pre" and b["z"] <= GAP_CELL_Z
+            and math.isfinite(b["share"]) and b["share"] < TAIL_SHARE)
 
 
 def stiffness_laws(findings: list[dict]) -> list[dict]:
