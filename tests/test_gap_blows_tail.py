@@ -60,3 +60,16 @@ def test_a_gap_in_the_decay_windows_is_never_a_tail():
     fit2 = GapMap((obs - fit.expected) / fit.spread, obs, fit.expected, fit.spread, fit.bands, GAGES)
     w = gap_where(fit2, fit2, first, N_FIT)
     assert w["window"] == "early" and "before_blows" not in w and not blows_tail(w)
+
+
+def test_the_headline_says_the_gap_is_the_blows_ringing():
+    from types import SimpleNamespace
+
+    from ramdaq.analysis.gap.diagnose import Diagnosis
+    from ramdaq.analysis.gap.layers import Answer
+
+    fit, first = _maps(0.0)
+    d = SimpleNamespace(verdict="unexplained", answer=Answer("none", "model", None, None), model_level=None,
+                        unexplained_where=gap_where(fit, fit, first, N_FIT))
+    head = Diagnosis.headline.fget(d)
+    assert head.startswith("no effect named") and "87.4 Hz" in head and "before the first blow" in head

@@ -67,7 +67,7 @@ from .evidence import (
 )
 from .features import FeatureMap, feature_map
 from .forward import Forward
-from .layers import Answer, Precedence, model_gages, precedence, strength, unconfirmed
+from .layers import Answer, Precedence, blows_tail, model_gages, precedence, strength, unconfirmed
 from .rigfit import ModelLevel
 from .sensors import DataChecks
 from .terms import Placement, Term
@@ -263,6 +263,9 @@ class Diagnosis:
         if a.named == "none":
             head = ("no effect" if self.verdict == "no gap beyond noise"
                     else "no effect named, the gap is the rig model's form")
+            if blows_tail(w := self.unexplained_where):
+                head += (f" (the blows' ringing in the next pre window, band {w['band']}, gages "
+                         f"{', '.join(map(str, w['gages']))}, none before the first blow: the rig's decay)")
         elif a.named == "unexplained":
             head = f"unexplained: {where_text(a.location)}" if a.location else "unexplained"
             if a.by == "data" and a.finding:     # what the data-only check found, how big
