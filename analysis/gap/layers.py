@@ -495,13 +495,15 @@ def blows_tail(where: dict | None) -> bool:
     """Whether an unexplained gap (:func:`~ramdaq.analysis.gap.verdict.gap_where`) is the
     previous blows' ringing mis-modelled in the next segment's pre window: in the pre window,
     and absent before the first blow (``before_blows``: cell z within chance and under
-    :data:`TAIL_SHARE` of the per-segment excess). Seconds after a blow a mode's tail is
-    ``exp(-zeta w t)`` of its start: a damping ratio off by 5 %
-    (:data:`~ramdaq.analysis.gap.rigfit.FORM_ZETA`, what a decrement is read to) at
-    ``zeta w t = 4`` is a 20 % error of the tail, at a blow's signal-to-noise thousands of
-    noise variances -- the rig's damping law (model form), not an
-    effect (issue 17: a clean truth-family trial "unexplained: band 87.4 Hz, pre window, excess
-    9.4e5 noise variances" while the model level left no shape or frequency form error).
+    :data:`TAIL_SHARE` of the per-segment excess). Seconds after a blow a lightly damped mode
+    still rings (the truth family's ALBACORE-in-air 87.3 Hz mode: zeta 0.05 %, 1/e in 3.7 s, a
+    blow every 3-6 s), and its tail carries the model's errors grown with time: a frequency off
+    by ``df`` is ``2 pi df t`` out of phase (0.04 Hz, 0.05 %, within
+    :data:`~ramdaq.analysis.gap.rigfit.FORM_F`'s 0.1 %, is 1 rad at 4 s: a residual the size of
+    the tail), a decay rate off by ``d`` is ``d t`` of it. The replicates carry amplitude and
+    decay tolerances, not frequency ones, so the map calls it beyond chance; it is the rig's
+    form, not an effect (issue 17: a clean truth-family trial "unexplained: band 87.4 Hz, pre
+    window, excess 9.4e5 noise variances" while the model level left no form error's gages).
     A gap stored without ``before_blows`` is not one."""
     b = (where or {}).get("before_blows")
     return (bool(b) and where["window"] == "pre" and b["z"] <= GAP_CELL_Z
