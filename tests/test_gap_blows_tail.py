@@ -73,3 +73,30 @@ def test_the_headline_says_the_gap_is_the_blows_ringing():
                         unexplained_where=gap_where(fit, fit, first, N_FIT))
     head = Diagnosis.headline.fget(d)
     assert head.startswith("no effect named") and "87.4 Hz" in head and "before the first blow" in head
+
+
+def _cand(name: str, closed: float, gages: list[int]) -> dict:
+    return {"name": name, "dbic": -1e6, "dbic_marginal": None, "closed_held": closed, "closed_fit": closed,
+            "location": {"gages": gages, "window": "early"}}
+
+
+# check seed 150006 (clean modal trial): every candidate closed ~70 % of the rig's form error
+CANDS_150006 = [_cand("tiller", 0.709, [8, 4, 1, 11, 3, 12]),
+                _cand("split_mode", 0.706, [8, 4, 12, 10, 1, 11]),
+                _cand("time_skew", 0.700, [8, 12, 11, 1, 10]),
+                _cand("gage_sensitivity", 0.693, [8, 11, 12, 1, 10])]
+FORM_150006 = {1, 5, 6, 7, 8, 9, 13, 14, 16}
+
+
+def test_a_structural_effect_a_sensor_effect_closes_as_much_of_is_the_rigs_form():
+    from ramdaq.analysis.gap.layers import model_answer, unspecific
+
+    assert unspecific(CANDS_150006[0], CANDS_150006)
+    assert model_answer("tiller", CANDS_150006, None, FORM_150006).named == "none"
+    # a tiller that closes 20 % more than any sensor effect is specific: it stands
+    own = [_cand("tiller", 0.9, [8, 4, 1])] + CANDS_150006[1:]
+    assert not unspecific(own[0], own)
+    assert model_answer("tiller", own, None, FORM_150006).named == "tiller"
+    # without form error left on the rig the rule does not apply
+    assert model_answer("tiller", CANDS_150006, None, set()).named == "tiller"
+
