@@ -100,3 +100,11 @@ def test_a_structural_effect_a_sensor_effect_closes_as_much_of_is_the_rigs_form(
     # without form error left on the rig the rule does not apply
     assert model_answer("tiller", CANDS_150006, None, set()).named == "tiller"
 
+
+def test_a_data_finding_naming_unexplained_needs_twice_its_chance_level_after_a_model_none():
+    homog = {"check": "homogeneity", "layer": "nonlinearity", "gages": [5, 9, 13, 14], "statistic": 1.4,
+             "chance_level": 1.0, "window": "decay", "mode_hz": [7.6], "more": {}, "text": "slope"}
+    a = answer("tiller", CANDS_150006, None, FORM_150006, [homog])
+    assert a.named == "none"            # 1.4x chance: what a clean modal trial shows
+    a = answer("tiller", CANDS_150006, None, FORM_150006, [homog | {"statistic": 2.5}])
+    assert a.named == "unexplained" and a.by == "data"

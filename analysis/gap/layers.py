@@ -461,7 +461,8 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
             out = Answer("none", "model", None, None)
     else:
         finds = [f for f in credible(findings) if data_effect(f)
-                 and (f["check"] not in NOT_LTI or strength(f) >= PRECEDENCE_STRENGTH)]
+                 and (f["check"] not in NOT_LTI and data_effect(f) != "unexplained"
+                      or strength(f) >= PRECEDENCE_STRENGTH)]
         laws = [f for f in finds
                 if (told_law(f) or f["check"] in NOT_LTI) and strength(f) >= PRECEDENCE_STRENGTH]
         same = [strength(f) for f in finds if data_effect(f) == named]
