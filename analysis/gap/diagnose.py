@@ -67,7 +67,7 @@ from .evidence import (
 )
 from .features import FeatureMap, feature_map
 from .forward import Forward
-from .layers import Answer, Precedence, model_gages, precedence, strength, unconfirmed
+from .layers import Answer, Precedence, blows_tail, model_gages, precedence, strength, unconfirmed
 from .rigfit import ModelLevel
 from .sensors import DataChecks
 from .terms import Placement, Term
@@ -236,6 +236,10 @@ class Diagnosis:
     model's form error it left (:func:`~ramdaq.analysis.gap.rigfit.model_level`); None when
     the diagnosis started from the rig as given."""
 
+    map_first: GapMap | None = None
+    """The calibrated model's map of the trial's first segment alone: its pre window is before
+    any blow (:func:`~ramdaq.analysis.gap.verdict.before_blows`)."""
+
     answer: Answer | None = None
     """The one report's answer of both layers (:func:`~ramdaq.analysis.gap.layers.answer`), the
     same the benchmark scores: set by ``ramdaq gap`` once the model level and the data-only
@@ -259,6 +263,9 @@ class Diagnosis:
         if a.named == "none":
             head = ("no effect" if self.verdict == "no gap beyond noise"
                     else "no effect named, the gap is the rig model's form")
+            if blows_tail(w := self.unexplained_where):
+                head += (f" (the blows' ringing in the next pre window, band {w['band']}, gages "
+                         f"{', '.join(map(str, w['gages']))}, none before the first blow: the rig's decay)")
         elif a.named == "unexplained":
             head = f"unexplained: {where_text(a.location)}" if a.location else "unexplained"
             if a.by == "data" and a.finding:     # what the data-only check found, how big
@@ -278,7 +285,10 @@ class Diagnosis:
     def unexplained_where(self) -> dict | None:
         """Where the gap no library effect closes lies and how big (:func:`gap_where`); None
         unless the verdict is "unexplained"."""
-        return gap_where(self.map_fit, self.map_held) if self.verdict == "unexplained" else None
+        if self.verdict != "unexplained":
+            return None
+        n_fit = int(np.sum(self.forward.td.fitted))
+        return gap_where(self.map_fit, self.map_held, self.map_first, n_fit)
 
     @functools.cached_property
     def features(self) -> FeatureMap | None:
@@ -565,11 +575,13 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
         best = named
     notes += _solver_notes(base, best)
     reps = search.held_reps()
+    m_first = gap_map(fw, base.fit.resid, rep_cells, bands, np.array([0]))
     return Diagnosis(
         verdict=verdict, best=best, candidates=cands, signatures=sigs, base=base, map_fit=m_fit,
         map_held=m_held, gap_fit=gap_fit, gap_held=gap_held,
         modes_before=modes_of(base, td.lowpass_hz), forward=fw,
-        seconds=time.perf_counter() - t_start, notes=notes, z_detect=z_detect, reps=reps)
+        seconds=time.perf_counter() - t_start, notes=notes, z_detect=z_detect, reps=reps,
+        map_first=m_first)
 
 
 def _calibrated(td: TrialData, settings: Settings, say: Callable[[str], None]

@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .datamodel import Finding, Layer
-from .verdict import UNEXPLAINED_CLOSURE
+from .evidence import GAP_CELL_Z
+from .verdict import CLOSURE_TIE, UNEXPLAINED_CLOSURE, closed_share
 
 SENSOR_EFFECTS = frozenset({"gage_sensitivity", "gage_alignment", "clipping", "time_skew", "highpass"})
 """The model layer's effects that blame a sensor."""
@@ -269,8 +270,26 @@ def model_answer(model: str | None, candidates: list[dict], where: dict | None,
         elif c is not None and c["location"]["gages"] and set(c["location"]["gages"]) <= set(
                 c.get("form_gages", form_gages)):
             named, c = "none", None
+        elif c is not None and unspecific(c, candidates):
+            named, c = "none", None
     loc = c["location"] if c else (where if named == "unexplained" else None)
     return Answer(named, "model", loc, c["closed_held"] if c else None)
+
+
+def unspecific(c: dict, candidates: list[dict]) -> bool:
+    """Whether a structural or excitation candidate ``c`` (a record, as :func:`model_answer`
+    reads it) closes no more of the held-out gap than a sensor effect does (within
+    :data:`~ramdaq.analysis.gap.verdict.CLOSURE_TIE`): a gage's gain or timing adds no mode and
+    moves no frequency, so when it closes as much as a structural update on a rig that carries
+    form error, what closes is the freedom any term adds to fit that form error, not the
+    update's physics -- no evidence for it (issue 17: a clean modal trial, check seed 150006,
+    the rig's 23.67 Hz mode 1-MAC 0.998 after calibration, named tiller at 26.0 Hz closing
+    70.9 %, with time_skew 70.0 % and gage_sensitivity 69.3 % beside it). A sensor effect
+    named is judged by the data layer's checks instead (:func:`form_not_sensor`)."""
+    if c["name"].split("+")[0] in SENSOR_EFFECTS:
+        return False
+    own = closed_share(c)
+    return any(r["name"] in SENSOR_EFFECTS and closed_share(r) >= own - CLOSURE_TIE for r in candidates)
 
 
 def split_answer(split: dict, candidates: list[dict]) -> Answer:
@@ -446,7 +465,7 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
         return split_answer(max(splits, key=lambda s: s["mac"]), candidates)
     if named == "unexplained":
         finds = overriding or data_unexplained(findings)
-        if not finds and form_gages:
+        if not finds and (form_gages or blows_tail(where)):
             # the model level's gap sits in the rig's form error and nothing in the data says
             # the trial is not linear, time-invariant and coherent: model form, not an effect
             # (issue 17: a clean modal trial's map cell at its 37.05 cap on gages 6, 3)
@@ -455,7 +474,8 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
         finds = contra
     else:
         finds = [f for f in credible(findings) if data_effect(f)
-                 and (f["check"] not in NOT_LTI or strength(f) >= PRECEDENCE_STRENGTH)]
+                 and (f["check"] not in NOT_LTI and data_effect(f) != "unexplained"
+                      or strength(f) >= PRECEDENCE_STRENGTH)]
         laws = [f for f in finds
                 if (told_law(f) or f["check"] in NOT_LTI) and strength(f) >= PRECEDENCE_STRENGTH]
         same = [strength(f) for f in finds if data_effect(f) == named]
@@ -505,6 +525,34 @@ def friction_contradicted(named: str, findings: list[dict]) -> list[dict]:
     if named.split("+")[0] != "friction":
         return []
     return [f for f in findings if told_law(f) and not is_friction(f) and strength(f) > 1]
+
+
+TAIL_SHARE = 0.5
+"""A pre-window gap is the blows' own ringing when the first segment's pre window -- before any
+blow -- holds less than half the fitted segments' mean excess per segment at its cells (and
+nothing beyond chance, :data:`~ramdaq.analysis.gap.evidence.GAP_CELL_Z`): a line or noise the
+blows do not make is in every pre window alike (share ~1, its scatter small for a gap that is
+beyond ``z_gap``), a decay carried over from the previous blow is in none before the first
+(share ~0). Half is the a-priori midpoint, not tuned."""
+
+
+def blows_tail(where: dict | None) -> bool:
+    """Whether an unexplained gap (:func:`~ramdaq.analysis.gap.verdict.gap_where`) is the
+    previous blows' ringing mis-modelled in the next segment's pre window: in the pre window,
+    and absent before the first blow (``before_blows``: cell z within chance and under
+    :data:`TAIL_SHARE` of the per-segment excess). Seconds after a blow a lightly damped mode
+    still rings (the truth family's ALBACORE-in-air 87.3 Hz mode: zeta 0.05 %, 1/e in 3.7 s, a
+    blow every 3-6 s), and its tail carries the model's errors grown with time: a frequency off
+    by ``df`` is ``2 pi df t`` out of phase (0.04 Hz, 0.05 %, within
+    :data:`~ramdaq.analysis.gap.rigfit.FORM_F`'s 0.1 %, is 1 rad at 4 s: a residual the size of
+    the tail), a decay rate off by ``d`` is ``d t`` of it. The replicates carry amplitude and
+    decay tolerances, not frequency ones, so the map calls it beyond chance; it is the rig's
+    form, not an effect (issue 17: a clean truth-family trial "unexplained: band 87.4 Hz, pre
+    window, excess 9.4e5 noise variances" while the model level left no form error's gages).
+    A gap stored without ``before_blows`` is not one."""
+    b = (where or {}).get("before_blows")
+    return (bool(b) and where["window"] == "pre" and b["z"] <= GAP_CELL_Z
+            and math.isfinite(b["share"]) and b["share"] < TAIL_SHARE)
 
 
 def stiffness_laws(findings: list[dict]) -> list[dict]:

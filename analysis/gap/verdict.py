@@ -79,12 +79,15 @@ effect to something the library does not hold -- and the verdict is "unexplained
 the gap is (:func:`gap_where`). Stated a priori (half the gap), not tuned on benchmark seeds."""
 
 
-def gap_where(fitted: GapMap, held: GapMap | None) -> dict:
+def gap_where(fitted: GapMap, held: GapMap | None, first: GapMap | None = None,
+              n_fitted: int = 0) -> dict:
     """Where a gap no library effect closes lies, and how big: the gages holding at least half
     the largest gage's excess energy (cells both maps show beyond chance, when any), the band
     and window holding most, the total excess (noise variances, whitened units) and the largest
     cell z. Keys: ``gages``, ``band``, ``band_hz``, ``band_edges_hz`` (the band's [low, high),
-    Hz), ``window``, ``excess``, ``z``."""
+    Hz), ``window``, ``excess``, ``z``; with ``first`` (the map of the trial's first segment
+    alone, whose pre window is before any blow) and ``n_fitted`` (the segments ``fitted`` sums)
+    and the gap in the pre window, ``before_blows`` (:func:`before_blows`)."""
     cells = fitted.gap_cells()
     if held is not None and (cells & held.gap_cells()).any():
         cells = cells & held.gap_cells()
@@ -96,9 +99,26 @@ def gap_where(fitted: GapMap, held: GapMap | None) -> dict:
     b, w = int(np.argmax(ex.sum(axis=(0, 2)))), int(np.argmax(ex.sum(axis=(0, 1))))
     bands = fitted.bands
     z = float(np.max(np.where(cells, fitted.z, -np.inf), initial=-np.inf))
-    return {"gages": gages[:6], "band": bands.labels[b], "band_hz": round(float(bands.center_hz[b]), 3),
-            "band_edges_hz": [float(bands.edges_hz[b]), float(bands.edges_hz[b + 1])],
-            "window": WINDOWS[w], "excess": float(ex.sum()), "z": z}
+    out = {"gages": gages[:6], "band": bands.labels[b], "band_hz": round(float(bands.center_hz[b]), 3),
+           "band_edges_hz": [float(bands.edges_hz[b]), float(bands.edges_hz[b + 1])],
+           "window": WINDOWS[w], "excess": float(ex.sum()), "z": z}
+    if first is not None and n_fitted > 0 and WINDOWS[w] == "pre" and gages:
+        rows = [fitted.gage_numbers.index(g) for g in gages[:6]]
+        out["before_blows"] = before_blows(fitted, first, n_fitted, rows, b)
+    return out
+
+
+def before_blows(fitted: GapMap, first: GapMap, n_fitted: int, rows: list[int], band: int) -> dict:
+    """The pre-window gap of gages ``rows`` (indices) in ``band`` as the trial's first segment
+    shows it -- its pre window is before any blow, where nothing the blows set ringing can be:
+    ``z`` the largest cell z there, ``share`` its excess energy over the fitted segments' mean
+    excess per segment at the same cells (a steady line or noise the blows do not make: ~1; the
+    blows' ringing carried into the next segment's pre window: ~0)."""
+    def ex(m: GapMap) -> float:
+        return float(np.maximum(m.observed - m.expected, 0)[rows, band, 0].sum())
+    per_seg = ex(fitted) / n_fitted
+    return {"z": float(first.z[rows, band, 0].max()),
+            "share": ex(first) / per_seg if per_seg > 0 else float("nan")}
 
 
 def where_text(w: dict) -> str:
