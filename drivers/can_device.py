@@ -32,13 +32,15 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   so a backlog the reader took late is not a silence) is held against the group's sample clock
   (:class:`~ramdaq.drivers.can_frames.CycleAssembler` gives the rule): a frame later or earlier
   than SEQ says by more than ``clock_tolerance_s`` (default 0.1 s) is held until the frames after
-  it show at what pace they come. Whole wraps that
-  explain the lateness within the tolerance are counted (``seq_wrap``: the gap is exact); when
-  nothing does (a front-end restarted, the tolerance is not under half the SEQ period) the samples
-  are re-anchored from the host clock and a ``gap_unknown`` event gives the estimated gap, what
-  SEQ said and the uncertainty -- the length is never guessed silently. Frames whose SEQ goes on
-  from the group's but which came late by more than the tolerance and no whole wraps (a stalled
-  sender or host) are placed where SEQ says, with a ``delayed_frames`` event; frames arriving
+  it show at what pace they come. Frames whose SEQ goes on from the group's but which came late
+  by more than the tolerance (a stalled sender or host) are placed where SEQ says, with a
+  ``delayed_frames`` event -- also when the lateness is whole SEQ periods: a stall cannot be told
+  from a silence of exactly whole wraps, and reading it as wraps moved every later sample (the
+  event gives ``whole_wraps_late``). After a SEQ jump, whole wraps that explain the lateness
+  within the tolerance are counted (``seq_wrap``: the gap is exact); when nothing does (a
+  front-end restarted, the tolerance is not under half the SEQ period) the samples are
+  re-anchored from the host clock and a ``gap_unknown`` event gives the estimated gap, what SEQ
+  said and the uncertainty -- the length is never guessed silently. Frames arriving
   faster than real time (a reader catching up after a stall, a replay) are judged by SEQ. A SEQ jump of
   more than 3 cycles is believed when the group's frames go on from it for more than 3 cycles
   (a lone one is a ``seq_outlier``);

@@ -579,8 +579,11 @@ class CycleAssembler:
     ``tolerance_s`` at the sample clock's pace, by its least late frame:
 
     * on time within the tolerance: SEQ was right;
-    * late by k SEQ periods within the tolerance (and the tolerance under half a period): k wraps
-      counted by time (``seq_wrap`` note), the gap's length known;
+    * SEQ going on from the group's (no cycle lost by SEQ): the frames came late, placed where SEQ
+      says (``delayed_frames`` note) -- even when the lateness is k whole SEQ periods, which a
+      stall of the sender or host cannot be told from (the note gives ``whole_wraps_late``);
+    * a SEQ jump, late by k SEQ periods within the tolerance (and the tolerance under half a
+      period): k wraps counted by time (``seq_wrap`` note), the gap's length known;
     * otherwise the gap's length cannot be known: the side is re-anchored from time (its lateness
       rounded to whole cycles, never onto cycles already placed; or the ``hint`` another group of
       the same front-end took, if it agrees within the tolerance, so the groups stay aligned), and
@@ -774,20 +777,30 @@ class CycleAssembler:
         self._adopt_by_time(late)
 
     def _adopt_by_time(self, late: float) -> None:
-        """Place the side where its arrival times say: whole SEQ wraps if they explain its
-        lateness within the tolerance; else, if its SEQ goes on from the group's, where SEQ says
-        (the frames came late, none was lost: ``delayed_frames``); else re-anchored (a gap of
-        unknown length)."""
+        """Place the side where its arrival times say. If its SEQ goes on from the group's, where
+        SEQ says: the frames came late, none was lost (``delayed_frames``; lateness of whole SEQ
+        periods is never read as wraps, below); else whole SEQ wraps if they explain its lateness
+        within the tolerance (``seq_wrap``); else re-anchored (a gap of unknown length).
+
+        A silence of whole wraps shows as a SEQ that goes on only if it lasted ``k x M`` cycles
+        to within ``window``, which the clock (``tol`` cycles) cannot tell from a stall of the
+        sender or the host of about that length -- and a stall keeps SEQ going on every time.
+        Counting wraps there moved every later sample by ``k x M x T`` on a wrong reading (a
+        sender starved ~0.8 s by a loaded host, classic CAN: 1536 samples). So the samples stay
+        where SEQ puts them, and the event names the ``whole_wraps_late`` it could not rule out.
+        """
         k = round(late / self.M)
-        if late > self.tol and k >= 1 and abs(late - k * self.M) <= self.tol < self.M / 2:
+        wraps = late > self.tol and k >= 1 and abs(late - k * self.M) <= self.tol < self.M / 2
+        if self.side.lo <= self.hi + self.window + 1:
+            self.notes.append(SeqNote("delayed_frames", self.side.lo, {
+                "late_s": round(late / self.rate, 3), "frames": len(self.side.frames),
+                **({"whole_wraps_late": k} if wraps else {})}))
+            self._adopt(0)
+        elif wraps:
             self.notes.append(SeqNote("seq_wrap", self.side.lo + k * self.M, {
                 "wraps": k, "wrap_samples": self.M * self.T,
                 "timing_error_samples": round((late - k * self.M) * self.T)}))
             self._adopt(k * self.M)
-        elif self.side.lo <= self.hi + self.window + 1:
-            self.notes.append(SeqNote("delayed_frames", self.side.lo, {
-                "late_s": round(late / self.rate, 3), "frames": len(self.side.frames)}))
-            self._adopt(0)
         else:
             hint, self.hint = self.hint, None
             self._adopt(hint if hint is not None and abs(hint - late) <= self.tol else round(late), True)

@@ -76,7 +76,9 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
                              f"({d.get('reason', '')})",
         "unrelated_frame": lambda: f"{_s(d.get('count', 1), 'frame')} of other nodes ignored",
         "delayed_frames": lambda: f"{_s(d.get('frames', 0), 'frame')} came {d.get('late_s', 0):g} s "
-                                  "late (none lost)",
+                                  "late (none lost)" + (f"; or a silence of {d['whole_wraps_late']} "
+                                  "whole counter wrap(s), which the counter cannot tell"
+                                  if d.get("whole_wraps_late") else ""),
         "gap_unknown": lambda: f"a gap of about {d.get('estimated_samples', 0)} samples "
                                f"(+- {d.get('uncertainty_samples', 0)}) the counter cannot measure",
         "seq_wrap": lambda: f"a silence of {d.get('wraps')} whole counter wrap(s) "

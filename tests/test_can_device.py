@@ -28,6 +28,7 @@ from crccheck.crc import Crc8Autosar, Crc16CcittFalse
 
 import ramdaq.drivers.can_frames as cf
 from ramdaq.daq.recorder import Recorder
+from ramdaq.drivers.base import DeviceFault
 from ramdaq.drivers.can_device import CanDevice, parse_address
 from ramdaq.drivers.emulators.can_emulator import (
     CanEmulator,
@@ -37,6 +38,7 @@ from ramdaq.drivers.emulators.can_emulator import (
     slcan_line,
 )
 from ramdaq.drivers.errors import DeviceClosed, DeviceNotFound
+from ramdaq.drivers.fault_words import describe
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.registry import open_device
 from ramdaq.drivers.sim import SimDevice
@@ -82,15 +84,17 @@ def _replay(path: Path):
 
 
 def _virtual_trial(tmp: Path, dbc: str, rig: Path, emu_kw: dict | None = None, buses: int = 1,
-                   pace: str = "fast", wires=None, idle_s: float = 0.5, **dev_kw):
+                   pace: str = "fast", wires=None, idle_s: float = 0.5, tx_kw: dict | None = None,
+                   **dev_kw):
     """Emulator (a thread) on virtual buses -> CanDevice (its stream ended by ``idle_s`` of
-    silence) -> Recorder -> replay."""
+    silence) -> Recorder -> replay. ``tx_kw``: more ``can.Bus`` arguments for the sending buses
+    (``preserve_timestamps=True``: the frames arrive with the timestamps ``wires`` gave them)."""
     names = [f"ramdaq-{uuid.uuid4().hex[:8]}" for _ in range(buses)]
     extra = [f"virtual/{n}" for n in names[1:]]
     dev = CanDevice(f"virtual/{names[0]}", dbc=dbc, rig=str(rig), idle_s=idle_s, extra_buses=extra, **dev_kw)
     dev.open()
     emu = CanEmulator(cf.FrameCodec(dbc), _sim(rig), **(emu_kw or {}))
-    tx = [can.Bus(interface="virtual", channel=n) for n in names]
+    tx = [can.Bus(interface="virtual", channel=n, **(tx_kw or {})) for n in names]
     by_group = {g: tx[i % buses] for i, g in enumerate(emu.codec.groups)}
     error: list[BaseException] = []
 
@@ -235,6 +239,35 @@ def test_stream_is_recorded_bit_for_bit(tmp_path, rigs, dbc):
     with _sim(rigs[dbc]) as sim:
         np.testing.assert_array_equal(blocks[0].scale, sim.read().scale)
         assert info.channels == sim.info.channels and info.rig_toml == sim.info.rig_toml
+
+
+def test_a_late_backlog_is_never_read_as_seq_wraps(tmp_path, rigs):
+    """The failure of test_stream_is_recorded_bit_for_bit[classic] at load 3-4, fed without timing:
+    the sender (fast pace, twice real time) stalls 0.8 s before cycle 611 and then goes on, its SEQ
+    unbroken, nothing lost. Held against the sample clock (683 cycles/s) the frames after the stall
+    end up 0.8 x 683 - 36 = 510 cycles late: two 8-bit SEQ periods (512 cycles) within the 0.1 s
+    (68 cycles) tolerance. They were read as a silence of two wraps: a seq_gap of 1536 samples the
+    emulator never dropped, and sample 1833 (cycle 611) and every later one placed 1536 later.
+    SEQ going on from the group's is lateness, never wraps: placed where SEQ says, bit for bit,
+    with a delayed_frames event that says the whole wraps it could not rule out."""
+    stall_s, stall_cycle, t_host = 0.8, 611, 1.0e6  # t_host: any host clock origin
+
+    def stalled(emu):
+        for w in emu.frames():
+            w.msg.timestamp = t_host + w.t_s / 2 + (stall_s if w.cycle >= stall_cycle else 0.0)
+            yield w
+
+    emu, dev, blocks, events, _ = _virtual_trial(tmp_path, "classic", rigs["classic"], wires=stalled,
+                                                 tx_kw=dict(preserve_timestamps=True))
+    truth = _truth(rigs["classic"])
+    assert not emu.missing(truth.shape[1])[: 682 * 3].any()  # the emulator lost no whole cycle
+    _check_against_truth(blocks, events, truth, emu.missing(truth.shape[1]))
+    assert {e["kind"] for e in events} == {"delayed_frames"}
+    delayed = [e["detail"] for e in events]
+    assert sorted(d["group"] for d in delayed) == [1, 2]  # each group judged on its own
+    assert all(d["whole_wraps_late"] == 2 and d["late_s"] > 0.7 for d in delayed)
+    words = describe(DeviceFault("delayed_frames", 0, delayed[0]), "can", 2048.0)
+    assert "none lost" in words and "2 whole counter wrap(s)" in words
 
 
 @pytest.mark.parametrize("dbc", ["classic", "fd24"])
