@@ -323,7 +323,8 @@ def refit_poles(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray,
     (decrements) by Gauss-Newton in the poles: each mode's response ``Re(c e^(s t))`` with the
     columns of its derivative ``Re(c t e^(s t))`` beside it, solved linearly, gives ``c ds``
     per channel; ``ds`` is their least-squares ratio over the channels. Returns f, d and their
-    standard errors (white residual), each (K,)."""
+    standard errors (white residual), each (K,); a standard error is NaN where the fit's Gram
+    matrix is too ill-conditioned to give one (the callers drop that refit)."""
     t = np.arange(seg.shape[1]) / fs_hz
     s = -d0 * f0 + 2j * math.pi * f0
     K = s.size
@@ -343,7 +344,10 @@ def refit_poles(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray,
     sig2 = np.sum(resid**2, axis=0) / max(1, t.size - B.shape[1])      # (n_ch,)
     v = np.diag(np.linalg.inv(G))
     vg = 0.5 * (v[2 * K:3 * K] + v[3 * K:4 * K])                        # (K,)
-    se = np.sqrt(vg * np.sum(sig2[None, :] * np.abs(c) ** 2, axis=1)) / np.maximum(w, 1e-300)
+    var = vg * np.sum(sig2[None, :] * np.abs(c) ** 2, axis=1)
+    # a Gram matrix too ill-conditioned to invert (a pole the segment barely holds) gives a
+    # negative diagonal: no standard error, NaN, which the callers drop as a refit that failed
+    se = np.sqrt(np.where(var >= 0, var, np.nan)) / np.maximum(w, 1e-300)
     f = s.imag / (2 * math.pi)
     return f, -s.real / f, se / (2 * math.pi), se / f
 
