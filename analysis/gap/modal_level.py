@@ -463,32 +463,20 @@ def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray,
     return off / max(energy, 1e-30), off / noise / dof, chance
 
 
-def rides_rigidly(model_shape: np.ndarray, pos: np.ndarray) -> bool:
-    """Whether a model mode's shape at athwartship gages of one assembly (``pos`` (n, 3) m)
-    carries them as one rigid body: less than :data:`COUPLED_NONRIGID` of its energy off the
-    best rigid-body motion (:func:`rigid_ride`; a model's shape has no noise to test against)."""
-    share = rigid_ride(model_shape, np.zeros(len(model_shape)), pos)[0]
-    return not share >= COUPLED_NONRIGID
-
-
 def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
     """The identified modes that are hull coupling (:class:`Coupled`) against the pairing ``cmp``
     of the calibrated rig: decaying, found in three quarters of the impacts or more, the hull's
-    (:data:`HULL_MODE_SHARE`), the rudder's and stock's athwartship gages off a rigid ride by at
-    least :data:`COUPLED_NONRIGID` of their energy and beyond the test's chance level, and the
-    calibrated rig without that participation: the mode unpaired, paired below chance (MAC
-    under 1 / n_gages, what two unrelated shapes give), or paired with a model mode that carries
-    the rudder and stock as one rigid body (:func:`rides_rigidly`: the rig has the hull mode, but
-    with the rudder as a passenger in it, so no constant of it makes the rudder's deformation; a
-    pair at MAC >= 1 / n_gages was skipped before, whatever the rudder did in it)."""
+    (:data:`HULL_MODE_SHARE`), unpaired or paired below chance (MAC under 1 / n_gages, what two
+    unrelated shapes give), and the rudder's and stock's athwartship gages off a rigid ride by at
+    least :data:`COUPLED_NONRIGID` of their energy and beyond the test's chance level."""
     gs = rig.gages_by_channel()
     body = np.array([g.body for g in gs])
     ride = np.array([g.body != "hull" and "z" not in g.axis for g in gs])
     pos = np.array([g.position_m for g in gs], float)
-    good = {p.i_id: p.i_model for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
+    good = {p.i_id for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
     out = []
     for i in range(tm.n_modes):
-        if tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts:
+        if i in good or tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts:
             continue
         s = tm.shapes[:, i]
         e = np.abs(s) ** 2
@@ -497,8 +485,6 @@ def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Couple
             continue
         share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride], tm.n_modes)
         if not (share >= COUPLED_NONRIGID and stat > chance):
-            continue
-        if i in good and not rides_rigidly(cmp.model.shapes[ride, good[i]], pos[ride]):
             continue
         a = np.abs(s)
         big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
