@@ -287,6 +287,8 @@ def test_gap_with_a_crude_rig_states_its_form_error(perturbed_trial, capsys):
     doc = json.loads((out / "gap.json").read_text())
     assert doc["effect"] is None
     assert doc["model_level"]["form_errors"]
+    # gap.json says so too: "stop" is the solver's own word, "outcome" the fit's
+    assert doc["model_level"]["outcome"] == "bound-limited"
 
 
 def test_apply_is_set_value_of_each_constant_in_turn():

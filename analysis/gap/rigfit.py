@@ -1027,7 +1027,7 @@ class ModelLevel:
         f = self.fit
         return {
             "fitted": True, "identification_failed": skipped, "statement": self.statement(),
-            "stop": f.stop.value, "message": f.message,
+            "stop": f.stop.value, "message": f.message, "outcome": f.outcome(),
             "constants": {p.name: {"start": p.start, "value": p.value, "factor": round(p.factor, 5),
                                    "bounds": [p.lo, p.hi], "at_bound": p.at_bound,
                                    "sd_rel": p.sd if math.isfinite(p.sd) else None,
