@@ -114,14 +114,24 @@ class DecayLaw:
     showing: tuple[int, ...] = ()
 
 
+def law_band(f_hz: float, fs_hz: float) -> tuple[np.ndarray, int] | None:
+    """The decay law's band around ``f_hz`` (Hz): its 2nd-order Butterworth band-pass (sos, half
+    width :data:`LAW_BAND` of ``f_hz``, at least :data:`LAW_BAND_MIN_HZ`) and its settling time in
+    samples (three of the band's time constants); None where the band leaves (0, fs/2)."""
+    half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
+    if f_hz + half >= 0.5 * fs_hz or f_hz - half <= 0:
+        return None
+    sos = scipy.signal.butter(2, [f_hz - half, f_hz + half], "bandpass", fs=fs_hz, output="sos")
+    return sos, int(3 * fs_hz / (math.pi * half))
+
+
 def _cycles(v: np.ndarray, fs_hz: float, f_hz: float, a: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Per cycle of the mode at ``f_hz``, over ``v[a:a+n]`` (one gage, m/s^2): the envelope's mean
     (m/s^2) and the frequency (Hz), from the analytic signal of the band around it (zero-phase)."""
-    half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
-    if f_hz + half >= 0.5 * fs_hz or f_hz - half <= 0:
+    band = law_band(f_hz, fs_hz)
+    if band is None:
         return np.empty(0), np.empty(0)
-    sos = scipy.signal.butter(2, [f_hz - half, f_hz + half], "bandpass", fs=fs_hz, output="sos")
-    settle = int(3 * fs_hz / (math.pi * half))                       # three of the band's time constants
+    sos, settle = band
     pre = min(settle, int(LAW_EDGE_S * fs_hz), a)
     seg = v[a - pre: a + n + settle]
     if seg.size < pre + n or not np.all(np.isfinite(seg)):
@@ -227,15 +237,14 @@ def band_noise(v: np.ndarray, fm: FreeModal, f_hz: float) -> float:
     cycles, the band's noise 0.003) is read down to ten times the noise that disturbs it. A line
     ringing before the blows in the band (an ambient tone) raises this floor, as it should: its
     steady share would bend the decay law."""
-    half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
-    if f_hz + half >= 0.5 * fm.fs_hz or f_hz - half <= 0:
+    band = law_band(f_hz, fm.fs_hz)
+    if band is None:
         return math.inf
+    sos, settle = band
     fs = fm.fs_hz
     end = int((fm.t0_s[0] - DECAY_START_S - LAW_EDGE_S) * fs)
-    settle = int(3 * fs / (math.pi * half))
     if end - 2 * settle < fs or not np.all(np.isfinite(v[:end])):
         return math.inf
-    sos = scipy.signal.butter(2, [f_hz - half, f_hz + half], "bandpass", fs=fs, output="sos")
     env = np.abs(scipy.signal.hilbert(scipy.signal.sosfiltfilt(sos, v[:end])))[settle:end - settle]
     return float(np.sqrt(np.mean(env**2)))
 
