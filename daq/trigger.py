@@ -1202,14 +1202,20 @@ class Trigger:
         trace (a recursion over every sample) is then not needed, only its last value."""
         if scan.on:
             return False
-        var = scan.whitener.var
-        bound = p[:, dead:] > self._double_on(kk) * var[:, None]
+        bound = p[:, dead:] > self._double_on(kk) * scan.whitener.var[:, None]
         if (bound.sum(axis=0) >= kk).any():
             return False
-        n = max(self._len.envelope, _REF_STA * self._len.innovation)  # as _innovation_ref
-        scan.ref = ons.exp_average_last(e2, n, var if scan.ref is None else scan.ref)
+        prev, n = self._ref_start(scan)
+        scan.ref = ons.exp_average_last(e2, n, prev)
         scan.ref_trace = None
         return True
+
+    def _ref_start(self, scan: _ContactScan) -> tuple[np.ndarray, int]:
+        """The innovation reference mean (:meth:`_innovation_ref`) before this block, per voter
+        (the fit's innovation variance before the first block), and its averaging length in
+        samples: ``envelope_s``, at least :data:`_REF_STA` innovation STAs."""
+        return (scan.whitener.var if scan.ref is None else scan.ref,
+                max(self._len.envelope, _REF_STA * self._len.innovation))
 
     def _double_on(self, kk: int) -> float:
         """The innovation ratio ``kk`` voting gages must pass for a second contact: the
@@ -1239,8 +1245,7 @@ class Trigger:
         hold it back, that slowly rising innovation crossed ``double_on`` every few seconds of
         a long ringing (false double hits and blows); a contact's burst hardly moves the mean."""
         var = scan.whitener.var
-        prev = var if scan.ref is None else scan.ref
-        n = max(self._len.envelope, _REF_STA * self._len.innovation)
+        prev, n = self._ref_start(scan)
         ref, last = ons.exp_average(e2, n, prev)
         scan.ref, scan.ref_trace = last, ref  # ref[:, i]: the mean up to sample i
         before = np.empty_like(ref)  # [:, i]: up to sample i - 1, in one array for the caller
