@@ -25,6 +25,7 @@ import scipy.signal
 from ..model.response import ambient_gage_amplitudes, impact_amplitudes, modal_form, predominant_mode
 from ..model.rig import Rig
 from ..model.structure import build_model
+from .ringing import RingingLine, decay_window, guard_s, ringing_lines, welch_power
 from .signal_checks import DeclaredLine
 
 DEC_ORDER = 8
@@ -94,6 +95,9 @@ class TrialData:
     gage_numbers: tuple[int, ...] = field(default=())
     dropped_onsets_s: list[float] = field(default_factory=list)
     """Trigger events too soon after the previous impact to compare (s)."""
+    ringing_above: list[RingingLine] = field(default_factory=list)
+    """Lines the data show ringing after the blows above ``lowpass_hz`` (full rate, against the
+    pre-trigger windows): not compared, said so (:mod:`~ramdaq.analysis.gap.ringing`)."""
 
     @property
     def n_seg(self) -> int:
@@ -352,11 +356,13 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
     if fitted.all() and len(onsets) > 1:
         fitted[-1] = False
     clip, flat, peak = _full_rate_stats(src, fs_hz, onsets, pre_s, post_s, rails)
+    gage_numbers = tuple(g.number for g in rig.gages_by_channel())
+    above = _ringing_above(src, fs_hz, onsets, pre_s, skip_s, post_s, corner if q > 1 else fs_hz / 2,
+                           0.8 * min(rig.daq.anti_alias_hz, fs_hz / 2), gage_numbers)
     return TrialData(rig=rig, x=x, fs_hz=fs_d, fs_full_hz=fs_hz, seg_t0_s=seg_t0, onsets_s=onsets,
                      windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
                      clip=clip, flat=flat, peak_full=peak,
-                     gage_numbers=tuple(g.number for g in rig.gages_by_channel()),
-                     dropped_onsets_s=dropped)
+                     gage_numbers=gage_numbers, dropped_onsets_s=dropped, ringing_above=above)
 
 
 def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner: float,
@@ -429,6 +435,29 @@ def _full_rate_stats(src: ScaledCounts | _ArrayWindows, fs_hz: float, onsets: np
         run = at[:, 2:] & at[:, 1:-1] & at[:, :-2] & (s[:, 2:] == s[:, :-2])
         flat[j] = run.sum(axis=1)
     return clip, flat, peak
+
+
+def _ringing_above(src: ScaledCounts | _ArrayWindows, fs_hz: float, onsets: np.ndarray, pre_s: float,
+                   skip_s: float, post_s: float, lo_hz: float, hi_hz: float,
+                   gage_numbers: tuple[int, ...]) -> list[RingingLine]:
+    """Lines ringing after the blows between ``lo_hz`` (the band's corner) and ``hi_hz``, from
+    each impact's pre-trigger window and first decay second at full rate, Welch powers summed
+    over the impacts (:func:`~ramdaq.analysis.gap.ringing.ringing_lines`): two short windows an
+    impact, read apart, so memory stays that of one window."""
+    if lo_hz >= hi_hz:
+        return []
+    sums, counts, f = [0.0, 0.0], [0, 0], None
+    n = src.shape[1]
+    for t in onsets:
+        for i, (a, b) in enumerate(((t - pre_s, t - guard_s(fs_hz)), decay_window(t, skip_s, post_s))):
+            ia, ib = max(0, int(a * fs_hz)), min(n, int(b * fs_hz))
+            if ib > ia:
+                f, p, k = welch_power(src.window(ia, ib), fs_hz)
+                sums[i] = sums[i] + p * k
+                counts[i] += k
+    if f is None:
+        return []
+    return ringing_lines(sums[1], counts[1], sums[0], counts[0], f, lo_hz, hi_hz, gage_numbers)
 
 
 def summed_spectrum(x: np.ndarray, fs_hz: float, nfft: int | None = None) -> tuple[np.ndarray, np.ndarray]:

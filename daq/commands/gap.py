@@ -81,6 +81,16 @@ def _pct(v: float) -> str:
     return "n/a" if not np.isfinite(v) else f"{100 * v:.0f} %"
 
 
+def band_lines(td) -> list[str]:
+    """What rings above the compared band (the data's own spectra), which the diagnosis does not
+    compare: said, never cut silently; the three strongest lines."""
+    if not td.ringing_above:
+        return []
+    more = len(td.ringing_above) - 3
+    return [f"  not compared, ringing above the {td.lowpass_hz:.0f} Hz band: "
+            + "; ".join(r.text() for r in td.ringing_above[:3]) + (f"; and {more} more" if more > 0 else "")]
+
+
 def summary_lines(d: Diagnosis) -> list[str]:
     """A trial engineer's one-minute read of a diagnosis."""
     td = d.forward.td
@@ -88,6 +98,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
            f"{int((~td.fitted).sum())} held out), {td.n_gages} gages, compared up to "
            f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
            *verdict_lines(d)]
+    out += band_lines(td)
     out += rig_check_lines(d)
     out += answer_lines(d)
     zf = float(np.max(d.map_fit.z))
