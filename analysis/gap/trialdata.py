@@ -7,8 +7,11 @@ first third of the decay after the ram has let go) and ``late`` (the rest).
 
 The data are low-passed with a zero-phase Butterworth (``sosfiltfilt``, so no phase error) and
 decimated to a rate about 2.5x the low-pass corner, which sits between the highest mode worth
-comparing and the next one. The forward model corrects each kept mode's amplitude by the
-low-pass's ``|H|^2`` at its frequency. What the trial's noise is comes from the pre windows.
+comparing and the next one (:func:`analysis_band`, from the rig, its cut widened by the rig's own
++-25 % uncertainty so a field rig's error does not move it to another mode). The forward model
+corrects each kept mode's amplitude by the low-pass's ``|H|^2`` at its frequency. What the
+trial's noise is comes from the pre windows. What the data show ringing above the corner is
+reported (``TrialData.ringing_above``), not compared.
 
 Shapes: ``x`` is (n_segments, n_gages, n_samples) in m/s^2, gages in DAQ channel order.
 """
