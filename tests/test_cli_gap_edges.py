@@ -148,3 +148,23 @@ def test_the_verdict_is_a_short_first_line_and_the_model_form_follows_once(heavy
         assert text.count(ln.strip()) == 1 and ln.strip() in rep["headline"], ln
     assert "(calibration to the modes" not in text         # the model level's line says it
     assert "(calibration to the modes" in rep["headline"]  # gap.json as it was
+
+
+def test_what_rings_above_the_band_is_in_the_summary_and_in_gap_json(heavy_none):
+    """The data's lines above the compared band (analysis/gap/ringing.py) were printed but not
+    kept in gap.json. The shipped water recording rings at its 59.8 and 208-215 Hz modes: held
+    against a rig whose rudder is x10 too heavy, its band is lower still, so lines ring above it.
+    Each in gap.json lies above the low-pass corner, beyond its chance level and the 25x floor,
+    and the strongest three are the printed line's."""
+    code, text, rep, _ = heavy_none
+    assert code == 0, text
+    band = rep["band"]
+    lines = band["ringing_above"]
+    assert lines, band
+    for r in lines:
+        assert r["frequency_hz"] > band["lowpass_hz"]
+        assert r["power_ratio"] > max(r["chance"], 25.0) and r["gages"]
+    printed = next(ln for ln in text.splitlines() if ln.startswith("  not compared, ringing above"))
+    assert f"the {band['lowpass_hz']:.0f} Hz band" in printed
+    for r in lines[:3]:
+        assert f"{r['frequency_hz']:.0f} Hz on gage" in printed

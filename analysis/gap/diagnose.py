@@ -334,6 +334,8 @@ class Diagnosis:
                             "placements": s.n_placements} for s in self.signatures],
             "noise_sigma_m_s2": np.round(fw.sigma, 6).tolist(),
             "decimated_rate_hz": fw.td.fs_hz,
+            "band": {"lowpass_hz": round(fw.td.lowpass_hz, 2), "unit": "Hz",
+                     "ringing_above": [r.to_json() for r in fw.td.ringing_above]},
             "seconds": round(self.seconds, 2),
             "notes": self.notes,
         }

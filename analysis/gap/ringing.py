@@ -50,10 +50,15 @@ class RingingLine:
                 f"{', '.join(map(str, self.gages))} ({self.ratio:.0f}x the pre-trigger power, "
                 f"chance {self.chance:.1f}x)")
 
+    def to_json(self) -> dict:
+        return {"frequency_hz": round(self.frequency_hz, 1), "power_ratio": round(self.ratio, 1),
+                "chance": round(self.chance, 2), "gages": list(self.gages)}
+
 
 def welch_power(seg: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
-    """Welch power (n_gages, n_bins) of ``seg`` (n_gages, n), m^2/s^4/Hz, its frequencies (Hz)
-    and the number of segments averaged; gaps (NaN) read as 0. (0 segments when too short.)"""
+    """The frequencies (n_bins,) Hz, the Welch power (n_gages, n_bins) m^2/s^4/Hz of ``seg``
+    (n_gages, n) and the number of segments averaged; gaps (NaN) read as 0 (0 segments when
+    too short)."""
     nper = int(round(fs_hz / RESOLUTION_HZ))
     if seg.shape[1] < nper:
         return np.fft.rfftfreq(nper, 1 / fs_hz), np.zeros((seg.shape[0], nper // 2 + 1)), 0
