@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import re
 from collections import deque
+from typing import TYPE_CHECKING
 
 import numpy as np
-from rich import box
 from rich.console import Console, Group
-from rich.live import Live
-from rich.table import Table
-from rich.text import Text
+
+if TYPE_CHECKING:  # imported where used: only a terminal draws the live table
+    from rich.live import Live
 
 from ..drivers.block import Block, StreamInfo
 
@@ -94,6 +94,8 @@ class LiveReadout:
 
     def __enter__(self) -> LiveReadout:
         if self.tty:
+            from rich.live import Live  # here: a readout that prints plain lines never imports it
+
             self._live = Live(self._table(), console=self.console, refresh_per_second=4)
             self._live.__enter__()
         return self
@@ -237,6 +239,10 @@ class LiveReadout:
                 + "  |  ".join(parts))
 
     def _table(self) -> Group:
+        from rich import box  # here, with Live: only a terminal draws the table
+        from rich.table import Table
+        from rich.text import Text
+
         t = self.samples / self.info.fs_hz
         health = (f"blocks {self.blocks}  gaps {self.gaps}  queue {self.queue}  "
                   f"overflows {self.overflows}  impacts at "
