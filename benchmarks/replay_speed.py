@@ -55,12 +55,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def child_times(cmd: list[str]) -> tuple[float, float]:
+def child_times(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
     """CPU seconds (user + system, every thread of the process summed) and wall seconds of
-    the finished child process ``cmd``."""
+    the finished child process ``cmd`` (its environment this one's, or ``env``)."""
     before, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                   env=os.environ | {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+                   env=(os.environ if env is None else env)
+                   | {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     wall, after = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), wall
 
@@ -212,11 +213,31 @@ def signal_users() -> list[str]:
 
 
 def startup_line(runs: int, startup: float) -> str:
-    """What ``scipy.signal`` costs the start-up, and which modules still import it."""
+    """What ``scipy.signal`` costs the start-up, and which modules still import it; and, where
+    this environment keeps Python from writing bytecode, what compiling ramdaq's sources costs
+    it (:func:`compile_share`)."""
     without = least([sys.executable, "-c", STUB_SIGNAL + REPLAY_IMPORTS], runs)
     return (f"  start-up {startup:.2f} s CPU, of which scipy.signal (and what only it imports) "
             f"{startup - without:.2f} s (the same imports with scipy.signal an empty module: "
-            f"{without:.2f} s); imported on the replay path by: {'; '.join(signal_users())}")
+            f"{without:.2f} s){compile_share(runs, startup)}; imported on the replay path by: "
+            f"{'; '.join(signal_users())}")
+
+
+def compile_share(runs: int, startup: float) -> str:
+    """With ``PYTHONDONTWRITEBYTECODE`` set (as where these benchmarks were first run), every
+    ``ramdaq`` command compiles ramdaq's sources afresh (an installed package has its ``.pyc``;
+    numpy's and scipy's are there): the start-up again with the bytecode cache (written once
+    under a temporary ``PYTHONPYCACHEPREFIX``), as a clause for :func:`startup_line`."""
+    if not os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        return ""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+        env["PYTHONPYCACHEPREFIX"] = cache
+        cmd = [sys.executable, "-c", REPLAY_IMPORTS]
+        child_times(cmd, env)  # writes the cache
+        cached = min(child_times(cmd, env)[0] for _ in range(runs))
+    return (f"; PYTHONDONTWRITEBYTECODE is set here: with the bytecode cache (as installed) the "
+            f"start-up is {cached:.2f} s, compiling ramdaq's sources {startup - cached:.2f} s of it")
 
 
 @contextlib.contextmanager
@@ -245,14 +266,12 @@ def estimator_timed():
 
 def readout_cpu(info, blocks: list) -> float:
     """CPU seconds of the live readout ``ramdaq replay`` keeps over ``blocks`` (its per-block
-    statistics and its plain lines, written to the null device as to a pipe)."""
-    from rich.console import Console
-
+    statistics and its plain lines, on its own console as the session makes it, the standard
+    output the null device as a pipe or a file)."""
     from ramdaq.daq.readout import LiveReadout
 
-    with open(os.devnull, "w") as null:
-        readout = LiveReadout(info, adc_bits=info.extra.get("adc_bits"),
-                              console=Console(file=null, soft_wrap=True))
+    with open(os.devnull, "w") as null, contextlib.redirect_stdout(null):
+        readout = LiveReadout(info, adc_bits=info.extra.get("adc_bits"))
         t0 = time.process_time()
         with readout:
             for b in blocks:

@@ -657,19 +657,24 @@ class McapReplayDevice(Device):
         blocks before it are handed over first."""
         limit = max(block.n_samples, round(self.join_s * block.fs_hz))
         parts, n, end, scale = [block], block.n_samples, block.next_sample, block.scale
+        # the same scale: np.array_equal's test (shapes, then every element), asked once a
+        # recorded block; a scale of the same bytes as the first block's passes it without the
+        # comparison (identical bits are equal elements unless one is a NaN, which no scale
+        # of the same bytes is let through as when it has none)
+        same_bytes = None if np.isnan(scale).any() else scale.tobytes()
+        blocks = self._blocks
         while n < limit:
             try:
-                nxt = next(self._blocks, None)
+                nxt = next(blocks, None)
             except Exception as err:  # noqa: BLE001 -- raised by the next read, as said
                 self._error = err
                 break
             if nxt is None:
                 break
             m = nxt.counts.shape[1]
-            # the same scale: np.array_equal's test (shapes, then every element), less its
-            # conversions and dispatch (asked once a recorded block)
-            if (nxt.first_sample != end or n + m > limit or nxt.scale.shape != scale.shape
-                    or not (nxt.scale == scale).all()):
+            if nxt.first_sample != end or n + m > limit or (
+                    nxt.scale.tobytes() != same_bytes and (
+                        nxt.scale.shape != scale.shape or not (nxt.scale == scale).all())):
                 self._pending = nxt
                 break
             parts.append(nxt)

@@ -127,3 +127,23 @@ def test_a_look_with_a_negative_decrement_is_left_out_of_the_plain_line(albacore
     view = _feed(Console(file=out, force_terminal=False, width=300), albacore)
     view.look(0.45, {"g01": (13.01, 0.0950, 0.004), "g02": (13.03, -0.0990, 0.006)})
     assert out.getvalue().splitlines()[-1].endswith("(median of 1 gage, 0.0950-0.0950); 1 unsure")
+
+
+def test_plain_lines_of_its_own_console_are_what_rich_prints(albacore, capsys):
+    """The readout's own console (no terminal) writes its plain lines without rich's pipeline:
+    the same text as rich prints, also where rich would read a channel name as markup."""
+    from dataclasses import replace
+
+    with SimDevice(albacore, duration_s=4.5, impacts=[1.0], seed=4) as dev:
+        info, blocks = dev.info, list(dev)
+    marked = replace(info, channels=("g01[b]",) + tuple(info.channels[1:]))
+    for stream_info in (info, marked):
+        outputs = []
+        for console in (None, Console(file=io.StringIO(), soft_wrap=True)):
+            view = LiveReadout(stream_info, adc_bits=24, console=console)
+            with view:
+                for block in blocks:
+                    view.update(block)
+            outputs.append(capsys.readouterr().out if console is None else console.file.getvalue())
+        assert outputs[0] == outputs[1] and outputs[0].count("\nt=") + outputs[0].startswith("t=") == 2
+    assert "g01[b]" not in outputs[0]  # rich took "[b]" as markup: it printed the line

@@ -95,6 +95,22 @@ def test_joined_blocks_are_the_same_samples_and_stop_at_a_gap(tmp_path):
         McapReplayDevice(path, pace="realtime", join_s=1.0)
 
 
+def test_joining_asks_np_array_equal_of_the_scales_not_their_bytes(tmp_path):
+    """Joined or not as ``np.array_equal`` of the scales says, not as their bytes: a scale
+    that differs from the first block's only in the sign of a zero is equal (joined, the first
+    block's scale kept); a doubled one is not. (A NaN scale cannot be recorded: its
+    scale-change event is not JSON.)"""
+    path = tmp_path / "trial.mcap"
+    base = stream(12, seed=2)
+    zero, neg = base[0].scale.copy(), base[0].scale.copy()
+    zero[0], neg[0] = 0.0, -0.0
+    scales = [zero] * 3 + [neg] * 3 + [2 * zero] * 3 + [zero] * 3
+    _record(path, [dataclasses.replace(b, scale=s) for b, s in zip(base, scales, strict=True)])
+    _, back, _ = _replay(path, join_s=12 * BLOCK_SAMPLES / FS_HZ)
+    assert [b.n_samples // BLOCK_SAMPLES for b in back] == [6, 3, 3]
+    assert not np.signbit(back[0].scale[0])  # the first block's 0.0, not the -0.0
+
+
 @pytest.mark.parametrize("compression", ["lz4", "none"])
 def test_every_compression_replays_the_same_blocks(tmp_path, compression):
     """The replay's own chunk reader (zstd, none) and mcap's (lz4) give the blocks recorded,

@@ -26,10 +26,6 @@ from ...analysis.model.structure import added_mass
 from ...analysis.model.surface import Surface
 from ...analysis.model.units import from_si
 from ..analyzer import HitResult, analysis_to_json, finite_json, trial_summary
-from ..api import analyze_hits, decay_samples
-from ..recording import read_recording, rig_or_fail
-from ..reports.frf_report import frf_section, plot_frf
-from .progress import bytes_bar, progress_bar
 
 MODEL_MOTIONS = ("v", "gamma", "alpha")
 """The model's motion names; ``report.json``'s ``surface.motions`` gives what the rig calls each
@@ -48,6 +44,11 @@ def run_analysis(path: str | Path, *, impact: int | None = None,
     in each hit instead of the most energetic one; ValueError, in one line, when it is
     within the resolution of no identified mode in any hit (a hit where only it fails is
     rejected with the reason)."""
+    # here, not with the module: ramdaq replay imports this module for its summary only
+    from ..api import analyze_hits
+    from ..recording import read_recording, rig_or_fail
+    from .progress import bytes_bar, progress_bar
+
     if mode_hz is not None and not (math.isfinite(mode_hz) and mode_hz > 0):
         raise ValueError(f"--mode-hz {mode_hz:g}: a frequency in Hz above 0")
     name = Path(path).name
@@ -119,6 +120,8 @@ def recorded_channels(path: str | Path) -> tuple[str, ...]:
 def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                  air: tuple[Rig, list[HitResult]] | None = None) -> dict:
     """The trial report as a JSON-serialisable dict (every NaN or infinity written as ``None``)."""
+    from ..reports.frf_report import frf_section  # (not imported by ramdaq replay)
+
     summary = trial_summary(hits)
     f_other = trial_summary(air[1])["f_hz"]["mean"] if air else None
     f_here = summary["f_hz"]["mean"]
@@ -395,6 +398,9 @@ def write_analysis(path: str | Path, rig: Rig, hits: list[HitResult], out: Path,
     PNGs: ``plots`` True draws :data:`DEFAULT_PLOTS`, False none, else the kinds named
     (:data:`~ramdaq.daq.reports.impact_plots.PLOT_KINDS`). Returns the report and the files
     written."""
+    from ..api import decay_samples  # (not imported by ramdaq replay)
+    from ..reports.frf_report import plot_frf
+
     report = build_report(path, rig, hits, air)
     out.mkdir(parents=True, exist_ok=True)
     for old in _earlier_plots(out):  # a report folder holds one run: no plots of an earlier one
