@@ -162,3 +162,22 @@ def test_a_time_invariance_failure_answers_only_well_above_chance():
     cand = {"name": "highpass", "dbic": -50.0, "closed_held": 0.3, "closed_fit": 0.3,
             "location": {"gages": [3], "window": "late"}}
     assert answer("highpass", [cand], None, set(), [hp, drift]).named == "unexplained"
+
+
+def test_a_fixed_channel_law_gives_way_to_the_same_gages_channel_not_fixed():
+    # issue 17: a resonance of gage 3's mount read as a skew of gage 3 at 100x its chance level
+    # beside the gage's own early line at 28x; a drifting gain read as a constant one
+    skew = _finding("time_skew", (3,), 100.0)
+    ring = _finding("one_gage_line", (3,), 28.0)
+    a = answer(None, [], None, {1, 2}, [skew, ring])
+    assert a.named == "unexplained" and a.by == "data" and a.location["gages"] == [3]
+    gain = _finding("gain", (2,), 8.8)
+    drift = _finding("gain_invariance", (2,), 4.0)
+    assert answer(None, [], None, {1, 2}, [gain, drift]).named == "unexplained"
+    # the skew stands where the channel finding is on another gage, or barely past chance
+    assert answer(None, [], None, {1, 2}, [skew, _finding("one_gage_line", (7,), 28.0)]).named == "time_skew"
+    weak = _finding("one_gage_line", (3,), 0.5 * (1 + PRECEDENCE_STRENGTH))
+    assert answer(None, [], None, {1, 2}, [skew, weak]).named == "time_skew"
+    # nor does it touch a flat top (read on the recorded values, not a channel law)
+    clip = _finding("clipping", (3,), 50.0)
+    assert answer(None, [], None, {1, 2}, [clip, ring]).named == "clipping"

@@ -179,7 +179,37 @@ def credible(findings: list[dict]) -> list[dict]:
     nonlinear = not_homogeneous(findings)
     return [f for f in findings if not (nonlinear and f["check"] in LINEAR_SHAPE_CHECKS)
             and not ((f.get("layer") == Layer.EXCITATION or f["check"] in CHAIN_CHECKS)
-                     and fails_held_out(f))]
+                     and fails_held_out(f)) and not channel_not_fixed(f, findings)]
+
+
+FIXED_CHANNEL = frozenset({"gain", "rigid_body", "time_skew", "highpass"})
+"""Data-only sensor checks that read one fixed law of a gage's channel on the free linear
+model's shapes and phases: a constant gain or axis, a constant delay, a constant first-order
+corner (:func:`channel_not_fixed`)."""
+NOT_FIXED = frozenset({"gain_invariance", "one_gage_line"})
+"""Data-only findings that a gage's channel is not one fixed law: its gain changes between
+impacts (:func:`~ramdaq.analysis.gap.invariance.gain_invariance`), or it rings with a line of its
+own that no other gage shows (:func:`~ramdaq.analysis.gap.invariance.one_gage_lines`)."""
+
+
+def channel_not_fixed(f: dict, findings: list[dict]) -> bool:
+    """Whether finding ``f`` (as JSON) reads a fixed channel law (:data:`FIXED_CHANNEL`) on a gage
+    where the same data show the channel is not fixed (:data:`NOT_FIXED`, at least
+    :data:`PRECEDENCE_STRENGTH` times its chance level). Then the fixed law is the projection
+    of another one, not the cause: a gain drifting through the trial reads, averaged over the
+    impacts, as a constant gain (its mean); a resonance of the gage's mount or chain at ``fr``
+    rings as a line on that gage alone and multiplies its response at the modes by
+    ``1 / (1 - (f / fr)^2)`` in gain with a phase lag growing with ``f`` -- a gain, a delay or a
+    corner fitted over the modes. Neither a fixed gain, nor a delay, nor a corner changes
+    between impacts or rings by itself, so the finding that they cannot make answers, at its
+    own statistic and chance level (issue 17: modal development seed 64000, a 126 Hz resonance
+    on gage 3 read as a 0.33 ms skew of gage 3 at 100x its chance level beside its own 18 Hz
+    early line at 28x; stored development and check trials of every library effect show no
+    such pair on one gage but one ambient tone, answered before by its pre-window line)."""
+    if f["check"] not in FIXED_CHANNEL:
+        return False
+    return any(g["check"] in NOT_FIXED and strength(g) >= PRECEDENCE_STRENGTH
+               and set(g["gages"]) & set(f["gages"]) for g in findings)
 
 
 CHAIN_CHECKS = frozenset({"time_skew", "highpass"})
