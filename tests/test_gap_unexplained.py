@@ -162,3 +162,50 @@ def test_a_time_invariance_failure_answers_only_well_above_chance():
     cand = {"name": "highpass", "dbic": -50.0, "closed_held": 0.3, "closed_fit": 0.3,
             "location": {"gages": [3], "window": "late"}}
     assert answer("highpass", [cand], None, set(), [hp, drift]).named == "unexplained"
+
+
+def test_a_fixed_channel_law_gives_way_to_the_same_gages_channel_not_fixed():
+    # issue 17: a resonance of gage 3's mount read as a skew of gage 3 at 100x its chance level
+    # beside the gage's own early line at 28x; a drifting gain read as a constant one
+    skew = _finding("time_skew", (3,), 100.0)
+    ring = _finding("one_gage_line", (3,), 28.0)
+    a = answer(None, [], None, {1, 2}, [skew, ring])
+    assert a.named == "unexplained" and a.by == "data" and a.location["gages"] == [3]
+    gain = _finding("gain", (2,), 8.8)
+    drift = _finding("gain_invariance", (2,), 4.0)
+    assert answer(None, [], None, {1, 2}, [gain, drift]).named == "unexplained"
+    # the skew stands where the channel finding is on another gage, or barely past chance
+    assert answer(None, [], None, {1, 2}, [skew, _finding("one_gage_line", (7,), 28.0)]).named == "time_skew"
+    weak = _finding("one_gage_line", (3,), 0.5 * (1 + PRECEDENCE_STRENGTH))
+    assert answer(None, [], None, {1, 2}, [skew, weak]).named == "time_skew"
+    # nor does it touch a flat top (read on the recorded values, not a channel law)
+    clip = _finding("clipping", (3,), 50.0)
+    assert answer(None, [], None, {1, 2}, [clip, ring]).named == "clipping"
+
+
+def _double_hit(ratio: float, closed_held: float) -> dict:
+    return Finding(check="double_hit", layer=Layer.EXCITATION, gages=tuple(range(1, 17)),
+                   statistic=ratio * 10.0, chance_level=10.0, size=0.2, unit="1", text="double_hit",
+                   window="early",
+                   closed_held=closed_held).to_json()
+
+
+def test_an_early_response_no_second_blow_explains_is_unexplained_not_model_form():
+    # issue 17, modal dev seeds 61000/62001: a crack or a rattle read as a second blow at 300-450x
+    # its chance level that closes none of its held-out residual; the model's gap was taken for
+    # the rig's form ("none")
+    bent = _double_hit(324.0, -0.03)
+    a = answer("unexplained", [], WHERE, {1, 2, 4, 5, 7, 8}, [bent])
+    assert a.named == "unexplained" and a.by == "data" and a.location["window"] == "early"
+    assert a.finding["check"] == "early_nonlinear" and a.finding["layer"] == "nonlinearity"
+    assert answer(None, [], None, {1, 2}, [bent]).named == "unexplained"
+    # a second blow that repeats (closes its held-out residual) stays a double hit
+    assert answer(None, [], None, {1, 2}, [_double_hit(324.0, 0.8)]).named == "double_hit"
+    # barely past chance, the misfit says nothing: model form
+    weak = _double_hit(0.5 * (1 + PRECEDENCE_STRENGTH), -0.03)
+    assert answer(None, [], None, {1, 2}, [weak]).named == "none"
+    # and it sets the model level's split aside: two linear poles respond in proportion
+    split = {"f_lo_hz": 12.4, "f_hi_hz": 12.6, "mac": 0.98, "gages": [1, 2, 3]}
+    a = answer("unexplained", [], WHERE, {1, 2}, [bent], splits=[split])
+    assert a.named == "unexplained"
+    assert answer("unexplained", [], WHERE, {1, 2}, [], splits=[split]).named == "split_mode"
