@@ -40,6 +40,7 @@ from .report1836.full_damping import GAGES as EQ14_15_GAGES
 from .report1836.full_damping import full_damping, table_amplitude_covariance
 from .report1836.motion_fits import fit_signals_at_poles
 from .report1836.motions import (
+    GageGeometry,
     alpha,
     alpha_b_from_13_14,
     d_rudder_hull,
@@ -505,11 +506,11 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     f = float(table.frequency_hz[k])
     rows = {n: i for i, n in enumerate(gage_numbers)}
     steps = list(CHAIN_STEPS)
-    rudder, relative, hull = _motion_signals(lambda n: x[rows[n]], rig, verdicts, skip, notes)
-    bandpassed = None
-    if xb is not None:  # the same signals of the band-passed gages (their notes said above)
-        bandpassed = {name: v for part in _motion_signals(lambda n: xb[rows[n]], rig, verdicts,
-                                                          skip, []) for name, v in part.items()}
+    made = _motion_signals([lambda n: x[rows[n]]] + ([] if xb is None else [lambda n: xb[rows[n]]]),
+                           rig, verdicts, skip, notes)
+    rudder, relative, hull = made[0]
+    # the same signals of the band-passed gages, for the peak method
+    bandpassed = None if xb is None else {name: v for part in made[1] for name, v in part.items()}
     fits = _motion_fits(rudder | relative | hull, fs_hz, table, k, notes, bandpassed)
     motions = {name: fits[name][0] for name in rudder}
     amps = {name: fits[name][1] for name in rudder}
@@ -524,22 +525,32 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
             "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
 
 
-def _motion_signals(d: Callable[[int], np.ndarray], rig: Rig, verdicts: dict[int, GageVerdict],
-                    skip: set[str], notes: list[str]
-                    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """The rudder motions (Eq 1-3b, those of usable gages), the motions relative to the hull
-    (Eq 8-13) and the hull's own, each a linear combination of the gages' decays ``d(n)``
-    (gage n's), for the steps of :data:`CHAIN_STEPS` not in ``skip``."""
+_Signals = dict[str, np.ndarray]
+
+
+def _motion_signals(ds: Sequence[Callable[[int], np.ndarray]], rig: Rig,
+                    verdicts: dict[int, GageVerdict], skip: set[str], notes: list[str]
+                    ) -> list[tuple[_Signals, _Signals, _Signals]]:
+    """For each accessor ``d`` of ``ds`` (``d(n)``: gage n's decay; e.g. the gages' and the
+    band-passed gages'), the rudder motions (Eq 1-3b, those of usable gages), the motions
+    relative to the hull (Eq 8-13) and the hull's own, each a linear combination of the gages,
+    for the steps of :data:`CHAIN_STEPS` not in ``skip``; the rig's geometry read once, the
+    notes said for the first accessor alone."""
     steps = list(CHAIN_STEPS)
-    rudder: dict[str, np.ndarray] = {}
-    relative: dict[str, np.ndarray] = {}
-    if steps[0] not in skip:
-        signals = _rudder_motions(d, rig)
-        rudder = _usable_motions(signals, verdicts, notes)
-        if steps[1] not in skip:
-            relative = _relative_signals(d, rig, signals, notes)
-    hull = _hull_motions(d, rig, verdicts) if rig.structural else {}
-    return rudder, relative, hull
+    geom = gage_geometry(rig) if steps[0] not in skip else None
+    out = []
+    for i, d in enumerate(ds):
+        said = notes if i == 0 else []
+        rudder: _Signals = {}
+        relative: _Signals = {}
+        if geom is not None:
+            signals = _rudder_motions(d, geom)
+            rudder = _usable_motions(signals, verdicts, said)
+            if steps[1] not in skip:
+                relative = _relative_signals(d, rig, geom, signals, said)
+        hull = _hull_motions(d, rig, verdicts) if rig.structural else {}
+        out.append((rudder, relative, hull))
+    return out
 
 
 def mode_tag(k: int, predominant: int, chosen: int | None, mode_hz: float | None) -> str:
@@ -597,9 +608,10 @@ MOTION_GAGES = {"gamma": (4, 8), "alpha": (2, 6), "v_2_6": (2, 6), "v_4_8": (4, 
 """The gages each rudder motion of :data:`MOTIONS` is computed from."""
 
 
-def _rudder_motions(d: Callable[[int], np.ndarray], rig: Rig) -> dict[str, np.ndarray]:
-    """The rudder motions of Eq 1, 2, 3a, 3b from the gages' decays (``d(n)``, gage n's)."""
-    K = geometry_constants(gage_geometry(rig))
+def _rudder_motions(d: Callable[[int], np.ndarray], geom: GageGeometry) -> dict[str, np.ndarray]:
+    """The rudder motions of Eq 1, 2, 3a, 3b from the gages' decays (``d(n)``, gage n's) and
+    the rig's distances ``geom`` (:func:`~ramdaq.analysis.model.geometry.gage_geometry`)."""
+    K = geometry_constants(geom)
     return {
         "gamma": gamma(d(4), d(8), K["K1"]),
         "alpha": alpha(d(6), d(2), K["K2"]),
@@ -622,11 +634,10 @@ def _usable_motions(signals: dict[str, np.ndarray], verdicts: dict[int, GageVerd
     return out
 
 
-def _relative_signals(d: Callable[[int], np.ndarray], rig: Rig, signals: dict[str, np.ndarray],
-                      notes: list[str]) -> dict[str, np.ndarray]:
+def _relative_signals(d: Callable[[int], np.ndarray], rig: Rig, geom: GageGeometry,
+                      signals: dict[str, np.ndarray], notes: list[str]) -> dict[str, np.ndarray]:
     """Eq 8-13: the hull motions from gages 13, 14 (and 5 for the yaw, when level with 13) and
     the rudder motions relative to the hull, whose decrements Eq 10-13 are."""
-    geom = gage_geometry(rig)
     alpha_b = alpha_b_from_13_14(d(13), d(14), geom.L_P)
     p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
     gamma_b = 0.0
