@@ -28,7 +28,7 @@ import numpy as np
 
 from .modal.before_blow import ambient_modes
 from .modal.identify import identify_modes
-from .modal.peaks import decrements_from_peaks
+from .modal.peaks import bandpass_rows, decrements_from_peaks
 from .modal.signal import fast_length_below
 from .modal.table import ModeTable
 from .modal.verdicts import DecayAssessment, JointAssessment, Verdict, assess_decay_jointly
@@ -40,6 +40,7 @@ from .report1836.full_damping import GAGES as EQ14_15_GAGES
 from .report1836.full_damping import full_damping, table_amplitude_covariance
 from .report1836.motion_fits import fit_signals_at_poles
 from .report1836.motions import (
+    GageGeometry,
     alpha,
     alpha_b_from_13_14,
     d_rudder_hull,
@@ -322,32 +323,48 @@ def _nearest(table: ModeTable, f_hz: float) -> int | None:
 
 
 def _peak_decrements(x: np.ndarray, fs_hz: float, f_hz: float,
-                     noise_std: np.ndarray | None = None) -> list[tuple[float, float]]:
+                     noise_std: np.ndarray | None = None,
+                     bandpassed: np.ndarray | None = None) -> list[tuple[float, float]]:
     """The report's peak-ratio decrement and its standard error of each row of ``x`` (signals,
     samples; all at once: :func:`~ramdaq.analysis.modal.peaks.decrements_from_peaks`; each row's
-    ``noise_std`` where known); NaN where the mode is too weak in a signal to show three peaks
+    ``noise_std`` where known; ``bandpassed``: the rows band-passed already, where known,
+    :func:`_bandpassed_rows`); NaN where the mode is too weak in a signal to show three peaks
     above the noise."""
     nan = (np.nan, np.nan)
     try:
-        got = decrements_from_peaks(x, fs_hz, f_hz, noise_std=noise_std)
+        got = decrements_from_peaks(x, fs_hz, f_hz, noise_std=noise_std, bandpassed=bandpassed)
     except ValueError:  # refused for all rows alike (too few samples a period, or in all)
         return [nan] * len(x)
     return [nan if isinstance(p, ValueError) else (p.delta, p.std_error) for p in got]
 
 
+def _bandpassed_rows(x: np.ndarray, fs_hz: float, f_hz: float) -> np.ndarray | None:
+    """The rows of ``x`` band-passed around ``f_hz`` as the peak decrements filter them
+    (:func:`~ramdaq.analysis.modal.peaks.bandpass_rows`), once for the gages and the motions
+    made of them; None where the band does not fit (the peak decrements then say why)."""
+    try:
+        return bandpass_rows(x, fs_hz, f_hz)
+    except ValueError:
+        return None
+
+
 def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable, k: int,
-                 notes: list[str]) -> dict[str, tuple[Decrement, complex]]:
+                 notes: list[str], bandpassed: dict[str, np.ndarray] | None = None
+                 ) -> dict[str, tuple[Decrement, complex]]:
     """Each signal's decrement of the predominant mode ``k`` of ``table`` (its own fit, reached
     from the joint poles: :mod:`~ramdaq.analysis.report1836.motion_fits`), beside the report's
     peak-ratio one, and the mode's complex amplitude in it (the combination of the gages'). A
-    signal in which the mode does not stand out of the noise gets NaN and a note."""
+    signal in which the mode does not stand out of the noise gets NaN and a note.
+    ``bandpassed``: each signal made of the band-passed gages (the same combination: equal to
+    rounding to the band-passed signal), so that the peak method filters no signal again."""
     if not signals:
         return {}
     S = np.array(list(signals.values()))
     fits = fit_signals_at_poles(S, fs_hz, table.frequency_hz, table.delta, modes=(k,),
                                 trend_terms=int(table.info.get("trend_terms", 1)))
     f = float(table.frequency_hz[k])
-    peaks = _peak_decrements(S, fs_hz, f)
+    Sb = None if bandpassed is None else np.array([bandpassed[name] for name in signals])
+    peaks = _peak_decrements(S, fs_hz, f, bandpassed=Sb)
     out = {}
     for name, fit, peak in zip(signals, fits, peaks, strict=True):
         if not np.isfinite(fit.delta[k]):
@@ -430,7 +447,9 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
               "at the decay's start: an ambient line, not the blow's free decay (not taken as "
               "the predominant mode; its decrement is no damping measure)" for a, r in ambient]
     f = float(table.frequency_hz[k])
-    peaks = _peak_decrements(x[good], fs_hz, f, judged.noise_std[good])  # the verdicts' noise
+    xb = _bandpassed_rows(x, fs_hz, f)  # the gages' and (combined) the motions' band-pass
+    peaks = _peak_decrements(x[good], fs_hz, f, judged.noise_std[good],  # the verdicts' noise
+                             None if xb is None else xb[good])
     gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),
                                         float(table.channel_delta[j, k]),
                                         float(table.channel_delta_se[j, k]),
@@ -443,7 +462,7 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
                                judged.noise_std[good]))
     skipped = skipped_steps(rig, tuple(gage_numbers))
     chain = _chain(x, fs_hz, rig, gage_numbers, verdicts, table, k, gages, amp,
-                   {s.step for s in skipped}, notes)
+                   {s.step for s in skipped}, notes, xb)
     return ImpactAnalysis(
         onset_s=onset_s, decay_start_s=decay_start_s, duration_s=n_record / fs_hz,
         modes=table, predominant=pred, gage_numbers=tuple(gage_numbers), verdicts=verdicts,
@@ -479,25 +498,20 @@ def crop_note(n_used: int, n_record: int, fs_hz: float, table: ModeTable, k: int
 def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
            verdicts: dict[int, GageVerdict], table: ModeTable, k: int,
            gages: dict[int, Decrement], amp: dict[int, complex], skip: set[str],
-           notes: list[str]) -> dict:
+           notes: list[str], xb: np.ndarray | None = None) -> dict:
     """The report's chain on the predominant mode ``k`` of ``table``: each step of
-    :data:`CHAIN_STEPS` not in ``skip``. Returns the :class:`ImpactAnalysis` fields it fills."""
+    :data:`CHAIN_STEPS` not in ``skip``. Returns the :class:`ImpactAnalysis` fields it fills.
+    ``xb``: the rows of ``x`` band-passed for the peak decrements (:func:`_bandpassed_rows`),
+    of which the motions' band-passed signals are made."""
     f = float(table.frequency_hz[k])
     rows = {n: i for i, n in enumerate(gage_numbers)}
-
-    def d(n: int) -> np.ndarray:
-        return x[rows[n]]
-
     steps = list(CHAIN_STEPS)
-    rudder: dict[str, np.ndarray] = {}
-    relative: dict[str, np.ndarray] = {}
-    if steps[0] not in skip:
-        signals = _rudder_motions(d, rig)
-        rudder = _usable_motions(signals, verdicts, notes)
-        if steps[1] not in skip:
-            relative = _relative_signals(d, rig, signals, notes)
-    hull = _hull_motions(d, rig, verdicts) if rig.structural else {}
-    fits = _motion_fits(rudder | relative | hull, fs_hz, table, k, notes)
+    made = _motion_signals([lambda n: x[rows[n]]] + ([] if xb is None else [lambda n: xb[rows[n]]]),
+                           rig, verdicts, skip, notes)
+    rudder, relative, hull = made[0]
+    # the same signals of the band-passed gages, for the peak method
+    bandpassed = None if xb is None else {name: v for part in made[1] for name, v in part.items()}
+    fits = _motion_fits(rudder | relative | hull, fs_hz, table, k, notes, bandpassed)
     motions = {name: fits[name][0] for name in rudder}
     amps = {name: fits[name][1] for name in rudder}
     ratio = float(np.real(amps.get("alpha", np.nan) / amps.get("gamma", np.nan)))
@@ -509,6 +523,34 @@ def _chain(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...],
     return {"motions": motions, "relative": {name: fits[name][0] for name in relative},
             "alpha1_over_gamma1": ratio, "damping": damping, "stock_lengths": lengths,
             "stock_curves": curves, "hull_motions": {name: fits[name][0] for name in hull}}
+
+
+_Signals = dict[str, np.ndarray]
+
+
+def _motion_signals(ds: Sequence[Callable[[int], np.ndarray]], rig: Rig,
+                    verdicts: dict[int, GageVerdict], skip: set[str], notes: list[str]
+                    ) -> list[tuple[_Signals, _Signals, _Signals]]:
+    """For each accessor ``d`` of ``ds`` (``d(n)``: gage n's decay; e.g. the gages' and the
+    band-passed gages'), the rudder motions (Eq 1-3b, those of usable gages), the motions
+    relative to the hull (Eq 8-13) and the hull's own, each a linear combination of the gages,
+    for the steps of :data:`CHAIN_STEPS` not in ``skip``; the rig's geometry read once, the
+    notes said for the first accessor alone."""
+    steps = list(CHAIN_STEPS)
+    geom = gage_geometry(rig) if steps[0] not in skip else None
+    out = []
+    for i, d in enumerate(ds):
+        said = notes if i == 0 else []
+        rudder: _Signals = {}
+        relative: _Signals = {}
+        if geom is not None:
+            signals = _rudder_motions(d, geom)
+            rudder = _usable_motions(signals, verdicts, said)
+            if steps[1] not in skip:
+                relative = _relative_signals(d, rig, geom, signals, said)
+        hull = _hull_motions(d, rig, verdicts) if rig.structural else {}
+        out.append((rudder, relative, hull))
+    return out
 
 
 def mode_tag(k: int, predominant: int, chosen: int | None, mode_hz: float | None) -> str:
@@ -566,9 +608,10 @@ MOTION_GAGES = {"gamma": (4, 8), "alpha": (2, 6), "v_2_6": (2, 6), "v_4_8": (4, 
 """The gages each rudder motion of :data:`MOTIONS` is computed from."""
 
 
-def _rudder_motions(d: Callable[[int], np.ndarray], rig: Rig) -> dict[str, np.ndarray]:
-    """The rudder motions of Eq 1, 2, 3a, 3b from the gages' decays (``d(n)``, gage n's)."""
-    K = geometry_constants(gage_geometry(rig))
+def _rudder_motions(d: Callable[[int], np.ndarray], geom: GageGeometry) -> dict[str, np.ndarray]:
+    """The rudder motions of Eq 1, 2, 3a, 3b from the gages' decays (``d(n)``, gage n's) and
+    the rig's distances ``geom`` (:func:`~ramdaq.analysis.model.geometry.gage_geometry`)."""
+    K = geometry_constants(geom)
     return {
         "gamma": gamma(d(4), d(8), K["K1"]),
         "alpha": alpha(d(6), d(2), K["K2"]),
@@ -591,11 +634,10 @@ def _usable_motions(signals: dict[str, np.ndarray], verdicts: dict[int, GageVerd
     return out
 
 
-def _relative_signals(d: Callable[[int], np.ndarray], rig: Rig, signals: dict[str, np.ndarray],
-                      notes: list[str]) -> dict[str, np.ndarray]:
+def _relative_signals(d: Callable[[int], np.ndarray], rig: Rig, geom: GageGeometry,
+                      signals: dict[str, np.ndarray], notes: list[str]) -> dict[str, np.ndarray]:
     """Eq 8-13: the hull motions from gages 13, 14 (and 5 for the yaw, when level with 13) and
     the rudder motions relative to the hull, whose decrements Eq 10-13 are."""
-    geom = gage_geometry(rig)
     alpha_b = alpha_b_from_13_14(d(13), d(14), geom.L_P)
     p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
     gamma_b = 0.0

@@ -219,6 +219,7 @@ STAGES = (  # (module, public name as that module calls it, label); nested ones 
     ("ramdaq.analysis.modal.order", "ModeSelector.refit", "    full refits (search's, the NLS data's)"),
     ("ramdaq.analysis.modal.identify", "fit_channels_varpro", "    16 single-gage fits (per_channel)"),
     ("ramdaq.analysis.impact", "identify_modes", "usable gages' refit (when a gage is left out)"),
+    ("ramdaq.analysis.impact", "bandpass_rows", "peak decrements (gages and motions)"),
     ("ramdaq.analysis.impact", "decrements_from_peaks", "peak decrements (gages and motions)"),
     ("ramdaq.analysis.impact", "fit_signals_at_poles", "motion fits (Eq 4-13)"),
     ("ramdaq.analysis.impact", "table_amplitude_covariance", "amplitude covariance (Eq 14/15 SE)"),

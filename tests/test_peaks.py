@@ -118,3 +118,33 @@ def test_rows_given_their_noise_equal_rows_estimating_it_to_the_bit():
     assert any(o.n_ratios != g.n_ratios for o, g in zip(other, got, strict=True))
     with pytest.raises(ValueError, match="noise_std"):
         decrements_from_peaks(x, fs, 13.0, noise_std=np.ones(2))
+
+
+def test_rows_band_passed_already_as_filtering_them_and_combinations_to_rounding():
+    """A hit's gages are band-passed once (bandpass_rows) and its motions, linear combinations
+    of the gages, are the same combinations of the band-passed gages: the peak decrements equal
+    those that filter the rows themselves (to the bit for the rows, to rounding for the
+    combinations: the filter is linear); rows of another shape are refused."""
+    from ramdaq.analysis.modal.peaks import bandpass_rows, decrements_from_peaks
+
+    rng = np.random.default_rng(9)
+    fs = 2048.0
+    x = damped_sinusoids(fs, 6000, [13.0, 60.0], [0.1, 0.02], rng.normal(size=(4, 2)))
+    x = x + 0.01 * rng.standard_normal(x.shape)
+    xb = bandpass_rows(x, fs, 13.0)
+    np.testing.assert_array_equal(xb[1], bandpass_mode(x[1], fs, 13.0))  # the same filter
+    for g, ref in zip(decrements_from_peaks(x, fs, 13.0, bandpassed=xb),
+                      decrements_from_peaks(x, fs, 13.0), strict=True):
+        assert (g.delta, g.std_error, g.n_ratios) == (ref.delta, ref.std_error, ref.n_ratios)
+    A = np.array([[0.5, -0.5, 0.0, 0.0], [0.3, 0.0, 0.7, 0.0], [0.0, 1.0, 0.0, -1.0]])
+    got = decrements_from_peaks(A @ x, fs, 13.0, bandpassed=A @ xb)
+    for g, ref in zip(got, decrements_from_peaks(A @ x, fs, 13.0), strict=True):
+        assert g.n_ratios == ref.n_ratios
+        # rounding only: ~1e-16 of the signal in each filtered sample, through a log-line fit
+        assert g.delta == pytest.approx(ref.delta, rel=1e-9)
+        assert g.std_error == pytest.approx(ref.std_error, rel=1e-9)
+    # the rows given are the ones read (silent rows: no peaks), not x filtered again
+    assert all(isinstance(g, ValueError) for g in decrements_from_peaks(x, fs, 13.0,
+                                                                        bandpassed=0 * xb))
+    with pytest.raises(ValueError, match="bandpassed"):
+        decrements_from_peaks(x, fs, 13.0, bandpassed=xb[:2])
