@@ -228,7 +228,9 @@ def main() -> None:
     worker = session._final_process is not None  # the finals ran in a worker process
     if cpu_finals:
         print(f"  final analysis CPU per hit: median {statistics.median(cpu_finals):.2f} s, max "
-              f"{max(cpu_finals):.2f} s (issue 19: <= 0.2 s, helper hitcost's item); on a free "
+              f"{max(cpu_finals):.2f} s, the whole final (judging and JSON with it) beside the "
+              f"running stream and view on 2 cores (issue 19's <= 0.2 s is a hit's estimator "
+              f"alone: benchmarks/hit_cost.py); on a free "
               f"core the final after the noise floor is this plus at most a block "
               f"({dev.block_n / info.fs_hz:g} s) and any final still running")
     load = outcome.load
