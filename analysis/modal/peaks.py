@@ -217,10 +217,10 @@ def decrements_from_peaks(
         sigma_noise = estimate_noise_std(Y) if Y.shape[0] else np.empty(0)
     sigma_filt = np.inf
     if bandpass and Y.shape[0]:
-        sos, sigma_filt, noise_gain = _bandpass_design(float(fs_hz), float(f_hz),
-                                                       float(rel_bandwidth), int(order))
+        _, sigma_filt, noise_gain = _bandpass_design(float(fs_hz), float(f_hz),
+                                                     float(rel_bandwidth), int(order))
         if bandpassed is None:
-            Y = signal.sosfiltfilt(sos.copy(), Y, axis=-1)
+            Y = bandpass_rows(Y, fs_hz, f_hz, rel_bandwidth=rel_bandwidth, order=order)
         else:
             Yb = np.asarray(bandpassed, dtype=float)
             if Yb.shape != Y.shape:
