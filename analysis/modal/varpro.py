@@ -107,7 +107,11 @@ def uniform_grid(t: np.ndarray) -> tuple[float, float] | None:
     if not dt > 0:
         return None
     tol = 1e-12 * (abs(t0) + abs(float(t[-1])) + dt)
-    if np.max(np.abs(t - (t0 + dt * np.arange(t.size)))) > tol:
+    g = np.arange(t.size, dtype=float)  # |t - (t0 + dt n)| in one buffer: the same operations
+    g *= dt
+    g += t0
+    np.subtract(t, g, out=g)
+    if np.max(np.abs(g, out=g)) > tol:
         return None
     return t0, dt
 
