@@ -44,7 +44,8 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg
-from scipy.linalg import blas, lapack
+from scipy.linalg import blas, get_lapack_funcs, lapack
+from scipy.linalg.lapack import _compute_lwork
 
 __all__ = ["VarProFit", "fit_channels_varpro", "fit_modes_varpro", "kaufman_weights", "linear_amplitudes"]
 
@@ -106,7 +107,11 @@ def uniform_grid(t: np.ndarray) -> tuple[float, float] | None:
     if not dt > 0:
         return None
     tol = 1e-12 * (abs(t0) + abs(float(t[-1])) + dt)
-    if np.max(np.abs(t - (t0 + dt * np.arange(t.size)))) > tol:
+    g = np.arange(t.size, dtype=float)  # |t - (t0 + dt n)| in one buffer: the same operations
+    g *= dt
+    g += t0
+    np.subtract(t, g, out=g)
+    if np.max(np.abs(g, out=g)) > tol:
         return None
     return t0, dt
 
@@ -303,14 +308,18 @@ class _Problem:
     residual, B (coefficients of the unprojected Φ) and JᵀJ, Jᵀr (the θ block of the problem
     with all columns) are unchanged while every evaluation touches 2K + m columns, not
     (2K + m)².
+
+    ``grid``: :func:`uniform_grid` of ``t`` where the caller has it (the channels fitted one by
+    one on the same times; default False: computed here).
     """
 
     def __init__(
-        self, t: np.ndarray, Yw: np.ndarray, offset: bool, fixed: np.ndarray | None = None
+        self, t: np.ndarray, Yw: np.ndarray, offset: bool, fixed: np.ndarray | None = None,
+        grid: tuple[float, float] | None | bool = False,
     ) -> None:
         self.t, self.offset = t, offset
         self.Yc = np.ascontiguousarray(np.asarray(Yw).T)  # (n_channels, n_samples)
-        self.grid = uniform_grid(t)
+        self.grid = uniform_grid(t) if grid is False else grid  # (given: uniform_grid(t))
         self.scratch: dict = {}
         self._pool: list[np.ndarray] = []  # Φᵀ buffers of projectors the caller released
         self._rpool: list[np.ndarray] = []  # residual buffers of points the caller released
@@ -494,6 +503,31 @@ def kaufman_weights(B: np.ndarray, f: np.ndarray, d: np.ndarray) -> np.ndarray:
     return H
 
 
+_GESDD = get_lapack_funcs(("gesdd", "gesdd_lwork"), (np.eye(2),), ilp64="preferred")
+
+
+def pinv_small(a: np.ndarray, atol: float = 0.0) -> np.ndarray:
+    """``scipy.linalg.pinv(a, atol=atol)`` of a small real (m, n) float64 matrix, equal to the bit:
+    the same LAPACK routine (gesdd, scipy's choice of integer width and workspace) and the same
+    arithmetic after it, without the wrappers' checks, which cost more than a 2 x 2 to 24 x 24
+    decomposition itself (~0.25 ms a call, ~40 calls a hit). Non-finite entries: ValueError."""
+    if not np.isfinite(a).all():
+        raise ValueError("array must not contain infs or NaNs")
+    gesdd, gesdd_lwork = _GESDD
+    lwork = _compute_lwork(gesdd_lwork, a.shape[0], a.shape[1], compute_uv=True,
+                           full_matrices=False)
+    u, s, vh, info = gesdd(a, compute_uv=True, lwork=lwork, full_matrices=False)
+    if info > 0:
+        raise linalg.LinAlgError("SVD did not converge")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal gesdd")
+    val = atol + np.max(s, initial=0.0) * (max(a.shape) * np.finfo(np.float64).eps)
+    rank = np.sum(s > val)
+    u = u[:, :rank]
+    u /= s[:rank]
+    return (u @ vh[:rank]).conj().T
+
+
 def _gauss_newton_decrease(JtJ: np.ndarray, Jtr: np.ndarray) -> float:
     """Decrease of Σr² the undamped Gauss–Newton step promises: (Jᵀr)ᵀ (JᵀJ)⁺ (Jᵀr)."""
     sc = 1.0 / np.sqrt(np.maximum(JtJ.diagonal(), 1e-300))
@@ -502,7 +536,7 @@ def _gauss_newton_decrease(JtJ: np.ndarray, Jtr: np.ndarray) -> float:
     c, x, info = lapack.dposv(A, g, lower=0)
     if info == 0 and np.min(np.abs(c.diagonal())) ** 2 > 1e-12:  # well conditioned: = pinv
         return float(g @ x)
-    return float(g @ linalg.pinv(A, atol=1e-12) @ g)
+    return float(g @ pinv_small(A, atol=1e-12) @ g)
 
 
 def _free_descent(
@@ -519,7 +553,7 @@ def _free_descent(
     if not np.any(free):
         return 0.0
     gf = g[free]
-    return float(gf @ linalg.pinv(A[np.ix_(free, free)], atol=1e-12) @ gf)
+    return float(gf @ pinv_small(A[np.ix_(free, free)], atol=1e-12) @ gf)
 
 
 _EXTRAPOLATE_RATIO = 1.5  # actual / predicted decrease above which a step is doubled
@@ -752,7 +786,7 @@ def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, 
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
     scale = 1.0 / np.sqrt(np.maximum(np.diag(JtJ), 1e-300))
-    cov = s2 * scale[:, None] * linalg.pinv(scale[:, None] * JtJ * scale[None, :]) * scale[None, :]
+    cov = s2 * scale[:, None] * pinv_small(scale[:, None] * JtJ * scale[None, :]) * scale[None, :]
     amp = (B[0 : 2 * K : 2] - 1j * B[1 : 2 * K : 2]).T
     return VarProFit(
         f_hz=theta[0::2].copy(),
@@ -785,7 +819,8 @@ def fit_channels_varpro(
     if N <= 4 * K + int(fit_offset):
         return [None] * C
     lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
-    raw = damped_basis(t, theta0[0::2], theta0[1::2], fit_offset, uniform_grid(t)).copy()
+    grid = uniform_grid(t)  # the same grid for every channel's problem
+    raw = damped_basis(t, theta0[0::2], theta0[1::2], fit_offset, grid).copy()
     proj = Projector(raw)
     shared = None
     if proj.cho is not None:  # else each channel's own first evaluation (QR path)
@@ -796,7 +831,7 @@ def fit_channels_varpro(
         shared = (raw.T @ T, T.T @ T, T.T @ R)  # ΦᵀT, TᵀT, Tᵀr
     out: list[VarProFit | None] = []
     for c in range(C):
-        prob = _Problem(t, Y[c : c + 1].T, fit_offset)
+        prob = _Problem(t, Y[c : c + 1].T, fit_offset, grid=grid)
         first = None
         if shared is not None:
             pc = copy.copy(proj)  # its Φ is not a pooled buffer: never handed to a channel's pool
@@ -825,8 +860,9 @@ class HeldPoleFitter:
         Y = np.atleast_2d(y)
         self.C, self.N = Y.shape
         self.K_fixed, self.fit_offset, self.weights = f_fixed.size, fit_offset, weights
-        fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, uniform_grid(t))
-        self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed)
+        grid = uniform_grid(t)
+        fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, grid)
+        self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed, grid=grid)
         if grams:  # trial fits and screens only: Σr² from Grams (see _GramResidual)
             self.prob.use_grams()
 
