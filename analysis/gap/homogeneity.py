@@ -398,7 +398,8 @@ def off_lines(fm: FreeModal, ks: np.ndarray, lines_hz: Sequence[float]) -> np.nd
 
 
 def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
-                skip_rows: Sequence[int] = (), lines_hz: Sequence[float] = ()) -> list[Finding]:
+                skip_rows: Sequence[int] = (), lines_hz: Sequence[float] = (),
+                early_from_s: float = EARLY_FROM_S) -> list[Finding]:
     """The homogeneity check: per excited mode, the slope of frequency and of decrement against
     the blow's level (per doubling of the blow), and every other mode's amplitude against it
     (:func:`_level_slopes`), and each mode's backbone and damping curve within the decays
@@ -407,7 +408,10 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     ``P_CHANCE``), naming the law it follows (:func:`_law_finding`). One finding: a stiffness
     law of the decays, else a frequency shift early in the blows (:func:`early_shift`), else
     Coulomb's law, else the strongest slope. Empty with fewer than three impacts. Modes on a
-    line found before the blows (``lines_hz``, Hz) are not judged (:func:`off_lines`)."""
+    line found before the blows (``lines_hz``, Hz) are not judged (:func:`off_lines`).
+    ``early_from_s``: where :func:`early_shift`'s early window starts, s after each onset
+    (later than :data:`~ramdaq.analysis.gap.signal_checks.EARLY_FROM_S` past a second blow of
+    the ram: :func:`~ramdaq.analysis.gap.sensors.early_window_from`)."""
     snr = np.median(fm.snr(), axis=0)                                   # (n_g, K)
     snr[list(skip_rows)] = 0
     weakest = np.min(np.max(np.delete(fm.snr(), list(skip_rows), axis=1), axis=1), axis=0)
@@ -422,7 +426,7 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     laws += early_laws(x, fm, numbers, skip_rows)
     n_tests = len(slopes) + 2 * len(laws)
     if n_tests == 0:
-        shift = early_shift(x, fm, numbers, skip_rows)
+        shift = early_shift(x, fm, numbers, skip_rows, early_from_s)
         return [shift] if shift is not None else []
     chance = float(scipy.stats.norm.isf(P_CHANCE / (2 * n_tests)))
     null = ("slope z of a linear structure's poles, amplitudes and per-cycle frequency and decrement "
@@ -437,7 +441,7 @@ def homogeneity(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     # a frequency the blow's early, large part of the decay moves (a crack, a stop acting only
     # above some amplitude, which the decay window may no longer reach) before Coulomb's law:
     # friction keeps the frequency (its own test, :data:`SHIFT_MIN`, does not fire on it)
-    shift = early_shift(x, fm, numbers, skip_rows)
+    shift = early_shift(x, fm, numbers, skip_rows, early_from_s)
     if shift is not None:
         return [shift]
     if law is not None:
@@ -660,16 +664,16 @@ class EarlyShift:
 
 
 def early_late_shifts(x: np.ndarray, fm: FreeModal, ks: Sequence[int],
-                      rows: Sequence[int]) -> list[EarlyShift]:
+                      rows: Sequence[int], early_from_s: float = EARLY_FROM_S) -> list[EarlyShift]:
     """Each mode ``ks``' frequency refitted (:func:`refit_poles`, every decaying pole of the free
-    model as the start) on the early window (from
-    :data:`~ramdaq.analysis.gap.signal_checks.EARLY_FROM_S` after the onset to the decay
+    model as the start) on the early window (from ``early_from_s`` after the onset,
+    :data:`~ramdaq.analysis.gap.signal_checks.EARLY_FROM_S` by default, to the decay
     window's start) and on the decay window's first stretch of the same length, gages ``rows``,
     blow by blow: a linear structure (and friction, a damping law) keeps its frequency as the
     amplitude falls, a stiffness that acts above some amplitude (a crack opening, a stop) does
     not."""
     kd = np.flatnonzero(~fm.steady)
-    n = int(round((DECAY_START_S - EARLY_FROM_S) * fm.fs_hz))
+    n = int(round((DECAY_START_S - early_from_s) * fm.fs_hz))
     ends = np.rint(fm.t0_s * fm.fs_hz).astype(int)
     fits = []
     for a in ends:
@@ -702,7 +706,7 @@ def early_late_shifts(x: np.ndarray, fm: FreeModal, ks: Sequence[int],
 
 
 def early_shift(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
-                skip_rows: Sequence[int] = ()) -> Finding | None:
+                skip_rows: Sequence[int] = (), early_from_s: float = EARLY_FROM_S) -> Finding | None:
     """The homogeneity check's frequency test within each blow (:func:`early_late_shifts`): per
     decaying mode measured on every blow (:data:`MIN_SNR` at its best gage on the median blow)
     with :data:`SHIFT_CYCLES` in each window, the chi-square of the early-less-late shifts over
@@ -710,16 +714,17 @@ def early_shift(x: np.ndarray, fm: FreeModal, numbers: Sequence[int],
     that many dof (Bonferroni over the modes). A finding (an amplitude-dependent stiffness, no
     library effect: "unexplained", with ``stiffness_law_z``) for the strongest mode past its
     chance level whose bigger blows shift by :data:`SHIFT_MIN` or more; None otherwise. Reuses
-    the free model's poles: two small refits per blow (0.23 s each)."""
+    the free model's poles: two small refits per blow (0.23 s each). The early window starts
+    ``early_from_s`` after each onset (:func:`early_late_shifts`)."""
     snr = np.median(fm.snr(), axis=0)                                   # (n_g, K)
     snr[list(skip_rows)] = 0
-    span = DECAY_START_S - EARLY_FROM_S
+    span = DECAY_START_S - early_from_s
     ks = [int(k) for k in np.flatnonzero(~fm.steady & (snr.max(axis=0) >= MIN_SNR))
           if fm.f_hz[k] * span >= SHIFT_CYCLES and fm.f_hz[k] < 0.45 * fm.fs_hz]
     if fm.amp.shape[0] < 3 or not ks:
         return None
     rows = list(dict.fromkeys(int(g) for k in ks for g in np.argsort(-snr[:, k])[:2]))[:SHIFT_ROWS]
-    tests = early_late_shifts(x, fm, ks, rows)
+    tests = early_late_shifts(x, fm, ks, rows, early_from_s)
     if not tests:
         return None
     hits = [(t.chi2 / float(scipy.stats.chi2.isf(P_CHANCE / len(ks), t.dof)), t) for t in tests
