@@ -159,12 +159,19 @@ def _all_pole(w: np.ndarray, a: np.ndarray) -> np.ndarray:
 def exp_filter(x: np.ndarray, c: float, y_prev: np.ndarray) -> np.ndarray:
     """``y[..., i] = c x[..., i] + (1 - c) y[..., i-1]`` along the last axis of ``x`` (n_rows, n),
     ``y[..., -1]`` before the first sample ``y_prev`` (n_rows,): ``scipy.signal.lfilter([c, 0],
-    [1, c - 1], x, zi=(1 - c) y_prev)`` to rounding. A new array."""
+    [1, c - 1], x, zi=(1 - c) y_prev)`` to rounding. A new array.
+
+    ``y_prev`` enters the solve as one more sample before ``x`` (one that the recursion passes
+    through unchanged), so the first sample is computed by the same operations as every other:
+    a record filtered block by block, each block given the last value of the one before, gives
+    the same bits as the whole record filtered at once."""
     x = np.asarray(x, dtype=np.float64)
     shape = x.shape
-    w = np.multiply(x.reshape(-1, shape[-1]), c)
-    w[:, 0] += (1.0 - c) * np.asarray(y_prev, dtype=np.float64).reshape(-1)
-    return _all_pole(w, np.array([1.0, c - 1.0])).reshape(shape)
+    rows = x.reshape(-1, shape[-1])
+    w = np.empty((rows.shape[0], rows.shape[1] + 1))
+    w[:, 0] = np.asarray(y_prev, dtype=np.float64).reshape(-1)
+    np.multiply(rows, c, out=w[:, 1:])
+    return _all_pole(w, np.array([1.0, c - 1.0]))[:, 1:].reshape(shape)
 
 
 def sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray | None = None) -> np.ndarray:

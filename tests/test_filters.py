@@ -143,3 +143,13 @@ def test_a_replay_does_not_import_scipy_signal():
             "ramdaq.daq.commands.analyze, ramdaq.analysis.impact; print('scipy.signal' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     assert out.stdout.strip() == "False"
+
+
+def test_exp_filter_block_by_block_is_the_whole_record_to_the_bit():
+    x = RNG.standard_normal((3, 3000)) ** 2
+    whole = F.exp_filter(x, 1 / 400, np.zeros(3))
+    prev, parts = np.zeros(3), []
+    for a, b in [(0, 1), (1, 700), (700, 701), (701, 3000)]:
+        parts.append(F.exp_filter(x[:, a:b], 1 / 400, prev))
+        prev = parts[-1][:, -1]
+    assert np.array_equal(np.hstack(parts), whole)
