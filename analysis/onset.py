@@ -35,7 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import signal
+
+from . import filters
 
 __all__ = [
     "CONTACT_FRACTION", "StaLtaState", "aic", "aic_pick", "ar_prediction_filter",
@@ -75,7 +76,7 @@ def exp_average(x: np.ndarray, n: int, last: np.ndarray | None = None
     prev = np.zeros(x.shape[:-1]) if last is None else np.asarray(last, dtype=np.float64)
     if x.shape[-1] == 0:
         return x.copy(), prev.copy()
-    y, _ = signal.lfilter([c, 0.0], [1.0, c - 1.0], x, axis=-1, zi=((1.0 - c) * prev)[..., None])
+    y = filters.exp_filter(x, c, prev)
     return y, y[..., -1].copy()
 
 
@@ -426,8 +427,7 @@ def prediction_error(x: ArrayLike, a: np.ndarray) -> np.ndarray:
         ``e[..., j]`` is the error at sample ``j + order`` of ``x``; it depends on ``x`` only
         (no filter state), so any split of a record gives the same numbers.
     """
-    order = len(a) - 1
-    return signal.lfilter(a, [1.0], np.asarray(x, dtype=np.float64), axis=-1)[..., order:]
+    return filters.fir_filter(np.asarray(a, dtype=np.float64), x)
 
 
 def butterworth_delay_s(order: int, corner_hz: float, fs_hz: float) -> float:
@@ -445,8 +445,8 @@ def butterworth_delay_s(order: int, corner_hz: float, fs_hz: float) -> float:
     """
     if not 0 < corner_hz < fs_hz / 2:
         raise ValueError(f"corner_hz ({corner_hz}) must lie between 0 and fs_hz/2 ({fs_hz / 2})")
-    b, a = signal.butter(_check_n("order", order), corner_hz, fs=fs_hz)
-    _, gd = signal.group_delay((b, a), w=[1e-6 * fs_hz], fs=fs_hz)
+    b, a = filters.butter(_check_n("order", order), corner_hz, fs_hz)
+    gd = filters.group_delay(b, a, [1e-6 * fs_hz], fs_hz)
     return float(gd[0]) / fs_hz
 
 

@@ -220,7 +220,7 @@ def startup_line(runs: int, startup: float) -> str:
     return (f"  start-up {startup:.2f} s CPU, of which scipy.signal (and what only it imports) "
             f"{startup - without:.2f} s (the same imports with scipy.signal an empty module: "
             f"{without:.2f} s){compile_share(runs, startup)}; imported on the replay path by: "
-            f"{'; '.join(signal_users())}")
+            f"{'; '.join(signal_users()) or 'none (analysis/filters.py stands in)'}")
 
 
 def compile_share(runs: int, startup: float) -> str:

@@ -25,8 +25,8 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import signal
 
+from .. import filters
 from .signal import estimate_noise_std
 
 __all__ = ["PeakDecrement", "bandpass_mode", "bandpass_rows", "decrement_from_peaks",
@@ -81,7 +81,7 @@ def _bandpass_sos(fs_hz: float, f_hz: float, rel_bandwidth: float, order: int) -
     lo, hi = f_hz * (1 - rel_bandwidth / 2), f_hz * (1 + rel_bandwidth / 2)
     if not 0 < f_hz or hi >= fs_hz / 2:
         raise ValueError(f"f_hz ({f_hz}) band edge {hi:.4g} Hz must be below fs_hz/2 ({fs_hz / 2})")
-    return signal.butter(order, [lo, hi], btype="bandpass", fs=fs_hz, output="sos")
+    return filters.butter(order, [lo, hi], fs_hz, output="sos")
 
 
 def bandpass_mode(
@@ -117,7 +117,8 @@ def bandpass_mode(
         Filtered signal, same shape as `x`.
     """
     sos = _bandpass_sos(fs_hz, f_hz, rel_bandwidth, order)
-    return signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=axis)
+    return np.moveaxis(filters.sosfiltfilt(sos, np.moveaxis(np.asarray(x, dtype=float), axis, -1)),
+                       -1, axis)
 
 
 def _parabolic_peaks(y: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -249,7 +250,7 @@ def bandpass_rows(x: ArrayLike, fs_hz: float, f_hz: float, *, rel_bandwidth: flo
         raise ValueError(f"x must be 2-D (one signal a row), got shape {Y.shape}")
     _check(fs_hz, f_hz, 1)
     sos, _, _ = _bandpass_design(float(fs_hz), float(f_hz), float(rel_bandwidth), int(order))
-    return signal.sosfiltfilt(sos.copy(), Y, axis=-1)
+    return filters.sosfiltfilt(sos, Y)
 
 
 def _check(fs_hz: float, f_hz: float, q: int) -> None:
@@ -293,7 +294,7 @@ def _bandpassed(y: np.ndarray, fs_hz: float, f_hz: float, rel_bandwidth: float,
     white noise's std (the forward-backward pass applies |H|^2)."""
     sos, sigma_filt, noise_gain = _bandpass_design(float(fs_hz), float(f_hz),
                                                    float(rel_bandwidth), int(order))
-    return signal.sosfiltfilt(sos.copy(), y), sigma_filt, noise_gain  # (its Cython wants it writable)
+    return filters.sosfiltfilt(sos, y), sigma_filt, noise_gain
 
 
 @lru_cache(maxsize=64)
@@ -306,7 +307,7 @@ def _bandpass_design(fs_hz: float, f_hz: float, rel_bandwidth: float,
     sos.setflags(write=False)
     poles = np.concatenate([np.roots(s[3:]) for s in sos])
     sigma_filt = float(np.min(-np.log(np.abs(poles)) * fs_hz))
-    _, H = signal.sosfreqz(sos, worN=4096, fs=fs_hz)
+    _, H = filters.sosfreqz(sos, 4096, fs_hz)
     return sos, sigma_filt, float(np.sqrt(np.mean(np.abs(H) ** 4)))
 
 
@@ -314,7 +315,7 @@ def _peaks_above(y: np.ndarray, fs_hz: float, period_n: float,
                  floor: float) -> tuple[np.ndarray, np.ndarray]:
     """Peak times (s) and amplitudes of ``y`` (parabola-interpolated maxima at least 0.6 period
     apart) from the first one above ``floor`` up to the first one lost below it after that."""
-    idx, _ = signal.find_peaks(y, distance=max(1, int(0.6 * period_n)))
+    idx = filters.find_peaks(y, max(1, int(0.6 * period_n)))
     t_all, a_all = _parabolic_peaks(y, idx)
     t_all = t_all / fs_hz
     usable = a_all > floor

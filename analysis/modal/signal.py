@@ -20,8 +20,9 @@ import functools
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import signal
 from scipy.special import gammainccinv, gammaincinv  # gamma isf / ppf (scipy.stats: ~1.5 s import)
+
+from .. import filters
 
 __all__ = [
     "damped_sinusoids",
@@ -85,7 +86,7 @@ def _kaiser14(n: int) -> tuple[np.ndarray, float]:
     The cached window is shared by every caller (and thread): it is read-only, so an in-place
     write raises instead of changing later results.
     """
-    w = signal.windows.kaiser(n, 14.0, sym=False)
+    w = filters.kaiser(n, 14.0, sym=False)
     w.setflags(write=False)
     return w, float(np.sum(w * w))
 
@@ -390,9 +391,9 @@ def _noise_floor(S: np.ndarray, f: np.ndarray, n_ch: int):
 def _fir_taps(factor: int, band_hz: float, fs_hz: float) -> np.ndarray:
     fs_d = fs_hz / factor
     width = max(fs_d - 2.0 * band_hz, 0.1 * fs_d)  # passband to band_hz, alias-free band
-    numtaps, beta = signal.kaiserord(80.0, width / (0.5 * fs_hz))
+    numtaps, beta = filters.kaiserord(80.0, width / (0.5 * fs_hz))
     numtaps |= 1  # odd: integer centre delay
-    h = signal.firwin(numtaps, 0.5 * fs_d, window=("kaiser", beta), fs=fs_hz)
+    h = filters.firwin_kaiser(numtaps, 0.5 * fs_d, beta, fs_hz)
     return h / h.sum()
 
 
@@ -400,7 +401,7 @@ def _first_sample_taps(factor: int, band_hz: float, fs_hz: float) -> np.ndarray:
     """The minimum-phase FIR of :func:`_fir_taps`' magnitude (homomorphic, same length; |H|
     equal within 1e-6), unit DC gain: its largest taps come first, so run backwards in time it
     weighs an output's first samples most."""
-    g = signal.minimum_phase(_fir_taps(factor, band_hz, fs_hz), method="homomorphic", half=False)
+    g = filters.minimum_phase(_fir_taps(factor, band_hz, fs_hz))
     return g / g.sum()
 
 
@@ -458,7 +459,7 @@ def decimate_valid(
     if max_outputs is not None:  # output j reads samples j - (taps - 1) ... j
         last = -(-(h.size - 1) // factor) * factor + (max(int(max_outputs), 1) - 1) * factor
         a = a[:, : last + 1]
-    full = signal.upfirdn(h, a, up=1, down=factor, axis=-1)  # full[k] = conv[k * factor]
+    full = filters.downsample_fir(h, a, factor)  # full[k] = conv[k * factor]
     j = np.arange(full.shape[-1]) * factor
     keep = (j >= h.size - 1) & (j <= a.shape[-1] - 1)
     if not np.any(keep):
@@ -481,7 +482,7 @@ def _decimate_from_first(a: np.ndarray, fs_hz: float, factor: int, band_hz: floa
     # no output kept) bring index L − 1, output 0, among them.
     pad = (-(L - 1)) % factor
     b = np.concatenate([np.zeros((a.shape[0], pad)), a], axis=1) if pad else a
-    full = signal.upfirdn(hc, b, up=1, down=factor, axis=-1)
+    full = filters.downsample_fir(hc, b, factor)
     first = (L - 1 + pad) // factor
     return full[:, first : first + n_out], np.arange(n_out) * factor, np.concatenate(
         [hc, np.zeros(L - 1)])

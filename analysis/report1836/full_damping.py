@@ -78,8 +78,8 @@ from dataclasses import dataclass, fields
 from functools import lru_cache
 
 import numpy as np
-import scipy.signal
 
+from .. import filters
 from ..modal.table import ModeTable
 from ..modal.varpro import Projector, damped_basis, uniform_grid
 from ..model.geometry import gage_geometry
@@ -258,7 +258,7 @@ def filtered_noise_factor(daq: Daq, fs_hz: float, f_hz: float) -> float:
     if got is None:
         return 1.0
     sos, rms = got
-    _, Hf = scipy.signal.sosfreqz(sos, worN=[f_hz], fs=fs_hz)
+    _, Hf = filters.sosfreqz(sos, [f_hz], fs_hz)
     return float(abs(Hf[0]) / rms)
 
 
@@ -271,7 +271,7 @@ def _anti_alias_response(daq: Daq, fs_hz: float) -> tuple[np.ndarray, np.floatin
     sos = daq.anti_alias_sos(fs_hz)
     if sos is None:
         return None
-    _, H = scipy.signal.sosfreqz(sos, worN=4096, fs=fs_hz)
+    _, H = filters.sosfreqz(sos, 4096, fs_hz)
     sos.setflags(write=False)
     return sos, np.sqrt(np.mean(np.abs(H) ** 2))
 
