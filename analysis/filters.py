@@ -296,6 +296,7 @@ def firwin_kaiser(numtaps: int, cutoff_hz: float, beta: float, fs_hz: float) -> 
     if not 0 < c < 1:
         raise ValueError(f"cutoff ({cutoff_hz} Hz) must lie inside (0, {fs_hz / 2}) Hz")
     m = np.arange(0, numtaps, dtype=np.float64) - 0.5 * (numtaps - 1)
+    # scipy's steps for the one band [0, c], its zero terms kept: the taps are then bit-equal
     h = 0
     h += c * np.sinc(c * m)
     h -= 0.0 * np.sinc(0.0 * m)
