@@ -33,6 +33,11 @@ from typing import Any
 
 import numpy as np
 
+# at import, not in GageSummary: a recorder is made once its device is open and streaming, and
+# a first import of scipy.signal there (~0.5 s) stalls a paced device's reader (a replay, which
+# makes no recorder, does not import this module)
+import scipy.signal
+
 from ..drivers import mcap_format as fmt
 from ..drivers.block import Block, StreamInfo
 from .trigger import IMPACT_JSON_SCHEMA
@@ -157,8 +162,6 @@ class GageSummary:
         self.rate_hz = info.fs_hz / self.q
         self._sos = None  # the trace's anti-alias low-pass (none when not decimated)
         if self.q > 1:
-            import scipy.signal  # here: only a recorder decimates; the module needs no filter
-
             self._sos = scipy.signal.butter(8, 0.8 / self.q, output="sos")
         self._zi: np.ndarray | None = None
         self._next = None  # the sample expected next; another one is a gap: the filter restarts
@@ -178,8 +181,6 @@ class GageSummary:
         """``(device time ns, message)`` of each ``/ramdaq/gages/trace`` sample in block ``b``."""
         x = b.values()
         if self._sos is not None and b.n_samples:
-            import scipy.signal  # imported by __init__ already: a dictionary look-up
-
             if self._zi is None or b.first_sample != self._next:
                 self._zi = scipy.signal.sosfilt_zi(self._sos)[:, None, :] * x[None, :, :1]
             x, self._zi = scipy.signal.sosfilt(self._sos, x, axis=-1, zi=self._zi)

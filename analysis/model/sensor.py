@@ -56,6 +56,12 @@ class SensorChain:
         n = len(self.sens)
         self.sos = d.anti_alias_sos(fs_hz) if anti_alias else None
         if self.sos is not None:
+            # imported here, when the chain is made: only a simulator filters (a replay reads
+            # its rig and never makes one), and a paced device must not stall 0.5 s at its
+            # first block importing scipy.signal
+            import scipy.signal
+
+            self._sosfilt = scipy.signal.sosfilt
             self.zi = np.zeros((self.sos.shape[0], n, 2))
         self.clipped = np.zeros(n, dtype=np.int64)
 
@@ -65,9 +71,7 @@ class SensorChain:
         if self.noise_rms > 0:
             volts += (self.noise_rms * self.sens)[:, None] * self.rng.standard_normal(acc.shape)
         if self.sos is not None:
-            import scipy.signal  # here: only a simulator filters; a replay reads its rig
-
-            volts, self.zi = scipy.signal.sosfilt(self.sos, volts, axis=1, zi=self.zi)
+            volts, self.zi = self._sosfilt(self.sos, volts, axis=1, zi=self.zi)
         counts = np.rint(volts / self.lsb_V)
         over = (counts < self.lo) | (counts > self.hi)
         if over.any():

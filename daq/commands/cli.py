@@ -290,6 +290,9 @@ def _stream_result(outcome, args: argparse.Namespace) -> int:
 
 def cmd_trial(args: argparse.Namespace) -> int:
     from ...drivers.registry import open_device
+    from ..session import Session  # noqa: F401  (imported before the device opens: a paced
+    # device streams from its opening, and the session's imports (~0.5 s) must not delay its
+    # first read -- an adapter silent 0.3 s after opening is reported as such)
 
     options, default_name = _device_options(args)
     out = _recording_path(args, default_name)
