@@ -2,7 +2,7 @@
 
 A live trial (:class:`ramdaq.daq.session.Session`, as ``ramdaq trial`` runs it) on the simulated
 ALBACORE-like rig, paced in real time, with ``--blows`` blows ``--every`` s apart. A blow's wall
-time is when its onset sample came from the paced device (the session's ``wall_at_start`` plus
+time is when its onset sample was due from the paced device (the simulator's own start plus
 the onset, s); a look's or a final's is when the session showed it (``Session.shown``); the
 decay reached the noise floor when the last sample of its record came (a record the trigger
 closed as ``decayed``, :mod:`ramdaq.daq.decay_end`; a record the next blow or the end of the
@@ -48,6 +48,15 @@ GOAL_FLOOR_S = 0.5
 """Issue 19: the final numbers within 0.5 s of the decay reaching the noise floor."""
 
 
+def anchor(session: Session) -> float:
+    """Monotonic s when the stream's sample 0 was due: the paced simulator's own start. The
+    session's ``wall_at_start`` (its first block's arrival less the block) is later by however
+    long the view and the session took to start after the device opened, the samples the device
+    banked meanwhile; anchored there, every latency would read that much short."""
+    t0 = getattr(session.device, "sample0_monotonic_s", None)
+    return session.wall_at_start if t0 is None else t0
+
+
 def latencies(session: Session, kind: str) -> dict[float, float]:
     """Per blow (its onset, s of stream): wall s from the blow to the first time its ``kind``
     ("look", "final") was shown."""
@@ -55,7 +64,7 @@ def latencies(session: Session, kind: str) -> dict[float, float]:
     for s in session.shown:
         key = round(s.onset_s, 3)
         if s.kind == kind and key not in out:
-            out[key] = s.wall_s - (session.wall_at_start + s.onset_s)
+            out[key] = s.wall_s - (anchor(session) + s.onset_s)
     return out
 
 
@@ -187,7 +196,7 @@ def main() -> None:
         session = Session(dev, record_path=Path(tmp) / "l.mcap", view=view, readout=False)
         try:
             outcome = session.run()
-            lag = time.monotonic() - (session.wall_at_start + session.samples / info.fs_hz)
+            lag = time.monotonic() - (anchor(session) + session.samples / info.fs_hz)
         finally:
             if view is not None:
                 view.close()
@@ -202,7 +211,7 @@ def main() -> None:
     after_floor = {k: finals[k] - floors[k] for k in floors if k in finals}
     jobs = {round(j.onset_sample / info.fs_hz, 3): j for j in session.job_times
             if j.kind == "final"}
-    floor_wall = {k: session.wall_at_start + k + v for k, v in floors.items()}
+    floor_wall = {k: anchor(session) + k + v for k, v in floors.items()}
     print("  blow onset s | first look s (cycles) | final s | decay at floor s | final after floor s"
           " | of which: stream lag, queue wait, analysis wall (CPU) s | record ended by")
     for h in sorted(outcome.hits, key=lambda h: h.event.onset_sample):

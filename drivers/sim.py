@@ -191,6 +191,13 @@ class SimDevice(Device):
         return f
 
     @property
+    def sample0_monotonic_s(self) -> float | None:
+        """``time.monotonic()`` s at which sample 0 was due (the device's start; with
+        ``pace="realtime"`` sample k is delivered no earlier than this plus k / fs_hz); None
+        before it opens."""
+        return getattr(self, "_t_start", None)
+
+    @property
     def clipped_samples(self) -> dict[str, int]:
         """Samples clipped at the ADC rails so far, by channel name (only those that clipped)."""
         return {name: int(c) for name, c in zip(self.info.channels, self._sensor.clipped,
