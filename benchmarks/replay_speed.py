@@ -216,7 +216,7 @@ def startup_line(runs: int, startup: float) -> str:
     """What ``scipy.signal`` costs the start-up, and which modules still import it; and, where
     this environment keeps Python from writing bytecode, what compiling ramdaq's sources costs
     it (:func:`compile_share`)."""
-    users = f"{'; '.join(signal_users()) or 'none (analysis/filters.py stands in)'}"
+    users = '; '.join(signal_users()) or 'none (analysis/filters.py stands in)'
     probe = REPLAY_IMPORTS + "; import sys; print('scipy.signal' in sys.modules)"
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                             check=True).stdout.strip() == "True"
