@@ -288,11 +288,20 @@ def _stream_result(outcome, args: argparse.Namespace) -> int:
     return EXIT_FAILED if outcome.notes else EXIT_OK
 
 
+def _import_live(view: bool) -> None:
+    """Import what a live session loads when it starts (the session, its recorder and, with
+    ``view``, the Rerun view), before the device opens: a device streams from its opening, and
+    imports after it (scipy.signal for the recorder's trace ~0.5 s, Rerun's SDK) delay the first
+    read -- an adapter silent for 0.3 s after opening would not be reported as such."""
+    from ..recorder import Recorder  # noqa: F401
+    from ..session import Session  # noqa: F401
+
+    if view:
+        from ..rerun_view import RerunView  # noqa: F401
+
+
 def cmd_trial(args: argparse.Namespace) -> int:
     from ...drivers.registry import open_device
-    from ..session import Session  # noqa: F401  (imported before the device opens: a paced
-    # device streams from its opening, and the session's imports (~0.5 s) must not delay its
-    # first read -- an adapter silent 0.3 s after opening is reported as such)
 
     options, default_name = _device_options(args)
     out = _recording_path(args, default_name)
@@ -301,6 +310,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     _check_outputs(outputs, args.overwrite)
     _check_ports(args)
     _make_folders(outputs)
+    _import_live(view=rrd is not None or args.web)
     device = open_device(args.device, **options)
     print(f"trial: {device.info.device} ({device.info.n_channels} ch at {device.info.fs_hz:g} Hz)"
           f" recording into {out}" + (f", Rerun view into {rrd}" if rrd else "")
