@@ -13,6 +13,7 @@ from ..analysis.gap.calibrate import ModeRef
 from ..analysis.gap.diagnose import Diagnosis, Settings, diagnose
 from ..analysis.gap.effects.base import rig_update
 from ..analysis.gap.layers import Answer, answer
+from ..analysis.gap.modal_level import structure_above
 from ..analysis.gap.rigfit import ModelLevel, with_updates
 from ..analysis.gap.rigfit import model_level as rig_to_modes
 from ..analysis.gap.sensors import DataChecks, check_trial
@@ -41,6 +42,11 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
     say = progress or (lambda s: None)
     given = lt
     td = trial_data(lt, **prep)
+    if td.ringing_above and "data_band" not in prep:
+        # the data ring above the rig's band: compared there where a structural effect is
+        wide = trial_data(lt, data_band=True, **prep)
+        if wide.lowpass_hz > td.lowpass_hz and structure_above(wide, 0.9 * td.lowpass_hz):
+            td, prep = wide, {**prep, "data_band": True}
     level = None
     settings = settings or Settings()
     if model_level:
