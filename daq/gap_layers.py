@@ -13,6 +13,7 @@ from ..analysis.gap.calibrate import ModeRef
 from ..analysis.gap.diagnose import Diagnosis, Settings, diagnose
 from ..analysis.gap.effects.base import rig_update
 from ..analysis.gap.layers import Answer, answer
+from ..analysis.gap.modal_level import structure_above
 from ..analysis.gap.rigfit import ModelLevel, with_updates
 from ..analysis.gap.rigfit import model_level as rig_to_modes
 from ..analysis.gap.sensors import DataChecks, check_trial
@@ -37,10 +38,21 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
     Without ``keep_counts`` the trial's counts are let go once the data-only layer has read
     them (:meth:`LoadedTrial.release_counts`, of ``lt`` and of the trial returned), before the
     effect search, whose peak memory they would add to.
+    The band compared is the rig's (:func:`~ramdaq.analysis.gap.trialdata.analysis_band`) unless
+    the trial rings above it on several gages and its modes there show a split or a coupled hull
+    mode (:func:`~ramdaq.analysis.gap.modal_level.structure_above`): then the data's band
+    (``data_band``), up to those lines, so that the layers see the effect (``data_band=False``
+    holds the rig's).
     Returns the trial (with the calibrated rig), its data as compared, and the diagnosis."""
     say = progress or (lambda s: None)
     given = lt
     td = trial_data(lt, **prep)
+    if td.ringing_above and "data_band" not in prep:
+        # the data ring above the rig's band: compared there where the modes show a structural
+        # effect the rig's band leaves out (the other lines stay listed, as the rig's band costs less)
+        wide = trial_data(lt, data_band=True, **prep)
+        if wide.lowpass_hz > td.lowpass_hz and structure_above(wide, 0.9 * td.lowpass_hz):
+            td, prep = wide, {**prep, "data_band": True}
     level = None
     settings = settings or Settings()
     if model_level:

@@ -335,6 +335,7 @@ class Diagnosis:
             "noise_sigma_m_s2": np.round(fw.sigma, 6).tolist(),
             "decimated_rate_hz": fw.td.fs_hz,
             "band": {"lowpass_hz": round(fw.td.lowpass_hz, 2), "unit": "Hz",
+                     "rig_lowpass_hz": round(fw.td.rig_lowpass_hz, 2),
                      "ringing_above": [r.to_json() for r in fw.td.ringing_above]},
             "seconds": round(self.seconds, 2),
             "notes": self.notes,
@@ -650,6 +651,10 @@ def _trial_notes(td: TrialData) -> list[str]:
     if td.dropped_onsets_s:
         notes.append("events too soon after the previous impact to compare, left out: "
                      + ", ".join(f"{t:.3f} s" for t in td.dropped_onsets_s))
+    if td.lowpass_hz > td.rig_lowpass_hz:
+        notes.append(f"compared up to {td.lowpass_hz:.0f} Hz, above the rig's {td.rig_lowpass_hz:.0f} Hz "
+                     "band: the trial rings there after every blow on several gages, and its modes there "
+                     "show a structural effect (a split or a coupled hull mode)")
     if td.fitted.sum() < 3:
         notes.append(f"only {int(td.fitted.sum())} impact(s) fitted: constants and effects are weakly "
                      "separated (a steady tone and a slow decay at its frequency look alike); six impacts "

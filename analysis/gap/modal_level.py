@@ -491,3 +491,22 @@ def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Couple
         out.append(Coupled(float(tm.f_hz[i]), float(tm.zeta[i]), hull, share, stat, chance,
                            tuple(tm.gage_numbers[k] for k in big)))
     return out
+
+
+# -- modes above the rig's band ------------------------------------------------------------------
+def structure_above(td: TrialData, f_from_hz: float) -> list[Split | Coupled]:
+    """The splits (:func:`splits`) and coupled hull modes (:func:`coupled_modes`) among ``td``'s
+    modes above ``f_from_hz`` (Hz; the rig's own band, which does not compare them), against
+    ``td``'s rig model as it stands: what makes the data's band (``prepare(..., data_band=True)``)
+    worth its cost. Only the modes above ``f_from_hz`` are identified, so the rig's modes there are
+    paired by shape and frequency within :data:`MAX_PAIR_RATIO` (a rig off by +-25 % moves a mode
+    by up to 1.3x, well within); a mode of the rig paired with one identified mode of its shape is
+    no finding, whatever its frequency. Empty when no mode there recurs over the impacts."""
+    try:
+        tm = trial_modes(td, f_lo_hz=f_from_hz)
+    except (ValueError, np.linalg.LinAlgError):
+        return []
+    if tm.n_modes == 0:
+        return []
+    cmp = compare(tm, td.rig)
+    return [*splits(tm, cmp), *coupled_modes(tm, td.rig, cmp)]

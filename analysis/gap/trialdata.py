@@ -11,7 +11,10 @@ comparing and the next one (:func:`analysis_band`, from the rig, its cut widened
 +-25 % uncertainty so a field rig's error does not move it to another mode). The forward model
 corrects each kept mode's amplitude by the low-pass's ``|H|^2`` at its frequency. What the
 trial's noise is comes from the pre windows. What the data show ringing above the corner is
-reported (``TrialData.ringing_above``), not compared.
+reported (``TrialData.ringing_above``), not compared -- unless asked for the data's band
+(``prepare(..., data_band=True)``): the corner is then widened to take in the lines the trial
+rings with on several gages (:func:`data_corner`), which ``ramdaq gap`` asks for where the modes
+there show a structural effect (``modal_level.structure_above``).
 
 Shapes: ``x`` is (n_segments, n_gages, n_samples) in m/s^2, gages in DAQ channel order.
 """
@@ -28,7 +31,7 @@ import scipy.signal
 from ..model.response import ambient_gage_amplitudes, impact_amplitudes, modal_form, predominant_mode
 from ..model.rig import Rig
 from ..model.structure import build_model
-from .ringing import RingingLine, decay_window, guard_s, ringing_lines, welch_power
+from .ringing import RESOLUTION_HZ, RingingLine, decay_window, guard_s, ringing_lines, welch_power
 from .signal_checks import DeclaredLine
 
 DEC_ORDER = 8
@@ -101,6 +104,9 @@ class TrialData:
     ringing_above: list[RingingLine] = field(default_factory=list)
     """Lines the data show ringing after the blows above ``lowpass_hz`` (full rate, against the
     pre-trigger windows): not compared, said so (:mod:`~ramdaq.analysis.gap.ringing`)."""
+    rig_lowpass_hz: float = float("nan")
+    """The corner the rig alone gives (:func:`analysis_band`), Hz: ``lowpass_hz`` is above it
+    where the data ring clearly above it (:func:`data_corner`)."""
 
     @property
     def n_seg(self) -> int:
@@ -196,6 +202,32 @@ def default_max_hz(predominant_hz: float, spread: float = RIG_SPREAD) -> float:
     return 5.0 * predominant_hz * (1 + spread) / (1 - spread)
 
 
+DATA_BAND_GAGES = 2
+"""Least gages a line ringing above the rig's band must ring on to widen the band: a mode of the
+structure moves its body's gages together, while a line on one gage alone is that channel's own
+(a mount's resonance, a clipped gage's harmonics) and is reported, not compared."""
+CORNER_OVER_LINE = 1.4
+"""The widened band's low-pass corner over the highest line it takes in (the line's bin's upper
+edge): the zero-phase order-8 Butterworth passes a line at 1/1.4 of its corner with an amplitude
+gain |H|^2 = 1 / (1 + 1.4^-16) = 0.995, and the upper half of a split up to 25 % above the line
+read (``modal_level.MAX_SPLIT_REL``) at 0.86; the forward model corrects each mode by the gain."""
+
+
+def data_corner(corner_hz: float, lines: list[RingingLine], limit_hz: float, fs_hz: float) -> float:
+    """The low-pass corner (Hz) of the band the data ask for: ``corner_hz`` (the rig's,
+    :func:`analysis_band`) widened to :data:`CORNER_OVER_LINE` times the highest line ``lines``
+    (:func:`~ramdaq.analysis.gap.ringing.ringing_lines`, above ``corner_hz``) rings on
+    :data:`DATA_BAND_GAGES` gages or more, below ``limit_hz`` (0.8x the anti-alias corner); at most
+    0.45x the rate ``fs_hz``. Unchanged when no line rings so: a mode the rig's band leaves out
+    that the trial rings with after every blow is compared, so an effect on it (a split, a
+    coupled hull mode, a shift) is seen by the layers, not only listed."""
+    ring = [r.frequency_hz + RESOLUTION_HZ / 2 for r in lines
+            if len(r.gages) >= DATA_BAND_GAGES and corner_hz < r.frequency_hz < limit_hz]
+    if not ring:
+        return corner_hz
+    return float(min(max(corner_hz, CORNER_OVER_LINE * max(ring)), 0.45 * fs_hz))
+
+
 @functools.lru_cache(maxsize=16)
 def _lowpass(corner_hz: float, fs_hz: float) -> np.ndarray:
     """The decimation low-pass's second-order sections, designed once per corner and rate
@@ -289,7 +321,8 @@ def filter_reach(corner_hz: float, fs_hz: float, rel: float = 1e-14) -> int:
 
 def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
             pre_s: float = 1.0, post_max_s: float = 4.0, held_out_every: int = 3,
-            rails: tuple[float, float] | None = None, max_hz: float | None = None) -> TrialData:
+            rails: tuple[float, float] | None = None, max_hz: float | None = None,
+            data_band: bool = False) -> TrialData:
     """Cut, filter and decimate a trial, reading only the windows compared.
 
     Parameters
@@ -314,6 +347,9 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
         ADC rails when known (``x`` equal to them is clipped).
     max_hz : float, optional
         Compare no mode above this frequency.
+    data_band : bool
+        Widen the rig's band to the lines the data ring with above it (:func:`data_corner`);
+        else the rig's band, and those lines are listed only.
     """
     rig = strip_ambient(rig)
     src = x_full if isinstance(x_full, ScaledCounts) else _ArrayWindows(x_full)
@@ -322,6 +358,7 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
         raise ValueError("no impacts to compare: the gap diagnosis needs at least one ram blow")
     n_g, n = src.shape
     corner, _ = analysis_band(rig, fs_hz, max_hz=max_hz)
+    rig_corner = corner
     # an event too close after the previous one to leave a decay (a re-trigger on a tone, a
     # bounce the trigger split off) is not compared; its ringing stays in the data
     min_gap = pre_s + rig.impact.duration_s + SMEAR_CYCLES / corner + 0.25
@@ -331,14 +368,23 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
             keep.append(j)
     dropped = [float(t) for j, t in enumerate(onsets) if j not in keep]
     onsets = onsets[keep]
-    q = max(1, int(fs_hz // (2.5 * corner)))
-    fs_d = fs_hz / q
     skip_s = rig.impact.duration_s + SMEAR_CYCLES / corner
     gaps_next = np.diff(np.append(onsets, n / fs_hz + pre_s))
     post_s = float(min(post_max_s, np.min(gaps_next) - pre_s))
     if post_s < skip_s + 0.25:
         raise ValueError(f"impacts {np.min(gaps_next):.2f} s apart leave too short a decay to "
                          f"compare (need {pre_s + skip_s + 0.25:.2f} s)")
+    gage_numbers = tuple(g.number for g in rig.gages_by_channel())
+    limit = 0.8 * min(rig.daq.anti_alias_hz, fs_hz / 2)
+    rig_q = max(1, int(fs_hz // (2.5 * corner)))
+    above = _ringing_above(src, fs_hz, onsets, pre_s, skip_s, post_s, corner if rig_q > 1 else fs_hz / 2,
+                           limit, gage_numbers)
+    if data_band:
+        corner = data_corner(corner, above, limit, fs_hz)
+        skip_s = rig.impact.duration_s + SMEAR_CYCLES / corner
+    q = max(1, int(fs_hz // (2.5 * corner)))
+    fs_d = fs_hz / q
+    above = [r for r in above if r.frequency_hz > (corner if q > 1 else fs_hz / 2)]
     n_pre = int(round(pre_s * fs_d))
     n_s = n_pre + int(round(post_s * fs_d))
     starts = np.rint((onsets - pre_s) * fs_hz).astype(int)
@@ -359,13 +405,11 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
     if fitted.all() and len(onsets) > 1:
         fitted[-1] = False
     clip, flat, peak = _full_rate_stats(src, fs_hz, onsets, pre_s, post_s, rails)
-    gage_numbers = tuple(g.number for g in rig.gages_by_channel())
-    above = _ringing_above(src, fs_hz, onsets, pre_s, skip_s, post_s, corner if q > 1 else fs_hz / 2,
-                           0.8 * min(rig.daq.anti_alias_hz, fs_hz / 2), gage_numbers)
     return TrialData(rig=rig, x=x, fs_hz=fs_d, fs_full_hz=fs_hz, seg_t0_s=seg_t0, onsets_s=onsets,
                      windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
                      clip=clip, flat=flat, peak_full=peak,
-                     gage_numbers=gage_numbers, dropped_onsets_s=dropped, ringing_above=above)
+                     gage_numbers=gage_numbers, dropped_onsets_s=dropped, ringing_above=above,
+                     rig_lowpass_hz=rig_corner)
 
 
 def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner: float,
