@@ -53,6 +53,7 @@ def diagnose_trial(lt: LoadedTrial, *, settings: Settings | None = None,
         wide = trial_data(lt, data_band=True, **prep)
         if wide.lowpass_hz > td.lowpass_hz and structure_above(wide, 0.9 * td.lowpass_hz):
             td, prep = wide, {**prep, "data_band": True}
+        del wide  # not held through the search when the rig's band stands
     level = None
     settings = settings or Settings()
     if model_level:
