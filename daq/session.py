@@ -111,6 +111,10 @@ fraction (and by ``update_s`` at least): a look's numbers change only as its dec
 fair part of itself (and not at all once the ringing is under the noise), and a look every
 ``update_s`` on a 14 s decay was 28 looks a blow at ~0.1 s CPU each -- most of a live trial's
 CPU, taken from the finals and the next blow's first looks -- where 1.5x makes about 8."""
+LOOK_LOCK_WAIT_S = 0.1
+"""Longest the look thread waits to show a look itself, s; past it the stream's thread shows it
+after its next block. Taking a block takes milliseconds; a device that can wait may hold the
+stream's thread for longer, waiting for room in the queue that the look's own job still takes."""
 FAULT_POLL_S = 0.25
 """Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 SUMMARY_TOPIC = "/ramdaq/summary"
@@ -252,6 +256,7 @@ class Session:
         self._look_first_sure: float | None = None  # periods of its first sure look
         self._look_unsure = 0.0  # periods of its longest look not sure enough to show
         self._look_sure = False  # a first look of the ringing hit has been shown
+        self._look_order: int | None = None  # modes in the last blow's first sure look
         self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
@@ -270,6 +275,9 @@ class Session:
                               and not self._final_process_wanted)
         self._jobs.trim = not self.finals_inline  # (run(): the heap kept for the next final)
         self._done: queue.Queue[FinalDone | LookDone | JobFailed | Notice] = queue.Queue()
+        # held by the stream's thread while it takes a block, and by the look thread while it
+        # shows a look: the readout, the view and the looks' schedule are changed under it
+        self._lock = threading.Lock()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
         self.samples = 0
@@ -326,7 +334,8 @@ class Session:
                     done = run_job(job, self.info, self.rig, self._gages)
             else:
                 done = run_job(job, self.info, self.rig, self._gages)
-            self._done.put(done)
+            if not (isinstance(done, LookDone) and self._show_look_now(done)):
+                self._done.put(done)
         except Exception as err:  # never let the analyzer thread die silently
             self._done.put(JobFailed(job, err))
         finally:
@@ -339,6 +348,20 @@ class Session:
                 "final" if final else "look", onset, data_end,
                 self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
                 time.monotonic(), cpu))
+
+    def _show_look_now(self, done: LookDone) -> bool:
+        """Show a look on the look thread as soon as it is done, not when the stream's thread
+        next drains the results (after the next block: up to a block later, 0.05 s, most of a
+        cycle of 13 Hz); False (the stream's thread shows it) if the stream's thread holds the
+        session for longer than :data:`LOOK_LOCK_WAIT_S` (a device that can wait, waiting for
+        room in the queue that this look's own bytes still take)."""
+        if not self._lock.acquire(timeout=LOOK_LOCK_WAIT_S):
+            return False
+        try:
+            self._show_look(done.onset_sample, done.look)
+        finally:
+            self._lock.release()
+        return True
 
     def _final_inline(self) -> None:
         """Run the final just queued on this thread (:attr:`finals_inline`)."""
@@ -402,11 +425,13 @@ class Session:
                 try:  # a timeout, so that what a quiet device reports is said at once
                     block = self.device.read(timeout=FAULT_POLL_S)
                 except DeviceTimeout:
-                    self._show_faults(self.device.take_faults(), rec)
+                    with self._lock:
+                        self._show_faults(self.device.take_faults(), rec)
                     continue
                 if block is None:
                     break
-                self._take(block, rec)
+                with self._lock:
+                    self._take(block, rec)
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             if rec:
                 rec.event("interrupted", self._t_end(), reason=str(err) or "Ctrl-C")
@@ -462,12 +487,14 @@ class Session:
 
     def _end_of_stream(self, rec: Recorder | None) -> None:
         """The last faults, the trigger's open event, and every final analysis still queued."""
-        self._show_faults(self.device.take_faults(), rec)  # faults reported with the last read
-        for ev in self.trigger.flush():
-            self._on_event(ev, rec)
-        self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
+        with self._lock:  # (the look thread shows its looks under it)
+            self._show_faults(self.device.take_faults(), rec)  # faults reported with the last read
+            for ev in self.trigger.flush():
+                self._on_event(ev, rec)
+            self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
         self._jobs.join()
-        self._drain(rec)
+        with self._lock:
+            self._drain(rec)
         tally = self._fault_words.tally()  # next to the trial's summary
         if tally:
             self._say(tally)
@@ -538,7 +565,10 @@ class Session:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
-        if not self._jobs.put_look(LookJob(onset, x, self._before_blow(onset))):
+        # until one is sure, a blow's looks fit the order the last blow's first sure look found
+        # (half the CPU of the search for it); after, the search follows the growing decay
+        order = None if self._look_sure else self._look_order
+        if not self._jobs.put_look(LookJob(onset, x, self._before_blow(onset), order)):
             self._look_skipped(onset, "its samples would pass the queue's bytes bound")
 
     def _before_blow(self, onset: int) -> np.ndarray | None:
@@ -643,6 +673,7 @@ class Session:
         if self._look_unsure > 0:
             self._start_cycles = max(LOOK_CYCLES, int(self._look_unsure + LOOK_EARLY) + 1)
         self._look_first_sure = look.duration_s * self.info.fs_hz / self._period_n
+        self._look_order = look.n_modes or None
 
     def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
