@@ -11,9 +11,11 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   device it hands the analysis to a worker process, :mod:`ramdaq.daq.final_process`, so that
   the final and the acquisition run on two cores, not on one interpreter lock), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
-  next blow's first looks. (A replay flat out with no looks and no view runs each final on the
-  caller's thread instead, as its record closes, :attr:`Session.finals_inline`: nobody watches
-  it, and the two threads' contention cost such a replay 5-9 % of its CPU.) A first look is
+  next blow's first looks; the look thread shows a look itself as soon as it is done, under
+  the session's lock, which the caller's thread holds while it takes a block. (A replay flat
+  out with no looks and no view runs each final on the caller's thread instead, as its record
+  closes, :attr:`Session.finals_inline`: nobody watches it, and the two threads' contention
+  cost such a replay 5-9 % of its CPU.) A first look is
   asked for when the last one is done: the first after
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
@@ -112,9 +114,10 @@ fair part of itself (and not at all once the ringing is under the noise), and a 
 ``update_s`` on a 14 s decay was 28 looks a blow at ~0.1 s CPU each -- most of a live trial's
 CPU, taken from the finals and the next blow's first looks -- where 1.5x makes about 8."""
 LOOK_LOCK_WAIT_S = 0.1
-"""Longest the look thread waits to show a look itself, s; past it the stream's thread shows it
-after its next block. Taking a block takes milliseconds; a device that can wait may hold the
-stream's thread for longer, waiting for room in the queue that the look's own job still takes."""
+"""Longest the look thread waits to show a look itself where the device can wait (a replay, a
+simulator flat out), s; past it the stream's thread shows it after its next block. Taking a
+block takes milliseconds; such a device may hold the stream's thread for longer, waiting for
+room in the queue that the look's own job still takes."""
 FAULT_POLL_S = 0.25
 """Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 SUMMARY_TOPIC = "/ramdaq/summary"
@@ -320,9 +323,10 @@ class Session:
 
     def _run_one(self, kind: type[FinalJob] | type[LookJob], job: FinalJob | LookJob) -> None:
         """Do ``job`` (in the finals' worker process if there is one), put its result (or its
-        failure) for :meth:`_drain` and time it (:class:`JobTime`)."""
+        failure) for :meth:`_drain` (a look: show it, :meth:`_show_look_now`) and time it
+        (:class:`JobTime`: the job's run, not the showing)."""
         wall, cpu = time.monotonic(), time.thread_time()
-        worker_cpu = None
+        worker_cpu = ran = None
         try:
             if kind is FinalJob and self._final_process is not None:
                 try:
@@ -334,28 +338,30 @@ class Session:
                     done = run_job(job, self.info, self.rig, self._gages)
             else:
                 done = run_job(job, self.info, self.rig, self._gages)
+            ran = time.monotonic(), time.thread_time()
             if not (isinstance(done, LookDone) and self._show_look_now(done)):
                 self._done.put(done)
         except Exception as err:  # never let the analyzer thread die silently
             self._done.put(JobFailed(job, err))
         finally:
             final = kind is FinalJob
-            cpu = time.thread_time() - cpu if worker_cpu is None else worker_cpu
+            end, cpu_end = ran or (time.monotonic(), time.thread_time())
+            cpu = cpu_end - cpu if worker_cpu is None else worker_cpu
             onset = job.event.onset_sample if final else job.onset_sample
             data_end = (job.event.last_sample + 1 if final else
                         onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
             self.job_times.append(JobTime(
                 "final" if final else "look", onset, data_end,
-                self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
-                time.monotonic(), cpu))
+                self._queued.pop(onset, wall) if kind is FinalJob else wall, wall, end, cpu))
 
     def _show_look_now(self, done: LookDone) -> bool:
         """Show a look on the look thread as soon as it is done, not when the stream's thread
         next drains the results (after the next block: up to a block later, 0.05 s, most of a
-        cycle of 13 Hz); False (the stream's thread shows it) if the stream's thread holds the
-        session for longer than :data:`LOOK_LOCK_WAIT_S` (a device that can wait, waiting for
-        room in the queue that this look's own bytes still take)."""
-        if not self._lock.acquire(timeout=LOOK_LOCK_WAIT_S):
+        cycle of 13 Hz). A live device's stream thread never waits while it holds the session,
+        so the look waits for it; a device that can wait may wait there for room in the queue
+        that this look's own bytes still take: past :data:`LOOK_LOCK_WAIT_S` the look is left
+        for the stream's thread to show after its next block (False)."""
+        if not self._lock.acquire(timeout=LOOK_LOCK_WAIT_S if not self.shed else -1):
             return False
         try:
             self._show_look(done.onset_sample, done.look)
