@@ -260,6 +260,7 @@ class Session:
         self._look_unsure = 0.0  # periods of its longest look not sure enough to show
         self._look_sure = False  # a first look of the ringing hit has been shown
         self._look_order: int | None = None  # modes in the last blow's first sure look
+        self._look_tried = False  # a look at the ringing hit has been asked for
         self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
@@ -545,6 +546,7 @@ class Session:
             self._look_cycles = self._start_cycles
             self._next_look = start + round(self._look_cycles * self._period_n)
             self._look_sure, self._look_first_sure, self._look_unsure = False, None, 0.0
+            self._look_tried = False
         # the detection sample until the trigger has refined the onset, which the looks carry
         self._ringing_onset = onset
         self._onsets[self._ringing_hit] = onset / self.info.fs_hz
@@ -571,9 +573,11 @@ class Session:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
-        # until one is sure, a blow's looks fit the order the last blow's first sure look found
-        # (half the CPU of the search for it); after, the search follows the growing decay
-        order = None if self._look_sure else self._look_order
+        # a blow's first look fits the order the last blow's first sure look found (half the CPU
+        # of the search for it; the schedule makes it as long as that one); should it not be
+        # sure, the next searches, and so do the looks as the decay grows
+        order = None if self._look_tried else self._look_order
+        self._look_tried = True
         if not self._jobs.put_look(LookJob(onset, x, self._before_blow(onset), order)):
             self._look_skipped(onset, "its samples would pass the queue's bytes bound")
 
