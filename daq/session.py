@@ -113,11 +113,6 @@ fraction (and by ``update_s`` at least): a look's numbers change only as its dec
 fair part of itself (and not at all once the ringing is under the noise), and a look every
 ``update_s`` on a 14 s decay was 28 looks a blow at ~0.1 s CPU each -- most of a live trial's
 CPU, taken from the finals and the next blow's first looks -- where 1.5x makes about 8."""
-LOOK_LOCK_WAIT_S = 0.1
-"""Longest the look thread waits to show a look itself where the device can wait (a replay, a
-simulator flat out), s; past it the stream's thread shows it after its next block. Taking a
-block takes milliseconds; such a device may hold the stream's thread for longer, waiting for
-room in the queue that the look's own job still takes."""
 FAULT_POLL_S = 0.25
 """Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 SUMMARY_TOPIC = "/ramdaq/summary"
@@ -358,11 +353,11 @@ class Session:
     def _show_look_now(self, done: LookDone) -> bool:
         """Show a look on the look thread as soon as it is done, not when the stream's thread
         next drains the results (after the next block: up to a block later, 0.05 s, most of a
-        cycle of 13 Hz). A live device's stream thread never waits while it holds the session,
-        so the look waits for it; a device that can wait may wait there for room in the queue
-        that this look's own bytes still take: past :data:`LOOK_LOCK_WAIT_S` the look is left
-        for the stream's thread to show after its next block (False)."""
-        if not self._lock.acquire(timeout=LOOK_LOCK_WAIT_S if not self.shed else -1):
+        cycle of 13 Hz). False if the stream's thread is taking a block (it shows the look as
+        it ends that block, :meth:`_stream`): the look thread never waits for it (on a loaded
+        machine the stream's thread may be off its core for a while, and a device that can
+        wait may hold it waiting for room that this look's own job still takes)."""
+        if not self._lock.acquire(blocking=False):
             return False
         try:
             self._show_look(done.onset_sample, done.look)
@@ -439,6 +434,9 @@ class Session:
                     break
                 with self._lock:
                     self._take(block, rec)
+                if not self._done.empty():  # a look left while the block was being taken
+                    with self._lock:
+                        self._drain(rec)
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             if rec:
                 rec.event("interrupted", self._t_end(), reason=str(err) or "Ctrl-C")
