@@ -10,7 +10,10 @@ stream cut never got there, and is listed). Prints per blow and then the median 
 over the blows, each beside issue 19's target: the first look within 5 cycles of the
 predominant mode after every blow (0.38 s at 13 Hz in water), the final numbers within 0.5 s of
 the decay reaching the noise floor; the looks skipped; the CPU time of the process and the load.
-A final's latency after the floor is split into the stream's lag, the wait for the finals
+A first look's latency is split into the samples it had (from the blow to the end of the last,
+on the stream's clock: the look's schedule and the device's blocks), the wait for the look
+thread, the look's run (wall and CPU) and the time from its end to its showing. A final's
+latency after the floor is split into the stream's lag, the wait for the finals
 thread and the analysis (wall and CPU: the finals' worker process's, where the session runs the
 finals in one, as it does for a device paced in real time; else the finals thread's). On a
 shared machine the wall-clock figures measure the contention; so the first looks are also
