@@ -786,19 +786,23 @@ class FirstLook:
     f_hz: float
     delta: float
     gages: dict[int, tuple[float, float, float]]  # gage -> (f_hz, delta, delta_se)
+    n_modes: int = 0  # modes in the fit (the order the look found, or was given)
 
 
 def first_look(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, ...], *,
-               max_samples: int = 40_000, pre: np.ndarray | None = None) -> FirstLook | None:
+               max_samples: int = 40_000, pre: np.ndarray | None = None,
+               n_modes: int | None = None) -> FirstLook | None:
     """Quick per-gage frequency and decrement on the decay so far, (n_gages, n) m/s^2.
 
     The same estimator as the final analysis, on a decimated copy (``max_samples``) and
     without verdicts or the report's chain: a first look, refined as the decay goes on. ``pre``
     (n_gages, n_pre) m/s^2 at ``fs_hz``, the same gages before the blow: a mode already ringing
-    there is not taken as the predominant one (as in :func:`analyze_decay`).
+    there is not taken as the predominant one (as in :func:`analyze_decay`). ``n_modes``: the
+    order to fit, where it is known (an earlier look at a like decay found it), instead of the
+    likelihood-ratio search for it -- the same fit, about half the CPU of a look on 16 gages.
     Returns None when no mode stands above the noise yet.
     """
-    table = identify_modes(x, fs_hz, per_channel=True, max_samples=max_samples)
+    table = identify_modes(x, fs_hz, per_channel=True, max_samples=max_samples, n_modes=n_modes)
     if len(table) == 0:
         return None
     ambient = ambient_modes(pre, fs_hz, table.frequency_hz, table.complex_amplitude)
@@ -807,4 +811,4 @@ def first_look(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int, .
     gages = {n: (float(table.channel_frequency_hz[i, k]), float(table.channel_delta[i, k]),
                  float(table.channel_delta_se[i, k])) for i, n in enumerate(gage_numbers)}
     return FirstLook(x.shape[1] / fs_hz, float(table.frequency_hz[k]), float(table.delta[k]),
-                     gages)
+                     gages, len(table))

@@ -10,7 +10,10 @@ stream cut never got there, and is listed). Prints per blow and then the median 
 over the blows, each beside issue 19's target: the first look within 5 cycles of the
 predominant mode after every blow (0.38 s at 13 Hz in water), the final numbers within 0.5 s of
 the decay reaching the noise floor; the looks skipped; the CPU time of the process and the load.
-A final's latency after the floor is split into the stream's lag, the wait for the finals
+A first look's latency is split into the samples it had (from the blow to the end of the last,
+on the stream's clock: the look's schedule and the device's blocks), the wait for the look
+thread, the look's run (wall and CPU) and the time from its end to its showing. A final's
+latency after the floor is split into the stream's lag, the wait for the finals
 thread and the analysis (wall and CPU: the finals' worker process's, where the session runs the
 finals in one, as it does for a device paced in real time; else the finals thread's). On a
 shared machine the wall-clock figures measure the contention; so the first looks are also
@@ -20,7 +23,7 @@ counted on the stream's clock.
 In water the ALBACORE-like rig's decay takes ~14 s to reach the noise floor after a 20 kN blow
 (58 dB), so the default spacing is 20 s; at 10 s every record is cut by the next blow.
 
-    python benchmarks/live_latency.py [--blows 12] [--every 20] [--rate 2048] [--view]
+    python benchmarks/live_latency.py [--blows 12] [--every 20] [--rate 2048] [--view] [--block-s S]
 """
 
 from __future__ import annotations
@@ -116,7 +119,7 @@ def free_core_looks(args: argparse.Namespace) -> dict[float, float]:
     simulated trial run flat out through a session whose looks run as :class:`_FreeCoreLooks`
     says; the look is shown when its CPU time after its last block has passed."""
     dev = SimDevice(RIG, medium=args.medium, seed=args.seed, impacts=_impacts(args),
-                    fs_hz=args.rate, duration_s=_duration(args), pace="fast")
+                    fs_hz=args.rate, duration_s=_duration(args), pace="fast", **_block(args))
     session = Session(dev, readout=False)
     fake = _FreeCoreLooks(session)
     session._jobs = fake
@@ -124,6 +127,36 @@ def free_core_looks(args: argparse.Namespace) -> dict[float, float]:
         session._take(block, None)
     fs = dev.info.fs_hz
     return {round(onset / fs, 3): end - onset / fs for onset, end in fake.first_sure.items()}
+
+
+def look_parts(session: Session) -> dict[float, str]:
+    """Per blow (its onset, s): its first look's latency in parts, s -- the samples it had
+    (from the blow to the end of the last it took, when that was due on the wall clock), the
+    wait until the look thread started on it (the stream's lag, the block's handling and a
+    running look), the look's own run (wall and CPU) and from its end to its showing; and how
+    many looks of the blow were run by then (the ones before it were not sure)."""
+    fs, t0 = session.info.fs_hz, anchor(session)
+    first_shown: dict[float, float] = {}
+    for s in session.shown:
+        if s.kind == "look":
+            first_shown.setdefault(round(s.onset_s, 3), s.wall_s)
+    out: dict[float, str] = {}
+    for k, wall in first_shown.items():
+        runs = [j for j in session.job_times if j.kind == "look"
+                and round(j.onset_sample / fs, 3) == k and j.end_s <= wall]
+        if not runs:
+            continue
+        j = max(runs, key=lambda j: j.end_s)
+        due = t0 + j.data_end / fs
+        out[k] = (f"{j.data_end / fs - k:5.3f}, {j.start_s - due:6.3f}, {j.end_s - j.start_s:5.3f} "
+                  f"({j.cpu_s:5.3f}), {wall - j.end_s:5.3f}; {len(runs)}")
+    return out
+
+
+def _block(args: argparse.Namespace) -> dict:
+    """The simulator's block length, s, where ``--block-s`` gives one (else its own, 0.05 s, as
+    ``ramdaq trial`` reads it): a look waits for the block that holds its last sample."""
+    return {} if args.block_s is None else {"block_s": args.block_s}
 
 
 def _impacts(args: argparse.Namespace) -> list[float]:
@@ -181,13 +214,16 @@ def main() -> None:
     ap.add_argument("--medium", default="water")
     ap.add_argument("--view", action="store_true", help="log to a Rerun .rrd as the trial does")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--block-s", type=float, default=None,
+                    help="the simulator's block, s (default its own, as ramdaq trial's)")
     args = ap.parse_args()
     dev = SimDevice(RIG, medium=args.medium, seed=args.seed, impacts=_impacts(args), fs_hz=args.rate,
-                    duration_s=_duration(args), pace="realtime")
+                    duration_s=_duration(args), pace="realtime", **_block(args))
     info = dev.open()
     load0 = os.getloadavg()[0]
     print(f"live latency: {args.blows} blows every {args.every:g} s at {args.rate:g} Hz, "
-          f"{args.medium}, view {'on' if args.view else 'off'} (about "
+          f"{args.medium}, blocks of {dev.block_n / args.rate:.4g} s, "
+          f"view {'on' if args.view else 'off'} (about "
           f"{_duration(args):.0f} s of real time); load average {load0:.1f} on "
           f"{os.cpu_count()} cores at the start", flush=True)
     cpu0 = time.process_time()
@@ -212,8 +248,10 @@ def main() -> None:
     jobs = {round(j.onset_sample / info.fs_hz, 3): j for j in session.job_times
             if j.kind == "final"}
     floor_wall = {k: anchor(session) + k + v for k, v in floors.items()}
+    parts = look_parts(session)
     print("  blow onset s | first look s (cycles) | final s | decay at floor s | final after floor s"
-          " | of which: stream lag, queue wait, analysis wall (CPU) s | record ended by")
+          " | of which: stream lag, queue wait, analysis wall (CPU) s | record ended by"
+          " | first look's: samples from the blow, wait, run wall (CPU), to shown s; looks run")
     for h in sorted(outcome.hits, key=lambda h: h.event.onset_sample):
         k = _key(h, info.fs_hz)
         look = looks.get(k)
@@ -221,7 +259,7 @@ def main() -> None:
                                    else "   none       ")
               + f"        | {finals.get(k, float('nan')):7.3f} | {floors.get(k, float('nan')):16.3f}"
               f" | {after_floor.get(k, float('nan')):19.3f} | {_parts(jobs.get(k), floor_wall.get(k))}"
-              f" | {h.event.end_reason}")
+              f" | {h.event.end_reason:7s} | {parts.get(k, '')}")
     ok_look = report("first look", list(looks.values()), f_hz, n, f"<= {GOAL_CYCLES:g} cycles")
     free = free_core_looks(args)
     report("first look on a free core", list(free.values()), f_hz, n,

@@ -75,11 +75,13 @@ class FinalJob:
 class LookJob:
     """A first look at a decay still ringing: ``x`` the gage rows from the decay's start to the
     latest sample (SI units, shape (n_gages, n_samples)) of the impact whose onset is sample
-    ``onset_sample`` of the stream; ``pre`` the same rows before the blow (None if not held)."""
+    ``onset_sample`` of the stream; ``pre`` the same rows before the blow (None if not held);
+    ``n_modes`` the order to fit where it is known (None: searched, as a final does)."""
 
     onset_sample: int
     x: np.ndarray
     pre: np.ndarray | None = None
+    n_modes: int | None = None
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,7 @@ def run_job(job: FinalJob | LookJob, info: StreamInfo, rig: Rig,
                             f"analysis failed: {type(err).__name__}: {err}", None, hit.coarse)
             return FinalDone(hit, hit_to_json(hit))
     try:
-        look = first_look(job.x, info.fs_hz, rig, gages, pre=job.pre)
+        look = first_look(job.x, info.fs_hz, rig, gages, pre=job.pre, n_modes=job.n_modes)
     except ValueError:
         look = None
     return LookDone(job.onset_sample, look)

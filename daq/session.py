@@ -11,9 +11,11 @@ Threads (the only place in ramdaq that starts them, besides the recorder's write
   device it hands the analysis to a worker process, :mod:`ramdaq.daq.final_process`, so that
   the final and the acquisition run on two cores, not on one interpreter lock), the other,
   while the rudder still rings, first looks at the decay so far -- so a final never holds up the
-  next blow's first looks. (A replay flat out with no looks and no view runs each final on the
-  caller's thread instead, as its record closes, :attr:`Session.finals_inline`: nobody watches
-  it, and the two threads' contention cost such a replay 5-9 % of its CPU.) A first look is
+  next blow's first looks; the look thread shows a look itself as soon as it is done, under
+  the session's lock, which the caller's thread holds while it takes a block. (A replay flat
+  out with no looks and no view runs each final on the caller's thread instead, as its record
+  closes, :attr:`Session.finals_inline`: nobody watches it, and the two threads' contention
+  cost such a replay 5-9 % of its CPU.) A first look is
   asked for when the last one is done: the first after
   :data:`LOOK_CYCLES` periods of the predominant mode of free decay (the rig model's period,
   then the one the last sure look measured; ``first_look_s`` stands in for a period where the
@@ -252,6 +254,8 @@ class Session:
         self._look_first_sure: float | None = None  # periods of its first sure look
         self._look_unsure = 0.0  # periods of its longest look not sure enough to show
         self._look_sure = False  # a first look of the ringing hit has been shown
+        self._look_order: int | None = None  # modes in the last blow's first sure look
+        self._look_tried = False  # a look at the ringing hit has been asked for
         self._ringing_onset: int | None = None  # onset sample of the latest blow that rang
         self.trigger = Trigger(self.info, trigger_settings)
         self.log = log
@@ -270,6 +274,9 @@ class Session:
                               and not self._final_process_wanted)
         self._jobs.trim = not self.finals_inline  # (run(): the heap kept for the next final)
         self._done: queue.Queue[FinalDone | LookDone | JobFailed | Notice] = queue.Queue()
+        # held by the stream's thread while it takes a block, and by the look thread while it
+        # shows a look: the readout, the view and the looks' schedule are changed under it
+        self._lock = threading.Lock()
         self.hits: list[HitResult] = []
         self.notes: list[str] = []
         self.samples = 0
@@ -312,9 +319,10 @@ class Session:
 
     def _run_one(self, kind: type[FinalJob] | type[LookJob], job: FinalJob | LookJob) -> None:
         """Do ``job`` (in the finals' worker process if there is one), put its result (or its
-        failure) for :meth:`_drain` and time it (:class:`JobTime`)."""
+        failure) for :meth:`_drain` (a look: show it, :meth:`_show_look_now`) and time it
+        (:class:`JobTime`: the job's run, not the showing)."""
         wall, cpu = time.monotonic(), time.thread_time()
-        worker_cpu = None
+        worker_cpu = ran = None
         try:
             if kind is FinalJob and self._final_process is not None:
                 try:
@@ -326,19 +334,36 @@ class Session:
                     done = run_job(job, self.info, self.rig, self._gages)
             else:
                 done = run_job(job, self.info, self.rig, self._gages)
-            self._done.put(done)
+            ran = time.monotonic(), time.thread_time()
+            if not (isinstance(done, LookDone) and self._show_look_now(done)):
+                self._done.put(done)
         except Exception as err:  # never let the analyzer thread die silently
             self._done.put(JobFailed(job, err))
         finally:
             final = kind is FinalJob
-            cpu = time.thread_time() - cpu if worker_cpu is None else worker_cpu
+            end, cpu_end = ran or (time.monotonic(), time.thread_time())
+            cpu = cpu_end - cpu if worker_cpu is None else worker_cpu
             onset = job.event.onset_sample if final else job.onset_sample
             data_end = (job.event.last_sample + 1 if final else
                         onset + round(decay_skip_s(self.rig) * self.info.fs_hz) + job.x.shape[1])
             self.job_times.append(JobTime(
                 "final" if final else "look", onset, data_end,
-                self._queued.pop(onset, wall) if kind is FinalJob else wall, wall,
-                time.monotonic(), cpu))
+                self._queued.pop(onset, wall) if kind is FinalJob else wall, wall, end, cpu))
+
+    def _show_look_now(self, done: LookDone) -> bool:
+        """Show a look on the look thread as soon as it is done, not when the stream's thread
+        next drains the results (after the next block: up to a block later, 0.05 s, most of a
+        cycle of 13 Hz). False if the stream's thread is taking a block (it shows the look as
+        it ends that block, :meth:`_stream`): the look thread never waits for it (on a loaded
+        machine the stream's thread may be off its core for a while, and a device that can
+        wait may hold it waiting for room that this look's own job still takes)."""
+        if not self._lock.acquire(blocking=False):
+            return False
+        try:
+            self._show_look(done.onset_sample, done.look)
+        finally:
+            self._lock.release()
+        return True
 
     def _final_inline(self) -> None:
         """Run the final just queued on this thread (:attr:`finals_inline`)."""
@@ -402,11 +427,16 @@ class Session:
                 try:  # a timeout, so that what a quiet device reports is said at once
                     block = self.device.read(timeout=FAULT_POLL_S)
                 except DeviceTimeout:
-                    self._show_faults(self.device.take_faults(), rec)
+                    with self._lock:
+                        self._show_faults(self.device.take_faults(), rec)
                     continue
                 if block is None:
                     break
-                self._take(block, rec)
+                with self._lock:
+                    self._take(block, rec)
+                if not self._done.empty():  # a look left while the block was being taken
+                    with self._lock:
+                        self._drain(rec)
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             if rec:
                 rec.event("interrupted", self._t_end(), reason=str(err) or "Ctrl-C")
@@ -462,12 +492,14 @@ class Session:
 
     def _end_of_stream(self, rec: Recorder | None) -> None:
         """The last faults, the trigger's open event, and every final analysis still queued."""
-        self._show_faults(self.device.take_faults(), rec)  # faults reported with the last read
-        for ev in self.trigger.flush():
-            self._on_event(ev, rec)
-        self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
+        with self._lock:  # (the look thread shows its looks under it)
+            self._show_faults(self.device.take_faults(), rec)  # faults reported with the last read
+            for ev in self.trigger.flush():
+                self._on_event(ev, rec)
+            self._say(f"waiting for the analyzer to finish {self._jobs.pending} job(s)")
         self._jobs.join()
-        self._drain(rec)
+        with self._lock:
+            self._drain(rec)
         tally = self._fault_words.tally()  # next to the trial's summary
         if tally:
             self._say(tally)
@@ -512,6 +544,7 @@ class Session:
             self._look_cycles = self._start_cycles
             self._next_look = start + round(self._look_cycles * self._period_n)
             self._look_sure, self._look_first_sure, self._look_unsure = False, None, 0.0
+            self._look_tried = False
         # the detection sample until the trigger has refined the onset, which the looks carry
         self._ringing_onset = onset
         self._onsets[self._ringing_hit] = onset / self.info.fs_hz
@@ -538,7 +571,12 @@ class Session:
             x = self.trigger.recent(start, end)[self._gage_rows]
         except IndexError:
             return
-        if not self._jobs.put_look(LookJob(onset, x, self._before_blow(onset))):
+        # a blow's first look fits the order the last blow's first sure look found (half the CPU
+        # of the search for it; the schedule makes it as long as that one); should it not be
+        # sure, the next searches, and so do the looks as the decay grows
+        order = None if self._look_tried else self._look_order
+        self._look_tried = True
+        if not self._jobs.put_look(LookJob(onset, x, self._before_blow(onset), order)):
             self._look_skipped(onset, "its samples would pass the queue's bytes bound")
 
     def _before_blow(self, onset: int) -> np.ndarray | None:
@@ -643,6 +681,7 @@ class Session:
         if self._look_unsure > 0:
             self._start_cycles = max(LOOK_CYCLES, int(self._look_unsure + LOOK_EARLY) + 1)
         self._look_first_sure = look.duration_s * self.info.fs_hz / self._period_n
+        self._look_order = look.n_modes or None
 
     def _show_final(self, hit: HitResult, doc: dict, rec: Recorder | None) -> None:
         """Show and record one hit's final numbers; ``doc`` is its JSON, made on the analyzer
