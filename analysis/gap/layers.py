@@ -473,7 +473,9 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     ``coupled``: the model level's hull modes the rudder does not ride rigidly
     (:meth:`~ramdaq.analysis.gap.rigfit.ModelLevel.coupled` as JSON), which answer "hull_coupling"
     where the layers would otherwise say "none" (model form) or "unexplained" on a trial with a
-    gap, and place the model's own hull_coupling at that mode (:func:`coupled_answer`)."""
+    gap (also a data-only "unexplained" that stands less far above its chance level,
+    :func:`coupled_over_data`), and place the model's own hull_coupling at that mode
+    (:func:`coupled_answer`)."""
     out = _answer(model, candidates, where, form_gages, findings, form_modes, splits)
     if model is not None and coupled and (out.by == "model" and out.named in ("none", "unexplained",
                                                                               "hull_coupling")
