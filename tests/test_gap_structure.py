@@ -247,3 +247,10 @@ def test_a_coupled_mode_answers_before_a_weaker_unexplained_data_finding():
     # a coupled mode nearer its chance level than the finding is to its own: the finding stands
     weak = answer("hull_coupling", cands, None, {3, 4}, [misfit], (), [], [coupled(5.0)])
     assert weak.named == "unexplained" and weak.by == "data"
+    # a stiffness law the decays told (check seed 158004's, 2.4x) is weighed by its strength too
+    law = {"check": "homogeneity", "layer": "nonlinearity", "gages": [1, 3, 7], "window": "early",
+           "mode_hz": [24.5], "statistic": 41.8, "chance_level": 17.7, "closed_held": None,
+           "more": {"stiffness_law_z": {"value": 6.5, "unit": "1"}}}
+    with_law = lambda ratio: answer("hull_coupling", cands, None, {3, 4}, [law], (), [], [coupled(ratio)])  # noqa: E731
+    assert with_law(20.0).named == "hull_coupling"
+    assert with_law(2.2).named == "unexplained"
