@@ -224,3 +224,33 @@ def test_a_coupled_mode_answers_hull_coupling_where_the_model_says_form_or_unexp
     hit = {"check": "double_hit", "layer": "excitation", "gages": [1, 2], "window": "early",
            "statistic": 50.0, "chance_level": 5.0, "mode_hz": []}
     assert answer("unexplained", cands, None, set(), [hit], (), [], [c]).named == "double_hit"
+
+
+def test_a_coupled_mode_answers_before_a_weaker_unexplained_data_finding():
+    """The coupled mode against a data-only "unexplained" finding: the stronger against its own
+    chance level answers (modal development seed 59004's pair: gage 2's phase at the coupled
+    mode's frequency that no time skew fits, 7.1x, beside the coupled mode)."""
+    misfit = {"check": "chain_misfit", "layer": "sensor", "gages": [2], "window": "decay",
+              "mode_hz": [24.9, 28.4], "statistic": 123.0, "chance_level": 17.3, "closed_held": None,
+              "more": {}}
+    cands = [{"name": "hull_coupling", "dbic": -1e6, "dbic_marginal": None, "closed_held": 0.54,
+              "closed_fit": 0.54, "location": {"gages": [2, 4, 5], "window": "pre", "band_hz": 33.2}}]
+
+    def coupled(ratio: float) -> dict:
+        return {"f_hz": 28.47, "zeta": 0.02, "hull_share": 0.91, "nonrigid": 0.2,
+                "statistic": 3.0 * ratio, "chance_level": 3.0, "gages": [5, 14, 13, 9]}
+
+    # without a coupled mode the data layer's finding answers
+    assert answer("hull_coupling", cands, None, {3, 4}, [misfit], (), [], []).named == "unexplained"
+    strong = answer("hull_coupling", cands, None, {3, 4}, [misfit], (), [], [coupled(20.0)])
+    assert strong.named == "hull_coupling" and strong.location["gages"] == [5, 14, 13, 9]
+    # a coupled mode nearer its chance level than the finding is to its own: the finding stands
+    weak = answer("hull_coupling", cands, None, {3, 4}, [misfit], (), [], [coupled(5.0)])
+    assert weak.named == "unexplained" and weak.by == "data"
+    # a stiffness law the decays told (check seed 158004's, 2.4x) is weighed by its strength too
+    law = {"check": "homogeneity", "layer": "nonlinearity", "gages": [1, 3, 7], "window": "early",
+           "mode_hz": [24.5], "statistic": 41.8, "chance_level": 17.7, "closed_held": None,
+           "more": {"stiffness_law_z": {"value": 6.5, "unit": "1"}}}
+    with_law = lambda ratio: answer("hull_coupling", cands, None, {3, 4}, [law], (), [], [coupled(ratio)])  # noqa: E731
+    assert with_law(20.0).named == "hull_coupling"
+    assert with_law(2.2).named == "unexplained"
