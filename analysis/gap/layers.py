@@ -475,7 +475,10 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     where the layers would otherwise say "none" (model form) or "unexplained" on a trial with a
     gap (also a data-only "unexplained" that stands less far above its chance level,
     :func:`coupled_over_data`), and place the model's own hull_coupling at that mode
-    (:func:`coupled_answer`)."""
+    (:func:`coupled_answer`). A gage's phase read at a coupled mode is no timing finding there
+    (:func:`phase_at_coupled`)."""
+    if coupled:
+        findings = [f for f in findings if not phase_at_coupled(f, coupled)]
     out = _answer(model, candidates, where, form_gages, findings, form_modes, splits)
     if model is not None and coupled and (out.by == "model" and out.named in ("none", "unexplained",
                                                                               "hull_coupling")
@@ -510,6 +513,27 @@ def coupled_over_data(out: Answer, coupled: Sequence[dict]) -> bool:
     if out.by != "data" or out.named != "unexplained" or not out.finding or not coupled:
         return False
     return max(c["statistic"] / c["chance_level"] for c in coupled) > strength(out.finding)
+
+
+def phase_at_coupled(f: dict, coupled: Sequence[dict]) -> bool:
+    """Whether data-only finding ``f`` (as JSON) is a phase misfit (``chain_misfit``: a gage's
+    phase off the other gages' that no one time skew fits) read at one of the model level's
+    coupled hull modes (``coupled``, as JSON: one of the finding's modes within that mode's
+    half-power bandwidth ``2 zeta f``, where two reads of one pole agree).
+
+    The misfit's chance level assumes real mode shapes: each gage in or out of phase with the
+    others, as a classically damped structure's modes are. A hull mode the rudder does not ride
+    rigidly, with the hull's own damping and beside a rudder mode, is damped
+    non-proportionally, and such a pair's shapes are complex: each gage's phase departs from
+    0 or pi by an amount set by where it sits, which no one delay of its channel fits. The
+    coupling makes that departure, so it is not evidence against a fixed channel (issue 17:
+    modal development seed 59004, a hull mode at 28.47 Hz coupled at 14000x its chance level,
+    read as gage 2's phase misfit at 7.1x on the 24.9 and 28.4 Hz modes and answered
+    "unexplained" over the model's hull_coupling)."""
+    if f["check"] != "chain_misfit":
+        return False
+    return any(abs(m - c["f_hz"]) <= 2 * c.get("zeta", 0.0) * c["f_hz"]
+               for m in f.get("mode_hz") or [] for c in coupled)
 
 
 def coupled_answer(c: dict, candidates: list[dict]) -> Answer:
