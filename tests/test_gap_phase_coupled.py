@@ -47,4 +47,4 @@ def test_a_phase_misfit_off_the_coupled_modes_still_answers():
                     chance_level=22.1, size=0.3, unit="1", window="decay", mode_hz=(28.433,),
                     text="gage 2's gain changes between impacts").to_json()
     assert not phase_at_coupled(drift, [COUPLED])
-    assert answer("hull_coupling", [HULL], None, FORM, [drift], (), [], [COUPLED]).named == "unexplained"
+    assert answer("hull_coupling", [HULL], None, FORM, [drift], (), [], [weak]).named == "unexplained"
