@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from ramdaq.analysis.gap.diagnose import _trial_notes
 from ramdaq.analysis.gap.modal_level import Split, model_modes_at_gages, structure_above
 from ramdaq.analysis.gap.ringing import RESOLUTION_HZ
 from ramdaq.analysis.gap.trialdata import CORNER_OVER_LINE, prepare
@@ -93,3 +94,15 @@ def test_a_split_of_the_mode_above_the_band_is_found_and_the_rigs_own_mode_is_no
     td = prepare(x, FS, onsets, rig, data_band=True)
     assert td.lowpass_hz > 215.5
     assert structure_above(td, 0.9 * td.rig_lowpass_hz) == []
+
+
+def test_a_rig_band_with_nothing_to_decimate_is_not_said_widened():
+    """A rig whose band reaches past 0.4x the rate (here its modes compared up to 900 Hz at
+    2048 Hz) is compared at the full rate, up to half of it: that is still the rig's band, and
+    the report must not say the data widened it."""
+    rig = _rig()
+    x, onsets, _ = _trial(rig, 3)
+    td = prepare(x, FS, onsets, rig, max_hz=900.0)
+    assert td.fs_hz == FS and td.lowpass_hz == FS / 2
+    assert td.rig_lowpass_hz == td.lowpass_hz
+    assert not [n for n in _trial_notes(td) if n.startswith("compared up to")]

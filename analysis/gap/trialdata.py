@@ -105,8 +105,9 @@ class TrialData:
     """Lines the data show ringing after the blows above ``lowpass_hz`` (full rate, against the
     pre-trigger windows): not compared, said so (:mod:`~ramdaq.analysis.gap.ringing`)."""
     rig_lowpass_hz: float = float("nan")
-    """The corner the rig alone gives (:func:`analysis_band`), Hz: ``lowpass_hz`` is above it
-    where the data ring clearly above it (:func:`data_corner`)."""
+    """The band's top the rig alone gives, Hz: its corner (:func:`analysis_band`), or half the
+    rate where that corner leaves nothing to decimate (as ``lowpass_hz``); ``lowpass_hz`` is
+    above it only where the data's band was asked for and they ring above it (:func:`data_corner`)."""
 
     @property
     def n_seg(self) -> int:
@@ -409,7 +410,7 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
                      windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
                      clip=clip, flat=flat, peak_full=peak,
                      gage_numbers=gage_numbers, dropped_onsets_s=dropped, ringing_above=above,
-                     rig_lowpass_hz=rig_corner)
+                     rig_lowpass_hz=rig_corner if rig_q > 1 else fs_hz / 2)
 
 
 def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner: float,
