@@ -58,14 +58,7 @@ def test_the_second_blows_first_looks_fit_the_order_the_first_blows_sure_look_fo
 def test_a_look_is_shown_by_the_look_thread_without_waiting_for_a_block(albacore):
     """A sure look done on the look thread is shown there at once: counted, and in ``shown``,
     before the stream's thread takes another block or drains the results."""
-    dev = SimDevice(albacore.with_medium("water"), duration_s=4.0, impacts=[3.0], seed=4)
-    session = Session(dev, readout=False)
-    jobs = []
-    session._jobs.put_look = lambda job: jobs.append(job) or True
-    blocks = iter(dev)
-    while session.trigger.ringing is None or not jobs or jobs[-1].x.shape[1] < 0.5 * 2048:
-        session._take(next(blocks), None)  # to a look with 0.5 s of decay: sure (test above)
-    job = jobs[-1]
+    session, job = _at_a_look_of_half_a_second(albacore)
     assert look_is_sure(run_job(job, session.info, session.rig, session._gages).look)
     t = threading.Thread(target=session._run_one, args=(LookJob, job))
     t.start()
@@ -77,6 +70,20 @@ def test_a_look_is_shown_by_the_look_thread_without_waiting_for_a_block(albacore
 def test_a_look_done_while_a_block_is_taken_is_left_for_the_stream_thread(albacore):
     """While the stream's thread holds the session (taking a block), a done look does not wait
     for it: it is left in the results, which the stream's thread shows when it has the block."""
+    session, job = _at_a_look_of_half_a_second(albacore)
+    with session._lock:
+        t = threading.Thread(target=session._run_one, args=(LookJob, job))
+        t.start()
+        t.join(30)  # the look's CPU, ~0.05 s
+        assert not t.is_alive() and session.first_looks == 0 and not session._done.empty()
+    session._drain(None)
+    assert session.first_looks == 1
+
+
+def _at_a_look_of_half_a_second(albacore) -> tuple[Session, LookJob]:
+    """A session fed the simulator's blocks (one blow at 3 s, in water) up to the look it asks
+    for with 0.5 s of decay (sure: the test above), and that look, not run: the session's
+    looks are caught as they are asked for."""
     dev = SimDevice(albacore.with_medium("water"), duration_s=4.0, impacts=[3.0], seed=4)
     session = Session(dev, readout=False)
     jobs = []
@@ -84,10 +91,4 @@ def test_a_look_done_while_a_block_is_taken_is_left_for_the_stream_thread(albaco
     blocks = iter(dev)
     while session.trigger.ringing is None or not jobs or jobs[-1].x.shape[1] < 0.5 * 2048:
         session._take(next(blocks), None)
-    with session._lock:
-        t = threading.Thread(target=session._run_one, args=(LookJob, jobs[-1]))
-        t.start()
-        t.join(30)  # the look's CPU, ~0.05 s
-        assert not t.is_alive() and session.first_looks == 0 and not session._done.empty()
-    session._drain(None)
-    assert session.first_looks == 1
+    return session, jobs[-1]
