@@ -18,13 +18,13 @@ from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
-import scipy.signal
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullLocator
 
+from ...analysis import filters
 from ...analysis.impact import ImpactAnalysis
 from ...analysis.modal.peaks import bandpass_mode
 from ...analysis.model.rig import Rig
@@ -204,9 +204,8 @@ def mode_envelopes(comp: np.ndarray, fs_hz: float, f_hz: np.ndarray) -> np.ndarr
     out = np.empty(comp.shape)
     for k, f in enumerate(np.asarray(f_hz, dtype=float)):
         z = comp[:, k] * np.exp(-2j * np.pi * f * t)
-        sos = scipy.signal.butter(2, 0.2 * f, fs=fs_hz, output="sos")
-        out[:, k] = 2 * np.hypot(scipy.signal.sosfiltfilt(sos, z.real, axis=-1),
-                                 scipy.signal.sosfiltfilt(sos, z.imag, axis=-1))
+        sos = filters.butter(2, 0.2 * f, fs_hz, output="sos")
+        out[:, k] = 2 * np.hypot(filters.sosfiltfilt(sos, z.real), filters.sosfiltfilt(sos, z.imag))
     return out
 
 
@@ -351,6 +350,8 @@ def spectrum_figure(a: ImpactAnalysis, x: np.ndarray, fs_hz: float, rig: Rig) ->
     which = f"the {rig.surface.body('rudder')} gages" if rows and rig.structural else "all gages"
     rows = rows if rows and rig.structural else list(range(len(a.gage_numbers)))
     nper = min(x.shape[1], int(8 * fs_hz))
+    import scipy.signal  # only here: ~0.5 s of imports (scipy.stats with it) the decay plot needs not
+
     f, pxx = scipy.signal.welch(x[rows], fs_hz, nperseg=nper, axis=-1)
     p = pxx.mean(axis=0)
     fm = a.modes.frequency_hz
