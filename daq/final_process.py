@@ -36,6 +36,8 @@ import time
 from collections.abc import Callable
 from typing import BinaryIO
 
+import numpy as np
+
 from ..analysis.model.rig import Rig
 from ..drivers.block import StreamInfo
 from .analyzer import FinalDone, FinalJob, run_job
@@ -57,9 +59,29 @@ class WorkerUnavailable(RuntimeError):
 
 
 def _start(info: StreamInfo, rig: Rig, gages: tuple[int, ...]) -> None:
-    """The worker's initializer: keep what every job needs."""
+    """The worker's initializer: keep what every job needs, and warm up (:func:`_warm`)."""
     global _STATE
     _STATE = (info, rig, gages)
+    _warm(info, rig, gages)
+
+
+def _warm(info: StreamInfo, rig: Rig, gages: tuple[int, ...]) -> None:
+    """One small analysis (a 2 s, 20 Hz free decay with noise on every gage) before the first
+    job, so that what a fresh interpreter pays on its first analysis (scipy's lazily loaded
+    submodules, the LAPACK wrappers' first calls, the cached windows and filter designs) is paid
+    here, at the session's start, not by the first blow's final. The estimators keep no state
+    between calls (:mod:`ramdaq.analysis.modal.identify`, "Threads"), so no later number
+    changes; a warm-up that fails leaves the worker as it was."""
+    from ..analysis.impact import analyze_decay
+
+    fs = info.fs_hz
+    t = np.arange(int(2 * fs)) / fs
+    ring = np.exp(-0.06 * 20.0 * t) * np.sin(2 * np.pi * 20.0 * t)
+    x = ring[None, :] + 1e-3 * np.random.default_rng(0).standard_normal((len(gages), t.size))
+    try:
+        analyze_decay(x, fs, rig, gages)
+    except Exception:  # noqa: BLE001 -- only a warm-up: the jobs say what fails in them
+        pass
 
 
 def run_final(job: FinalJob) -> tuple[FinalDone, float]:
