@@ -66,18 +66,22 @@ def _start(info: StreamInfo, rig: Rig, gages: tuple[int, ...]) -> None:
 
 
 def _warm(info: StreamInfo, rig: Rig, gages: tuple[int, ...]) -> None:
-    """One small analysis (a 2 s, 20 Hz free decay with noise on every gage) before the first
-    job, so that what a fresh interpreter pays on its first analysis (scipy's lazily loaded
-    submodules, the LAPACK wrappers' first calls, the cached windows and filter designs) is paid
-    here, at the session's start, not by the first blow's final. The estimators keep no state
+    """One small analysis (a 2 s, 20 Hz free decay with noise on every gage, through the
+    report's chain) before the first job, so that what a fresh interpreter pays on its first
+    analysis (scipy's lazily loaded submodules, the LAPACK wrappers' first calls, the cached
+    windows and filter designs) is paid here, at the session's start, not by the first blow's
+    final. The estimators keep no state
     between calls (:mod:`ramdaq.analysis.modal.identify`, "Threads"), so no later number
     changes; a warm-up that fails leaves the worker as it was."""
     from ..analysis.impact import analyze_decay
+    from ..analysis.modal.signal import damped_sinusoids
 
-    fs = info.fs_hz
-    t = np.arange(int(2 * fs)) / fs
-    ring = np.exp(-0.06 * 20.0 * t) * np.sin(2 * np.pi * 20.0 * t)
-    x = ring[None, :] + 1e-3 * np.random.default_rng(0).standard_normal((len(gages), t.size))
+    fs, n = info.fs_hz, int(2 * info.fs_hz)
+    rng = np.random.default_rng(0)
+    # each gage its own amplitude: gages all alike are a pure translation, whose rotations the
+    # report's chain cannot resolve (it stops there, and would leave the chain unwarmed)
+    x = damped_sinusoids(fs, n, [20.0], [0.06], rng.uniform(0.5, 1.5, (len(gages), 1)))
+    x += 1e-3 * rng.standard_normal(x.shape)
     try:
         analyze_decay(x, fs, rig, gages)
     except Exception:  # noqa: BLE001 -- only a warm-up: the jobs say what fails in them
