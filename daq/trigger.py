@@ -234,10 +234,11 @@ class TriggerSettings:
         (:func:`_samples_needed`; at 50 Hz: ``sta_s`` and ``innovation_sta_s`` 0.1 s,
         ``ar_guard_s`` 0.02 s, ``ar_fit_s`` 0.6 s). Where the defaults resolve (from 1.6 kHz
         up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it, with
-        ``n_voters`` the stream's gages: a ``k_of_n`` not given votes ``k = min(3, n_voters)``,
-        so a record of one or two gages triggers on them."""
-        if "k_of_n" not in overrides and n_voters is not None and 1 <= n_voters < cls.k_of_n[0]:
-            overrides["k_of_n"] = (n_voters, None)
+        ``n_voters`` the stream's gages: a ``k_of_n`` not given votes ``k = 3`` of four gages
+        or more and all but one of two or three (one of one), so that one gage that does not
+        respond (dead, unplugged, on a node of the blow's modes) never hides every blow."""
+        if "k_of_n" not in overrides and n_voters is not None and 1 <= n_voters <= cls.k_of_n[0]:
+            overrides["k_of_n"] = (max(1, n_voters - 1), None)
         s = cls(**overrides)
         longer = {name: need / fs_hz for name, (need, _) in _samples_needed(s).items()
                   if name not in overrides and round(getattr(s, name) * fs_hz) < need}

@@ -104,3 +104,21 @@ def test_mode_hz_a_few_percent_off_takes_the_mode_on_every_hit(tmp_path, capsys)
     hits = a["impacts"]
     assert hits and all(h["accepted"] for h in hits), [h.get("reason") for h in hits]
     assert all(abs(h["analysis"]["f_hz"] - 13.003) < 0.01 for h in hits)
+
+
+def test_a_record_with_no_blow_says_so(tmp_path, capsys):
+    """A record from another system in which the trigger never fires (3 channels of noise
+    alone, imported from CSV) says "no blow found" and why, not only "0 of 0 hits"."""
+    import numpy as np
+
+    t = np.arange(4096) / 2048
+    x = 1e-3 * np.random.default_rng(0).standard_normal((3, t.size))
+    csv = tmp_path / "quiet.csv"
+    np.savetxt(csv, np.column_stack([t, *x]), delimiter=",", comments="",
+               header="time_s,a [m/s^2],b [m/s^2],c [m/s^2]")
+    assert main(["import", str(csv), "--out", str(tmp_path / "quiet.mcap")]) == 0
+    capsys.readouterr()
+    assert main(["analyze", str(tmp_path / "quiet.mcap"), "--no-plots"]) == 0
+    out = capsys.readouterr().out
+    assert "no blow found: the trigger never fired" in out
+    assert "0 of 0 hits accepted" in out

@@ -301,6 +301,10 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
         lines.append(f"{arming} blow(s) came before the trigger's long-term average was full: "
                      "not analysable live or in a replay (the trial's own trigger); "
                      "`ramdaq analyze` arms on the whole record and analyses them")
+    if not s["hits"]:
+        lines.append("no blow found: the trigger never fired (no load cell crossed its level, and "
+                     "no gages' short-term power rose above their background on enough gages at "
+                     "once; a gage that never rings, dead or on a node, is one of them)")
     skipped = sum(r == "not requested" for r in s.get("rejected", {}).values())
     lines += [f"\n{s['accepted']} of {s['hits'] - skipped} {'requested ' if skipped else ''}hits "
               f"accepted{f' ({skipped} more not analysed)' if skipped else ''}. Mean over "
