@@ -88,6 +88,17 @@ def test_time_without_a_unit_asks_for_it(decay, tmp_path):
         _read(p2, time_unit="s")
 
 
+def test_a_file_without_a_time_column_is_told_so(tmp_path):
+    """Gage columns only, each with its unit (the new user's notime.csv): the error says there
+    is no time column and to give the rate, not that the "time column 'Accel 1' is in 'g'"."""
+    p = tmp_path / "notime.csv"
+    x = 1e-3 * np.random.default_rng(1).standard_normal((400, 2))
+    np.savetxt(p, x, delimiter=",", comments="", header="Accel 1 [g],Accel 2 [g]")
+    with pytest.raises(ImportFormatError, match=r"notime\.csv: no time column \(the first column, "
+                       r"'Accel 1', is in 'g', not s, ms or us\): give the rate"):
+        _read(p)
+
+
 def test_cli_names_the_rate_and_takes_fs(decay, tmp_path, capsys):
     x, _ = decay
     p = _csv(tmp_path / "slow.csv", np.arange(x.shape[1]) / 1000.0, x[:2], "time")
@@ -286,9 +297,10 @@ def test_part_of_the_layout_runs_the_steps_its_gages_allow(decay, tmp_path, caps
             "needs gage(s) 5, 13, 14, which the record does not have"}
 
 
-@pytest.mark.parametrize(("n_gages", "k"), [(1, 1), (2, 2), (3, 3), (16, 3)])
+@pytest.mark.parametrize(("n_gages", "k"), [(1, 1), (2, 1), (3, 2), (4, 3), (16, 3)])
 def test_trigger_votes_k_of_at_most_the_gages_it_has(n_gages, k):
-    """k of n follows the channel count (was: ``k_of_n k (3) must lie in 1..2``); a k given is
+    """k of n follows the channel count (was: ``k_of_n k (3) must lie in 1..2``): 3 of four or
+    more, all but one of two or three (one dead gage must not hide the blows); a k given is
     kept, and refused when the stream cannot meet it."""
     from ramdaq.daq.trigger import Trigger, TriggerSettings
     from ramdaq.drivers.block import StreamInfo

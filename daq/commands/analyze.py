@@ -215,7 +215,8 @@ def format_summary(report: dict, units: str = "si") -> str:
         lines.append(f"\nvirtual inertias: {vi['not_computed']}")
         return "\n".join(lines)
     lines.append(surface.label(
-        f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
+        f"\nthe rig's added mass (from its geometry, not measured): virtual mass, Eq 19: "
+        f"{conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
         f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
         f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g} {iu}"))
     if "m_vir_eq18_kg" in vi:

@@ -277,6 +277,10 @@ def _time_unit(column: str, stated: str | None, given: str | None, name: str) ->
     if stated is not None:
         unit = stated.strip().lower()
         if unit not in _TIME_UNITS:
+            if not _time_like(column, None):  # a data column first: the file has no time column
+                raise ImportFormatError(
+                    f"{name}: no time column (the first column, {column!r}, is in {stated!r}, "
+                    f"not s, ms or us): give the rate, {option('fs_hz=', '--fs')} HZ")
             raise ImportFormatError(f"{name}: time column {column!r} is in {stated!r}; expected "
                                     f"s, ms or us")
         if given is not None and _TIME_UNITS[given] != _TIME_UNITS[unit]:
