@@ -634,6 +634,7 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".uff")
+    _check_outputs([out], args.overwrite)  # before the analysis, not after it
     rig, hits = run_analysis(src, progress=lambda m: print(m, flush=True))
     r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
     print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
@@ -963,6 +964,7 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("file", help="a recording (MCAP), analysed as by ramdaq analyze")
     x.add_argument("--out", help="output file (default FILE.uff)")
     x.add_argument("--binary", action="store_true", help="binary 58b decay records")
+    x.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     x.set_defaults(func=cmd_export_uff)
 
     xc = sub.add_parser("export-csv", help="every recorded sample as CSV (what ramdaq import reads back)")
