@@ -146,9 +146,24 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                     for h in hits],
         "summary": surface.relabel(summary),
         "virtual_inertias": vi,
+        "rig_agreement": _rig_agreement(rig, f_here),
         # driving-point H1 where the rig has a force channel; rows as recorded
         "frf": frf_section(rig, hits, recorded_channels(path)) if rig.forces else None,
     })
+
+
+def _rig_agreement(rig: Rig, f_hz: float | None) -> dict | None:
+    """The record's mean predominant frequency (Hz) against the rig model's modes
+    (:func:`~ramdaq.analysis.model.rig_modes.rig_agreement`), None for a channels-only rig or
+    no accepted hit."""
+    from ...analysis.model.rig_modes import rig_agreement
+
+    if not rig.structural or f_hz is None or not np.isfinite(f_hz) or f_hz <= 0:
+        return None
+    a = rig_agreement(rig, f_hz)
+    return {"medium": a.medium, "f_record_hz": a.f_record_hz, "nearest_model_hz": a.nearest_hz,
+            "predominant_model_hz": a.predominant_hz, "ratio": a.ratio, "agrees": a.agrees,
+            "warning": a.warning()}
 
 
 def _in_words(surface: Surface, analysis: dict) -> dict:
@@ -205,6 +220,9 @@ def format_summary(report: dict, units: str = "si") -> str:
     lines += motions_not_used(report["impacts"], report["summary"])
     for s in report.get("skipped", []):
         lines.append(f"skipped: {s['step']}: {s['reason']}")
+    agree = report.get("rig_agreement") or {}
+    if agree.get("warning"):
+        lines.append(f"WARNING {agree['warning']}")
     vi = report["virtual_inertias"]
     if vi is None:
         return "\n".join(lines)
