@@ -120,3 +120,20 @@ def test_a_recording_as_the_device_refuses_the_simulators_options(extra, named, 
     assert r.returncode == 1 and not out.exists()
     line, = r.stderr.strip().splitlines()
     assert line.startswith(f"ramdaq trial: {named}: ") and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize(("extra", "says"), [
+    (("--impacts", "12", "--duration", "5"), "--impacts 12 s: outside the 5 s trial"),
+    (("--impacts", "1,4", "--impact-every", "2"), "--impacts and --impact-every: give one"),
+    (("--fs", "100000", "--duration", "1"), "--fs 100000 Hz: above the 51200 Hz"),
+])
+def test_simulator_options_that_cannot_be_met_are_refused(extra, says, tmp_path):
+    """The new user's: a blow after the trial's end gave 0 hits with no word; --impacts with
+    --impact-every merged both (a blow 0.5 s after another reads as a double hit); a rate the
+    trigger cannot run at was taken. Each is one line, before anything is written."""
+    out = tmp_path / "x.mcap"
+    r = _ramdaq("record", "--rig", str(RIGS / "albacore.toml"), *extra, "--fast", "--quiet",
+                "--out", str(out), cwd=tmp_path)
+    assert r.returncode == 1 and not out.exists(), r.stderr
+    line, = r.stderr.strip().splitlines()
+    assert line.startswith("ramdaq record: " + says), line

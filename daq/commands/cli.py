@@ -148,6 +148,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 SIM_DURATION_S = 10.0
 """A simulated trial's length without ``--duration``, s."""
+MAX_SIM_FS_HZ = 51_200.0
+"""Highest simulated rate, Hz: the trigger's (:mod:`ramdaq.daq.trigger`, 50 Hz to 51.2 kHz)."""
 
 
 def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
@@ -158,6 +160,15 @@ def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
     if args.medium:
         rig = rig.with_medium(args.medium)
     duration = SIM_DURATION_S if args.duration is None else args.duration
+    if args.impacts and args.impact_every:
+        raise ValueError("--impacts and --impact-every: give one (the blows at the times listed, "
+                         "or one every so many seconds), not both")
+    late = [t for t in args.impacts or [] if not 0 <= t < duration]
+    if late:
+        raise ValueError(f"--impacts {', '.join(f'{t:g}' for t in late)} s: outside the "
+                         f"{duration:g} s trial (--duration)")
+    if args.fs is not None and args.fs > MAX_SIM_FS_HZ:
+        raise ValueError(f"--fs {args.fs:g} Hz: above the {MAX_SIM_FS_HZ:g} Hz the trigger runs at")
     impacts = list(args.impacts or [])
     if args.impact_every:
         t = args.impact_every / 2
