@@ -237,7 +237,7 @@ def test_import_without_a_rig_makes_one_and_analyze_reports_each_gage(forced, tm
     p = write_csv(tmp_path / "hammer.csv", np.arange(x.shape[1]) / FS, np.vstack([x[3], x[16]]),
                   ["acc", "Load"], units=["", "N"])
     rc, out, err = _run(["import", str(p), "--fs", "2048"], capsys)
-    assert rc == 1 and "'acc' states no unit; give --units" in err
+    assert rc == 1 and "hammer.csv: channel 'acc' states no unit; give --units" in err
     rc, out, err = _run(["import", str(p), "--fs", "2048", "--units", "m/s^2", "--force-channel",
                          "Load"], capsys)
     assert rc == 0, err

@@ -609,10 +609,13 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                             fs_hz=args.fs)
     force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
                                     or args.force_channel)
-    made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
-                       units=args.units, force_channel=force,
-                       medium=args.medium or found.medium or "air", file_units=found.units,
-                       anti_alias=found.anti_alias)
+    try:
+        made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
+                           units=args.units, force_channel=force,
+                           medium=args.medium or found.medium or "air", file_units=found.units,
+                           anti_alias=found.anti_alias)
+    except ValueError as err:  # a channel it cannot make a gage of: say in which file
+        raise ValueError(f"{src}: {err}") from None
     if found.anti_alias is not None:
         print(f"anti-alias filter order {found.anti_alias[0]} at {found.anti_alias[1]:g} Hz, as the "
               f"file states: written into {rig_out.name}, so onsets have its delay removed")
