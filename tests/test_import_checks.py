@@ -333,3 +333,20 @@ def test_channels_only_rig_refused_where_a_structure_is_needed(tmp_path):
     with pytest.raises(RigError, match=r"comparing a trial with the rig's model \(ramdaq gap, ramdaq "
                        r"rig fit\) needs the structure; pass --rig with a rig that describes it$"):
         _gages_present("t.mcap", None, rig)
+
+
+def test_a_file_cut_off_mid_line_leaves_its_last_row_out_and_says_so(decay, tmp_path, capsys):
+    """The new user's cut.csv (`head -c` of a good file): its last value a cut number
+    (-0.152 of -0.1520...) went in as data without a word. The last row, without a line end,
+    is left out and the import warns naming its line; the rows before are imported as read."""
+    x, _ = decay
+    p = _csv(tmp_path / "whole.csv", np.arange(400) / FS, x[:2, :400], "time_s")
+    text = p.read_text()
+    cut = tmp_path / "cut.csv"
+    cut.write_text(text[:-4])   # the line end and the last 3 characters of row 400's last value
+    info, blocks = _read(cut)
+    assert sum(b.n_samples for b in blocks) == 399
+    rc, out, err = _run(["import", str(cut), "--rig", str(RIG), "--out", str(tmp_path / "c.mcap")],
+                        capsys)
+    assert rc == 0
+    assert "warning: line 401, the last, has no line end (the file cut off mid-line?)" in out + err

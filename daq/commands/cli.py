@@ -586,6 +586,9 @@ def _read_notes(imp: dict, rig_given: bool = True) -> list[str]:
         res, fs = imp["time_resolution_s"], imp.get("fs_hz")
         out.append(f"the time column is printed to {res:g} s ({res * fs:.2f} sample at {fs:g} "
                    f"Hz): each row is placed on the {fs:g} Hz grid within that rounding")
+    if imp.get("cut_last_line"):
+        out.append(f"warning: line {imp['cut_last_line']}, the last, has no line end (the file "
+                   f"cut off mid-line?): left out, as its last value may be a cut number")
     if imp.get("decimal") == ",":
         out.append(f"read decimal commas as decimal points (the delimiter is "
                    f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")

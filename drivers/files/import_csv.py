@@ -175,6 +175,11 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
         text = text[:lines.pos] + text[lines.pos:].replace(",", ".")
         notes["decimal"] = ","
     table, line_of_row = _parse_rows(text, lines.pos, lines.number, delim, names, name)
+    if table.shape[0] > 1 and not text.endswith(("\n", "\r")):
+        # a file cut off mid-line: its last row's last value may be a cut number (-0.152 of
+        # -0.15203...), read as data; the row is left out, and the import says so
+        notes["cut_last_line"] = int(line_of_row[-1])
+        table, line_of_row = table[:-1], line_of_row[:-1]
     if table.shape[0] == 0:
         raise ImportFormatError(f"{name}: no data rows after the header")
     where = lambda r: f"line {line_of_row[r]}"  # noqa: E731
