@@ -91,6 +91,17 @@ def _parse_impacts(text: str) -> list[float]:
             f"--impacts {text!r}: expected seconds separated by commas, e.g. 1,4.5,8") from None
 
 
+def _plot_spec(text: str) -> str:
+    """An argparse type: ``--plots`` kinds that exist (a usage error, exit 2, names the known)."""
+    from .analyze import plot_kinds
+
+    try:
+        plot_kinds(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix(f"--plots {text!r}: ")) from None
+    return text
+
+
 def _positive(text: str) -> float:
     """An argparse type: a finite number above zero (seconds, Hz)."""
     try:
@@ -933,7 +944,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--units", choices=("si", "report"), default="si",
                    help="terminal units: SI, or the report's ft / long ton / s")
     a.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    a.add_argument("--plots", metavar="KINDS",
+    a.add_argument("--plots", metavar="KINDS", type=_plot_spec,
                    help="plot kinds per hit, comma-separated, or 'all': decay, spectrum, "
                         "modeshape, stock (default: decay)")
     a.set_defaults(func=cmd_analyze)
