@@ -684,15 +684,30 @@ def _damping(rig: Rig, f: float, delta: float, gages: dict[int, Decrement],
     r = rig.rudder
     m_y = r.mass_kg + add["m_vir"]
     I_z = r.Iz_kg_m2 + add["Iz_vir"]
+    d_v, d_gamma = _motion_delta(motions, "v_2_6", notes), _motion_delta(motions, "gamma", notes)
     return DampingConstants(
         m_y_kg=m_y, I_z_kg_m2=I_z, I_xz_kg_m2=r.Ixz_kg_m2,
         delta_modal=_rudder_mean([gages[n].delta for n in gages if rig.gage(n).body == "rudder"],
                                  notes),
-        C_N_s_per_m=float(C_translational(m_y, f, motions["v_2_6"].delta))
-        if "v_2_6" in motions else np.nan,
-        c_N_m_s_per_rad=float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f, motions["gamma"].delta))
-        if "gamma" in motions and np.isfinite(ratio) else np.nan,
+        C_N_s_per_m=float(C_translational(m_y, f, d_v)) if np.isfinite(d_v) else np.nan,
+        c_N_m_s_per_rad=float(c_rotational(I_z, r.Ixz_kg_m2, ratio, f, d_gamma))
+        if np.isfinite(d_gamma) and np.isfinite(ratio) else np.nan,
         full=_full_damping(amp, f, delta, rig, m_y, I_z, curves, notes, amp_cov) if full else None)
+
+
+def _motion_delta(motions: dict[str, Decrement], name: str, notes: list[str]) -> float:
+    """The decrement of the rudder motion ``name`` that Eq 16 / 17 take, NaN when the motion was
+    not computed (its gages unusable: already noted) or its decay gave no decrement (a motion
+    the blow did not excite above the noise, e.g. no rotation when every rudder gage moves
+    alike), with a note naming which damping constant that leaves undetermined."""
+    if name not in motions:
+        return float("nan")
+    d = float(motions[name].delta)
+    if not np.isfinite(d):
+        eq = "Eq 17, c" if name == "gamma" else "Eq 16, C"
+        notes.append(f"{eq}: not computed, the {name} motion's decay gave no decrement "
+                     "(not excited above the noise)")
+    return d
 
 
 def _rudder_mean(deltas: list[float], notes: list[str]) -> float:

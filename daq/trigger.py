@@ -25,18 +25,18 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
   (:func:`ramdaq.analysis.onset.hinge_onset`) to a fraction of a sample, less the front end's delay
   (``delay_s``; by default the rig's anti-alias Butterworth, read from ``info.rig_toml``; a
   rig that does not say it usably is refused when the trigger is built, never read as 0 s).
-* **Second contact.** 15-45 ms after the onset an AR prediction-error filter is fitted to the
-  ringing (all gages share its poles, so it reaches the noise floor); the innovation of a new
-  blow then stands far out of the ringing. A new sharp onset within ``double_hit_s`` flags the
-  event ``double_hit`` (its time: AIC on the innovation, which the AR filter has also freed of
-  the anti-alias delay); later, while still ringing, it closes the record
+* **Second contact.** 15-45 ms after the onset an AR prediction-error filter is fitted, forward
+  and backward, to the ringing (all gages share its poles, so it reaches the noise floor); the
+  innovation of a new blow then stands far out of the ringing. A new sharp onset within
+  ``double_hit_s`` flags the event ``double_hit`` (its time: AIC on the innovation, which the AR
+  filter has also freed of the anti-alias delay); later, while still ringing, it closes the record
   (``end_reason="next_impact"``) and opens a new event timed the same way. The innovation is
-  compared with the fit's variance (corrected for the fit's few equations) or, if higher, its
-  own mean over ``envelope_s`` (the filter whitens a long ringing less well as its modes decay);
-  fewer than three voting gages need the ratio with three gages' chance (11.6 for one gage at
-  2048 Hz, 6.7 for two), so one gage does not take its ringing for blows. With a load cell, a
-  second crossing of ``level`` after ``|F|`` fell below ``hysteresis * level`` is the second
-  contact. Contacts closer than ``ar_guard_s + ar_fit_s`` (45 ms) to the first are not seen.
+  compared with the fit's variance (corrected for the fit's few equations) or, if higher, its own
+  mean over ``envelope_s`` (the filter whitens a long ringing less well as its modes decay); fewer
+  than three voting gages need the ratio with three gages' chance (11.6 for one gage at 2048 Hz,
+  6.7 for two), so one gage does not take its ringing for blows. With a load cell, a second
+  crossing of ``level`` after ``|F|`` fell below ``hysteresis * level`` is the second contact.
+  Contacts closer than ``ar_guard_s + ar_fit_s`` (45 ms) to the first are not seen.
 * **Decay and re-arm.** The envelope (recursive mean of x**2 over ``envelope_s``) of every
   responding gage must stay below ``rearm_ratio`` times its pre-event level for
   ``rearm_hold_s``. The record runs from ``pre_trigger_s`` before the onset to the decay's end,
@@ -118,7 +118,7 @@ _AIC_MARGIN = 4                              # samples the AIC keeps clear of a 
 _STAT_N = 5                                  # fewest samples of an average set against a threshold
 _REF_STA = 20                                # innovation reference: >= 20 innovation STAs
 _DESIGN_VOTES = 3                            # gages the second-contact threshold is set for
-_AR_MODES_TAPS = 10                          # fewest AR taps by default: five ringing modes
+_AR_MODES_TAPS = 10                          # fewest AR taps by default: 2-3 modes (fwd-bwd fit)
 _MAD_SIGMA = 1.4826                          # rms of Gaussian noise per median absolute deviation
 _START_LTAS = 4                              # offline background: the record's first 4 LTAs
 _FORCE_NOISE_LEVELS = 20.0                   # an offline force level: at least 20 noise rms ...
@@ -234,10 +234,11 @@ class TriggerSettings:
         (:func:`_samples_needed`; at 50 Hz: ``sta_s`` and ``innovation_sta_s`` 0.1 s,
         ``ar_guard_s`` 0.02 s, ``ar_fit_s`` 0.6 s). Where the defaults resolve (from 1.6 kHz
         up) this is exactly ``TriggerSettings(**overrides)``. ``Trigger(info)`` uses it, with
-        ``n_voters`` the stream's gages: a ``k_of_n`` not given votes ``k = min(3, n_voters)``,
-        so a record of one or two gages triggers on them."""
-        if "k_of_n" not in overrides and n_voters is not None and 1 <= n_voters < cls.k_of_n[0]:
-            overrides["k_of_n"] = (n_voters, None)
+        ``n_voters`` the stream's gages: a ``k_of_n`` not given votes ``k = 3`` of four gages
+        or more and all but one of two or three (one of one), so that one gage that does not
+        respond (dead, unplugged, on a node of the blow's modes) never hides every blow."""
+        if "k_of_n" not in overrides and n_voters is not None and 1 <= n_voters <= cls.k_of_n[0]:
+            overrides["k_of_n"] = (max(1, n_voters - 1), None)
         s = cls(**overrides)
         longer = {name: need / fs_hz for name, (need, _) in _samples_needed(s).items()
                   if name not in overrides and round(getattr(s, name) * fs_hz) < need}
@@ -251,8 +252,9 @@ def _samples_needed(s: TriggerSettings) -> dict[str, tuple[int, str]]:
     noise's power over one sample exceeds 4 times its mean on 3 of 4 gages about once in 2 700
     samples (chi-square, one degree of freedom: P = 0.046 per gage), a recursive mean over five
     samples about once in 10^10 (P = 1.8e-4 per gage, simulated). The AR
-    fit needs three equations per tap and ten taps (five ringing modes) for the innovation to
-    be noise where the ringing has more modes than one (with an AR(2) fitted to two modes,
+    fit needs three equations per tap and ten taps (two or three ringing modes, each with its
+    poles' backward reflections) for the innovation to be noise where the ringing has more
+    modes than one (with an AR(2) fitted to two modes,
     a second contact is found 0.1 s after every blow). These are the counts the design rate,
     2048 Hz, has (20, 6, 61 samples)."""
     needs = {"sta_s": (_STAT_N, "an STA compared with on"),

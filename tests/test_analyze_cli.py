@@ -135,3 +135,16 @@ def test_hits_not_requested_are_not_analysed_nor_counted(air_report):
     assert "REJECTED" not in text
     assert text.count("not analysed (not requested)") == 2
     assert "1 of 1 requested hits accepted (2 more not analysed)" in text
+
+
+def test_an_unknown_plot_kind_is_a_usage_error(capsys):
+    """`--plots bogus` exited 1 after reading the recording; the README's usage errors exit 2,
+    before any work, naming the known kinds."""
+    from pathlib import Path
+
+    rec = Path(__file__).resolve().parents[1] / "recordings" / "albacore-air.mcap"
+    with pytest.raises(SystemExit) as ex:
+        main(["analyze", str(rec), "--plots", "decay,bogus"])
+    assert ex.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --plots: unknown kind(s) ['bogus']; known: decay, spectrum" in err

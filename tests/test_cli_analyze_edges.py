@@ -104,3 +104,45 @@ def test_mode_hz_a_few_percent_off_takes_the_mode_on_every_hit(tmp_path, capsys)
     hits = a["impacts"]
     assert hits and all(h["accepted"] for h in hits), [h.get("reason") for h in hits]
     assert all(abs(h["analysis"]["f_hz"] - 13.003) < 0.01 for h in hits)
+
+
+def test_a_record_with_no_blow_says_so(tmp_path, capsys):
+    """A record from another system in which the trigger never fires (3 channels of noise
+    alone, imported from CSV) says "no blow found" and why, not only "0 of 0 hits"."""
+    import numpy as np
+
+    t = np.arange(4096) / 2048
+    x = 1e-3 * np.random.default_rng(0).standard_normal((3, t.size))
+    csv = tmp_path / "quiet.csv"
+    np.savetxt(csv, np.column_stack([t, *x]), delimiter=",", comments="",
+               header="time_s,a [m/s^2],b [m/s^2],c [m/s^2]")
+    assert main(["import", str(csv), "--out", str(tmp_path / "quiet.mcap")]) == 0
+    capsys.readouterr()
+    assert main(["analyze", str(tmp_path / "quiet.mcap"), "--no-plots"]) == 0
+    out = capsys.readouterr().out
+    assert "no blow found: the trigger never fired" in out
+    assert "0 of 0 hits accepted" in out
+
+
+def test_a_rig_that_does_not_describe_the_record_is_said_so(albacore, sampson):
+    """ALBACORE's 13.0 Hz in water against SAMPSON's water modes (nearest 7.6 Hz: 1.71x, past
+    the 1.29x that +-25 % in masses and stiffnesses allow) warns; against ALBACORE's own rig,
+    or one 20 % stiffer (sqrt(1.2) = 1.10x), it does not."""
+    from ramdaq.analysis.model.rig_modes import RIG_SPREAD_RATIO, rig_agreement
+
+    assert RIG_SPREAD_RATIO == pytest.approx((1.25 / 0.75) ** 0.5, abs=0.02)
+    wrong = rig_agreement(sampson.with_medium("water"), 13.0)
+    assert not wrong.agrees and wrong.ratio == pytest.approx(13.0 / 7.598, rel=0.01)
+    assert wrong.warning().startswith("the rig does not describe this record: its predominant "
+                                      "mode, 13 Hz, is 1.71x")
+    own = rig_agreement(albacore.with_medium("water"), 13.0)
+    assert own.agrees and own.warning() is None
+    assert rig_agreement(albacore.with_medium("water"), 13.0 * 1.2 ** 0.5).agrees
+
+
+def test_the_report_carries_the_rigs_agreement(water_run):
+    """The shipped ALBACORE-in-water recording against its own rig: agrees, no warning line."""
+    text, rep = water_run
+    a = rep["rig_agreement"]
+    assert a["agrees"] and a["ratio"] < 1.001 and a["warning"] is None
+    assert "WARNING the rig does not describe" not in text

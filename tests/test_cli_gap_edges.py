@@ -168,3 +168,26 @@ def test_what_rings_above_the_band_is_in_the_summary_and_in_gap_json(heavy_none)
     assert f"the {band['lowpass_hz']:.0f} Hz band" in printed
     for r in lines[:3]:
         assert f"{r['frequency_hz']:.0f} Hz on gage" in printed
+
+
+def test_a_rig_of_another_rate_is_refused_in_one_line(tmp_path, capsys):
+    """The new user's handA: 8 gages at 1000 Hz (imported from CSV) held against ALBACORE's rig,
+    a 2048 Hz rig whose anti-alias corner (800 Hz) lies above this record's Nyquist. ramdaq
+    import refuses that rig for that rate; gap ran 26 s and answered "unexplained". Now one
+    line, before any reading, as import says it."""
+    import numpy as np
+
+    fs = 1000.0
+    t = np.arange(int(4 * fs)) / fs
+    x = 1e-3 * np.random.default_rng(2).standard_normal((8, t.size))
+    csv = tmp_path / "hand.csv"
+    np.savetxt(csv, np.column_stack([t, *x]), delimiter=",", comments="",
+               header="time_s," + ",".join(f"g{k:02d} [m/s^2]" for k in range(1, 9)))
+    assert main(["import", str(csv), "--out", str(tmp_path / "hand.mcap")]) == 0
+    capsys.readouterr()
+    assert main(["gap", str(tmp_path / "hand.mcap"), "--rig", str(ALBACORE),
+                 "--out", str(tmp_path / "g")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "at its 1000 Hz the anti-alias corner of rig 'albacore-like' (800 Hz" in err
+    assert "the rig cannot describe this record" in err

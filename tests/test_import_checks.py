@@ -88,6 +88,17 @@ def test_time_without_a_unit_asks_for_it(decay, tmp_path):
         _read(p2, time_unit="s")
 
 
+def test_a_file_without_a_time_column_is_told_so(tmp_path):
+    """Gage columns only, each with its unit (the new user's notime.csv): the error says there
+    is no time column and to give the rate, not that the "time column 'Accel 1' is in 'g'"."""
+    p = tmp_path / "notime.csv"
+    x = 1e-3 * np.random.default_rng(1).standard_normal((400, 2))
+    np.savetxt(p, x, delimiter=",", comments="", header="Accel 1 [g],Accel 2 [g]")
+    with pytest.raises(ImportFormatError, match=r"notime\.csv: no time column \(the first column, "
+                       r"'Accel 1', is in 'g', not s, ms or us\): give the rate"):
+        _read(p)
+
+
 def test_cli_names_the_rate_and_takes_fs(decay, tmp_path, capsys):
     x, _ = decay
     p = _csv(tmp_path / "slow.csv", np.arange(x.shape[1]) / 1000.0, x[:2], "time")
@@ -226,7 +237,7 @@ def test_import_without_a_rig_makes_one_and_analyze_reports_each_gage(forced, tm
     p = write_csv(tmp_path / "hammer.csv", np.arange(x.shape[1]) / FS, np.vstack([x[3], x[16]]),
                   ["acc", "Load"], units=["", "N"])
     rc, out, err = _run(["import", str(p), "--fs", "2048"], capsys)
-    assert rc == 1 and "'acc' states no unit; give --units" in err
+    assert rc == 1 and "hammer.csv: channel 'acc' states no unit; give --units" in err
     rc, out, err = _run(["import", str(p), "--fs", "2048", "--units", "m/s^2", "--force-channel",
                          "Load"], capsys)
     assert rc == 0, err
@@ -286,9 +297,10 @@ def test_part_of_the_layout_runs_the_steps_its_gages_allow(decay, tmp_path, caps
             "needs gage(s) 5, 13, 14, which the record does not have"}
 
 
-@pytest.mark.parametrize(("n_gages", "k"), [(1, 1), (2, 2), (3, 3), (16, 3)])
+@pytest.mark.parametrize(("n_gages", "k"), [(1, 1), (2, 1), (3, 2), (4, 3), (16, 3)])
 def test_trigger_votes_k_of_at_most_the_gages_it_has(n_gages, k):
-    """k of n follows the channel count (was: ``k_of_n k (3) must lie in 1..2``); a k given is
+    """k of n follows the channel count (was: ``k_of_n k (3) must lie in 1..2``): 3 of four or
+    more, all but one of two or three (one dead gage must not hide the blows); a k given is
     kept, and refused when the stream cannot meet it."""
     from ramdaq.daq.trigger import Trigger, TriggerSettings
     from ramdaq.drivers.block import StreamInfo
@@ -321,3 +333,20 @@ def test_channels_only_rig_refused_where_a_structure_is_needed(tmp_path):
     with pytest.raises(RigError, match=r"comparing a trial with the rig's model \(ramdaq gap, ramdaq "
                        r"rig fit\) needs the structure; pass --rig with a rig that describes it$"):
         _gages_present("t.mcap", None, rig)
+
+
+def test_a_file_cut_off_mid_line_leaves_its_last_row_out_and_says_so(decay, tmp_path, capsys):
+    """The new user's cut.csv (`head -c` of a good file): its last value a cut number
+    (-0.152 of -0.1520...) went in as data without a word. The last row, without a line end,
+    is left out and the import warns naming its line; the rows before are imported as read."""
+    x, _ = decay
+    p = _csv(tmp_path / "whole.csv", np.arange(400) / FS, x[:2, :400], "time_s")
+    text = p.read_text()
+    cut = tmp_path / "cut.csv"
+    cut.write_text(text[:-4])   # the line end and the last 3 characters of row 400's last value
+    info, blocks = _read(cut)
+    assert sum(b.n_samples for b in blocks) == 399
+    rc, out, err = _run(["import", str(cut), "--rig", str(RIG), "--out", str(tmp_path / "c.mcap")],
+                        capsys)
+    assert rc == 0
+    assert "warning: line 401, the last, has no line end (the file cut off mid-line?)" in out + err

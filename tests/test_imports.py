@@ -433,6 +433,11 @@ def test_cli_export_uff(imported_trial, tmp_path, capsys):
     assert "16 gage nodes" in capsys.readouterr().out
     types = [int(t) for t in pyuff.UFF(str(out)).get_set_types()]
     assert types[:2] == [164, 15] and types.count(58) == 16 and 55 in types
+    # an existing file is refused in one line, before the analysis, as every writer does
+    assert main(["export-uff", str(mcap), "--out", str(out)]) == 1
+    err = capsys.readouterr()
+    assert "trial.uff exists; --overwrite replaces it" in err.err and "wrote" not in err.out
+    assert main(["export-uff", str(mcap), "--out", str(out), "--overwrite"]) == 0
 
 
 def test_import_devices_are_registered(sim, tmp_path):

@@ -120,3 +120,38 @@ def test_a_recording_as_the_device_refuses_the_simulators_options(extra, named, 
     assert r.returncode == 1 and not out.exists()
     line, = r.stderr.strip().splitlines()
     assert line.startswith(f"ramdaq trial: {named}: ") and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize(("extra", "says"), [
+    (("--impacts", "12", "--duration", "5"), "--impacts 12 s: outside the 5 s trial"),
+    (("--impacts", "1,4", "--impact-every", "2"), "--impacts and --impact-every: give one"),
+    (("--fs", "100000", "--duration", "1"), "--fs 100000 Hz: above the 51200 Hz"),
+])
+def test_simulator_options_that_cannot_be_met_are_refused(extra, says, tmp_path):
+    """The new user's: a blow after the trial's end gave 0 hits with no word; --impacts with
+    --impact-every merged both (a blow 0.5 s after another reads as a double hit); a rate the
+    trigger cannot run at was taken. Each is one line, before anything is written."""
+    out = tmp_path / "x.mcap"
+    r = _ramdaq("record", "--rig", str(RIGS / "albacore.toml"), *extra, "--fast", "--quiet",
+                "--out", str(out), cwd=tmp_path)
+    assert r.returncode == 1 and not out.exists(), r.stderr
+    line, = r.stderr.strip().splitlines()
+    assert line.startswith("ramdaq record: " + says), line
+
+
+def test_cli_rig_warns_of_a_rudder_a_thousand_times_too_light(tmp_path):
+    """The new user's typo, the rudder's 2870.2 kg as 2.8702: `ramdaq rig` printed 8955 kg of
+    added mass on it and "Eq 18 is -99.7 % off" without a warning (the check looked only at
+    Eq 18 too large). Both lines now warn; the shipped rigs (ratio 3.1 and 3.3) do not."""
+    text = (RIGS / "albacore.toml").read_text()
+    light = re.sub(r"(?m)^mass_kg = 2870.2$", "mass_kg = 2.8702", text, count=1)
+    assert light != text
+    (tmp_path / "light.toml").write_text(light)
+    r = _ramdaq("rig", str(tmp_path / "light.toml"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    warn = [ln for ln in r.stdout.splitlines() if ln.startswith("warning: ")]
+    assert any(w.startswith("warning: the rudder's mass (2.87 kg) is 3.12e+03x smaller") for w in warn)
+    assert any(w.startswith("warning: Eq 18 is 289x off") for w in warn)
+    for name in ("albacore.toml", "sampson.toml"):
+        r = _ramdaq("rig", str(RIGS / name), cwd=tmp_path)
+        assert "warning" not in r.stdout, r.stdout

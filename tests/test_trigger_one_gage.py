@@ -107,3 +107,41 @@ def test_live_force_mode_reports_a_blow_while_settling_or_arming(albacore, blow_
     assert [round(e.onset_s, 2) for e in events] == [blow_s, 5.0]
     assert events[0].not_analysable.startswith("trigger still arming (")
     assert events[1].not_analysable is None and events[1].mode == "force"
+
+
+def few_gages(rig, impacts, duration_s: float, seed: int, rows: list[int], dead: int | None):
+    """Gages ``rows`` of the simulated rig, the one at position ``dead`` of them all zeros (a
+    gage unplugged or on a node of the blow's modes): (info, blocks)."""
+    with SimDevice(rig, seed=seed, duration_s=duration_s, impacts=impacts) as dev:
+        blocks, info = list(dev), dev.info
+    sub = StreamInfo(info.device, info.fs_hz, tuple(info.channels[r] for r in rows),
+                     tuple(info.units[r] for r in rows), tuple(info.gages[r] for r in rows))
+    out = []
+    for b in blocks:
+        counts = b.counts[rows].copy()
+        if dead is not None:
+            counts[dead] = 0
+        out.append(Block(b.seq, b.first_sample, b.t0_ns, b.fs_hz, counts, b.scale[rows]))
+    return sub, out
+
+
+@pytest.mark.parametrize("rows", [[0, 5, 10], [0, 5]])
+def test_one_dead_gage_of_two_or_three_does_not_hide_the_blows(albacore, rows):
+    """Two or three gages, one of them dead: every blow is still found (the vote is all gages
+    but one), on time, and the ringing gives no false second contact (three blows 10 s apart
+    in air: each closed by the next, none a double hit). Before, three gages needed all three
+    (k = min(3, n)): 0 events."""
+    info, blocks = few_gages(albacore, [3.0, 13.0, 23.0], 30.0, seed=3, rows=rows, dead=1)
+    events = events_of(info, blocks)
+    assert [round(e.onset_s, 2) for e in events] == [3.0, 13.0, 23.0]
+    assert not any(e.double_hit for e in events), [e.second_onset_s for e in events]
+
+
+@pytest.mark.parametrize("rows", [[0, 5, 10], [0, 5]])
+def test_two_or_three_live_gages_give_no_false_second_contact(albacore, rows):
+    """All gages live, the vote all but one: the ringing of three blows in air is not taken for
+    second contacts (the threshold for fewer than three votes has three gages' chance)."""
+    info, blocks = few_gages(albacore, [3.0, 13.0, 23.0], 30.0, seed=4, rows=rows, dead=None)
+    events = events_of(info, blocks)
+    assert [round(e.onset_s, 2) for e in events] == [3.0, 13.0, 23.0]
+    assert not any(e.double_hit for e in events), [e.second_onset_s for e in events]

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from .response import ModelModes, modal_form, model_modes, predominant_mode
 from .rig import Rig
 from .structure import build_model
@@ -58,3 +60,48 @@ def eq18_check(rig: Rig) -> Eq18Check:
     ratio = air.predominant_hz / water.predominant_hz
     return Eq18Check(air.predominant_hz, water.predominant_hz, m_a, m_a * (ratio**2 - 1),
                      water.added["m_vir"])
+
+
+RIG_SPREAD_RATIO = 1.3
+"""Farthest a structure's mode lies from its rig model's nearest mode, as a frequency ratio, when
+the rig describes it: masses, inertias and stiffnesses each within +-25 % (the spread the gap
+diagnosis calibrates over) move a frequency, sqrt(k / m), by at most sqrt(1.25 / 0.75) = 1.29."""
+
+
+@dataclass(frozen=True)
+class RigAgreement:
+    """The record's predominant mode against the rig model's modes in the trial's medium:
+    ``nearest_hz`` the model mode nearest ``f_record_hz`` in ratio, ``ratio`` the larger over
+    the smaller (>= 1); ``agrees`` when within :data:`RIG_SPREAD_RATIO`."""
+
+    medium: str
+    f_record_hz: float
+    nearest_hz: float
+    predominant_hz: float
+    ratio: float
+
+    @property
+    def agrees(self) -> bool:
+        return self.ratio <= RIG_SPREAD_RATIO
+
+    def warning(self) -> str | None:
+        """One line when the rig does not describe the record, else None."""
+        if self.agrees:
+            return None
+        return (f"the rig does not describe this record: its predominant mode, "
+                f"{self.f_record_hz:.3g} Hz, is {self.ratio:.2f}x from the rig model's nearest "
+                f"mode in {self.medium} ({self.nearest_hz:.3g} Hz; predominant "
+                f"{self.predominant_hz:.3g} Hz), beyond the {RIG_SPREAD_RATIO}x a rig within "
+                f"+-25 % allows: the masses, damping constants and virtual inertias rest on the "
+                f"rig (a wrong rig file? `ramdaq rig fit` tunes one)")
+
+
+def rig_agreement(rig: Rig, f_record_hz: float) -> RigAgreement:
+    """How near the rig model's modes in ``rig.medium`` lie to a record's predominant mode
+    ``f_record_hz`` (Hz); the rig must describe a structure (``rig.structural``)."""
+    m = modes_in(rig, rig.medium)
+    f = m.table.frequency_hz[m.table.frequency_hz > 0]
+    ratios = np.maximum(f / f_record_hz, f_record_hz / f)
+    k = int(np.argmin(ratios))
+    return RigAgreement(rig.medium, float(f_record_hz), float(f[k]), m.predominant_hz,
+                        float(ratios[k]))

@@ -146,9 +146,24 @@ def build_report(path: str | Path, rig: Rig, hits: list[HitResult],
                     for h in hits],
         "summary": surface.relabel(summary),
         "virtual_inertias": vi,
+        "rig_agreement": _rig_agreement(rig, f_here),
         # driving-point H1 where the rig has a force channel; rows as recorded
         "frf": frf_section(rig, hits, recorded_channels(path)) if rig.forces else None,
     })
+
+
+def _rig_agreement(rig: Rig, f_hz: float | None) -> dict | None:
+    """The record's mean predominant frequency (Hz) against the rig model's modes
+    (:func:`~ramdaq.analysis.model.rig_modes.rig_agreement`), None for a channels-only rig or
+    no accepted hit."""
+    from ...analysis.model.rig_modes import rig_agreement
+
+    if not rig.structural or f_hz is None or not np.isfinite(f_hz) or f_hz <= 0:
+        return None
+    a = rig_agreement(rig, f_hz)
+    return {"medium": a.medium, "f_record_hz": a.f_record_hz, "nearest_model_hz": a.nearest_hz,
+            "predominant_model_hz": a.predominant_hz, "ratio": a.ratio, "agrees": a.agrees,
+            "warning": a.warning()}
 
 
 def _in_words(surface: Surface, analysis: dict) -> dict:
@@ -205,6 +220,9 @@ def format_summary(report: dict, units: str = "si") -> str:
     lines += motions_not_used(report["impacts"], report["summary"])
     for s in report.get("skipped", []):
         lines.append(f"skipped: {s['step']}: {s['reason']}")
+    agree = report.get("rig_agreement") or {}
+    if agree.get("warning"):
+        lines.append(f"WARNING {agree['warning']}")
     vi = report["virtual_inertias"]
     if vi is None:
         return "\n".join(lines)
@@ -215,7 +233,8 @@ def format_summary(report: dict, units: str = "si") -> str:
         lines.append(f"\nvirtual inertias: {vi['not_computed']}")
         return "\n".join(lines)
     lines.append(surface.label(
-        f"\nvirtual mass, Eq 19: {conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
+        f"\nthe rig's added mass (from its geometry, not measured): virtual mass, Eq 19: "
+        f"{conv(vi['m_vir_eq19_kg'], 'mass'):.4g} {mu}; "
         f"(I_z)_vir, Eq 20: {conv(vi['Iz_vir_eq20_kg_m2'], 'inertia'):.4g} {iu}; "
         f"(I_x)_vir, Eq 21 (reconstructed): {conv(vi['Ix_vir_eq21_kg_m2'], 'inertia'):.4g} {iu}"))
     if "m_vir_eq18_kg" in vi:
@@ -301,6 +320,10 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
         lines.append(f"{arming} blow(s) came before the trigger's long-term average was full: "
                      "not analysable live or in a replay (the trial's own trigger); "
                      "`ramdaq analyze` arms on the whole record and analyses them")
+    if not s["hits"]:
+        lines.append("no blow found: the trigger never fired (no load cell crossed its level, and "
+                     "no gages' short-term power rose above their background on enough gages at "
+                     "once; a gage that never rings, dead or on a node, is one of them)")
     skipped = sum(r == "not requested" for r in s.get("rejected", {}).values())
     lines += [f"\n{s['accepted']} of {s['hits'] - skipped} {'requested ' if skipped else ''}hits "
               f"accepted{f' ({skipped} more not analysed)' if skipped else ''}. Mean over "

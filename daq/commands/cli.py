@@ -50,7 +50,7 @@ import traceback  # noqa: E402
 from collections.abc import Iterator  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from ...analysis.model.rig import RigError, load_rig, parse_rig
+from ...analysis.model.rig import Rig, RigError, load_rig, parse_rig
 from ...analysis.model.surface import Surface
 from ...drivers.errors import DeviceError
 from ..errors import RecordingError, ViewError
@@ -89,6 +89,17 @@ def _parse_impacts(text: str) -> list[float]:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--impacts {text!r}: expected seconds separated by commas, e.g. 1,4.5,8") from None
+
+
+def _plot_spec(text: str) -> str:
+    """An argparse type: ``--plots`` kinds that exist (a usage error, exit 2, names the known)."""
+    from .analyze import plot_kinds
+
+    try:
+        plot_kinds(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix(f"--plots {text!r}: ")) from None
+    return text
 
 
 def _positive(text: str) -> float:
@@ -148,6 +159,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 SIM_DURATION_S = 10.0
 """A simulated trial's length without ``--duration``, s."""
+MAX_SIM_FS_HZ = 51_200.0
+"""Highest simulated rate, Hz: the trigger's (:mod:`ramdaq.daq.trigger`, 50 Hz to 51.2 kHz)."""
 
 
 def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
@@ -158,6 +171,15 @@ def _sim_options(args: argparse.Namespace, pace: str) -> tuple[dict, str]:
     if args.medium:
         rig = rig.with_medium(args.medium)
     duration = SIM_DURATION_S if args.duration is None else args.duration
+    if args.impacts and args.impact_every:
+        raise ValueError("--impacts and --impact-every: give one (the blows at the times listed, "
+                         "or one every so many seconds), not both")
+    late = [t for t in args.impacts or [] if not 0 <= t < duration]
+    if late:
+        raise ValueError(f"--impacts {', '.join(f'{t:g}' for t in late)} s: outside the "
+                         f"{duration:g} s trial (--duration)")
+    if args.fs is not None and args.fs > MAX_SIM_FS_HZ:
+        raise ValueError(f"--fs {args.fs:g} Hz: above the {MAX_SIM_FS_HZ:g} Hz the trigger runs at")
     impacts = list(args.impacts or [])
     if args.impact_every:
         t = args.impact_every / 2
@@ -575,6 +597,9 @@ def _read_notes(imp: dict, rig_given: bool = True) -> list[str]:
         res, fs = imp["time_resolution_s"], imp.get("fs_hz")
         out.append(f"the time column is printed to {res:g} s ({res * fs:.2f} sample at {fs:g} "
                    f"Hz): each row is placed on the {fs:g} Hz grid within that rounding")
+    if imp.get("cut_last_line"):
+        out.append(f"warning: line {imp['cut_last_line']}, the last, has no line end (the file "
+                   f"cut off mid-line?): left out, as its last value may be a cut number")
     if imp.get("decimal") == ",":
         out.append(f"read decimal commas as decimal points (the delimiter is "
                    f"{'a tab' if imp.get('delimiter') == chr(9) else repr(imp.get('delimiter'))})")
@@ -598,10 +623,13 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                             fs_hz=args.fs)
     force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
                                     or args.force_channel)
-    made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
-                       units=args.units, force_channel=force,
-                       medium=args.medium or found.medium or "air", file_units=found.units,
-                       anti_alias=found.anti_alias)
+    try:
+        made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
+                           units=args.units, force_channel=force,
+                           medium=args.medium or found.medium or "air", file_units=found.units,
+                           anti_alias=found.anti_alias)
+    except ValueError as err:  # a channel it cannot make a gage of: say in which file
+        raise ValueError(f"{src}: {err}") from None
     if found.anti_alias is not None:
         print(f"anti-alias filter order {found.anti_alias[0]} at {found.anti_alias[1]:g} Hz, as the "
               f"file states: written into {rig_out.name}, so onsets have its delay removed")
@@ -634,6 +662,7 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_suffix(".uff")
+    _check_outputs([out], args.overwrite)  # before the analysis, not after it
     rig, hits = run_analysis(src, progress=lambda m: print(m, flush=True))
     r = export_uff(out, hits, rig, source=str(src), binary=args.binary)
     print(f"wrote {out}: {r.nodes} gage nodes, {r.modes} mode shapes and {r.records} decay "
@@ -672,6 +701,8 @@ def cmd_rig(args: argparse.Namespace) -> int:
             print(f"warning: mode(s) at {', '.join(f'{f:.0f}' for f in above)} Hz lie above half "
                   f"the sample rate ({nyquist:g} Hz): no trial at this rate records them; a mass "
                   f"or inertia in the report's units (ton s^2/ft, ft ton s^2) rather than SI?")
+    if rig.structural:
+        _warn_added_mass_ratio(rig)
     if {"air", "water"} <= set(rig.damping):
         from ...analysis.model.units import from_si
 
@@ -687,11 +718,31 @@ def cmd_rig(args: argparse.Namespace) -> int:
               f" the predominant mode couples v with alpha and gamma, whose added inertias "
               f"(Eq 20, 21) differ in proportion from Eq 19's (Report 1836 found 0.2240 against "
               f"0.2735 ton s^2/ft, -18 %).")
-        if abs(c.difference) > 1.0:  # beyond the report's own -18 % by far: the rig, not Eq 18
-            print(f"warning: Eq 18 is {abs(c.difference) + 1:.3g}x off the model's own added mass: "
+        ratio = c.m_vir_eq18_kg / c.m_vir_model_kg
+        off = max(ratio, 1 / ratio) if ratio > 0 else math.inf
+        if off > 2.0:  # beyond the report's own -18 % by far, either way: the rig, not Eq 18
+            print(f"warning: Eq 18 is {off:.3g}x off the model's own added mass: "
                   "check the rig's masses, inertias and their units (the air and water modes "
                   "compared may not be the same mode)")
     return EXIT_OK
+
+
+ADDED_OVER_MASS_MAX = 30.0
+"""Largest plausible ratio of a surface's added mass in water (Eq 19) to its own mass: a steel
+plate's is ~0.1 chord / thickness (1-3 for a rudder; ALBACORE's and SAMPSON's rigs 3.1 and
+3.3); ten times that is a unit slip (kg for tonnes) or a typo."""
+
+
+def _warn_added_mass_ratio(rig: Rig) -> None:
+    """A warning line when the rig's surface is far lighter than the water it moves."""
+    from ...analysis.model.rig_modes import modes_in
+
+    mass = rig.rudder.mass_kg
+    added = modes_in(rig, "water").added.get("m_vir", math.nan) if "water" in rig.damping else math.nan
+    if mass > 0 and added / mass > ADDED_OVER_MASS_MAX:
+        print(f"warning: the {rig.surface.title.lower()}'s mass ({mass:.4g} kg) is {added / mass:.3g}x "
+              f"smaller than the added mass of the water it moves ({added:.4g} kg, Eq 19), beyond "
+              f"the {ADDED_OVER_MASS_MAX:g}x a steel surface can be: a mass in tonnes, or a typo?")
 
 
 def cmd_rig_fit(args: argparse.Namespace) -> int:
@@ -893,7 +944,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--units", choices=("si", "report"), default="si",
                    help="terminal units: SI, or the report's ft / long ton / s")
     a.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    a.add_argument("--plots", metavar="KINDS",
+    a.add_argument("--plots", metavar="KINDS", type=_plot_spec,
                    help="plot kinds per hit, comma-separated, or 'all': decay, spectrum, "
                         "modeshape, stock (default: decay)")
     a.set_defaults(func=cmd_analyze)
@@ -963,6 +1014,7 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("file", help="a recording (MCAP), analysed as by ramdaq analyze")
     x.add_argument("--out", help="output file (default FILE.uff)")
     x.add_argument("--binary", action="store_true", help="binary 58b decay records")
+    x.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     x.set_defaults(func=cmd_export_uff)
 
     xc = sub.add_parser("export-csv", help="every recorded sample as CSV (what ramdaq import reads back)")

@@ -175,6 +175,11 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
         text = text[:lines.pos] + text[lines.pos:].replace(",", ".")
         notes["decimal"] = ","
     table, line_of_row = _parse_rows(text, lines.pos, lines.number, delim, names, name)
+    if table.shape[0] > 1 and not text.endswith(("\n", "\r")):
+        # a file cut off mid-line: its last row's last value may be a cut number (-0.152 of
+        # -0.15203...), read as data; the row is left out, and the import says so
+        notes["cut_last_line"] = int(line_of_row[-1])
+        table, line_of_row = table[:-1], line_of_row[:-1]
     if table.shape[0] == 0:
         raise ImportFormatError(f"{name}: no data rows after the header")
     where = lambda r: f"line {line_of_row[r]}"  # noqa: E731
@@ -277,6 +282,10 @@ def _time_unit(column: str, stated: str | None, given: str | None, name: str) ->
     if stated is not None:
         unit = stated.strip().lower()
         if unit not in _TIME_UNITS:
+            if not _time_like(column, None):  # a data column first: the file has no time column
+                raise ImportFormatError(
+                    f"{name}: no time column (the first column, {column!r}, is in {stated!r}, "
+                    f"not s, ms or us): give the rate, {option('fs_hz=', '--fs')} HZ")
             raise ImportFormatError(f"{name}: time column {column!r} is in {stated!r}; expected "
                                     f"s, ms or us")
         if given is not None and _TIME_UNITS[given] != _TIME_UNITS[unit]:
