@@ -137,6 +137,13 @@ _SUBSPACE_MAX_SAMPLES = 2000
 # the white threshold it took the stern plane's stacked decays to a 382 Hz pole growing by e^50
 # (Λ 151 against 148), which lost their 20 Hz mode (tests/test_free_modes_stern_plane.py).
 _RESIDUAL_PENCIL = 100
+# The first round's pencil is at most 200 long (it was 400): its eigendecomposition is O(L³),
+# ~3.7x cheaper at 200 on a 16-gage hit whose 270 Hz band leaves 2000 subspace samples (~8 ms
+# of a 14 s hit's analysis). The NLS refines whatever start it gets: on a 600 s, 20-blow
+# ALBACORE replay every hit selected the same modes as at 400, its numbers equal to ~1e-10 of
+# their standard errors. Records whose band leaves under 600 subspace samples (all of the
+# accuracy benchmark's) had L < 200 already.
+_PENCIL = 200
 # A channel longer than 8192 samples is searched on a copy decimated within the band to about
 # 4096 samples, whatever the number of channels (one gage's record of 6 s at 2048 Hz: by 3).
 _SEARCH_MAX_LENGTH, _SEARCH_LENGTH = 8192, 4096
@@ -150,7 +157,7 @@ _MAX_PRINCIPAL_CHANNELS = 8
 
 def _candidates(
     Y: np.ndarray, t: np.ndarray, fs: float, band_hi: float, order: int, method: str,
-    zeta_max: float, f_lo: float, max_length: int = 400,
+    zeta_max: float, f_lo: float, max_length: int = _PENCIL,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Candidate (f, δ) from the subspace start on decimated, whitened, compressed data (pencil
     length at most ``max_length``)."""
@@ -316,7 +323,7 @@ def identify_modes(
     def select(trend: bool | int, D: _Data) -> tuple[ModeSelector, int]:
         """The modes selected in ``D`` with ``trend`` columns in the model; and the candidates'
         count."""
-        def ranked_candidates(Z: np.ndarray, w: np.ndarray, max_length: int = 400
+        def ranked_candidates(Z: np.ndarray, w: np.ndarray, max_length: int = _PENCIL
                               ) -> tuple[np.ndarray, np.ndarray]:
             """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
             f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo,
