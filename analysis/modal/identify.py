@@ -482,7 +482,8 @@ def _search_crop(n_channels: int, max_samples: int) -> int:
 
 
 def _reweighted(sel: ModeSelector) -> None:
-    """``sel``'s fit refitted with weights from its own residual (converged to rounding)."""
+    """``sel``'s fit refitted with weights from its own residual (converged as a final fit,
+    :data:`~ramdaq.analysis.modal.order._FINAL_SE_TOL`)."""
     sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)
     sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
 
