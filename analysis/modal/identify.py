@@ -85,7 +85,7 @@ from scipy import linalg
 from scipy.special import chdtri  # χ² isf, as scipy.stats.chi2.isf (stats costs ~1.5 s to import)
 
 from .crb import damping_ratio_from_decrement
-from .order import ModeSelector, floor_noise
+from .order import FINAL_SE_TOL, ModeSelector, floor_noise
 from .signal import (
     band_lengths,
     decimate_valid,
@@ -276,7 +276,9 @@ def identify_modes(
         a 270 Hz band: by 3, not 2, so every fit on the NLS data touches a third fewer
         samples; the FIR keeps the band and its noise, the estimates' accuracy is unchanged:
         :func:`_nls_data`); the order search then runs on the NLS data themselves, cropped as
-        its own decimated copy would be. ``analyze_decay`` (a final) sets it.
+        its own decimated copy would be; and the selected modes' final fits stop within ~0.001
+        of their standard errors of the optimum instead of converging to rounding
+        (:data:`~ramdaq.analysis.modal.order.FINAL_SE_TOL`). ``analyze_decay`` (a final) sets it.
 
     Returns
     -------
@@ -317,6 +319,7 @@ def identify_modes(
             else _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples,
                               crop_full=band_decimation))
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
+    final_se_tol = FINAL_SE_TOL if band_decimation else 0.0
     start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
                                                 for v in start)
 
@@ -332,7 +335,8 @@ def identify_modes(
 
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
                   else _rank(D.Y, D.t, D.w0, *start_fd, trend))
-        sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0)
+        sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0,
+                           final_se_tol)
         # One channel: its weight scales the cost, not the optimum, so the reweighted refit
         # would restart at the point reached; the fit of the n modes is converged at once.
         final = n_modes is not None and D.Y.shape[0] == 1 and D is full
@@ -482,8 +486,8 @@ def _search_crop(n_channels: int, max_samples: int) -> int:
 
 
 def _reweighted(sel: ModeSelector) -> None:
-    """``sel``'s fit refitted with weights from its own residual (converged as a final fit,
-    :data:`~ramdaq.analysis.modal.order._FINAL_SE_TOL`)."""
+    """``sel``'s fit refitted with weights from its own residual (converged to rounding, or to
+    ``sel.final_se_tol``)."""
     sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)
     sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
 
@@ -493,7 +497,7 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
     columns; a trial fit with ``full``'s starting weights, then reweighted and converged as the
     search's own last step); None when they do not fit there."""
     sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
-                       (0.5 * f_lo, 0.49 * full.fs), full.w0)
+                       (0.5 * f_lo, 0.49 * full.fs), full.w0, found.final_se_tol)
     f, d = found.fit.f_hz, found.fit.delta
     if full.Y.shape[0] == 1:  # its weight scales the cost, not the optimum: no reweighting
         sel.fit = sel.refit(f, d)
