@@ -338,14 +338,25 @@ def _peak_decrements(x: np.ndarray, fs_hz: float, f_hz: float,
     return [nan if isinstance(p, ValueError) else (p.delta, p.std_error) for p in got]
 
 
-def _bandpassed_rows(x: np.ndarray, fs_hz: float, f_hz: float) -> np.ndarray | None:
-    """The rows of ``x`` band-passed around ``f_hz`` as the peak decrements filter them
-    (:func:`~ramdaq.analysis.modal.peaks.bandpass_rows`), once for the gages and the motions
-    made of them; None where the band does not fit (the peak decrements then say why)."""
+CHAIN_READS = (2, 4, 5, 6, 8, 13, 14)
+"""The gages the report's chain combines into motions whether or not they are usable (the
+rudder motions, Eq 1-3b, and the hull's, Eq 8-13, are formed before the unusable are dropped)."""
+
+
+def _bandpassed_rows(x: np.ndarray, fs_hz: float, f_hz: float,
+                     rows: list[int]) -> np.ndarray | None:
+    """The rows ``rows`` of ``x`` band-passed around ``f_hz`` as the peak decrements filter them
+    (:func:`~ramdaq.analysis.modal.peaks.bandpass_rows`: each row on its own, the same bits as
+    all rows at once), once for the gages and the motions made of them, in an array shaped as
+    ``x`` whose other rows are NaN (no step reads them); None where the band does not fit (the
+    peak decrements then say why)."""
     try:
-        return bandpass_rows(x, fs_hz, f_hz)
+        got = bandpass_rows(x[rows], fs_hz, f_hz)
     except ValueError:
         return None
+    out = np.full(x.shape, np.nan)
+    out[rows] = got
+    return out
 
 
 def _motion_fits(signals: dict[str, np.ndarray], fs_hz: float, table: ModeTable, k: int,
@@ -447,7 +458,8 @@ def analyze_decay(x: np.ndarray, fs_hz: float, rig: Rig, gage_numbers: tuple[int
               "at the decay's start: an ambient line, not the blow's free decay (not taken as "
               "the predominant mode; its decrement is no damping measure)" for a, r in ambient]
     f = float(table.frequency_hz[k])
-    xb = _bandpassed_rows(x, fs_hz, f)  # the gages' and (combined) the motions' band-pass
+    xb = _bandpassed_rows(x, fs_hz, f, sorted(set(good) | {  # the gages' and (combined) the
+        i for i, n in enumerate(gage_numbers) if n in CHAIN_READS}))  # motions' band-pass
     peaks = _peak_decrements(x[good], fs_hz, f, judged.noise_std[good],  # the verdicts' noise
                              None if xb is None else xb[good])
     gages = {gage_numbers[i]: Decrement(float(table.channel_frequency_hz[j, k]),

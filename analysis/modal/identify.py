@@ -85,7 +85,7 @@ from scipy import linalg
 from scipy.special import chdtri  # χ² isf, as scipy.stats.chi2.isf (stats costs ~1.5 s to import)
 
 from .crb import damping_ratio_from_decrement
-from .order import ModeSelector, floor_noise
+from .order import FINAL_SE_TOL, ModeSelector, floor_noise
 from .signal import (
     band_lengths,
     decimate_valid,
@@ -137,6 +137,13 @@ _SUBSPACE_MAX_SAMPLES = 2000
 # the white threshold it took the stern plane's stacked decays to a 382 Hz pole growing by e^50
 # (Λ 151 against 148), which lost their 20 Hz mode (tests/test_free_modes_stern_plane.py).
 _RESIDUAL_PENCIL = 100
+# The first round's pencil is at most 200 long (it was 400): its eigendecomposition is O(L³),
+# ~3.7x cheaper at 200 on a 16-gage hit whose 270 Hz band leaves 2000 subspace samples (~8 ms
+# of a 14 s hit's analysis). The NLS refines whatever start it gets: on a 600 s, 20-blow
+# ALBACORE replay every hit selected the same modes as at 400, its numbers equal to ~1e-10 of
+# their standard errors. Records whose band leaves under 600 subspace samples (all of the
+# accuracy benchmark's) had L < 200 already.
+_PENCIL = 200
 # A channel longer than 8192 samples is searched on a copy decimated within the band to about
 # 4096 samples, whatever the number of channels (one gage's record of 6 s at 2048 Hz: by 3).
 _SEARCH_MAX_LENGTH, _SEARCH_LENGTH = 8192, 4096
@@ -150,7 +157,7 @@ _MAX_PRINCIPAL_CHANNELS = 8
 
 def _candidates(
     Y: np.ndarray, t: np.ndarray, fs: float, band_hi: float, order: int, method: str,
-    zeta_max: float, f_lo: float, max_length: int = 400,
+    zeta_max: float, f_lo: float, max_length: int = _PENCIL,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Candidate (f, δ) from the subspace start on decimated, whitened, compressed data (pencil
     length at most ``max_length``)."""
@@ -269,7 +276,9 @@ def identify_modes(
         a 270 Hz band: by 3, not 2, so every fit on the NLS data touches a third fewer
         samples; the FIR keeps the band and its noise, the estimates' accuracy is unchanged:
         :func:`_nls_data`); the order search then runs on the NLS data themselves, cropped as
-        its own decimated copy would be. ``analyze_decay`` (a final) sets it.
+        its own decimated copy would be; and the selected modes' final fits stop within ~0.001
+        of their standard errors of the optimum instead of converging to rounding
+        (:data:`~ramdaq.analysis.modal.order.FINAL_SE_TOL`). ``analyze_decay`` (a final) sets it.
 
     Returns
     -------
@@ -310,13 +319,14 @@ def identify_modes(
             else _search_data(full, Xa, fs_hz, d_nls, band_hi, search_max_samples,
                               crop_full=band_decimation))
     order = 2 * (max_modes if n_modes is None else n_modes) + 4
+    final_se_tol = FINAL_SE_TOL if band_decimation else 0.0
     start_fd = None if start is None else tuple(np.atleast_1d(np.asarray(v, dtype=float))
                                                 for v in start)
 
     def select(trend: bool | int, D: _Data) -> tuple[ModeSelector, int]:
         """The modes selected in ``D`` with ``trend`` columns in the model; and the candidates'
         count."""
-        def ranked_candidates(Z: np.ndarray, w: np.ndarray, max_length: int = 400
+        def ranked_candidates(Z: np.ndarray, w: np.ndarray, max_length: int = _PENCIL
                               ) -> tuple[np.ndarray, np.ndarray]:
             """Candidate (f, δ) in ``Z`` (the data or a residual), strongest first by ``w``."""
             f_c, d_c = _candidates(Z, D.t, D.fs, band_hi, order, method, zeta_max, f_lo,
@@ -325,7 +335,8 @@ def identify_modes(
 
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
                   else _rank(D.Y, D.t, D.w0, *start_fd, trend))
-        sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0)
+        sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0,
+                           final_se_tol)
         # One channel: its weight scales the cost, not the optimum, so the reweighted refit
         # would restart at the point reached; the fit of the n modes is converged at once.
         final = n_modes is not None and D.Y.shape[0] == 1 and D is full
@@ -475,7 +486,8 @@ def _search_crop(n_channels: int, max_samples: int) -> int:
 
 
 def _reweighted(sel: ModeSelector) -> None:
-    """``sel``'s fit refitted with weights from its own residual (converged to rounding)."""
+    """``sel``'s fit refitted with weights from its own residual (converged to rounding, or to
+    ``sel.final_se_tol``)."""
     sel.w = 1.0 / floor_noise(sel.fit.noise_std, sel.Y)
     sel.fit = sel.refit(sel.fit.f_hz, sel.fit.delta) or sel.fit
 
@@ -485,7 +497,7 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
     columns; a trial fit with ``full``'s starting weights, then reweighted and converged as the
     search's own last step); None when they do not fit there."""
     sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
-                       (0.5 * f_lo, 0.49 * full.fs), full.w0)
+                       (0.5 * f_lo, 0.49 * full.fs), full.w0, found.final_se_tol)
     f, d = found.fit.f_hz, found.fit.delta
     if full.Y.shape[0] == 1:  # its weight scales the cost, not the optimum: no reweighting
         sel.fit = sel.refit(f, d)
