@@ -57,11 +57,11 @@ def flat_tops(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequen
     extreme in it); the extremes' noises are independent, so ``P(S >= s)`` is at most the sum of
     ``prod (k_i + 1) p^k_i`` over the splits of ``s`` into ``n`` parts:
     ``C(s + n - 1, n - 1) (1 + s / n)^n p^s``. The chance level is the least ``s`` where that
-    reaches ``P_CHANCE / n_g`` (every gage searched), and at least 2. Summed over the extremes,
-    a rail that several blows reach counts every flat top, not only the longest: a clip level
-    only the larger blows pass (the median blow overdriven 1.9x, the smallest not at all) tops
-    several peaks with runs of 2-6 samples each, which the longest run alone reads near its
-    single-peak chance level."""
+    reaches ``P_CHANCE / n_g`` (every gage searched), and at least :data:`FLAT_TOP_MIN`. Summed
+    over the extremes, a rail that several blows reach counts every flat top, not only the
+    longest: a clip level only the larger blows pass (the median blow overdriven 1.9x, the
+    smallest not at all) tops several peaks with runs of 2-6 samples each, which the longest run
+    alone reads near its single-peak chance level."""
     out = []
     n_peaks = 2 * len(onsets_s)
     for g, num in enumerate(numbers):
@@ -69,7 +69,6 @@ def flat_tops(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequen
         q = _step(x[g, : int(min(x.shape[1], (onsets_s[0] + CLIP_SPAN_S) * fs_hz))])
         sig = _pre_noise(x[g], fs_hz, onsets_s, pre_s)
         p = min(0.999, q / (2 * math.sqrt(math.pi) * sig)) if sig > 0 else 0.999
-        level = flat_top_level(p, n_peaks, len(numbers))
         for t in onsets_s:
             seg = x[g, int(t * fs_hz): int((t + CLIP_SPAN_S) * fs_hz)]
             seg = seg[np.isfinite(seg)]
@@ -80,6 +79,9 @@ def flat_tops(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequen
                 runs.append(_longest_run(sgn * seg >= top - 0.5 * q))
                 tops.append(top)
         excess = sum(max(k - 1, 0) for k in runs)
+        if excess <= FLAT_TOP_MIN:
+            continue                 # under the least level: the bound need not be sought
+        level = flat_top_level(p, n_peaks, len(numbers))
         if excess > level:
             flat = [(t, k) for t, k in zip(tops, runs, strict=True) if k > 1]
             lvl = float(np.median([t for t, _ in flat]))
@@ -93,6 +95,10 @@ def flat_tops(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequen
     return out
 
 
+FLAT_TOP_MIN = 2.0
+"""The least chance level of :func:`flat_tops`' excess, a floor as the single longest run's
+least level of 3 samples was (two repeats); a gage at or under it is no finding whatever its
+bound, which is then not computed (most gages: 70 ms of a trial's CPU)."""
 FLAT_TOP_MAX = 100_000
 """The largest repeat count the chance level is sought up to (a coarse converter whose
 neighbouring samples are mostly equal has none below it: no finding)."""
@@ -101,14 +107,14 @@ neighbouring samples are mostly equal has none below it: no finding)."""
 def flat_top_level(p: float, n_peaks: int, n_gages: int) -> float:
     """The chance level of :func:`flat_tops`' excess ``S`` over ``n_peaks`` extremes, each
     neighbour equal with probability at most ``p``: the least ``s`` with
-    ``C(s + n - 1, n - 1) (1 + s / n)^n p^s <= P_CHANCE / n_gages``, at least 2; infinite when
-    none up to :data:`FLAT_TOP_MAX`."""
+    ``C(s + n - 1, n - 1) (1 + s / n)^n p^s <= P_CHANCE / n_gages``, at least :data:`FLAT_TOP_MIN`;
+    infinite when none up to :data:`FLAT_TOP_MAX`."""
     n = max(n_peaks, 1)
     s = np.arange(1, FLAT_TOP_MAX + 1, dtype=float)
     log_b = (scipy.special.gammaln(s + n) - scipy.special.gammaln(s + 1) - scipy.special.gammaln(n)
              + n * np.log1p(s / n) + s * math.log(p))
     ok = np.flatnonzero(log_b <= math.log(P_CHANCE / max(n_gages, 1)))
-    return max(2.0, float(s[ok[0]])) if ok.size else math.inf
+    return max(FLAT_TOP_MIN, float(s[ok[0]])) if ok.size else math.inf
 
 
 def _pre_noise(v: np.ndarray, fs_hz: float, onsets_s: np.ndarray, pre_s: float) -> float:
