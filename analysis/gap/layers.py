@@ -398,6 +398,26 @@ def ambient_first(findings: list[dict]) -> list[dict]:
             and f["mode_hz"] and not any(abs(f["mode_hz"][0] - h) <= SAME_LINE_HZ for h in switched)]
 
 
+def flat_tops_first(findings: list[dict], named: str) -> list[dict]:
+    """The data-only clipping findings (as JSON) that answer before the model layer's effect
+    (unless it names clipping itself): flat tops at a gage's peaks at least
+    :data:`PRECEDENCE_STRENGTH` times their chance level, whose own correction -- the rails read
+    on the other blows -- closes at least :data:`~ramdaq.analysis.gap.verdict.UNEXPLAINED_CLOSURE`
+    of the free model's misfit at the held-out blows' peaks. Both are read on the recorded
+    values themselves: samples that stay at one value at the extremes of several blows of
+    different force (the flat tops' excess over the noise's chance of equal neighbours,
+    :func:`~ramdaq.analysis.gap.signal_checks.flat_tops`) are the converter's rail, which no
+    structure (a linear update, a coupled hull mode) and no nonlinearity of the structure makes,
+    while a model fitted to the clipped peaks takes up their cut amplitude with whatever freedom
+    its candidates add (issue 17's benchmark: modal clipping read as
+    hull_coupling+gage_alignment). The same a-priori bar and half as :func:`held_out_data`."""
+    if "clipping" in named.split("+"):
+        return []
+    return [f for f in credible(findings) if f["check"] == "clipping" and strength(f) >= PRECEDENCE_STRENGTH
+            and f.get("closed_held") is not None and math.isfinite(float(f["closed_held"]))
+            and float(f["closed_held"]) >= UNEXPLAINED_CLOSURE]
+
+
 def held_out_data(findings: list[dict]) -> list[dict]:
     """The credible data-only findings (as JSON, :func:`credible`) of a sensor or a second blow
     (:data:`HELD_OUT_EXCITATION`) that outrank a model layer's structural update on a rig that
@@ -554,8 +574,9 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
     named = out.named
     if named == "ambient_tone" and (d := declared_tone(findings, out.location)):
         return Answer("none", "data", out.location, None, d)    # the environment the rig declares
-    if (tones := ambient_first(findings)) and named.split("+")[0] != "ambient_tone":
-        return _data_answer(max(tones, key=strength), candidates)
+    if first := (ambient_first(findings) if named.split("+")[0] != "ambient_tone" else []) or flat_tops_first(
+            findings, named):
+        return _data_answer(max(first, key=strength), candidates)
     if form_not_sensor(out, findings, form_gages):
         out, named = Answer("none", "model", None, None), "none"
     overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
