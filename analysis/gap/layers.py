@@ -502,10 +502,12 @@ def unrung_hull(model: str | None, candidates: list[dict], coupled: Sequence[dic
     its mode (``effect_mode_hz``): the search places the mode within +-25 % of a residual peak and
     the stock's coupling moves it by up to that. An added hull mode with free frequency,
     stiffness and two tilts is the most flexible update in the library; on a rig with form error
-    it closes up to half the held-out gap of a clean trial (modal development seeds 51000,
-    51001, 51005: 50, 44 and 43 %, at 83.8, 21.3 and 17.1 Hz, where no line rings the rig lacks),
-    so its closure there is no evidence -- a mode it adds that the trial does not ring is the
-    freedom fitting the form error (issue 17: modal benchmark none trial answered hull_coupling)."""
+    it closes up to half the held-out gap of a clean trial, so its closure there is no evidence:
+    a mode it adds that the trial does not ring is the freedom fitting the form error (issue 17:
+    a modal no-effect trial answered hull_coupling; modal development seeds 51000 and 51001, 50
+    and 44 % closed at 83.8 and 21.3 Hz, their lines at 10.2 and 7.3 Hz, are set aside; 51005's,
+    43 % at 17.1 Hz beside a 14.9 Hz line, is not; the right hull_coupling answers of the truth
+    family's development and check seeds 2003, 101001 and 101004 sit 3-7 % from a line)."""
     flexible = [c for c in coupled if c.get("kind", "flexible") != "line"]
     lines = [c["f_hz"] for c in coupled if c.get("kind") == "line"]
     c = next((x for x in candidates if x["name"] == model), None)
