@@ -16,6 +16,7 @@ from ramdaq.analysis.gap.modal_level import (
     TrialModes,
     compare,
     coupled_modes,
+    flexible_coupled,
     model_modes_at_gages,
     modes_of_set,
     splits,
@@ -192,17 +193,25 @@ def test_a_hull_mode_the_rudder_does_not_ride_rigidly_is_coupling():
     gs = rig.gages_by_channel()
     tm = modes_of(rig)
     assert coupled_modes(tm, rig, compare(tm, rig)) == []     # the rig's own hull modes: none
-    # a hull mode the rig lacks that carries the rudder as a passenger (one rigid ride): model
-    # form, the rig's hull description -- not coupling
+    # a hull mode the rig lacks that carries the rudder as a passenger (one rigid ride): a line
+    # the rig lacks, reported as such, not coupling
     rigid = with_hull_mode(tm, rig, 9.0, np.full(len(gs), 0.3))
-    assert coupled_modes(rigid, rig, compare(rigid, rig)) == []
+    assert flexible_coupled(rigid, rig, compare(rigid, rig)) == []
+    (line,) = coupled_modes(rigid, rig, compare(rigid, rig))
+    assert line.kind == "line" and line.f_hz == 9.0 and line.statistic > line.chance
+    assert set(line.gages) <= {g.number for g in gs if g.body == "hull"}
+    # the same line undamped (a steady tone in the decay window): no structure's mode
+    tone = replace(rigid, zeta=np.where(rigid.f_hz == 9.0, 1e-5, rigid.zeta),
+                   zeta_se=np.where(rigid.f_hz == 9.0, 2e-4, rigid.zeta_se))
+    assert coupled_modes(tone, rig, compare(tone, rig)) == []
     # the same hull motion with the stock swaying 6x the rudder, which lags: the rudder's own
     # flexibility takes part in the hull's mode
     rng = np.random.default_rng(1)
     sway = np.array([0.3 if g.body == "stock" else 0.05 for g in gs]) * rng.uniform(0.7, 1.0, len(gs))
     moved = with_hull_mode(tm, rig, 9.0, sway)
     (c,) = coupled_modes(moved, rig, compare(moved, rig))
-    assert c.f_hz == 9.0 and c.hull_share > 0.5 and c.nonrigid > 0.05 and c.statistic > c.chance
+    assert c.kind == "flexible" and c.f_hz == 9.0
+    assert c.hull_share > 0.5 and c.nonrigid > 0.05 and c.statistic > c.chance
     hull = {g.number for g in gs if g.body == "hull"}
     assert set(c.gages) <= hull and c.gages
 
@@ -257,3 +266,25 @@ def test_a_coupled_mode_answers_before_a_weaker_unexplained_data_finding():
     with_law = lambda ratio: answer("hull_coupling", cands, None, {3, 4}, [law], (), [], [coupled(ratio)])  # noqa: E731
     assert with_law(20.0).named == "hull_coupling"
     assert with_law(2.2).named == "unexplained"
+
+
+def test_an_effect_search_hull_mode_the_trial_does_not_ring_is_set_aside_on_a_rig_with_form_error():
+    """Modal development seed 51001's kind (a clean trial): the search's hull_coupling at 21.3 Hz,
+    where no line rings the calibrated rig lacks, on a rig left with form error: its closure is
+    the added mode's freedom fitting the form -- no effect. With a line within a factor 1.25 of
+    its mode (truth development seed 2003's kind: 17.2 Hz against a 16.1 Hz line) it stands."""
+    cands = [{"name": "hull_coupling", "dbic": -1e6, "dbic_marginal": None, "closed_held": 0.55,
+              "closed_fit": 0.55, "location": {"gages": [6, 2, 8], "window": "pre", "band_hz": 12.1,
+                                               "effect_mode_hz": 21.3}}]
+    form = {2, 3, 4, 6}
+    line = {"f_hz": 10.2, "zeta": 0.011, "hull_share": 0.76, "nonrigid": 0.001, "statistic": 30.0,
+            "chance_level": 1.0, "gages": [5, 9, 13], "kind": "line"}
+    assert answer("hull_coupling", cands, None, form, [], (), [], [line]).named == "none"
+    assert answer("hull_coupling", cands, None, form, [], (), [], []).named == "none"
+    near = line | {"f_hz": 18.0}
+    a = answer("hull_coupling", cands, None, form, [], (), [], [near])
+    assert a.named == "hull_coupling" and a.location["gages"] == [6, 2, 8]
+    # no form error left: the search's closure is the evidence
+    assert answer("hull_coupling", cands, None, set(), [], (), [], []).named == "hull_coupling"
+    # a line alone names nothing: the model's form answers
+    assert answer("unexplained", cands, None, form, [], (), [], [line]).named == "none"

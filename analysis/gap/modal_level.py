@@ -434,11 +434,15 @@ class Coupled:
     statistic: float
     chance: float
     gages: tuple[int, ...]
+    kind: str = "flexible"
+    """"flexible": the rudder deforms in the hull mode (:func:`flexible_coupled`); "line": a hull
+    mode the calibrated rig lacks that the rudder rides rigidly (:func:`extra_lines`), whose
+    ``statistic`` is its frequency's steadiness over a chance pole's (:func:`steadiness`)."""
 
     def to_json(self) -> dict:
         return {"f_hz": self.f_hz, "zeta": self.zeta, "hull_share": self.hull_share,
                 "nonrigid": self.nonrigid, "statistic": self.statistic, "chance_level": self.chance,
-                "gages": list(self.gages)}
+                "gages": list(self.gages), "kind": self.kind}
 
 
 def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray,
@@ -464,6 +468,14 @@ def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray,
 
 
 def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
+    """The hull modes the model level reports: those the rudder deforms in, hull coupling
+    (:func:`flexible_coupled`, ``kind`` "flexible"), and the hull modes the calibrated rig lacks
+    (:func:`extra_lines`, ``kind`` "line"), which name nothing alone but say where a hull mode
+    rings (:func:`~ramdaq.analysis.gap.layers.unrung_hull`)."""
+    return [*flexible_coupled(tm, rig, cmp), *extra_lines(tm, rig, cmp)]
+
+
+def flexible_coupled(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
     """The identified modes that are hull coupling (:class:`Coupled`) against the pairing ``cmp``
     of the calibrated rig: decaying, found in three quarters of the impacts or more, the hull's
     (:data:`HULL_MODE_SHARE`), unpaired or paired below chance (MAC under 1 / n_gages, what two
@@ -493,9 +505,81 @@ def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Couple
     return out
 
 
+LINE_DECAY_Z = 3.1
+"""A line decays when its damping ratio stands this many standard errors (the impacts' spread)
+above zero: one-sided chance 1e-3 (:data:`COUPLED_P`). A steady tone (ambient, mains) read in a
+decay window has a damping ratio of zero within its error; a structure's mode decays."""
+LINE_RIDE = 5.0
+"""The most a hull line's largest rudder/stock amplitude may be over its largest hull amplitude
+(athwartship gages): the rig model's own hull modes ride the rudder at 1.2-1.7x their hull
+amplitude and the rudder's own modes at 30-3000x; above 5x a mode is the rudder's (as the
+benchmark's ``RUDDER_OVER_HULL`` reads a rig's modes)."""
+
+
+def steadiness(tm: TrialModes, i: int) -> float:
+    """How much steadier mode ``i``'s frequency is over the impacts than a pole the identification
+    admits by chance: a spurious pole lands anywhere within :data:`SAME_MODE_REL` of the cluster's
+    frequency (uniform: standard deviation ``SAME_MODE_REL f / sqrt(3)``, its mean's standard error
+    that over ``sqrt(n_seen)``), a structure's mode within its own estimation error; the ratio of
+    the two standard errors (chance level 1)."""
+    chance_se = SAME_MODE_REL * float(tm.f_hz[i]) / math.sqrt(3 * max(int(tm.n_seen[i]), 1))
+    return chance_se / max(float(tm.f_se_hz[i]), 1e-12 * float(tm.f_hz[i]))
+
+
+def extra_lines(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
+    """The identified modes that are a hull mode the calibrated rig lacks (:class:`Coupled`,
+    ``kind`` "line"): unpaired with any of the rig's modes (or paired below chance, MAC under
+    1 / n_gages), rung by three quarters of the impacts or more, decaying beyond its error
+    (:data:`LINE_DECAY_Z`), not half of a split (a mode of its shape within
+    :data:`MAX_SPLIT_REL`, to :data:`SPLIT_MAC`), moving the hull (the rudder at most
+    :data:`LINE_RIDE` times the hull), the rudder and stock riding it rigidly (off a rigid ride
+    by less than :data:`COUPLED_NONRIGID`: else :func:`flexible_coupled` reads it), and its
+    frequency steadier than a chance pole's (:func:`steadiness` above 1). A +-25 % change of the
+    rig's masses, inertias and stiffnesses moves the modes the rig has and adds none: a further
+    mode that moves the hull is a hull structure the rig lacks. Alone it is no coupling (a clean
+    modal-family trial rings two or three hull modes where the rig has one: modal development
+    seed 51000's 10.2 Hz line rides the rudder at 0.27x its hull amplitude); it is the mode an
+    effect search's hull_coupling must ring at (:func:`~ramdaq.analysis.gap.layers.unrung_hull`).
+    ``gages``: the hull gages where its shape is at least half its largest hull entry."""
+    gs = rig.gages_by_channel()
+    body = np.array([g.body for g in gs])
+    ath = np.array(["z" not in g.axis for g in gs])
+    ride = (body != "hull") & ath
+    hull_ath = (body == "hull") & ath
+    if not hull_ath.any() or not ride.any():
+        return []
+    pos = np.array([g.position_m for g in gs], float)
+    good = {p.i_id for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
+    out = []
+    for i in range(tm.n_modes):
+        if (i in good or tm.n_seen[i] < 0.75 * tm.n_impacts or tm.zeta[i] <= 0
+                or tm.zeta[i] < LINE_DECAY_Z * tm.zeta_se[i] or _split_half(tm, i)):
+            continue
+        s = tm.shapes[:, i]
+        a = np.abs(s)
+        share, _, _ = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride], tm.n_modes)
+        stat = steadiness(tm, i)
+        if not (a[ride].max() <= LINE_RIDE * a[hull_ath].max() and share < COUPLED_NONRIGID and stat > 1.0):
+            continue
+        e = a**2
+        hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
+        top = a[hull_ath].max()
+        big = [int(k) for k in np.argsort(-a) if hull_ath[k] and a[k] >= 0.5 * top]
+        out.append(Coupled(float(tm.f_hz[i]), float(tm.zeta[i]), hull, share, stat, 1.0,
+                           tuple(tm.gage_numbers[k] for k in big), "line"))
+    return out
+
+
+def _split_half(tm: TrialModes, i: int) -> bool:
+    """Whether identified mode ``i`` has another identified mode of its shape (to
+    :data:`SPLIT_MAC`) within :data:`MAX_SPLIT_REL` in frequency: half of a split."""
+    return any(abs(math.log(tm.f_hz[j] / tm.f_hz[i])) <= math.log(1 + MAX_SPLIT_REL)
+               and mac(tm.shapes[:, i], tm.shapes[:, j]) >= SPLIT_MAC for j in range(tm.n_modes) if j != i)
+
+
 # -- modes above the rig's band ------------------------------------------------------------------
 def structure_above(td: TrialData, f_from_hz: float) -> list[Split | Coupled]:
-    """The splits (:func:`splits`) and coupled hull modes (:func:`coupled_modes`) among ``td``'s
+    """The splits (:func:`splits`) and flexibly coupled hull modes (:func:`flexible_coupled`) among ``td``'s
     modes above ``f_from_hz`` (Hz; the rig's own band, which does not compare them), against
     ``td``'s rig model as it stands: what makes the data's band (``prepare(..., data_band=True)``)
     worth its cost. Only the modes above ``f_from_hz`` are identified, so the rig's modes there are
@@ -509,4 +593,4 @@ def structure_above(td: TrialData, f_from_hz: float) -> list[Split | Coupled]:
     if tm.n_modes == 0:
         return []
     cmp = compare(tm, td.rig)
-    return [*splits(tm, cmp), *coupled_modes(tm, td.rig, cmp)]
+    return [*splits(tm, cmp), *flexible_coupled(tm, td.rig, cmp)]
