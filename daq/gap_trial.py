@@ -179,6 +179,8 @@ def _gages_present(path: str | Path, info: StreamInfo, rig: Rig | None) -> list[
 
 
 def trial_data(lt: LoadedTrial, *, pre_s: float = 1.0, post_max_s: float = 4.0,
-               held_out_every: int = 3, data_band: bool = False) -> TrialData:
+               held_out_every: int = 3, data_band: bool = False,
+               min_corner_hz: float | None = None) -> TrialData:
     return prepare(lt.data, lt.fs_hz, lt.onsets_s, lt.rig, pre_s=pre_s, post_max_s=post_max_s,
-                   held_out_every=held_out_every, rails=lt.rails, data_band=data_band)
+                   held_out_every=held_out_every, rails=lt.rails, data_band=data_band,
+                   min_corner_hz=min_corner_hz)

@@ -123,3 +123,18 @@ def test_a_blow_in_the_first_second_is_found_by_gap_as_by_analyze(tmp_path):
     onsets = [ev.onset_s - rec.first_sample / rec.info.fs_hz for ev in rec.impacts]
     assert len(onsets) == 2 and abs(onsets[0] - 0.3) < 0.01  # 0.01 s: the trigger's onset pick
     np.testing.assert_array_equal(lt.onsets_s, onsets)
+
+
+def test_a_calibrated_rig_does_not_narrow_the_band_compared():
+    """``min_corner_hz`` holds the band the modes were identified on: a rig whose own band is
+    narrower than it (a benchmark trial's calibrated rig put its corner at 8.8 Hz, under the
+    13 Hz the trial rang with, and the pre window came out one sample long) is compared up to
+    it all the same; without it, or below the rig's own, the rig's band stands."""
+    rig = load_rig(ROOT / "recordings" / "rigs" / "albacore.toml").with_medium("water")
+    x = np.random.default_rng(2).standard_normal((16, 2048 * 14)) * 1e-3
+    onsets = np.array([2.0, 8.0])
+    own = prepare(x, 2048.0, onsets, rig)
+    assert prepare(x, 2048.0, onsets, rig, min_corner_hz=50.0).lowpass_hz == own.lowpass_hz
+    held = prepare(x, 2048.0, onsets, rig, min_corner_hz=300.0)
+    assert own.lowpass_hz < 300.0 <= held.lowpass_hz and held.rig_lowpass_hz >= 300.0
+    assert held.fs_hz > own.fs_hz    # decimated less: the band is sampled

@@ -73,6 +73,10 @@ def noise_model(fw: Forward, resid: np.ndarray) -> NoiseModel:
     line = scipy.ndimage.binary_dilation(P > 4 * S, structure=np.ones((1, 5)))  # Hann spreads a line
     fg = np.fft.rfftfreq(td.n_s, 1 / td.fs_hz)
     band = (f > 0) & (f < td.lowpass_hz)
+    if band.sum() < 3:  # the floor's three constants need three bins at the least
+        raise ValueError(f"the band compared ({td.lowpass_hz:.3g} Hz, decimated to "
+                         f"{td.fs_hz:.3g} Hz) leaves {int(band.sum())} bin(s) of the pre-trigger "
+                         f"window's spectrum ({n_pre} samples): too little to model the noise")
     psd = np.empty((P.shape[0], len(fg)))
     for g in range(P.shape[0]):
         keep = band & ~line[g]

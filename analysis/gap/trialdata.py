@@ -323,7 +323,7 @@ def filter_reach(corner_hz: float, fs_hz: float, rel: float = 1e-14) -> int:
 def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarray, rig: Rig, *,
             pre_s: float = 1.0, post_max_s: float = 4.0, held_out_every: int = 3,
             rails: tuple[float, float] | None = None, max_hz: float | None = None,
-            data_band: bool = False) -> TrialData:
+            data_band: bool = False, min_corner_hz: float | None = None) -> TrialData:
     """Cut, filter and decimate a trial, reading only the windows compared.
 
     Parameters
@@ -351,6 +351,9 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
     data_band : bool
         Widen the rig's band to the lines the data ring with above it (:func:`data_corner`);
         else the rig's band, and those lines are listed only.
+    min_corner_hz : float, optional
+        The low-pass corner at the least (Hz): the band the trial's modes were identified and
+        the rig calibrated on, which the calibrated rig's own band does not narrow.
     """
     rig = strip_ambient(rig)
     src = x_full if isinstance(x_full, ScaledCounts) else _ArrayWindows(x_full)
@@ -359,6 +362,8 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
         raise ValueError("no impacts to compare: the gap diagnosis needs at least one ram blow")
     n_g, n = src.shape
     corner, _ = analysis_band(rig, fs_hz, max_hz=max_hz)
+    if min_corner_hz is not None:
+        corner = max(corner, min_corner_hz)
     rig_corner = corner
     # an event too close after the previous one to leave a decay (a re-trigger on a tone, a
     # bounce the trigger split off) is not compared; its ringing stays in the data
