@@ -550,10 +550,11 @@ def extra_lines(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]
         return []
     pos = np.array([g.position_m for g in gs], float)
     good = {p.i_id for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
+    halves = {k for i, j, _ in _alike(tm) for k in (i, j)}   # half of a split
     out = []
     for i in range(tm.n_modes):
-        if (i in good or tm.n_seen[i] < 0.75 * tm.n_impacts or tm.zeta[i] <= 0
-                or tm.zeta[i] < LINE_DECAY_Z * tm.zeta_se[i] or _split_half(tm, i)):
+        if (i in good or i in halves or tm.n_seen[i] < 0.75 * tm.n_impacts or tm.zeta[i] <= 0
+                or tm.zeta[i] < LINE_DECAY_Z * tm.zeta_se[i]):
             continue
         s = tm.shapes[:, i]
         a = np.abs(s)
@@ -568,13 +569,6 @@ def extra_lines(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]
         out.append(Coupled(float(tm.f_hz[i]), float(tm.zeta[i]), hull, share, stat, 1.0,
                            tuple(tm.gage_numbers[k] for k in big), "line"))
     return out
-
-
-def _split_half(tm: TrialModes, i: int) -> bool:
-    """Whether identified mode ``i`` has another identified mode of its shape (to
-    :data:`SPLIT_MAC`) within :data:`MAX_SPLIT_REL` in frequency: half of a split."""
-    return any(abs(math.log(tm.f_hz[j] / tm.f_hz[i])) <= math.log(1 + MAX_SPLIT_REL)
-               and mac(tm.shapes[:, i], tm.shapes[:, j]) >= SPLIT_MAC for j in range(tm.n_modes) if j != i)
 
 
 # -- modes above the rig's band ------------------------------------------------------------------

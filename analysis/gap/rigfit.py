@@ -601,7 +601,7 @@ def _calibrate(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float, float]
         theta, how = _solve(tm, start, params, _pairs(tm, cmp), theta, max_nfev)
         nfev += how[2]
         new = compare(tm, apply(start, params, theta), top_hz=top)
-        same = [(p.i_id, p.i_model) for p in new.pairs] == [(p.i_id, p.i_model) for p in cmp.pairs]
+        same = _same_pairs(new, cmp)
         cmp = new
         if same:
             break
@@ -634,6 +634,11 @@ def _calibrate(tm: TrialModes, start: Rig, bounds: dict[str, tuple[float, float]
     return polished if not polished.form and better and within else out
 
 
+def _same_pairs(a: ModalComparison, b: ModalComparison) -> bool:
+    """Whether two comparisons pair the same identified modes with the same model modes."""
+    return [(p.i_id, p.i_model) for p in a.pairs] == [(p.i_id, p.i_model) for p in b.pairs]
+
+
 FIT_GAIN_LEVEL = 0.05
 """The chance that a fit's gain over its start rig is noise (:func:`_start_kept`): the rig is
 moved only where the modes ask for it beyond that chance."""
@@ -650,8 +655,7 @@ def _start_kept(tm: TrialModes, fit: ModeFit, params: list[FitParam], keep: np.n
     trial fitted to its own generating rig moved masses and stiffnesses 10-16 % together and
     the 13 Hz mode's damping ratio 100 standard errors off, for a 3 % lower misfit)."""
     k = int(keep.sum())
-    same = [(p.i_id, p.i_model) for p in fit.before.pairs] == [(p.i_id, p.i_model) for p in fit.after.pairs]
-    if k == 0 or not same or not np.isfinite(fit.cost_before):
+    if k == 0 or not _same_pairs(fit.before, fit.after) or not np.isfinite(fit.cost_before):
         return None
     gain = fit.cost_before - fit.cost_after
     chance = fit.misfit_scale ** 2 * float(scipy.stats.chi2.isf(FIT_GAIN_LEVEL, k))

@@ -735,10 +735,10 @@ plate's is ~0.1 chord / thickness (1-3 for a rudder; ALBACORE's and SAMPSON's ri
 
 def _warn_added_mass_ratio(rig: Rig) -> None:
     """A warning line when the rig's surface is far lighter than the water it moves."""
-    from ...analysis.model.rig_modes import modes_in
+    from ...analysis.model.structure import added_mass
 
     mass = rig.rudder.mass_kg
-    added = modes_in(rig, "water").added.get("m_vir", math.nan) if "water" in rig.damping else math.nan
+    added = added_mass(rig.with_medium("water"))["m_vir"] if "water" in rig.damping else math.nan
     if mass > 0 and added / mass > ADDED_OVER_MASS_MAX:
         print(f"warning: the {rig.surface.title.lower()}'s mass ({mass:.4g} kg) is {added / mass:.3g}x "
               f"smaller than the added mass of the water it moves ({added:.4g} kg, Eq 19), beyond "
