@@ -459,7 +459,7 @@ def decimate_valid(
     if max_outputs is not None:  # output j reads samples j - (taps - 1) ... j
         last = -(-(h.size - 1) // factor) * factor + (max(int(max_outputs), 1) - 1) * factor
         a = a[:, : last + 1]
-    full = downsample_fir(h, a, factor)  # full[k] = conv[k * factor]
+    full = filters.downsample_fir(h, a, factor)  # full[k] = conv[k * factor]
     j = np.arange(full.shape[-1]) * factor
     keep = (j >= h.size - 1) & (j <= a.shape[-1] - 1)
     if not np.any(keep):
@@ -482,43 +482,10 @@ def _decimate_from_first(a: np.ndarray, fs_hz: float, factor: int, band_hz: floa
     # no output kept) bring index L − 1, output 0, among them.
     pad = (-(L - 1)) % factor
     b = np.concatenate([np.zeros((a.shape[0], pad)), a], axis=1) if pad else a
-    full = downsample_fir(hc, b, factor)
+    full = filters.downsample_fir(hc, b, factor)
     first = (L - 1 + pad) // factor
     return full[:, first : first + n_out], np.arange(n_out) * factor, np.concatenate(
         [hc, np.zeros(L - 1)])
-
-
-_FIR_BLOCK = 32
-"""Outputs a row of :func:`downsample_fir` computes from one segment of its samples."""
-
-
-def downsample_fir(h: np.ndarray, x: np.ndarray, q: int) -> np.ndarray:
-    """:func:`~ramdaq.analysis.filters.downsample_fir` (the full convolution of each row of ``x``
-    (n_rows, n) with the taps ``h`` at samples 0, q, 2q, ...: ``(n + len(h) - 2) // q + 1`` of
-    them), to rounding, as one matrix product: each run of :data:`_FIR_BLOCK` outputs is its
-    segment of the zero-padded row, ``(_FIR_BLOCK - 1) q + len(h)`` samples, times a matrix
-    whose column k holds the reversed taps from row k q (zeros elsewhere, which add exact
-    zeros). The filters' version multiplies overlapping windows of the row by the taps, which
-    NumPy cannot hand to BLAS: 3-5x dearer (a 14 s hit's NLS data, 14 gages x 28 812 samples
-    by 3, 75 taps). Each output is the same sum whatever follows its segment in the row (a
-    record read only as far as its first outputs need gives them to the bit)."""
-    x = np.asarray(x, dtype=np.float64)
-    g = np.asarray(h, dtype=np.float64)[::-1]
-    rows, n = x.shape
-    L, B = g.size, _FIR_BLOCK
-    n_out = (n + L - 2) // q + 1
-    n_blocks = -(-n_out // B)
-    width = (B - 1) * q + L
-    padded = np.zeros((rows, (n_blocks * B - 1) * q + L))
-    padded[:, L - 1:L - 1 + n] = x
-    segments = np.lib.stride_tricks.as_strided(
-        padded, shape=(rows, n_blocks, width),
-        strides=(padded.strides[0], B * q * padded.itemsize, padded.itemsize), writeable=False)
-    taps = np.zeros((width, B))
-    for k in range(B):
-        taps[k * q:k * q + L, k] = g
-    out = np.ascontiguousarray(segments).reshape(rows * n_blocks, width) @ taps
-    return out.reshape(rows, n_blocks * B)[:, :n_out]
 
 
 def decimated_index(n_samples: int, fs_hz: float, factor: int, band_hz: float) -> np.ndarray:
