@@ -682,6 +682,14 @@ SCAN_PAD = 8
 resolution, within the refit's reach of the peak."""
 
 
+def _others_basis(t: np.ndarray, f0: np.ndarray, d0: np.ndarray, i: int) -> np.ndarray:
+    """The columns (n, 2 (n_poles - 1) + 1) every pole of ``f0`` (Hz), ``d0`` but ``i`` and an
+    offset give at the times ``t`` (s): the held poles' real and imaginary parts, then ones."""
+    others = np.delete(np.arange(f0.size), i)
+    E = np.exp(np.outer(t, -d0[others] * f0[others] + 2j * math.pi * f0[others]))
+    return np.hstack([E.real, E.imag, np.ones((t.size, 1))])
+
+
 def scan_start(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray, i: int) -> float:
     """The frequency (Hz) to start pole ``i``'s refit from on ``seg`` (n_ch, n): the peak, within
     ``f0[i] (1 +- SHIFT_SPAN)`` (never past the geometric midpoint to another pole of ``f0``, nor
@@ -691,14 +699,11 @@ def scan_start(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray, i:
     mode rings in the early window tens of per cent off the decay window's frequency, beyond a
     refit's reach from it."""
     n = seg.shape[1]
-    t = np.arange(n) / fs_hz
-    others = np.delete(np.arange(f0.size), i)
     lo, hi = f0[i] * (1 - SHIFT_SPAN), min(f0[i] * (1 + SHIFT_SPAN), 0.45 * fs_hz)
-    for f in f0[others]:
+    for f in np.delete(f0, i):
         mid = math.sqrt(f * f0[i])
         lo, hi = (max(lo, mid), hi) if f < f0[i] else (lo, min(hi, mid))
-    E = np.exp(np.outer(t, -d0[others] * f0[others] + 2j * math.pi * f0[others]))
-    B = np.hstack([E.real, E.imag, np.ones((n, 1))])
+    B = _others_basis(np.arange(n) / fs_hz, f0, d0, i)
     c, *_ = np.linalg.lstsq(B, seg.T, rcond=None)
     r = (seg.T - B @ c).T * np.hanning(n)
     f = np.fft.rfftfreq(SCAN_PAD * n, 1 / fs_hz)
@@ -715,9 +720,7 @@ def refit_one(seg: np.ndarray, fs_hz: float, f0: np.ndarray, d0: np.ndarray, i: 
     error (white residual; NaN where the Gram matrix gives none). Holding the others keeps two
     close poles from sliding onto one another, which leaves the Gram matrix singular."""
     t = np.arange(seg.shape[1]) / fs_hz
-    others = np.delete(np.arange(f0.size), i)
-    E = np.exp(np.outer(t, -d0[others] * f0[others] + 2j * math.pi * f0[others]))
-    base = np.hstack([E.real, E.imag, np.ones((t.size, 1))])
+    base = _others_basis(t, f0, d0, i)
     s = -d0[i] * f_start + 2j * math.pi * f_start
     for _ in range(n_iter):
         e = np.exp(s * t)
