@@ -164,12 +164,9 @@ def _gages_present(path: str | Path, info: StreamInfo, rig: Rig | None) -> list[
         raise RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
     rig.require_structure("comparing a trial with the rig's model (ramdaq gap, ramdaq rig fit)",
                           "pass --rig with a rig that describes it")
-    corner = rig.daq.anti_alias_hz
-    if corner >= info.fs_hz / 2:  # as ramdaq import refuses it
-        raise RigError(f"{path}: at its {info.fs_hz:g} Hz the anti-alias corner of rig "
-                       f"{rig.name!r} ({corner:g} Hz, daq.anti_alias_hz, a rig for "
-                       f"{rig.daq.sample_rate_hz:g} Hz) lies above Nyquist: the rig cannot "
-                       f"describe this record; use a rig of this rate")
+    why = rig.cannot_describe_rate(info.fs_hz)  # as ramdaq import refuses it
+    if why:
+        raise RigError(f"{path}: {why}")
     rows = {g for g in info.gages if g}
     have = [g for g in rig.gages_by_channel() if g.number in rows]
     if len(have) < 3:

@@ -189,5 +189,5 @@ def test_a_rig_of_another_rate_is_refused_in_one_line(tmp_path, capsys):
                  "--out", str(tmp_path / "g")]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1
-    assert "at its 1000 Hz the anti-alias corner of rig 'albacore-like' (800 Hz" in err
+    assert "at 1000 Hz the anti-alias corner of rig 'albacore-like' (800 Hz" in err
     assert "the rig cannot describe this record" in err

@@ -312,6 +312,17 @@ class Rig:
                            f"[rudder], [stock], [hull]); {what} needs the structure"
                            + (f"; {fix}" if fix else ""))
 
+    def cannot_describe_rate(self, fs_hz: float) -> str | None:
+        """Why this rig cannot describe a record sampled at ``fs_hz`` (Hz): its anti-alias corner
+        at or above that record's Nyquist frequency; None if it can (a channels-only rig that
+        names no filter, corner NaN, can)."""
+        corner = self.daq.anti_alias_hz
+        if not corner >= fs_hz / 2:
+            return None
+        return (f"at {fs_hz:g} Hz the anti-alias corner of rig {self.name!r} ({corner:g} Hz, "
+                f"daq.anti_alias_hz, a rig for {self.daq.sample_rate_hz:g} Hz) lies above "
+                f"Nyquist: the rig cannot describe this record; use a rig of this rate")
+
     @property
     def n_channels(self) -> int:
         """DAQ channels: gages and force channels."""

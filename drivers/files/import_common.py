@@ -731,12 +731,9 @@ class FileImportDevice(Device):
                 raise ImportFormatError(f"{name}: the file's sample rate is {fs:g} Hz, not the "
                                         f"{self.fs_hz:g} Hz stated "
                                         f"({option('fs_hz=', '--fs')})")
-            corner = self.rig.daq.anti_alias_hz
-            if corner >= fs / 2:  # NaN (a channels-only rig that names no filter) passes
-                raise ImportFormatError(f"{name}: at {fs:g} Hz the anti-alias corner of rig "
-                                        f"{self.rig.name!r} ({corner:g} Hz, daq.anti_alias_hz) "
-                                        f"lies above Nyquist: the rig cannot describe this "
-                                        f"record; use a rig of this rate")
+            why = self.rig.cannot_describe_rate(fs)
+            if why:
+                raise ImportFormatError(f"{name}: {why}")
             return
         rig_fs = self.rig.daq.sample_rate_hz
         if abs(fs / rig_fs - 1) > RATE_TOLERANCE:
