@@ -536,7 +536,9 @@ class McapReplayDevice(Device):
     # -- Device hooks ------------------------------------------------------------------------
     def _open(self) -> StreamInfo:
         if not self.path.is_file():
-            raise DeviceNotFound(f"mcap: no recording at {self.path}")
+            what = "is a directory, not a recording" if self.path.is_dir() else \
+                "No such file or directory"  # as the commands that open the file say it
+            raise DeviceNotFound(f"{self.path}: {what}")
         f = open(self.path, "rb")  # noqa: SIM115 - closed by _close, or below on failure
         try:
             info = self._read_info(f)
@@ -554,6 +556,10 @@ class McapReplayDevice(Device):
         check_mcap_magic(f, self.path)
         end = read_file_end(f, os.fstat(f.fileno()).st_size)
         if not end.footer:
+            if not self._stream_at_head(f):
+                raise fmt.NotARamdaqRecording(
+                    f"{self.path}: not a ramdaq recording (no footer, and no "
+                    f"{fmt.STREAM_METADATA} metadata before its first message)")
             raise fmt.TruncatedRecording(
                 f"{self.path}: recording has no footer (its recorder was killed?); "
                 f"run `ramdaq recover {self.path}` to salvage it")
@@ -586,6 +592,17 @@ class McapReplayDevice(Device):
             return fmt.stream_info_from_metadata(meta[fmt.STREAM_METADATA], rig.decode())
         except (fmt.NotARamdaqRecording, UnicodeDecodeError) as err:
             raise fmt.NotARamdaqRecording(f"{self.path}: {err}") from err
+
+    def _stream_at_head(self, f: BinaryIO) -> bool:
+        """Whether the ``ramdaq.stream`` metadata, which a recorder writes before any message,
+        is in the file: what ``ramdaq recover`` needs to salvage a footer-less file."""
+        f.seek(0)
+        for record in RecordScanner(f, self.path):
+            if isinstance(record, Metadata) and record.name == fmt.STREAM_METADATA:
+                return True
+            if isinstance(record, Message):
+                return False
+        return False
 
     def _iter_blocks(self, scanner: RecordScanner, fs_hz: float) -> Iterator[Block]:
         """The block messages of the data section, in file order; a damaged record raises

@@ -281,6 +281,16 @@ def test_truncated_file_gives_one_line_error_suggesting_recover(tmp_path):
     assert "\n" not in str(err.value)
 
 
+def test_a_stub_cut_before_its_stream_metadata_is_not_sent_to_recover(tmp_path):
+    """A file cut inside its header (the new user's 100-byte stub) has nothing ``ramdaq
+    recover`` can salvage; replay must say it is not a recording, not send the user there."""
+    path = tmp_path / "stub.mcap"
+    _record(path, stream(20, seed=6))
+    path.write_bytes(path.read_bytes()[:30])
+    with pytest.raises(NotARamdaqRecording, match=r"stub\.mcap: not a ramdaq recording \(no footer"):
+        open_device(str(path))
+
+
 def test_replay_refuses_mcap_that_is_not_ramdaq(tmp_path):
     path = tmp_path / "other.mcap"
     with open(path, "wb") as f:
@@ -294,7 +304,7 @@ def test_replay_refuses_mcap_that_is_not_ramdaq(tmp_path):
     assert "\n" not in str(err.value)
     with pytest.raises(NotARamdaqRecording, match="other.mcap: not a ramdaq recording"):
         describe_recording(path)
-    with pytest.raises(DeviceNotFound, match="no recording at .*missing.mcap"):
+    with pytest.raises(DeviceNotFound, match="missing.mcap: No such file or directory"):
         open_device(str(tmp_path / "missing.mcap"))
 
 
