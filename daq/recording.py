@@ -279,6 +279,18 @@ def read_recording(path: str | PathLike, *, rig: Rig | str | Path | None = None,
     return Recording(str(path), info, values, first, scale, created, the_rig, events, tuple(impacts))
 
 
+def recorded_rig(path: str | PathLike) -> Rig:
+    """The rig recording ``path`` carries, in its recorded medium, from its summary alone (no
+    samples read); :class:`RigError` naming the file when it carries none."""
+    from ..drivers.mcap_replay import McapReplayDevice
+
+    with McapReplayDevice(path) as dev:
+        rig = rig_of(path, dev.info, None)
+    if rig is None:
+        raise RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
+    return rig
+
+
 def rig_or_fail(rec: Recording) -> Rig:
     """The recording's rig; a :class:`RigError` naming the file when it has none."""
     if rec.rig is None:

@@ -93,8 +93,10 @@ def test_air_twin_must_be_the_same_rig_in_air(tmp_path, capsys):
         check_air_twin(water, water, "w.mcap")
     assert main(["analyze", str(SAMPLES / "albacore-water.mcap"), "--impact", "0", "--air",
                  str(SAMPLES / "sampson-water.mcap"), "--out", str(tmp_path), "--no-plots"]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
+    out, err = capsys.readouterr()
+    err = err.strip().splitlines()
     assert len(err) == 1 and "sampson-water.mcap" in err[0] and "not air" in err[0]
+    assert "impact 0" not in out  # refused from the files' rigs, before either is analysed
 
 
 def test_a_damping_constant_of_no_sign_is_said_and_the_table_says_what_c_is(air_report, capsys):

@@ -47,7 +47,7 @@ import signal  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
 import traceback  # noqa: E402
-from collections.abc import Iterator  # noqa: E402
+from collections.abc import Callable, Iterator  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from ...analysis.model.rig import Rig, RigError, load_rig, parse_rig
@@ -365,19 +365,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
+    from ..recording import recorded_rig
     from .analyze import check_air_twin, format_summary, plot_kinds, run_analysis, write_analysis
 
     src = Path(args.file)
     out = Path(args.out) if args.out else src.with_name(src.stem + "_analysis")
 
-    def progress(msg: str) -> None:
-        print(msg, flush=True)
+    def progress_of(path: Path) -> Callable[[str], None]:
+        """Progress lines, named by file when there are two (``--air``)."""
+        return lambda msg: print(f"{path.name}: {msg}" if args.air else msg, flush=True)
 
     plots = plot_kinds(args.plots, off=args.no_plots)  # checked before the analysis
-    rig, hits = run_analysis(src, impact=args.impact, progress=progress, bars=None, mode_hz=args.mode_hz)
-    air = run_analysis(Path(args.air), progress=progress, bars=None) if args.air else None
-    if air is not None:
-        check_air_twin(rig, air[0], args.air)
+    if args.air:  # both rigs from the files' summaries: refused before either is analysed
+        check_air_twin(recorded_rig(src), recorded_rig(args.air), args.air)
+    rig, hits = run_analysis(src, impact=args.impact, progress=progress_of(src), bars=None,
+                             mode_hz=args.mode_hz)
+    air = run_analysis(Path(args.air), progress=progress_of(Path(args.air)),
+                       bars=None) if args.air else None
     report, files = write_analysis(src, rig, hits, out, plots=plots, air=air)
     print(format_summary(report, args.units))
     plural = "s" if len(files) != 1 else ""
