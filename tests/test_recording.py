@@ -23,6 +23,7 @@ from ramdaq.drivers.block import Block
 from ramdaq.drivers.errors import DeviceNotFound, DeviceTimeout
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.registry import open_device
+from tests.conftest import RIGS
 from tests.recording_helpers import BLOCK_SAMPLES, FS_HZ, block, stream, stream_info
 
 pytestmark = pytest.mark.timeout(60)
@@ -67,6 +68,15 @@ def test_round_trip_is_bit_identical_and_keeps_the_gap(tmp_path):
     text = format_info(d)
     assert "after seq 19: 2 block(s)" in text and "device" in text
     json.dumps(dataclasses.asdict(d))  # the CLI prints it as JSON
+
+
+def test_info_names_the_carried_rig_and_medium():
+    """``ramdaq info`` says which rig a recording carries and in which medium it was taken
+    (the new user had to run analyze to learn it)."""
+    for name, rig in (("albacore-water", "albacore-like (rudder, stock, hull) in water"),
+                      ("albacore-air", "albacore-like (rudder, stock, hull) in air")):
+        d = describe_recording(RIGS.parent / f"{name}.mcap")
+        assert d.rig == rig and f"rig        {rig}" in format_info(d)
 
 
 def test_joined_blocks_are_the_same_samples_and_stop_at_a_gap(tmp_path):

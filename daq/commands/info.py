@@ -83,6 +83,7 @@ class RecordingFacts:
     n_channels: int
     extra: Any
     rig_toml_bytes: int
+    rig: str
     ramdaq_version: str
     created_utc: str
     blocks: int
@@ -193,7 +194,7 @@ def describe_recording(path: str | PathLike) -> RecordingFacts:
         summary_ok=scanner.end.summary_ok, data_crc_ok=scanner.data_crc_ok, damaged=scan.damaged,
         chunks=scanner.chunks, device=info.device, fs_hz=info.fs_hz, channels=list(info.channels),
         units=list(info.units), gages=list(info.gages), n_channels=info.n_channels,
-        extra=info.extra, rig_toml_bytes=len(scan.rig),
+        extra=info.extra, rig_toml_bytes=len(scan.rig), rig=_rig_line(path, scan.rig, info.extra),
         ramdaq_version=stream.get("ramdaq_version", "?"),
         created_utc=stream.get("created_utc", "?"), blocks=scan.blocks, n_samples=scan.n_samples,
         first_sample=first.first_sample if first else -1,
@@ -266,12 +267,29 @@ def _gap_cause(d: RecordingFacts, seq: int) -> str:
     return "device"
 
 
+def _rig_line(path: Path, toml: bytes, extra: Any) -> str:
+    """The carried rig in a few words: its name, whether it describes the structure, the
+    recorded medium; or why there is none to read."""
+    from ...analysis.model.rig import RigError, parse_rig
+
+    if not toml:
+        return "none carried (analysis needs one: --rig)"
+    try:
+        rig = parse_rig(toml.decode(), source=f"{path}:rig.toml")
+    except (RigError, UnicodeDecodeError) as err:
+        return f"unreadable ({err})"
+    medium = extra.get("medium") if isinstance(extra, dict) else None
+    what = "rudder, stock, hull" if rig.structural else "channels only"
+    return f"{rig.name} ({what}) in {medium or rig.medium}"
+
+
 def format_info(d: RecordingFacts) -> str:
     """Readable text of :func:`describe_recording`'s result, one fact per line."""
     bps = f", {d.bytes_per_sample:.2f} bytes/sample" if d.bytes_per_sample else ""
     lines = [
         f"{d.path}  ({_mb(d.file_bytes)}{bps}, {_state(d)})",
         f"device     {d.device}   created {d.created_utc}   ramdaq {d.ramdaq_version}",
+        f"rig        {d.rig}",
         f"stream     {d.n_channels} channels at {d.fs_hz:g} Hz: {d.duration_s:.3f} s "
         f"recorded ({d.n_samples} samples/channel) in {d.blocks} blocks, "
         f"samples {d.first_sample}..{d.last_sample}",
