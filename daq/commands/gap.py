@@ -96,7 +96,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
     td = d.forward.td
     out = [f"gap diagnosis of {td.n_seg} impacts ({int(td.fitted.sum())} fitted, "
            f"{int((~td.fitted).sum())} held out), {td.n_gages} gages, compared up to "
-           f"{td.lowpass_hz:.0f} Hz at {td.fs_hz:.0f} Hz, in {d.seconds:.1f} s",
+           f"{td.lowpass_hz:.0f} Hz (analysed at {td.fs_hz:.0f} samples/s), in {d.seconds:.1f} s",
            *verdict_lines(d)]
     out += band_lines(td)
     out += rig_check_lines(d)
