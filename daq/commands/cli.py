@@ -880,7 +880,8 @@ def _device_args(r: argparse.ArgumentParser) -> None:
     r.add_argument("--medium", choices=("air", "water"), help="override the rig's medium")
     r.add_argument("--duration", type=_positive, help="seconds to record (sim; default 10)")
     r.add_argument("--impacts", type=_parse_impacts, help="ram blows at these seconds, e.g. 1,4,7")
-    r.add_argument("--impact-every", type=_positive, help="a ram blow every S seconds")
+    r.add_argument("--impact-every", type=_positive,
+                   help="a ram blow every S seconds, at S/2, 3S/2, ... (half a period of quiet first)")
     r.add_argument("--seed", type=int, help="noise seed (sim; default 0)")
     r.add_argument("--fs", type=_positive, help="override the rig's sample rate, Hz")
     r.add_argument("--fast", action="store_true", help="simulate as fast as possible")
