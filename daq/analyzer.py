@@ -241,13 +241,32 @@ def _full_scale(info: StreamInfo, scale: np.ndarray) -> float | None:
     return float(np.min(np.abs(scale)) * (2 ** (bits - 1) - 1))
 
 
-def _mean_scatter(values: list[float]) -> dict:
-    v = np.array([x for x in values if np.isfinite(x)])
+def _mean_scatter(values: list[float], se: list[float] | None = None) -> dict:
+    """Mean, scatter (std) and count of the finite ``values``, each one's deviation from the
+    mean (%); with their standard errors ``se``, ``p_agree``: the chance that hits measuring one
+    number scatter as much (chi-square of the values about their weighted mean, over n - 1
+    degrees of freedom), None where fewer than two values have one."""
+    pairs = [(x, e) for x, e in zip(values, se or [math.nan] * len(values), strict=True)
+             if np.isfinite(x)]
+    v = np.array([x for x, _ in pairs])
     if v.size == 0:
-        return {"mean": None, "std": None, "n": 0, "deviation_pct": []}
+        return {"mean": None, "std": None, "n": 0, "deviation_pct": [], "p_agree": None}
     mean = float(v.mean())
     return {"mean": mean, "std": float(v.std(ddof=1)) if v.size > 1 else None, "n": int(v.size),
-            "deviation_pct": [float(100 * (x / mean - 1)) for x in v]}
+            "deviation_pct": [float(100 * (x / mean - 1)) for x in v],
+            "p_agree": _p_agree(v, np.array([e for _, e in pairs]))}
+
+
+def _p_agree(v: np.ndarray, se: np.ndarray) -> float | None:
+    """Chance of a chi-square about the weighted mean as large as ``v``'s with errors ``se``."""
+    ok = np.isfinite(se) & (se > 0)
+    if ok.sum() < 2:
+        return None
+    from scipy.special import chdtrc
+
+    w = 1 / se[ok] ** 2
+    mean = float(np.sum(w * v[ok]) / np.sum(w))
+    return float(chdtrc(int(ok.sum()) - 1, float(np.sum(w * (v[ok] - mean) ** 2))))
 
 
 @dataclass(frozen=True)
@@ -291,9 +310,11 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
         "analyzer": None if load is None else load.to_json(),
         "coarse": {h.index: h.coarse for h in hits if h.coarse},
         "f_hz": _mean_scatter([a.f_hz for a in ok]),
-        "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages])
+        "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages],
+                                                  [a.gages[n].delta_se for a in ok if n in a.gages])
                        for n in gages},
-        "delta_motion": {m: _mean_scatter([a.motions[m].delta for a in ok if m in a.motions])
+        "delta_motion": {m: _mean_scatter([a.motions[m].delta for a in ok if m in a.motions],
+                                          [a.motions[m].delta_se for a in ok if m in a.motions])
                          for m in motions},
         "delta_modal": _mean_scatter([a.damping["delta_modal"] for a in ok]),
         "delta_hull_motion": {m: _mean_scatter([a.hull_motions[m].delta for a in ok

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -69,3 +70,16 @@ def test_finite_json_turns_every_non_finite_number_into_null() -> None:
            "d": {"e": np.float64(2.0), "f": True}}
     assert finite_json(doc) == {"a": None, "b": [None, None, 1.5], "c": [3, "x"],
                                 "d": {"e": 2.0, "f": True}}
+
+
+def test_a_summary_row_whose_hits_disagree_is_marked():
+    """Three hits of one decrement: 0.05, 0.05, 0.08 with standard errors 0.001 cannot be one
+    number (chi-square ~600 over 2 dof); with errors 0.02 they can (chi-square ~1.5, chance
+    ~0.5). NaN values, and errors of NaN, count for neither."""
+    from ramdaq.daq.analyzer import _mean_scatter
+
+    tight = _mean_scatter([0.05, 0.05, 0.08, math.nan], [0.001, 0.001, 0.001, 0.001])
+    loose = _mean_scatter([0.05, 0.05, 0.08], [0.02, 0.02, 0.02])
+    assert tight["n"] == 3 and tight["p_agree"] < 1e-100
+    assert 0.3 < loose["p_agree"] < 0.7
+    assert _mean_scatter([0.05, 0.06], [math.nan, 0.01])["p_agree"] is None

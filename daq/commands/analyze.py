@@ -186,6 +186,11 @@ def _skipped(rig: Rig, hits: list[HitResult]) -> list[dict]:
     return [{"step": k, "reason": v} for k, v in seen.items()]
 
 
+HITS_AGREE_P = 1e-3
+"""A summary row whose hits scatter more than their standard errors allow at this chance (a
+mode fitted at different frequencies in different hits, a gage that changed) is marked."""
+
+
 def format_summary(report: dict, units: str = "si") -> str:
     """A readable table: each hit, then per gage and motion the mean decrement and scatter."""
     kind = report.get("surface", {}).get("kind", "rudder").replace("_", " ") \
@@ -334,6 +339,9 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
             return
         std = "-" if d["std"] is None else fmt.format(d["std"])
         lines.append(f"  {name:14s} {fmt.format(d['mean']):>9s} {std:>10s} {d['n']:5d}")
+        if (d.get("p_agree") or 1.0) < HITS_AGREE_P:
+            lines.append(f"  {'':14s} ^ the hits differ beyond their own standard errors "
+                         f"(chance {d['p_agree']:.1e}): not one number; see each hit above")
 
     row("f (Hz)", s["f_hz"], "{:.3f}")
     for m, d in s["delta_motion"].items():
