@@ -433,10 +433,32 @@ def _body_gains(fm: FreeModal, gages: Sequence[Gage], rows: list[int]) -> list[F
     # (modal check seed 151000: a 228 Hz rudder mode, weak on its gages, passed as rigid and its
     # bending was read as gage 4's gain varying by mode); one rigid at MIN_ENTRY_SNR too stays
     rigid = low & ((fm.f_hz < first_bent) | _rigid_modes(fm, G, rows)[0])
+    if rigid.sum() == 1:
+        rigid |= _unread_below(fm, G, rows, first_bent)
     if rigid.sum() < 2 or rigid.sum() == (~fm.steady).sum():
         return out
     gains = [f for f in _body_gains_on(fm, gages, rows, G, ~rigid, RIDE_SNR) if f.check == "gain"]
     return gains + out
+
+
+def _unread_below(fm: FreeModal, G: dict, rows: list[int], first_bent: float) -> np.ndarray:
+    """(K,) bool: the modes (not steady) below ``first_bent`` (Hz, the lowest mode the body is
+    measured to bend in) that the rigid-body test could not read at :data:`RIDE_SNR` (fewer
+    than three of the body's gages read, whichever is left out). A body rides rigidly,
+    quasi-statically, below its first own mode, so a hull mode there carries it as one: with
+    a single mode shown rigid a gain is not told from the body's shape, and these modes, weak
+    as they are, are the second reading of the same ratio that :func:`_mode_spread` then tests
+    (issue 17, modal development seed 52005: a x1.40 gain on gage 8 read 1.373 +- 0.012 on the
+    one rigid 13.6 Hz mode and 1.39 +- 0.08 on a 5.4 Hz hull mode the rudder's gages read at
+    SNR 7-12, and was not found)."""
+    a, se = _real_modes(fm)
+    out = np.zeros(fm.n_modes, dtype=bool)
+    for k in np.flatnonzero(~fm.steady & (fm.f_hz < first_bent)):
+        only = np.ones(fm.n_modes, dtype=bool)
+        only[k] = False
+        z = [_largest_z(a, se, G, [r for r in rows if r != c], only, RIDE_SNR) for c in rows]
+        out[k] = not any(math.isfinite(v) for v in z + [_largest_z(a, se, G, rows, only, RIDE_SNR)])
+    return out
 
 
 def _rigid_modes(fm: FreeModal, G: dict, rows: list[int],
