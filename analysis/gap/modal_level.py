@@ -587,8 +587,10 @@ the rig's constants are off by +-25 % before calibration, and a constant the mod
 may end at its calibration bound (x0.5-x2), where the rudder's response near one of its own
 modes scales with the distance to it. A hull mode the rudder rides in a proportion of its own
 leaves the order of its whole energy or more: clean modal-family trials' hull lines ride the
-rudder at 0.1-0.4x the hull's amplitude where the stock would carry it at about 1x, a misfit of
-2-80 (development seed 51000's 10.2 Hz line: 7.8)."""
+rudder at 0.1-0.4x the hull's amplitude where the stock would carry it at about 1x (development
+and check seeds 51000-51005, 150000-150005: 14 lines, misfits 1.1-4800 where the hull gages move
+as one section, the rest not), the truth family's local hull modes at 0.0001-0.17 (development
+and check hull-coupling seeds 2000-2005, 101000-101005)."""
 PROBE_MASS = 1e3
 """The probe hull mode's modal mass over the rudder's (:func:`stock_driven`): heavy enough that
 the rudder's reaction neither moves its frequency nor its section's motion, so the mode's shape
@@ -599,9 +601,12 @@ def section_motion(s: np.ndarray, rig: Rig) -> tuple[np.ndarray, float]:
     """The hull section's motion at the stock (``v_b`` m, ``gamma_b`` and ``alpha_b`` rad; complex,
     (3,)) that best reads a mode shape ``s`` (n_gages,) at the hull gages through the rig's own
     kinematics (:func:`~ramdaq.analysis.model.structure.gage_map`: the section at the stock moves
-    rigidly), and the share of the hull gages' shape energy it leaves."""
+    rigidly), and the share of the hull gages' shape energy it leaves (1 when four hull gages or
+    more are not there to test the three motions)."""
     gs = rig.gages_by_channel()
     hull = np.array([g.body == "hull" for g in gs])
+    if hull.sum() < 4:
+        return np.zeros(3, complex), 1.0
     n0 = 3 + len(rig.hull_modes)
     unit = tuple(HullMode(f"unit{j}", 1.0, 0.0, 1.0, *np.eye(3)[j]) for j in range(3))
     A = gage_map(replace(rig, hull_modes=rig.hull_modes + unit), n0 + 3)[hull][:, n0:]
@@ -618,8 +623,9 @@ def stock_driven(s: np.ndarray, f_hz: float, rig: Rig) -> float:
     rudder-and-stock shape energy the response misses once scaled to the hull gages (the hull
     gages set the scale; the rudder's amplitude and shape are the prediction). ``inf`` when the
     hull gages do not move as the rig's section can (more than :data:`COUPLED_NONRIGID` of their
-    energy off it). A +-25 % change of the rig's constants adds no hull mode; a second hull
-    structure at the stock (hull coupling) rings one the rudder answers exactly so."""
+    energy off it, or fewer than four of them). A +-25 % change of the rig's constants adds no
+    hull mode; a second hull structure at the stock (hull coupling) rings one the rudder answers
+    exactly so."""
     c, off = section_motion(s, rig)
     if off > COUPLED_NONRIGID or not np.any(c):
         return math.inf
