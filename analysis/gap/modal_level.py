@@ -20,7 +20,7 @@ filters in the signal chain act alike on every gage).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
@@ -29,8 +29,8 @@ import scipy.stats
 
 from ..modal.identify import identify_modes
 from ..model.response import ModalForm, modal_form
-from ..model.rig import BODIES, Rig
-from ..model.structure import build_model
+from ..model.rig import BODIES, HullMode, Rig
+from ..model.structure import build_model, gage_map
 from .trialdata import TrialData
 
 SAME_MODE_REL = 0.01
@@ -437,7 +437,9 @@ class Coupled:
     kind: str = "flexible"
     """"flexible": the rudder deforms in the hull mode (:func:`flexible_coupled`); "line": a hull
     mode the calibrated rig lacks that the rudder rides rigidly (:func:`extra_lines`), whose
-    ``statistic`` is its frequency's steadiness over a chance pole's (:func:`steadiness`)."""
+    ``statistic`` is its frequency's steadiness over a chance pole's (:func:`steadiness`);
+    "driven": such a line that the rudder rides as the calibrated rig's stock carries it from
+    the hull's section (:func:`stock_driven`), a second hull structure at the stock."""
 
     def to_json(self) -> dict:
         return {"f_hz": self.f_hz, "zeta": self.zeta, "hull_share": self.hull_share,
@@ -471,7 +473,8 @@ def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Couple
     """The hull modes the model level reports: those the rudder deforms in, hull coupling
     (:func:`flexible_coupled`, ``kind`` "flexible"), and the hull modes the calibrated rig lacks
     (:func:`extra_lines`, ``kind`` "line"), which name nothing alone but say where a hull mode
-    rings (:func:`~ramdaq.analysis.gap.layers.unrung_hull`)."""
+    rings (:func:`~ramdaq.analysis.gap.layers.unrung_hull`), or "driven" where the rig's stock
+    carries the rudder in them as it rides (a hull structure at the stock the rig lacks)."""
     return [*flexible_coupled(tm, rig, cmp), *extra_lines(tm, rig, cmp)]
 
 
@@ -540,6 +543,10 @@ def extra_lines(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]
     modal-family trial rings two or three hull modes where the rig has one: modal development
     seed 51000's 10.2 Hz line rides the rudder at 0.27x its hull amplitude); it is the mode an
     effect search's hull_coupling must ring at (:func:`~ramdaq.analysis.gap.layers.unrung_hull`).
+    A line the rudder rides as the calibrated rig's stock would carry it from the hull section's
+    motion (:func:`stock_driven` within :data:`DRIVEN_MISFIT`) is ``kind`` "driven": a hull mode
+    at the stock the rig lacks, which no change of its constants adds -- hull coupling (the truth
+    family's local hull mode carries the rudder rigidly, so the flexible test cannot see it).
     ``gages``: the hull gages where its shape is at least half its largest hull entry."""
     gs = rig.gages_by_channel()
     body = np.array([g.body for g in gs])
@@ -566,9 +573,70 @@ def extra_lines(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]
         hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
         top = a[hull_ath].max()
         big = [int(k) for k in np.argsort(-a) if hull_ath[k] and a[k] >= 0.5 * top]
+        kind = "driven" if stock_driven(s, float(tm.f_hz[i]), rig) <= DRIVEN_MISFIT else "line"
         out.append(Coupled(float(tm.f_hz[i]), float(tm.zeta[i]), hull, share, stat, 1.0,
-                           tuple(tm.gage_numbers[k] for k in big), "line"))
+                           tuple(tm.gage_numbers[k] for k in big), kind))
     return out
+
+
+DRIVEN_MISFIT = 0.25
+"""The largest share of a line's rudder-and-stock shape energy the calibrated rig's forced
+response may miss for the line to be a hull mode driven through the stock (:func:`stock_driven`):
+the response's amplitude off by up to half (a relative error eps leaves eps^2 of the energy) --
+the rig's constants are off by +-25 % before calibration, and a constant the modes do not pin
+may end at its calibration bound (x0.5-x2), where the rudder's response near one of its own
+modes scales with the distance to it. A hull mode the rudder rides in a proportion of its own
+leaves the order of its whole energy or more: clean modal-family trials' hull lines ride the
+rudder at 0.1-0.4x the hull's amplitude where the stock would carry it at about 1x (development
+and check seeds 51000-51005, 150000-150005: 14 lines, misfits 1.1-4800 where the hull gages move
+as one section, the rest not), the truth family's local hull modes at 0.0001-0.17 (development
+and check hull-coupling seeds 2000-2005, 101000-101005)."""
+PROBE_MASS = 1e3
+"""The probe hull mode's modal mass over the rudder's (:func:`stock_driven`): heavy enough that
+the rudder's reaction neither moves its frequency nor its section's motion, so the mode's shape
+is the section's motion with the rudder's forced response to it."""
+
+
+def section_motion(s: np.ndarray, rig: Rig) -> tuple[np.ndarray, float]:
+    """The hull section's motion at the stock (``v_b`` m, ``gamma_b`` and ``alpha_b`` rad; complex,
+    (3,)) that best reads a mode shape ``s`` (n_gages,) at the hull gages through the rig's own
+    kinematics (:func:`~ramdaq.analysis.model.structure.gage_map`: the section at the stock moves
+    rigidly), and the share of the hull gages' shape energy it leaves (1 when four hull gages or
+    more are not there to test the three motions)."""
+    gs = rig.gages_by_channel()
+    hull = np.array([g.body == "hull" for g in gs])
+    if hull.sum() < 4:
+        return np.zeros(3, complex), 1.0
+    n0 = 3 + len(rig.hull_modes)
+    unit = tuple(HullMode(f"unit{j}", 1.0, 0.0, 1.0, *np.eye(3)[j]) for j in range(3))
+    A = gage_map(replace(rig, hull_modes=rig.hull_modes + unit), n0 + 3)[hull][:, n0:]
+    c, *_ = np.linalg.lstsq(A.astype(complex), s[hull], rcond=None)
+    r = s[hull] - A @ c
+    return c, float(np.vdot(r, r).real / max(np.vdot(s[hull], s[hull]).real, 1e-30))
+
+
+def stock_driven(s: np.ndarray, f_hz: float, rig: Rig) -> float:
+    """How far a hull line's shape ``s`` (n_gages,) at ``f_hz`` is from a hull mode driven through
+    the stock of the calibrated ``rig``: the hull section moving as the line's hull gages read it
+    (:func:`section_motion`), the rig's rudder and stock answering that motion at ``f_hz`` (a probe
+    hull mode of that shape, :data:`PROBE_MASS`, added to the rig), and the share of the line's
+    rudder-and-stock shape energy the response misses once scaled to the hull gages (the hull
+    gages set the scale; the rudder's amplitude and shape are the prediction). ``inf`` when the
+    hull gages do not move as the rig's section can (more than :data:`COUPLED_NONRIGID` of their
+    energy off it, or fewer than four of them). A +-25 % change of the rig's constants adds no
+    hull mode; a second hull structure at the stock (hull coupling) rings one the rudder answers
+    exactly so."""
+    c, off = section_motion(s, rig)
+    if off > COUPLED_NONRIGID or not np.any(c):
+        return math.inf
+    c = (c * np.exp(-1j * np.angle(c[np.argmax(np.abs(c))]))).real
+    probe = HullMode("probe", f_hz, 0.02, PROBE_MASS * rig.rudder.mass_kg, *(c / np.abs(c).max()))
+    mm = model_modes_at_gages(replace(rig, hull_modes=rig.hull_modes + (probe,)))
+    p = mm.shapes[:, int(np.argmin(np.abs(mm.f_hz - f_hz)))]
+    hull = np.array([g.body == "hull" for g in rig.gages_by_channel()])
+    a = np.vdot(p[hull], s[hull]) / max(np.vdot(p[hull], p[hull]).real, 1e-30)
+    r = s[~hull] - a * p[~hull]
+    return float(np.vdot(r, r).real / max(np.vdot(s[~hull], s[~hull]).real, 1e-30))
 
 
 # -- modes above the rig's band ------------------------------------------------------------------
