@@ -82,8 +82,9 @@ class SecondBlow:
     ``statistic`` that drop over the two-blow residual's variance per degree of freedom (at least
     1: an F-test, as the double-hit scan's), about chi-square with 2 degrees of freedom under one
     blow; ``n_delays`` the delays it was the best of (a Bonferroni count); ``at_first`` whether
-    that delay is the earliest tried (within a sample): the drop still grows toward the first
-    contact, what a first contact that is no exact half-sine leaves."""
+    the second contact starts where the first (of the length fitted with it) ends plus
+    :data:`SEPARATION_S`, within a sample: the earliest a second contact may start, where a
+    first contact that is no exact half-sine leaves its misfit."""
 
     delay_s: float
     rho: float
@@ -266,4 +267,5 @@ def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
                                          bounds=(rho / step, rho * step), options={"xatol": 1e-3 * rho})
     drop = float(rss0 - res.fun)
     s2 = max(1.0, float(res.fun) / max(ob.dof() - 2, 1))
-    return SecondBlow(i / fs_hz, float(res.x), c, drop, drop / s2, max(1, len(range(lo, hi))), i <= lo + 1)
+    flush = i <= math.ceil((c + SEPARATION_S) * fs_hz) + 1
+    return SecondBlow(i / fs_hz, float(res.x), c, drop, drop / s2, max(1, len(range(lo, hi))), flush)

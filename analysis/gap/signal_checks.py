@@ -617,9 +617,10 @@ def early_double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers
     quantile. A contact that is no exact half-sine leaves a misfit the statistic reads past its
     level (clean modal trials: 22-56x, at the least size tried, 1.4 %, or at 5-13 % right where
     the delays tried begin, the contact's end plus its separation), so, as for the scan, a blow
-    counts only with a second blow of :data:`RHO_MIN` or more, and not at the earliest delay
-    tried (a drop still growing toward the first contact is that contact's own shape; a true
-    second blow that close is not told from it), and a finding needs :data:`MIN_BLOWS` of them.
+    counts only with a second blow of :data:`RHO_MIN` or more, and not flush against the first
+    contact (starting as it ends plus :data:`~ramdaq.analysis.gap.contact.SEPARATION_S`: there a
+    first contact that is no exact half-sine leaves its misfit; a true second blow that close is
+    not told from it), and a finding needs :data:`MIN_BLOWS` of them.
     ``poles`` the free model's decaying poles (1/s); ``sig`` (n_g,) each gage's noise, m/s^2."""
     until = EARLY_FROM_S + 2 / fs_hz                  # the scan's first delay
     found = [second_blow(x, fs_hz, t, poles, sig, until_s=until) for t in onsets_s]
@@ -653,7 +654,7 @@ def contact_closure(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, poles: np
     (:func:`~ramdaq.analysis.gap.contact.one_blow`) a second contact read on the other blows
     closes (:func:`closure_of`): its delay, size and contact length the medians of ``found``'s
     (one per blow, :func:`~ramdaq.analysis.gap.contact.second_blow`) on the blows not held out
-    beyond ``chance`` of :data:`RHO_MIN` or more past the earliest delay, the first contact's
+    beyond ``chance`` of :data:`RHO_MIN` or more not flush against the first, the first contact's
     start the held-out blow's own. Units: the gages of the held-out blows; the noise expectation
     one per sample less the gage's share of the fitted amplitudes."""
     held = held_out(len(onsets_s))
