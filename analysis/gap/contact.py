@@ -211,19 +211,21 @@ class OneBlow:
 
 
 def one_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
-             sig: np.ndarray) -> OneBlow | None:
+             sig: np.ndarray, extra: np.ndarray | None = None) -> OneBlow | None:
     """The early window after ``onset_s`` (from :data:`SHIFT_GRID`'s earliest shift to
     :data:`EARLY_TO_S`) fitted as one half-sine contact: the contact length and onset shift of
     least residual (every shift judged on the same samples), over ``poles`` (the free modal
     model's), the early window's own (:func:`early_poles`) and the fast ones. ``sig`` (n_g,)
-    each gage's noise, m/s^2. None when the window runs off the record or over a gap."""
+    each gage's noise, m/s^2; ``extra`` the early window's own poles when already read (else
+    they are read here). None when the window runs off the record or over a gap."""
     first = int(SHIFT_GRID.min())
     a = int(round(onset_s * fs_hz)) + first
     b = int(round((onset_s + EARLY_TO_S) * fs_hz))
     if a < 0 or b > x.shape[1] or b - a < 64 or not np.all(np.isfinite(x[:, a:b])):
         return None
     y = (x[:, a:b] / sig[:, None]).T
-    s = np.concatenate([poles, early_poles(x, fs_hz, onset_s, poles, sig), fast_poles(fs_hz)])
+    own = early_poles(x, fs_hz, onset_s, poles, sig) if extra is None else extra
+    s = np.concatenate([poles, own, fast_poles(fs_hz)])
     n = np.arange(y.shape[0])
     rss0, sh, T = min((float(rss(contact_response((n - (k - first)) / fs_hz, s, c), y)), int(k), float(c))
                       for k in SHIFT_GRID for c in CONTACT_GRID_S)
@@ -231,7 +233,8 @@ def one_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
 
 
 def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
-                sig: np.ndarray, until_s: float | None = None) -> SecondBlow | None:
+                sig: np.ndarray, until_s: float | None = None, min_rho: float = 0.0,
+                extra: np.ndarray | None = None) -> SecondBlow | None:
     """The second blow after the onset ``onset_s`` that best fits with the contact held: the
     one-blow model's contact length and onset shift (:func:`one_blow`), every other delay from
     :data:`MIN_DELAY_S` and the contact's end plus :data:`SEPARATION_S` (up to ``until_s`` s
@@ -241,8 +244,10 @@ def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
     stretches its contact over a second blow: 9 ms for two 5 ms contacts 18 ms apart), and the
     size refined. ``poles`` the free modal model's (the early window's own,
     :func:`early_poles`, and the fast ones are added); ``sig`` (n_g,) each gage's noise, m/s^2.
-    None when the window runs off the record or over a gap, or no delay is left to try."""
-    ob = one_blow(x, fs_hz, onset_s, poles, sig)
+    None when the window runs off the record or over a gap, or no delay is left to try, or the
+    best delay's size on the grid is more than a grid step under ``min_rho`` (the refinement,
+    most of the cost, would not bring it there)."""
+    ob = one_blow(x, fs_hz, onset_s, poles, sig, extra)
     if ob is None:
         return None
     y, s, tau, T, rss0 = ob.y, ob.poles, ob.tau, ob.contact_s, ob.rss0
@@ -252,9 +257,11 @@ def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
         hi = min(hi, int(math.floor(until_s * fs_hz)) + 1)
     if hi <= lo:
         return None
-    coarse = [(float(rss0 - r.min()), i) for i in range(lo, hi, 2)
+    coarse = [(float(rss0 - r.min()), i, float(RHO_GRID[int(np.argmin(r))])) for i in range(lo, hi, 2)
               for r in [_two_blow_rss(tau, s, T, i / fs_hz, y)]]
-    i0 = max(coarse)[1]
+    _, i0, rho0 = max(coarse)
+    if rho0 * RHO_GRID[1] / RHO_GRID[0] < min_rho:
+        return None
     near = [(float(rss0 - r.min()), i, float(RHO_GRID[int(np.argmin(r))]), float(c))
             for i in range(max(lo, i0 - 2), min(hi, i0 + 3))
             for c in np.union1d(CONTACT_GRID_S, T + np.arange(-4, 5) * 0.25e-3)

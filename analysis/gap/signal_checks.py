@@ -586,7 +586,8 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
     chance = float(scipy.stats.chi2.isf(P_CHANCE / (n_d * len(onsets_s)), 2))
     hits = [(j, b) for j, b in enumerate(best) if b[0] > chance and b[2] >= RHO_MIN]
     if len(hits) < min(MIN_BLOWS, len(onsets_s)):
-        return early_double_hits(x, fs_hz, onsets_s, numbers, fm, poles, sig)
+        return early_double_hits(x, fs_hz, onsets_s, numbers, fm, poles, sig,
+                                 [p[poles.size:] for p in every])
     stat = max(b[0] for _, b in hits)
     d, rho, contact = _measured(x, fs_hz, onsets_s, poles, sig, hits)
     blows = ", ".join(str(j + 1) for j, _ in hits)
@@ -604,7 +605,8 @@ def double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequ
 
 
 def early_double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers: Sequence[int],
-                      fm: FreeModal, poles: np.ndarray, sig: np.ndarray) -> list[Finding]:
+                      fm: FreeModal, poles: np.ndarray, sig: np.ndarray,
+                      extra: Sequence[np.ndarray] | None = None) -> list[Finding]:
     """A second blow before the scan's early window starts (:data:`EARLY_FROM_S`): there its
     response from the window's start on is the first blow's modes with other amplitudes, which
     the scan's free amplitudes absorb whole (issue 17: a second blow 13.0 ms after the first at
@@ -621,9 +623,13 @@ def early_double_hits(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, numbers
     contact (starting as it ends plus :data:`~ramdaq.analysis.gap.contact.SEPARATION_S`: there a
     first contact that is no exact half-sine leaves its misfit; a true second blow that close is
     not told from it), and a finding needs :data:`MIN_BLOWS` of them.
-    ``poles`` the free model's decaying poles (1/s); ``sig`` (n_g,) each gage's noise, m/s^2."""
+    ``poles`` the free model's decaying poles (1/s); ``sig`` (n_g,) each gage's noise, m/s^2;
+    ``extra`` each blow's early-window poles when already read
+    (:func:`~ramdaq.analysis.gap.contact.early_poles`)."""
     until = EARLY_FROM_S + 2 / fs_hz                  # the scan's first delay
-    found = [second_blow(x, fs_hz, t, poles, sig, until_s=until) for t in onsets_s]
+    extra = list(extra) if extra is not None else [None] * len(onsets_s)
+    found = [second_blow(x, fs_hz, t, poles, sig, until_s=until, min_rho=RHO_MIN, extra=e)
+             for t, e in zip(onsets_s, extra, strict=True)]
     n_d = max([m.n_delays for m in found if m is not None], default=1)
     chance = float(scipy.stats.chi2.isf(P_CHANCE / (n_d * len(onsets_s)), 2))
     hits = [(j, m) for j, m in enumerate(found)
