@@ -78,12 +78,21 @@ EARLY_MAX = 3
 @dataclass(frozen=True)
 class SecondBlow:
     """One blow's best second blow: its delay from the first contact's start (s), size (ratio),
-    the contact length (s), and the drop of the whitened residual sum of squares it gives."""
+    the contact length (s), and the drop of the whitened residual sum of squares it gives;
+    ``statistic`` that drop over the two-blow residual's variance per degree of freedom (at least
+    1: an F-test, as the double-hit scan's), about chi-square with 2 degrees of freedom under one
+    blow; ``n_delays`` the delays it was the best of (a Bonferroni count); ``at_first`` whether
+    the second contact starts where the first (of the length fitted with it) ends plus
+    :data:`SEPARATION_S`, within a sample: the earliest a second contact may start, where a
+    first contact that is no exact half-sine leaves its misfit."""
 
     delay_s: float
     rho: float
     contact_s: float
     drop: float
+    statistic: float = math.nan
+    n_delays: int = 1
+    at_first: bool = False
 
 
 def fast_poles(fs_hz: float) -> np.ndarray:
@@ -180,35 +189,79 @@ def _two_blow_rss(tau: np.ndarray, poles: np.ndarray, contact_s: float, delay_s:
     return rss(h1[None] + RHO_GRID[:, None, None] * h2[None], y)
 
 
-def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
-                sig: np.ndarray) -> SecondBlow | None:
-    """The second blow after the onset ``onset_s`` that best fits with the contact held: the
-    one-blow model's contact length and onset shift (least residual, every shift judged on the
-    same samples), every other delay from :data:`MIN_DELAY_S` and the contact's end plus
-    :data:`SEPARATION_S`, each size of :data:`RHO_GRID`; then the best delay's neighbours with
-    the contact length tried again over its grid and near the one blow's (the one-blow fit
-    stretches its contact over a second blow: 9 ms for two 5 ms contacts 18 ms apart), and the
-    size refined. ``poles`` the free modal model's (the early window's own,
-    :func:`early_poles`, and the fast ones are added); ``sig`` (n_g,) each gage's noise, m/s^2.
-    None when the window runs off the record or over a gap."""
+@dataclass(frozen=True)
+class OneBlow:
+    """A blow's early window fitted as one contact (:func:`one_blow`): ``y`` (N, n_g) the window
+    from the earliest onset shift, whitened; ``poles`` (K,) 1/s every pole fitted (the free
+    model's, the early window's own, the fast ones); ``tau`` (N,) s from the fitted contact's
+    start; ``contact_s`` its length; ``rss0`` its whitened residual sum of squares; ``shift`` the
+    onset shift (samples from the window's first sample to the contact's start)."""
+
+    y: np.ndarray
+    poles: np.ndarray
+    tau: np.ndarray
+    contact_s: float
+    rss0: float
+    shift: int
+
+    def dof(self) -> int:
+        """The one-blow fit's residual degrees of freedom (each gage's complex amplitudes and a
+        mean per gage; the contact's length and onset)."""
+        return int(self.y.size - self.y.shape[1] * (2 * self.poles.size + 1) - 2)
+
+
+def one_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
+             sig: np.ndarray, extra: np.ndarray | None = None) -> OneBlow | None:
+    """The early window after ``onset_s`` (from :data:`SHIFT_GRID`'s earliest shift to
+    :data:`EARLY_TO_S`) fitted as one half-sine contact: the contact length and onset shift of
+    least residual (every shift judged on the same samples), over ``poles`` (the free modal
+    model's), the early window's own (:func:`early_poles`) and the fast ones. ``sig`` (n_g,)
+    each gage's noise, m/s^2; ``extra`` the early window's own poles when already read (else
+    they are read here). None when the window runs off the record or over a gap."""
     first = int(SHIFT_GRID.min())
     a = int(round(onset_s * fs_hz)) + first
     b = int(round((onset_s + EARLY_TO_S) * fs_hz))
     if a < 0 or b > x.shape[1] or b - a < 64 or not np.all(np.isfinite(x[:, a:b])):
         return None
     y = (x[:, a:b] / sig[:, None]).T
-    s = np.concatenate([poles, early_poles(x, fs_hz, onset_s, poles, sig), fast_poles(fs_hz)])
+    own = early_poles(x, fs_hz, onset_s, poles, sig) if extra is None else extra
+    s = np.concatenate([poles, own, fast_poles(fs_hz)])
     n = np.arange(y.shape[0])
     rss0, sh, T = min((float(rss(contact_response((n - (k - first)) / fs_hz, s, c), y)), int(k), float(c))
                       for k in SHIFT_GRID for c in CONTACT_GRID_S)
-    tau = (n - (sh - first)) / fs_hz                       # s from the first contact's start
+    return OneBlow(y, s, (n - (sh - first)) / fs_hz, T, rss0, sh - first)
+
+
+def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
+                sig: np.ndarray, until_s: float | None = None, min_rho: float = 0.0,
+                extra: np.ndarray | None = None) -> SecondBlow | None:
+    """The second blow after the onset ``onset_s`` that best fits with the contact held: the
+    one-blow model's contact length and onset shift (:func:`one_blow`), every other delay from
+    :data:`MIN_DELAY_S` and the contact's end plus :data:`SEPARATION_S` (up to ``until_s`` s
+    after the contact's start when given, else to :data:`SEEN_FOR_S` before the window's end),
+    each size of :data:`RHO_GRID`; then the best delay's neighbours with
+    the contact length tried again over its grid and near the one blow's (the one-blow fit
+    stretches its contact over a second blow: 9 ms for two 5 ms contacts 18 ms apart), and the
+    size refined. ``poles`` the free modal model's (the early window's own,
+    :func:`early_poles`, and the fast ones are added); ``sig`` (n_g,) each gage's noise, m/s^2.
+    None when the window runs off the record or over a gap, or no delay is left to try, or the
+    best delay's size on the grid is more than a grid step under ``min_rho`` (the refinement,
+    most of the cost, would not bring it there)."""
+    ob = one_blow(x, fs_hz, onset_s, poles, sig, extra)
+    if ob is None:
+        return None
+    y, s, tau, T, rss0 = ob.y, ob.poles, ob.tau, ob.contact_s, ob.rss0
     lo = int(math.ceil(max(MIN_DELAY_S, T + SEPARATION_S) * fs_hz))
-    hi = y.shape[0] - (sh - first) - int(SEEN_FOR_S * fs_hz)
+    hi = y.shape[0] - ob.shift - int(SEEN_FOR_S * fs_hz)
+    if until_s is not None:
+        hi = min(hi, int(math.floor(until_s * fs_hz)) + 1)
     if hi <= lo:
         return None
-    coarse = [(float(rss0 - r.min()), i) for i in range(lo, hi, 2)
+    coarse = [(float(rss0 - r.min()), i, float(RHO_GRID[int(np.argmin(r))])) for i in range(lo, hi, 2)
               for r in [_two_blow_rss(tau, s, T, i / fs_hz, y)]]
-    i0 = max(coarse)[1]
+    _, i0, rho0 = max(coarse)
+    if rho0 * RHO_GRID[1] / RHO_GRID[0] < min_rho:
+        return None
     near = [(float(rss0 - r.min()), i, float(RHO_GRID[int(np.argmin(r))]), float(c))
             for i in range(max(lo, i0 - 2), min(hi, i0 + 3))
             for c in np.union1d(CONTACT_GRID_S, T + np.arange(-4, 5) * 0.25e-3)
@@ -219,4 +272,7 @@ def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
     step = RHO_GRID[1] / RHO_GRID[0]
     res = scipy.optimize.minimize_scalar(lambda r: float(rss(h1 + r * h2, y)), method="bounded",
                                          bounds=(rho / step, rho * step), options={"xatol": 1e-3 * rho})
-    return SecondBlow(i / fs_hz, float(res.x), c, float(rss0 - res.fun))
+    drop = float(rss0 - res.fun)
+    s2 = max(1.0, float(res.fun) / max(ob.dof() - 2, 1))
+    flush = i <= math.ceil((c + SEPARATION_S) * fs_hz) + 1
+    return SecondBlow(i / fs_hz, float(res.x), c, drop, drop / s2, max(1, len(range(lo, hi))), flush)
