@@ -36,3 +36,20 @@ def rung_mode(f_hz: float, zeta: float, law: dict | None = None) -> np.ndarray:
     if law:
         return mf.nonlinear_mode(f_hz, zeta, force, dt, **law)[0]
     return scipy.signal.lfilter(*mf.mode_filter(f_hz, zeta, dt), force)
+
+
+def struck(delay_s: float, rho: float, seed: int = 0) -> np.ndarray:
+    """Two linear modes (60 Hz at 1 %, 25 Hz at 0.5 %) at three gages, the six blows each
+    followed (``rho`` > 0) by the same half sine ``rho`` times as large ``delay_s`` later
+    (a double hit), through the modal family's own mode filter; white noise at 1e-4 of the
+    largest peak. (3, n) at :data:`FS_HZ`."""
+    dt = 1 / FS_HZ
+    t = np.arange(int(19.0 * FS_HZ)) * dt
+    force = mf.half_sine(ONSETS_S, PEAKS, CONTACT_S, t)
+    if rho > 0:
+        force = force + mf.half_sine(ONSETS_S + delay_s, rho * PEAKS, CONTACT_S, t)
+    q = scipy.signal.lfilter(*mf.mode_filter(60.0, 0.01, dt), force)
+    q2 = scipy.signal.lfilter(*mf.mode_filter(25.0, 0.005, dt), force)
+    q2 *= 0.5 * np.abs(q).max() / np.abs(q2).max()
+    x = np.outer([1.0, 0.6, -0.4], q) + np.outer([0.3, 1.0, 0.8], q2)
+    return x + 1e-4 * np.abs(x).max() * np.random.default_rng(seed).standard_normal(x.shape)

@@ -9,40 +9,22 @@ free decays of the same poles."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
-import scipy.signal
 
 from ramdaq.analysis.gap.datamodel import Finding, Layer, free_modal_model
 from ramdaq.analysis.gap.homogeneity import early_shift
 from ramdaq.analysis.gap.sensors import early_window_from
 from ramdaq.analysis.gap.signal_checks import EARLY_FROM_S, double_hits
 from ramdaq.analysis.gap.verdict import UNEXPLAINED_CLOSURE
-from ramdaq.analysis.truth import modal_family as mf
-from tests.blow_helpers import CONTACT_S, FS_HZ, ONSETS_S, PEAKS
+from tests.blow_helpers import FS_HZ, ONSETS_S, struck
 
 DELAY_S, RHO = 0.06, 0.45
 """The second blow: 60 ms after the first at 45 % of it (the modal family's double hits are
 10-60 ms, 0.15-0.6x)."""
 
 
-def _struck_twice(seed: int = 0) -> np.ndarray:
-    """Two linear modes (60 Hz at 1 %, 25 Hz at 0.5 %) at three gages, six blows of 0.5-2x each
-    followed by the same half-sine :data:`RHO` as large :data:`DELAY_S` later, through the modal
-    family's own mode filter; white noise at 1e-4 of the largest peak. (3, n) at FS_HZ."""
-    dt = 1 / FS_HZ
-    t = np.arange(int(19.0 * FS_HZ)) * dt
-    force = (mf.half_sine(ONSETS_S, PEAKS, CONTACT_S, t)
-             + mf.half_sine(ONSETS_S + DELAY_S, RHO * PEAKS, CONTACT_S, t))
-    q = scipy.signal.lfilter(*mf.mode_filter(60.0, 0.01, dt), force)
-    q2 = scipy.signal.lfilter(*mf.mode_filter(25.0, 0.005, dt), force)
-    q2 *= 0.5 * np.abs(q).max() / np.abs(q2).max()
-    x = np.outer([1.0, 0.6, -0.4], q) + np.outer([0.3, 1.0, 0.8], q2)
-    return x + 1e-4 * np.abs(x).max() * np.random.default_rng(seed).standard_normal(x.shape)
-
-
 def test_a_linear_structure_struck_twice_shows_no_early_stiffness():
-    x = _struck_twice()
+    x = struck(DELAY_S, RHO)
     fm = free_modal_model(x, FS_HZ, ONSETS_S)
     (dh,) = double_hits(x, FS_HZ, ONSETS_S, (1, 2, 3), fm)
     # the second blow is found where it is, and it repeats: it closes at least half its

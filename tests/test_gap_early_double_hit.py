@@ -6,40 +6,20 @@ rung is the first blow's modes with other amplitudes). Read with the contact hel
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
-import scipy.signal
 
 from ramdaq.analysis.gap.datamodel import free_modal_model
 from ramdaq.analysis.gap.signal_checks import EARLY_FROM_S, RHO_MIN, double_hits
 from ramdaq.analysis.gap.verdict import UNEXPLAINED_CLOSURE
-from ramdaq.analysis.truth import modal_family as mf
-from tests.blow_helpers import CONTACT_S, FS_HZ, ONSETS_S, PEAKS
+from tests.blow_helpers import FS_HZ, ONSETS_S, struck
 
 DELAY_S, RHO = 0.013, 0.45
 """The second blow: 13 ms after the first (inside the scan's 16 ms start) at 45 % of it."""
 
 
-def _struck(delay_s: float, rho: float, seed: int = 0) -> np.ndarray:
-    """Two linear modes (60 Hz at 1 %, 25 Hz at 0.5 %) at three gages, six blows of 0.5-2x each
-    (a 4 ms half sine) followed (``rho`` > 0) by the same half sine ``rho`` times as large
-    ``delay_s`` later, through the modal family's own mode filter; white noise at 1e-4 of the
-    largest peak. (3, n) at FS_HZ."""
-    dt = 1 / FS_HZ
-    t = np.arange(int(19.0 * FS_HZ)) * dt
-    force = mf.half_sine(ONSETS_S, PEAKS, CONTACT_S, t)
-    if rho > 0:
-        force = force + mf.half_sine(ONSETS_S + delay_s, rho * PEAKS, CONTACT_S, t)
-    q = scipy.signal.lfilter(*mf.mode_filter(60.0, 0.01, dt), force)
-    q2 = scipy.signal.lfilter(*mf.mode_filter(25.0, 0.005, dt), force)
-    q2 *= 0.5 * np.abs(q).max() / np.abs(q2).max()
-    x = np.outer([1.0, 0.6, -0.4], q) + np.outer([0.3, 1.0, 0.8], q2)
-    return x + 1e-4 * np.abs(x).max() * np.random.default_rng(seed).standard_normal(x.shape)
-
-
 def test_a_second_blow_before_the_scans_window_is_found():
     assert DELAY_S < EARLY_FROM_S
-    x = _struck(DELAY_S, RHO)
+    x = struck(DELAY_S, RHO)
     fm = free_modal_model(x, FS_HZ, ONSETS_S)
     (dh,) = double_hits(x, FS_HZ, ONSETS_S, (1, 2, 3), fm)
     more = {n: v for n, v, _ in dh.more}
@@ -56,10 +36,10 @@ def test_a_second_blow_before_the_scans_window_is_found():
 
 def test_one_blow_and_a_small_rebound_raise_no_double_hit():
     # one half sine per blow: its own shape is no second blow
-    x = _struck(0.0, 0.0)
+    x = struck(0.0, 0.0)
     fm = free_modal_model(x, FS_HZ, ONSETS_S)
     assert double_hits(x, FS_HZ, ONSETS_S, (1, 2, 3), fm) == []
     # a rebound under RHO_MIN at the same delay is not named either
-    x = _struck(DELAY_S, 0.5 * RHO_MIN)
+    x = struck(DELAY_S, 0.5 * RHO_MIN)
     fm = free_modal_model(x, FS_HZ, ONSETS_S)
     assert double_hits(x, FS_HZ, ONSETS_S, (1, 2, 3), fm) == []
