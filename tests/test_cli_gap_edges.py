@@ -166,8 +166,9 @@ def test_what_rings_above_the_band_is_in_the_summary_and_in_gap_json(heavy_none)
         assert r["power_ratio"] > max(r["chance"], 25.0) and r["gages"]
     printed = next(ln for ln in text.splitlines() if ln.startswith("  not compared, ringing above"))
     assert f"the {band['lowpass_hz']:.0f} Hz band" in printed
-    for r in lines[:3]:
-        assert f"{r['frequency_hz']:.0f} Hz on gage" in printed
+    for r in lines[:3]:  # printed at the line's frequency between the bins, within its bin
+        assert f"{r['peak_hz']:.0f} Hz on gage" in printed
+        assert abs(r["peak_hz"] - r["frequency_hz"]) <= 4.0  # half of ringing.RESOLUTION_HZ
 
 
 def test_a_rig_of_another_rate_is_refused_in_one_line(tmp_path, capsys):

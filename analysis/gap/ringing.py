@@ -33,25 +33,29 @@ start within 1 s; a longer window would dilute it in the noise."""
 class RingingLine:
     """A line ringing after the blows above the diagnosis band.
 
-    frequency_hz : the bin's centre, Hz (to within RESOLUTION_HZ / 2).
+    frequency_hz : the bin's centre, Hz (to within RESOLUTION_HZ / 2); the band rules read it.
     ratio : decay over pre-trigger power at the gage where it is largest.
     chance : the ratio noise alone exceeds with the stated false-alarm probability over all bins
         and gages (F distribution of two Welch averages).
     gages : gage numbers where the ratio passes both ``chance`` and :data:`STRONG`.
+    peak_hz : the line's frequency between the bins, Hz (:func:`peak_between_bins`), as printed.
     """
 
     frequency_hz: float
     ratio: float
     chance: float
     gages: tuple[int, ...]
+    peak_hz: float = math.nan
 
     def text(self) -> str:
-        return (f"{self.frequency_hz:.0f} Hz on gage{'s' if len(self.gages) > 1 else ''} "
+        f = self.peak_hz if math.isfinite(self.peak_hz) else self.frequency_hz
+        return (f"{f:.0f} Hz on gage{'s' if len(self.gages) > 1 else ''} "
                 f"{', '.join(map(str, self.gages))} ({self.ratio:.0f}x the pre-trigger power, "
                 f"chance {self.chance:.1f}x)")
 
     def to_json(self) -> dict:
-        return {"frequency_hz": round(self.frequency_hz, 1), "power_ratio": round(self.ratio, 1),
+        return {"frequency_hz": round(self.frequency_hz, 1), "peak_hz": round(self.peak_hz, 1),
+                "power_ratio": round(self.ratio, 1),
                 "chance": round(self.chance, 2), "gages": list(self.gages)}
 
 
@@ -89,10 +93,26 @@ def ringing_lines(decay: np.ndarray, n_decay: int, pre: np.ndarray, n_pre: int, 
     # over a few bins is one line, not several)
     peaks, _ = scipy.signal.find_peaks(np.log(np.maximum(top, 1e-300)), height=math.log(level),
                                        prominence=math.log(2.0))
+    total = decay.sum(axis=0)
     out = [RingingLine(float(f_hz[k]), float(top[k]), chance,
-                       tuple(int(gage_numbers[g]) for g in np.flatnonzero(ratio[:, k] > level)))
+                       tuple(int(gage_numbers[g]) for g in np.flatnonzero(ratio[:, k] > level)),
+                       peak_between_bins(f_hz, total, k))
            for k in peaks]
     return sorted(out, key=lambda r: -r.ratio)
+
+
+def peak_between_bins(f_hz: np.ndarray, power: np.ndarray, k: int) -> float:
+    """The frequency (Hz) of the line whose power spectrum ``power`` (n_bins,) peaks at bin
+    ``k``: the vertex of the parabola through the log power of bins ``k - 1 .. k + 1``
+    (Gaussian interpolation: a Hann window's main lobe is near Gaussian, so the line's
+    frequency comes to a few per cent of a bin, where the bin's centre is off by up to half
+    of one); the bin's centre at the spectrum's ends or where a neighbour holds no power."""
+    if not 0 < k < len(power) - 1 or min(power[k - 1:k + 2]) <= 0:
+        return float(f_hz[k])
+    a, b, c = np.log(power[k - 1:k + 2])
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    return float(f_hz[k] + np.clip(shift, -0.5, 0.5) * (f_hz[1] - f_hz[0]))
 
 
 def decay_window(onset_s: float, skip_s: float, post_s: float) -> tuple[float, float]:
