@@ -1133,24 +1133,18 @@ class Trigger:
         n = self._len
         f0 = self._fit_start(ev)
         scan = ev.scan
-        scan.whitener = self._whitener(ev, f0, f0 + n.fit)
+        scan.whitener = self._whitener(ev, (f0, f0 + n.fit))
         var = scan.whitener.var
         scan.pos = scan.off_pos = f0 + n.fit
         scan.on, scan.level, scan.ref = False, var.copy(), var.copy()
 
-    def _whitener(self, ev: _Event, lo: int | tuple[int, int], hi: int) -> _Whitener:
-        """The AR filter fitted to the voters of ``ev`` over samples ``lo .. hi-1``, or, for
-        ``lo = (a, b)``, over the two pieces ``a .. a+hi-1`` and ``b .. b+hi-1`` at once."""
+    def _whitener(self, ev: _Event, *spans: tuple[int, int]) -> _Whitener:
+        """The AR filter fitted to the voters of ``ev`` over the sample spans ``(a, b)``
+        (``a .. b-1``, all of one length) at once."""
         order = self._len.order
         rows = self._vidx[ev.voters]
-        pre = ev.pre[ev.voters]
-        if isinstance(lo, tuple):
-            x = np.vstack([self._values(lo[0], lo[0] + hi, rows),
-                           self._values(lo[1], lo[1] + hi, rows)])
-            pre, start = np.concatenate([pre, pre]), lo[0]
-        else:
-            x, start = self._values(lo, hi, rows), lo
-        a = ons.ar_prediction_filter(x, order, pre)
+        x = np.vstack([self._values(a, b, rows) for a, b in spans])
+        a = ons.ar_prediction_filter(x, order, np.tile(ev.pre[ev.voters], len(spans)))
         e = ons.prediction_error(x, a)
         # The fit's residual understates the innovation it will see after the window: by
         # (m - p) / m in the window, and by (1 + p / m) after it (least squares, m equations,
@@ -1160,7 +1154,7 @@ class Trigger:
         m = e.size
         var = np.mean(e * e, axis=1) * (m / (m - order)) * (1 + order / m)
         var = var.reshape(-1, len(rows)).mean(axis=0)
-        return _Whitener(a, np.maximum(var, self._scale[rows] ** 2 / 12), start)
+        return _Whitener(a, np.maximum(var, self._scale[rows] ** 2 / 12), spans[0][0])
 
     def _confirm(self, ev: _Event, s: int, kk: int, closing: bool) -> bool | None:
         """Whether the innovation burst at ``s`` is a contact or the filter's extrapolation
@@ -1183,15 +1177,15 @@ class Trigger:
             return True  # too little ringing before the burst to refit: it stands as found
         if self._ring.end < s + 4 * n.innovation:
             return None if not closing else True
-        if m == span and self._stands_out(ev, s, kk, self._whitener(ev, s - gap[0] - m,
-                                                                    s - gap[0])):
+        if m == span and self._stands_out(ev, s, kk, self._whitener(ev, (s - gap[0] - m,
+                                                                     s - gap[0]))):
             return True
         late = min(m, self._ring.end - s - gap[1])
         if late < m and not closing:
             return None
         if late <= 2 * n.order:
             return True
-        w = self._whitener(ev, (s - gap[0] - late, s + gap[1]), late)
+        w = self._whitener(ev, (s - gap[0] - late, s - gap[0]), (s + gap[1], s + gap[1] + late))
         if self._stands_out(ev, s, kk, w):
             return True
         scan.whitener = w
