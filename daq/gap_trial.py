@@ -14,7 +14,7 @@ from ..analysis.gap.trialdata import ScaledCounts, TrialData, prepare
 from ..analysis.model.rig import Gage, Rig, RigError
 from ..drivers.block import StreamInfo
 from ..drivers.mcap_replay import McapReplayDevice
-from .recording import BlockwiseOfflineTrigger, Recording, force_row, rig_of, rig_or_fail
+from .recording import BlockwiseOfflineTrigger, Recording, force_row, no_rig, rig_of, rig_or_fail
 from .trigger import ImpactEvent, Trigger
 
 __all__ = ["LoadedTrial", "load_trial", "trial_data"]
@@ -161,7 +161,7 @@ def _joined(parts: list[tuple[int, np.ndarray | None]], same_scale: bool, scale:
 def _gages_present(path: str | Path, info: StreamInfo, rig: Rig | None) -> list[Gage]:
     """The rig's gages the recording has, in the rig's channel order; three or more."""
     if rig is None:
-        raise RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
+        raise no_rig(path)
     rig.require_structure("comparing a trial with the rig's model (ramdaq gap, ramdaq rig fit)",
                           "pass --rig with a rig that describes it")
     why = rig.cannot_describe_rate(info.fs_hz)  # as ramdaq import refuses it

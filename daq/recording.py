@@ -287,13 +287,18 @@ def recorded_rig(path: str | PathLike) -> Rig:
     with McapReplayDevice(path) as dev:
         rig = rig_of(path, dev.info, None)
     if rig is None:
-        raise RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
+        raise no_rig(path)
     return rig
+
+
+def no_rig(path: str | PathLike) -> RigError:
+    """The error for a recording at ``path`` that carries no rig and was given none."""
+    return RigError(f"{path}: the recording carries no rig; pass one (--rig, rig=)")
 
 
 def rig_or_fail(rec: Recording) -> Rig:
     """The recording's rig; a :class:`RigError` naming the file when it has none."""
     if rec.rig is None:
-        raise RigError(f"{rec.path}: the recording carries no rig; pass one (--rig, rig=)")
+        raise no_rig(rec.path)
     return rec.rig
 
