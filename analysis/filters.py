@@ -406,6 +406,21 @@ def downsample_fir(h: np.ndarray, x: np.ndarray, q: int) -> np.ndarray:
 
 
 # -- peaks --------------------------------------------------------------------------------------
+def log_parabola_peak(f_hz: np.ndarray, power: np.ndarray, k: int) -> float:
+    """The frequency (Hz) of the line whose power spectrum ``power`` (n_bins,) peaks at bin
+    ``k``: the vertex of the parabola through the log power of bins ``k - 1 .. k + 1``
+    (Gaussian interpolation: a Hann window's main lobe is near Gaussian, so the line's
+    frequency comes to a few per cent of a bin, where the bin's centre is off by up to half
+    of one); the bin's centre at the spectrum's ends, where a neighbour holds no power, or where
+    the three are level (no vertex)."""
+    if not 0 < k < len(power) - 1 or min(power[k - 1:k + 2]) <= 0:
+        return float(f_hz[k])
+    a, b, c = np.log(power[k - 1:k + 2])
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    return float(f_hz[k] + np.clip(shift, -0.5, 0.5) * (f_hz[1] - f_hz[0]))
+
+
 def find_peaks(x: np.ndarray, distance: float) -> np.ndarray:
     """Indices of the local maxima of ``x`` (n,) (a flat top's middle sample), the lower ones
     within ``distance`` samples of a higher one dropped: ``scipy.signal.find_peaks(x,

@@ -21,6 +21,7 @@ from typing import IO
 
 import numpy as np
 
+from .. import filters
 from .forward import Fit, Forward
 from .terms import Term
 from .trialdata import summed_spectrum
@@ -253,9 +254,7 @@ def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.35,
         i = sel[np.argmax(P[sel])]
         if i in (sel[0], sel[-1]) or P[i] < prominence * np.median(P[sel]):
             continue
-        y0, y1, y2 = np.log(P[i - 1: i + 2])
-        d = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-        out[k] = f[i] + d * (f[1] - f[0])
+        out[k] = filters.log_parabola_peak(f, P, i)
     return out
 
 

@@ -18,6 +18,8 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
+from .. import filters
+
 RESOLUTION_HZ = 8.0
 """Welch segment length 1 / RESOLUTION_HZ: a line's bin is 8 Hz wide (Hann), fine enough to tell
 the rigs' modes apart above 50 Hz, and 8+ segments a second to average."""
@@ -38,7 +40,8 @@ class RingingLine:
     chance : the ratio noise alone exceeds with the stated false-alarm probability over all bins
         and gages (F distribution of two Welch averages).
     gages : gage numbers where the ratio passes both ``chance`` and :data:`STRONG`.
-    peak_hz : the line's frequency between the bins, Hz (:func:`peak_between_bins`), as printed.
+    peak_hz : the line's frequency between the bins, Hz, as printed
+        (:func:`~ramdaq.analysis.filters.log_parabola_peak`).
     """
 
     frequency_hz: float
@@ -96,23 +99,9 @@ def ringing_lines(decay: np.ndarray, n_decay: int, pre: np.ndarray, n_pre: int, 
     total = decay.sum(axis=0)
     out = [RingingLine(float(f_hz[k]), float(top[k]), chance,
                        tuple(int(gage_numbers[g]) for g in np.flatnonzero(ratio[:, k] > level)),
-                       peak_between_bins(f_hz, total, k))
+                       filters.log_parabola_peak(f_hz, total, k))
            for k in peaks]
     return sorted(out, key=lambda r: -r.ratio)
-
-
-def peak_between_bins(f_hz: np.ndarray, power: np.ndarray, k: int) -> float:
-    """The frequency (Hz) of the line whose power spectrum ``power`` (n_bins,) peaks at bin
-    ``k``: the vertex of the parabola through the log power of bins ``k - 1 .. k + 1``
-    (Gaussian interpolation: a Hann window's main lobe is near Gaussian, so the line's
-    frequency comes to a few per cent of a bin, where the bin's centre is off by up to half
-    of one); the bin's centre at the spectrum's ends or where a neighbour holds no power."""
-    if not 0 < k < len(power) - 1 or min(power[k - 1:k + 2]) <= 0:
-        return float(f_hz[k])
-    a, b, c = np.log(power[k - 1:k + 2])
-    den = a - 2 * b + c
-    shift = 0.5 * (a - c) / den if den < 0 else 0.0
-    return float(f_hz[k] + np.clip(shift, -0.5, 0.5) * (f_hz[1] - f_hz[0]))
 
 
 def decay_window(onset_s: float, skip_s: float, post_s: float) -> tuple[float, float]:
