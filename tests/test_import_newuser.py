@@ -270,6 +270,26 @@ def test_a_rig_unit_the_header_contradicts_is_warned_of(tmp_path, capsys):
     assert np.max(np.abs(_values(tmp_path / "o.mcap") - x)) <= 1e-7 * np.max(np.abs(x))
 
 
+def test_a_rig_that_states_no_unit_is_not_contradicted(tmp_path, capsys):
+    """``export-csv --units g`` then ``import --rig`` with a rig whose gages state no unit
+    warned "in g by the file's header, but rig says m/s^2" on an exact round trip: the rig's
+    m/s^2 was only the default for unlabelled columns. A header's unit against a rig that says
+    nothing is no disagreement; an unlabelled column is still read in m/s^2."""
+    src = _archive_b(tmp_path / "b.csv", "g", G)
+    assert _run(["import", src], capsys)[0] == 0
+    rig = tmp_path / "b.rig.toml"
+    rig.write_text(rig.read_text().replace('unit = "g"\n', ""))
+    assert load_rig(rig).gages[0].unit is None and load_rig(rig).gages[0].assumed_unit == "m/s^2"
+    _, x = _decay(FS_B, 2)
+    for header, scale in (("g", G), (None, 1.0)):
+        f = _archive_b(tmp_path / f"in_{header}.csv".replace("/", ""), header, scale)
+        rc, _, err = _run(["import", f, "--rig", rig], capsys)
+        assert rc == 0 and "warning" not in err, err
+        # E16.9 in g, requantised to 24 bits: 6e-8 of the peak
+        got = _values(tmp_path / f"in_{header}.mcap".replace("/", ""))
+        assert np.max(np.abs(got - x)) <= 1e-7 * np.max(np.abs(x))
+
+
 def test_a_tsv_file_is_read_as_csv(tmp_path, capsys):
     """``dryd_A_tab.tsv`` without --format: 'format 'tsv' is not csv, uff or tdms'."""
     src = tmp_path / "b.tsv"

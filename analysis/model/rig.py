@@ -136,7 +136,8 @@ class Gage:
     direction (``"y"`` athwartship, ``"z"`` vertical, signs allowed); ``sensitivity_V_per_m_s2``
     volts per m/s^2; ``channel`` the DAQ channel index (0-based row of every block); ``unit``
     the unit an imported file gives it in when the file says none (``"m/s^2"`` or ``"g"``; the
-    stream is always in m/s^2).
+    stream is always in m/s^2), None where the rig does not say (m/s^2 is then assumed; see
+    :attr:`assumed_unit`).
     """
 
     number: int
@@ -145,7 +146,12 @@ class Gage:
     axis: str
     sensitivity_V_per_m_s2: float
     channel: int
-    unit: str = "m/s^2"
+    unit: str | None = None
+
+    @property
+    def assumed_unit(self) -> str:
+        """The unit an imported file's unlabelled column is read in: :attr:`unit`, else m/s^2."""
+        return self.unit or "m/s^2"
 
     @property
     def direction(self) -> np.ndarray:
@@ -507,8 +513,10 @@ def _gage_number(r: _Reader, i: int, top: int, seen: dict[int, int]) -> int:
     return number
 
 
-def _gage_unit(r: _Reader, p: str) -> str:
-    unit = r.text(f"{p}.unit", default="m/s^2")
+def _gage_unit(r: _Reader, p: str) -> str | None:
+    if r.get(f"{p}.unit", None) is None:
+        return None
+    unit = r.text(f"{p}.unit")
     if unit not in GAGE_UNITS:
         r.fail(f"{p}.unit", f"{unit!r} is not an acceleration unit ({', '.join(GAGE_UNITS)})")
     return unit

@@ -28,8 +28,9 @@ gap is on every channel (a block has no per-channel hole, and a sentinel count w
 invented sample), so the other channels' good values on that row go too:
 ``extra["import"]["dropped_with_gaps"]`` counts them per channel, and ``ramdaq import`` says so.
 Units: m/s^2 and
-g (9.80665 m/s^2) for a gage (the file's stated unit wins over the rig's; where they differ
-``"rig_unit_not_applied"`` says so); N, kN, lbf for a force channel (the rig's ``[[forces]]``, named in
+g (9.80665 m/s^2) for a gage (the file's stated unit wins over the rig's; where the rig states a
+different one ``"rig_unit_not_applied"`` says so; a rig that states none assumes m/s^2); N, kN,
+lbf for a force channel (the rig's ``[[forces]]``, named in
 the stream by its rig name, unit ``"N"``, gage 0); anything else is refused naming the channel.
 The file's sample rate must be the rig's unless ``fs_hz`` states it. Every problem with a file is
 an :class:`ImportFormatError`: one line naming the file and what."""
@@ -644,7 +645,8 @@ class FileImportDevice(Device):
             factor = (force_unit_factor(src.units[i], self.rig.force(pick.name).unit,
                                         src.names[i], name) if pick.is_force
                       else unit_factor(src.units[i] if _stated(src.units[i])
-                                       else self.rig.gage(pick.gage).unit, src.names[i], name))
+                                       else self.rig.gage(pick.gage).assumed_unit, src.names[i],
+                                       name))
             try:
                 counts[row], q = quantise(x, factor, stated_scales.get(src.names[i]))
             except ValueError as err:
@@ -652,13 +654,14 @@ class FileImportDevice(Device):
             nan_rows.append(np.isnan(x))
             missing |= nan_rows[-1]
             scales.append(q.scale)
+            rig_unit = None if pick.is_force else self.rig.gage(pick.gage).unit
             assumed = self.rig.force(pick.name).unit if pick.is_force else \
-                self.rig.gage(pick.gage).unit
+                self.rig.gage(pick.gage).assumed_unit
             notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
                                 "si_unit": "N" if pick.is_force else "m/s^2", **q.to_json()}
-            if not pick.is_force and _stated(src.units[i]) and \
-                    factor != unit_factor(assumed, src.names[i], name):
-                notes[pick.name]["rig_unit_not_applied"] = assumed  # the header's unit wins
+            if rig_unit is not None and _stated(src.units[i]) and \
+                    factor != unit_factor(rig_unit, src.names[i], name):
+                notes[pick.name]["rig_unit_not_applied"] = rig_unit  # the header's unit wins
         if missing.all():
             raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
         # samples count from the file's time zero, so times in ramdaq are the file's times
