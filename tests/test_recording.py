@@ -72,9 +72,9 @@ def test_round_trip_is_bit_identical_and_keeps_the_gap(tmp_path):
 
 def test_info_names_the_carried_rig_and_medium():
     """``ramdaq info`` says which rig a recording carries and in which medium it was taken
-    (the new user had to run analyze to learn it)."""
-    for name, rig in (("albacore-water", "albacore-like (rudder, stock, hull) in water"),
-                      ("albacore-air", "albacore-like (rudder, stock, hull) in air")):
+    (the new user had to run analyze to learn it), in the words analyze's summary uses."""
+    for name, rig in (("albacore-water", "albacore-like (rudder) in water"),
+                      ("albacore-air", "albacore-like (rudder) in air")):
         d = describe_recording(RIGS.parent / f"{name}.mcap")
         assert d.rig == rig and f"rig        {rig}" in format_info(d)
 

@@ -310,6 +310,12 @@ class Rig:
         """The rig describes the structure (rudder, stock, hull), not only its channels."""
         return self.rudder is not None
 
+    @property
+    def described(self) -> str:
+        """What the rig describes, in the words every command's rig line uses: the surface
+        ("rudder", "stern plane") or "channels only"."""
+        return self.surface.title if self.structural else "channels only"
+
     def require_structure(self, what: str, fix: str = "") -> None:
         """Raise :class:`RigError` if this is a channels-only rig: ``what`` needs the structure;
         ``fix``, if given, says what to do."""

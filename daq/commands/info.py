@@ -279,8 +279,7 @@ def _rig_line(path: Path, toml: bytes, extra: Any) -> str:
     except (RigError, UnicodeDecodeError) as err:
         return f"unreadable ({err})"
     medium = extra.get("medium") if isinstance(extra, dict) else None
-    what = "rudder, stock, hull" if rig.structural else "channels only"
-    return f"{rig.name} ({what}) in {medium or rig.medium}"
+    return f"{rig.name} ({rig.described}) in {medium or rig.medium}"
 
 
 def format_info(d: RecordingFacts) -> str:
