@@ -5,6 +5,7 @@ from the file and the nominal rig alone. Bad input gets one line naming what and
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -122,3 +123,19 @@ def test_unknown_effect_and_too_few_gages_are_refused(csv_trial, capsys, tmp_pat
     assert main(["gap", str(small), "--no-plots", "--out", str(tmp_path / "g")]) == 1
     err = capsys.readouterr().err
     assert "only 2 of the rig's gages" in err and err.count("\n") == 1
+
+
+def test_a_finding_within_its_chance_level_is_not_printed_as_beyond_it():
+    """A model-form phase finding (the sensor law's F within its chance level) printed
+    "statistic 33.43 > 1.07e+03" to a new user; a finding beyond its level keeps ">"."""
+    from ramdaq.analysis.gap.sensors import _scattered
+    from ramdaq.daq.commands.gap import finding_line
+
+    # a 40-chi-square drop against a 20-per-dof residual over 15 entries: F = 2, far within
+    # the F(1, 14) level at P_CHANCE / 16 (about 30)
+    form = _scattered(3, drop=40.0, resid=280.0, n_entries=15, n_gages=8, modes=(13.0,))
+    assert form is not None and form.statistic < form.chance_level
+    line = finding_line(form)
+    assert f"statistic {form.statistic:.4g} within {form.chance_level:.3g}" in line and " > " not in line
+    beyond = finding_line(replace(form, statistic=2 * form.chance_level))
+    assert f"statistic {2 * form.chance_level:.4g} > {form.chance_level:.3g}" in beyond

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...analysis.gap.datamodel import P_CHANCE
+from ...analysis.gap.datamodel import P_CHANCE, Finding
 from ...analysis.gap.diagnose import Diagnosis, Settings
 from ...analysis.gap.trialdata import TrialData
 from ..analyzer import finite_json
@@ -218,13 +218,20 @@ def data_lines(d: Diagnosis) -> list[str]:
            f"chance level is what a trial without the fault passes with probability {P_CHANCE:g}):"]
     if not dc.findings:
         return out + ["    nothing beyond chance (" + ", ".join(dc.looked) + ")"]
-    for f in dc.findings:
-        closes = (f"; closes {_pct(f.closed_held)} of its check's residual on held-out impacts "
-                  f"(95 % {_pct(f.closed_held_ci[0])} .. {_pct(f.closed_held_ci[1])})"
-                  if np.isfinite(f.closed_held) else "")
-        out.append(f"    [{f.layer}] {f.text} ({f.window} window; statistic {f.statistic:.4g} > "
-                   f"{f.chance_level:.3g}{closes})")
-    return out
+    return out + [finding_line(f) for f in dc.findings]
+
+
+def finding_line(f: Finding) -> str:
+    """One data-only finding: its layer, text, window, and its statistic against its chance
+    level -- beyond it (``>``), or ``within`` it where the finding is that a law did not stand
+    out (a model-form reading); with how much of its check's residual it closes on held-out
+    impacts, where measured."""
+    closes = (f"; closes {_pct(f.closed_held)} of its check's residual on held-out impacts "
+              f"(95 % {_pct(f.closed_held_ci[0])} .. {_pct(f.closed_held_ci[1])})"
+              if np.isfinite(f.closed_held) else "")
+    beyond = ">" if f.statistic > f.chance_level else "within"
+    return (f"    [{f.layer}] {f.text} ({f.window} window; statistic {f.statistic:.4g} {beyond} "
+            f"{f.chance_level:.3g}{closes})")
 
 VERDICT_WIDTH = 120
 """The verdict's first line is at most about this long: the answer; what it rests on follows."""
