@@ -53,6 +53,14 @@ def test_failure_reasons_are_words_and_an_empty_file_says_so(archive, tmp_path):
     assert reason("empty.mcap") == "empty (0 bytes), not a recording"
     why = reason("corrupt_trunc.mcap")  # the row names the recording: the reason does not repeat it
     assert why.startswith("recording has no footer") and "TruncatedRecording" not in why
+    # a damaged chunk's reason is long (its byte, the CRCs, how far it was read) and its advice
+    # comes last: a new user's row was cut at 300 characters, mid-word in the advice
+    data = bytearray(SAMPLE.read_bytes())
+    data[len(data) // 3] ^= 0x10
+    (archive / "flipped.mcap").write_bytes(bytes(data))
+    why = reason("flipped.mcap")
+    assert why.startswith("damaged chunk at byte") and len(why) > 300, why
+    assert why.endswith("copies every intact chunk to a new file"), why
 
 
 def test_a_log_gets_unwrapped_lines(archive, tmp_path, capsys):

@@ -195,7 +195,8 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
 def one_line(exc: BaseException, limit: int = 300) -> str:
     """An exception as one line in words: the first line of its message, which for ramdaq's
     own errors (a damaged recording, a bad rig, a file that cannot be read) names the file and
-    what; any other exception is an ``internal error`` with its type."""
+    what, whole (its advice comes last); any other exception is an ``internal error`` with its
+    type and its message's first ``limit`` characters, a cut marked "..."."""
     from ...analysis.model.rig import RigError
     from ...drivers.errors import DeviceError
     from ...drivers.mcap_format import RecordingError
@@ -203,8 +204,9 @@ def one_line(exc: BaseException, limit: int = 300) -> str:
     text = str(exc).strip().splitlines()
     first = text[0] if text else ""
     if isinstance(exc, RigError | DeviceError | RecordingError | OSError | ValueError) and first:
-        return first[:limit]
-    return f"internal error ({type(exc).__name__}){': ' + first if first else ''}"[:limit]
+        return first
+    cut = first if len(first) <= limit else first[:limit].rsplit(" ", 1)[0] + " ..."
+    return f"internal error ({type(exc).__name__}){': ' + cut if cut else ''}"
 
 
 def failure_reason(exc: BaseException, path: str) -> str:
