@@ -31,10 +31,12 @@ class ModeEstimate:
     asked for (report.json ``chosen_mode``; False on every row when none was asked), on which
     the report's chain then ran instead of the predominant one. ``verdict`` is the gage's
     (``ok`` or what is wrong with its decay) and ``reason`` the hit's when it was rejected, else
-    the gage's. ``mode`` is the index into report.json's ``analysis.modes`` (from 0, as the CLI's
-    ``mode 0``); where no mode was fitted -- a rejected or unrequested hit (one row, gage 0), a
-    gage with no usable decay -- it is None, ``fitted`` is False and ``reason`` says why, the
-    numbers NaN: the convention of ``ramdaq batch analyze``'s table (null + ``fitted``).
+    the gage's -- judged on one mode, the gage's dominant one; the other modes' rows say so
+    ("the gage's verdict, judged at 11 Hz: ..."). ``mode`` is the index into report.json's
+    ``analysis.modes`` (from 0, as the CLI's ``mode 0``); where no mode was fitted -- a rejected
+    or unrequested hit (one row, gage 0), a gage with no usable decay -- it is None, ``fitted``
+    is False and ``reason`` says why, the numbers NaN: the convention of ``ramdaq batch
+    analyze``'s table (null + ``fitted``).
     """
 
     hit: int
@@ -86,6 +88,7 @@ def mode_rows(h: HitResult) -> Iterator[ModeEstimate]:
                                str(v.code), v.reason)
             continue
         j = row[n]
+        judged = _judged_mode(v.f_hz, m.frequency_hz)
         for k in range(len(m.frequency_hz)):
             d, dse = float(m.channel_delta[j, k]), float(m.channel_delta_se[j, k])
             z, zse = zeta_with_se(d, dse)
@@ -95,4 +98,14 @@ def mode_rows(h: HitResult) -> Iterator[ModeEstimate]:
                                float(m.channel_frequency_hz[j, k]),
                                float(m.channel_frequency_se_hz[j, k]), d, dse, z, zse,
                                *(float(x) for x in shared), float(abs(m.complex_amplitude[j, k])),
-                               float(np.angle(m.mode_shape[j, k])), str(v.code), v.reason)
+                               float(np.angle(m.mode_shape[j, k])), str(v.code),
+                               v.reason if judged in (None, k) else
+                               f"the gage's verdict, judged at {v.f_hz:.4g} Hz: {v.reason}")
+
+
+def _judged_mode(f_hz: float, modes_hz: np.ndarray) -> int | None:
+    """Index of the mode (of ``modes_hz``, Hz) nearest the frequency a gage's verdict judged;
+    None where the verdict estimated none (NaN): its reason then stands on every row."""
+    if not np.isfinite(f_hz) or len(modes_hz) == 0:
+        return None
+    return int(np.argmin(np.abs(np.asarray(modes_hz) - f_hz)))
