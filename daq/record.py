@@ -9,16 +9,20 @@ for it the loop waits for room in the queue instead of dropping.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..drivers.base import Device, DeviceFault
 from ..drivers.block import Block
+from ..drivers.errors import DeviceError, DeviceTimeout
 from ..drivers.fault_words import FaultWords
 from ..drivers.mcap_format import SIM_IMPACTS_TOPIC
 from .readout import LiveReadout
 from .recorder import Recorder
+
+FAULT_POLL_S = 0.25
+"""Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 
 
 def store_block(rec: Recorder, device: Device, block: Block, truth_written: int, *,
@@ -69,7 +73,11 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
 
     The device's faults are recorded as events and told in words as they come, one line an
     incident (:class:`~ramdaq.drivers.fault_words.FaultWords`, as a live trial tells them): in
-    the readout when there is one, else to ``say``. The summary's ``faults`` counts them."""
+    the readout when there is one, else to ``say``; while no block comes too (the device is read
+    with a :data:`FAULT_POLL_S` timeout), so a lost port is said when it is lost, not at the
+    next block. The summary's ``faults`` counts them. A device that gives up (``DeviceError``,
+    e.g. a port that did not come back) has its last faults and a ``device_error`` event
+    recorded, then the error is raised: the file is finished with what came before."""
     info = device.open()
     paced = getattr(device, "pace", "realtime") != "fast"
     truth = getattr(device, "delivered_impacts", None)
@@ -87,12 +95,10 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
         try:
             if view:
                 view.__enter__()
-            for block in device:
+            for block in _blocks(device, rec, words, tell):
                 written_truth, faults = store_block(rec, device, block, written_truth,
                                                     wait_for_room=not paced, queue_limit=queue_blocks)
-                for line in words.lines(faults):  # counted whether told or not
-                    if tell:
-                        tell(line)
+                _tell(words.lines(faults), tell)
                 if progress:
                     progress(block)
                 gap = last is not None and block.first_sample != last
@@ -112,3 +118,37 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
     return RecordSummary(Path(path), stats.blocks, stats.samples, stats.samples / info.fs_hz, gaps,
                          stats.overflows, written_truth, interrupted, time.monotonic() - t_wall,
                          words.tally())
+
+
+def _blocks(device: Device, rec: Recorder, words: FaultWords,
+            tell: Callable[[str], None] | None) -> Iterator[Block]:
+    """The device's blocks to the stream's end; the faults it reports meanwhile, while no block
+    comes, recorded and told at once (as :class:`~ramdaq.daq.session.TrialSession` does)."""
+    while True:
+        try:
+            block = device.read(timeout=FAULT_POLL_S)
+        except DeviceTimeout:
+            _faults_now(device, rec, words, tell)
+            continue
+        except DeviceError as err:  # gave up: what it said before, then why, then raise
+            _faults_now(device, rec, words, tell)
+            rec.event("device_error", rec.t_end_ns, message=str(err))
+            raise
+        if block is None:
+            _faults_now(device, rec, words, tell)  # reported with the last read
+            return
+        yield block
+
+
+def _faults_now(device: Device, rec: Recorder, words: FaultWords,
+                tell: Callable[[str], None] | None) -> None:
+    faults = device.take_faults()
+    for fault in faults:
+        rec.event(fault.kind, fault.t_ns, **fault.detail)
+    _tell(words.lines(faults), tell)
+
+
+def _tell(lines: list[str], tell: Callable[[str], None] | None) -> None:
+    for line in lines:  # counted by FaultWords whether told or not
+        if tell:
+            tell(line)

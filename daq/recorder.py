@@ -280,6 +280,11 @@ class Recorder:
             self._q.put(block)
         return True
 
+    @property
+    def t_end_ns(self) -> int:
+        """Stream time just after the last sample put, ns (0 before the first block)."""
+        return self._last_t_ns
+
     def event(self, kind: str, t_ns: int, **detail: Any) -> None:
         """Write an event to ``/ramdaq/events``: ``{"kind", "t_ns", "detail"}``.
 

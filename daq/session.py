@@ -77,6 +77,7 @@ from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .heap import map_large_blocks
 from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import UNSURE_REL_SE, LiveReadout, accepted_line
+from .record import FAULT_POLL_S
 from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 if TYPE_CHECKING:  # the recorder (the MCAP writer) is imported only by a session that records
@@ -113,8 +114,6 @@ fraction (and by ``update_s`` at least): a look's numbers change only as its dec
 fair part of itself (and not at all once the ringing is under the noise), and a look every
 ``update_s`` on a 14 s decay was 28 looks a blow at ~0.1 s CPU each -- most of a live trial's
 CPU, taken from the finals and the next blow's first looks -- where 1.5x makes about 8."""
-FAULT_POLL_S = 0.25
-"""Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 SUMMARY_TOPIC = "/ramdaq/summary"
 """The trial summary (:func:`~ramdaq.daq.analyzer.trial_summary`), written once at the end."""
 

@@ -431,3 +431,33 @@ def test_url_options_are_split_from_pyserials():
 def test_missing_port_is_not_found_naming_it(tmp_path):
     with pytest.raises(DeviceNotFound, match=re.escape(str(tmp_path / "nope"))):
         open_device(f"serial://{tmp_path / 'nope'}")
+
+
+def test_record_says_a_lost_port_when_it_is_lost_and_records_why_it_ended(tmp_path):
+    """``ramdaq record`` from a front-end killed mid-stream: nothing was said until the
+    give-up (the port_lost fault waited for a block that never came) and neither port_lost nor
+    device_error was in the file. Now the loss is said at once -- well before the give-up --
+    and both are recorded, then the give-up is raised with the file finished."""
+    path, said, give_up = tmp_path / "killed.mcap", [], 2.0
+    with emulator(tmp_path, "tcp", "--pace", "realtime", duration=60.0) as (proc, address):
+        dev = SerialDevice(address, rig=RIG, reconnect_s=0.05, give_up_s=give_up)
+        killer = threading.Timer(0.5, proc.kill)
+        started = []
+
+        def first_block(_block):
+            if not started:
+                started.append(killer.start())
+
+        with pytest.raises(DeviceClosed, match=re.escape(address)):
+            record(dev, path, readout=False, progress=first_block,
+                   say=lambda line: said.append((time.monotonic(), line)))
+        ended = time.monotonic()
+    lost = [t for t, line in said if " lost (" in line]
+    # said once, when lost: at least the give-up minus one fault poll (0.25 s) before the end
+    assert len(lost) == 1 and ended - lost[0] >= give_up - 0.25 - 0.1, said
+    blocks, events = replay(path)
+    n = kinds(events)
+    assert blocks and n["port_lost"] == 1 and n["device_error"] == 1, n
+    end = next(e for e in events if e["kind"] == "device_error")
+    assert address in end["detail"]["message"] and end["t_ns"] == sample_time_ns(
+        blocks[-1].next_sample, 2048.0)
