@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.gap.trialdata import ScaledCounts, TrialData, prepare
-from ..analysis.model.rig import Gage, Rig, RigError
+from ..analysis.model.rig import Gage, Rig, RigError, parse_rig
 from ..drivers.block import StreamInfo
 from ..drivers.mcap_replay import McapReplayDevice
 from .recording import BlockwiseOfflineTrigger, Recording, force_row, no_rig, rig_of, rig_or_fail
@@ -76,6 +76,8 @@ def load_trial(src: str | Path | Recording, rig: Rig | str | Path | None = None,
     n = data.shape[1]
     if n == 0:
         raise ValueError(f"{path}: the recording holds no samples")
+    for line in _matching_words(path, info, rig, have):
+        say(line)
     if len(have) < len(rig.gages):
         rig = replace(rig, gages=tuple(replace(g, channel=k) for k, g in enumerate(have)))
     bits = info.extra.get("adc_bits")
@@ -173,6 +175,44 @@ def _gages_present(path: str | Path, info: StreamInfo, rig: Rig | None) -> list[
         raise RigError(f"{path}: only {len(have)} of the rig's gages are in the recording "
                        f"(gages {sorted(rows)}); the gap diagnosis needs three or more")
     return have
+
+
+def _matching_words(path: str | Path, info: StreamInfo, rig: Rig, have: list[Gage]) -> list[str]:
+    """Warnings on how the rig's gages were matched to the recording's channels (by gage
+    number): the rig's gages no channel carries, and a rig other than the one recorded."""
+    out = []
+    missing = sorted({g.number for g in rig.gages} - {g.number for g in have})
+    if missing:
+        out.append(f"warning: {path}: rig {rig.name!r}'s gage(s) {_numbers(missing)} have no "
+                   f"channel in the recording: the diagnosis uses gages "
+                   f"{_numbers(sorted(g.number for g in have))} only")
+    carried = _carried_name(info)
+    if carried is not None and carried != rig.name:
+        out.append(f"warning: {path}: the recording carries rig {carried!r}; rig {rig.name!r} "
+                   f"given is matched to its channels by gage number (gage 1 -> gage 1, ...): "
+                   f"check its bodies and positions are those gages'")
+    return out
+
+
+def _carried_name(info: StreamInfo) -> str | None:
+    """The name of the rig the recording carries, or None when it carries none readable."""
+    if not info.rig_toml:
+        return None
+    try:
+        return parse_rig(info.rig_toml).name
+    except RigError:
+        return None
+
+
+def _numbers(ns: list[int]) -> str:
+    """Gage numbers as runs: [1, 2, 3, 5] -> '1-3, 5'."""
+    runs: list[list[int]] = []
+    for n in ns:
+        if runs and n == runs[-1][-1] + 1:
+            runs[-1].append(n)
+        else:
+            runs.append([n])
+    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
 
 
 def trial_data(lt: LoadedTrial, *, pre_s: float = 1.0, post_max_s: float = 4.0,

@@ -139,3 +139,36 @@ def test_a_finding_within_its_chance_level_is_not_printed_as_beyond_it():
     assert f"statistic {form.statistic:.4g} within {form.chance_level:.3g}" in line and " > " not in line
     beyond = finding_line(replace(form, statistic=2 * form.chance_level))
     assert f"statistic {2 * form.chance_level:.4g} > {form.chance_level:.3g}" in beyond
+
+
+def test_a_rig_with_more_gages_than_the_record_is_said(csv_trial, tmp_path, capsys):
+    """A new user's 8-channel import diagnosed with a 16-gage rig of their own: channels 1-8
+    were matched to the rig's gages 1-8 by number without a word of gages 9-16 or of the rig
+    the record carries. Both are said now; the same rig as recorded says nothing."""
+    from ramdaq.daq.gap_trial import load_trial
+
+    _, _, rig, tt = csv_trial
+    x = tt.counts[:8] * tt.scale[:8, None]      # the first 8 gages, m/s^2
+    src = tmp_path / "eight.csv"
+    head = "time (s)," + ",".join(f"g{k + 1:02d} (m/s^2)" for k in range(8))
+    np.savetxt(src, np.column_stack([np.arange(x.shape[1]) / tt.fs_hz, x.T]), delimiter=",",
+               header=head, comments="", fmt="%.8e")
+    assert main(["import", str(src)]) == 0      # a channels-only rig, 'eight', is recorded
+    said: list[str] = []
+    lt = load_trial(tmp_path / "eight.mcap", rig, said.append)
+    assert len(lt.rig.gages) == 8
+    assert ("warning: " + str(tmp_path / "eight.mcap") + ": rig 'sampson-like''s gage(s) 9-16 have "
+            "no channel in the recording: the diagnosis uses gages 1-8 only") in said, said
+    assert any("the recording carries rig 'eight'; rig 'sampson-like' given is matched to its "
+               "channels by gage number" in s for s in said), said
+    said.clear()
+    mcap = tmp_path / "all.mcap"                # all 16, imported with the rig itself
+    csv = tmp_path / "all.csv"
+    full = tt.counts * tt.scale[:, None]
+    names = ",".join(f"g{g.number:02d} (m/s^2)" for g in tt.rig.gages_by_channel())
+    np.savetxt(csv, np.column_stack([np.arange(full.shape[1]) / tt.fs_hz, full.T]), delimiter=",",
+               header="time (s)," + names, comments="", fmt="%.8e")
+    assert main(["import", str(csv), "--rig", str(rig), "--out", str(mcap)]) == 0
+    load_trial(mcap, rig, said.append)
+    assert not any(s.startswith("warning") for s in said), said
+    capsys.readouterr()
