@@ -35,7 +35,7 @@ def test_a_motion_not_taken_from_every_hit_says_which_and_why(water_run):
     assert rep["summary"]["delta_hull_motion"]["alpha_b"]["n"] == 0
     line = next(ln for ln in text.splitlines() if ln.startswith("  delta_alpha_b: n = "))
     assert line.startswith("  delta_alpha_b: n = 0 of 3 accepted hits; not from hits 0, 1, 2: ")
-    assert "no decrement of the 13 Hz mode" in line and "(gages: g13 ok, g14 ok)" in line
+    assert "no decrement of the 13 Hz mode" in line and "(its gages' own decays: g13 ok, g14 ok)" in line
     # every motion the table averages over all 3 hits gets no such line
     full = [m for m, d in rep["summary"]["delta_motion"].items() if d["n"] == 3]
     assert full and not any(ln.startswith(f"  delta_{m}: n = ") for m in full for ln in text.splitlines())
@@ -57,7 +57,7 @@ def test_a_hit_without_a_note_is_said_to_have_none():
     s = {"delta_motion": {"gamma": {"n": 1}}, "delta_hull_motion": {}}
     (line,) = motions_not_used(imp, s)
     assert line.startswith("  delta_gamma: n = 1 of 3 accepted hits; not from ")
-    assert "hit 1: not computed, gage(s) [8] unusable (gages: g04 ok, g08 no_decay)" in line
+    assert "hit 1: not computed, gage(s) [8] unusable (its gages' own decays: g04 ok, g08 no_decay)" in line
     assert "hit 2: computed, but no decrement recorded and no note why" in line
 
 

@@ -290,13 +290,14 @@ def _note_on(imp: dict, m: str) -> str | None:
 
 
 def _why_not(imp: dict, key: str, m: str, gages: tuple[int, ...]) -> str:
-    """Why hit ``imp`` has no decrement of motion ``m``, with its gages' verdicts."""
+    """Why hit ``imp`` has no decrement of motion ``m``, with its gages' verdicts: each gage's
+    own decay (a motion combines its gages, in which a mode may cancel though each rings)."""
     why = _note_on(imp, m) or ("computed, but no decrement recorded and no note why"
                                if m in (imp["analysis"].get(key) or {}) else
                                "not computed from its gages (the hit records no note why)")
     v = imp["analysis"].get("verdicts") or {}
     gv = ", ".join(f"g{g:02d} {v[f'g{g:02d}']['verdict']}" for g in gages if f"g{g:02d}" in v)
-    return why + (f" (gages: {gv})" if gv else "")
+    return why + (f" (its gages' own decays: {gv})" if gv else "")
 
 
 def _fmt(v: float | None, spec: str = ".4f") -> str:
