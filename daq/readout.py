@@ -143,7 +143,8 @@ class LiveReadout:
         if np.isfinite(delta_se) and delta:  # short: an 80-column table
             if not final and not is_sure(delta, delta_se):
                 status = "unsure"
-            status = f"{status} ±{100 * abs(delta_se / delta):.2g}%"  # its SE, in % of it
+            rel = 100 * abs(delta_se / delta)  # its SE, in % of it; beyond 100 % no number
+            status = f"{status} ±{rel:.2g}%" if rel < 99.5 else f"{status} ±>100%"  # says more
         self.results[channel] = (f_hz, delta, status)
         self._refresh()
 

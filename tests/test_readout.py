@@ -115,6 +115,10 @@ def test_the_result_column_says_which_hit_and_look_it_shows(albacore):
     assert "hit 2: look 0.42 s in" in text
     row12 = next(line for line in text.splitlines() if " g12 " in line)
     assert "unsure ±18%" in row12  # 0.0200 / 0.1085: sure by its error, but not a decay
+    # an error many times the decrement: one short cell, not '±1.6e+03%' across the table
+    view.look(0.26, {"g12": (24.40, -0.0081, 0.13)}, hit=2)
+    row12 = next(line for line in _table_text(view).splitlines() if " g12 " in line)
+    assert "unsure ±>100%" in row12 and "e+" not in row12
     view.showing("hit 2: final")
     view.set_result("g04", 24.503, 0.0581, final=True, delta_se=0.0012)
     text = _table_text(view)
