@@ -292,13 +292,30 @@ class AnalyzerLoad:
                 "max_MB": self.max_bytes / 1e6, "max_finals": self.max_finals}
 
 
+CUT_ENDS = {"gap": "a gap in the stream", "flush": "the stream's end"}
+"""Ends of a record that cut a hit's decay by accident. A record cut by the next blow is the
+trial's design (the blows come faster than the ringing dies) and is said in each hit's line."""
+
+
+def cut_short(h: HitResult) -> str:
+    """Why an analysed hit's decay is shorter than the trigger's record would have been: its
+    record cut by a gap or the stream's end (seconds of record after the onset, and which);
+    '' if it was not."""
+    ev = h.event
+    if not ev.too_short or ev.end_reason not in CUT_ENDS:
+        return ""
+    return (f"{(ev.last_sample + 1 - ev.onset_sample) / ev.fs_hz:.1f} s after the blow, cut by "
+            f"{CUT_ENDS[ev.end_reason]}")
+
+
 def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
                   load: AnalyzerLoad | None = None) -> dict:
     """Per gage and per motion: mean decrement over accepted hits, its standard deviation and
     each hit's percent deviation from the mean; the predominant frequency likewise. How many
     blows were seen but not analysable, and, given the trigger's ``stream`` health, its gaps,
     missing, blind and arming time (s); given the analyzer's ``load``, the work it skipped or
-    made coarse, and which hits were coarse."""
+    made coarse, and which hits were coarse; the accepted hits whose record a gap or the stream's
+    end cut short (:func:`cut_short`), which the means include."""
     ok = [h.analysis for h in hits if h.accepted and h.analysis is not None]
     gages = sorted({n for a in ok for n in a.gages})
     motions = sorted({m for a in ok for m in a.motions})
@@ -309,6 +326,7 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
         "stream": None if stream is None else stream.to_json(),
         "analyzer": None if load is None else load.to_json(),
         "coarse": {h.index: h.coarse for h in hits if h.coarse},
+        "cut_short": {h.index: cut_short(h) for h in hits if h.accepted and cut_short(h)},
         "f_hz": _mean_scatter([a.f_hz for a in ok]),
         "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages],
                                                   [a.gages[n].delta_se for a in ok if n in a.gages])

@@ -371,6 +371,8 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
                      "dashpot (the report's reading), not a rig's separate dashpots")
     if s.get("delta_hull_motion"):
         lines.append("  *_b: the hull's own motion at the rudder (gages 5, 13, 14; Eq 8-13)")
+    lines += [f"  hit {i} is in these means on a short decay: its record ended {why}"
+              for i, why in (s.get("cut_short") or {}).items()]
     return lines
 
 
