@@ -130,10 +130,10 @@ def damped_basis(
     Returned as the transpose of a C-ordered (2K [+1], n_samples) array, so that every product
     with Φ runs along contiguous samples. On a uniform grid (``grid`` from
     :func:`uniform_grid`) the complex exponentials exp(s (t₀ + n Δt)) are products of two short
-    tables, exp(s (t₀ + j Δt)) · exp(s i m Δt) with n = i m + j and m ≈ √N
-    (:func:`_blocked_basis`): two multiply-adds a sample instead of an exp, a cos and a sin,
-    equal to within a few ulp. ``scratch``: a dict in which the short tables' grids are kept
-    between calls; ``out``: a (2K [+1], n_samples) array to fill with Φᵀ.
+    tables, exp(s (t₀ + j Δt)) · exp(s i m Δt) with n = i m + j and m ≈ √N: one complex multiply
+    per sample instead of an exp, a cos and a sin, equal to within a few ulp. ``scratch``: a dict
+    in which the complex work array is kept between calls (fewer large allocations); ``out``:
+    a (2K [+1], n_samples) array to fill with Φᵀ.
     """
     K, n = f.size, t.size
     n_trend = int(offset)
@@ -145,7 +145,24 @@ def damped_basis(
         ends = np.maximum(s.real * t0, s.real * (t0 + dt * (n - 1)))
         blocked = bool((ends < 300.0).all())  # else the envelope clamp below is active
     if blocked:
-        _blocked_basis(PhiT, s, t0, dt, n, scratch)
+        grids = None if scratch is None else scratch.get("grids")
+        if grids is None:
+            m = int(np.ceil(np.sqrt(n)))
+            grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
+            if scratch is not None:
+                scratch["grids"] = grids
+        m, rows = grids[0].size, grids[1].size
+        lo = np.exp(s[:, None] * grids[0][None, :])  # (K, m)
+        hi = np.exp(s[:, None] * grids[1][None, :])  # (K, rows)
+        work = None if scratch is None else scratch.get("z")
+        if work is None or work.shape != (K, rows, m):
+            work = np.empty((K, rows, m), dtype=complex)
+            if scratch is not None:
+                scratch["z"] = work
+        np.multiply(hi[:, :, None], lo[:, None, :], out=work)
+        Z = work.reshape(K, rows * m)[:, :n]
+        PhiT[0 : 2 * K : 2] = Z.real
+        PhiT[1 : 2 * K : 2] = Z.imag
     elif K:
         env = np.exp(np.minimum(-(d * f)[:, None] * t[None, :], 300.0))
         arg = _TWO_PI * f[:, None] * t[None, :]
@@ -156,43 +173,6 @@ def damped_basis(
     elif n_trend > 1:
         PhiT[2 * K :] = trend_basis(t, n_trend)
     return PhiT.T
-
-
-def _blocked_basis(PhiT: np.ndarray, s: np.ndarray, t0: float, dt: float, n: int,
-                   scratch: dict | None) -> None:
-    """Rows 2k, 2k+1 of ``PhiT`` (2K [+p], n), C-ordered rows) = Re, Im exp(s_k (t₀ + i Δt)),
-    i < n, for the poles ``s`` (K,) (1/s): with i = r m + j (m ≈ √n), the product of the short
-    tables h = exp(s r m Δt) and l = exp(s (t₀ + j Δt)) written as a real matrix product per
-    mode, [Re; Im](r, j) = [[Re h, −Im h], [Im h, Re h]](r) · [Re l; Im l](j), by BLAS straight
-    into Φᵀ's rows seen as (rows, m) blocks (no complex work array, no strided copies out of
-    one: ~2x faster than the complex product it replaces, the same to rounding, ≲ 1 ulp of the
-    larger term)."""
-    K = s.size
-    grids = None if scratch is None else scratch.get("grids")
-    if grids is None:
-        m = int(np.ceil(np.sqrt(n)))
-        grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
-        if scratch is not None:
-            scratch["grids"] = grids
-    m, rows = grids[0].size, grids[1].size
-    lo = np.exp(s[:, None] * grids[0][None, :])  # (K, m)
-    hi = np.exp(s[:, None] * grids[1][None, :])  # (K, rows)
-    A = np.empty((K, 2, rows, 2))  # per mode and part (Re, Im): the row's 2 weights of (Re l, Im l)
-    A[:, 0, :, 0] = A[:, 1, :, 1] = hi.real
-    np.negative(hi.imag, out=A[:, 0, :, 1])
-    A[:, 1, :, 0] = hi.imag
-    L = np.empty((K, 1, 2, m))
-    L[:, 0, 0], L[:, 0, 1] = lo.real, lo.imag
-    full = n // m  # whole rows of m samples; the last, partial one apart
-    dest = PhiT if PhiT.strides[1] == PhiT.itemsize else np.empty((2 * K, n))
-    s0, item = dest.strides
-    view = np.lib.stride_tricks.as_strided(dest, shape=(K, 2, full, m),
-                                           strides=(2 * s0, s0, m * item, item))
-    np.matmul(A[:, :, :full], L, out=view)
-    if full * m < n:
-        dest[: 2 * K, full * m :] = (A[:, :, full] @ L[:, 0]).reshape(2 * K, m)[:, : n - full * m]
-    if dest is not PhiT:  # (rows not contiguous: written through a C-ordered copy)
-        PhiT[: 2 * K] = dest
 
 
 def trend_basis(t: np.ndarray, n_trend: int) -> np.ndarray:
@@ -609,9 +589,6 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     step solved for the others; a step the bounds still cut to (almost) nothing is not
     convergence unless the point is a Karush–Kuhn–Tucker point (:func:`_free_descent`), it
     counts as a rejected step (the larger damping turns the next one towards the gradient).
-    A step the bounds did not cut is judged as inside the box, also at a point on a bound (a
-    coordinate held there moves by 0): its gain below rounding is convergence on the free
-    coordinates.
     (A noise candidate that slides to f = f_min, δ = δ_max to take up a drift must come back
     down in δ along f = f_min; the plain clipped step kept pointing out of the corner.)
     """
@@ -629,15 +606,14 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
         if info != 0:  # not positive definite (scipy: LinAlgError)
             lam *= 10.0
             continue
-        free_step = theta + u * sc
-        new = np.clip(free_step, lo, hi)
+        new = np.clip(theta + u * sc, lo, hi)
         r_new, p_new, B_new = prob.residual(new)
         n_eval += 1
         cost_new = prob.sumsq(r_new)
         if cost_new <= cost:
             small = bool((np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc)).all())
             rel = (cost - cost_new) / max(cost, 1e-300)
-            if (small or rel < 1e-11) and (new != free_step).any():  # the bounds cut the step
+            if (small or rel < 1e-11) and ((new <= lo) | (new >= hi)).any():
                 tol = max(1e-11 * cost, chi2_tol * cost / max(dof, 1))
                 if _free_descent(A, g, theta, lo, hi) > tol:  # stuck on a bound, not at a minimum
                     prob.release(p_new)
