@@ -288,12 +288,14 @@ def identify_modes(
     X = _checked(x, fs_hz, n_modes=n_modes, f_range_hz=f_range_hz, method=method)
     n_ch, n = X.shape
     active = np.ptp(X, axis=1) > 0
-    Xa = X[active]
+    every = bool(active.all())  # (then the rows themselves, not a copy: nothing here writes them)
+    Xa = X if every else X[active]
     info: dict = {"active_channels": np.flatnonzero(active)}
     if Xa.shape[0] == 0:
         return _empty(n_ch, fs_hz, n, method, info | {"reason": "all channels constant"})
     pg = (channel_periodograms(Xa) if periodograms is None  # the band test's; P0: the noise
-          else {m: P[active] for m, P in periodograms.items()})  # estimate's when not decimated
+          else {m: P if every else P[active] for m, P in periodograms.items()})  # estimate's when
+    # not decimated
     P0 = pg[n]
     sig0 = (noise_std_from_periodogram(P0) if noise_std is None or periodograms is None
             else np.asarray(noise_std, dtype=float)[active])  # the band test's, and the
