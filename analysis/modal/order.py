@@ -98,13 +98,17 @@ class ModeSelector:
     final_se_tol : float
         ``se_tol`` of the fits that are not trial fits (0: converged to rounding; module
         docstring).
+    by_matmul : bool
+        Every fit's basis by :func:`~ramdaq.analysis.modal.varpro.damped_basis`'s ``by_matmul``
+        (a hit's finals).
     """
 
     def __init__(
         self, Y: np.ndarray, t: np.ndarray, fit_offset: bool, threshold: float, zeta_max: float,
         f_lim: tuple[float, float], w0: np.ndarray, final_se_tol: float = 0.0,
+        by_matmul: bool = False,
     ) -> None:
-        self.Y, self.t, self.fit_offset = Y, t, fit_offset
+        self.Y, self.t, self.fit_offset, self.by_matmul = Y, t, fit_offset, by_matmul
         self.final_se_tol = final_se_tol
         self.threshold, self.zeta_max, self.f_lim = threshold, zeta_max, f_lim
         self.w = w0
@@ -129,7 +133,8 @@ class ModeSelector:
             fit = fit_modes_varpro(self.t, self.Y, f, d, weights=self.w, fit_offset=self.fit_offset,
                                    f_bounds_hz=self.f_lim, delta_bounds=(-3.0, 3.0),
                                    chi2_tol=_TRIAL_CHI2_TOL if trial else 0.0,
-                                   se_tol=0.0 if trial else self.final_se_tol)
+                                   se_tol=0.0 if trial else self.final_se_tol,
+                                   by_matmul=self.by_matmul)
         except (ValueError, linalg.LinAlgError):
             return None
         zeta = damping_ratio_from_decrement(fit.delta)
@@ -145,7 +150,8 @@ class ModeSelector:
         """Fitter with the current fit's poles held, for the current weights (cached)."""
         if self._held is None or self._held[0] is not self.fit or self._held[1] is not self.w:
             fitter = HeldPoleFitter(self.t, self.Y, self.fit.f_hz, self.fit.delta,
-                                     weights=self.w, fit_offset=self.fit_offset, grams=True)
+                                     weights=self.w, fit_offset=self.fit_offset, grams=True,
+                                     by_matmul=self.by_matmul)
             self._held = (self.fit, self.w, fitter)
         return self._held[2]
 
@@ -153,7 +159,8 @@ class ModeSelector:
         """Gauss–Newton gain on the data weighted by the current weights (cached)."""
         if self._gain_cache is None or self._gain_cache[0] is not self.w:
             self._gain_cache = (self.w, GaussNewtonGain(self.t, self.Y, weights=self.w,
-                                                         fit_offset=self.fit_offset))
+                                                         fit_offset=self.fit_offset,
+                                                         by_matmul=self.by_matmul))
         return self._gain_cache[1]
 
     def try_add(self, fc: float, dc: float) -> bool:

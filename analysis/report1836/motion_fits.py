@@ -83,7 +83,7 @@ class _Linear:
 
 def _linear(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, trend: int) -> _Linear:
     """Least squares of the signals ``Y`` (S, n) on the damped basis at poles (f, d)."""
-    Phi = damped_basis(t, f, d, trend, uniform_grid(t))
+    Phi = damped_basis(t, f, d, trend, uniform_grid(t), by_matmul=True)
     proj = Projector(Phi)
     B = proj.coef(Y.T)
     R = Y.T - Phi @ B
@@ -153,7 +153,7 @@ def _shared_terms(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, tr
     K, n = f.size, t.size
     P = 2 * K + trend
     W = np.empty((P + 2 * K, n))
-    damped_basis(t, f, d, trend, uniform_grid(t), out=W[:P])
+    damped_basis(t, f, d, trend, uniform_grid(t), out=W[:P], by_matmul=True)
     np.multiply(W[: 2 * K], t[None, :], out=W[P:])
     G = W @ W.T
     proj = Projector(None, gram=G[:P, :P])
@@ -190,7 +190,7 @@ class _Held:
                  free: np.ndarray, trend: int) -> None:
         held = np.setdiff1d(np.arange(f.size), free)
         self.t, self.grid = t, uniform_grid(t)
-        F = damped_basis(t, f[held], d[held], trend, self.grid)
+        F = damped_basis(t, f[held], d[held], trend, self.grid, by_matmul=True)
         Q, R = linalg.qr(F, mode="economic", check_finite=False)
         rd = np.abs(np.diag(R))
         self.QT = np.ascontiguousarray(Q[:, rd > 1e-10 * rd.max()].T) if rd.size else None
@@ -216,7 +216,7 @@ class _Held:
         T^T r = (W y)_T - G_Tp b and M = G_TT - G_Tp G_pp^-1 G_pT."""
         c = 2 * f.size
         W = np.empty((2 * c, self.t.size))
-        damped_basis(self.t, f, d, 0, self.grid, out=W[:c])
+        damped_basis(self.t, f, d, 0, self.grid, out=W[:c], by_matmul=True)
         np.multiply(W[:c], self.t[None, :], out=W[c:])
         G = projected_gram(W, self.QT)
         if G is None:
@@ -239,7 +239,7 @@ class _Held:
     def _explicit_terms(self, s: int, f: np.ndarray, d: np.ndarray
                         ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`terms` on the projected columns and residual themselves."""
-        phi = damped_basis(self.t, f, d, 0, self.grid)
+        phi = damped_basis(self.t, f, d, 0, self.grid, by_matmul=True)
         c = phi.shape[1]
         T = phi * self.t[:, None]
         both = self._perp(np.hstack([phi, T]))  # one pass over the held columns for both
