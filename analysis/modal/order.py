@@ -70,8 +70,11 @@ FINAL_SE_TOL = 1e-6  # a hit's final fits: stopped within ~0.001 standard errors
 
 
 def floor_noise(sig: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Noise std floored at 10⁻⁹ of each channel's rms (noise-free synthetic data)."""
-    rms = np.sqrt(np.mean(y * y, axis=-1))
+    """Noise std floored at 10⁻⁹ of each channel's rms (noise-free synthetic data). The rms
+    by one fused pass (no squared copy of the data: its rounding differs from the mean of
+    squares by ~1e-16, and only the floor, 10⁻⁹ of it, reads it)."""
+    yy = np.einsum("...i,...i->...", y, y)
+    rms = np.sqrt(yy / max(y.shape[-1], 1))
     return np.maximum(sig, 1e-9 * rms + 1e-300)
 
 
@@ -95,13 +98,17 @@ class ModeSelector:
     final_se_tol : float
         ``se_tol`` of the fits that are not trial fits (0: converged to rounding; module
         docstring).
+    by_matmul : bool
+        Every fit's basis by :func:`~ramdaq.analysis.modal.varpro.damped_basis`'s ``by_matmul``
+        (a hit's finals).
     """
 
     def __init__(
         self, Y: np.ndarray, t: np.ndarray, fit_offset: bool, threshold: float, zeta_max: float,
         f_lim: tuple[float, float], w0: np.ndarray, final_se_tol: float = 0.0,
+        by_matmul: bool = False,
     ) -> None:
-        self.Y, self.t, self.fit_offset = Y, t, fit_offset
+        self.Y, self.t, self.fit_offset, self.by_matmul = Y, t, fit_offset, by_matmul
         self.final_se_tol = final_se_tol
         self.threshold, self.zeta_max, self.f_lim = threshold, zeta_max, f_lim
         self.w = w0
@@ -126,7 +133,8 @@ class ModeSelector:
             fit = fit_modes_varpro(self.t, self.Y, f, d, weights=self.w, fit_offset=self.fit_offset,
                                    f_bounds_hz=self.f_lim, delta_bounds=(-3.0, 3.0),
                                    chi2_tol=_TRIAL_CHI2_TOL if trial else 0.0,
-                                   se_tol=0.0 if trial else self.final_se_tol)
+                                   se_tol=0.0 if trial else self.final_se_tol,
+                                   by_matmul=self.by_matmul)
         except (ValueError, linalg.LinAlgError):
             return None
         zeta = damping_ratio_from_decrement(fit.delta)
@@ -142,7 +150,8 @@ class ModeSelector:
         """Fitter with the current fit's poles held, for the current weights (cached)."""
         if self._held is None or self._held[0] is not self.fit or self._held[1] is not self.w:
             fitter = HeldPoleFitter(self.t, self.Y, self.fit.f_hz, self.fit.delta,
-                                     weights=self.w, fit_offset=self.fit_offset, grams=True)
+                                     weights=self.w, fit_offset=self.fit_offset, grams=True,
+                                     by_matmul=self.by_matmul)
             self._held = (self.fit, self.w, fitter)
         return self._held[2]
 
@@ -150,7 +159,8 @@ class ModeSelector:
         """Gauss–Newton gain on the data weighted by the current weights (cached)."""
         if self._gain_cache is None or self._gain_cache[0] is not self.w:
             self._gain_cache = (self.w, GaussNewtonGain(self.t, self.Y, weights=self.w,
-                                                         fit_offset=self.fit_offset))
+                                                         fit_offset=self.fit_offset,
+                                                         by_matmul=self.by_matmul))
         return self._gain_cache[1]
 
     def try_add(self, fc: float, dc: float) -> bool:

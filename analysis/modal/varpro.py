@@ -119,7 +119,7 @@ def uniform_grid(t: np.ndarray) -> tuple[float, float] | None:
 def damped_basis(
     t: np.ndarray, f: np.ndarray, d: np.ndarray, offset: bool | int,
     grid: tuple[float, float] | None = None, scratch: dict | None = None,
-    out: np.ndarray | None = None,
+    out: np.ndarray | None = None, by_matmul: bool = False,
 ) -> np.ndarray:
     """Φ, shape (n_samples, 2K [+p]): columns e·cos, e·sin per mode (+ a trend), e = exp(−δ f t).
 
@@ -133,7 +133,9 @@ def damped_basis(
     tables, exp(s (t₀ + j Δt)) · exp(s i m Δt) with n = i m + j and m ≈ √N: one complex multiply
     per sample instead of an exp, a cos and a sin, equal to within a few ulp. ``scratch``: a dict
     in which the complex work array is kept between calls (fewer large allocations); ``out``:
-    a (2K [+1], n_samples) array to fill with Φᵀ.
+    a (2K [+1], n_samples) array to fill with Φᵀ. ``by_matmul``: that product as a real matrix
+    product by BLAS instead (:func:`_blocked_basis`: ~2x faster, the same to rounding but not to
+    the bit; a hit's finals use it, the default keeps the bits other callers were tuned on).
     """
     K, n = f.size, t.size
     n_trend = int(offset)
@@ -144,7 +146,9 @@ def damped_basis(
         t0, dt = grid
         ends = np.maximum(s.real * t0, s.real * (t0 + dt * (n - 1)))
         blocked = bool((ends < 300.0).all())  # else the envelope clamp below is active
-    if blocked:
+    if blocked and by_matmul:
+        _blocked_basis(PhiT, s, t0, dt, n, scratch)
+    elif blocked:
         grids = None if scratch is None else scratch.get("grids")
         if grids is None:
             m = int(np.ceil(np.sqrt(n)))
@@ -173,6 +177,43 @@ def damped_basis(
     elif n_trend > 1:
         PhiT[2 * K :] = trend_basis(t, n_trend)
     return PhiT.T
+
+
+def _blocked_basis(PhiT: np.ndarray, s: np.ndarray, t0: float, dt: float, n: int,
+                   scratch: dict | None) -> None:
+    """Rows 2k, 2k+1 of ``PhiT`` (2K [+p], n), C-ordered rows) = Re, Im exp(s_k (t₀ + i Δt)),
+    i < n, for the poles ``s`` (K,) (1/s): with i = r m + j (m ≈ √n), the product of the short
+    tables h = exp(s r m Δt) and l = exp(s (t₀ + j Δt)) written as a real matrix product per
+    mode, [Re; Im](r, j) = [[Re h, −Im h], [Im h, Re h]](r) · [Re l; Im l](j), by BLAS straight
+    into Φᵀ's rows seen as (rows, m) blocks (no complex work array, no strided copies out of
+    one: ~2x faster than the complex product of the default path, the same to rounding, ≲ 1 ulp of the
+    larger term)."""
+    K = s.size
+    grids = None if scratch is None else scratch.get("grids")
+    if grids is None:
+        m = int(np.ceil(np.sqrt(n)))
+        grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
+        if scratch is not None:
+            scratch["grids"] = grids
+    m, rows = grids[0].size, grids[1].size
+    lo = np.exp(s[:, None] * grids[0][None, :])  # (K, m)
+    hi = np.exp(s[:, None] * grids[1][None, :])  # (K, rows)
+    A = np.empty((K, 2, rows, 2))  # per mode and part (Re, Im): the row's 2 weights of (Re l, Im l)
+    A[:, 0, :, 0] = A[:, 1, :, 1] = hi.real
+    np.negative(hi.imag, out=A[:, 0, :, 1])
+    A[:, 1, :, 0] = hi.imag
+    L = np.empty((K, 1, 2, m))
+    L[:, 0, 0], L[:, 0, 1] = lo.real, lo.imag
+    full = n // m  # whole rows of m samples; the last, partial one apart
+    dest = PhiT if PhiT.strides[1] == PhiT.itemsize else np.empty((2 * K, n))
+    s0, item = dest.strides
+    view = np.lib.stride_tricks.as_strided(dest, shape=(K, 2, full, m),
+                                           strides=(2 * s0, s0, m * item, item))
+    np.matmul(A[:, :, :full], L, out=view)
+    if full * m < n:
+        dest[: 2 * K, full * m :] = (A[:, :, full] @ L[:, 0]).reshape(2 * K, m)[:, : n - full * m]
+    if dest is not PhiT:  # (rows not contiguous: written through a C-ordered copy)
+        PhiT[: 2 * K] = dest
 
 
 def trend_basis(t: np.ndarray, n_trend: int) -> np.ndarray:
@@ -310,14 +351,14 @@ class _Problem:
     (2K + m)².
 
     ``grid``: :func:`uniform_grid` of ``t`` where the caller has it (the channels fitted one by
-    one on the same times; default False: computed here).
+    one on the same times; default False: computed here). ``by_matmul``: :func:`damped_basis`'s.
     """
 
     def __init__(
         self, t: np.ndarray, Yw: np.ndarray, offset: bool, fixed: np.ndarray | None = None,
-        grid: tuple[float, float] | None | bool = False,
+        grid: tuple[float, float] | None | bool = False, by_matmul: bool = False,
     ) -> None:
-        self.t, self.offset = t, offset
+        self.t, self.offset, self.by_matmul = t, offset, by_matmul
         self.Yc = np.ascontiguousarray(np.asarray(Yw).T)  # (n_channels, n_samples)
         self.grid = uniform_grid(t) if grid is False else grid  # (given: uniform_grid(t))
         self.scratch: dict = {}
@@ -360,7 +401,7 @@ class _Problem:
         shape = (P + 2 * K, n)
         W = self._pool.pop() if self._pool and self._pool[-1].shape == shape else np.empty(shape)
         damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
-                     out=W[:P])
+                     out=W[:P], by_matmul=self.by_matmul)
         np.multiply(W[: 2 * K], self.t[None, :], out=W[P:])
         G = projected_gram(W, self.QfT)
         if G is None:
@@ -391,7 +432,7 @@ class _Problem:
         shape = (theta.size + int(self.offset), self.t.size)
         buf = self._pool.pop() if self._pool and self._pool[-1].shape == shape else None
         raw = damped_basis(self.t, theta[0::2], theta[1::2], self.offset, self.grid, self.scratch,
-                     out=buf)
+                           out=buf, by_matmul=self.by_matmul)
         proj = Projector(self._perp(raw))
         proj.raw = raw
         B = proj.coef(self.Yw)
@@ -711,6 +752,7 @@ def fit_modes_varpro(
     max_iter: int = 100,
     chi2_tol: float = 0.0,
     se_tol: float = 0.0,
+    by_matmul: bool = False,
 ) -> VarProFit:
     """Fit damped modes with poles shared by all channels by variable projection.
 
@@ -741,6 +783,8 @@ def fit_modes_varpro(
         variance per degree of freedom: f and δ are then within about √se_tol of their standard
         errors of the converged values (0: off). The per-channel fits of
         :func:`~ramdaq.analysis.modal.identify.identify_modes` use 3e-4.
+    by_matmul : bool
+        The basis by :func:`damped_basis`'s ``by_matmul`` (a hit's finals).
 
     Returns
     -------
@@ -755,7 +799,7 @@ def fit_modes_varpro(
     P = 2 * K + int(fit_offset)
     if N <= P + 2 * K:
         raise ValueError(f"n_samples ({N}) too small for {K} modes")
-    prob = _Problem(t, (Y * w[:, None]).T, fit_offset)
+    prob = _Problem(t, (Y * w[:, None]).T, fit_offset, by_matmul=by_matmul)
     lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
     return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol, se_tol=se_tol)
 
@@ -806,12 +850,14 @@ def fit_channels_varpro(
     t_s: np.ndarray, y: np.ndarray, f0_hz: np.ndarray, delta0: np.ndarray, *,
     fit_offset: bool | int, f_bounds_hz: tuple[float, float],
     delta_bounds: tuple[float, float], max_iter: int = 100, se_tol: float = 0.0,
+    by_matmul: bool = False,
 ) -> list[VarProFit | None]:
     """Each channel (row of ``y``, (n_channels, n_samples)) fitted on its own from the same
     start: ``fit_modes_varpro(t_s, y[c:c+1], f0_hz, delta0, ..., se_tol=se_tol)`` for every c
     (None where that raises ValueError or LinAlgError), the first evaluation at the common
     start (basis, its factorisation and the Grams of the derivative columns: all but each
-    channel's coefficients, residual and Tᵀr) computed once for all channels."""
+    channel's coefficients, residual and Tᵀr) computed once for all channels. ``by_matmul``:
+    :func:`damped_basis`'s."""
     t = np.asarray(t_s, dtype=float)
     Y = np.atleast_2d(np.asarray(y, dtype=float))
     f0, d0 = np.asarray(f0_hz, dtype=float), np.asarray(delta0, dtype=float)
@@ -820,7 +866,7 @@ def fit_channels_varpro(
         return [None] * C
     lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
     grid = uniform_grid(t)  # the same grid for every channel's problem
-    raw = damped_basis(t, theta0[0::2], theta0[1::2], fit_offset, grid).copy()
+    raw = damped_basis(t, theta0[0::2], theta0[1::2], fit_offset, grid, by_matmul=by_matmul).copy()
     proj = Projector(raw)
     shared = None
     if proj.cho is not None:  # else each channel's own first evaluation (QR path)
@@ -831,7 +877,7 @@ def fit_channels_varpro(
         shared = (raw.T @ T, T.T @ T, T.T @ R)  # ΦᵀT, TᵀT, Tᵀr
     out: list[VarProFit | None] = []
     for c in range(C):
-        prob = _Problem(t, Y[c : c + 1].T, fit_offset, grid=grid)
+        prob = _Problem(t, Y[c : c + 1].T, fit_offset, grid=grid, by_matmul=by_matmul)
         first = None
         if shared is not None:
             pc = copy.copy(proj)  # its Φ is not a pooled buffer: never handed to a channel's pool
@@ -850,19 +896,21 @@ class HeldPoleFitter:
     All amplitudes (and the offset) are fitted; the held modes' columns are projected out once
     here (:class:`_Problem` ``fixed``) and reused for every candidate tried against them.
     ``grams``: Σr² from Grams wherever they keep the digits a trial fit needs
-    (:class:`_GramResidual`; for fits with ``chi2_tol`` > 0 and screens only).
+    (:class:`_GramResidual`; for fits with ``chi2_tol`` > 0 and screens only). ``by_matmul``:
+    :func:`damped_basis`'s.
     """
 
     def __init__(
         self, t: np.ndarray, y: np.ndarray, f_fixed: np.ndarray, d_fixed: np.ndarray, *,
-        weights: np.ndarray, fit_offset: bool, grams: bool = False,
+        weights: np.ndarray, fit_offset: bool, grams: bool = False, by_matmul: bool = False,
     ) -> None:
         Y = np.atleast_2d(y)
         self.C, self.N = Y.shape
         self.K_fixed, self.fit_offset, self.weights = f_fixed.size, fit_offset, weights
         grid = uniform_grid(t)
-        fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, grid)
-        self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed, grid=grid)
+        fixed = damped_basis(t, f_fixed, d_fixed, fit_offset, grid, by_matmul=by_matmul)
+        self.prob = _Problem(t, (Y * weights[:, None]).T, fit_offset, fixed=fixed, grid=grid,
+                             by_matmul=by_matmul)
         if grams:  # trial fits and screens only: Σr² from Grams (see _GramResidual)
             self.prob.use_grams()
 
@@ -907,11 +955,13 @@ class GaussNewtonGain:
     no residual as large as the data is formed. Their rounding is relative to ‖Y‖/‖r‖ (the
     square root of the ratio Σr² would lose), ≲ 10⁻¹¹ of the gain, which enters the order
     search's test multiplied by 4 plus 1. Where the Grams lose digits, the residual is formed.
+    ``by_matmul``: :func:`damped_basis`'s.
     """
 
     def __init__(self, t: np.ndarray, y: np.ndarray, *, weights: np.ndarray,
-                 fit_offset: bool) -> None:
-        self.prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset)
+                 fit_offset: bool, by_matmul: bool = False) -> None:
+        self.prob = _Problem(t, (np.atleast_2d(y) * weights[:, None]).T, fit_offset,
+                             by_matmul=by_matmul)
 
     def __call__(self, f: np.ndarray, d: np.ndarray) -> float:
         theta = np.empty(2 * f.size)

@@ -249,11 +249,12 @@ def assess_decay_jointly(
     n_ch, n = X.shape
     out = _screen(X, adc_full_scale, clip_run)
     rest = [c for c in range(n_ch) if c not in out]
-    pg = channel_periodograms(X[rest]) if rest else {}  # read by both tests, computed once
+    Xr = _rows(X, rest)
+    pg = channel_periodograms(Xr) if rest else {}  # read by both tests, computed once
     sigma = np.full(n_ch, np.nan)
     if rest:  # the channel's own order search would stop at its first test: no peak at all
         sigma[rest] = noise_std_from_periodogram(pg[n])
-        for c, peak in zip(rest, peak_above_noise(X[rest], fs_hz, false_alarm=false_alarm,
+        for c, peak in zip(rest, peak_above_noise(Xr, fs_hz, false_alarm=false_alarm,
                                                   periodograms=pg, noise_std=sigma[rest]),
                            strict=True):
             if not peak:
@@ -262,8 +263,8 @@ def assess_decay_jointly(
     table = None
     if rows:
         sel = [rest.index(c) for c in rows]
-        table = identify_modes(X[list(rows)], fs_hz, false_alarm=false_alarm, per_channel=True,
-                               periodograms={m: P[sel] for m, P in pg.items()},
+        table = identify_modes(_rows(X, list(rows)), fs_hz, false_alarm=false_alarm,
+                               per_channel=True, periodograms={m: _rows(P, sel) for m, P in pg.items()},
                                noise_std=sigma[list(rows)], band_decimation=band_decimation)
         for j, c in enumerate(rows):
             got = _judge_from_joint(c, j, table, min_cycles, min_delta, false_alarm)
@@ -280,6 +281,12 @@ def assess_decay_jointly(
             quiet.append(c)
     return JointAssessment([out[c] for c in range(n_ch)], table, rows, len(own), tuple(quiet),
                            sigma)
+
+
+def _rows(a: np.ndarray, idx: list[int]) -> np.ndarray:
+    """``a[idx]``, or ``a`` itself where ``idx`` takes every row in order (a hit's 16 gages
+    when all pass the screen: no copy of the record; nothing downstream writes to it)."""
+    return a if idx == list(range(a.shape[0])) else a[idx]
 
 
 def _significant_in(table: ModeTable, j: int, false_alarm: float) -> np.ndarray:

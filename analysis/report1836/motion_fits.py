@@ -10,7 +10,8 @@ from the joint poles instead of a fresh search:
 
 1. One step for all signals together: the basis Phi at the joint poles, its projector and the
    Schur complement ``T^T P_perp T`` (T = t Phi) are shared; each signal adds only its linear
-   amplitudes B (its combination of the gages') and ``T^T r``.
+   amplitudes B (its combination of the gages') and ``T^T r`` (all from the Grams of Phi, T and
+   the signals where they keep the digits: :func:`_shared_terms`).
 2. A second step for each signal from where its first landed: the step it asks for is its
    remaining distance to the optimum, so a first step that was already converged shows here.
 3. Accepted when the second evaluation lowered the residual and its step is within one standard
@@ -82,7 +83,7 @@ class _Linear:
 
 def _linear(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, trend: int) -> _Linear:
     """Least squares of the signals ``Y`` (S, n) on the damped basis at poles (f, d)."""
-    Phi = damped_basis(t, f, d, trend, uniform_grid(t))
+    Phi = damped_basis(t, f, d, trend, uniform_grid(t), by_matmul=True)
     proj = Projector(Phi)
     B = proj.coef(Y.T)
     R = Y.T - Phi @ B
@@ -123,18 +124,55 @@ def _step(M: np.ndarray, Tr: np.ndarray, H: np.ndarray, free: np.ndarray
     return step, inv, float(-Jtr @ step)
 
 
-def _significant(t: np.ndarray, lin: _Linear, f: np.ndarray, d: np.ndarray) -> np.ndarray:
+def _significant(t: np.ndarray, B: np.ndarray, rss: np.ndarray, f: np.ndarray,
+                 d: np.ndarray) -> np.ndarray:
     """(S, K) bool: mode k stands out of signal s's noise (whitened energy of its fit at the
-    joint poles above the chi-squared(2) quantile at 1e-3, as the per-gage fits test)."""
+    joint poles, coefficients ``B`` (m, S) and residual sums of squares ``rss`` (S,), above the
+    chi-squared(2) quantile at 1e-3, as the per-gage fits test)."""
     K = f.size
-    n, m = lin.Phi.shape
-    noise2 = np.maximum(lin.rss / max(n - m, 1), 1e-300)
+    n, m = t.size, B.shape[0]
+    noise2 = np.maximum(rss / max(n - m, 1), 1e-300)
     env2 = np.sum(np.exp(-2.0 * (d * f)[:, None] * t[None, :]), axis=1) / 2.0
-    amp2 = lin.B[0 : 2 * K : 2] ** 2 + lin.B[1 : 2 * K : 2] ** 2  # (K, S)
+    amp2 = B[0 : 2 * K : 2] ** 2 + B[1 : 2 * K : 2] ** 2  # (K, S)
     return (amp2 * env2[:, None] / noise2[None, :]).T > _SIGNIFICANT
 
 
 _GRAM_MIN_FRACTION = 1e-4  # Grams only while rss >= 1e-4 y^T y (<~ 4 of 16 digits lost), as varpro
+
+
+def _shared_terms(t: np.ndarray, Y: np.ndarray, f: np.ndarray, d: np.ndarray, trend: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(B, rss, M, T^T r, H) of the signals ``Y`` (S, n) at the joint poles (f, d): the linear
+    fit (:func:`_linear`) and its Gauss-Newton terms (:func:`_gauss_newton_terms`), from Grams
+    where they keep the digits: W = [Phi^T; (t Phi_modes)^T] meets the samples in two products
+    (W W^T, W Y^T), the residual and P_perp T are never formed (rss = y^T y - (Phi^T y)^T B,
+    T^T r = T^T y - (Phi^T T)^T B, M = T^T T - (Phi^T T)^T (Phi^T Phi)^-1 Phi^T T). A signal
+    whose rss is below 1e-4 of its y^T y (its digits lost to the subtraction) gets its rss and
+    T^T r from its residual itself; all get the explicit path where the Gram needs the QR path
+    or the Schur complement M lost over half its digits (as varpro's)."""
+    K, n = f.size, t.size
+    P = 2 * K + trend
+    W = np.empty((P + 2 * K, n))
+    damped_basis(t, f, d, trend, uniform_grid(t), out=W[:P], by_matmul=True)
+    np.multiply(W[: 2 * K], t[None, :], out=W[P:])
+    G = W @ W.T
+    proj = Projector(None, gram=G[:P, :P])
+    if proj.cho is not None:
+        WY = W @ Y.T  # (P + 2K, S)
+        B = proj.coef_from(WY[:P])
+        yy = np.einsum("ij,ij->i", Y, Y)
+        rss = yy - np.sum(WY[:P] * B, axis=0)
+        PtT, TT = G[:P, P:], G[P:, P:]
+        V = proj.whitened(PtT)
+        M = TT - V.T @ V
+        if (M.diagonal() > 1e-8 * TT.diagonal()).all():
+            Tr = WY[P:] - PtT.T @ B
+            for j in np.flatnonzero(~(rss >= _GRAM_MIN_FRACTION * yy)):  # explicit residual
+                r = Y[j] - B[:, j] @ W[:P]
+                rss[j], Tr[:, j] = r @ r, W[P:] @ r
+            return B, rss, M, Tr, kaufman_weights(B, f, d)
+    lin = _linear(t, Y, f, d, trend)
+    return (lin.B, lin.rss, *_gauss_newton_terms(t, lin, f, d))
 
 
 class _Held:
@@ -152,7 +190,7 @@ class _Held:
                  free: np.ndarray, trend: int) -> None:
         held = np.setdiff1d(np.arange(f.size), free)
         self.t, self.grid = t, uniform_grid(t)
-        F = damped_basis(t, f[held], d[held], trend, self.grid)
+        F = damped_basis(t, f[held], d[held], trend, self.grid, by_matmul=True)
         Q, R = linalg.qr(F, mode="economic", check_finite=False)
         rd = np.abs(np.diag(R))
         self.QT = np.ascontiguousarray(Q[:, rd > 1e-10 * rd.max()].T) if rd.size else None
@@ -178,7 +216,7 @@ class _Held:
         T^T r = (W y)_T - G_Tp b and M = G_TT - G_Tp G_pp^-1 G_pT."""
         c = 2 * f.size
         W = np.empty((2 * c, self.t.size))
-        damped_basis(self.t, f, d, 0, self.grid, out=W[:c])
+        damped_basis(self.t, f, d, 0, self.grid, out=W[:c], by_matmul=True)
         np.multiply(W[:c], self.t[None, :], out=W[c:])
         G = projected_gram(W, self.QT)
         if G is None:
@@ -201,7 +239,7 @@ class _Held:
     def _explicit_terms(self, s: int, f: np.ndarray, d: np.ndarray
                         ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`terms` on the projected columns and residual themselves."""
-        phi = damped_basis(self.t, f, d, 0, self.grid)
+        phi = damped_basis(self.t, f, d, 0, self.grid, by_matmul=True)
         c = phi.shape[1]
         T = phi * self.t[:, None]
         both = self._perp(np.hstack([phi, T]))  # one pass over the held columns for both
@@ -251,13 +289,12 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
     wanted = np.zeros(f.size, dtype=bool)
     wanted[list(range(f.size)) if modes is None else list(modes)] = True
     t = np.arange(n) / fs_hz
-    lin = _linear(t, Y, f, d, trend_terms)
-    M, Tr, H = _gauss_newton_terms(t, lin, f, d)
-    sig = _significant(t, lin, f, d) & wanted[None, :]
+    B, rss, M, Tr, H = _shared_terms(t, Y, f, d, trend_terms)
+    sig = _significant(t, B, rss, f, d) & wanted[None, :]
     helds: dict[tuple[int, ...], _Held] = {}
     out = []
     for s in range(Y.shape[0]):
-        amp = lin.B[0 : 2 * f.size : 2, s] - 1j * lin.B[1 : 2 * f.size : 2, s]
+        amp = B[0 : 2 * f.size : 2, s] - 1j * B[1 : 2 * f.size : 2, s]
         free = np.flatnonzero(sig[s])
         if free.size == 0:
             nan = np.full(f.size, np.nan)
@@ -267,7 +304,7 @@ def fit_signals_at_poles(signals: np.ndarray, fs_hz: float, f_hz: np.ndarray,
         if key not in helds:
             helds[key] = _Held(t, Y, f, d, free, trend_terms)
         est = _gauss_newton(helds[key], s, f, d, free, trend_terms,
-                            (M, Tr[:, s], H[..., s], float(lin.rss[s])))
+                            (M, Tr[:, s], H[..., s], float(rss[s])))
         if est is None:
             est = _levenberg_marquardt(t, Y[s], f, d, free, trend_terms)
         out.append(SignalModes(*est, amplitude=amp))
