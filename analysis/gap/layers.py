@@ -524,8 +524,9 @@ def turned_stock(out: Answer, turns: Sequence[dict], candidates: list[dict]) -> 
     inertias and stiffnesses moves the modes, not the twist's kinematics), so the calibration
     that absorbs the lowered torsion mode does not absorb it. Placed at its gages and mode,
     all windows; its closure the effect search's tiller's. ``out`` unchanged otherwise (issue 17:
-    the truth family's tillers answered "none" with the rig calibrated, benchmark seeds 504001
-    and 504003)."""
+    the truth family's tillers of size 0.1-2 answered "none" with the rig calibrated to their
+    modes, the stock's top turning by 0.09-0.78 of the rudder's rotation; development seeds
+    1001-1003, 1005 of ``gap-benchmark --effects tiller``)."""
     if not turns or out.by != "model" or out.named not in ("none", "unexplained"):
         return out
     t = max(turns, key=lambda c: c["statistic"] / c["chance_level"])
