@@ -496,8 +496,11 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     gap (also a data-only "unexplained" that stands less far above its chance level,
     :func:`coupled_over_data`), and place the model's own hull_coupling at that mode
     (:func:`coupled_answer`). A gage's phase read at a coupled mode is no timing finding there
-    (:func:`phase_at_coupled`)."""
-    model, coupled = unrung_hull(model, candidates, coupled, form_gages)
+    (:func:`phase_at_coupled`). Its records of kind "tiller" (the stock's top turning with the
+    rudder, :func:`~ramdaq.analysis.gap.modal_level.stock_turns`) are no hull mode: they answer
+    "tiller" where the rest answers "none" or "unexplained" by the model (:func:`turned_stock`)."""
+    turns = [c for c in coupled if c.get("kind") == "tiller"]
+    model, coupled = unrung_hull(model, candidates, [c for c in coupled if c not in turns], form_gages)
     if coupled:
         findings = [f for f in findings if not phase_at_coupled(f, coupled)]
     out = _answer(model, candidates, where, form_gages, findings, form_modes, splits)
@@ -508,7 +511,29 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
         # (modal dev 59000: named at 22.7 Hz on rudder gages, the coupled mode at 6.0 Hz on the
         # hull's): the identified coupled mode says where the coupling is
         return coupled_answer(max(coupled, key=lambda c: c["statistic"] / c["chance_level"]), candidates)
-    return out
+    return turned_stock(out, turns, candidates)
+
+
+def turned_stock(out: Answer, turns: Sequence[dict], candidates: list[dict]) -> Answer:
+    """The answer "tiller" from the model level's stock turning with the rudder (``turns``, as
+    JSON, :func:`~ramdaq.analysis.gap.modal_level.stock_turns`), where the model layer would
+    otherwise say "none" (no gap, or the gap taken for the rig's form) or "unexplained": the
+    stock's top turns with the rudder in phase, by a share that grows with frequency, while the
+    stock twists linearly between them -- a steering gear of finite stiffness, which every rig
+    with a rigid gear leaves at zero whatever its constants (a +-25 % error of masses,
+    inertias and stiffnesses moves the modes, not the twist's kinematics), so the calibration
+    that absorbs the lowered torsion mode does not absorb it. Placed at its gages and mode,
+    all windows; its closure the effect search's tiller's. ``out`` unchanged otherwise (issue 17:
+    the truth family's tillers of size 0.1-2 answered "none" with the rig calibrated to their
+    modes, the stock's top turning by 0.09-0.78 of the rudder's rotation; development seeds
+    1001-1003, 1005 of ``gap-benchmark --effects tiller``)."""
+    if not turns or out.by != "model" or out.named not in ("none", "unexplained"):
+        return out
+    t = max(turns, key=lambda c: c["statistic"] / c["chance_level"])
+    cd = next((x for x in candidates if x["name"] == "tiller"), None)
+    loc = {"gages": list(t["gages"]), "window": "all", "band_hz": t["f_hz"], "effect_mode_hz": t["f_hz"],
+           "band": f"{t['f_hz']:.1f} Hz"}
+    return Answer("tiller", "model", loc, cd["closed_held"] if cd else None)
 
 
 def unrung_hull(model: str | None, candidates: list[dict], coupled: Sequence[dict],

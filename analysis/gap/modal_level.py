@@ -469,13 +469,15 @@ def rigid_ride(shape: np.ndarray, se: np.ndarray, pos: np.ndarray,
     return off / max(energy, 1e-30), off / noise / dof, chance
 
 
-def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
+def coupled_modes(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled | StockTurn]:
     """The hull modes the model level reports: those the rudder deforms in, hull coupling
     (:func:`flexible_coupled`, ``kind`` "flexible"), and the hull modes the calibrated rig lacks
     (:func:`extra_lines`, ``kind`` "line"), which name nothing alone but say where a hull mode
     rings (:func:`~ramdaq.analysis.gap.layers.unrung_hull`), or "driven" where the rig's stock
-    carries the rudder in them as it rides (a hull structure at the stock the rig lacks)."""
-    return [*flexible_coupled(tm, rig, cmp), *extra_lines(tm, rig, cmp)]
+    carries the rudder in them as it rides (a hull structure at the stock the rig lacks); and the
+    stock's top turning with the rudder (:func:`stock_turns`, ``kind`` "tiller"), a steering gear
+    the rig holds rigid, which the model level reports beside them (not a hull mode)."""
+    return [*flexible_coupled(tm, rig, cmp), *extra_lines(tm, rig, cmp), *stock_turns(tm, rig)]
 
 
 def flexible_coupled(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]:
@@ -637,6 +639,151 @@ def stock_driven(s: np.ndarray, f_hz: float, rig: Rig) -> float:
     a = np.vdot(p[hull], s[hull]) / max(np.vdot(p[hull], p[hull]).real, 1e-30)
     r = s[~hull] - a * p[~hull]
     return float(np.vdot(r, r).real / max(np.vdot(s[~hull], s[~hull]).real, 1e-30))
+
+
+# -- the stock's top turning with the rudder: a steering gear the rig holds rigid ----------------
+TURN_FORM = 0.05
+"""The model-form tolerance of the stock's twist (share of the rudder's rotation): the rig's stock
+twists linearly from the rudder's rotation at its attachment to the hull section's at its top
+(:func:`~ramdaq.analysis.model.structure.point_dofs`), a kinematic law no mass, inertia or
+stiffness changes; a stock with its own torsional inertia bends that line by about
+``(2 pi f l_T / c)^2 / 6`` (c = sqrt(G / rho) ~ 3200 m/s in steel: ~1 % at 88 Hz on a 1.3 m
+stock). Measured: the truth family's clean trials (development seeds 1000-1011, 24 turning
+modes) turn the stock's top by at most 0.025 of the rudder's rotation and leave the linear twist
+by at most 0.051; a tiller of size s turns it by s / (1 + s) at low frequency (0.048 at s 0.05,
+0.33 at 0.46, 0.69 at 2) with the line kept to 0.012."""
+
+
+@dataclass(frozen=True)
+class StockTurn:
+    """The stock's top turning with the rudder in its modes: a steering gear / tiller of finite
+    stiffness, which the rig holds rigid (:func:`stock_turns`). ``f_hz`` and ``zeta`` the mode
+    that turns the rudder most; ``modes_hz`` the modes read, by frequency, and ``turn`` each one's
+    top rotation over the rudder's (the gear's law: real, positive and growing with frequency
+    below the tiller's own mode, negative above it); ``statistic`` the smallest turn in the run
+    below the tiller's mode over its tolerance (:data:`TURN_FORM` plus three standard errors),
+    ``chance`` 1; ``gages`` where the strongest mode's rudder and stock shape is at least half
+    its largest entry, largest first."""
+
+    f_hz: float
+    zeta: float
+    modes_hz: tuple[float, ...]
+    turn: tuple[float, ...]
+    statistic: float
+    chance: float
+    gages: tuple[int, ...]
+    kind: str = "tiller"
+
+    def to_json(self) -> dict:
+        return {"f_hz": self.f_hz, "zeta": self.zeta, "modes_hz": list(self.modes_hz),
+                "turn": list(self.turn), "statistic": self.statistic, "chance_level": self.chance,
+                "gages": list(self.gages), "kind": self.kind}
+
+
+def twist_maps(rig: Rig) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Linear maps of a mode shape (n_gages,) to what its stock's twist reads, rows in the rig's
+    gage (DAQ channel) order: ``top`` (n,), the stock top's rotation less the hull section's
+    (rad per unit shape), from a linear twist between the rudder's rotation at the attachment
+    and the top's, least squares through the stock's gage pairs; ``rudder`` (n,), the rudder's
+    rotation about its vertical axis (its athwartship gages' rigid-body fit, basis 1, x, -z)
+    less the hull section's (:func:`section_motion`'s, with four hull gages or more; a hull mode
+    turns the rudder with the hull, which the stock's top turns with too);
+    ``misfit`` (H, n), the twist at each of the H pair heights less that line. A pair is two
+    athwartship stock gages at one height and different x (their difference over the distance
+    is the twist there). None when the rig has fewer than three athwartship rudder gages or
+    pairs at fewer than two heights (the line then has no freedom left to test)."""
+    gs = rig.gages_by_channel()
+    if rig.rudder is None or rig.stock is None:
+        return None
+    pos = np.array([g.position_m for g in gs], float)
+    body = np.array([g.body for g in gs])
+    ath = np.array(["z" not in g.axis for g in gs])
+    rud = np.flatnonzero((body == "rudder") & ath)
+    stock = np.flatnonzero((body == "stock") & ath)
+    heights = sorted({float(pos[i, 2]) for i in stock})
+    pairs = [(ii[0], ii[-1]) for z in heights
+             if len(ii := [i for i in stock if pos[i, 2] == z]) >= 2 and pos[ii[0], 0] != pos[ii[-1], 0]]
+    if len(rud) < 3 or len(pairs) < 2:
+        return None
+    n = len(gs)
+    gamma = np.zeros(n)
+    gamma[rud] = np.linalg.pinv(np.c_[np.ones(len(rud)), pos[rud, 0], -pos[rud, 2]])[1]
+    tw = np.zeros((len(pairs), n))
+    for k, (i, j) in enumerate(pairs):
+        tw[k, i], tw[k, j] = 1 / (pos[i, 0] - pos[j, 0]), -1 / (pos[i, 0] - pos[j, 0])
+    t = np.array([(pos[i, 2] - rig.rudder.attach_z_m) / rig.stock.torsion_length_m for i, _ in pairs])
+    free = tw - np.outer(1 - t, gamma)                  # what the top's turn must explain
+    top = t @ free / float(t @ t)
+    misfit = free - np.outer(t, top)
+    unit = tuple(HullMode(f"unit{j}", 1.0, 0.0, 1.0, *np.eye(3)[j]) for j in range(3))
+    hull = body == "hull"
+    if hull.sum() >= 4:                                 # the hull section's own rotation, as it moves
+        n0 = 3 + len(rig.hull_modes)
+        A = gage_map(replace(rig, hull_modes=rig.hull_modes + unit), n0 + 3)[hull][:, n0:]
+        hull_turn = np.linalg.pinv(A)[1]
+        top, gamma = top.copy(), gamma.copy()
+        top[hull] -= hull_turn
+        gamma[hull] -= hull_turn
+    return top, gamma, misfit
+
+
+def stock_turns(tm: TrialModes, rig: Rig) -> list[StockTurn]:
+    """The stock's top turning with the rudder (:class:`StockTurn`; one or none): a steering gear
+    or tiller of finite stiffness ``k_g`` with the tiller's inertia ``J_t`` at the stock's top,
+    where the rig holds the top to the hull. A stock of torsional stiffness ``k_s`` then turns
+    its top by ``q = k_s / (k_s + k_g - J_t w^2)`` of the rudder's rotation (both relative to
+    the hull's section) in a mode of circular
+    frequency ``w``: real, positive and growing with frequency below the tiller's own mode,
+    negative above it, and the stock's twist between the rudder and the top stays linear. Any
+    mass, inertia or stiffness of the rig leaves ``q`` at zero -- the twist's kinematics are
+    geometry (:func:`twist_maps`) -- so a ``q`` beyond :data:`TURN_FORM` is what no calibration of
+    the constants makes.
+
+    Read on the identified modes that turn the rudder (decaying, found in three quarters of the
+    impacts, the rudder's by most of their energy, ``q`` known to within :data:`TURN_FORM`): at
+    least two, each with its stock twisting linearly (the line's misfit within
+    :data:`TURN_FORM` of the rudder's rotation), and by frequency a run of two or more whose
+    ``q`` is in phase (imaginary part within the tolerance and three standard errors), above the
+    tolerance and not falling by more than it, before any that turns against the rudder. A
+    structure whose stock does not twist as the rig's kinematics say (the modal family's stock
+    gages read each mode's own field: the line missed by 0.09-1.1 on development seeds
+    51000-51005, in every trial on one mode at least) raises none."""
+    maps = twist_maps(rig)
+    if maps is None:
+        return []
+    top, gamma, misfit = maps
+    body = np.array([g.body for g in rig.gages_by_channel()])
+    rows = []
+    for i in range(tm.n_modes):
+        s, se = tm.shapes[:, i], tm.shape_se[:, i]
+        e = np.abs(s) ** 2
+        g = complex(gamma @ s)
+        if (tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts or abs(g) == 0
+                or e[body == "hull"].sum() >= HULL_MODE_SHARE * e.sum()):
+            continue
+        q = complex(top @ s) / g
+        q_se = float(np.sqrt(np.sum(np.abs(top - q * gamma) ** 2 * se**2)) / abs(g))
+        if q_se <= TURN_FORM:
+            rows.append((i, q, q_se, float(np.linalg.norm(misfit @ s)) / abs(g), abs(g)))
+    if len(rows) < 2 or any(r[3] > TURN_FORM for r in rows):
+        return []
+    run = []
+    for r in rows:
+        if r[1].real < 0:
+            break
+        tol = TURN_FORM + 3 * r[2]
+        if abs(r[1].imag) > tol or r[1].real < tol or (run and r[1].real < run[-1][1].real - tol):
+            return []
+        run.append(r)
+    if len(run) < 2:
+        return []
+    i = max(run, key=lambda r: r[4])[0]
+    a = np.where(body == "hull", 0.0, np.abs(tm.shapes[:, i]))
+    big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
+    return [StockTurn(float(tm.f_hz[i]), float(tm.zeta[i]), tuple(float(tm.f_hz[r[0]]) for r in rows),
+                      tuple(float(r[1].real) for r in rows),
+                      min(r[1].real / (TURN_FORM + 3 * r[2]) for r in run), 1.0,
+                      tuple(tm.gage_numbers[k] for k in big))]
 
 
 # -- modes above the rig's band ------------------------------------------------------------------
