@@ -289,7 +289,7 @@ def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None, terms: lis
         th = theta0.copy()
         th[free] = v
         try:
-            f = fw.modes(th, terms).f_hz
+            f = fw.frequencies(th, terms)
         except (ValueError, np.linalg.LinAlgError):
             return np.full(ok.sum() + len(v), 1e3)
         f = f[f > 0]

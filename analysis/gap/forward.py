@@ -29,8 +29,9 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.linalg
 
-from ..model.response import half_sine_response, modal_form
+from ..model.response import half_sine_response, modal_form, state_matrix
 from ..model.rig import Rig
 from ..model.structure import StructuralModel, build_model
 from .trialdata import TrialData
@@ -236,6 +237,29 @@ class Forward:
             ms = t.effect.modes(ms, self, t)
         return ms
 
+    def frequencies(self, theta: np.ndarray, terms: list[Term] = ()) -> np.ndarray:
+        """The damped frequencies (Hz) of :meth:`modes` ``(theta, terms).f_hz``, ascending in
+        ``|lambda|``: where no term changes the mode set (its ``modes`` hook), only the
+        eigen-analysis :func:`~ramdaq.analysis.model.response.modal_form` makes (the same call,
+        the same numbers and the same errors), without the gages' and the ram's parts; else
+        :meth:`modes` itself. The spectrum prefit asks for nothing else, thousands of times."""
+        from .effects.base import Effect
+        if any(type(t.effect).modes is not Effect.modes for t in terms):
+            return self.modes(theta, terms).f_hz
+        rig = self.rig_for(theta, terms)
+        model = build_model(rig)
+        for t in terms:
+            model = t.effect.model(model, t)
+        lam, V = scipy.linalg.eig(state_matrix(model))
+        np.linalg.inv(V)        # as modal_form: a singular V fails here as it does there
+        keep = np.flatnonzero(lam.imag >= 0)
+        lam = lam[keep[np.argsort(np.abs(lam[keep]))]]
+        if np.any(np.abs(lam.imag) < 1e-9 * np.abs(lam)):
+            raise ValueError("model has an overdamped (real) mode; ram-impact trials expect "
+                             "underdamped modes: check the rig's damping")
+        f = lam.imag / (2 * math.pi)
+        return f[f < self.td.fs_full_hz / 2]
+
     def _filter_gain(self, lam: np.ndarray) -> np.ndarray:
         g = self.td.lowpass_gain(lam.imag / (2 * math.pi)).astype(complex)
         if self._aa is not None:
@@ -394,7 +418,8 @@ class Forward:
                 coef, pred = design.solve(data)
             del design
         else:     # no term changes the unit responses: only the blocks a pulse writes are made
-            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra, consume=True).solve(data)
+            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra, consume=True,
+                                           data=data).solve(data)
         mask = self.mask
         for t in terms:
             pred, m = t.effect.output(pred, self, t)
@@ -457,16 +482,18 @@ class Forward:
         return Design(blocks, 2 * n + e, self._w2.reshape(self.td.n_seg, -1))
 
     def block_design(self, blocks: dict[tuple[int, int], list[np.ndarray]],
-                     extra: np.ndarray | None, *, consume: bool = False) -> Design:
+                     extra: np.ndarray | None, *, consume: bool = False,
+                     data: np.ndarray | None = None) -> Design:
         """:meth:`linear_design` from the blocks of :meth:`unit_blocks` (the same columns, rows
         and numbers as from the dense unit responses they fill); with ``consume`` each block is
-        taken out of ``blocks`` as its segment's rows are made (no second copy of them all)."""
+        taken out of ``blocks`` as its segment's rows are made (no second copy of them all);
+        ``data`` the data it will be solved against first (see :class:`Design`)."""
         n = self.td.n_seg
         take = blocks.pop if consume else blocks.get
         segs = [_segment_columns(n, self.td.n_gages * self.td.n_s, s,
                                  lambda j, s=s: take((j, s), None), extra) for s in range(n)]
         return Design(segs, 2 * n + (0 if extra is None else extra.shape[0]),
-                      self._w2.reshape(n, -1))
+                      self._w2.reshape(n, -1), data=data)
 
     def alive_columns(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
         """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
@@ -516,24 +543,36 @@ class Design:
     equations are summed segment by segment (made once: the replicates solve many data against
     one design). ``w2`` (n_seg, n_gages * n_s) the squared weights, zero where not compared;
     the rows times them are made segment by segment where they are used, never all kept (they
-    were as large as the rows: 75 MB for a friction term's dense responses over 20 impacts)."""
+    were as large as the rows: 75 MB for a friction term's dense responses over 20 impacts).
+    With ``data`` (n_seg, n_gages, n_s) given, its right-hand side is summed in the same pass as
+    the normal equations, the weighted rows made once for both (a prediction solves its design
+    once): :meth:`solve` of that same array then uses it, the same numbers."""
 
-    def __init__(self, blocks: list[tuple[list[int], np.ndarray]], n_cols: int, w2: np.ndarray) -> None:
+    def __init__(self, blocks: list[tuple[list[int], np.ndarray]], n_cols: int, w2: np.ndarray,
+                 data: np.ndarray | None = None) -> None:
         self.blocks = blocks
         self.n_cols = n_cols
         self.w2 = w2
         G = np.zeros((n_cols, n_cols))
+        b = None if data is None else np.zeros(n_cols)
         for s, (idx, X) in enumerate(blocks):
-            G[np.ix_(idx, idx)] += (X * w2[s]) @ X.T
+            XW = X * w2[s]
+            G[np.ix_(idx, idx)] += XW @ X.T
+            if b is not None:
+                b[idx] += XW @ data[s].ravel()
+        self._first = None if b is None else (data, b)
         self.scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
         self.Gs = G / self.scale[:, None] / self.scale[None, :]
 
     def solve(self, data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The coefficients fitted to ``data`` (n_seg, n_gages, n_s; zeros where there is none)
         by weighted least squares, and the prediction they make (same shape)."""
-        b = np.zeros(self.n_cols)
-        for s, (idx, X) in enumerate(self.blocks):
-            b[idx] += (X * self.w2[s]) @ data[s].ravel()
+        if self._first is not None and self._first[0] is data:
+            b, self._first = self._first[1], None
+        else:
+            b = np.zeros(self.n_cols)
+            for s, (idx, X) in enumerate(self.blocks):
+                b[idx] += (X * self.w2[s]) @ data[s].ravel()
         coef = np.linalg.lstsq(self.Gs, b / self.scale, rcond=1e-10)[0] / self.scale
         pred = np.empty_like(data)
         for s, (idx, X) in enumerate(self.blocks):
