@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.linalg
 
-from ..model.response import half_sine_response, modal_form, state_matrix
+from ..model.response import half_sine_response, modal_form
 from ..model.rig import Rig
 from ..model.structure import StructuralModel, build_model
 from .trialdata import TrialData
@@ -136,11 +136,22 @@ least squares, not data. Blows 30 s apart then cost one segment or two each, not
 def _rung_out(ms: ModeSet, c: np.ndarray, JT: np.ndarray) -> bool:
     """Whether a free decay of modal factors ``c`` (m,) is below :data:`RUNG_OUT` of the blow
     whose factors just after contact are ``JT`` (m,), for the response and its rate."""
-    A = np.abs(ms.A)
-    lam = np.abs(ms.lam)
-    now = [(A @ np.abs(c)).max(), (A @ (np.abs(c) * lam)).max()]
-    ref = [(A @ np.abs(JT)).max(), (A @ (np.abs(JT) * lam)).max()]
-    return all(v <= RUNG_OUT * r for v, r in zip(now, ref, strict=True))
+    return _RungOut(ms, JT)(c)
+
+
+class _RungOut:
+    """:func:`_rung_out` for one mode set and blow (``JT``), asked of many decays ``c``: what
+    does not depend on ``c`` (the moduli, the blow's bound) made once."""
+
+    def __init__(self, ms: ModeSet, JT: np.ndarray) -> None:
+        self.A = np.abs(ms.A)
+        self.lam = np.abs(ms.lam)
+        self.ref = [(self.A @ np.abs(JT)).max(), (self.A @ (np.abs(JT) * self.lam)).max()]
+
+    def __call__(self, c: np.ndarray) -> bool:
+        ac = np.abs(c)
+        now = [(self.A @ ac).max(), (self.A @ (ac * self.lam)).max()]
+        return all(v <= RUNG_OUT * r for v, r in zip(now, self.ref, strict=True))
 
 
 def _add(blocks: dict, key: tuple[int, int], u: np.ndarray, du: np.ndarray) -> None:
@@ -201,6 +212,8 @@ class Forward:
         self.x0 = np.where(valid, td.x, 0.0)
         self.set_weights(np.broadcast_to(self.weight[None, :, None], td.x.shape))
         self._aa = td.rig.daq.anti_alias_sos(td.fs_full_hz)
+        self._k_s = np.arange(td.n_s) / td.fs_hz
+        """A segment's sample times from its sample 0, s (n_s,)."""
 
     def set_weights(self, W: np.ndarray) -> None:
         """Per-sample weights ``1 / sigma_eff`` (n_seg, n_gages, n_s), 1/(m/s^2)."""
@@ -250,7 +263,7 @@ class Forward:
         model = build_model(rig)
         for t in terms:
             model = t.effect.model(model, t)
-        lam, V = scipy.linalg.eig(state_matrix(model))
+        lam, V = scipy.linalg.eig(_state_matrix(model))
         np.linalg.inv(V)        # as modal_form: a singular V fails here as it does there
         keep = np.flatnonzero(lam.imag >= 0)
         lam = lam[keep[np.argsort(np.abs(lam[keep]))]]
@@ -298,6 +311,7 @@ class Forward:
         T = ms.duration_s
         out: dict[tuple[int, int], list[np.ndarray]] = {}
         free = []      # (impact, segment, modal factors) of pulses over before the segment began
+        rung_out = _RungOut(ms, JT)
         for j in range(td.n_seg):
             for s_ in range(j, td.n_seg):
                 for delay, ratio in pulses:
@@ -308,7 +322,7 @@ class Forward:
                     if tau0 >= T:
                         lag = np.where(ms.exp_only, tau0, tau0 - T)
                         c = ratio * JT * np.exp(ms.lam * lag)
-                        if s_ > j and _rung_out(ms, c, JT):
+                        if s_ > j and rung_out(c):
                             continue       # a blow rung out before a later segment: exact zeros
                         free.append((j, s_, c))
                         continue
@@ -352,35 +366,33 @@ class Forward:
         n_s, fs = self.td.n_s, self.td.fs_hz
         k0 = np.ceil(np.maximum(-lag, 0.0) * fs).astype(int)
         Z = (JT * np.exp(lam * (lag + k0 / fs)))[:, None] * E
-        k = np.arange(n_s)
-        t = tau0 + k / fs
-        early = t < T
+        t = tau0 + self._k_s
+        # t rises: the samples before the contact (t <= 0) and those during it (0 < t < T) are
+        # the first n0 and the next n1 - n0
+        n0, n1 = int(np.count_nonzero(t <= 0)), int(np.count_nonzero(t < T))
         if k0.any():
             for v in np.unique(k0[(k0 > 0) & (k0 < n_s)]):   # one shift per kind of mode
                 rows = k0 == v
                 Z[rows, v:] = Z[rows, :n_s - v]
             # samples before k0 are set below -- to 0 before the contact, to J(t) during it
             # (exp_only: kept) -- but for a rounding edge, where t and lag disagree by an ulp:
-            # only those are computed from the closed form (t rises, so what is set below is
-            # the first ``first`` samples)
-            first = np.where(ms.exp_only, np.count_nonzero(early & (t <= 0)), np.count_nonzero(early))
+            # only those are computed from the closed form (what is set below is the first
+            # ``first`` samples)
+            first = np.where(ms.exp_only, n0, n1)
             for m in np.flatnonzero(first < np.minimum(k0, n_s)):
                 kk = np.arange(first[m], min(k0[m], n_s))
                 with np.errstate(over="ignore", invalid="ignore"):
                     Z[m, kk] = JT[m] * np.exp(lam[m] * (lag[m] + kk / fs))
-        if early.any():
-            Z[:, early & (t <= 0)] = 0.0
-            during = early & (t > 0)
-            if during.any():
-                Jd = half_sine_response(lam, T, t[during])
-                Z[:, during] = np.where(ms.exp_only[:, None], Z[:, during], Jd)
+        Z[:, :n0] = 0.0
+        if n1 > n0:
+            Jd = half_sine_response(lam, T, t[n0:n1])
+            Z[:, n0:n1] = np.where(ms.exp_only[:, None], Z[:, n0:n1], Jd)
         u = np.real(ms.A @ Z)
         du = np.real(ms.A @ (lam[:, None] * Z))
-        inside = (t > 0) & (t < T)
-        if inside.any():
-            f = np.sin(math.pi / T * t[inside])
-            u[:, inside] += ms.feed[:, None] * f[None, :]
-            du[:, inside] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
+        if n1 > n0:
+            f = np.sin(math.pi / T * t[n0:n1])
+            u[:, n0:n1] += ms.feed[:, None] * f[None, :]
+            du[:, n0:n1] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
                 f, (int((~ms.exp_only).sum()), f.size)))
         return u, du
 
@@ -511,6 +523,18 @@ class Forward:
         return np.nan_to_num(r.ravel(), nan=0.0, copy=False)
 
 
+def _state_matrix(model: StructuralModel) -> np.ndarray:
+    """:func:`~ramdaq.analysis.model.response.state_matrix` made by the same operations into
+    one array (no ``np.block``: its bookkeeping was a tenth of the spectrum prefit's call)."""
+    n = model.n_dof
+    Minv = np.linalg.inv(model.M)
+    A = np.zeros((2 * n, 2 * n))
+    A[:n, n:] = np.eye(n)
+    A[n:, :n] = -Minv @ model.K
+    A[n:, n:] = -Minv @ model.C
+    return A
+
+
 def _segment_columns(n: int, L: int, s: int,
                      unit: Callable[[int], tuple[np.ndarray, np.ndarray] | None],
                      extra: np.ndarray | None) -> tuple[list[int], np.ndarray]:
@@ -525,11 +549,13 @@ def _segment_columns(n: int, L: int, s: int,
     a = len(live)
     live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
     idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
-    X = np.zeros((len(idx), L))
+    X = np.empty((len(idx), L))     # every row written below (no pass of zeros first)
     for k, j in enumerate(live):
         if units[j] is not None:
             X[k] = units[j][0].ravel()
             X[a + k] = units[j][1].ravel()
+        else:
+            X[k] = X[a + k] = 0.0
     if live_e:
         X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
     return idx, X
