@@ -535,6 +535,14 @@ def _state_matrix(model: StructuralModel) -> np.ndarray:
     return A
 
 
+def _nonzero(block: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Whether a unit response or its derivative (each (n_gages, n_s)) is not all zero: the
+    first sample of every gage asked first (a decay is largest there), the whole only if those
+    are all zero -- the same answer, mostly without reading the block."""
+    u, du = block
+    return bool(u[:, 0].any() or du[:, 0].any() or u.any() or du.any())
+
+
 def _segment_columns(n: int, L: int, s: int,
                      unit: Callable[[int], tuple[np.ndarray, np.ndarray] | None],
                      extra: np.ndarray | None) -> tuple[list[int], np.ndarray]:
@@ -545,7 +553,7 @@ def _segment_columns(n: int, L: int, s: int,
     derivatives after the ``n`` impacts, the terms' after those) and rows (k, ``L``)."""
     e = 0 if extra is None else extra.shape[0]
     units = {j: unit(j) for j in range(min(s + 1, n))}
-    live = [j for j, b in units.items() if j == s or (b is not None and (b[0].any() or b[1].any()))]
+    live = [j for j, b in units.items() if j == s or (b is not None and _nonzero(b))]
     a = len(live)
     live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
     idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
