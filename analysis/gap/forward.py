@@ -256,8 +256,7 @@ class Forward:
         eigen-analysis :func:`~ramdaq.analysis.model.response.modal_form` makes (the same call,
         the same numbers and the same errors), without the gages' and the ram's parts; else
         :meth:`modes` itself. The spectrum prefit asks for nothing else, thousands of times."""
-        from .effects.base import Effect
-        if any(type(t.effect).modes is not Effect.modes for t in terms):
+        if any(_own_modes_hook(t.effect) for t in terms):
             return self.modes(theta, terms).f_hz
         rig = self.rig_for(theta, terms)
         model = build_model(rig)
@@ -521,6 +520,14 @@ class Forward:
         else:        # the segments first: the same products, fewer of them
             r = fit.resid[segments] * self.W[segments]
         return np.nan_to_num(r.ravel(), nan=0.0, copy=False)
+
+
+def _own_modes_hook(effect: object) -> bool:
+    """Whether an effect's class changes the mode set: a ``modes`` hook of its own over the
+    base's (which returns the mode set as it is) -- the classes defining ``modes`` in its
+    method order are more than the base alone (the core imports no effect)."""
+    defs = [c for c in type(effect).__mro__ if "modes" in vars(c)]
+    return len(defs) > 1
 
 
 def _state_matrix(model: StructuralModel) -> np.ndarray:
