@@ -9,7 +9,9 @@ Each scenario runs in this process, one at a time, exactly as ``ramdaq gap-bench
 (:func:`ramdaq.daq.commands.gap_bench.run_one`); its stages are timed with
 ``time.process_time`` (CPU of this process: steadier than wall time on a shared machine, which
 is printed too). Prints one line per scenario and a median per blow count, and the whole
-benchmark's CPU at the default size it implies.
+benchmark's CPU at the default size it implies. ``double_hit`` is the part of ``data_only`` spent
+in the early double-hit check (:func:`ramdaq.analysis.gap.signal_checks.double_hits`, as
+:mod:`ramdaq.analysis.gap.sensors` calls it), printed beside the stages, not added to them.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 STAGES = ("generate", "record", "load", "model_level", "data_only", "effect_search")
+INSIDE = ("double_hit",)
+"""Parts of a stage timed on their own (within ``data_only``), not added to the stages."""
 
 
 def _timed(module, name: str, stage: str, cpu: dict[str, float]) -> None:
@@ -43,6 +47,7 @@ def _timed(module, name: str, stage: str, cpu: dict[str, float]) -> None:
 
 
 def main(argv: list[str]) -> int:
+    from ramdaq.analysis.gap import sensors
     from ramdaq.daq import gap_layers, record
     from ramdaq.daq.commands import gap, gap_bench
 
@@ -61,10 +66,11 @@ def main(argv: list[str]) -> int:
                                 (record, "record", "record"), (gap, "load_trial", "load"),
                                 (gap_layers, "rig_to_modes", "model_level"),
                                 (gap_layers, "data_only", "data_only"),
-                                (gap_layers, "diagnose", "effect_search")):
+                                (gap_layers, "diagnose", "effect_search"),
+                                (sensors, "double_hits", "double_hit")):
         _timed(module, name, stage, cpu)
     per_blows: dict[int, list[float]] = defaultdict(list)
-    print(f"{'blows':>5s} {'effect':14s} {'rig':16s} " + " ".join(f"{s:>13s}" for s in STAGES)
+    print(f"{'blows':>5s} {'effect':14s} {'rig':16s} " + " ".join(f"{s:>13s}" for s in STAGES + INSIDE)
           + f" {'other':>6s} {'total CPU':>9s} {'wall':>6s}  named")
     for blows in a.blows:
         scs = gap_bench.scenarios(max(a.rigs) + 1, a.seeds, tuple(a.effects), a.perturb, a.family, blows)
@@ -78,7 +84,7 @@ def main(argv: list[str]) -> int:
             total, wall = time.process_time() - t0, time.perf_counter() - w0
             per_blows[blows].append(total)
             print(f"{blows:5d} {sc['effect']:14s} {sc['rig'] + '/' + sc['medium']:16s} "
-                  + " ".join(f"{cpu[s]:13.2f}" for s in STAGES)
+                  + " ".join(f"{cpu[s]:13.2f}" for s in STAGES + INSIDE)
                   + f" {total - sum(cpu[s] for s in STAGES):6.2f} {total:9.2f} {wall:6.1f}  "
                   f"{r.get('named') or r.get('error')}", flush=True)
     load = os.getloadavg()[0]

@@ -289,7 +289,7 @@ def prefit_frequencies(fw: Forward, theta0: np.ndarray | None = None, terms: lis
         th = theta0.copy()
         th[free] = v
         try:
-            f = fw.modes(th, terms).f_hz
+            f = fw.frequencies(th, terms)
         except (ValueError, np.linalg.LinAlgError):
             return np.full(ok.sum() + len(v), 1e3)
         f = f[f > 0]
@@ -361,12 +361,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
         nfev += 1
         c_new = float(r_new @ r_new) if r_new is not None else math.inf
         if r_new is not None:
-            # Broyden's rank-one update, column by column in place: J is n_data x n_params,
-            # and neither it nor the outer product is copied whole (the same numbers as
-            # ``J += outer(v, step) / |step|^2``)
-            v, ss = r_new - r - J @ step, float(step @ step)
-            for j in np.flatnonzero(step):
-                J[:, j] += v * step[j] / ss
+            _broyden(J, r_new - r - J @ step, step)
         if c_new < cost:
             small = (cost - c_new) < tol * cost
             x, r, cost = x_new, r_new, c_new
@@ -390,6 +385,25 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
             elif fails >= 6 or mu > 1e8:
                 return LMResult(x, J, nfev, Stop.GAVE_UP)
     return LMResult(x, J, nfev, Stop.ITERATION_LIMIT)
+
+
+def _broyden(J: np.ndarray, v: np.ndarray, step: np.ndarray) -> None:
+    """Broyden's rank-one update of the Jacobian ``J`` (n_data, n_params) in place, ``J[:, j] +=
+    v step_j / |step|^2`` for each column the ``step`` moved (``v`` (n_data,) the residual's
+    change the Jacobian did not predict): :data:`NORMAL_ROWS` rows at a time over all columns
+    when the step moved every one (each element the same product, quotient and sum as column
+    by column, in one pass over ``J`` instead of one strided pass per column), else column by
+    column. Neither ``J`` nor the outer product is copied whole."""
+    ss = float(step @ step)
+    cols = np.flatnonzero(step)
+    if len(cols) < J.shape[1]:
+        for j in cols:
+            J[:, j] += v * step[j] / ss
+        return
+    for a in range(0, J.shape[0], NORMAL_ROWS):
+        t = v[a:a + NORMAL_ROWS, None] * step[None, :]
+        t /= ss
+        J[a:a + NORMAL_ROWS] += t
 
 
 def _difference(fun: Callable[[np.ndarray], np.ndarray], J: np.ndarray | None, x: np.ndarray,

@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.linalg
 
 from ..model.response import half_sine_response, modal_form
 from ..model.rig import Rig
@@ -135,11 +136,22 @@ least squares, not data. Blows 30 s apart then cost one segment or two each, not
 def _rung_out(ms: ModeSet, c: np.ndarray, JT: np.ndarray) -> bool:
     """Whether a free decay of modal factors ``c`` (m,) is below :data:`RUNG_OUT` of the blow
     whose factors just after contact are ``JT`` (m,), for the response and its rate."""
-    A = np.abs(ms.A)
-    lam = np.abs(ms.lam)
-    now = [(A @ np.abs(c)).max(), (A @ (np.abs(c) * lam)).max()]
-    ref = [(A @ np.abs(JT)).max(), (A @ (np.abs(JT) * lam)).max()]
-    return all(v <= RUNG_OUT * r for v, r in zip(now, ref, strict=True))
+    return _RungOut(ms, JT)(c)
+
+
+class _RungOut:
+    """:func:`_rung_out` for one mode set and blow (``JT``), asked of many decays ``c``: what
+    does not depend on ``c`` (the moduli, the blow's bound) made once."""
+
+    def __init__(self, ms: ModeSet, JT: np.ndarray) -> None:
+        self.A = np.abs(ms.A)
+        self.lam = np.abs(ms.lam)
+        self.ref = [(self.A @ np.abs(JT)).max(), (self.A @ (np.abs(JT) * self.lam)).max()]
+
+    def __call__(self, c: np.ndarray) -> bool:
+        ac = np.abs(c)
+        now = [(self.A @ ac).max(), (self.A @ (ac * self.lam)).max()]
+        return all(v <= RUNG_OUT * r for v, r in zip(now, self.ref, strict=True))
 
 
 def _add(blocks: dict, key: tuple[int, int], u: np.ndarray, du: np.ndarray) -> None:
@@ -200,6 +212,8 @@ class Forward:
         self.x0 = np.where(valid, td.x, 0.0)
         self.set_weights(np.broadcast_to(self.weight[None, :, None], td.x.shape))
         self._aa = td.rig.daq.anti_alias_sos(td.fs_full_hz)
+        self._k_s = np.arange(td.n_s) / td.fs_hz
+        """A segment's sample times from its sample 0, s (n_s,)."""
 
     def set_weights(self, W: np.ndarray) -> None:
         """Per-sample weights ``1 / sigma_eff`` (n_seg, n_gages, n_s), 1/(m/s^2)."""
@@ -235,6 +249,28 @@ class Forward:
         for t in terms:
             ms = t.effect.modes(ms, self, t)
         return ms
+
+    def frequencies(self, theta: np.ndarray, terms: list[Term] = ()) -> np.ndarray:
+        """The damped frequencies (Hz) of :meth:`modes` ``(theta, terms).f_hz``, ascending in
+        ``|lambda|``: where no term changes the mode set (its ``modes`` hook), only the
+        eigen-analysis :func:`~ramdaq.analysis.model.response.modal_form` makes (the same call,
+        the same numbers and the same errors), without the gages' and the ram's parts; else
+        :meth:`modes` itself. The spectrum prefit asks for nothing else, thousands of times."""
+        if any(_own_modes_hook(t.effect) for t in terms):
+            return self.modes(theta, terms).f_hz
+        rig = self.rig_for(theta, terms)
+        model = build_model(rig)
+        for t in terms:
+            model = t.effect.model(model, t)
+        lam, V = scipy.linalg.eig(_state_matrix(model))
+        np.linalg.inv(V)        # as modal_form: a singular V fails here as it does there
+        keep = np.flatnonzero(lam.imag >= 0)
+        lam = lam[keep[np.argsort(np.abs(lam[keep]))]]
+        if np.any(np.abs(lam.imag) < 1e-9 * np.abs(lam)):
+            raise ValueError("model has an overdamped (real) mode; ram-impact trials expect "
+                             "underdamped modes: check the rig's damping")
+        f = lam.imag / (2 * math.pi)
+        return f[f < self.td.fs_full_hz / 2]
 
     def _filter_gain(self, lam: np.ndarray) -> np.ndarray:
         g = self.td.lowpass_gain(lam.imag / (2 * math.pi)).astype(complex)
@@ -274,6 +310,7 @@ class Forward:
         T = ms.duration_s
         out: dict[tuple[int, int], list[np.ndarray]] = {}
         free = []      # (impact, segment, modal factors) of pulses over before the segment began
+        rung_out = _RungOut(ms, JT)
         for j in range(td.n_seg):
             for s_ in range(j, td.n_seg):
                 for delay, ratio in pulses:
@@ -284,7 +321,7 @@ class Forward:
                     if tau0 >= T:
                         lag = np.where(ms.exp_only, tau0, tau0 - T)
                         c = ratio * JT * np.exp(ms.lam * lag)
-                        if s_ > j and _rung_out(ms, c, JT):
+                        if s_ > j and rung_out(c):
                             continue       # a blow rung out before a later segment: exact zeros
                         free.append((j, s_, c))
                         continue
@@ -328,35 +365,33 @@ class Forward:
         n_s, fs = self.td.n_s, self.td.fs_hz
         k0 = np.ceil(np.maximum(-lag, 0.0) * fs).astype(int)
         Z = (JT * np.exp(lam * (lag + k0 / fs)))[:, None] * E
-        k = np.arange(n_s)
-        t = tau0 + k / fs
-        early = t < T
+        t = tau0 + self._k_s
+        # t rises: the samples before the contact (t <= 0) and those during it (0 < t < T) are
+        # the first n0 and the next n1 - n0
+        n0, n1 = int(np.count_nonzero(t <= 0)), int(np.count_nonzero(t < T))
         if k0.any():
             for v in np.unique(k0[(k0 > 0) & (k0 < n_s)]):   # one shift per kind of mode
                 rows = k0 == v
                 Z[rows, v:] = Z[rows, :n_s - v]
             # samples before k0 are set below -- to 0 before the contact, to J(t) during it
             # (exp_only: kept) -- but for a rounding edge, where t and lag disagree by an ulp:
-            # only those are computed from the closed form (t rises, so what is set below is
-            # the first ``first`` samples)
-            first = np.where(ms.exp_only, np.count_nonzero(early & (t <= 0)), np.count_nonzero(early))
+            # only those are computed from the closed form (what is set below is the first
+            # ``first`` samples)
+            first = np.where(ms.exp_only, n0, n1)
             for m in np.flatnonzero(first < np.minimum(k0, n_s)):
                 kk = np.arange(first[m], min(k0[m], n_s))
                 with np.errstate(over="ignore", invalid="ignore"):
                     Z[m, kk] = JT[m] * np.exp(lam[m] * (lag[m] + kk / fs))
-        if early.any():
-            Z[:, early & (t <= 0)] = 0.0
-            during = early & (t > 0)
-            if during.any():
-                Jd = half_sine_response(lam, T, t[during])
-                Z[:, during] = np.where(ms.exp_only[:, None], Z[:, during], Jd)
+        Z[:, :n0] = 0.0
+        if n1 > n0:
+            Jd = half_sine_response(lam, T, t[n0:n1])
+            Z[:, n0:n1] = np.where(ms.exp_only[:, None], Z[:, n0:n1], Jd)
         u = np.real(ms.A @ Z)
         du = np.real(ms.A @ (lam[:, None] * Z))
-        inside = (t > 0) & (t < T)
-        if inside.any():
-            f = np.sin(math.pi / T * t[inside])
-            u[:, inside] += ms.feed[:, None] * f[None, :]
-            du[:, inside] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
+        if n1 > n0:
+            f = np.sin(math.pi / T * t[n0:n1])
+            u[:, n0:n1] += ms.feed[:, None] * f[None, :]
+            du[:, n0:n1] += np.real(ms.A[:, ~ms.exp_only] @ np.broadcast_to(
                 f, (int((~ms.exp_only).sum()), f.size)))
         return u, du
 
@@ -394,7 +429,8 @@ class Forward:
                 coef, pred = design.solve(data)
             del design
         else:     # no term changes the unit responses: only the blocks a pulse writes are made
-            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra, consume=True).solve(data)
+            coef, pred = self.block_design(self.unit_blocks(ms, terms), extra, consume=True,
+                                           data=data).solve(data)
         mask = self.mask
         for t in terms:
             pred, m = t.effect.output(pred, self, t)
@@ -457,16 +493,18 @@ class Forward:
         return Design(blocks, 2 * n + e, self._w2.reshape(self.td.n_seg, -1))
 
     def block_design(self, blocks: dict[tuple[int, int], list[np.ndarray]],
-                     extra: np.ndarray | None, *, consume: bool = False) -> Design:
+                     extra: np.ndarray | None, *, consume: bool = False,
+                     data: np.ndarray | None = None) -> Design:
         """:meth:`linear_design` from the blocks of :meth:`unit_blocks` (the same columns, rows
         and numbers as from the dense unit responses they fill); with ``consume`` each block is
-        taken out of ``blocks`` as its segment's rows are made (no second copy of them all)."""
+        taken out of ``blocks`` as its segment's rows are made (no second copy of them all);
+        ``data`` the data it will be solved against first (see :class:`Design`)."""
         n = self.td.n_seg
         take = blocks.pop if consume else blocks.get
         segs = [_segment_columns(n, self.td.n_gages * self.td.n_s, s,
                                  lambda j, s=s: take((j, s), None), extra) for s in range(n)]
         return Design(segs, 2 * n + (0 if extra is None else extra.shape[0]),
-                      self._w2.reshape(n, -1))
+                      self._w2.reshape(n, -1), data=data)
 
     def alive_columns(self, U, dU, extra, s: int) -> tuple[list[int], np.ndarray]:
         """The linear columns alive in segment ``s`` -- impacts 0 .. s, their derivatives, the
@@ -484,6 +522,34 @@ class Forward:
         return np.nan_to_num(r.ravel(), nan=0.0, copy=False)
 
 
+def _own_modes_hook(effect: object) -> bool:
+    """Whether an effect's class changes the mode set: a ``modes`` hook of its own over the
+    base's (which returns the mode set as it is) -- the classes defining ``modes`` in its
+    method order are more than the base alone (the core imports no effect)."""
+    defs = [c for c in type(effect).__mro__ if "modes" in vars(c)]
+    return len(defs) > 1
+
+
+def _state_matrix(model: StructuralModel) -> np.ndarray:
+    """:func:`~ramdaq.analysis.model.response.state_matrix` made by the same operations into
+    one array (no ``np.block``: its bookkeeping was a tenth of the spectrum prefit's call)."""
+    n = model.n_dof
+    Minv = np.linalg.inv(model.M)
+    A = np.zeros((2 * n, 2 * n))
+    A[:n, n:] = np.eye(n)
+    A[n:, :n] = -Minv @ model.K
+    A[n:, n:] = -Minv @ model.C
+    return A
+
+
+def _nonzero(block: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Whether a unit response or its derivative (each (n_gages, n_s)) is not all zero: the
+    first sample of every gage asked first (a decay is largest there), the whole only if those
+    are all zero -- the same answer, mostly without reading the block."""
+    u, du = block
+    return bool(u[:, 0].any() or du[:, 0].any() or u.any() or du.any())
+
+
 def _segment_columns(n: int, L: int, s: int,
                      unit: Callable[[int], tuple[np.ndarray, np.ndarray] | None],
                      extra: np.ndarray | None) -> tuple[list[int], np.ndarray]:
@@ -494,15 +560,17 @@ def _segment_columns(n: int, L: int, s: int,
     derivatives after the ``n`` impacts, the terms' after those) and rows (k, ``L``)."""
     e = 0 if extra is None else extra.shape[0]
     units = {j: unit(j) for j in range(min(s + 1, n))}
-    live = [j for j, b in units.items() if j == s or (b is not None and (b[0].any() or b[1].any()))]
+    live = [j for j, b in units.items() if j == s or (b is not None and _nonzero(b))]
     a = len(live)
     live_e = [] if extra is None else [i for i in range(e) if extra[i, s].any()]
     idx = live + [n + j for j in live] + [2 * n + i for i in live_e]
-    X = np.zeros((len(idx), L))
+    X = np.empty((len(idx), L))     # every row written below (no pass of zeros first)
     for k, j in enumerate(live):
         if units[j] is not None:
             X[k] = units[j][0].ravel()
             X[a + k] = units[j][1].ravel()
+        else:
+            X[k] = X[a + k] = 0.0
     if live_e:
         X[2 * a:] = extra[live_e, s].reshape(len(live_e), -1)
     return idx, X
@@ -516,24 +584,36 @@ class Design:
     equations are summed segment by segment (made once: the replicates solve many data against
     one design). ``w2`` (n_seg, n_gages * n_s) the squared weights, zero where not compared;
     the rows times them are made segment by segment where they are used, never all kept (they
-    were as large as the rows: 75 MB for a friction term's dense responses over 20 impacts)."""
+    were as large as the rows: 75 MB for a friction term's dense responses over 20 impacts).
+    With ``data`` (n_seg, n_gages, n_s) given, its right-hand side is summed in the same pass as
+    the normal equations, the weighted rows made once for both (a prediction solves its design
+    once): :meth:`solve` of that same array then uses it, the same numbers."""
 
-    def __init__(self, blocks: list[tuple[list[int], np.ndarray]], n_cols: int, w2: np.ndarray) -> None:
+    def __init__(self, blocks: list[tuple[list[int], np.ndarray]], n_cols: int, w2: np.ndarray,
+                 data: np.ndarray | None = None) -> None:
         self.blocks = blocks
         self.n_cols = n_cols
         self.w2 = w2
         G = np.zeros((n_cols, n_cols))
+        b = None if data is None else np.zeros(n_cols)
         for s, (idx, X) in enumerate(blocks):
-            G[np.ix_(idx, idx)] += (X * w2[s]) @ X.T
+            XW = X * w2[s]
+            G[np.ix_(idx, idx)] += XW @ X.T
+            if b is not None:
+                b[idx] += XW @ data[s].ravel()
+        self._first = None if b is None else (data, b)
         self.scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
         self.Gs = G / self.scale[:, None] / self.scale[None, :]
 
     def solve(self, data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The coefficients fitted to ``data`` (n_seg, n_gages, n_s; zeros where there is none)
         by weighted least squares, and the prediction they make (same shape)."""
-        b = np.zeros(self.n_cols)
-        for s, (idx, X) in enumerate(self.blocks):
-            b[idx] += (X * self.w2[s]) @ data[s].ravel()
+        if self._first is not None and self._first[0] is data:
+            b, self._first = self._first[1], None
+        else:
+            b = np.zeros(self.n_cols)
+            for s, (idx, X) in enumerate(self.blocks):
+                b[idx] += (X * self.w2[s]) @ data[s].ravel()
         coef = np.linalg.lstsq(self.Gs, b / self.scale, rcond=1e-10)[0] / self.scale
         pred = np.empty_like(data)
         for s, (idx, X) in enumerate(self.blocks):

@@ -1,0 +1,78 @@
+"""The diagnosis's shortcuts for cost give the very numbers of the long way: the prefit's
+frequencies without the rest of a mode set, a prediction's right-hand side summed with its
+normal equations, the Broyden update in row blocks. Exact equality, not a tolerance: each
+shortcut does the same floating-point operations on the same operands, only fewer others."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ramdaq.analysis.gap.calibrate import NORMAL_ROWS, _broyden
+from ramdaq.analysis.gap.effects import EFFECTS
+from ramdaq.analysis.gap.forward import Forward
+from ramdaq.analysis.gap.terms import Term
+from ramdaq.daq.gap_trial import load_trial, trial_data
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _forward() -> Forward:
+    td = trial_data(load_trial(ROOT / "recordings" / "albacore-water.mcap"))
+    return Forward(td, np.full(td.n_gages, 1e-3))
+
+
+def test_the_prefit_frequencies_are_the_mode_sets():
+    """At constants spread over their bounds, with a term that changes the model (added mass)
+    and one that changes the mode set (gage alignment: the long way itself), and failing alike
+    where the model cannot be built."""
+    fw = _forward()
+    rng = np.random.default_rng(7)
+    bound = np.array([p.bound for p in fw.params])
+    thetas = [np.zeros(len(bound))] + [rng.uniform(-0.8, 0.8, len(bound)) * bound for _ in range(6)]
+    am = EFFECTS["added_mass"]
+    pl = am.placements(fw, None)[0]
+    for th in thetas:
+        np.testing.assert_array_equal(fw.frequencies(th), fw.modes(th).f_hz)
+        t = Term(am, pl, np.array([0.7]))
+        got, want = fw.frequencies(th, [t]), fw.modes(th, [t]).f_hz
+        np.testing.assert_array_equal(got, want)
+        assert not np.array_equal(got, fw.frequencies(th))     # the term is on: it can fail
+    fw_fit = fw.fit(np.zeros(len(bound)))
+    ga = EFFECTS["gage_alignment"]
+    for pl in ga.placements(fw, fw_fit)[:2]:
+        t = Term(ga, pl, pl.probes[0])
+        np.testing.assert_array_equal(fw.frequencies(thetas[1], [t]), fw.modes(thetas[1], [t]).f_hz)
+
+
+def test_a_design_solved_with_its_data_summed_in_is_the_design_solved_after():
+    fw = _forward()
+    th = np.zeros(len(fw.params))
+    ms = fw.modes(th)
+    data = fw.x0
+    once = fw.block_design(fw.unit_blocks(ms), None, data=data)
+    after = fw.block_design(fw.unit_blocks(ms), None)
+    c1, p1 = once.solve(data)
+    c2, p2 = after.solve(data)
+    np.testing.assert_array_equal(c1, c2)
+    np.testing.assert_array_equal(p1, p2)
+    # another array is solved for itself, not with the first one's right-hand side
+    other = 2.0 * data
+    c3, _ = once.solve(other)
+    np.testing.assert_array_equal(c3, after.solve(other)[0])
+    assert not np.array_equal(c3, c1)
+
+
+def test_the_broyden_update_in_row_blocks_is_the_column_one():
+    rng = np.random.default_rng(3)
+    n, p = NORMAL_ROWS + 1234, 7      # more rows than one block
+    for step in (rng.normal(size=p), np.where(np.arange(p) == 2, 0.0, rng.normal(size=p))):
+        J = rng.normal(size=(n, p))
+        v = rng.normal(size=n)
+        want = J.copy()
+        ss = float(step @ step)
+        for j in np.flatnonzero(step):
+            want[:, j] += v * step[j] / ss
+        _broyden(J, v, step)
+        np.testing.assert_array_equal(J, want)
