@@ -9,12 +9,13 @@ for it the loop waits for room in the queue instead of dropping.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..drivers.base import Device, DeviceFault
-from ..drivers.block import Block
+from ..drivers.block import Block, sample_time_ns
+from ..drivers.errors import DeviceError, DeviceTimeout
 from ..drivers.fault_words import FaultWords
 from ..drivers.mcap_format import SIM_IMPACTS_TOPIC
 from .readout import LiveReadout
@@ -60,6 +61,35 @@ class RecordSummary:
     faults: str | None = None  # one line of what went wrong with the device, None if nothing did
 
 
+def _blocks(device: Device, between: Callable[[], None]) -> Iterator[Block]:
+    """The device's blocks to the end of its stream, read with a timeout so that ``between``
+    says what the device reported while no block came (a silence, a lost port) at once."""
+    if device.quiet_s is None:  # a device that never says it is quiet: read as it is iterated
+        yield from device
+        return
+    poll = min(0.25, device.quiet_s)
+    while True:
+        try:
+            block = device.read(poll)
+        except DeviceTimeout:
+            between()
+            continue
+        if block is None:
+            return
+        yield block
+
+
+def _faults_between(rec: Recorder, device: Device, words: FaultWords,
+                    tell: Callable[[str], None] | None) -> None:
+    """Faults the device reported with no block: recorded as events and told."""
+    faults = device.take_faults()
+    for fault in faults:
+        rec.event(fault.kind, fault.t_ns, **fault.detail)
+    for line in words.lines(faults):
+        if tell:
+            tell(line)
+
+
 def record(device: Device, path: str | Path, *, readout: bool = True, overwrite: bool = False,
            queue_blocks: int = 256, chunk_seconds: float = 0.25,
            progress: Callable[[Block], None] | None = None,
@@ -87,7 +117,7 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
         try:
             if view:
                 view.__enter__()
-            for block in device:
+            for block in _blocks(device, lambda: _faults_between(rec, device, words, tell)):
                 written_truth, faults = store_block(rec, device, block, written_truth,
                                                     wait_for_room=not paced, queue_limit=queue_blocks)
                 for line in words.lines(faults):  # counted whether told or not
@@ -104,7 +134,13 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM raised as KeyboardInterrupt("SIGTERM")
             interrupted = True
             rec.event("interrupted", 0 if last is None else block.t0_ns, reason=str(err) or "Ctrl-C")
+        except DeviceError as err:  # the device gave up: what it said last, then why, recorded
+            _faults_between(rec, device, words, tell)
+            at = 0 if last is None else sample_time_ns(last, info.fs_hz)
+            rec.event("device_error", at, message=str(err))
+            raise
         finally:
+            _faults_between(rec, device, words, tell)  # reported with the stream's last read
             if view:
                 view.__exit__(None, None, None)
             device.close()
