@@ -500,18 +500,33 @@ class CanDevice(Device):
                     silent_s=round(quiet, 3), others_ahead_samples=max(0, lead - at))
 
     def _missing_to_end(self) -> str | None:
-        """The line that ends a stream in which a group stayed silent (declared missing) to the
-        end, or never spoke: what the recording lacks and why, for :class:`DeviceClosed`."""
-        gone = {g: at for g, at in self._silent.items()}
-        gone.update({g: self._origin or 0 for g, grp in self.groups.items() if grp.base is None})
-        if not gone or self._origin is None:
+        """The line that ends a stream in which a group was silent to the end while another
+        delivered (declared missing, or behind the others by more than ``group_timeout_s`` of
+        samples when the frames came faster than real time), or never spoke; ``None`` if none.
+
+        Why the stream ends with an error there: a block carries every channel, so the samples
+        the other groups delivered after the silence are not recorded (a sample of the silent
+        group's channels would have to be invented). They are not dropped silently --
+        ``group_timeout`` and a ``seq_gap`` with ``to_end`` give the group, its channels and the
+        time --, but a recording that stops where a group stopped must not end as a good one.
+        """
+        if self._origin is None:
             return None
         lead = max(g.done() for g in self.groups.values() if g.base is not None)
+        behind = round(self.group_timeout_s * self.fs_hz)
+        gone = dict(self._silent)
+        for g, grp in self.groups.items():
+            at = self._origin if grp.base is None else grp.done()
+            if g not in gone and lead - at > behind:
+                self._timed_out(g, grp, (lead - at) / self.fs_hz, lead)
+                gone[g] = self._silent[g]
+        if not gone:
+            return None
         said = [f"frame group {g} (channels {self._channels_of([g])}) silent from "
                 f"{self._t_ns(at) / 1e9:.3f} s to the end" for g, at in sorted(gone.items())]
         first = min(gone.values())
-        return (f"can: {'; '.join(said)}: the other groups' {max(0, lead - first)} samples from then "
-                "on are not recorded (a block carries every channel)")
+        return (f"can: {'; '.join(said)} while the others delivered: their {max(0, lead - first)} "
+                "samples from then on are not recorded (a block carries every channel)")
 
     def _finish(self) -> None:
         for grp in self.groups.values():
@@ -663,10 +678,10 @@ class CanDevice(Device):
     def _gap_to_end(self, groups: list[CycleAssembler], p: int) -> None:
         """At the end: samples some groups delivered after the last block, lost for want of the
         others' (a group silent to the end), as a ``seq_gap`` with ``to_end``."""
-        at = self._gap_at[0] if self._gap_at is not None else p
+        at, lacking = self._gap_at if self._gap_at is not None else (p, None)
         lead = max((g.done() for g in groups), default=p)
         if lead > at:
-            lacking = [g.lay.group for g in groups if g.done() < lead]
+            lacking = lacking or [g.lay.group for g in groups if g.done() < lead]
             self._counts["seq_gap"] += 1
             Device._fault(self, "seq_gap", self._t_ns(at), missing_samples=lead - at,
                           groups=lacking, channels=self._channels_of(lacking), to_end=True)
