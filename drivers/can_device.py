@@ -21,8 +21,19 @@ delivered only when every group delivered it. Several buses may feed one trial: 
 identifier names its group, whatever bus it came on. Nothing is filled in:
 
 * a lost, corrupted (``bad_crc``) or wrong-length (``wrong_dlc``) frame loses its cycle, a SEQ
-  jump loses the cycles skipped, a silent group (``group_timeout``) everything until it speaks
-  again: the next block's ``first_sample`` jumps by exactly the samples lost (``seq_gap``);
+  jump loses the cycles skipped: the next block's ``first_sample`` jumps by exactly the samples
+  lost, and one ``seq_gap`` per jump says them at the first missing sample's time (``groups``:
+  the groups that lacked them; the same instants lost in two groups are one gap, once);
+* a group silent for ``group_timeout_s`` while another delivers is declared missing
+  (``group_timeout``, at the stream time it fell silent, with its channels). A block carries
+  every channel and the recording has no per-channel hole, so nothing is recorded until it
+  speaks again: the other groups' samples of that span are lost -- never the silent group's
+  invented -- and the ``seq_gap`` when it is back counts them. A stream that ends while a group
+  is missing (or one that never spoke, or fell behind the others by more than
+  ``group_timeout_s`` of samples) has stopped where that group stopped: a ``seq_gap`` with
+  ``to_end`` counts what the others sent after, and :meth:`read` raises
+  :class:`~ramdaq.drivers.errors.DeviceClosed` naming the group, its channels and the time
+  (``ramdaq record`` exits 1), so that such a recording never ends as a good one;
 * error frames (SocketCAN error classes: bus-off 0x40, restarted 0x100), ``bus.state`` and frames
   resuming give ``error_frame``, ``bus_off`` and ``bus_recovered``;
 * SEQ and the host clock. SEQ wraps (classic: 256 cycles = 0.375 s at 2.048 kHz; fd24: 65 536
@@ -51,9 +62,10 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   (``conflicting_frame``); no sample of it is ever placed;
 * frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
   (``bad_frame``, with the line), late and duplicate frames are counted; these faults are
-  reported at most once per ``report_s`` with their counts. ``bus_lost`` (the interface failed)
-  ends that bus; when none is left, the samples already assembled are handed out and then
-  :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
+  reported at most once per ``report_s`` with their counts, except those that lose samples
+  (``bad_frame``, ``wrong_dlc``, ``bad_crc``: each at once, at its group's stream time).
+  ``bus_lost`` (the interface failed) ends that bus; when none is left, the samples already
+  assembled are handed out and then :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
 * ``no_data`` / ``data_back``: no block for ``quiet_s`` (default 1 s; :mod:`ramdaq.drivers.base`),
   also before the first frame; ``idle_s`` (default: never) instead *ends* the stream after that
   long without a frame (only once frames have come);
