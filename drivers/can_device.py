@@ -65,7 +65,8 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   reported at most once per ``report_s`` with their counts, except those that lose samples
   (``bad_frame``, ``wrong_dlc``, ``bad_crc``: each at once, at its group's stream time).
   ``bus_lost`` (the interface failed) ends that bus; when none is left, the samples already
-  assembled are handed out and then :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
+  assembled are handed out and then :meth:`read` raises
+  :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
 * ``no_data`` / ``data_back``: no block for ``quiet_s`` (default 1 s; :mod:`ramdaq.drivers.base`),
   also before the first frame; ``idle_s`` (default: never) instead *ends* the stream after that
   long without a frame (only once frames have come);
