@@ -7,9 +7,10 @@ only decides what a person watching the trial is told, and how:
   adapter's start-up) is part of a normal connect: recorded, not shown;
 * faults within :data:`INCIDENT_S` of stream time that are one incident -- a corrupt frame,
   the bytes skipped to find the next frame and the samples it took with it -- are one line, the
-  faults of one kind in it summed (two unreadable lines, two gaps); a part of that incident
-  reported later (in the next batch) is not shown again, unless it is a gap (samples missing
-  are always said, so the lines add up to the recording's gap list);
+  faults of one kind in it summed (two unreadable lines, two gaps), at the time of its first
+  fault (a gap's first missing sample); a part of that incident reported later (in the next
+  batch) is not shown again, unless it is a second gap (each gap is reported once, so the lines
+  add up to the recording's gap list);
 * a fault that repeats every frame (a wrong channel count) is shown once, and then at most every
   :data:`REPEAT_S` seconds (wall clock: no samples may be coming) with the count so far;
 * :meth:`FaultWords.tally` gives one line of counts for the trial's summary.
@@ -150,6 +151,7 @@ class FaultWords:
         self.counts: Counter = Counter()  # kind -> faults (or frames, where the fault counts them)
         self.silent_s = 0.0
         self._incident_t: int | None = None  # stream time of the last incident shown, ns
+        self._incident_gap = False  # ... and whether its line said a gap
         self._repeat_t: dict[tuple, float] = {}  # (kind, what) -> monotonic s last shown
 
     def lines(self, faults: Iterable[DeviceFault]) -> list[str]:
@@ -165,7 +167,7 @@ class FaultWords:
                     out.append(self._incident(group))
                     group = []
                 if (group or self._incident_t is None or not _near(f.t_ns, self._incident_t)
-                        or f.kind in _LOSSES):  # samples missing are said whenever they come
+                        or (f.kind in _LOSSES and self._incident_gap)):  # a gap of its own
                     group.append(f)
                 continue
             if group:
@@ -183,9 +185,12 @@ class FaultWords:
         return out
 
     def _incident(self, group: list[DeviceFault]) -> str:
+        """One incident's line, at its first fault's time (a gap's: its first missing sample),
+        the causes before the samples they cost."""
         self._incident_t = group[0].t_ns
-        return self._line(group[0].t_ns, "; ".join(describe(f, self.device, self.fs_hz)
-                                                   for f in _merged(group)))
+        self._incident_gap = any(f.kind in _LOSSES for f in group)
+        parts = sorted(_merged(group), key=lambda f: f.kind in _LOSSES)
+        return self._line(group[0].t_ns, "; ".join(describe(f, self.device, self.fs_hz) for f in parts))
 
     def _line(self, t_ns: int, words: str) -> str:
         if words.startswith(("no data from", "data from", "first data from")):  # names the device

@@ -171,8 +171,8 @@ def test_fault_lines_match_the_gap_list(tmp_path):
     assert seq == [(a, n, [1, 2]) for a, n in gaps]
     lines = [s.split(" at ", 1)[1] for _, s in said if s.startswith("can://") and " at " in s]
     assert lines == [f"{a / FS:.3f} s: {w}" for a, w in [
-        (68 * T, "3 samples (0.001 s) missing; 2 frames of the wrong length dropped (id 0x115, 6 bytes)"),
-        (136 * T, "3 samples (0.001 s) missing; 2 corrupt frames dropped (CRC failed)"),
+        (68 * T, "2 frames of the wrong length dropped (id 0x115, 6 bytes); 3 samples (0.001 s) missing"),
+        (136 * T, "2 corrupt frames dropped (CRC failed); 3 samples (0.001 s) missing"),
         (204 * T, "18 samples (0.009 s) missing")]], lines
     assert summary.faults == ("device faults: 2 corrupt frame(s), 2 frame(s) of the wrong length, "
                               "3 gap(s) in the frame sequence")
@@ -219,7 +219,7 @@ def test_unreadable_slcan_lines_each_said_and_counted(tmp_path):
     assert gaps == [T, T]
     assert sum(e["detail"]["count"] for e in events if e["kind"] == "bad_frame") == 2
     missing = [s for s in said if "samples (0.001 s) missing" in s]
-    assert len(missing) == 2 and "2 unreadable lines" in missing[0], said
+    assert len(missing) == 2 and "2 unreadable lines" in missing[0], said  # the 2nd gap: own line
     words = FaultWords(dev.info.device, FS)  # the closing count, from what was recorded
     words.lines([DeviceFault(e["kind"], e["t_ns"], e["detail"]) for e in events])
     assert "2 unreadable line(s) from the adapter" in words.tally()
