@@ -111,6 +111,7 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
             interrupted = True
             rec.event("interrupted", 0 if last is None else block.t0_ns, reason=str(err) or "Ctrl-C")
         finally:
+            _faults_now(device, rec, words, tell)  # what an interruption left untold
             if view:
                 view.__exit__(None, None, None)
             device.close()

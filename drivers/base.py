@@ -65,6 +65,7 @@ class Device(ABC):
         self._quiet_faulted = False  # ... and no_data was reported for it
         self._t_after = 0  # device time just after the last block, ns
         self._quiet_t = 0  # device time at which the reported silence began, ns
+        self._blocks_heard = False  # a block came (data_back then says "again")
 
     # -- faults --------------------------------------------------------------------------------
     def _fault(self, kind: str, t_ns: int, **detail: object) -> None:
@@ -163,7 +164,9 @@ class Device(ABC):
                 return
             self._fault("data_back", max(block.t0_ns, self._quiet_t),
                         silent_s=round(now - self._heard_at, 3),
-                        missing_s=round((block.t0_ns - self._quiet_t) / 1e9, 6))
+                        missing_s=round((block.t0_ns - self._quiet_t) / 1e9, 6),
+                        **({} if self._blocks_heard else {"first": True}))
+        self._blocks_heard = True
         self._heard_at, self._quiet_said, self._quiet_faulted = now, False, False
         self._t_after = end
 

@@ -21,8 +21,19 @@ delivered only when every group delivered it. Several buses may feed one trial: 
 identifier names its group, whatever bus it came on. Nothing is filled in:
 
 * a lost, corrupted (``bad_crc``) or wrong-length (``wrong_dlc``) frame loses its cycle, a SEQ
-  jump loses the cycles skipped, a silent group (``group_timeout``) everything until it speaks
-  again: the next block's ``first_sample`` jumps by exactly the samples lost (``seq_gap``);
+  jump loses the cycles skipped: the next block's ``first_sample`` jumps by exactly the samples
+  lost, and one ``seq_gap`` per jump says them at the first missing sample's time (``groups``:
+  the groups that lacked them; the same instants lost in two groups are one gap, once);
+* a group silent for ``group_timeout_s`` while another delivers is declared missing
+  (``group_timeout``, at the stream time it fell silent, with its channels). A block carries
+  every channel and the recording has no per-channel hole, so nothing is recorded until it
+  speaks again: the other groups' samples of that span are lost -- never the silent group's
+  invented -- and the ``seq_gap`` when it is back counts them. A stream that ends while a group
+  is missing (or one that never spoke, or fell behind the others by more than
+  ``group_timeout_s`` of samples) has stopped where that group stopped: a ``seq_gap`` with
+  ``to_end`` counts what the others sent after, and :meth:`read` raises
+  :class:`~ramdaq.drivers.errors.DeviceClosed` naming the group, its channels and the time
+  (``ramdaq record`` exits 1), so that such a recording never ends as a good one;
 * error frames (SocketCAN error classes: bus-off 0x40, restarted 0x100), ``bus.state`` and frames
   resuming give ``error_frame``, ``bus_off`` and ``bus_recovered``;
 * SEQ and the host clock. SEQ wraps (classic: 256 cycles = 0.375 s at 2.048 kHz; fd24: 65 536
@@ -51,9 +62,11 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   (``conflicting_frame``); no sample of it is ever placed;
 * frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
   (``bad_frame``, with the line), late and duplicate frames are counted; these faults are
-  reported at most once per ``report_s`` with their counts. ``bus_lost`` (the interface failed)
-  ends that bus; when none is left, the samples already assembled are handed out and then
-  :meth:`read` raises :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
+  reported at most once per ``report_s`` with their counts, except those that lose samples
+  (``bad_frame``, ``wrong_dlc``, ``bad_crc``: each at once, at its group's stream time).
+  ``bus_lost`` (the interface failed) ends that bus; when none is left, the samples already
+  assembled are handed out and then :meth:`read` raises
+  :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
 * ``no_data`` / ``data_back``: no block for ``quiet_s`` (default 1 s; :mod:`ramdaq.drivers.base`),
   also before the first frame; ``idle_s`` (default: never) instead *ends* the stream after that
   long without a frame (only once frames have come);
@@ -88,6 +101,7 @@ _BUS_OFF, _RESTARTED, _CRTL, _CRTL_ACTIVE = 0x40, 0x100, 0x04, 0x40  # linux/can
 _OPTIONS = {"rig", "dbc", "channels", "fs_hz", "block_s", "bitrate", "data_bitrate", "fd", "bus",
             "duration_s", "idle_s", "quiet_s", "group_timeout_s", "clock_tolerance_s", "scale"}
 _CONNECT_KINDS = ("bad_frame", "seq_gap", "delayed_frames", "late_frame")
+_PROMPT = ("bad_frame", "wrong_dlc", "bad_crc")  # each loses samples: reported at once, never summed
 
 
 def _coerce(text: str) -> object:
@@ -224,7 +238,9 @@ class CanDevice(Device):
         self._names: list[str] = []
         self._off_since: dict[str, float] = {}
         self._last_seen: dict[int, float] = {}    # group -> monotonic time of that frame, s
-        self._silent: set[int] = set()
+        self._silent: dict[int, int] = {}  # group declared missing -> sample it went silent at
+        self._gap_at: tuple[int, list[int]] | None = None  # a gap the blocks are skipping: from, groups
+        self._said_to = 0  # the gap said ahead ends here (absolute sample)
         self._stateful: list[bool] = []
         self._rr = 0
 
@@ -330,6 +346,10 @@ class CanDevice(Device):
                     self._report(kind, math.inf)
                 if self._lost and not self._buses:
                     raise DeviceClosed(f"can: {'; '.join(self._lost)}: the device vanished")
+                missing = self._missing_to_end()
+                if missing:
+                    self._silent.clear()
+                    raise DeviceClosed(missing)
                 return None
             wait = 0.05
             if deadline is not None:
@@ -397,8 +417,7 @@ class CanDevice(Device):
             return
         hit = self.codec.check(msg)
         if type(hit) is str or hit[0].group not in self.groups:
-            self._count(hit if type(hit) is str else UNRELATED, now, id=hex(msg.arbitration_id),
-                        dlc=len(msg.data))
+            self._rejected(msg, hit if type(hit) is str else UNRELATED, now)
             return
         if self._states and self._states.get(self._names[bus_i]) == "bus_off":
             self._bus_state(bus_i, "active", now, why="frames resumed")
@@ -412,7 +431,7 @@ class CanDevice(Device):
                 self._first_wall = now
         self._last_seen[lay.group], self._last_wall = now, now
         if self._silent:
-            self._silent.discard(lay.group)
+            self._silent.pop(lay.group, None)
         base = grp.base
         problem = grp.put(seq, lay.slot, msg.data, t)
         if problem:
@@ -424,6 +443,15 @@ class CanDevice(Device):
         self._dirty = self._dirty or grp.base != base
         if grp.lost:
             self._report_lost(grp, now)
+
+    def _rejected(self, msg: can.Message | SlcanFrame, kind: str, now: float) -> None:
+        """Count a frame refused by the codec; one of a group's (a wrong length, a failed CRC) is
+        stamped where that group's stream stands, not where the group furthest ahead does."""
+        lay = self.codec.layout_of(msg)
+        grp = self.groups.get(lay.group) if lay is not None and kind != UNRELATED else None
+        at = None if grp is None or grp.base is None else self._t_ns((grp.hi + 1) * grp.T)
+        self._count(kind, now, at, id=hex(msg.arbitration_id), dlc=len(msg.data),
+                    **({"group": grp.lay.group} if grp is not None else {}))
 
     def _on_error_frame(self, msg: can.Message | SlcanFrame, bus_i: int, now: float) -> None:
         cls, data = msg.arbitration_id, bytes(msg.data)
@@ -467,8 +495,7 @@ class CanDevice(Device):
                 quiet = now - self._last_seen.get(g, self._first_wall)
                 if quiet > self.group_timeout_s and (grp.base is None or grp.done() < lead):
                     if g not in self._silent:
-                        self._silent.add(g)
-                        self._fault("group_timeout", self._t_ns(), group=g, silent_s=round(quiet, 3))
+                        self._timed_out(g, grp, quiet, lead)
                     grp.skip_to(lead // grp.T)
                     self._report_lost(grp, now)
                     self._dirty = True
@@ -477,6 +504,42 @@ class CanDevice(Device):
         for kind in list(self._pending):
             if now - self._reported.get(kind, -math.inf) >= self.report_s:
                 self._report(kind, now)
+
+    def _timed_out(self, g: int, grp: CycleAssembler, quiet: float, lead: int) -> None:
+        """``group_timeout``: group ``g`` is declared missing from where its stream stands."""
+        at = (grp.hi + 1) * grp.T if grp.base is not None else (self._origin or 0)
+        self._silent[g] = at
+        self._fault("group_timeout", self._t_ns(at), group=g, channels=self._channels_of([g]),
+                    silent_s=round(quiet, 3), others_ahead_samples=max(0, lead - at))
+
+    def _missing_to_end(self) -> str | None:
+        """The line that ends a stream in which a group was silent to the end while another
+        delivered (declared missing, or behind the others by more than ``group_timeout_s`` of
+        samples when the frames came faster than real time), or never spoke; ``None`` if none.
+
+        Why the stream ends with an error there: a block carries every channel, so the samples
+        the other groups delivered after the silence are not recorded (a sample of the silent
+        group's channels would have to be invented). They are not dropped silently --
+        ``group_timeout`` and a ``seq_gap`` with ``to_end`` give the group, its channels and the
+        time --, but a recording that stops where a group stopped must not end as a good one.
+        """
+        if self._origin is None:
+            return None
+        lead = max(g.done() for g in self.groups.values() if g.base is not None)
+        behind = round(self.group_timeout_s * self.fs_hz)
+        gone = dict(self._silent)
+        for g, grp in self.groups.items():
+            at = self._origin if grp.base is None else grp.done()
+            if g not in gone and lead - at > behind:
+                self._timed_out(g, grp, (lead - at) / self.fs_hz, lead)
+                gone[g] = self._silent[g]
+        if not gone:
+            return None
+        said = [f"frame group {g} (channels {self._channels_of([g])}) silent from "
+                f"{self._t_ns(at) / 1e9:.3f} s to the end" for g, at in sorted(gone.items())]
+        first = min(gone.values())
+        return (f"can: {'; '.join(said)} while the others delivered: their {max(0, lead - first)} "
+                "samples from then on are not recorded (a block carries every channel)")
 
     def _finish(self) -> None:
         for grp in self.groups.values():
@@ -516,7 +579,7 @@ class CanDevice(Device):
         if "groups" in detail:
             p["groups"] = sorted(set(p.get("groups", [])) | set(detail.pop("groups")))
         p.update(detail)
-        if now - self._reported.get(kind, -math.inf) >= self.report_s:
+        if kind in _PROMPT or now - self._reported.get(kind, -math.inf) >= self.report_s:
             self._report(kind, now)
 
     def _report(self, kind: str, now: float) -> None:
@@ -540,10 +603,10 @@ class CanDevice(Device):
                         other.hint = note.shift
         grp.notes.clear()
 
-    def _report_lost(self, grp: CycleAssembler, now: float) -> None:
-        for first, n, incomplete in grp.lost:
-            self._count("seq_gap", now, self._t_ns(first * grp.T), groups=[grp.lay.group],
-                        missing_cycles=n, incomplete_cycles=incomplete, missing_samples=n * grp.T)
+    @staticmethod
+    def _report_lost(grp: CycleAssembler, now: float) -> None:
+        """Forget the group's lost cycles: what the stream misses is said where the blocks skip it
+        (:meth:`_gap_closed`), once for every group that lacks those samples."""
         grp.lost = []
 
     # -- blocks ------------------------------------------------------------------------------
@@ -572,8 +635,14 @@ class CanDevice(Device):
             spans = [g.present_from(p) for g in groups]
             start = max((s[0] if s else ready) for s in spans)
             if start > p:
+                if self._gap_at is None and p >= self._said_to:
+                    self._gap_at = (p, [g.lay.group for g, s in zip(groups, spans, strict=True)
+                                        if not s or s[0] > p])
                 p = min(start, ready)
                 continue
+            if self._gap_at is not None:
+                self._gap_fault(*self._gap_at, p)
+                self._gap_at = None
             end = min(min(s[1] for s in spans), ready, p + self.block_n)
             if end - p < self.block_n and not (last or end < ready):
                 break  # wait for the rest of the block
@@ -583,10 +652,57 @@ class CanDevice(Device):
             first = p - self._origin
             self._pos = end
             self._seq += 1
+            if end < ready:  # cut where a run ends: say the gap after it with this block
+                self._gap_ahead(groups, end)
             return Block(seq=self._seq - 1, first_sample=first, t0_ns=sample_time_ns(first, self.fs_hz),
                          fs_hz=self.fs_hz, counts=np.ascontiguousarray(counts, dtype=np.int32),
                          scale=self.scale)
         self._pos = p
         if last and p >= ready:
             self._ended = True
+            self._gap_to_end(groups, p)
         return None
+
+    def _gap_ahead(self, groups: list[CycleAssembler], at: int) -> None:
+        """Say the gap that starts at sample ``at`` (absolute) now if its end is known (every
+        group has samples again), so that it is said with the fault that caused it."""
+        q, lacking = at, None
+        while True:
+            spans = [g.present_from(q) for g in groups]
+            if any(s is None for s in spans):
+                return  # not known yet: said where the blocks skip it
+            start = max(s[0] for s in spans)
+            if lacking is None:
+                lacking = [g.lay.group for g, s in zip(groups, spans, strict=True) if s[0] > q]
+            if start == q:
+                break
+            q = start
+        if q > at:
+            self._gap_fault(at, lacking, q)
+            self._said_to = q
+
+    def _gap_fault(self, at: int, groups: list[int], to: int) -> None:
+        """``seq_gap``: samples ``at..to`` (absolute) are missing from the stream, for want of
+        ``groups``' frames: one fault per gap the blocks skip, as the recording's gap list has."""
+        self._counts["seq_gap"] += 1
+        self._fault("seq_gap", self._t_ns(at), missing_samples=to - at, groups=groups,
+                    channels=self._channels_of(groups))
+
+    def _gap_to_end(self, groups: list[CycleAssembler], p: int) -> None:
+        """At the end: samples some groups delivered after the last block, lost for want of the
+        others' (a group silent to the end), as a ``seq_gap`` with ``to_end``."""
+        at, lacking = self._gap_at if self._gap_at is not None else (p, None)
+        lead = max((g.done() for g in groups), default=p)
+        if lead > at:
+            lacking = lacking or [g.lay.group for g in groups if g.done() < lead]
+            self._counts["seq_gap"] += 1
+            Device._fault(self, "seq_gap", self._t_ns(at), missing_samples=lead - at,
+                          groups=lacking, channels=self._channels_of(lacking), to_end=True)
+        self._gap_at = None
+
+    def _channels_of(self, groups: list[int]) -> str:
+        """``"9-16"``: the channels of ``groups`` (1-based, as the DBC numbers them)."""
+        chans = sorted(c for g in groups for c in self.groups[g].lay.channels)
+        if chans and chans == list(range(chans[0], chans[-1] + 1)):
+            return f"{chans[0]}-{chans[-1]}" if len(chans) > 1 else str(chans[0])
+        return ",".join(map(str, chans))

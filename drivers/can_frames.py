@@ -318,6 +318,10 @@ class FrameCodec:
                            np.concatenate(gather), np.concatenate(rows), np.concatenate(cols))
 
     # -- decoding ----------------------------------------------------------------------------
+    def layout_of(self, msg: can.Message) -> FrameLayout | None:
+        """The sample frame layout of ``msg``'s identifier, or ``None`` (another node's)."""
+        return self.layouts.get(msg.arbitration_id | (_EXT if msg.is_extended_id else 0))
+
     def check(self, msg: can.Message) -> tuple[FrameLayout, int] | str:
         """The fast path: ``(layout, seq)`` of a good sample frame, or the rejection reason.
 

@@ -6,8 +6,11 @@ only decides what a person watching the trial is told, and how:
 * a fault marked ``at_connect`` (bytes before the first frame boundary, the backlog of an
   adapter's start-up) is part of a normal connect: recorded, not shown;
 * faults within :data:`INCIDENT_S` of stream time that are one incident -- a corrupt frame,
-  the bytes skipped to find the next frame and the samples it took with it -- are one line;
-  a part of that incident reported later (in the next batch) is not shown again;
+  the bytes skipped to find the next frame and the samples it took with it -- are one line, the
+  faults of one kind in it summed (two unreadable lines, two gaps), at the time of its first
+  fault (a gap's first missing sample); a part of that incident reported later (in the next
+  batch) is not shown again, unless it is a second gap (each gap is reported once, so the lines
+  add up to the recording's gap list);
 * a fault that repeats every frame (a wrong channel count) is shown once, and then at most every
   :data:`REPEAT_S` seconds (wall clock: no samples may be coming) with the count so far;
 * :meth:`FaultWords.tally` gives one line of counts for the trial's summary.
@@ -31,6 +34,7 @@ REPEAT_S = 10.0
 """Least seconds between two lines for a fault that repeats (``frame_mismatch``)."""
 _INCIDENT = ("crc_error", "resync", "seq_gap", "bad_crc", "wrong_dlc", "bad_frame", "port_back")
 _REPEATING = ("frame_mismatch",)
+_LOSSES = ("seq_gap", "port_back")  # each is a gap of its own: never taken as said already
 
 
 def _s(n: float, unit: str) -> str:
@@ -48,7 +52,9 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
     words = {
         "crc_error": lambda: f"{_s(d.get('count', 1), 'corrupt frame')} dropped (CRC failed)",
         "resync": lambda: f"{_s(d.get('bytes_discarded', 0), 'stray byte')} skipped to the next frame",
-        "seq_gap": lambda: _samples(d, fs_hz),
+        "seq_gap": lambda: _samples(d, fs_hz) + (f" in {d['gaps']} gaps" if d.get("gaps", 1) > 1 else "")
+                           + (" at the end (the stream ended before every group delivered them)"
+                              if d.get("to_end") else ""),
         "repeated_frame": lambda: f"{_s(d.get('frames', 1), 'repeated frame')} dropped",
         "stale_frame": lambda: f"a frame {d.get('where', '')} the stream that the next one does not "
                                "continue dropped",
@@ -63,12 +69,15 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
                                   f"{d.get('expected')}: frames refused"
                                   + (f" ({d['total']} so far)" if d.get("total", 1) > 1 else ""),
         "no_data": lambda: f"no data from {device} for {d.get('quiet_s', 0):g} s",
-        "data_back": lambda: f"data from {device} again after {d.get('silent_s', 0):.1f} s",
+        "data_back": lambda: (f"first data from {device} after {d.get('silent_s', 0):.1f} s" if d.get("first")
+                              else f"data from {device} again after {d.get('silent_s', 0):.1f} s"),
         "bus_lost": lambda: f"CAN bus {d.get('bus', '?')} lost ({d.get('error', '?')})",
         "bus_off": lambda: f"CAN bus {d.get('bus', '?')} off ({d.get('reason', '')})",
         "bus_recovered": lambda: f"CAN bus {d.get('bus', '?')} back after {d.get('off_s', 0):g} s off",
-        "group_timeout": lambda: f"frame group {d.get('group')} silent for {d.get('silent_s', 0):g} s: "
-                                 "its samples are missing until it speaks again",
+        "group_timeout": lambda: f"frame group {d.get('group')} (channels {d.get('channels', '?')}) silent "
+                                 f"for {d.get('silent_s', 0):g} s while another delivers: declared "
+                                 "missing; nothing is recorded until it speaks again (a block carries "
+                                 "every channel), the other groups' samples meanwhile are lost",
         "bad_crc": lambda: f"{_s(d.get('count', 1), 'corrupt frame')} dropped (CRC failed)",
         "wrong_dlc": lambda: f"{_s(d.get('count', 1), 'frame')} of the wrong length dropped "
                              f"(id {d.get('id')}, {d.get('dlc')} bytes)",
@@ -103,6 +112,32 @@ def describe(f: DeviceFault, device: str, fs_hz: float) -> str:
     return k.replace("_", " ") + (f" ({extra})" if extra else "")
 
 
+_SUMMED = {"count": ("crc_error", "bad_crc", "wrong_dlc", "bad_frame"),
+           "missing_samples": ("seq_gap",), "bytes_discarded": ("resync",)}
+
+
+def _merged(group: list[DeviceFault]) -> list[DeviceFault]:
+    """An incident's faults with those of one kind made one: counts and missing samples summed
+    (``gaps``: how many gaps), the reasons of unreadable lines joined; in first-seen order."""
+    out: dict[str, DeviceFault] = {}
+    for f in group:
+        m = out.get(f.kind)
+        if m is None:
+            out[f.kind] = f
+            continue
+        d = dict(m.detail)
+        for key, kinds in _SUMMED.items():
+            if f.kind in kinds:
+                one = 1 if key == "count" else 0
+                d[key] = int(d.get(key, one)) + int(f.detail.get(key, one))
+        if f.kind == "seq_gap":
+            d["gaps"] = int(d.get("gaps", 1)) + 1
+        if f.detail.get("reason") and f.detail["reason"] != d.get("reason"):
+            d["reason"] = f"{d.get('reason', '')}; {f.detail['reason']}"
+        out[f.kind] = DeviceFault(f.kind, m.t_ns, d)
+    return list(out.values())
+
+
 def _near(a_ns: int, b_ns: int) -> bool:
     return abs(a_ns - b_ns) <= INCIDENT_S * 1e9
 
@@ -116,13 +151,14 @@ class FaultWords:
         self.counts: Counter = Counter()  # kind -> faults (or frames, where the fault counts them)
         self.silent_s = 0.0
         self._incident_t: int | None = None  # stream time of the last incident shown, ns
+        self._incident_gap = False  # ... and whether its line said a gap
         self._repeat_t: dict[tuple, float] = {}  # (kind, what) -> monotonic s last shown
 
     def lines(self, faults: Iterable[DeviceFault]) -> list[str]:
         """The lines to show for one batch of faults (oldest first)."""
         out: list[str] = []
         group: list[DeviceFault] = []
-        for f in faults:
+        for f in sorted(faults, key=lambda f: f.t_ns):  # a device may report out of stream order
             if f.detail.get("at_connect"):
                 continue
             self._count(f)
@@ -130,7 +166,8 @@ class FaultWords:
                 if group and not _near(group[0].t_ns, f.t_ns):
                     out.append(self._incident(group))
                     group = []
-                if group or self._incident_t is None or not _near(f.t_ns, self._incident_t):
+                if (group or self._incident_t is None or not _near(f.t_ns, self._incident_t)
+                        or (f.kind in _LOSSES and self._incident_gap)):  # a gap of its own
                     group.append(f)
                 continue
             if group:
@@ -148,12 +185,15 @@ class FaultWords:
         return out
 
     def _incident(self, group: list[DeviceFault]) -> str:
+        """One incident's line, at its first fault's time (a gap's: its first missing sample),
+        the causes before the samples they cost."""
         self._incident_t = group[0].t_ns
-        return self._line(group[0].t_ns, "; ".join(describe(f, self.device, self.fs_hz)
-                                                   for f in group))
+        self._incident_gap = any(f.kind in _LOSSES for f in group)
+        parts = sorted(_merged(group), key=lambda f: f.kind in _LOSSES)
+        return self._line(group[0].t_ns, "; ".join(describe(f, self.device, self.fs_hz) for f in parts))
 
     def _line(self, t_ns: int, words: str) -> str:
-        if words.startswith(("no data from", "data from")):  # the device is named in the words
+        if words.startswith(("no data from", "data from", "first data from")):  # names the device
             return f"{words} (stream time {t_ns / 1e9:.3f} s)"
         return f"{self.device} at {t_ns / 1e9:.3f} s: {words}"
 
@@ -175,7 +215,9 @@ class FaultWords:
         parts = [(c["frame_mismatch"], "frame(s) refused for a wrong channel count"),
                  (c["crc_error"] + c["bad_crc"], "corrupt frame(s)"),
                  (c["wrong_dlc"], "frame(s) of the wrong length"),
+                 (c["bad_frame"], "unreadable line(s) from the adapter"),
                  (c["seq_gap"], "gap(s) in the frame sequence"),
+                 (c["group_timeout"], "frame group(s) declared missing"),
                  (c["no_data"], "silence(s) of the device"),
                  (c["port_lost"] + c["bus_lost"], "lost port(s) or bus(es)"),
                  (c["port_back"], "reconnect(s)")]

@@ -201,7 +201,7 @@ def test_fault_lines_hide_connect_noise_and_group_one_incident():
     can = FaultWords("can://slcan/x", FS)  # a CAN frame of the wrong length and the cycle it lost
     dlc = DeviceFault("wrong_dlc", sample_time_ns(10128, FS), {"count": 1, "id": "0x40f", "dlc": 6})
     lost = DeviceFault("seq_gap", sample_time_ns(10126, FS), {"missing_samples": 3})
-    assert can.lines([dlc, lost]) == ["can://slcan/x at 4.945 s: 1 frame of the wrong length "
+    assert can.lines([dlc, lost]) == ["can://slcan/x at 4.944 s: 1 frame of the wrong length "
                                       "dropped (id 0x40f, 6 bytes); 3 samples (0.001 s) missing"]
 
 
