@@ -13,16 +13,13 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..drivers.base import Device, DeviceFault
+from ..drivers.base import FAULT_POLL_S, Device, DeviceFault
 from ..drivers.block import Block
 from ..drivers.errors import DeviceError, DeviceTimeout
 from ..drivers.fault_words import FaultWords
 from ..drivers.mcap_format import SIM_IMPACTS_TOPIC
 from .readout import LiveReadout
 from .recorder import Recorder
-
-FAULT_POLL_S = 0.25
-"""Longest wait for a block before the device's faults (a silence, a lost port) are said, s."""
 
 
 def store_block(rec: Recorder, device: Device, block: Block, truth_written: int, *,

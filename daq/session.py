@@ -55,7 +55,7 @@ import numpy as np
 from ..analysis.impact import FirstLook
 from ..analysis.model.rig import Rig, parse_rig
 from ..analysis.model.rig_modes import modes_in
-from ..drivers.base import Device, DeviceFault
+from ..drivers.base import FAULT_POLL_S, Device, DeviceFault
 from ..drivers.block import Block, sample_time_ns
 from ..drivers.errors import DeviceError, DeviceTimeout
 from ..drivers.fault_words import FaultWords
@@ -77,7 +77,6 @@ from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .heap import map_large_blocks
 from .jobqueue import Admission, JobQueue, QueuePolicy
 from .readout import UNSURE_REL_SE, LiveReadout, accepted_line
-from .record import FAULT_POLL_S
 from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 if TYPE_CHECKING:  # the recorder (the MCAP writer) is imported only by a session that records

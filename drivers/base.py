@@ -34,6 +34,9 @@ QUIET_S = 1.0
 """Seconds without a block after which a front-end says ``no_data`` (module notes): ~20 blocks of
 50 ms, far longer than any healthy front-end's jitter, short enough to be said before a blow
 is missed."""
+FAULT_POLL_S = 0.25
+"""Longest wait for a block before a reader takes the device's faults (a silence, a lost port)
+and says them, s: ``ramdaq record`` and a live trial read with this timeout."""
 
 
 @dataclass(frozen=True)
