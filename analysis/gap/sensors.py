@@ -117,7 +117,7 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     rows = tuple(i for i, n in enumerate(numbers) if n in gone)
     fm = free_modal_model(x, fs_hz, onsets_s, pre_s=pre_s, exclude_rows=rows)
     found = [_with_clip_closure(f, x, fs_hz, onsets_s, numbers, fm) for f in found]
-    timing = [f for f in chain_phase(fm, numbers) if not set(f.gages) & gone]
+    timing = [f for f in chain_phase(fm, numbers, [g.body for g in gages]) if not set(f.gages) & gone]
     found += timing + rigid_gain(fm, gages, skip=gone | {g for f in timing for g in f.gages})
     found += pre_trigger_lines(x, fs_hz, onsets_s, numbers, fm, pre_s=pre_s, declared=declared)
     keep = [i for i in range(len(numbers)) if i not in rows]
@@ -203,7 +203,8 @@ FC_GRID_HZ = np.concatenate([[0.0], np.geomspace(0.05, 20.0, 400)])
 """First-order high-pass corners tried, Hz."""
 
 
-def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
+def chain_phase(fm: FreeModal, numbers: Sequence[int],
+                bodies: Sequence[str] | None = None) -> list[Finding]:
     """Per gage, its phase off the other gages across all modes and impacts, held against a
     time skew (``phi = -2 pi f tau``) and a first-order high-pass (``phi = atan(fc / f)``).
 
@@ -214,8 +215,11 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
     corner is reported only when it turns some measured mode by :data:`PHASE_MIN_RAD`. Its
     closure: the share of the phase chi-square beyond its noise expectation (one a
     well-measured entry) the same model takes out on impacts it was not fitted on
-    (:func:`_chain_closure`)."""
+    (:func:`_chain_closure`). A departure no law fits (``chain_misfit``) must also stand out of
+    the departures of the gages that share its body (``bodies``, per row; all other gages when
+    not given) at the same modes (:func:`_beside_peers`), else it is model form."""
     dep, se = _departures(fm)
+    peers = _peers(numbers, bodies)
     level = float(scipy.stats.chi2.isf(P_CHANCE / (2 * len(numbers)), 1))
     out = []
     for g, num in enumerate(numbers):
@@ -242,7 +246,7 @@ def chain_phase(fm: FreeModal, numbers: Sequence[int]) -> list[Finding]:
         misfit = _law_misfit(num, float(c_tau[i]), int(ok.sum()), len(numbers), drop_tau, level,
                              modes) if skew else None
         if misfit is not None:
-            out.append(misfit)
+            out.append(_beside_peers(misfit, dep / se, g, peers[g], len(numbers)) or misfit)
             continue
         drop, resid = (drop_tau, float(c_tau[i])) if skew else (drop_fc, float(c_fc[k]))
         scattered = _scattered(num, drop, resid, int(ok.sum()), len(numbers), modes)
@@ -297,6 +301,65 @@ def _law_misfit(num: int, resid: float, n_entries: int, n_gages: int, drop: floa
                         f"it over its modes and impacts (residual chi-square {resid:.0f} over {dof} "
                         f"dof, chance level {fit_level:.0f}): unexplained at gage {num}",
                    null="chi-square, 1 dof (phase departures over their standard errors)")
+
+
+def _peers(numbers: Sequence[int], bodies: Sequence[str] | None) -> list[list[int]]:
+    """Per row, the other rows its phases are held against: those of its body (``bodies``, per
+    row), or every other row when the bodies are not given."""
+    n = len(numbers)
+    if bodies is None:
+        return [[j for j in range(n) if j != i] for i in range(n)]
+    return [[j for j in range(n) if j != i and bodies[j] == bodies[i]] for i in range(n)]
+
+
+def _beside_peers(f: Finding, z: np.ndarray, g: int, peers: list[int], n_gages: int) -> Finding | None:
+    """A phase finding ``f`` of row ``g`` held against the departures of its ``peers`` (rows) at
+    the same modes: None when it stands out of them, else a model-form ``complex_phase`` finding
+    (the shapes' complexity, which every gage of the body shares), never a sensor's. ``z``:
+    every entry's departure over its standard error (n_imp, n_g, K), NaN where not measured.
+
+    A structure whose damping is not proportional has complex modes wherever two of them are
+    close (a hull mode beside a rudder mode, a cluster of hull modes): every gage of the body
+    that carries them departs from 0 or pi, mode by mode, at a scale the phase noise does not
+    give and by an amount set by where it sits, which no one law of a channel fits. A fault of
+    one channel (a gain drifting through the trial, a resonance of its mount) departs at that
+    gage alone. Not knowing the shapes' scale, the gage's mean squared departure is tested
+    against its peers' at the modes it measures as a ratio of two variances:
+    ``F = mean(z_g^2) / max(1, mean(z_peers^2))`` (the peers' at least the noise's 1) against the
+    F(n_g, n_peers) distribution's ``P_CHANCE / n_gages`` upper quantile (every gage; ``n`` the
+    entries measured). Modal development and check trials (issue 17): a gain drifting on gage
+    8 (seed 65003) departs 406x its body's others (level 2.7); the departures of friction, of
+    rattles (but one rudder gage of check seed 161000) and of a high-pass gage the skew law
+    was fitted to are 0.2-3.6x their body's (levels 3.7-13). With no peer of its body measured
+    at its modes, every other gage is its peer; with none at all the finding stands."""
+    zg = z[:, g, :]
+    modes = np.isfinite(zg).any(axis=0)
+    mine = zg[np.isfinite(zg)] ** 2
+    theirs = _measured(z, peers, modes)
+    if not theirs.size:
+        theirs = _measured(z, [j for j in range(z.shape[1]) if j != g], modes)
+    if not theirs.size:
+        return None
+    stat = float(mine.mean() / max(1.0, theirs.mean()))
+    level = float(scipy.stats.f.isf(P_CHANCE / n_gages, mine.size, theirs.size))
+    if stat > level:
+        return None
+    num = f.gages[0]
+    return Finding(check="complex_phase", layer=Layer.MODEL_FORM, gages=(num,), statistic=stat,
+                   chance_level=level, size=f.size, unit=f.unit, window="decay", mode_hz=f.mode_hz,
+                   p_chance=P_CHANCE, more=f.more + (("misfit_chi2", f.statistic, ""),),
+                   text=f"gage {num}'s phase departs from the other gages' and no one time skew fits it, "
+                        f"but it departs only {stat:.1f}x as much as its body's other gages at the same "
+                        f"modes (chance level {level:.1f}): the mode shapes' complexity, which the body's "
+                        "gages share (model form), not a sensor's",
+                   null="F(n_g, n_peers): the gage's mean squared phase departure over its peers'")
+
+
+def _measured(z: np.ndarray, rows: list[int], modes: np.ndarray) -> np.ndarray:
+    """The squared departures ``z**2`` of ``rows`` at ``modes`` ((K,) bool) that are measured,
+    flat."""
+    v = z[:, rows][:, :, modes]
+    return v[np.isfinite(v)] ** 2
 
 
 def _scattered(num: int, drop: float, resid: float, n_entries: int, n_gages: int,
