@@ -149,15 +149,8 @@ def damped_basis(
     if blocked and by_matmul:
         _blocked_basis(PhiT, s, t0, dt, n, scratch)
     elif blocked:
-        grids = None if scratch is None else scratch.get("grids")
-        if grids is None:
-            m = int(np.ceil(np.sqrt(n)))
-            grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
-            if scratch is not None:
-                scratch["grids"] = grids
-        m, rows = grids[0].size, grids[1].size
-        lo = np.exp(s[:, None] * grids[0][None, :])  # (K, m)
-        hi = np.exp(s[:, None] * grids[1][None, :])  # (K, rows)
+        lo, hi = _grid_tables(s, t0, dt, n, scratch)
+        rows, m = hi.shape[1], lo.shape[1]
         work = None if scratch is None else scratch.get("z")
         if work is None or work.shape != (K, rows, m):
             work = np.empty((K, rows, m), dtype=complex)
@@ -179,6 +172,20 @@ def damped_basis(
     return PhiT.T
 
 
+def _grid_tables(s: np.ndarray, t0: float, dt: float, n: int,
+                 scratch: dict | None) -> tuple[np.ndarray, np.ndarray]:
+    """The short tables whose products give exp(s_k (t0 + i dt)), i < n, for the poles ``s``
+    (K,): with i = r m + j (m = ceil(sqrt n)), ``lo`` = exp(s (t0 + j dt)) (K, m) and ``hi`` =
+    exp(s r m dt) (K, rows); the two time grids kept in ``scratch["grids"]``."""
+    grids = None if scratch is None else scratch.get("grids")
+    if grids is None:
+        m = int(np.ceil(np.sqrt(n)))
+        grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
+        if scratch is not None:
+            scratch["grids"] = grids
+    return np.exp(s[:, None] * grids[0][None, :]), np.exp(s[:, None] * grids[1][None, :])
+
+
 def _blocked_basis(PhiT: np.ndarray, s: np.ndarray, t0: float, dt: float, n: int,
                    scratch: dict | None) -> None:
     """Rows 2k, 2k+1 of ``PhiT`` (2K [+p], n), C-ordered rows) = Re, Im exp(s_k (t₀ + i Δt)),
@@ -189,15 +196,8 @@ def _blocked_basis(PhiT: np.ndarray, s: np.ndarray, t0: float, dt: float, n: int
     one: ~2x faster than the complex product of the default path, the same to rounding, ≲ 1 ulp of the
     larger term)."""
     K = s.size
-    grids = None if scratch is None else scratch.get("grids")
-    if grids is None:
-        m = int(np.ceil(np.sqrt(n)))
-        grids = (t0 + dt * np.arange(m), dt * m * np.arange(-(-n // m)))
-        if scratch is not None:
-            scratch["grids"] = grids
-    m, rows = grids[0].size, grids[1].size
-    lo = np.exp(s[:, None] * grids[0][None, :])  # (K, m)
-    hi = np.exp(s[:, None] * grids[1][None, :])  # (K, rows)
+    lo, hi = _grid_tables(s, t0, dt, n, scratch)
+    rows, m = hi.shape[1], lo.shape[1]
     A = np.empty((K, 2, rows, 2))  # per mode and part (Re, Im): the row's 2 weights of (Re l, Im l)
     A[:, 0, :, 0] = A[:, 1, :, 1] = hi.real
     np.negative(hi.imag, out=A[:, 0, :, 1])
