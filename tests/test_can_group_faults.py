@@ -161,8 +161,11 @@ def _spoil(g: int, c: int, slot: int, m: can.Message) -> can.Message | None:
 def test_fault_lines_match_the_gap_list(tmp_path):
     """One line per incident at its stream time with the samples the recording lacks: the same
     instants lost in both groups count once; the seq_gap events are the recorder's gaps."""
-    # quiet_s over idle_s: the silence that ends the stream is not one the count must hold
-    said, summary, blocks, events = _record(tmp_path, _frames(400, lambda c: (1, 2), _spoil), "quiet_s=5")
+    # quiet_s over idle_s: the silence that ends the stream is not one the count must hold;
+    # paced at the sample clock as a front-end sends: a refused frame is stamped where its
+    # group's stream stands, which lags behind frames queued faster than real time and held
+    said, summary, blocks, events = _record(tmp_path, _frames(400, lambda c: (1, 2), _spoil),
+                                            "quiet_s=5", pace_s=1.0)
     assert not isinstance(summary, DeviceClosed)
     gaps = [(e["detail"]["expected_sample"], e["detail"]["missing_samples"])
             for e in events if e["kind"] == "gap"]
