@@ -346,12 +346,14 @@ class SerialDevice(Device):
                 if self._suspect is not None:
                     self._judge_suspect(frame)
                 self._end_repeats()
+                self._report_refused()
                 self._ended = True
                 self._drop_port()
                 break
             if frame.n_channels != self.n_channels:
                 self._mismatch(frame)
                 continue
+            self._report_refused()  # a run of refused frames ended: its count, all of it
             self._place(frame)
         if self._ended:
             self._emit_partial()

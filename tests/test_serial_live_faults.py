@@ -28,7 +28,7 @@ from ramdaq.drivers.errors import DeviceClosed
 from ramdaq.drivers.fault_words import FaultWords, describe
 from ramdaq.drivers.mcap_replay import McapReplayDevice
 from ramdaq.drivers.serial_device import SerialDevice
-from ramdaq.drivers.serial_frames import encode_frame
+from ramdaq.drivers.serial_frames import FLAG_END, encode_frame
 from ramdaq.drivers.sim import SimDevice
 
 pytestmark = pytest.mark.timeout(60)
@@ -135,6 +135,18 @@ def test_wrong_channel_count_said_once_and_counted(tmp_path):
     refused = [e["detail"] for e in events if e["kind"] == "frame_mismatch"]
     assert sum(d["frames"] for d in refused) == refused[-1]["total"] == n
     assert out.samples == 0
+
+
+def test_refused_run_between_good_frames_counted_whole(tmp_path):
+    """Ten frames of a wrong channel count between good ones, within one report interval: the
+    first is said at once, and the closing count has all ten (the run's end reports the rest)."""
+    end = encode_frame(50, 50 * NS, np.zeros((16, 0), dtype=np.int64), flags=FLAG_END)
+    frames = _frames(0, 20, 16) + _frames(20, 10, 12) + _frames(30, 20, 16) + end
+    device, shown, events, _ = _trial(tmp_path, [frames, 1.0])  # ends by its end frame
+    tally = [s for s in shown if s.startswith("device faults: ")]
+    assert len(tally) == 1 and "10 frame(s) refused for a wrong channel count" in tally[0]
+    refused = [e["detail"] for e in events if e["kind"] == "frame_mismatch"]
+    assert sum(d["frames"] for d in refused) == refused[-1]["total"] == 10
 
 
 def test_record_loop_records_the_silence(tmp_path):
