@@ -95,7 +95,7 @@ def record(device: Device, path: str | Path, *, readout: bool = True, overwrite:
             for block in _blocks(device, rec, words, tell):
                 written_truth, faults = store_block(rec, device, block, written_truth,
                                                     wait_for_room=not paced, queue_limit=queue_blocks)
-                _tell(words.lines(faults), tell)
+                words.tell(faults, tell)
                 if progress:
                     progress(block)
                 gap = last is not None and block.first_sample != last
@@ -140,13 +140,5 @@ def _blocks(device: Device, rec: Recorder, words: FaultWords,
 
 def _faults_now(device: Device, rec: Recorder, words: FaultWords,
                 tell: Callable[[str], None] | None) -> None:
-    faults = device.take_faults()
-    for fault in faults:
-        rec.event(fault.kind, fault.t_ns, **fault.detail)
-    _tell(words.lines(faults), tell)
-
-
-def _tell(lines: list[str], tell: Callable[[str], None] | None) -> None:
-    for line in lines:  # counted by FaultWords whether told or not
-        if tell:
-            tell(line)
+    """The faults the device reports now, recorded as events and told."""
+    words.tell(device.take_faults(), tell, rec.event)

@@ -454,11 +454,7 @@ class Session:
     def _show_faults(self, faults: list[DeviceFault], rec: Recorder | None,
                      recorded: bool = False) -> None:
         """Record the device's faults (unless ``store_block`` did) and say them in words."""
-        if rec and not recorded:
-            for fault in faults:
-                rec.event(fault.kind, fault.t_ns, **fault.detail)
-        for line in self._fault_words.lines(faults):
-            self._say(line)
+        self._fault_words.tell(faults, self._say, rec.event if rec and not recorded else None)
 
     def _take(self, block: Block, rec: Recorder | None) -> None:
         """One block through the recorder, the trigger, the first looks and the views."""

@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from .base import DeviceFault
 
-__all__ = ["FaultWords", "REPEAT_S"]
+__all__ = ["FaultWords", "REPEAT_S", "number_runs"]
 
 INCIDENT_S = 0.01
 """Faults of an incident's kinds this close in stream time are one incident, s: a CAN frame of
@@ -35,6 +35,18 @@ REPEAT_S = 10.0
 _INCIDENT = ("crc_error", "resync", "seq_gap", "bad_crc", "wrong_dlc", "bad_frame", "port_back")
 _REPEATING = ("frame_mismatch",)
 _LOSSES = ("seq_gap", "port_back")  # each is a gap of its own: never taken as said already
+
+
+def number_runs(ns: Iterable[int]) -> str:
+    """Channel or gage numbers as runs, in the order given: [1, 2, 3, 5] -> ``"1-3, 5"``,
+    [9, ..., 16] -> ``"9-16"``; a run of two is written out (``"4, 5"``)."""
+    runs: list[list[int]] = []
+    for n in ns:
+        if runs and n == runs[-1][-1] + 1:
+            runs[-1].append(n)
+        else:
+            runs.append([n])
+    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
 
 
 def _s(n: float, unit: str) -> str:
@@ -153,6 +165,18 @@ class FaultWords:
         self._incident_t: int | None = None  # stream time of the last incident shown, ns
         self._incident_gap = False  # ... and whether its line said a gap
         self._repeat_t: dict[tuple, float] = {}  # (kind, what) -> monotonic s last shown
+
+    def tell(self, faults: list[DeviceFault], say: Callable[[str], None] | None,
+             record: Callable[..., None] | None = None) -> None:
+        """Record each fault through ``record`` (a recorder's ``event(kind, t_ns, **detail)``;
+        None where the faults are recorded already or nothing is recorded), then say their
+        :meth:`lines` through ``say`` (None: counted, not said)."""
+        if record is not None:
+            for fault in faults:
+                record(fault.kind, fault.t_ns, **fault.detail)
+        for line in self.lines(faults):
+            if say is not None:
+                say(line)
 
     def lines(self, faults: Iterable[DeviceFault]) -> list[str]:
         """The lines to show for one batch of faults (oldest first)."""
