@@ -13,6 +13,7 @@ import numpy as np
 from ..analysis.gap.trialdata import ScaledCounts, TrialData, prepare
 from ..analysis.model.rig import Gage, Rig, RigError, parse_rig
 from ..drivers.block import StreamInfo
+from ..drivers.fault_words import number_runs
 from ..drivers.mcap_replay import McapReplayDevice
 from .recording import BlockwiseOfflineTrigger, Recording, force_row, no_rig, rig_of, rig_or_fail
 from .trigger import ImpactEvent, Trigger
@@ -183,9 +184,9 @@ def _matching_words(path: str | Path, info: StreamInfo, rig: Rig, have: list[Gag
     out = []
     missing = sorted({g.number for g in rig.gages} - {g.number for g in have})
     if missing:
-        out.append(f"warning: {path}: rig {rig.name!r}'s gage(s) {_numbers(missing)} have no "
+        out.append(f"warning: {path}: rig {rig.name!r}'s gage(s) {number_runs(missing)} have no "
                    f"channel in the recording: the diagnosis uses gages "
-                   f"{_numbers(sorted(g.number for g in have))} only")
+                   f"{number_runs(sorted(g.number for g in have))} only")
     carried = _carried_name(info)
     if carried is not None and carried != rig.name:
         out.append(f"warning: {path}: the recording carries rig {carried!r}; rig {rig.name!r} "
@@ -202,17 +203,6 @@ def _carried_name(info: StreamInfo) -> str | None:
         return parse_rig(info.rig_toml).name
     except RigError:
         return None
-
-
-def _numbers(ns: list[int]) -> str:
-    """Gage numbers as runs: [1, 2, 3, 5] -> '1-3, 5'."""
-    runs: list[list[int]] = []
-    for n in ns:
-        if runs and n == runs[-1][-1] + 1:
-            runs[-1].append(n)
-        else:
-            runs.append([n])
-    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
 
 
 def trial_data(lt: LoadedTrial, *, pre_s: float = 1.0, post_max_s: float = 4.0,

@@ -92,6 +92,7 @@ from .base import QUIET_S, TIMED_OUT, Device, DeviceFault
 from .block import Block, StreamInfo, sample_time_ns
 from .can_frames import UNRELATED, CycleAssembler, FrameCodec
 from .errors import DeviceClosed, DeviceNotFound
+from .fault_words import number_runs
 from .rig_channels import rig_channels
 from .slcan_reader import SlcanFrame, SlcanReader
 
@@ -701,8 +702,5 @@ class CanDevice(Device):
         self._gap_at = None
 
     def _channels_of(self, groups: list[int]) -> str:
-        """``"9-16"``: the channels of ``groups`` (1-based, as the DBC numbers them)."""
-        chans = sorted(c for g in groups for c in self.groups[g].lay.channels)
-        if chans and chans == list(range(chans[0], chans[-1] + 1)):
-            return f"{chans[0]}-{chans[-1]}" if len(chans) > 1 else str(chans[0])
-        return ",".join(map(str, chans))
+        """``"9-16"``: the channels of ``groups`` (1-based, as the DBC numbers them) as runs."""
+        return number_runs(sorted(c for g in groups for c in self.groups[g].lay.channels))

@@ -327,8 +327,8 @@ class SlcanReader:
         except BlockingIOError:
             return b""
         if not chunk:
-            raise serial.SerialException("device reports readiness to read but returned no data "
-                                         "(device disconnected?)")
+            raise serial.SerialException("end of file on the port: the adapter was unplugged or "
+                                         "its other end closed")
         return chunk
 
     def fileno(self) -> int:
