@@ -168,7 +168,12 @@ def rig_of(path: str | PathLike, info: StreamInfo, rig: Rig | str | Path | None)
     elif not isinstance(rig, Rig):
         rig = load_rig(rig)
     medium = info.extra.get("medium")
-    return rig.with_medium(medium) if medium and medium != rig.medium else rig
+    if not medium or medium == rig.medium:
+        return rig
+    try:
+        return rig.with_medium(medium)
+    except RigError as err:
+        raise RigError(f"{err} (the medium comes from the recording: {path} was made in {medium})") from err
 
 
 def _join(blocks: list[Block], n_channels: int) -> tuple[np.ndarray, int]:

@@ -417,3 +417,22 @@ def test_sim_device_back_to_back(tmp_path, albacore):
     back_info, back, _ = _replay(path)
     assert back_info == info and len(back) == len(blocks)
     assert all(a.same_as(b) for a, b in zip(back, blocks, strict=True))
+
+
+def test_a_rig_without_the_recorded_medium_says_the_medium_came_from_the_recording(tmp_path):
+    """A water-only rig given for an air recording: refused in one line that names the missing
+    section and says the air came from the recording (a new user could not tell, session 16)."""
+    from ramdaq.analysis.model.rig import RigError, parse_rig
+    from ramdaq.daq.recording import rig_of
+
+    text = (RIGS / "albacore.toml").read_text()
+    start = text.index("[damping.air]")
+    water_only = (text[:start] + text[text.index("[damping.water]"):]).replace(
+        'medium = "air"', 'medium = "water"', 1)
+    rig = parse_rig(water_only, source="water-only.toml")
+    info = dataclasses.replace(stream_info(), extra={"medium": "air"})
+    with pytest.raises(RigError) as err:
+        rig_of(tmp_path / "trial.mcap", info, rig)
+    msg = str(err.value)
+    assert "damping.air: missing" in msg and f"{tmp_path / 'trial.mcap'} was made in air" in msg
+    assert "\n" not in msg
