@@ -241,20 +241,36 @@ def _full_scale(info: StreamInfo, scale: np.ndarray) -> float | None:
     return float(np.min(np.abs(scale)) * (2 ** (bits - 1) - 1))
 
 
+UNSURE_REL_SE = 0.25
+"""A gage's first-look decrement whose standard error is more than this fraction of itself is
+marked "unsure" (a gage at the noise level); the session shows a look only when the median gage
+is within it (``session.LOOK_REL_SE``), and a trial summary row whose hits are
+mostly above it is marked."""
+
+
+def is_sure(delta: float, delta_se: float) -> bool:
+    """A decrement worth showing as a gage's number so far: a decay (``delta`` > 0) whose
+    standard error is within :data:`UNSURE_REL_SE` of it (False for a NaN error)."""
+    return bool(delta > 0 and delta_se / delta <= UNSURE_REL_SE)
+
+
 def _mean_scatter(values: list[float], se: list[float] | None = None) -> dict:
     """Mean, scatter (std) and count of the finite ``values``, each one's deviation from the
-    mean (%); with their standard errors ``se``, ``p_agree``: the chance that hits measuring one
-    number scatter as much (chi-square of the values about their weighted mean, over n - 1
-    degrees of freedom), None where fewer than two values have one."""
+    mean (%); with their standard errors ``se``, ``rel_se``: each one's error relative to it
+    (those finite), and ``p_agree``: the chance that hits measuring one number scatter as much
+    (chi-square of the values about their weighted mean, over n - 1 degrees of freedom), None
+    where fewer than two values have one."""
     pairs = [(x, e) for x, e in zip(values, se or [math.nan] * len(values), strict=True)
              if np.isfinite(x)]
     v = np.array([x for x, _ in pairs])
     if v.size == 0:
-        return {"mean": None, "std": None, "n": 0, "deviation_pct": [], "p_agree": None}
+        return {"mean": None, "std": None, "n": 0, "deviation_pct": [], "rel_se": [], "p_agree": None}
     mean = float(v.mean())
+    se_v = np.array([e for _, e in pairs])
+    rel = [float(e / abs(x)) for x, e in pairs if math.isfinite(e) and x != 0]
     return {"mean": mean, "std": float(v.std(ddof=1)) if v.size > 1 else None, "n": int(v.size),
-            "deviation_pct": [float(100 * (x / mean - 1)) for x in v],
-            "p_agree": _p_agree(v, np.array([e for _, e in pairs]))}
+            "deviation_pct": [float(100 * (x / mean - 1)) for x in v], "rel_se": rel,
+            "p_agree": _p_agree(v, se_v)}
 
 
 def _p_agree(v: np.ndarray, se: np.ndarray) -> float | None:
@@ -336,6 +352,8 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
                          for m in motions},
         "delta_modal": _mean_scatter([a.damping["delta_modal"] for a in ok]),
         "delta_hull_motion": {m: _mean_scatter([a.hull_motions[m].delta for a in ok
+                                                if m in a.hull_motions],
+                                               [a.hull_motions[m].delta_se for a in ok
                                                 if m in a.hull_motions])
                               for m in sorted({m for a in ok for m in a.hull_motions})},
         "C_N_s_per_m": _mean_scatter([a.damping["C_N_s_per_m"] for a in ok]),

@@ -18,21 +18,10 @@ if TYPE_CHECKING:  # imported where used: only a terminal draws the live table
     from rich.live import Live
 
 from ..drivers.block import Block, StreamInfo
-
-UNSURE_REL_SE = 0.25
-"""A gage's first-look decrement whose standard error is more than this fraction of itself is
-marked "unsure" (a gage at the noise level); the session shows a look only when the median gage
-is within it (``session.LOOK_REL_SE``)."""
-
+from .analyzer import is_sure
 
 _RICH_MARKS = re.compile(r"\[|:\S*?:")
 """What rich's ``print`` may read as markup (``[style]``) or an emoji code (``:name:``)."""
-
-
-def is_sure(delta: float, delta_se: float) -> bool:
-    """A decrement worth showing as a gage's number so far: a decay (``delta`` > 0) whose
-    standard error is within :data:`UNSURE_REL_SE` of it (False for a NaN error)."""
-    return bool(delta > 0 and delta_se / delta <= UNSURE_REL_SE)
 
 
 def accepted_line(index: int, onset_s: float, a, v_label: str = "v") -> str:

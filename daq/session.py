@@ -61,6 +61,7 @@ from ..drivers.errors import DeviceError, DeviceTimeout
 from ..drivers.fault_words import FaultWords
 from ..drivers.mcap_format import IMPACTS_TOPIC
 from .analyzer import (
+    UNSURE_REL_SE,
     AnalyzerLoad,
     FinalDone,
     FinalJob,
@@ -76,7 +77,7 @@ from .analyzer import (
 from .final_process import FinalProcess, WorkerDied, WorkerUnavailable
 from .heap import map_large_blocks
 from .jobqueue import Admission, JobQueue, QueuePolicy
-from .readout import UNSURE_REL_SE, LiveReadout, accepted_line
+from .readout import LiveReadout, accepted_line
 from .trigger import ImpactEvent, Trigger, TriggerSettings
 
 if TYPE_CHECKING:  # the recorder (the MCAP writer) is imported only by a session that records

@@ -53,3 +53,32 @@ def test_a_hit_cut_by_the_streams_end_is_marked_in_the_summary(tmp_path):
     lines = summary_table(s)
     assert f"  hit 1 is in these means on a short decay: its record ended {s['cut_short'][1]}" \
         in lines
+
+
+def test_a_summary_row_whose_hits_sit_at_the_noise_is_marked_unsure(tmp_path):
+    """ALBACORE in air: the hull's own rotation at the rudder (alpha_b, gages 5, 13, 14) barely
+    moves, so each hit's decrement of it has an error of a third of itself, while the rudder's
+    motions have errors of ~0.01 %. The summary's mean over hits of such a row is marked, with
+    the hits' own errors, exactly where the median of those errors is above the live readout's
+    "unsure" limit; the rudder's rows are not."""
+    from ramdaq.daq.analyzer import UNSURE_REL_SE, trial_summary
+    from ramdaq.daq.commands.analyze import summary_table
+    from ramdaq.daq.record import record
+    from ramdaq.drivers.sim import SimDevice
+
+    path = tmp_path / "air.mcap"
+    rig = SAMPLE.parent / "rigs" / "albacore.toml"
+    with SimDevice(rig, duration_s=30.0, impacts=[5.0, 15.0, 25.0], seed=0, pace="fast") as dev:
+        record(dev, path, readout=False)
+    _, hits = run_analysis(path)
+    ok = [h.analysis for h in hits if h.accepted]
+    assert len(ok) == 3
+    lines = summary_table(trial_summary(hits))
+    for name in ok[0].hull_motions:  # the hits' own errors, straight from each hit
+        rel = [a.hull_motions[name].delta_se / abs(a.hull_motions[name].delta) for a in ok]
+        at = next(i for i, ln in enumerate(lines) if ln.startswith(f"  delta_{name} "))
+        marked = lines[at + 1].lstrip().startswith("^ unsure:")
+        assert marked == (float(np.median(rel)) > UNSURE_REL_SE), (name, rel, lines[at:at + 2])
+    assert any(ln.lstrip().startswith("^ unsure:") for ln in lines)  # alpha_b, in this trial
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("  delta_alpha "))
+    assert "unsure" not in lines[at + 1]

@@ -25,7 +25,7 @@ from ...analysis.model.rig import Rig
 from ...analysis.model.structure import added_mass
 from ...analysis.model.surface import Surface
 from ...analysis.model.units import from_si
-from ..analyzer import HitResult, analysis_to_json, finite_json, trial_summary
+from ..analyzer import UNSURE_REL_SE, HitResult, analysis_to_json, finite_json, trial_summary
 
 MODEL_MOTIONS = ("v", "gamma", "alpha")
 """The model's motion names; ``report.json``'s ``surface.motions`` gives what the rig calls each
@@ -311,6 +311,23 @@ def _pct(v: float | None) -> str:
     return "-" if v is None else f"{100 * v:.2g}%"
 
 
+def _row_marks(d: dict) -> list[str]:
+    """What a summary row's mean over hits does not say by itself: hits that differ beyond
+    their own standard errors (:data:`HITS_AGREE_P`), and hits each at the noise level (median
+    relative error above :data:`~ramdaq.daq.analyzer.UNSURE_REL_SE`, the live readout's
+    "unsure")."""
+    out = []
+    if (d.get("p_agree") or 1.0) < HITS_AGREE_P:
+        out.append(f"the hits differ beyond their own standard errors (chance {d['p_agree']:.1e}): "
+                   "not one number; see each hit above")
+    rel = d.get("rel_se") or []
+    if rel and float(np.median(rel)) > UNSURE_REL_SE:
+        out.append(f"unsure: each hit's own standard error is {100 * min(rel):.0f}-"
+                   f"{100 * max(rel):.0f} % of it (more than {100 * UNSURE_REL_SE:.0f} %: near "
+                   "the noise)")
+    return out
+
+
 def summary_table(s: dict, units: str = "si") -> list[str]:
     """Lines of the trial summary: per motion and gage the mean decrement over accepted hits
     with its standard deviation; C and c in SI or, with ``units="report"``, ton/ft units."""
@@ -340,9 +357,7 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
             return
         std = "-" if d["std"] is None else fmt.format(d["std"])
         lines.append(f"  {name:14s} {fmt.format(d['mean']):>9s} {std:>10s} {d['n']:5d}")
-        if (d.get("p_agree") or 1.0) < HITS_AGREE_P:
-            lines.append(f"  {'':14s} ^ the hits differ beyond their own standard errors "
-                         f"(chance {d['p_agree']:.1e}): not one number; see each hit above")
+        lines.extend(f"  {'':14s} ^ {mark}" for mark in _row_marks(d))
 
     row("f (Hz)", s["f_hz"], "{:.3f}")
     for m, d in s["delta_motion"].items():
