@@ -133,13 +133,14 @@ def skipped_steps(rig: Rig, gage_numbers: tuple[int, ...]) -> tuple[SkippedStep,
     if not rig.structural:
         return tuple(SkippedStep(step, f"rig {rig.name!r} describes only its channels (no rudder, "
                                        f"stock or hull)") for step in CHAIN_STEPS)
-    have = set(gage_numbers)
+    have, in_rig = set(gage_numbers), {g.number for g in rig.gages}
     out = []
     for step, need in CHAIN_STEPS.items():
         lacking = [n for n in need if n not in have]
         if lacking:
+            whose = "the record" if set(lacking) <= in_rig else f"rig {rig.name!r}"
             out.append(SkippedStep(step, f"needs gage(s) {', '.join(map(str, lacking))}, which "
-                                         f"the record does not have"))
+                                         f"{whose} does not have"))
     return tuple(out)
 
 

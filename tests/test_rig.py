@@ -1,5 +1,6 @@
 """Rig files: the shipped rigs load, wrong rigs are refused with a line naming the field."""
 
+import math
 import re
 
 import pytest
@@ -27,11 +28,28 @@ def _gage_block(text: str, number: int) -> str:
     return m.group(0)
 
 
-def test_missing_gage_refused():
+def test_a_layout_short_of_16_gages_is_read_and_says_what_it_cannot_compute():
+    """A field system of 8 channels (gages 1-8 under their report numbers): the rig is read,
+    its geometry has NaN where a left-out gage gives a distance, and the steps of the report's
+    chain that need gages 9-16 are named with the gages they lack; two gages are refused."""
+    from ramdaq.analysis.impact import CHAIN_STEPS, skipped_steps
+    from ramdaq.analysis.model.geometry import gage_geometry
+
     text = (RIGS / "albacore.toml").read_text()
-    bad = text.replace(_gage_block(text, 16), "")
-    with pytest.raises(RigError, match=r"bad\.toml: gages: missing gage\(s\) 16"):
-        parse_rig(bad, "bad.toml")
+    for n in range(9, 17):
+        text = text.replace(_gage_block(text, n), "")
+    rig = parse_rig(text, "eight.toml")
+    assert [g.number for g in rig.gages] == list(range(1, 9))
+    geom = gage_geometry(rig)
+    assert math.isnan(geom.L_H) and math.isnan(geom.x7) and geom.x1 > 0 and geom.z1 > 0
+    skipped = {s.step: s.reason for s in skipped_steps(rig, tuple(range(1, 9)))}
+    assert set(skipped) == {step for step, need in CHAIN_STEPS.items() if max(need) > 8}
+    assert all(r.endswith(f"which rig {rig.name!r} does not have") for r in skipped.values())
+    two = text
+    for n in range(3, 9):
+        two = two.replace(_gage_block(two, n), "")
+    with pytest.raises(RigError, match=r"two\.toml: gages: 2 gage\(s\); a structure needs 3 or more"):
+        parse_rig(two, "two.toml")
 
 
 def test_duplicate_gage_refused():

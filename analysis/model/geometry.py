@@ -14,6 +14,7 @@ stock; the errors name the positions as its file writes them, in ship axes.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from ..report1836.motions import GageGeometry
@@ -31,8 +32,13 @@ class StockPair:
     half_spacing_m: float
 
 
+_NOWHERE = (math.nan, math.nan, math.nan)
+
+
 def _pos(rig: Rig, n: int) -> tuple[float, float, float]:
-    return rig.gage(n).position_m
+    """Gage ``n``'s position, m; NaN for a gage the rig leaves out (the distances it gives are
+    NaN, and the report's steps that need it are skipped: ``impact.skipped_steps``)."""
+    return next((g.position_m for g in rig.gages if g.number == n), _NOWHERE)
 
 
 def _ship(rig: Rig, p: tuple[float, float, float]) -> tuple[float, ...]:
@@ -47,6 +53,8 @@ def _height(rig: Rig) -> str:
 def stock_pair(rig: Rig, a: int, b: int) -> StockPair:
     """Order a stock (or rudder-top) gage pair by which is aft of the stock axis."""
     pa, pb = _pos(rig, a), _pos(rig, b)
+    if math.isnan(pa[0] + pb[0]):  # one is left out
+        return StockPair(a, b, math.nan, math.nan)
     if abs(pa[2] - pb[2]) > ALIGN_TOL_M:
         raise RigError(f"{rig.source}: gages {a} and {b} must be at one {_height(rig)} "
                        f"({_ship(rig, pa)} vs {_ship(rig, pb)} m)")
@@ -56,7 +64,8 @@ def stock_pair(rig: Rig, a: int, b: int) -> StockPair:
 
 
 def gage_geometry(rig: Rig) -> GageGeometry:
-    """The report's distances for ``rig`` (metres), checked against its assumptions."""
+    """The report's distances for ``rig`` (metres), checked against its assumptions; NaN those
+    of gages the rig leaves out."""
     p = {n: _pos(rig, n) for n in range(1, 17)}
     h, b = rig.rudder.stock_x_m, rig.rudder.attach_z_m
     along = "vertical" if rig.surface.is_rudder else "line along the stock"

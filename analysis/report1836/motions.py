@@ -23,6 +23,7 @@ angles in rad. Damping (Eq 14-17) is in :mod:`ramdaq.analysis.report1836.damping
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -56,7 +57,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class GageGeometry:
-    """Gage distances of Figures 1, 2 and 7, all in metres and all positive.
+    """Gage distances of Figures 1, 2 and 7, all in metres and all positive (NaN where a gage
+    that gives it is left out of the layout).
 
     Attributes
     ----------
@@ -99,7 +101,7 @@ class GageGeometry:
             value = getattr(self, f.name)
             if f.name in ("h", "b"):
                 finite(f.name, value)
-            else:
+            elif not math.isnan(value):  # NaN: a gage that gives it is not in the layout
                 positive(f.name, value)
 
 

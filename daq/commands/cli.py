@@ -677,6 +677,7 @@ def cmd_export_uff(args: argparse.Namespace) -> int:
 
 
 def cmd_rig(args: argparse.Namespace) -> int:
+    from ...analysis.impact import skipped_steps
     from ...analysis.model.rig_modes import eq18_check, modes_in
 
     if args.rig == "fit":
@@ -690,6 +691,8 @@ def cmd_rig(args: argparse.Namespace) -> int:
     if not rig.structural:
         print("channels only (no rudder, stock or hull): no modes to compute")
         return EXIT_OK
+    for s in skipped_steps(rig, tuple(g.number for g in rig.gages)):  # a layout short of 16
+        print(f"not computed with these gages: {s.step}: {s.reason}")
     for medium in ("air", "water"):
         if medium not in rig.damping:
             continue
