@@ -63,7 +63,8 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
 * frames of other nodes (``unrelated_frame``), unparseable lines from a serial adapter
   (``bad_frame``, with the line), late and duplicate frames are counted; these faults are
   reported at most once per ``report_s`` with their counts, except those that lose samples
-  (``bad_frame``, ``wrong_dlc``, ``bad_crc``: each at once, at its group's stream time).
+  (``bad_frame``, ``wrong_dlc``, ``bad_crc``: each at once, at the cycle its SEQ names, else at its
+  group's stream time).
   ``bus_lost`` (the interface failed) ends that bus; when none is left, the samples already
   assembled are handed out and then :meth:`read` raises
   :class:`~ramdaq.drivers.errors.DeviceClosed` naming the buses;
@@ -447,10 +448,20 @@ class CanDevice(Device):
 
     def _rejected(self, msg: can.Message | SlcanFrame, kind: str, now: float) -> None:
         """Count a frame refused by the codec; one of a group's (a wrong length, a failed CRC) is
-        stamped where that group's stream stands, not where the group furthest ahead does."""
+        stamped at the cycle its SEQ names, when it still holds one within the group's reorder
+        window (frames queued faster than real time are held, so the group's stream lags the
+        frames read), else where that group's stream stands -- never where the group furthest
+        ahead does."""
         lay = self.codec.layout_of(msg)
         grp = self.groups.get(lay.group) if lay is not None and kind != UNRELATED else None
-        at = None if grp is None or grp.base is None else self._t_ns((grp.hi + 1) * grp.T)
+        at = None
+        if grp is not None and grp.base is not None:
+            cycle = grp.hi + 1
+            if len(msg.data) >= lay.seq_end:  # a wrong length may keep its SEQ; a bad CRC may not
+                named = grp.cycle_of(int.from_bytes(msg.data[lay.seq_at:lay.seq_end], "little"))
+                if abs(named - cycle) <= grp.window:
+                    cycle = named
+            at = self._t_ns(cycle * grp.T)
         self._count(kind, now, at, id=hex(msg.arbitration_id), dlc=len(msg.data),
                     **({"group": grp.lay.group} if grp is not None else {}))
 

@@ -646,6 +646,12 @@ class CycleAssembler:
         self.finalize_to(cycle)
         self.hi = max(self.hi, self.base - 1)
 
+    def cycle_of(self, seq: int) -> int:
+        """The cycle a frame's ``seq`` names, unwrapped around the newest cycle ``hi`` as
+        :meth:`put` places it."""
+        d = (seq + self.seq_shift - self.hi) % self.M
+        return self.hi + d if d < self.wrap_at else self.hi + d - self.M
+
     def put(self, seq: int, slot: int, data: bytes, t: float | None = None) -> str | None:
         """Place a good frame that arrived at host time ``t`` (s; ``None``: no clock). Returns this
         frame's problem (``late_frame``, ``duplicate_frame``, ``conflicting_frame``,

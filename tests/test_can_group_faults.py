@@ -255,3 +255,14 @@ def test_first_data_is_not_data_again(tmp_path):
     assert first[0].startswith(f"no data from can://virtual/{name}"), said
     assert first[1].startswith(f"first data from can://virtual/{name} after"), said
     assert not any("again" in s for s in first[:2]), said
+
+
+def test_refused_frames_stamped_at_their_own_cycle_when_queued(tmp_path):
+    """The same three incidents with every frame queued before the record loop reads (a backlog
+    after a host stall): the groups' frames come faster than real time and are held, so the
+    groups' streams lag the frames read; a refused frame is still stamped at the cycle its SEQ
+    names (cycle 68 and 136), not where its group's held-back stream stood."""
+    said, summary, _, events = _record(tmp_path, _frames(400, lambda c: (1, 2), _spoil), "quiet_s=5")
+    assert not isinstance(summary, DeviceClosed)
+    stamps = {e["kind"]: round(e["t_ns"] * FS / 1e9) for e in events if e["kind"] in ("wrong_dlc", "bad_crc")}
+    assert stamps == {"wrong_dlc": 68 * T, "bad_crc": 136 * T}, stamps
