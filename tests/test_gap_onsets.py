@@ -1,0 +1,48 @@
+"""Trigger onsets that are no blow (issue 17): where a friction mode stops ringing (sticks) the
+trigger fires too; the gap diagnosis compares only onsets after which the gages ring more than
+before (a blow adds energy), and says each one it drops. Trials from the independent modal
+generator, recorded through the recorder and read back as ``ramdaq gap`` reads them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ramdaq.analysis.model.rig import load_rig
+from ramdaq.analysis.truth.modal_family import generate
+from ramdaq.daq.commands.gap_bench import perturbed_rig, rudder_modes_hz, scenarios
+from ramdaq.daq.gap_trial import load_trial
+from ramdaq.daq.record import record
+from ramdaq.drivers.array_device import ArrayDevice
+
+
+def _loaded(tmp_path, seed: int, effect: str):
+    sc = next(s for s in scenarios(6, "dev", (effect,), 0.25, "modal", 4) if s["seed"] == seed)
+    rig = load_rig(sc["rig"]).with_medium(sc["medium"])
+    tr = generate(rig.text, rudder_modes_hz(rig), sc["effect"], sc["size"], sc["seed"], n_impacts=4)
+    path = tmp_path / "trial.mcap"
+    dev = ArrayDevice(tr.counts, tr.scale, tr.fs_hz, gages=tr.gage_numbers, rig_toml=rig.text,
+                      extra={"medium": sc["medium"], "adc_bits": tr.adc_bits})
+    record(dev, path, readout=False, overwrite=True)
+    said: list[str] = []
+    lt = load_trial(path, perturbed_rig(rig, 0.25, sc["seed"]), said.append)
+    return np.asarray(tr.onsets_s, float), lt, said
+
+
+def test_a_friction_mode_sticking_is_not_compared_as_a_blow(tmp_path):
+    """Modal development seed 58004 (friction, SAMPSON in water): the trigger fires 8 times for
+    4 blows; the 4 onsets where a mode stops ringing are dropped, each in a line, and the 4
+    blows are kept (within 2 ms: the trigger's onset)."""
+    blows, lt, said = _loaded(tmp_path, 58004, "friction")
+    assert len(lt.onsets_s) == 4
+    assert np.max(np.abs(lt.onsets_s - blows)) < 2e-3
+    dropped = [s for s in said if "is no blow, not compared" in s]
+    assert len(dropped) == 4 and all("ring less after it than before" in s for s in dropped)
+
+
+@pytest.mark.parametrize(("seed", "effect"), [(51000, "none"), (57000, "double_hit")])
+def test_every_blow_is_kept(tmp_path, seed, effect):
+    """A clean trial and a double hit: every blow adds energy, none is dropped."""
+    blows, lt, said = _loaded(tmp_path, seed, effect)
+    assert len(lt.onsets_s) == len(blows) == 4
+    assert not [s for s in said if "is no blow" in s]
