@@ -53,3 +53,15 @@ def test_a_slope_beside_a_held_out_second_blow_does_not_make_the_trial_nonlinear
     assert not_homogeneous([_double_hit(12182.0, 0.2), slope])
     # a law told within the decays (Coulomb's) stands beside any second blow
     assert not_homogeneous([dh, _slope(15.4, "coulomb_law_z")])
+
+
+def test_a_held_out_second_blow_outranks_a_structural_update_on_a_rig_without_form_error():
+    """The model names hull_coupling on a rig left with no form error, and never weighed a
+    second blow; the data layer reads one at 921x its chance level whose own correction closes
+    81 % held out: a second blow (no linear update of the structure puts a second rise of every
+    gage 32 ms after the blow). One closing 30 % does not outrank the update."""
+    cands = [_candidate("hull_coupling+gage_alignment", 0.8), _candidate("hull_coupling", 0.62)]
+    a = answer("hull_coupling+gage_alignment", cands, None, set(), [_double_hit(25600.0, 0.81)])
+    assert a.named == "double_hit" and a.by == "data"
+    a = answer("hull_coupling+gage_alignment", cands, None, set(), [_double_hit(25600.0, 0.3)])
+    assert a.named == "hull_coupling+gage_alignment"

@@ -472,7 +472,11 @@ def held_out_data(findings: list[dict]) -> list[dict]:
     a rig already known wrong (issue 17: modal check seed 154001, a 3 Hz high-pass on five gages
     at 93-153x chance, each closing 94-99.6 % held out, was named tiller; modal development seed
     57001, a second blow 18 ms after the first at 916x chance closing 74 % held out, was named
-    hull_coupling)."""
+    hull_coupling). A second blow outranks a structural update on any rig, form error or not
+    (the caller's choice): its pulse is read on the early window's recorded values, where no
+    linear update of the structure puts a second rise of every gage tens of ms after the blow,
+    and its held-out closure says it repeats blow after blow (development seed 13003 of an
+    earlier run: a second blow named with a gage's alignment beside it)."""
     return [f for f in credible(findings)
             if (f.get("layer") == Layer.SENSOR or f["check"] in HELD_OUT_EXCITATION)
             and data_effect(f) not in (None, "unexplained") and strength(f) >= PRECEDENCE_STRENGTH
@@ -718,7 +722,7 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
             on = set((out.location or {}).get("gages") or [])
             strong = [f for f in finds if unconf and strength(f) >= PRECEDENCE_STRENGTH
                       and not set(f["gages"]) & on]
-            held = held_out_data(findings) if form_gages else []
+            held = [f for f in held_out_data(findings) if form_gages or f["check"] in HELD_OUT_EXCITATION]
             if not laws and not strong and not held:
                 return out
             finds = laws or strong or held
