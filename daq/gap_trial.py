@@ -107,10 +107,10 @@ most half the time since the onset before)."""
 def energy_added(data: ScaledCounts | np.ndarray, fs_hz: float, onsets_s: np.ndarray) -> np.ndarray:
     """Per onset, the median over gages of the RMS in the :data:`BLOW_WINDOW_S` after it over
     the RMS in as long a window before it (NaN where there is no window before, or nothing in
-    it). A ram blow adds energy to the structure: every blow of the benchmarks' generators reads
-    50-4500; where a mode stops ringing (Coulomb friction sticking, 1-2 s after a small blow)
-    the trigger fires too, and the gages ring less after it than before (0.4-0.8, modal
-    development seed 58004: three such onsets among four blows)."""
+    it). A ram blow adds energy to the structure: the blows of the modal development trials
+    looked at read 69-4500; where a mode stops ringing (Coulomb friction sticking, 1-2 s after
+    a small blow) the trigger fires too, and the gages ring less after it than before
+    (0.4-0.8, modal development seed 58004: four such onsets among four blows)."""
     n = data.shape[1]
     out = np.full(len(onsets_s), np.nan)
     for k, t in enumerate(onsets_s):
