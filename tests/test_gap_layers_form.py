@@ -242,7 +242,9 @@ def test_a_data_finding_that_closes_held_out_outranks_a_structural_update_on_a_w
     dh = _finding("double_hit", "excitation", tuple(range(1, 17)), 25473.0, 27.81, (4.35,), 0.736,
                   window="early")
     assert answer("hull_coupling", [hull], None, {4, 6, 9, 10}, [dh]).named == "double_hit"
-    assert answer("hull_coupling", [hull], None, set(), [dh]).named == "hull_coupling"
+    # unlike a sensor's, on a rig without form error too: no linear update of the structure
+    # puts a second rise of every gage 18 ms after the blow (layers.held_out_data)
+    assert answer("hull_coupling", [hull], None, set(), [dh]).named == "double_hit"
 
 
 def test_a_second_blow_that_explains_no_held_out_blow_is_not_named():
