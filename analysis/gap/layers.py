@@ -172,8 +172,7 @@ def second_blow_slope(f: dict, findings: list[dict]) -> bool:
     if f.get("layer") != Layer.NONLINEARITY or told_law(f):
         return False
     return any(g["check"] == "double_hit" and strength(g) > strength(f)
-               and g.get("closed_held") is not None and math.isfinite(float(g["closed_held"]))
-               and float(g["closed_held"]) >= UNEXPLAINED_CLOSURE for g in findings)
+               and closes_held_out(g) for g in findings)
 
 
 def at_splits(findings: list[dict], splits: Sequence[dict]) -> list[dict]:
@@ -298,8 +297,8 @@ def second_blow_held(f: dict, candidates: list[dict]) -> dict:
     "unexplained" by :func:`early_nonlinear`)."""
     if f["check"] != "double_hit" or not fails_held_out(f):
         return f
-    held = [float(c["closed_held"]) for c in candidates if "double_hit" in c["name"].split("+")
-            and c.get("closed_held") is not None and math.isfinite(float(c["closed_held"]))]
+    held = [v for c in candidates if "double_hit" in c["name"].split("+")
+            and (v := held_closure(c)) is not None]
     if not held or max(held) < UNEXPLAINED_CLOSURE:
         return f
     return f | {"closed_held": max(held), "closed_held_by": "effect search"}
@@ -313,8 +312,24 @@ def fails_held_out(f: dict) -> bool:
     (a bilinear stiffness's or an impact's response, not a second blow) closed -0.4 to -19 of its
     residual held out, the modal double hits 0.71-0.84 (issue 17: modal check seed 160000 and
     the earlier sessions' stored dev and check trials)."""
-    v = f.get("closed_held")
-    return v is not None and math.isfinite(float(v)) and float(v) < UNEXPLAINED_CLOSURE
+    v = held_closure(f)
+    return v is not None and v < UNEXPLAINED_CLOSURE
+
+
+def held_closure(d: dict) -> float | None:
+    """The share of its residual a finding's (or a candidate's, as JSON) correction, fitted on
+    the other impacts, closes on the held-out ones; None where it was not measured (absent,
+    null or not finite)."""
+    v = d.get("closed_held")
+    return float(v) if v is not None and math.isfinite(float(v)) else None
+
+
+def closes_held_out(d: dict) -> bool:
+    """Whether a finding's (or a candidate's, as JSON) measured held-out closure
+    (:func:`held_closure`) is at least :data:`~ramdaq.analysis.gap.verdict.UNEXPLAINED_CLOSURE`:
+    the half the model layer asks of an effect before it names one."""
+    v = held_closure(d)
+    return v is not None and v >= UNEXPLAINED_CLOSURE
 
 
 @dataclass(frozen=True)
@@ -457,8 +472,7 @@ def flat_tops_first(findings: list[dict], named: str) -> list[dict]:
     if "clipping" in named.split("+"):
         return []
     return [f for f in credible(findings) if f["check"] == "clipping" and strength(f) >= PRECEDENCE_STRENGTH
-            and f.get("closed_held") is not None and math.isfinite(float(f["closed_held"]))
-            and float(f["closed_held"]) >= UNEXPLAINED_CLOSURE]
+            and closes_held_out(f)]
 
 
 def held_out_data(findings: list[dict]) -> list[dict]:
@@ -480,8 +494,7 @@ def held_out_data(findings: list[dict]) -> list[dict]:
     return [f for f in credible(findings)
             if (f.get("layer") == Layer.SENSOR or f["check"] in HELD_OUT_EXCITATION)
             and data_effect(f) not in (None, "unexplained") and strength(f) >= PRECEDENCE_STRENGTH
-            and f.get("closed_held") is not None and math.isfinite(float(f["closed_held"]))
-            and float(f["closed_held"]) >= UNEXPLAINED_CLOSURE]
+            and closes_held_out(f)]
 
 
 HELD_OUT_EXCITATION = frozenset({"double_hit"})
@@ -895,7 +908,7 @@ def data_closure(f: dict, cd: dict | None) -> float | None:
     measures none, as the homogeneity's), else None. On a perturbed rig and a structure that is
     not the simulator the model-level gap is the rig's form error, which a gain or a skew closes
     ~0 % of (issue 17: the modal family's sensor layer read 0.9 % median)."""
-    own = f.get("closed_held")
-    if own is not None and math.isfinite(float(own)):
-        return float(own)
+    own = held_closure(f)
+    if own is not None:
+        return own
     return cd["closed_held"] if cd else None
