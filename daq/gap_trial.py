@@ -4,14 +4,13 @@ the impacts found as ``ramdaq analyze`` finds them, and the windows the diagnosi
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..analysis.gap.trialdata import ScaledCounts, TrialData, prepare
+from ..analysis.gap.trialdata import BLOW_WINDOW_S, ScaledCounts, TrialData, energy_added, prepare
 from ..analysis.model.rig import Gage, Rig, RigError, parse_rig
 from ..drivers.block import StreamInfo
 from ..drivers.fault_words import number_runs
@@ -97,37 +96,6 @@ def load_trial(src: str | Path | Recording, rig: Rig | str | Path | None = None,
     say(f"{path}: {n / info.fs_hz:.1f} s of {len(have)} gages at {info.fs_hz:g} Hz, "
         f"{len(onsets)} impacts found")
     return LoadedTrial(rig, data, info.fs_hz, onsets, rails, impacts, str(path))
-
-
-BLOW_WINDOW_S = 0.2
-"""The windows before and after a trigger onset whose RMS :func:`energy_added` compares, s (at
-most half the time since the onset before)."""
-
-
-def energy_added(data: ScaledCounts | np.ndarray, fs_hz: float, onsets_s: np.ndarray) -> np.ndarray:
-    """Per onset, the median over gages of the RMS in the :data:`BLOW_WINDOW_S` after it over
-    the RMS in as long a window before it (NaN where there is no window before, or nothing in
-    it). A ram blow adds energy to the structure: the blows of the modal development trials
-    looked at read 69-4500; where a mode stops ringing (Coulomb friction sticking, 1-2 s after
-    a small blow) the trigger fires too, and the gages ring less after it than before
-    (0.4-0.8, modal development seed 58004: four such onsets among four blows)."""
-    n = data.shape[1]
-    out = np.full(len(onsets_s), np.nan)
-    for k, t in enumerate(onsets_s):
-        i = int(round(t * fs_hz))
-        w = int(BLOW_WINDOW_S * fs_hz)
-        if k:
-            w = min(w, int((t - onsets_s[k - 1]) * fs_hz / 2))
-        if w < 1 or i - w < 0 or i + w > n:
-            continue
-        x = data.window(i - w, i + w) if hasattr(data, "window") else np.asarray(data[:, i - w:i + w], float)
-        with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a gage missing over a window: NaN
-            r = np.sqrt(np.nanmean(x[:, w:] ** 2, axis=1) / np.nanmean(x[:, :w] ** 2, axis=1))
-        r = r[np.isfinite(r)]
-        if r.size:
-            out[k] = float(np.median(r))
-    return out
 
 
 SMALL = np.iinfo(np.int16)
