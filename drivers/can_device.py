@@ -24,8 +24,9 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   jump loses the cycles skipped: the next block's ``first_sample`` jumps by exactly the samples
   lost, and one ``seq_gap`` per jump says them at the first missing sample's time (``groups``:
   the groups that lacked them; the same instants lost in two groups are one gap, once);
-* a group silent for ``group_timeout_s`` while another delivers is declared missing
-  (``group_timeout``, at the stream time it fell silent, with its channels). A block carries
+* a group silent for ``group_timeout_s`` while another delivers (and behind it by that much of
+  samples: a host that stalled between two groups' frames has not heard a silence) is declared
+  missing (``group_timeout``, at the stream time it fell silent, with its channels). A block carries
   every channel and the recording has no per-channel hole, so nothing is recorded until it
   speaks again: the other groups' samples of that span are lost -- never the silent group's
   invented -- and the ``seq_gap`` when it is back counts them. A stream that ends while a group
@@ -507,6 +508,8 @@ class CanDevice(Device):
                 quiet = now - self._last_seen.get(g, self._first_wall)
                 if quiet > self.group_timeout_s and (grp.base is None or grp.done() < lead):
                     if g not in self._silent:
+                        if self._behind(grp, lead) <= self._timeout_samples():
+                            continue  # the host stalled between two groups' frames: not silence
                         self._timed_out(g, grp, quiet, lead)
                     grp.skip_to(lead // grp.T)
                     self._report_lost(grp, now)
@@ -516,6 +519,14 @@ class CanDevice(Device):
         for kind in list(self._pending):
             if now - self._reported.get(kind, -math.inf) >= self.report_s:
                 self._report(kind, now)
+
+    def _timeout_samples(self) -> int:
+        """``group_timeout_s`` in samples of the stream."""
+        return round(self.group_timeout_s * self.fs_hz)
+
+    def _behind(self, grp: CycleAssembler, lead: int) -> int:
+        """Samples group ``grp``'s stream stands behind ``lead`` (the furthest group's)."""
+        return lead - (self._origin if grp.base is None else grp.done())
 
     def _timed_out(self, g: int, grp: CycleAssembler, quiet: float, lead: int) -> None:
         """``group_timeout``: group ``g`` is declared missing from where its stream stands."""
@@ -538,12 +549,11 @@ class CanDevice(Device):
         if self._origin is None:
             return None
         lead = max(g.done() for g in self.groups.values() if g.base is not None)
-        behind = round(self.group_timeout_s * self.fs_hz)
         gone = dict(self._silent)
         for g, grp in self.groups.items():
-            at = self._origin if grp.base is None else grp.done()
-            if g not in gone and lead - at > behind:
-                self._timed_out(g, grp, (lead - at) / self.fs_hz, lead)
+            behind = self._behind(grp, lead)
+            if g not in gone and behind > self._timeout_samples():
+                self._timed_out(g, grp, behind / self.fs_hz, lead)
                 gone[g] = self._silent[g]
         if not gone:
             return None

@@ -16,6 +16,7 @@ import select
 import subprocess
 import sys
 import threading
+import time
 import tty
 import uuid
 from pathlib import Path
@@ -85,14 +86,17 @@ def _replay(path: Path):
 
 def _virtual_trial(tmp: Path, dbc: str, rig: Path, emu_kw: dict | None = None, buses: int = 1,
                    pace: str = "fast", wires=None, idle_s: float = 0.5, tx_kw: dict | None = None,
-                   **dev_kw):
+                   reader=None, **dev_kw):
     """Emulator (a thread) on virtual buses -> CanDevice (its stream ended by ``idle_s`` of
     silence) -> Recorder -> replay. ``tx_kw``: more ``can.Bus`` arguments for the sending buses
-    (``preserve_timestamps=True``: the frames arrive with the timestamps ``wires`` gave them)."""
+    (``preserve_timestamps=True``: the frames arrive with the timestamps ``wires`` gave them).
+    ``reader(dev)``: called once the device is open (to make its host misbehave)."""
     names = [f"ramdaq-{uuid.uuid4().hex[:8]}" for _ in range(buses)]
     extra = [f"virtual/{n}" for n in names[1:]]
     dev = CanDevice(f"virtual/{names[0]}", dbc=dbc, rig=str(rig), idle_s=idle_s, extra_buses=extra, **dev_kw)
     dev.open()
+    if reader:
+        reader(dev)
     emu = CanEmulator(cf.FrameCodec(dbc), _sim(rig), **(emu_kw or {}))
     tx = [can.Bus(interface="virtual", channel=n, **(tx_kw or {})) for n in names]
     by_group = {g: tx[i % buses] for i, g in enumerate(emu.codec.groups)}
@@ -268,6 +272,33 @@ def test_a_late_backlog_is_never_read_as_seq_wraps(tmp_path, rigs):
     assert all(d["whole_wraps_late"] == 2 and d["late_s"] > 0.7 for d in delayed)
     words = describe(DeviceFault("delayed_frames", 0, delayed[0]), "can", 2048.0)
     assert "none lost" in words and "2 whole counter wrap(s)" in words
+
+
+def test_a_host_stall_between_two_groups_frames_is_no_silence(tmp_path, rigs):
+    """The failure of test_faults_leave_the_recording_consistent[classic] in CI: every frame
+    queued, the reading host stalled longer than ``group_timeout_s`` after a frame of group 1 and
+    before the next of group 2. Group 1 had then been quiet that long by the host's clock while
+    group 2 had just delivered, and was declared silent to the end. A silence is also the others
+    delivering ``group_timeout_s`` of samples past it: here group 1 stands one cycle behind."""
+    stall_s, timeout_s = 0.4, 0.15
+
+    def stall_once(dev):
+        bus, reads = dev._buses[0], [0]
+        recv = bus.recv
+
+        def stalling_recv(timeout=None):
+            msg = recv(timeout)
+            reads[0] += 1
+            if reads[0] == 1000:  # then the next read puts group 1 a cycle ahead of group 2
+                time.sleep(stall_s)
+            return msg
+        bus.recv = stalling_recv
+
+    emu, dev, blocks, events, _ = _virtual_trial(tmp_path, "classic", rigs["classic"],
+                                                 reader=stall_once, group_timeout_s=timeout_s)
+    truth = _truth(rigs["classic"])
+    _check_against_truth(blocks, events, truth, emu.missing(truth.shape[1]))
+    assert not [e for e in events if e["kind"] not in ("gap", "delayed_frames")]
 
 
 @pytest.mark.parametrize("dbc", ["classic", "fd24"])
