@@ -28,7 +28,7 @@ from ..analysis.impact import FirstLook, ImpactAnalysis, NoSuchMode, analyze_dec
 from ..analysis.model.rig import Rig
 from ..analysis.onset import contact_duration_s
 from ..drivers.block import StreamInfo
-from .trigger import ImpactEvent, StreamHealth
+from .trigger import NO_BLOW, ImpactEvent, StreamHealth
 
 MIN_DECAY_S = 0.25
 """Shortest free decay analysed, s: fewer than a few periods of a 13 Hz mode is no decrement."""
@@ -175,8 +175,9 @@ def analyze_event(index: int, event: ImpactEvent, info: StreamInfo, rig: Rig,
     shorter, decimated decay it describes (:func:`coarsen`); with ``mode_hz``, the chain on the
     mode nearest it (:func:`~ramdaq.analysis.impact.chosen_mode`)."""
     if event.not_analysable:
+        said = event.not_analysable
         return HitResult(index, event, False,
-                         f"{NOT_ANALYSABLE}: {event.not_analysable}", None)
+                         said if said.startswith(NO_BLOW) else f"{NOT_ANALYSABLE}: {said}", None)
     if event.double_hit:
         return HitResult(index, event, False, f"double hit: second contact at "
                          f"{event.second_onset_s:.3f} s", None)

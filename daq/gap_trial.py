@@ -10,8 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.gap.trialdata import BLOW_WINDOW_S, ScaledCounts, TrialData, energy_added, prepare
+from ..analysis.gap.trialdata import ScaledCounts, TrialData, energy_added, prepare
 from ..analysis.model.rig import Gage, Rig, RigError, parse_rig
+from ..analysis.onset import BLOW_WINDOW_S
 from ..drivers.block import StreamInfo
 from ..drivers.fault_words import number_runs
 from ..drivers.mcap_replay import McapReplayDevice

@@ -50,6 +50,12 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
   then followed to the re-arm without a record, as after a gap. On re-arming, the LTA
   resumes from the larger of the pre-event level and the envelope, so what still rings (or a
   background that changed) cannot trigger at once.
+* **No blow.** An STA/LTA event after which no octave band of the voting gages rings more
+  than twice as much in the 0.2 s after the onset as before it
+  (:func:`ramdaq.analysis.onset.band_energy_ratio`) added no energy: a mode that stops ringing
+  by friction fires the trigger too, while a blow, even struck into the last one's ringing,
+  drives every mode. It is handed over with ``not_analysable`` saying so, the ratio in the
+  words, never dropped.
 * **Clipping.** Counts at the ADC rails ``-2**(bits-1)`` / ``2**(bits-1) - 1`` (``adc_bits``
   from ``info.extra``; no check without it) anywhere in the record name the channel in
   ``clipped``.
@@ -369,6 +375,14 @@ class ImpactRecord:
         return self.counts[:, :stop] * self.scale[:, None]
 
 
+NO_BLOW = "no blow"
+"""How ``not_analysable`` begins for an onset that added no energy (:meth:`Trigger._no_blow`)."""
+NO_BLOW_RATIO = 2.0
+"""An onset after which no octave band's RMS rises above this factor is no blow: the blows
+measured rose 25-12 500x in their strongest band, friction sticking at most 1.04x (the noise's
+scatter; :func:`~ramdaq.analysis.onset.band_energy_ratio`); 2 lies a factor 12 and 2 from them."""
+
+
 @dataclass(frozen=True)
 class ImpactEvent:
     """One detected blow. Samples count from the stream's first sample; times are s since it.
@@ -382,7 +396,7 @@ class ImpactEvent:
     ``max_length``, ``next_impact``, ``gap`` or ``flush``. ``decay_s``: onset to the decay at the
     noise floor (or to re-arm, if that came first), or ``None`` if the envelope never came
     back. ``not_analysable``: why a blow that was seen cannot be analysed (``"trigger still
-    arming ..."``, ``"onset ... after a gap ..."``), else ``None``.
+    arming ..."``, ``"onset ... after a gap ..."``, ``"no blow: ..."``), else ``None``.
     """
 
     onset_sample: int
@@ -704,6 +718,7 @@ class Trigger:
         self._background: RecordBackground | None = None  # offline: armed on the whole record
         self._double_on_k: dict[int, float] = {}    # second-contact ratio for fewer voters
         self._ev: _Event | None = None
+        self._prev_onset: int | None = None          # the last finished event's onset sample
 
     # -- public ----------------------------------------------------------------------------
     @property
@@ -1349,6 +1364,28 @@ class Trigger:
         self._ev = None
         return out
 
+    def _no_blow(self, ev: _Event, first: int, counts: np.ndarray) -> str | None:
+        """Why an STA/LTA event is no blow, else ``None``: no octave band of the voting gages
+        rings more (by :data:`NO_BLOW_RATIO`) in the :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S`
+        after its onset than before it, at most half the time since the previous onset
+        (:func:`~ramdaq.analysis.onset.band_energy_ratio`). A load cell's event is a blow by
+        its force."""
+        prev, self._prev_onset = self._prev_onset, ev.onset
+        if self._fidx is not None:
+            return None
+        w = min(round(ons.BLOW_WINDOW_S * self.fs_hz), ev.onset - first, counts.shape[1] - (ev.onset - first))
+        if prev is not None:
+            w = min(w, (ev.onset - prev) // 2)
+        if w < 8:
+            return None
+        x = counts[self._vidx, ev.onset - first - w: ev.onset - first + w] * self._scale[self._vidx, None]
+        r = ons.band_energy_ratio(x[:, :w], x[:, w:], self.fs_hz)
+        if not r <= NO_BLOW_RATIO:
+            return None
+        return (f"{NO_BLOW}: no band of the gages rings more in the {w / self.fs_hz:.2f} s after "
+                f"the onset than before (at most {r:.2f}x the RMS); a ram blow drives every mode "
+                "(a mode that stops ringing by friction fires the trigger too)")
+
     def _finish(self, ev: _Event) -> ImpactEvent:
         """The completed event with its record cut from the ring."""
         fs, names = self.fs_hz, self.info.channels
@@ -1381,7 +1418,7 @@ class Trigger:
             second_onset_s=second[1], clipped=clipped,
             too_short=cut or first > ev.onset - self._len.pre, end_reason=ev.end_reason,
             decay_s=None if decayed is None else (decayed - ev.onset) / fs,
-            not_analysable=ev.not_analysable,
+            not_analysable=ev.not_analysable or self._no_blow(ev, first, counts),
             record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
                                 self._scale.copy()) if self.settings.keep_records else None)
 

@@ -13,6 +13,8 @@ from ramdaq.analysis.truth.modal_family import generate
 from ramdaq.daq.commands.gap_bench import perturbed_rig, rudder_modes_hz, scenarios
 from ramdaq.daq.gap_trial import load_trial
 from ramdaq.daq.record import record
+from ramdaq.daq.recording import read_recording
+from ramdaq.daq.trigger import NO_BLOW
 from ramdaq.drivers.array_device import ArrayDevice
 
 
@@ -26,14 +28,14 @@ def _loaded(tmp_path, seed: int, effect: str):
     record(dev, path, readout=False, overwrite=True)
     said: list[str] = []
     lt = load_trial(path, perturbed_rig(rig, 0.25, sc["seed"]), said.append)
-    return np.asarray(tr.onsets_s, float), lt, said
+    return np.asarray(tr.onsets_s, float), lt, said, path
 
 
 def test_a_friction_mode_sticking_is_not_compared_as_a_blow(tmp_path):
     """Modal development seed 58004 (friction, SAMPSON in water): the trigger fires 8 times for
     4 blows; the 4 onsets where a mode stops ringing are dropped, each in a line, and the 4
     blows are kept (within 2 ms: the trigger's onset)."""
-    blows, lt, said = _loaded(tmp_path, 58004, "friction")
+    blows, lt, said, path = _loaded(tmp_path, 58004, "friction")
     assert len(lt.onsets_s) == 4
     assert np.max(np.abs(lt.onsets_s - blows)) < 2e-3
     dropped = [s for s in said if "is no blow, not compared" in s]
@@ -43,6 +45,20 @@ def test_a_friction_mode_sticking_is_not_compared_as_a_blow(tmp_path):
 @pytest.mark.parametrize(("seed", "effect"), [(51000, "none"), (57000, "double_hit")])
 def test_every_blow_is_kept(tmp_path, seed, effect):
     """A clean trial and a double hit: every blow adds energy, none is dropped."""
-    blows, lt, said = _loaded(tmp_path, seed, effect)
+    blows, lt, said, path = _loaded(tmp_path, seed, effect)
     assert len(lt.onsets_s) == len(blows) == 4
     assert not [s for s in said if "is no blow" in s]
+    assert not [ev for ev in read_recording(path).impacts if (ev.not_analysable or "").startswith(NO_BLOW)]
+
+
+def test_the_trigger_says_a_friction_sticking_is_no_blow(tmp_path):
+    """The same trial as ``ramdaq analyze`` reads it: the trigger's 8 events are all handed over,
+    the 4 where the mode sticks not analysable as no blow (their ratio in the words), the 4
+    blows not."""
+    blows, _, _, path = _loaded(tmp_path, 58004, "friction")
+    events = read_recording(path).impacts
+    flagged = [ev for ev in events if (ev.not_analysable or "").startswith(NO_BLOW)]
+    kept = [ev.onset_s for ev in events if ev not in flagged]
+    assert len(events) == 8 and len(flagged) == 4
+    assert all("at most 1.0" in ev.not_analysable for ev in flagged)  # the noise: 1.00-1.04x
+    assert np.max(np.abs(np.asarray(kept) - events[0].onset_s + blows[0] - blows)) < 2e-3

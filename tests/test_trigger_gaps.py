@@ -138,7 +138,7 @@ def test_a_blow_in_the_arming_window_is_a_rejected_hit_the_summary_counts(albaco
     assert s["stream"]["gaps"] == 0 and s["stream"]["blind_s"] == SETTLE_S
     assert s["stream"]["arming_s"] == pytest.approx(1.2 - SETTLE_S, abs=1 / FS)
     text = "\n".join(summary_table(s))
-    assert "1 blow(s) seen but not analysable" in text
+    assert "1 onset(s) seen but not analysable" in text
     # and why, with what would analyse it (a new user read 'arming 0.000 s' beside a blow
     # rejected as arming, at the first sample of a replayed import)
     assert "1 blow(s) came before the trigger's long-term average was full" in text

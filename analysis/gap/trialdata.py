@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import functools
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,6 +31,7 @@ import scipy.signal
 from ..model.response import ambient_gage_amplitudes, impact_amplitudes, modal_form, predominant_mode
 from ..model.rig import Rig
 from ..model.structure import build_model
+from ..onset import BLOW_WINDOW_S, energy_ratio
 from .ringing import RESOLUTION_HZ, RingingLine, decay_window, guard_s, ringing_lines, welch_power
 from .signal_checks import DeclaredLine
 
@@ -310,18 +310,11 @@ def _windows(x: ScaledCounts | np.ndarray) -> ScaledCounts | _ArrayWindows:
     return x if isinstance(x, ScaledCounts) else _ArrayWindows(x)
 
 
-BLOW_WINDOW_S = 0.2
-"""The windows before and after a trigger onset whose RMS :func:`energy_added` compares, s (at
-most half the time since the onset before)."""
-
-
 def energy_added(data: ScaledCounts | np.ndarray, fs_hz: float, onsets_s: np.ndarray) -> np.ndarray:
-    """Per onset, the median over gages of the RMS in the :data:`BLOW_WINDOW_S` after it over
-    the RMS in as long a window before it (NaN where there is no window before, or nothing in
-    it). A ram blow adds energy to the structure: the blows of the modal development trials
-    looked at read 69-4500; where a mode stops ringing (Coulomb friction sticking, 1-2 s after
-    a small blow) the trigger fires too, and the gages ring less after it than before
-    (0.4-0.8, modal development seed 58004: four such onsets among four blows)."""
+    """Per onset, :func:`~ramdaq.analysis.onset.energy_ratio` of the gages over the
+    :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S` after it against as long a window before it (at
+    most half the time since the onset before); NaN where there is no window before, or nothing
+    in it. At most 1: no blow (a mode that stops ringing by friction fires the trigger too)."""
     src = _windows(data)
     n = src.shape[1]
     out = np.full(len(onsets_s), np.nan)
@@ -333,12 +326,7 @@ def energy_added(data: ScaledCounts | np.ndarray, fs_hz: float, onsets_s: np.nda
         if w < 1 or i - w < 0 or i + w > n:
             continue
         x = src.window(i - w, i + w)
-        with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a gage missing over a window: NaN
-            r = np.sqrt(np.nanmean(x[:, w:] ** 2, axis=1) / np.nanmean(x[:, :w] ** 2, axis=1))
-        r = r[np.isfinite(r)]
-        if r.size:
-            out[k] = float(np.median(r))
+        out[k] = energy_ratio(x[:, :w], x[:, w:])
     return out
 
 

@@ -26,6 +26,7 @@ from ...analysis.model.structure import added_mass
 from ...analysis.model.surface import Surface
 from ...analysis.model.units import from_si
 from ..analyzer import UNSURE_REL_SE, HitResult, analysis_to_json, finite_json, trial_summary
+from ..trigger import NO_BLOW
 
 MODEL_MOTIONS = ("v", "gamma", "alpha")
 """The model's motion names; ``report.json``'s ``surface.motions`` gives what the rig calls each
@@ -337,7 +338,11 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
         lines.append(f"\nstream: {st['gaps']} gap(s), {st['missing_s']:.3f} s missing; the "
                      f"trigger was blind {st['blind_s']:.3f} s and arming {st['arming_s']:.3f} s")
     if s.get("not_analysable"):
-        lines.append(f"{s['not_analysable']} blow(s) seen but not analysable (among the rejected)")
+        lines.append(f"{s['not_analysable']} onset(s) seen but not analysable (among the rejected)")
+    no_blow = sum((r or "").startswith(NO_BLOW) for r in s.get("rejected", {}).values())
+    if no_blow:
+        lines.append(f"{no_blow} of them no blow: the gages rang less after the onset than before "
+                     "(a mode that stops ringing by friction fires the trigger too)")
     arming = sum("trigger still arming" in (r or "") for r in s.get("rejected", {}).values())
     if arming:
         lines.append(f"{arming} blow(s) came before the trigger's long-term average was full: "
