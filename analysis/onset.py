@@ -31,7 +31,6 @@ gives the same numbers as one call on the whole record.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,8 +40,8 @@ from . import filters
 
 __all__ = [
     "CONTACT_FRACTION", "StaLtaState", "aic", "aic_pick", "ar_prediction_filter",
-    "BLOW_WINDOW_S", "band_energy_ratio", "butterworth_delay_s", "contact_duration_s",
-    "energy_ratio",
+    "BLOW_WINDOW_S", "NO_BLOW_RATIO", "band_energy_ratio", "butterworth_delay_s",
+    "contact_duration_s",
     "exp_average", "exp_average_last", "first_hold", "hinge_onset", "next_trigger", "prediction_error",
     "recursive_sta_lta", "recursive_sta_lta_ref",
 ]
@@ -460,22 +459,11 @@ def butterworth_delay_s(order: int, corner_hz: float, fs_hz: float) -> float:
 
 
 BLOW_WINDOW_S = 0.2
-"""The windows before and after an onset whose RMS :func:`energy_ratio` compares, s."""
-
-
-def energy_ratio(before: np.ndarray, after: np.ndarray) -> float:
-    """Whether an onset added energy: the median over channels of RMS(``after``) / RMS(``before``)
-    (rows are channels, shape (n_channels, n) each; NaN samples left out); NaN where no channel
-    has both. A ram blow adds energy to the structure: the blows of the gap diagnosis's modal
-    development trials read 69-4500. Where a mode stops ringing (Coulomb friction sticking, 1-2 s
-    after a small blow) an STA/LTA trigger fires too, and the gages ring less after it than
-    before (0.4-0.8, modal development seed 58004: four such onsets among four blows): a ratio
-    at most 1 is no blow."""
-    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a channel missing over a window: NaN
-        r = np.sqrt(np.nanmean(after**2, axis=1) / np.nanmean(before**2, axis=1))
-    r = r[np.isfinite(r)]
-    return float(np.median(r)) if r.size else math.nan
+"""The windows before and after an onset whose spectra :func:`band_energy_ratio` compares, s."""
+NO_BLOW_RATIO = 2.0
+"""An onset after which no octave band's RMS rises above this factor is no blow: the blows
+measured rose 25-12 500x in their strongest band, friction sticking at most 1.04x (the noise's
+scatter; :func:`band_energy_ratio`); 2 lies a factor 12 and 2 from them."""
 
 
 def band_energy_ratio(before: np.ndarray, after: np.ndarray, fs_hz: float) -> float:
@@ -485,12 +473,12 @@ def band_energy_ratio(before: np.ndarray, after: np.ndarray, fs_hz: float) -> fl
     (n_channels, n) each, n >= 8); NaN where no band has a channel with both.
 
     A blow struck into the last one's ringing may leave a mode ringing less (struck against its
-    motion, J v + J^2 / 2m < 0: :func:`energy_ratio` read 0.85 for an ALBACORE blow 3 s after a
-    double hit), but it drives every mode up to 1 / its contact time, so some band rings far
-    more after it (that blow: 25x at 20-40 Hz; the blows of four modal development trials:
-    45-12 500x). A mode that stops ringing by friction (Coulomb sticking) takes energy out of
-    its band and adds none: at most 1.04x in any band (modal development seed 58004, four
-    such onsets), the noise's own scatter."""
+    motion, J v + J^2 / 2m < 0: the median RMS ratio over the whole band read 0.85 for an
+    ALBACORE blow 3 s after a double hit), but it drives every mode up to 1 / its contact
+    time, so some band rings far more after it (that blow: 25x at 20-40 Hz; the blows of four
+    modal development trials: 45-12 500x). A mode that stops ringing by friction (Coulomb
+    sticking) takes energy out of its band and adds none: at most 1.04x in any band (modal
+    development seed 58004, four such onsets), the noise's own scatter."""
     n = before.shape[-1]
     win = np.hanning(n)
     pb = np.abs(np.fft.rfft(before * win, axis=-1)) ** 2

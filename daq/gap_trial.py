@@ -12,7 +12,7 @@ import numpy as np
 
 from ..analysis.gap.trialdata import ScaledCounts, TrialData, energy_added, prepare
 from ..analysis.model.rig import Gage, Rig, RigError, parse_rig
-from ..analysis.onset import BLOW_WINDOW_S
+from ..analysis.onset import BLOW_WINDOW_S, NO_BLOW_RATIO
 from ..drivers.block import StreamInfo
 from ..drivers.fault_words import number_runs
 from ..drivers.mcap_replay import McapReplayDevice
@@ -88,11 +88,11 @@ def load_trial(src: str | Path | Recording, rig: Rig | str | Path | None = None,
         rails = (-(2.0 ** (bits - 1)) * scale, (2.0 ** (bits - 1) - 1) * scale)
     onsets = np.array([ev.onset_s for ev in impacts]) - first / info.fs_hz
     ratio = energy_added(data, info.fs_hz, onsets)
-    blow = ~(ratio <= 1.0)  # NaN (nothing before to compare): kept
+    blow = ~(ratio <= NO_BLOW_RATIO)  # NaN (nothing before to compare): kept
     for t, r in zip(onsets[~blow], ratio[~blow], strict=True):
-        say(f"{path}: the trigger's onset at {t:.3f} s is no blow, not compared: the gages ring "
-            f"less after it than before (median RMS ratio {r:.2f} over {BLOW_WINDOW_S} s); a blow "
-            f"adds energy (a mode that stops ringing by friction fires the trigger too)")
+        say(f"{path}: the trigger's onset at {t:.3f} s is no blow, not compared: no band of the "
+            f"gages rings more after it than before (at most {r:.2f}x the RMS over {BLOW_WINDOW_S} s); "
+            f"a blow drives every mode (a mode that stops ringing by friction fires the trigger too)")
     onsets, impacts = onsets[blow], [ev for ev, b in zip(impacts, blow, strict=True) if b]
     say(f"{path}: {n / info.fs_hz:.1f} s of {len(have)} gages at {info.fs_hz:g} Hz, "
         f"{len(onsets)} impacts found")

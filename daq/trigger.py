@@ -377,10 +377,6 @@ class ImpactRecord:
 
 NO_BLOW = "no blow"
 """How ``not_analysable`` begins for an onset that added no energy (:meth:`Trigger._no_blow`)."""
-NO_BLOW_RATIO = 2.0
-"""An onset after which no octave band's RMS rises above this factor is no blow: the blows
-measured rose 25-12 500x in their strongest band, friction sticking at most 1.04x (the noise's
-scatter; :func:`~ramdaq.analysis.onset.band_energy_ratio`); 2 lies a factor 12 and 2 from them."""
 
 
 @dataclass(frozen=True)
@@ -1366,10 +1362,10 @@ class Trigger:
 
     def _no_blow(self, ev: _Event, first: int, counts: np.ndarray) -> str | None:
         """Why an STA/LTA event is no blow, else ``None``: no octave band of the voting gages
-        rings more (by :data:`NO_BLOW_RATIO`) in the :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S`
-        after its onset than before it, at most half the time since the previous onset
-        (:func:`~ramdaq.analysis.onset.band_energy_ratio`). A load cell's event is a blow by
-        its force."""
+        rings more (by :data:`~ramdaq.analysis.onset.NO_BLOW_RATIO`) in the
+        :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S` after its onset than before it, at most
+        half the time since the previous onset (:func:`~ramdaq.analysis.onset.band_energy_ratio`).
+        A load cell's event is a blow by its force."""
         prev, self._prev_onset = self._prev_onset, ev.onset
         if self._fidx is not None:
             return None
@@ -1380,7 +1376,7 @@ class Trigger:
             return None
         x = counts[self._vidx, ev.onset - first - w: ev.onset - first + w] * self._scale[self._vidx, None]
         r = ons.band_energy_ratio(x[:, :w], x[:, w:], self.fs_hz)
-        if not r <= NO_BLOW_RATIO:
+        if not r <= ons.NO_BLOW_RATIO:
             return None
         return (f"{NO_BLOW}: no band of the gages rings more in the {w / self.fs_hz:.2f} s after "
                 f"the onset than before (at most {r:.2f}x the RMS); a ram blow drives every mode "

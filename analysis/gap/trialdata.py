@@ -31,7 +31,7 @@ import scipy.signal
 from ..model.response import ambient_gage_amplitudes, impact_amplitudes, modal_form, predominant_mode
 from ..model.rig import Rig
 from ..model.structure import build_model
-from ..onset import BLOW_WINDOW_S, energy_ratio
+from ..onset import BLOW_WINDOW_S, band_energy_ratio
 from .ringing import RESOLUTION_HZ, RingingLine, decay_window, guard_s, ringing_lines, welch_power
 from .signal_checks import DeclaredLine
 
@@ -311,10 +311,11 @@ def _windows(x: ScaledCounts | np.ndarray) -> ScaledCounts | _ArrayWindows:
 
 
 def energy_added(data: ScaledCounts | np.ndarray, fs_hz: float, onsets_s: np.ndarray) -> np.ndarray:
-    """Per onset, :func:`~ramdaq.analysis.onset.energy_ratio` of the gages over the
+    """Per onset, :func:`~ramdaq.analysis.onset.band_energy_ratio` of the gages over the
     :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S` after it against as long a window before it (at
-    most half the time since the onset before); NaN where there is no window before, or nothing
-    in it. At most 1: no blow (a mode that stops ringing by friction fires the trigger too)."""
+    most half the time since the onset before); NaN where there is no window of 8 samples
+    before, or nothing in it. At most :data:`~ramdaq.analysis.onset.NO_BLOW_RATIO`: no blow (a
+    mode that stops ringing by friction fires the trigger too)."""
     src = _windows(data)
     n = src.shape[1]
     out = np.full(len(onsets_s), np.nan)
@@ -323,10 +324,10 @@ def energy_added(data: ScaledCounts | np.ndarray, fs_hz: float, onsets_s: np.nda
         w = int(BLOW_WINDOW_S * fs_hz)
         if k:
             w = min(w, int((t - onsets_s[k - 1]) * fs_hz / 2))
-        if w < 1 or i - w < 0 or i + w > n:
+        if w < 8 or i - w < 0 or i + w > n:
             continue
         x = src.window(i - w, i + w)
-        out[k] = energy_ratio(x[:, :w], x[:, w:])
+        out[k] = band_energy_ratio(x[:, :w], x[:, w:], fs_hz)
     return out
 
 
