@@ -343,7 +343,7 @@ def trial_summary(hits: list[HitResult], stream: StreamHealth | None = None,
         "stream": None if stream is None else stream.to_json(),
         "analyzer": None if load is None else load.to_json(),
         "coarse": {h.index: h.coarse for h in hits if h.coarse},
-        "cut_short": {h.index: cut_short(h) for h in hits if h.accepted and cut_short(h)},
+        "cut_short": {h.index: why for h in hits if h.accepted and (why := cut_short(h))},
         "f_hz": _mean_scatter([a.f_hz for a in ok]),
         "delta_gage": {f"g{n:02d}": _mean_scatter([a.gages[n].delta for a in ok if n in a.gages],
                                                   [a.gages[n].delta_se for a in ok if n in a.gages])

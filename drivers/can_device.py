@@ -427,7 +427,7 @@ class CanDevice(Device):
         lay, seq = hit
         grp = self.groups[lay.group]
         if grp.base is None:
-            started = [(g.hi + 1) * g.T for g in self.groups.values() if g.base is not None]
+            started = [g.seen() for g in self.groups.values() if g.base is not None]
             grp.start(seq, max(started) // grp.T if started else None, t)
             if self._origin is None:
                 self._origin = self._pos = grp.done()
@@ -530,7 +530,7 @@ class CanDevice(Device):
 
     def _timed_out(self, g: int, grp: CycleAssembler, quiet: float, lead: int) -> None:
         """``group_timeout``: group ``g`` is declared missing from where its stream stands."""
-        at = (grp.hi + 1) * grp.T if grp.base is not None else (self._origin or 0)
+        at = grp.seen() if grp.base is not None else (self._origin or 0)
         self._silent[g] = at
         self._fault("group_timeout", self._t_ns(at), group=g, channels=self._channels_of([g]),
                     silent_s=round(quiet, 3), others_ahead_samples=max(0, lead - at))
@@ -574,7 +574,7 @@ class CanDevice(Device):
     # -- faults ------------------------------------------------------------------------------
     def _t_ns(self, sample: int | None = None) -> int:
         """Device time of ``sample`` (absolute), default the newest sample seen."""
-        s = max(((g.hi + 1) * g.T for g in self.groups.values()), default=0) if sample is None else sample
+        s = max((g.seen() for g in self.groups.values()), default=0) if sample is None else sample
         return sample_time_ns(max(0, s - (self._origin or 0)), self.fs_hz)
 
     def _fault(self, kind: str, t_ns: int, **detail: object) -> None:

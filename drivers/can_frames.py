@@ -630,6 +630,10 @@ class CycleAssembler:
         """Samples before this (absolute) index are final."""
         return self.base * self.T
 
+    def seen(self) -> int:
+        """The sample after the newest cycle seen (absolute index; the group must have started)."""
+        return (self.hi + 1) * self.T
+
     def start(self, seq: int, near: int | None = None, t: float | None = None) -> None:
         """First frame: its cycle is ``seq`` unwrapped nearest to cycle ``near`` (if given);
         ``t`` its arrival time, s."""
