@@ -1361,8 +1361,9 @@ class Trigger:
         return out
 
     def _no_blow(self, ev: _Event, first: int, counts: np.ndarray) -> str | None:
-        """Why an STA/LTA event is no blow, else ``None``: no octave band of the voting gages
-        rings more (by :data:`~ramdaq.analysis.onset.NO_BLOW_RATIO`) in the
+        """Why an STA/LTA event is no blow, else ``None``: no octave band of the responding
+        gages (a blow that rings a few gages only is not judged by the others' noise) rings
+        more (by :data:`~ramdaq.analysis.onset.NO_BLOW_RATIO`) in the
         :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S` after its onset than before it, at most
         half the time since the previous onset (:func:`~ramdaq.analysis.onset.band_energy_ratio`).
         A load cell's event is a blow by its force."""
@@ -1374,7 +1375,8 @@ class Trigger:
             w = min(w, (ev.onset - prev) // 2)
         if w < 8:
             return None
-        x = counts[self._vidx, ev.onset - first - w: ev.onset - first + w] * self._scale[self._vidx, None]
+        rows = self._vidx[ev.voters] if ev.voters.size else self._vidx  # the responding gages
+        x = counts[rows, ev.onset - first - w: ev.onset - first + w] * self._scale[rows, None]
         r = ons.band_energy_ratio(x[:, :w], x[:, w:], self.fs_hz)
         if not r <= ons.NO_BLOW_RATIO:
             return None
