@@ -50,7 +50,7 @@ design rates (2048 Hz, 25.6 kHz). States and what moves them::
   then followed to the re-arm without a record, as after a gap. On re-arming, the LTA
   resumes from the larger of the pre-event level and the envelope, so what still rings (or a
   background that changed) cannot trigger at once.
-* **No blow.** An STA/LTA event after which no octave band of the voting gages rings more
+* **No blow.** An STA/LTA event after which no octave band of the responding gages rings more
   than twice as much in the 0.2 s after the onset as before it
   (:func:`ramdaq.analysis.onset.band_energy_ratio`) added no energy: a mode that stops ringing
   by friction fires the trigger too, while a blow, even struck into the last one's ringing,
