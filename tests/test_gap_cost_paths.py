@@ -1,7 +1,9 @@
 """The diagnosis's shortcuts for cost give the very numbers of the long way: the prefit's
 frequencies without the rest of a mode set, a prediction's right-hand side summed with its
-normal equations, the Broyden update in row blocks. Exact equality, not a tolerance: each
-shortcut does the same floating-point operations on the same operands, only fewer others."""
+normal equations, the Broyden update in row blocks. Exact equality, not a tolerance, where a
+shortcut does the same floating-point operations on the same operands, only fewer others (a
+cache, a reused buffer); a tolerance with its reason where a path is held against its closed
+form."""
 
 from __future__ import annotations
 
@@ -76,3 +78,33 @@ def test_the_broyden_update_in_row_blocks_is_the_column_one():
             want[:, j] += v * step[j] / ss
         _broyden(J, v, step)
         np.testing.assert_array_equal(J, want)
+
+
+def test_a_pulse_response_after_the_contact_is_its_closed_form():
+    """After the ram lets go (sample 0 at least the contact time T after it began) every mode
+    is J(T) exp(lambda (t - T)) (a filter's own pole exp(lambda t)): the response computed from
+    that directly, exp per sample and a complex product, against the segment-grid path (its
+    real parts as one real product, exponentials as products of tables): equal within 1e-12
+    of the largest sample (a few ulp of each exponential, summed over the modes)."""
+    fw = _forward()
+    ms = fw.modes(np.zeros(len(fw.params)))
+    basis = fw.pulse_basis(ms)
+    _, JT = basis
+    k = np.arange(fw.td.n_s) / fw.td.fs_hz
+    for tau0 in (ms.duration_s, 0.05, 0.5, 3.0):
+        u, du = fw.pulse_response(ms, tau0, basis)
+        lag = np.where(ms.exp_only, tau0, tau0 - ms.duration_s)
+        Z = JT[:, None] * np.exp(ms.lam[:, None] * (lag[:, None] + k[None, :]))
+        np.testing.assert_allclose(u, np.real(ms.A @ Z), rtol=0, atol=1e-12 * np.abs(u).max())
+        np.testing.assert_allclose(du, np.real(ms.A @ (ms.lam[:, None] * Z)), rtol=0,
+                                   atol=1e-12 * np.abs(du).max())
+
+
+def test_the_decay_spectrum_is_made_once_per_weights():
+    fw = _forward()
+    first = fw.decay_spectrum()
+    assert fw.decay_spectrum() is first
+    fw.set_weights(fw.W * 2.0)
+    again = fw.decay_spectrum()
+    assert again is not first
+    np.testing.assert_allclose(again[1], 4.0 * first[1], rtol=1e-12)  # power: twice the weights

@@ -24,7 +24,6 @@ import numpy as np
 from .. import filters
 from .forward import Fit, Forward
 from .terms import Term
-from .trialdata import summed_spectrum
 
 
 class Stop(StrEnum):
@@ -239,10 +238,7 @@ def spectrum_peaks(fw: Forward, f_guess: np.ndarray, *, rel: float = 0.35,
     of the two (a stiffness error of a factor two moves a mode 30 %; the neighbour's peak is
     the neighbour's), interpolated (parabola on log power); NaN where no peak stands
     ``prominence`` times above the median of that range."""
-    td = fw.td
-    a, b = td.windows.early.start, td.n_s
-    r = np.nan_to_num(td.x[td.fitted][:, :, a:b] * fw.W[td.fitted][:, :, a:b])
-    f, P = summed_spectrum(r, td.fs_hz)
+    f, P = fw.decay_spectrum()
     out = np.full(len(f_guess), np.nan)
     g = np.asarray(f_guess, float)
     for k, fg in enumerate(g):

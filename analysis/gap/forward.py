@@ -34,7 +34,7 @@ import scipy.linalg
 from ..model.response import half_sine_response, modal_form
 from ..model.rig import Rig
 from ..model.structure import StructuralModel, build_model
-from .trialdata import TrialData
+from .trialdata import TrialData, summed_spectrum
 
 if TYPE_CHECKING:
     from .terms import Term
@@ -219,6 +219,19 @@ class Forward:
         """Per-sample weights ``1 / sigma_eff`` (n_seg, n_gages, n_s), 1/(m/s^2)."""
         self.W = np.array(W, dtype=float)
         self._w2 = (self.mask * self.W**2).ravel()
+        self._spectrum: tuple[np.ndarray, np.ndarray] | None = None
+
+    def decay_spectrum(self) -> tuple[np.ndarray, np.ndarray]:
+        """The summed, whitened, Hann-windowed and zero-padded spectrum (frequencies Hz, power)
+        of the fitted impacts' decay windows (early window's start to the segment's end), by
+        :func:`~ramdaq.analysis.gap.trialdata.summed_spectrum`: made once for these weights
+        (the spectrum prefit reads it for every candidate)."""
+        if self._spectrum is None:
+            td = self.td
+            a, b = td.windows.early.start, td.n_s
+            r = np.nan_to_num(td.x[td.fitted][:, :, a:b] * self.W[td.fitted][:, :, a:b])
+            self._spectrum = summed_spectrum(r, td.fs_hz)
+        return self._spectrum
 
     # -- stages ---------------------------------------------------------------------------
     def rig_for(self, theta: np.ndarray, terms: list[Term] = ()) -> Rig:
@@ -596,8 +609,9 @@ class Design:
         self.w2 = w2
         G = np.zeros((n_cols, n_cols))
         b = None if data is None else np.zeros(n_cols)
+        buf = np.empty((max((len(idx) for idx, _ in blocks), default=0), w2.shape[1]))
         for s, (idx, X) in enumerate(blocks):
-            XW = X * w2[s]
+            XW = np.multiply(X, w2[s], out=buf[: len(idx)])  # (one buffer for every segment's)
             G[np.ix_(idx, idx)] += XW @ X.T
             if b is not None:
                 b[idx] += XW @ data[s].ravel()
