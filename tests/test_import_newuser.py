@@ -376,3 +376,35 @@ def test_the_anti_alias_line_names_the_rig_once_quoted(tmp_path, capsys):
     rig = Path(__file__).resolve().parents[1] / "recordings" / "rigs" / "albacore.toml"
     rc, out, err = _run(["import", src, "--rig", rig, "--fs", "1000"], capsys)
     assert rc == 1 and "the anti-alias corner of rig 'albacore-like' (" in err and "''" not in err
+
+
+def test_a_tdms_file_with_decimated_groups_names_their_rates_and_imports_one(tmp_path, capsys):
+    """LabVIEW writes decimated copies of a recording as groups of their own (new user, npTDMS's
+    ``Digital_Input.tdms``): the import said 'a truncated or partial file?' of a whole one. It
+    names each group's rate and asks for one group; ``--group`` imports it."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    fs = 2000.0
+    t, x = _decay(fs, 2)
+    src = tmp_path / "decimated.tdms"
+    with TdmsWriter(str(src)) as w:
+        w.write_segment(
+            [ChannelObject("All Data", f"g{k + 1:02d}", x[k], properties={
+                "wf_increment": 1 / fs, "wf_start_offset": 0.0, "unit_string": "m/s^2"})
+             for k in range(2)]
+            + [ChannelObject("Decimated Data_Level1", f"g{k + 1:02d}", x[k, ::50], properties={
+                "wf_increment": 50 / fs, "wf_start_offset": 0.0, "unit_string": "m/s^2"})
+               for k in range(2)])
+    rc, out, err = _run(["import", src], capsys)
+    assert rc == 1 and "truncated" not in err
+    assert "group 'All Data' at 2000 Hz; group 'Decimated Data_Level1' at 40 Hz" in err
+    assert "--group NAME" in err
+    rc, out, err = _run(["import", src, "--group", "All Data"], capsys)
+    assert rc == 0, err
+    rig = load_rig(tmp_path / "decimated.rig.toml")
+    assert rig.daq.sample_rate_hz == fs and len(rig.gages) == 2
+    np.testing.assert_allclose(_values(tmp_path / "decimated.mcap")[:, : t.size], x, rtol=0,
+                               atol=1e-6 * np.abs(x).max())  # 24-bit requantisation of 0.5 m/s^2
+    rc, out, err = _run(["import", _archive_b(tmp_path / "b.csv", "m/s^2"), "--group", "All Data"],
+                        capsys)
+    assert rc == 1 and "--group is for a TDMS file" in err

@@ -483,6 +483,10 @@ def _import_file(args: argparse.Namespace) -> int:
         if fmt != "csv":
             raise ValueError(f"--time-unit is for a CSV file, not {src}")
         options["time_unit"] = args.time_unit
+    if args.group:
+        if fmt != "tdms":
+            raise ValueError(f"--group is for a TDMS file, not {src}")
+        options["group"] = args.group
     from .progress import progress_bar
 
     device = open_device(f"{fmt}://{src}" if fmt in ("csv", "uff", "tdms") else str(src), **options)
@@ -624,7 +628,7 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
         raise ValueError("without --rig, every channel is imported (--force-channel names the "
                          "force); --channels maps channels onto a rig's gages")
     found = source_channels(src, "uff" if fmt == "unv" else fmt, time_unit=args.time_unit,
-                            fs_hz=args.fs)
+                            fs_hz=args.fs, group=args.group if fmt == "tdms" else None)
     force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
                                     or args.force_channel)
     try:
@@ -1013,6 +1017,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--force-channel", help="the source channel that is the force (a load cell or "
                    "instrumented hammer, in N, kN or lbf); its header text with the unit ('Load "
                    "cell [N]') or a UFF record's ID line 1 ('Hammer') names it too")
+    m.add_argument("--group", help="TDMS: import only this group's channels (a file whose groups "
+                   "are at different rates, LabVIEW's decimated copies, needs it)")
     m.add_argument("--allow-gaps", action="store_true", help="import a missing value (empty, NaN) "
                    "as a gap in the recording instead of refusing the file")
     m.add_argument("--overwrite", action="store_true", help="replace an existing output file")

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ...analysis.model.rig import Rig
-from .import_common import FileImportDevice, ImportFormatError, SourceTable, snap_rate, stated_medium
+from .import_common import FileImportDevice, ImportFormatError, SourceTable, option, snap_rate, stated_medium
 from .import_csv import sample_grid
 
 __all__ = ["TdmsImportDevice", "check_tdms_segments"]
@@ -160,6 +160,23 @@ def read_tdms_table(path: Path, *, group: str | None = None) -> SourceTable:
                                 f"{err})") from err
 
 
+def _one_rate(data: list, path: Path) -> None:
+    """Refuse channels at different waveform rates (``wf_increment``) with a line that names
+    each group's rate: LabVIEW writes decimated copies of a recording as groups of their own
+    ("Decimated Data_Level1"), which are not the trial's channels at a lower rate."""
+    rates: dict[str, set[float]] = {}
+    for g, c in data:
+        inc = c.properties.get("wf_increment")
+        if isinstance(inc, (int, float, np.number)) and inc > 0:
+            rates.setdefault(g, set()).add(round(1.0 / float(inc), 9))
+    if len({r for rs in rates.values() for r in rs}) < 2:
+        return
+    said = "; ".join(f"group {g!r} at {', '.join(f'{r:g}' for r in sorted(rs))} Hz"
+                     for g, rs in rates.items())
+    raise ImportFormatError(f"{path}: its channels are at different rates ({said}); a recording "
+                            f"is one rate: import one group ({option('group=', '--group NAME')})")
+
+
 def _describe(tdms, path: Path, group: str | None, collect: _Collect, n_segments: int,
               close: Callable[[], None]) -> SourceTable:
     groups = tdms.groups()
@@ -178,6 +195,7 @@ def _describe(tdms, path: Path, group: str | None, collect: _Collect, n_segments
         raise ImportFormatError(f"{path}: no numeric channels with samples")
     short = [c.name for _, c in data]
     names = [c.name if short.count(c.name) == 1 else f"{g}/{c.name}" for g, c in data]
+    _one_rate(data, path)
     n = len(data[0][1])
     for nm, (_, c) in zip(names, data, strict=True):
         if len(c) != n:

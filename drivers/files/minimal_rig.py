@@ -49,11 +49,11 @@ class SourceChannels:
 
 
 def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
-                    fs_hz: float | None = None) -> SourceChannels:
+                    fs_hz: float | None = None, group: str | None = None) -> SourceChannels:
     """The channels a CSV, UFF 58 or TDMS file holds (``fmt``: ``csv``, ``uff``, ``unv``,
     ``tdms``), in the file's order, with their stated units and the file's rate. ``fs_hz``
-    (Hz) is needed only for a CSV of one row. Raises :class:`ImportFormatError` for an
-    unreadable file."""
+    (Hz) is needed only for a CSV of one row; ``group`` picks a TDMS file's group. Raises
+    :class:`ImportFormatError` for an unreadable file."""
     if fmt == "csv":
         from .import_csv import read_csv_table
 
@@ -65,7 +65,7 @@ def source_channels(path: Path, fmt: str, *, time_unit: str | None = None,
     elif fmt == "tdms":
         from .import_tdms import read_tdms_table
 
-        src = read_tdms_table(path)
+        src = read_tdms_table(path, group=group)
         if src.close is not None:
             src.close()
     else:
