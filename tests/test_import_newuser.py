@@ -408,3 +408,37 @@ def test_a_tdms_file_with_decimated_groups_names_their_rates_and_imports_one(tmp
     rc, out, err = _run(["import", _archive_b(tmp_path / "b.csv", "m/s^2"), "--group", "All Data"],
                         capsys)
     assert rc == 1 and "--group is for a TDMS file" in err
+
+
+def test_accelerometers_recorded_in_volts_import_with_their_sensitivity(tmp_path, capsys):
+    """A field system that stores volts (new user: npTDMS's ``raw1.tdms``, 'Volts'): refused with
+    the option to give, then imported with ``--sensitivity`` per channel (100 mV/g and 10.2
+    mV/(m/s^2)), said channel by channel; the m/s^2 come back within the 24-bit requantisation
+    (the file's volts are not quantised: 1e-6 of full scale)."""
+    sens = {"AI0 acc": 0.1 / G, "AI1 acc": 10.2e-3}          # V per m/s^2
+    t, x = _decay(FS_B, 2)
+    volts = tmp_path / "v.csv"
+    rows = ["t [ms],AI0 acc (V),AI1 acc (mV)"] + [
+        f"{t[i] * 1e3:.4f},{x[0, i] * sens['AI0 acc']:.9e},{x[1, i] * sens['AI1 acc'] * 1e3:.9e}"
+        for i in range(t.size)]
+    volts.write_text("\n".join(rows) + "\n")
+    rc, out, err = _run(["import", volts], capsys)
+    assert rc == 1 and "'AI0 acc' is in 'V'" in err and "--sensitivity" in err
+    rc, out, err = _run(["import", volts, "--sensitivity", "AI0 acc=100mV/g,AI1 acc=10.2mV/(m/s^2)"],
+                        capsys)
+    assert rc == 0, err
+    assert "channel 'AI0 acc' is in volts: converted at 10.2 mV/(m/s^2) = 100 mV/g" in out
+    assert "channel 'AI1 acc' is in volts: converted at 10.2 mV/(m/s^2) = 100 mV/g" in out  # 100.03
+    got = _values(tmp_path / "v.mcap")[:, : t.size]
+    np.testing.assert_allclose(got, x, rtol=0, atol=2e-6 * np.abs(x).max())
+    # a sensitivity nothing uses is an error, not a silent no-op
+    ms2 = _archive_b(tmp_path / "b.csv", "m/s^2")
+    rc, out, err = _run(["import", ms2, "--sensitivity", "100mV/g", "--out", tmp_path / "b.mcap"],
+                        capsys)
+    assert rc == 1 and "no channel imported is in volts" in err
+    rc, out, err = _run(["import", volts, "--sensitivity", "AI0 acc=100mV/g,AI1 acc=10mV/g,AI2=1V/g",
+                         "--out", tmp_path / "c.mcap"], capsys)
+    assert rc == 1 and "'AI2'" in err
+    rc, out, err = _run(["import", volts, "--sensitivity", "100 mV per g", "--out", tmp_path / "d.mcap"],
+                        capsys)
+    assert rc == 1 and "expected e.g. 100mV/g" in err

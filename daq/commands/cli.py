@@ -460,7 +460,7 @@ def _import_many(args: argparse.Namespace) -> int:
 
 
 def _import_file(args: argparse.Namespace) -> int:
-    from ...drivers.files.import_common import parse_channel_map
+    from ...drivers.files.import_common import G0, parse_channel_map, parse_sensitivities
     from ...drivers.registry import open_device
     from ..record import record
 
@@ -472,7 +472,8 @@ def _import_file(args: argparse.Namespace) -> int:
         if path.exists() and not args.overwrite:
             raise FileExistsError(f"{path} exists; --overwrite replaces it")
     options: dict = {"channels": parse_channel_map(args.channels), "fs_hz": args.fs,
-                     "force_channel": args.force_channel, "allow_gaps": args.allow_gaps}
+                     "force_channel": args.force_channel, "allow_gaps": args.allow_gaps,
+                     "sensitivity": parse_sensitivities(args.sensitivity)}
     if args.rig:
         options["rig"] = load_rig(args.rig)
     else:
@@ -505,6 +506,12 @@ def _import_file(args: argparse.Namespace) -> int:
           f"({imp.get('missing_samples', 0)} samples missing)")
     for line in _read_notes(imp, rig_given=rig_out is None):
         print(line, file=sys.stderr if line.startswith("warning:") else sys.stdout)
+    volts = [(c["source"], c["unit"], c["sensitivity_V_per_m_s2"]) for c in chans
+             if "sensitivity_V_per_m_s2" in c]
+    for v in sorted({v for _, _, v in volts}):  # what turned volts into m/s^2, said
+        names = [n for n, _, w in volts if w == v]
+        print(f"{_channels_are(names, most=4)} in volts: converted at {1e3 * v:.4g} mV/(m/s^2) "
+              f"= {1e3 * v * G0:.4g} mV/g")
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
     for unit, rig_unit in sorted({(u, r) for _, u, r in odd}):  # one line per disagreement
@@ -621,7 +628,7 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
     header unit where it states one (a differing ``--units`` is warned of and not applied),
     else ``--units``. Returns the rig and the source -> gage map."""
     from ...analysis.model.rig import parse_rig
-    from ...drivers.files.import_common import find_channel
+    from ...drivers.files.import_common import find_channel, is_volts, parse_sensitivities
     from ...drivers.files.minimal_rig import minimal_rig, source_channels
 
     if args.channels:
@@ -631,10 +638,14 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
                             fs_hz=args.fs, group=args.group if fmt == "tdms" else None)
     force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
                                     or args.force_channel)
+    # a channel in volts whose sensitivity is given records m/s^2 (its volts are converted)
+    sens = parse_sensitivities(args.sensitivity)
+    file_units = [("m/s^2" if is_volts(u) and (isinstance(sens, float) or (sens or {}).get(n))
+                   else u) for n, u in zip(found.names, found.units, strict=True)]
     try:
         made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                            units=args.units, force_channel=force,
-                           medium=args.medium or found.medium or "air", file_units=found.units,
+                           medium=args.medium or found.medium or "air", file_units=file_units,
                            anti_alias=found.anti_alias)
     except ValueError as err:  # a channel it cannot make a gage of: say in which file
         raise ValueError(f"{src}: {err}") from None
@@ -1017,6 +1028,9 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--force-channel", help="the source channel that is the force (a load cell or "
                    "instrumented hammer, in N, kN or lbf); its header text with the unit ('Load "
                    "cell [N]') or a UFF record's ID line 1 ('Hammer') names it too")
+    m.add_argument("--sensitivity", help="accelerometers recorded in volts (V, mV): their "
+                   "sensitivity, one for all ('100mV/g') or per channel ('Accel 1=100mV/g,Accel "
+                   "2=10.2mV/(m/s^2)')")
     m.add_argument("--group", help="TDMS: import only this group's channels (a file whose groups "
                    "are at different rates, LabVIEW's decimated copies, needs it)")
     m.add_argument("--allow-gaps", action="store_true", help="import a missing value (empty, NaN) "

@@ -165,6 +165,47 @@ def parse_channel_map(text: str | None) -> dict[str, int] | None:
     return out
 
 
+_SENSITIVITY = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(m?V)\s*/\s*(.+?)\s*$")
+_PER_MS2 = {"(m/s^2)", "m/s^2", "(m/s2)", "m/s2", "ms^-2", "(m/s/s)", "m/s/s"}
+
+
+def parse_sensitivity(text: str) -> float:
+    """An accelerometer's sensitivity, ``"100mV/g"``, ``"0.1 V/g"`` or ``"10.2 mV/(m/s^2)"``,
+    in V per m/s^2.
+
+    Raises
+    ------
+    ValueError
+        Not a positive number with V or mV per g or per m/s^2.
+    """
+    m = _SENSITIVITY.match(text)
+    per = m.group(3).lower().replace(" ", "").replace("**", "^") if m else ""
+    if m is None or not (per in _GEE or per in _PER_MS2) or not float(m.group(1)) > 0:
+        raise ValueError(f"sensitivity {text.strip()!r}: expected e.g. 100mV/g, 0.1V/g or "
+                         f"10.2mV/(m/s^2)")
+    volts = float(m.group(1)) * (1e-3 if m.group(2) == "mV" else 1.0)
+    return volts / (G0 if per in _GEE else 1.0)
+
+
+def parse_sensitivities(text: str | None) -> float | dict[str, float] | None:
+    """``"100mV/g"`` (every channel in volts) or ``"Accel 1=100mV/g,Accel 2=98.5mV/g"`` (source
+    name -> sensitivity), in V per m/s^2 (:func:`parse_sensitivity`)."""
+    if not text or not text.strip():
+        return None
+    if "=" not in text:
+        return parse_sensitivity(text)
+    out: dict[str, float] = {}
+    for item in text.split(","):
+        if not item.strip():
+            continue
+        name, sep, value = item.rpartition("=")
+        if not sep or not name.strip():
+            raise ValueError(f"--sensitivity item {item.strip()!r}: expected SOURCE=VALUE, e.g. "
+                             f"'Accel 1=100mV/g'")
+        out[name.strip()] = parse_sensitivity(value)
+    return out
+
+
 @dataclass(frozen=True)
 class Pick:
     """One source channel to import: its index in the file, the gage it is (0 for a force
@@ -272,13 +313,23 @@ _MS2 = {"m/s^2", "m/s2", "m/s/s", "ms^-2", "m*s^-2", "m.s^-2", "ms-2", "m/sec^2"
 _GEE = {"g", "gn", "g_n", "g0", "g's"}
 
 
-def unit_factor(unit: str | None, channel: str, source: str) -> float:
-    """m/s^2 per unit of ``unit``: 1 for m/s^2 (and for no unit), 9.80665 for g.
+_VOLTS = {"v": 1.0, "volt": 1.0, "volts": 1.0, "mv": 1e-3, "millivolt": 1e-3, "millivolts": 1e-3}
+
+
+def is_volts(unit: str | None) -> bool:
+    """Whether a stated unit is a voltage (V, mV, Volts)."""
+    return unit is not None and unit.strip().lower() in _VOLTS
+
+
+def unit_factor(unit: str | None, channel: str, source: str,
+                sensitivity: float | None = None) -> float:
+    """m/s^2 per unit of ``unit``: 1 for m/s^2 (and for no unit), 9.80665 for g; for a voltage
+    (V, mV) 1 / the accelerometer's ``sensitivity`` (V per m/s^2), which it then needs.
 
     Raises
     ------
     ImportFormatError
-        Any other unit, naming the channel.
+        Any other unit, or a voltage without a sensitivity, naming the channel.
     """
     if unit is None or not unit.strip() or unit.strip().upper() == "NONE":
         return 1.0
@@ -287,9 +338,17 @@ def unit_factor(unit: str | None, channel: str, source: str) -> float:
         return 1.0
     if u in _GEE:
         return G0
-    raise ImportFormatError(f"{source}: channel {channel!r} is in {unit.strip()!r}; only m/s^2 "
-                            f"and g are accepted for an acceleration (a force channel in N, kN or "
-                            f"lbf is named with --force-channel)")
+    if is_volts(unit):
+        if sensitivity is None:
+            raise ImportFormatError(
+                f"{source}: channel {channel!r} is in {unit.strip()!r}: an accelerometer's "
+                f"volts need its sensitivity, {option('sensitivity=', '--sensitivity')} "
+                f"'{channel}=100mV/g' (mV/g or V/(m/s^2); one value for every channel in volts)")
+        return _VOLTS[unit.strip().lower()] / sensitivity
+    raise ImportFormatError(f"{source}: channel {channel!r} is in {unit.strip()!r}; only m/s^2, "
+                            f"g, and V or mV with {option('sensitivity=', '--sensitivity')} are "
+                            f"accepted for an acceleration (a force channel in N, kN or lbf is "
+                            f"named with --force-channel)")
 
 
 def _stated(unit: str | None) -> bool:
@@ -571,6 +630,10 @@ class FileImportDevice(Device):
     allow_gaps : bool
         A missing value (NaN, an empty cell) drops its row, a gap in the stream that the
         recording keeps. Without it a missing value is an error naming where it is.
+    sensitivity : float or mapping of str to float, optional
+        V per m/s^2 of the accelerometers whose channels the file holds in volts (V, mV): one
+        for all, or per source channel (:func:`parse_sensitivities`). A channel in volts
+        without one, or one given for a channel not in volts, is an error.
     """
 
     kind = "import"
@@ -579,7 +642,8 @@ class FileImportDevice(Device):
     def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
                  channels: Mapping[str, int] | None = None, medium: str | None = None,
                  block_s: float = 0.1, fs_hz: float | None = None,
-                 force_channel: str | None = None, allow_gaps: bool = False) -> None:
+                 force_channel: str | None = None, allow_gaps: bool = False,
+                 sensitivity: float | Mapping[str, float] | None = None) -> None:
         super().__init__()
         if fs_hz is not None and not (isinstance(fs_hz, int | float) and 0 < fs_hz < 1e9):
             raise ValueError(f"{self.kind}: fs_hz ({fs_hz}) must be a positive rate in Hz")
@@ -594,6 +658,7 @@ class FileImportDevice(Device):
         self.fs_hz = None if fs_hz is None else float(fs_hz)
         self.force_channel = force_channel
         self.allow_gaps = bool(allow_gaps)
+        self.sensitivity = dict(sensitivity) if isinstance(sensitivity, Mapping) else sensitivity
         self._blocks: Iterator[Block] | None = None
 
     def _load(self) -> SourceTable:
@@ -642,11 +707,12 @@ class FileImportDevice(Device):
                     f"{src.names[i]!r}: missing value (empty or NaN); "
                     f"{option('allow_gaps=', '--allow-gaps')} "
                     f"imports it as a gap in the recording")
+            sens = self._sensitivity_of(src.names[i], src.units[i], name)
             factor = (force_unit_factor(src.units[i], self.rig.force(pick.name).unit,
                                         src.names[i], name) if pick.is_force
                       else unit_factor(src.units[i] if _stated(src.units[i])
                                        else self.rig.gage(pick.gage).assumed_unit, src.names[i],
-                                       name))
+                                       name, sens))
             try:
                 counts[row], q = quantise(x, factor, stated_scales.get(src.names[i]))
             except ValueError as err:
@@ -659,9 +725,13 @@ class FileImportDevice(Device):
                 self.rig.gage(pick.gage).assumed_unit
             notes[pick.name] = {"source": src.names[i], "unit": src.units[i] or f"{assumed} (assumed)",
                                 "si_unit": "N" if pick.is_force else "m/s^2", **q.to_json()}
-            if rig_unit is not None and _stated(src.units[i]) and \
+            if sens is not None:
+                notes[pick.name]["sensitivity_V_per_m_s2"] = sens
+            if rig_unit is not None and _stated(src.units[i]) and sens is None and \
                     factor != unit_factor(rig_unit, src.names[i], name):
                 notes[pick.name]["rig_unit_not_applied"] = rig_unit  # the header's unit wins
+        self._check_sensitivities_used([src.names[p.index] for p in picks],
+                                       [src.units[p.index] for p in picks], name)
         if missing.all():
             raise ImportFormatError(f"{name}: every row misses a value; nothing to import")
         # samples count from the file's time zero, so times in ramdaq are the file's times
@@ -686,6 +756,31 @@ class FileImportDevice(Device):
             gages=tuple(p.gage for p in picks), rig_toml=self.rig.text,
             extra={"medium": self.rig.medium, "rig_name": self.rig.name,
                    "block_samples": self._block_n, "import": report})
+
+    def _sensitivity_of(self, channel: str, unit: str | None, name: str) -> float | None:
+        """The sensitivity (V per m/s^2) given for a source channel the file holds in volts;
+        None for one not in volts. A sensitivity named for a channel not in volts is an error
+        (it would otherwise go unused, unsaid)."""
+        given = self.sensitivity
+        if isinstance(given, dict):
+            if channel in given and not is_volts(unit):
+                raise ImportFormatError(f"{name}: channel {channel!r} is in {unit or 'no unit'!r}, "
+                                        f"not volts: its {option('sensitivity=', '--sensitivity')} "
+                                        f"does not apply")
+            return given.get(channel) if is_volts(unit) else None
+        return given if is_volts(unit) else None
+
+    def _check_sensitivities_used(self, names: list[str], units: list[str | None], name: str) -> None:
+        """A sensitivity given for a channel not imported, or one value with no channel in volts,
+        is an error, not a silent no-op."""
+        given, opt = self.sensitivity, option("sensitivity=", "--sensitivity")
+        if isinstance(given, dict):
+            unused = [c for c in given if c not in names]
+            if unused:
+                raise ImportFormatError(f"{name}: {opt} names {', '.join(map(repr, unused))}, "
+                                        f"not among the channels imported ({', '.join(map(repr, names))})")
+        elif given is not None and not any(is_volts(u) for u in units):
+            raise ImportFormatError(f"{name}: {opt} given, but no channel imported is in volts")
 
     def _apply_stated_medium(self, stated: str | None, name: str) -> dict:
         """The medium the file states (``# medium: water``, a TDMS ``medium`` property, a UFF

@@ -96,7 +96,7 @@ class CsvImportDevice(FileImportDevice):
         the rows must lie on its grid. Needed when the rig's rate differs.
     time_unit : {"s", "ms", "us"}, optional
         The time column's unit when its header does not say it.
-    force_channel, allow_gaps
+    force_channel, allow_gaps, sensitivity
         As :class:`FileImportDevice`.
     """
 
@@ -105,9 +105,11 @@ class CsvImportDevice(FileImportDevice):
     def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
                  channels: Mapping[str, int] | None = None, medium: str | None = None,
                  block_s: float = 0.1, fs_hz: float | None = None, time_unit: str | None = None,
-                 force_channel: str | None = None, allow_gaps: bool = False) -> None:
+                 force_channel: str | None = None, allow_gaps: bool = False,
+                 sensitivity: float | Mapping[str, float] | None = None) -> None:
         super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s,
-                         fs_hz=fs_hz, force_channel=force_channel, allow_gaps=allow_gaps)
+                         fs_hz=fs_hz, force_channel=force_channel, allow_gaps=allow_gaps,
+                         sensitivity=sensitivity)
         if time_unit is not None and time_unit not in _TIME_UNITS:
             raise ValueError(f"csv: time_unit {time_unit!r} is not one of s, ms, us")
         self.time_unit = time_unit

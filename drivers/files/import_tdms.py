@@ -60,7 +60,7 @@ class TdmsImportDevice(FileImportDevice):
         Longest block, s.
     group : str, optional
         Import only this group's channels.
-    fs_hz, force_channel, allow_gaps
+    fs_hz, force_channel, allow_gaps, sensitivity
         As :class:`~ramdaq.drivers.files.import_common.FileImportDevice`.
     """
 
@@ -69,9 +69,11 @@ class TdmsImportDevice(FileImportDevice):
     def __init__(self, path: str | PathLike, *, rig: Rig | str | PathLike,
                  channels: Mapping[str, int] | None = None, medium: str | None = None,
                  block_s: float = 0.1, group: str | None = None, fs_hz: float | None = None,
-                 force_channel: str | None = None, allow_gaps: bool = False) -> None:
+                 force_channel: str | None = None, allow_gaps: bool = False,
+                 sensitivity: float | Mapping[str, float] | None = None) -> None:
         super().__init__(path, rig=rig, channels=channels, medium=medium, block_s=block_s,
-                         fs_hz=fs_hz, force_channel=force_channel, allow_gaps=allow_gaps)
+                         fs_hz=fs_hz, force_channel=force_channel, allow_gaps=allow_gaps,
+                         sensitivity=sensitivity)
         self.group = group
 
     def _load(self) -> SourceTable:
