@@ -1360,14 +1360,14 @@ class Trigger:
         self._ev = None
         return out
 
-    def _no_blow(self, ev: _Event, first: int, counts: np.ndarray) -> str | None:
+    def _no_blow(self, ev: _Event, first: int, counts: np.ndarray, prev: int | None) -> str | None:
         """Why an STA/LTA event is no blow, else ``None``: no octave band of the responding
         gages (a blow that rings a few gages only is not judged by the others' noise) rings
         more (by :data:`~ramdaq.analysis.onset.NO_BLOW_RATIO`) in the
         :data:`~ramdaq.analysis.onset.BLOW_WINDOW_S` after its onset than before it, at most
-        half the time since the previous onset (:func:`~ramdaq.analysis.onset.band_energy_ratio`).
-        A load cell's event is a blow by its force."""
-        prev, self._prev_onset = self._prev_onset, ev.onset
+        half the time since the previous onset ``prev`` (sample; None: none)
+        (:func:`~ramdaq.analysis.onset.band_energy_ratio`). A load cell's event is a blow by its
+        force."""
         if self._fidx is not None:
             return None
         w = min(round(ons.BLOW_WINDOW_S * self.fs_hz), ev.onset - first, counts.shape[1] - (ev.onset - first))
@@ -1387,6 +1387,7 @@ class Trigger:
     def _finish(self, ev: _Event) -> ImpactEvent:
         """The completed event with its record cut from the ring."""
         fs, names = self.fs_hz, self.info.channels
+        prev, self._prev_onset = self._prev_onset, ev.onset  # every event's, analysable or not
         first = max(ev.onset - self._len.pre, self._ring.start)
         last = max(ev.end, ev.onset)
         counts = self._ring.read(first, last + 1)
@@ -1416,7 +1417,7 @@ class Trigger:
             second_onset_s=second[1], clipped=clipped,
             too_short=cut or first > ev.onset - self._len.pre, end_reason=ev.end_reason,
             decay_s=None if decayed is None else (decayed - ev.onset) / fs,
-            not_analysable=ev.not_analysable or self._no_blow(ev, first, counts),
+            not_analysable=ev.not_analysable or self._no_blow(ev, first, counts, prev),
             record=ImpactRecord(first, t0 + round((first - seg0) * 1e9 / fs), fs, counts.copy(),
                                 self._scale.copy()) if self.settings.keep_records else None)
 
