@@ -341,8 +341,8 @@ def summary_table(s: dict, units: str = "si") -> list[str]:
         lines.append(f"{s['not_analysable']} onset(s) seen but not analysable (among the rejected)")
     no_blow = sum((r or "").startswith(NO_BLOW) for r in s.get("rejected", {}).values())
     if no_blow:
-        lines.append(f"{no_blow} of them no blow: the gages rang less after the onset than before "
-                     "(a mode that stops ringing by friction fires the trigger too)")
+        lines.append(f"{no_blow} of them no blow: no band of the gages rang more after the onset "
+                     "than before (a mode that stops ringing by friction fires the trigger too)")
     arming = sum("trigger still arming" in (r or "") for r in s.get("rejected", {}).values())
     if arming:
         lines.append(f"{arming} blow(s) came before the trigger's long-term average was full: "
