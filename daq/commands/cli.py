@@ -477,7 +477,8 @@ def _import_file(args: argparse.Namespace) -> int:
     if args.rig:
         options["rig"] = load_rig(args.rig)
     else:
-        options["rig"], options["channels"] = _channels_only_rig(args, src, fmt, rig_out)
+        options["rig"], options["channels"] = _channels_only_rig(args, src, fmt, rig_out,
+                                                                 options["sensitivity"])
     if args.medium:
         options["medium"] = args.medium
     if args.time_unit:
@@ -621,14 +622,15 @@ def _read_notes(imp: dict, rig_given: bool = True) -> list[str]:
     return out
 
 
-def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
-                       rig_out: Path) -> tuple[object, dict[str, int]]:
+def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str, rig_out: Path,
+                       sensitivity: float | dict[str, float] | None) -> tuple[object, dict[str, int]]:
     """Without ``--rig``: a channels-only rig for the file's channels (every one), at the
     file's own rate (``--fs`` checks it), each gage in the unit its samples are in: the file's
     header unit where it states one (a differing ``--units`` is warned of and not applied),
-    else ``--units``. Returns the rig and the source -> gage map."""
+    else ``--units``; m/s^2 for a channel in volts that ``sensitivity`` (V per m/s^2, parsed
+    ``--sensitivity``) converts. Returns the rig and the source -> gage map."""
     from ...analysis.model.rig import parse_rig
-    from ...drivers.files.import_common import find_channel, is_volts, parse_sensitivities
+    from ...drivers.files.import_common import find_channel, sensitivity_of
     from ...drivers.files.minimal_rig import minimal_rig, source_channels
 
     if args.channels:
@@ -639,9 +641,8 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str,
     force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
                                     or args.force_channel)
     # a channel in volts whose sensitivity is given records m/s^2 (its volts are converted)
-    sens = parse_sensitivities(args.sensitivity)
-    file_units = [("m/s^2" if is_volts(u) and (isinstance(sens, float) or (sens or {}).get(n))
-                   else u) for n, u in zip(found.names, found.units, strict=True)]
+    file_units = [("m/s^2" if sensitivity_of(sensitivity, n, u) else u)
+                  for n, u in zip(found.names, found.units, strict=True)]
     try:
         made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                            units=args.units, force_channel=force,

@@ -321,6 +321,16 @@ def is_volts(unit: str | None) -> bool:
     return unit is not None and unit.strip().lower() in _VOLTS
 
 
+def sensitivity_of(given: float | Mapping[str, float] | None, channel: str,
+                   unit: str | None) -> float | None:
+    """The sensitivity (V per m/s^2) ``given`` (one for all, or per source channel:
+    :func:`parse_sensitivities`) that converts a source channel in volts; None for a channel
+    not in volts or not named."""
+    if not is_volts(unit):
+        return None
+    return given.get(channel) if isinstance(given, Mapping) else given
+
+
 def unit_factor(unit: str | None, channel: str, source: str,
                 sensitivity: float | None = None) -> float:
     """m/s^2 per unit of ``unit``: 1 for m/s^2 (and for no unit), 9.80665 for g; for a voltage
@@ -762,13 +772,11 @@ class FileImportDevice(Device):
         None for one not in volts. A sensitivity named for a channel not in volts is an error
         (it would otherwise go unused, unsaid)."""
         given = self.sensitivity
-        if isinstance(given, dict):
-            if channel in given and not is_volts(unit):
-                raise ImportFormatError(f"{name}: channel {channel!r} is in {unit or 'no unit'!r}, "
-                                        f"not volts: its {option('sensitivity=', '--sensitivity')} "
-                                        f"does not apply")
-            return given.get(channel) if is_volts(unit) else None
-        return given if is_volts(unit) else None
+        if isinstance(given, dict) and channel in given and not is_volts(unit):
+            raise ImportFormatError(f"{name}: channel {channel!r} is in {unit or 'no unit'!r}, "
+                                    f"not volts: its {option('sensitivity=', '--sensitivity')} "
+                                    f"does not apply")
+        return sensitivity_of(given, channel, unit)
 
     def _check_sensitivities_used(self, names: list[str], units: list[str | None], name: str) -> None:
         """A sensitivity given for a channel not imported, or one value with no channel in volts,
