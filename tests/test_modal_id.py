@@ -673,14 +673,13 @@ def test_the_early_look_at_held_fits_decides_as_the_converged_test(monkeypatch):
     two = damped_sinusoids(FS_HZ, 2508, [24.5, 24.745], [0.06, 0.07], [1.0, 0.8], [0.4, 2.0]) \
         + 0.005 * rng.standard_normal(2508)  # two modes 1 % apart, 40 dB
     evals = []
-    fit = varpro.HeldPoleFitter.fit
+    close = varpro.HeldFit.close
 
-    def counted(self, *a, **k):
-        got = fit(self, *a, **k)
-        evals.append(got[4])
-        return got
+    def counted(self):
+        evals.append(self.run.n_eval)
+        close(self)
 
-    monkeypatch.setattr(varpro.HeldPoleFitter, "fit", counted)
+    monkeypatch.setattr(varpro.HeldFit, "close", counted)
     runs, look = {}, order._EARLY_REJECT
     for early in (look, 0.0):  # 0: never rejected early (Λ_p + 1 > 0)
         monkeypatch.setattr(order, "_EARLY_REJECT", early)
@@ -694,6 +693,29 @@ def test_the_early_look_at_held_fits_decides_as_the_converged_test(monkeypatch):
         np.testing.assert_array_equal(a.delta, b.delta)
     assert len(with_look[0]) == 4 and len(with_look[1]) == 2
     assert n_with < n_without  # and the look saved held-fit evaluations
+
+
+def test_a_held_fit_advanced_in_parts_reaches_the_point_of_one_fit_to_the_bit():
+    """The order search looks at a held-pole fit after one iteration and continues it from
+    there: 1 + 2 + the rest iterations end where one fit does, bit for bit (a noise candidate
+    against three held modes, whose path takes step doublings)."""
+    from ramdaq.analysis.modal.varpro import HeldPoleFitter
+
+    rng = np.random.default_rng(5)
+    n = 3000
+    f, d = np.array([13.0, 60.0, 215.0]), np.array([0.1, 0.015, 0.002])
+    y = damped_sinusoids(FS_HZ, n, f, d, rng.normal(size=(4, 3))) \
+        + 0.02 * rng.standard_normal((4, n))
+    t = np.arange(n) / FS_HZ
+    kw = {"f_bounds_hz": (0.5, 500.0), "delta_bounds": (-3.0, 3.0), "chi2_tol": 1e-3}
+    held = HeldPoleFitter(t, y, f, d, weights=np.full(4, 50.0), fit_offset=True, grams=True)
+    whole = held.fit(np.array([101.0]), np.array([0.05]), **kw)
+    run = held.start(np.array([101.0]), np.array([0.05]), **kw)
+    parts = [run.advance(1), run.advance(2), run.advance(97)]
+    run.close()
+    assert parts[0][4] < whole[4]  # the first look is part-way
+    for a, b in zip(parts[-1], whole, strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_each_channels_band_at_once_equals_each_channel_alone_to_the_bit():

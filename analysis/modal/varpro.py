@@ -633,65 +633,98 @@ def _levenberg_marquardt(prob, theta, lo, hi, max_iter, chi2_tol=0.0, dof=1, fir
     (A noise candidate that slides to f = f_min, δ = δ_max to take up a drift must come back
     down in δ along f = f_min; the plain clipped step kept pointing out of the corner.)
     """
-    resid, proj, B = prob.residual(theta) if first is None else first
-    cost = prob.sumsq(resid)
-    JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
-    lam, n_eval, stop = 1e-4, 1, LMStop.ITERATION_LIMIT
-    if se_tol > 0 and _gauss_newton_decrease(JtJ, Jtr) < se_tol * cost / max(dof, 1):
-        max_iter, stop = 0, LMStop.CONVERGED  # the start is within √se_tol standard errors
-    for _ in range(max_iter):
-        sc = 1.0 / np.sqrt(np.maximum(JtJ.diagonal(), 1e-300))
-        A = JtJ * sc[:, None] * sc[None, :]
-        g = Jtr * sc
-        u, info = _damped_step(A, g, lam, theta, lo, hi)
+    run = LMRun(prob, theta, lo, hi, chi2_tol, dof, first, se_tol)
+    run.advance(max_iter)
+    return run.result()
+
+
+class LMRun:
+    """One :func:`_levenberg_marquardt` fit that can be advanced a few iterations at a time:
+    :meth:`advance` by a, then by b, takes the path of one call with ``max_iter`` = a + b, to
+    the bit (the whole iteration state is kept between calls). For a look at a fit part-way (the
+    order search's early look at a candidate) that continues where it looked instead of
+    starting again. :meth:`result` ends it; nothing may be advanced after."""
+
+    def __init__(self, prob, theta, lo, hi, chi2_tol=0.0, dof=1, first=None,  # noqa: PLR0913
+                 se_tol=0.0) -> None:
+        self.prob, self.lo, self.hi = prob, lo, hi
+        self.chi2_tol, self.dof, self.se_tol = chi2_tol, dof, se_tol
+        self.theta = theta
+        self.resid, self.proj, self.B = prob.residual(theta) if first is None else first
+        self.cost = prob.sumsq(self.resid)
+        self.JtJ, self.Jtr = prob.normal_equations(theta, self.resid, self.proj, self.B)
+        self.lam, self.n_eval, self.stop = 1e-4, 1, LMStop.ITERATION_LIMIT
+        self.finished = bool(se_tol > 0 and _gauss_newton_decrease(self.JtJ, self.Jtr)
+                             < se_tol * self.cost / max(dof, 1))
+        if self.finished:  # the start is within √se_tol standard errors
+            self.stop = LMStop.CONVERGED
+
+    def advance(self, max_iter: int) -> None:
+        """Up to ``max_iter`` more iterations (none once converged or given up)."""
+        for _ in range(max_iter):
+            if self.finished:
+                return
+            self._iterate()
+
+    def result(self) -> tuple:
+        """(θ, residual, B, JᵀJ, evaluations, how it stopped) at the point reached."""
+        self.prob.release(self.proj, keep_residual=True)
+        return self.theta, self.resid, self.B, self.JtJ, self.n_eval, self.stop
+
+    def _iterate(self) -> None:
+        """One iteration: a damped step tried, taken if it lowers Σr² (:func:`_levenberg_marquardt`)."""
+        prob, lo, hi, theta, cost = self.prob, self.lo, self.hi, self.theta, self.cost
+        sc = 1.0 / np.sqrt(np.maximum(self.JtJ.diagonal(), 1e-300))
+        A = self.JtJ * sc[:, None] * sc[None, :]
+        g = self.Jtr * sc
+        u, info = _damped_step(A, g, self.lam, theta, lo, hi)
         if info != 0:  # not positive definite (scipy: LinAlgError)
-            lam *= 10.0
-            continue
+            self.lam *= 10.0
+            return
         new = np.clip(theta + u * sc, lo, hi)
         r_new, p_new, B_new = prob.residual(new)
-        n_eval += 1
+        self.n_eval += 1
         cost_new = prob.sumsq(r_new)
-        if cost_new <= cost:
-            small = bool((np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc)).all())
-            rel = (cost - cost_new) / max(cost, 1e-300)
-            if (small or rel < 1e-11) and ((new <= lo) | (new >= hi)).any():
-                tol = max(1e-11 * cost, chi2_tol * cost / max(dof, 1))
-                if _free_descent(A, g, theta, lo, hi) > tol:  # stuck on a bound, not at a minimum
-                    prob.release(p_new)
-                    lam *= 8.0
-                    if lam > 1e10:
-                        stop = LMStop.GAVE_UP
-                        break
-                    continue
-            predicted = -(2.0 * (g @ u) + u @ A @ u)  # Gauss–Newton decrease of Σr² (≥ 0)
-            if not (small or rel < 1e-11) and cost - cost_new > _EXTRAPOLATE_RATIO * predicted:
-                (new, cost_new, r_new, p_new, B_new), n = _extrapolate(
-                    prob, theta, (new, cost_new, r_new, p_new, B_new), lo, hi)
-                n_eval += n
-                rel = (cost - cost_new) / max(cost, 1e-300)
-            drop = cost - cost_new
-            prob.release(proj)
-            theta, cost, resid, proj, B = new, cost_new, r_new, p_new, B_new
-            JtJ, Jtr = prob.normal_equations(theta, resid, proj, B)
-            lam = max(lam / 5.0, 1e-12)
-            if not (small or rel < 1e-11) and (chi2_tol > 0 or se_tol > 0):
-                ftol = chi2_tol * cost / max(dof, 1)
-                gn = _gauss_newton_decrease(JtJ, Jtr)
-                small = (drop < ftol and gn < ftol) or gn < se_tol * cost / max(dof, 1)
-            if small or rel < 1e-11:
-                stop = LMStop.CONVERGED
-                break
-        else:
+        if cost_new > cost:
             prob.release(p_new)
             if cost_new - cost <= 1e-11 * cost:  # equal to rounding: at the minimum
-                stop = LMStop.CONVERGED
-                break
-            lam *= 8.0
-            if lam > 1e10:  # damped to nothing and still no descent
-                stop = LMStop.GAVE_UP
-                break
-    prob.release(proj, keep_residual=True)
-    return theta, resid, B, JtJ, n_eval, stop
+                self._end(LMStop.CONVERGED)
+                return
+            self.lam *= 8.0
+            if self.lam > 1e10:  # damped to nothing and still no descent
+                self._end(LMStop.GAVE_UP)
+            return
+        small = bool((np.abs(new - theta) <= 1e-10 * (np.abs(theta) + sc)).all())
+        rel = (cost - cost_new) / max(cost, 1e-300)
+        if (small or rel < 1e-11) and ((new <= lo) | (new >= hi)).any():
+            tol = max(1e-11 * cost, self.chi2_tol * cost / max(self.dof, 1))
+            if _free_descent(A, g, theta, lo, hi) > tol:  # stuck on a bound, not at a minimum
+                prob.release(p_new)
+                self.lam *= 8.0
+                if self.lam > 1e10:
+                    self._end(LMStop.GAVE_UP)
+                return
+        predicted = -(2.0 * (g @ u) + u @ A @ u)  # Gauss–Newton decrease of Σr² (≥ 0)
+        if not (small or rel < 1e-11) and cost - cost_new > _EXTRAPOLATE_RATIO * predicted:
+            (new, cost_new, r_new, p_new, B_new), n = _extrapolate(
+                prob, theta, (new, cost_new, r_new, p_new, B_new), lo, hi)
+            self.n_eval += n
+            rel = (cost - cost_new) / max(cost, 1e-300)
+        drop = cost - cost_new
+        prob.release(self.proj)
+        self.theta, self.cost, self.resid, self.proj, self.B = new, cost_new, r_new, p_new, B_new
+        self.JtJ, self.Jtr = prob.normal_equations(new, r_new, p_new, B_new)
+        self.lam = max(self.lam / 5.0, 1e-12)
+        if not (small or rel < 1e-11) and (self.chi2_tol > 0 or self.se_tol > 0):
+            dof = max(self.dof, 1)
+            ftol = self.chi2_tol * cost_new / dof
+            gn = _gauss_newton_decrease(self.JtJ, self.Jtr)
+            small = (drop < ftol and gn < ftol) or gn < self.se_tol * cost_new / dof
+        if small or rel < 1e-11:
+            self._end(LMStop.CONVERGED)
+
+    def _end(self, stop: LMStop) -> None:
+        self.stop, self.finished = stop, True
 
 
 def _damped_step(A: np.ndarray, g: np.ndarray, lam: float, theta: np.ndarray, lo: np.ndarray,
@@ -927,6 +960,18 @@ class HeldPoleFitter:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
         """(f, δ, rss, noise_std, n_eval): f and δ of the new modes; unweighted residual sum of
         squares and noise std per channel (degrees of freedom as :func:`fit_modes_varpro`)."""
+        run = self.start(f0, d0, f_bounds_hz=f_bounds_hz, delta_bounds=delta_bounds,
+                         chi2_tol=chi2_tol)
+        got = run.advance(max_iter)
+        run.close()
+        return got
+
+    def start(
+        self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
+        delta_bounds: tuple[float, float], chi2_tol: float = 0.0,
+    ) -> HeldFit:
+        """A fit of the new modes from (f0, δ0), to be advanced a few iterations at a time
+        (:class:`HeldFit`); its first evaluation done (:meth:`weighted_rss`'s if at that start)."""
         C, N = self.C, self.N
         K = f0.size + self.K_fixed
         P = 2 * K + int(self.fit_offset)
@@ -940,11 +985,29 @@ class HeldPoleFitter:
         theta0 = np.clip(theta0, lo, hi)
         last, self._last = getattr(self, "_last", None), None
         first = last[1] if last is not None and np.array_equal(last[0], theta0) else None
-        theta, resid_w, _, _, n_eval, _ = _levenberg_marquardt(
-            self.prob, theta0, lo, hi, max_iter, chi2_tol, dof, first)
-        rss = self.prob.channel_ss(resid_w) / self.weights**2
-        noise_std = np.sqrt(rss / max(N - P - 2 * K / C, 1))
-        return theta[0::2].copy(), theta[1::2].copy(), rss, noise_std, int(n_eval)
+        run = LMRun(self.prob, theta0, lo, hi, chi2_tol, dof, first)
+        return HeldFit(run, self.weights, max(N - P - 2 * K / C, 1))
+
+
+class HeldFit:
+    """A :class:`HeldPoleFitter` fit under way: :meth:`advance` by a, then by b iterations
+    reaches the point of one fit of ``max_iter`` = a + b, to the bit (:class:`LMRun`)."""
+
+    def __init__(self, run: LMRun, weights: np.ndarray, dof: float) -> None:
+        self.run, self.weights, self.dof = run, weights, dof
+
+    def advance(self, max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+        """Up to ``max_iter`` more iterations; then :meth:`HeldPoleFitter.fit`'s tuple at the
+        point reached."""
+        run = self.run
+        run.advance(max_iter)
+        rss = run.prob.channel_ss(run.resid) / self.weights**2
+        noise_std = np.sqrt(rss / self.dof)
+        return run.theta[0::2].copy(), run.theta[1::2].copy(), rss, noise_std, int(run.n_eval)
+
+    def close(self) -> None:
+        """The fit ended: its buffers handed back for reuse."""
+        self.run.result()
 
 
 class GaussNewtonGain:
