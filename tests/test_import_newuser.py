@@ -431,6 +431,17 @@ def test_accelerometers_recorded_in_volts_import_with_their_sensitivity(tmp_path
     assert "channel 'AI1 acc' is in volts: converted at 10.2 mV/(m/s^2) = 100 mV/g" in out  # 100.03
     got = _values(tmp_path / "v.mcap")[:, : t.size]
     np.testing.assert_allclose(got, x, rtol=0, atol=2e-6 * np.abs(x).max())
+    # the rig that import wrote keeps each sensitivity: it re-imports its source without the
+    # option, saying whose sensitivity converted the volts, to the same counts
+    rig = load_rig(tmp_path / "v.rig.toml")
+    np.testing.assert_allclose([g.sensitivity_V_per_m_s2 for g in rig.gages_by_channel()],
+                               [sens["AI0 acc"], sens["AI1 acc"]], rtol=1e-15)  # as parsed
+    rc, out, err = _run(["import", volts, "--rig", tmp_path / "v.rig.toml",
+                         "--out", tmp_path / "again.mcap"], capsys)
+    assert rc == 0, err
+    assert "channel 'AI0 acc' is in volts: converted at 10.2 mV/(m/s^2) = 100 mV/g (gage 1's " \
+           "sensitivity in rig 'v')" in out
+    np.testing.assert_array_equal(_values(tmp_path / "again.mcap"), _values(tmp_path / "v.mcap"))
     # a sensitivity nothing uses is an error, not a silent no-op
     ms2 = _archive_b(tmp_path / "b.csv", "m/s^2")
     rc, out, err = _run(["import", ms2, "--sensitivity", "100mV/g", "--out", tmp_path / "b.mcap"],

@@ -507,12 +507,12 @@ def _import_file(args: argparse.Namespace) -> int:
           f"({imp.get('missing_samples', 0)} samples missing)")
     for line in _read_notes(imp, rig_given=rig_out is None):
         print(line, file=sys.stderr if line.startswith("warning:") else sys.stdout)
-    volts = [(c["source"], c["unit"], c["sensitivity_V_per_m_s2"]) for c in chans
-             if "sensitivity_V_per_m_s2" in c]
-    for v in sorted({v for _, _, v in volts}):  # what turned volts into m/s^2, said
-        names = [n for n, _, w in volts if w == v]
+    volts = [(c["source"], c.get("sensitivity_from", ""), c["sensitivity_V_per_m_s2"])
+             for c in chans if "sensitivity_V_per_m_s2" in c]
+    for v, whose in sorted({(v, f) for _, f, v in volts}):  # what turned volts into m/s^2, said
+        names = [n for n, f, w in volts if (w, f) == (v, whose)]
         print(f"{_channels_are(names, most=4)} in volts: converted at {1e3 * v:.4g} mV/(m/s^2) "
-              f"= {1e3 * v * G0:.4g} mV/g")
+              f"= {1e3 * v * G0:.4g} mV/g" + (f" ({whose})" if whose else ""))
     odd = [(c["source"], c["unit"], c["rig_unit_not_applied"]) for c in chans
            if "rig_unit_not_applied" in c]
     for unit, rig_unit in sorted({(u, r) for _, u, r in odd}):  # one line per disagreement
@@ -641,13 +641,14 @@ def _channels_only_rig(args: argparse.Namespace, src: Path, fmt: str, rig_out: P
     force = args.force_channel and (find_channel(args.force_channel, found.names, found.aliases)
                                     or args.force_channel)
     # a channel in volts whose sensitivity is given records m/s^2 (its volts are converted)
-    file_units = [("m/s^2" if sensitivity_of(sensitivity, n, u) else u)
-                  for n, u in zip(found.names, found.units, strict=True)]
+    sens = {n: v for n, u in zip(found.names, found.units, strict=True)
+            if (v := sensitivity_of(sensitivity, n, u)) is not None}
+    file_units = [("m/s^2" if n in sens else u) for n, u in zip(found.names, found.units, strict=True)]
     try:
         made = minimal_rig(found.names, name=src.stem, fs_hz=args.fs or found.fs_hz,
                            units=args.units, force_channel=force,
                            medium=args.medium or found.medium or "air", file_units=file_units,
-                           anti_alias=found.anti_alias)
+                           anti_alias=found.anti_alias, sensitivities=sens)
     except ValueError as err:  # a channel it cannot make a gage of: say in which file
         raise ValueError(f"{src}: {err}") from None
     if found.anti_alias is not None:

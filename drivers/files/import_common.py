@@ -717,7 +717,8 @@ class FileImportDevice(Device):
                     f"{src.names[i]!r}: missing value (empty or NaN); "
                     f"{option('allow_gaps=', '--allow-gaps')} "
                     f"imports it as a gap in the recording")
-            sens = self._sensitivity_of(src.names[i], src.units[i], name)
+            sens, sens_from = self._sensitivity_of(src.names[i], src.units[i], name,
+                                                   None if pick.is_force else pick.gage)
             factor = (force_unit_factor(src.units[i], self.rig.force(pick.name).unit,
                                         src.names[i], name) if pick.is_force
                       else unit_factor(src.units[i] if _stated(src.units[i])
@@ -737,6 +738,8 @@ class FileImportDevice(Device):
                                 "si_unit": "N" if pick.is_force else "m/s^2", **q.to_json()}
             if sens is not None:
                 notes[pick.name]["sensitivity_V_per_m_s2"] = sens
+            if sens_from:
+                notes[pick.name]["sensitivity_from"] = sens_from
             if rig_unit is not None and _stated(src.units[i]) and sens is None and \
                     factor != unit_factor(rig_unit, src.names[i], name):
                 notes[pick.name]["rig_unit_not_applied"] = rig_unit  # the header's unit wins
@@ -767,16 +770,25 @@ class FileImportDevice(Device):
             extra={"medium": self.rig.medium, "rig_name": self.rig.name,
                    "block_samples": self._block_n, "import": report})
 
-    def _sensitivity_of(self, channel: str, unit: str | None, name: str) -> float | None:
-        """The sensitivity (V per m/s^2) given for a source channel the file holds in volts;
-        None for one not in volts. A sensitivity named for a channel not in volts is an error
-        (it would otherwise go unused, unsaid)."""
+    def _sensitivity_of(self, channel: str, unit: str | None, name: str,
+                        gage: int | None) -> tuple[float | None, str]:
+        """The sensitivity (V per m/s^2) that converts a source channel the file holds in volts,
+        and where it came from ("" where given, else the rig's words): the one given for it,
+        else that of its ``gage`` in the rig (a channels-only rig written by an import of a file
+        in volts keeps it); None for a channel not in volts (or one in volts with neither). A
+        sensitivity named for a channel not in volts is an error (it would otherwise go unused,
+        unsaid)."""
         given = self.sensitivity
         if isinstance(given, dict) and channel in given and not is_volts(unit):
             raise ImportFormatError(f"{name}: channel {channel!r} is in {unit or 'no unit'!r}, "
                                     f"not volts: its {option('sensitivity=', '--sensitivity')} "
                                     f"does not apply")
-        return sensitivity_of(given, channel, unit)
+        sens = sensitivity_of(given, channel, unit)
+        if sens is None and is_volts(unit) and gage is not None:
+            rig_sens = self.rig.gage(gage).sensitivity_V_per_m_s2
+            if math.isfinite(rig_sens):
+                return rig_sens, f"gage {gage}'s sensitivity in rig {self.rig.name!r}"
+        return sens, ""
 
     def _check_sensitivities_used(self, names: list[str], units: list[str | None], name: str) -> None:
         """A sensitivity given for a channel not imported, or one value with no channel in volts,

@@ -11,6 +11,7 @@ analysis gives each gage's frequency, decrement and damping ratio and skips the 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,7 +83,8 @@ def source_channel_names(path: Path, fmt: str, *, time_unit: str | None = None) 
 def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
                 force_channel: str | None = None, force_unit: str = "N",
                 medium: str = "air", file_units: list[str | None] | None = None,
-                anti_alias: tuple[int, float] | None = None) -> MinimalRig:
+                anti_alias: tuple[int, float] | None = None,
+                sensitivities: Mapping[str, float] | None = None) -> MinimalRig:
     """A channels-only rig for source channels ``names``.
 
     Each gage records the unit its samples are in: the file's own where ``file_units`` states
@@ -114,6 +116,9 @@ def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
         into ``[daq]`` so that the trigger removes its delay from onsets, as for the recording
         the file was exported from (without it the onset is the filtered edge's, ~0.5 sample
         later at 2048 Hz for a 4th-order 800 Hz filter).
+    sensitivities : mapping of str to float, optional
+        The accelerometer sensitivity (V per m/s^2) of each source channel recorded in volts
+        (``--sensitivity``): written into its gage, so that the rig converts the file again.
 
     Raises
     ------
@@ -153,6 +158,8 @@ def minimal_rig(names: list[str], *, name: str, fs_hz: float, units: str | None,
     for k, (src, gage) in enumerate(channels.items()):
         lines += ["", f"[[gages]]  # source channel {json.dumps(src)}", f"number = {gage}",
                   f"channel = {k}", f"unit = {json.dumps(applied[src])}"]
+        if sensitivities and src in sensitivities:  # its file is in volts
+            lines.append(f"sensitivity_V_per_m_s2 = {float(sensitivities[src])!r}")
     if force_channel is not None:
         lines += ["", "[[forces]]", f"name = {json.dumps(force_channel)}",
                   f"channel = {len(channels)}", f"unit = {json.dumps(force_unit)}"]
