@@ -112,6 +112,10 @@ def test_highpass_on_four_gages(trials):
     for f in fs:
         assert f.size == pytest.approx(1.5, rel=0.1) and f.layer is Layer.SENSOR
         _closes_its_gap(f)
+    # the answer names every gage the check found, not the strongest alone
+    a = answer(None, [], None, set(), [f.to_json() for f in fs])
+    assert a.named == "highpass" and set(a.location["gages"]) == set(what.gages)
+    assert a.location["gages"][0] == max(fs, key=lambda f: f.statistic / f.chance_level).gages[0]
 
 
 def test_double_hit_30_ms_after_the_blow(trials):

@@ -273,8 +273,11 @@ class Diagnosis:
                          "chance level)")
         elif a.by == "data":
             f = a.finding or {}
+            also = [g for g in (a.location or {}).get("gages", []) if g not in f.get("gages", [])]
             head = (f"explained by the data-only layer: {a.named} ({f.get('text', '')}; statistic "
-                    f"{strength(f):.1f}x its chance level)")
+                    f"{strength(f):.1f}x its chance level"
+                    + (f"; found on gage{'s' if len(also) > 1 else ''} {', '.join(map(str, also))} "
+                       "too" if also else "") + ")")
         elif self.best is None or a.named != self.best.name:
             head = f"explained by the model level: {a.named} ({where_text(a.location)})"
         else:

@@ -690,7 +690,7 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
         return Answer("none", "data", out.location, None, d)    # the environment the rig declares
     if first := (ambient_first(findings) if named.split("+")[0] != "ambient_tone" else []) or flat_tops_first(
             findings, named):
-        return _data_answer(max(first, key=strength), candidates)
+        return _data_answer(max(first, key=strength), candidates, findings)
     if form_not_sensor(out, findings, form_gages):
         out, named = Answer("none", "model", None, None), "none"
     overriding = [f for f in overriding_unexplained(findings) if data_effect(f)]
@@ -752,7 +752,7 @@ def _answer(model: str | None, candidates: list[dict], where: dict | None, form_
         # clipping on gages 4 and 6 at 2.6x, a slope on the hull's gages at 6.3x, answered
         # "unexplained"; the same check's slope reaches 2.5x on a clean modal trial)
         f = max(raw, key=strength)
-    return _data_answer(f, candidates)
+    return _data_answer(f, candidates, findings)
 
 
 def beyond_form(finds: list[dict]) -> list[dict]:
@@ -852,11 +852,24 @@ def stiffness_laws(findings: list[dict]) -> list[dict]:
     return [f for f in findings if told_law(f) and not is_friction(f) and strength(f) >= PRECEDENCE_STRENGTH]
 
 
-def _data_answer(f: dict, candidates: list[dict]) -> Answer:
-    """The answer a data-only finding ``f`` (as JSON) gives, placed at its gages and window."""
+PER_GAGE = frozenset({"gain", "rigid_body", "time_skew", "highpass", "clipping", "noisy", "dead"})
+"""Data-only sensor checks that test each gage's channel on its own, one finding a gage."""
+
+
+def _data_answer(f: dict, candidates: list[dict], findings: Sequence[dict] = ()) -> Answer:
+    """The answer a data-only finding ``f`` (as JSON) gives, placed at its gages and window; a
+    check of each gage on its own (:data:`PER_GAGE`) that found the same fault on other gages
+    (credible ``findings``, :func:`credible`) names them too, the strongest first (a 1.5 Hz
+    high-pass on gages 1-4, each found at 1.47-1.51 Hz, was answered at gage 4 alone: new
+    user, 2026-11-29)."""
     eff = data_effect(f)
     cd = next((c for c in candidates if c["name"] == eff), None)
-    loc = {"gages": list(f["gages"]), "window": DATA_WINDOW.get(f["window"], f["window"]), "band_hz": None,
+    gages = list(f["gages"])
+    if f["check"] in PER_GAGE:
+        for g in sorted((x for x in credible(list(findings)) if x["check"] == f["check"]),
+                        key=strength, reverse=True):
+            gages += [n for n in g["gages"] if n not in gages]
+    loc = {"gages": gages, "window": DATA_WINDOW.get(f["window"], f["window"]), "band_hz": None,
            "effect_mode_hz": f["mode_hz"][0] if f["mode_hz"] else None}
     return Answer(eff, "data", loc, data_closure(f, cd), f)
 
