@@ -119,6 +119,21 @@ def test_an_absurd_rudder_mass_is_named_in_one_line(water, k):
 
 
 
+def test_a_soft_stock_in_water_is_no_absurd_mass(water):
+    """New user: a hand-written rig whose stock is 24 % too soft (I and J x0.76), in water, read
+    "CHECK THE RIG: rudder mass 43x what the modes imply". The added mass holds the 13 Hz mode:
+    no factor on the rudder's own mass brings it to its frequency (the search ended at its
+    bound), and the 59.8 Hz mode asked for another factor; a wrong mass or unit moves every mode
+    by one factor. No line, and no scale from a mode the mass cannot reach."""
+    tm, rig = water
+    soft = set_value(set_value(rig, "stock.I_m4", get_value(rig, "stock.I_m4") * 0.76),
+                     "stock.J_m4", get_value(rig, "stock.J_m4") * 0.76)
+    s = mass_scale(tm, soft)
+    assert s is None or not s.absurd, s
+    assert not any(line.startswith("CHECK THE RIG")
+                   for line in fit_lines(calibrate_to_modes(tm, soft), Path("x.toml")))
+
+
 def test_a_pair_of_unlike_shapes_is_no_damping_misfit():
     """tester8's 100x rig paired a 43 Hz mode with a model mode of MAC 0.01, and the damping
     fit pushed the hull's damping to its bound for it (its one alike mode left at 7.9 % against

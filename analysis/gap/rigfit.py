@@ -764,7 +764,13 @@ def mass_scale(tm: TrialModes, rig: Rig, *, min_mac: float = 0.8, min_share: flo
     wrong unit in the rig file does not touch) that brings each paired model mode to its
     identified frequency is found; ``ratio`` is ``1 / s`` of their median (one mode the rig
     models badly -- a crude rig's torsion -- does not decide it). None when the rig has no
-    structure or no mode pairs."""
+    structure or no mode pairs, and when the paired modes say no one scale: a mode no factor
+    within 1e-4..1e4 brings to its frequency (in water the rudder's own mass is a small part of
+    what moves, so a mode the added mass holds needs no rudder mass at all), or factors that
+    differ by more than :data:`MASS_SCALE_LIMIT` between modes -- a wrong mass or unit moves every
+    mode by one factor, a wrong stiffness moves them by different ones (new user: a stock 24 %
+    too soft in water read "rudder mass 43x what the modes imply", the 13 Hz mode's factor at
+    the search's bound, the 59.8 Hz mode's 0.55)."""
     if rig.rudder is None or rig.stock is None:
         return None
     rows = np.array([g.body == "rudder" for g in rig.gages_by_channel()])
@@ -800,11 +806,16 @@ def mass_scale(tm: TrialModes, rig: Rig, *, min_mac: float = 0.8, min_share: flo
             return 1e6
         return float(np.log(f[c] / tm.f_hz[i]) ** 2)
 
-    each = [scipy.optimize.minimize_scalar(miss, bounds=(-math.log(1e3), math.log(1e3)), args=(i, c),
-                                           method="bounded", options={"xatol": 1e-3}).x
-            for i, c in zip(i_id, i_m, strict=True)]
-    return MassScale(ratio=float(math.exp(-np.median(each))),
-                     modes_hz=tuple(sorted(float(tm.f_hz[i]) for i in i_id)), rig_mass_kg=r.mass_kg)
+    edge = math.log(1e4)
+    each = np.array([scipy.optimize.minimize_scalar(miss, bounds=(-edge, edge), args=(i, c),
+                                                    method="bounded", options={"xatol": 1e-3}).x
+                     for i, c in zip(i_id, i_m, strict=True)])
+    reached = np.abs(each) < edge - 0.01  # a factor at the search's edge reaches no frequency
+    if not reached.any() or np.ptp(each[reached]) > math.log(MASS_SCALE_LIMIT):
+        return None
+    return MassScale(ratio=float(math.exp(-np.median(each[reached]))),
+                     modes_hz=tuple(sorted(float(tm.f_hz[i]) for i in i_id[reached])),
+                     rig_mass_kg=r.mass_kg)
 
 
 def _is_damping(name: str) -> bool:
