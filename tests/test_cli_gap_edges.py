@@ -192,3 +192,22 @@ def test_a_rig_of_another_rate_is_refused_in_one_line(tmp_path, capsys):
     assert err.count("\n") == 1
     assert "at 1000 Hz the anti-alias corner of rig 'albacore-like' (800 Hz" in err
     assert "the rig cannot describe this record" in err
+
+
+def test_a_gage_misplaced_in_the_rig_is_form_error_in_the_verdict(tmp_path):
+    """New user: a rig with gage 4 measured 5 cm off. The calibrated rig's modes agree with the
+    trial's (the position moves no frequency), so the verdict read "model form: none beyond the
+    identification's uncertainty" while the data-only layer, a few lines below, found gage 4 not
+    moving with the rudder's other gages as one rigid body. The verdict's form line now says both."""
+    text = ALBACORE.read_text()
+    moved = re.sub(r"(number = 4\n(?:.*\n)??position_m = \[)0\.60,", r"\g<1>0.65,", text)
+    assert moved != text
+    rig = tmp_path / "moved.toml"
+    rig.write_text(moved)
+    with _Captured() as cap:
+        code = main(["gap", str(WATER), "--rig", str(rig), "--effects", "none", "--no-plots",
+                     "--out", str(tmp_path / "g")])
+    assert code == 0, cap.text
+    assert re.search(r"\[model form\] gage 4 does not move with the rudder's other gages", cap.text), cap.text
+    form = [line for line in cap.text.splitlines() if line.startswith("  model form")]
+    assert form and "form error at gage 4" in form[0], form

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...analysis.gap.datamodel import P_CHANCE, Finding
+from ...analysis.gap.datamodel import P_CHANCE, Finding, Layer
 from ...analysis.gap.diagnose import Diagnosis, Settings
 from ...analysis.gap.trialdata import TrialData
 from ..analyzer import finite_json
@@ -275,7 +275,14 @@ def form_lines(d: Diagnosis) -> list[str]:
         head, items = f"model form with {named}'s update on the rig", [e.text() for e in ml.updates[named]]
     else:
         head, items = "model form", [f.text() for f in ml.fit.form] + [m.text() for m in ml.fit.damping]
+    data_form = [f for f in (d.data.findings if d.data is not None else ())
+                 if f.layer == Layer.MODEL_FORM]
     if not items:
+        if data_form:  # the modes agree, the gages' kinematics or shapes do not: say both
+            gages = sorted({g for f in data_form for g in f.gages})
+            return [f"  {head}: none in the modes beyond the identification's uncertainty; the "
+                    f"data-only layer finds form error at gage{'s' if len(gages) > 1 else ''} "
+                    f"{', '.join(map(str, gages))} (below)"]
         return [f"  {head}: none beyond the identification's uncertainty"]
     return [f"  {head}:"] + [f"    {t}" for t in items]
 
