@@ -55,6 +55,7 @@ from scipy import linalg
 
 from .crb import damping_ratio_from_decrement
 from .varpro import (
+    HELD_MAX_ITER,
     GaussNewtonGain,
     HeldPoleFitter,
     VarProFit,
@@ -70,7 +71,6 @@ _TRIAL_CHI2_TOL = 1e-3  # trial fits: converged to 10⁻³ of the residual varia
 _GAIN_MARGIN = 4.0  # reject on held poles when Λ_p + 4·(Gauss–Newton gain) + 1 < threshold
 _EARLY_ITER = 2  # held-pole fits: judged first after 2 Levenberg–Marquardt iterations …
 _EARLY_REJECT = 0.6  # … and rejected there when Λ_p + 4·gain + 1 ≤ 0.6 × threshold
-_HELD_MAX_ITER = 100  # a held-pole fit's iterations, the early look's included
 FINAL_SE_TOL = 1e-6  # a hit's final fits: stopped within ~0.001 standard errors of the optimum
 
 
@@ -195,7 +195,7 @@ class ModeSelector:
                     # descends from there, is above it too: no early rejection possible)
                     if looked and self._rejected(*run.advance(_EARLY_ITER)[:4], _EARLY_REJECT):
                         return False
-                    fp, dp, rss_p, noise_p, _ = run.advance(_HELD_MAX_ITER
+                    fp, dp, rss_p, noise_p, _ = run.advance(HELD_MAX_ITER
                                                             - _EARLY_ITER * looked)
                 finally:
                     run.close()

@@ -923,6 +923,10 @@ def fit_channels_varpro(
     return out
 
 
+HELD_MAX_ITER = 100
+"""Levenberg-Marquardt iterations of a :class:`HeldPoleFitter` fit, a look part-way included."""
+
+
 class HeldPoleFitter:
     """Fits of further modes to weighted data with the poles (f_fixed, d_fixed) held.
 
@@ -956,7 +960,7 @@ class HeldPoleFitter:
 
     def fit(
         self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
-        delta_bounds: tuple[float, float], chi2_tol: float = 0.0, max_iter: int = 100,
+        delta_bounds: tuple[float, float], chi2_tol: float = 0.0, max_iter: int = HELD_MAX_ITER,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
         """(f, δ, rss, noise_std, n_eval): f and δ of the new modes; unweighted residual sum of
         squares and noise std per channel (degrees of freedom as :func:`fit_modes_varpro`)."""
