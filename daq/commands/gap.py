@@ -275,9 +275,9 @@ def form_lines(d: Diagnosis) -> list[str]:
         head, items = f"model form with {named}'s update on the rig", [e.text() for e in ml.updates[named]]
     else:
         head, items = "model form", [f.text() for f in ml.fit.form] + [m.text() for m in ml.fit.damping]
-    data_form = [f for f in (d.data.findings if d.data is not None else ())
-                 if f.layer == Layer.MODEL_FORM]
     if not items:
+        data_form = [f for f in (d.data.findings if d.data is not None else ())
+                     if f.layer == Layer.MODEL_FORM]
         if data_form:  # the modes agree, the gages' kinematics or shapes do not: say both
             gages = sorted({g for f in data_form for g in f.gages})
             return [f"  {head}: none in the modes beyond the identification's uncertainty; the "
