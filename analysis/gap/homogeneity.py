@@ -103,8 +103,10 @@ class DecayLaw:
     amplitude falls; ``coulomb`` the slope, m/s^2 of envelope lost per cycle to friction, about
     ``4 mu / w^2`` in acceleration; ``coulomb_size`` what it adds to the decrement at the
     smallest amplitude read, relative to the median decrement per cycle; nan when that is not
-    positive). ``showing``: the gages (numbers) that show a mode the free modal model does not
-    hold (:func:`early_laws`); empty for the free model's modes."""
+    positive). The stiffness law is read across blows of different force only (z 0, ``df_rel``
+    nan when the mode's blows span less than :data:`MIN_LEVEL_SPAN`). ``showing``: the gages
+    (numbers) that show a mode the free modal model does not hold (:func:`early_laws`); empty
+    for the free model's modes."""
 
     mode_hz: float
     gage: int
@@ -214,6 +216,7 @@ def decay_laws(x: np.ndarray, fm: FreeModal, ks: Sequence[int], rows: Sequence[i
     :data:`LAW_MIN_RATIO` times the gage's residual rms. A mode with fewer than 8 such cycles
     over all blows has none."""
     starts = np.rint(fm.t0_s * fm.fs_hz).astype(int)
+    own = np.abs(own_amplitudes(fm))
     out, seen = [], []
     for k, g in zip(ks, rows, strict=True):
         f_k = _peak_hz(x[g], fm, starts, float(fm.f_hz[k]))
@@ -225,6 +228,11 @@ def decay_laws(x: np.ndarray, fm: FreeModal, ks: Sequence[int], rows: Sequence[i
         if law is None:     # a mode stopped early: read down to its band's own noise, while it falls
             floor = min(floor, LAW_MIN_RATIO * band_noise(x[g], fm, f_k))
             law = _law(x[g], fm.fs_hz, f_k, starts, fm.n_s, floor, int(numbers[g]), falling=True)
+        if law is not None and np.ptp(np.log(own[:, g, k])) < MIN_LEVEL_SPAN:
+            # blows of one force: at a given time after the blow every decay has the same
+            # amplitude, and the across-blows slope regresses noise on noise (issue 17: ALBACORE,
+            # five equal blows, clean, read z -4.4 on one mode and up to 2.7 on a numpy record's)
+            law = dataclasses.replace(law, z_stiffness=0.0, df_rel=math.nan)
         if law is not None:
             out.append(law)
     return out
@@ -542,8 +550,9 @@ def _law_finding(fm: FreeModal, laws: list[DecayLaw], snr: np.ndarray, numbers: 
                    chance, w.coulomb, "m/s^2 per cycle",
                    f"mode {w.mode_hz:.2f} Hz: Coulomb friction -- its decrement per cycle grows as "
                    f"1/amplitude ({w.coulomb:.3g} m/s^2 of envelope lost per cycle, {w.coulomb_size:.2g} "
-                   "times the decrement at the smallest amplitude read), its frequency "
-                   f"unchanged ({100 * same.df_rel:+.2f} % over the decays)",
+                   "times the decrement at the smallest amplitude read), "
+                   + (f"its frequency unchanged ({100 * same.df_rel:+.2f} % over the decays)"
+                      if math.isfinite(same.df_rel) else "its frequency's law not read (blows of one force)"),
                    window="decay", mode_hz=(w.mode_hz,), null=null,
                    more=(("coulomb_law_z", w.z_coulomb, "1"), ("frequency_change", same.df_rel, "1"),
                          ("coulomb_size", w.coulomb_size, "1"),
