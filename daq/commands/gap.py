@@ -18,6 +18,8 @@ import numpy as np
 
 from ...analysis.gap.datamodel import P_CHANCE, Finding, Layer
 from ...analysis.gap.diagnose import Diagnosis, Settings
+from ...analysis.gap.evidence import GAP_CELL_Z
+from ...analysis.gap.rigfit import PINNED_SD
 from ...analysis.gap.trialdata import TrialData
 from ..analyzer import finite_json
 from ..gap_layers import diagnose_trial
@@ -184,9 +186,12 @@ def model_level_lines(d: Diagnosis) -> list[str]:
     held = [p.name for p in ml.fit.params if not p.pinned]
     text = ", ".join(f"{p.name} x{p.factor:.3f}"
                      + (f" +-{100 * p.sd:.1f} %" if math.isfinite(p.sd) else "")
+                     + (" (loose)" if p.loose else "")
                      + (" AT ITS BOUND" if p.at_bound else "") for p in moved)
     out = [f"{head} calibrated to the trial's modes ({ml.fit.outcome()}): "
            f"{text or 'no constant moved beyond 1 %'}"]
+    if any(p.loose for p in moved):
+        out.append(f"    loose: fitted, but the modes leave it beyond +-{100 * PINNED_SD:.0f} % (1 sd)")
     if held:
         out.append(f"    held at the rig's values (the modes do not pin them): {', '.join(held)}")
     return out
