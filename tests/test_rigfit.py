@@ -251,7 +251,9 @@ def test_gap_with_a_perturbed_rig_says_no_effect_and_model_form(perturbed_trial,
     i = next(k for k, line in enumerate(lines) if line.startswith("verdict: "))
     assert lines[i] == "verdict: NO EFFECT" and lines[i + 1].startswith("  model form"), lines[i:i + 2]
     doc = json.loads((out / "gap.json").read_text())
-    assert doc["verdict"] == "no gap beyond noise" and doc["effect"] is None
+    # the terminal's answer ("NO EFFECT"), and the effect search's map's own verdict beside it
+    assert doc["verdict"] == "no effect" and doc["map_verdict"] == "no gap beyond noise"
+    assert doc["effect"] is None
     level = doc["model_level"]
     assert level["fitted"] and level["stop"] == "converged"
     assert len(level["modes"]) >= 2
