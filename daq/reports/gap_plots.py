@@ -88,9 +88,8 @@ def map_figure(d: Diagnosis) -> Figure:
     axes = fig.subplots(len(maps), 3, squeeze=False)
     for row, (m, t) in zip(axes, maps, strict=True):
         _heat(fig, row, m, t, vmax)
-    fig.suptitle(f"gap map (gage x band x window); grey hatched: not computed\nthe map alone: "
-                 f"{d.verdict} (the diagnosis's answer, with the data-only layer: gap.json's verdict)",
-                 fontsize=11)
+    fig.suptitle(f"gap map (gage x band x window); grey hatched: not computed\nthe map alone says: "
+                 f"{d.verdict} (the diagnosis's answer, both layers, is gap.json's verdict)", fontsize=11)
     return fig
 
 
