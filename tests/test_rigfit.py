@@ -201,12 +201,12 @@ def test_rig_fit_refuses_bad_bounds_in_one_line(perturbed_trial, capsys):
     tmp, start, _, mcap = perturbed_trial
     assert main(["rig", "fit", str(mcap), "--rig", str(start), "--bound", "stock.I_m4"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err == ("ramdaq rig: --bound 'stock.I_m4': expected NAME=LO:HI, multipliers of the start "
+    assert err == ("ramdaq rig fit: --bound 'stock.I_m4': expected NAME=LO:HI, multipliers of the start "
                    "value, e.g. stock.I_m4=0.8:1.25")
     assert main(["rig", "fit", str(mcap), "--rig", str(start), "--bound", "mass=0.5:2"]) == 1
     cap = capsys.readouterr()
     err = cap.err.strip()
-    assert err.startswith("ramdaq rig: --bound mass: not a constant the fit can move") and "\n" not in err
+    assert err.startswith("ramdaq rig fit: --bound mass: not a constant the fit can move") and "\n" not in err
     assert "identifying modes" not in cap.out  # refused before the identification's work
 
 
@@ -217,7 +217,7 @@ def test_rig_fit_refuses_to_write_over_an_existing_rig(perturbed_trial, capsys):
     before = start.read_text()
     assert main(["rig", "fit", str(mcap), "--rig", str(start), "--out", str(start)]) == 1
     cap = capsys.readouterr()
-    assert cap.err.strip() == (f"ramdaq rig: {start} exists (it is the start rig); --overwrite "
+    assert cap.err.strip() == (f"ramdaq rig fit: {start} exists (it is the start rig); --overwrite "
                                "replaces it")
     assert "identifying modes" not in cap.out and start.read_text() == before
 
@@ -251,7 +251,9 @@ def test_gap_with_a_perturbed_rig_says_no_effect_and_model_form(perturbed_trial,
     i = next(k for k, line in enumerate(lines) if line.startswith("verdict: "))
     assert lines[i] == "verdict: NO EFFECT" and lines[i + 1].startswith("  model form"), lines[i:i + 2]
     doc = json.loads((out / "gap.json").read_text())
-    assert doc["verdict"] == "no gap beyond noise" and doc["effect"] is None
+    # the terminal's answer ("NO EFFECT"), and the effect search's map's own verdict beside it
+    assert doc["verdict"] == "no effect" and doc["map_verdict"] == "no gap beyond noise"
+    assert doc["effect"] is None
     level = doc["model_level"]
     assert level["fitted"] and level["stop"] == "converged"
     assert len(level["modes"]) >= 2

@@ -5,6 +5,7 @@ one line. On the shipped ALBACORE-in-water recording (3 blows) and the rig that 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -150,3 +151,83 @@ def test_a_pair_of_unlike_shapes_is_no_damping_misfit():
     named = damping_misfits(mf)
     assert [m.f_id_hz for m in named] == [15.8]
     assert 0.01 < DAMPING_MIN_MAC <= 0.9
+
+
+SAMPSON = Path(__file__).resolve().parents[1] / "recordings" / "sampson-water.mcap"
+_ROW = re.compile(r"^  (\S+)(?: \[[^]]*\])?\s+\S+\s+\S+\s+x\S+\s+\+-\s*([\d.]+) %\s+\[[^]]*\]\s+"
+                  r"(pinned|loose|NOT PINNED, held)(?:  AT BOUND)?$")
+
+
+def _table(lines: list[str]) -> dict[str, tuple[float, str]]:
+    """The constants' rows of ``rig fit``'s table: name -> (posterior sd in %, the word)."""
+    return {m[1]: (float(m[2]), m[3]) for line in lines if (m := _ROW.match(line))}
+
+
+def test_a_constant_the_modes_leave_wide_is_not_called_pinned():
+    """New user: `rig fit` printed "pinned" beside a constant of +-108 % (the shipped SAMPSON
+    water trial, from its own rig: damping.water.c_N_m_s_per_rad). The rule that fits a constant
+    (the modes take half its prior variance) let it through, its factor-5 bounds being wide.
+    Now a row reads "pinned" only within +-50 % at 1 sd; a fitted constant beyond reads "loose",
+    and the table says what each word means."""
+    lt = load_trial(SAMPSON, None)
+    mf = calibrate_to_modes(trial_modes(trial_data(lt)), lt.rig)
+    lines = fit_lines(mf, Path("x.toml"))
+    rows = _table(lines)
+    assert len(rows) == len(mf.params), lines       # every constant's row read
+    for name, (sd, word) in rows.items():
+        if word == "pinned":
+            assert sd <= 50.0, (name, sd)
+    sd, word = rows["damping.water.c_N_m_s_per_rad"]
+    assert sd > 100 and word == "loose", (sd, word)   # fitted (not held), and said to be loose
+    assert any("loose: fitted, but the modes leave it beyond +-50 %" in line for line in lines)
+
+
+def test_rig_fit_help_is_its_own(capsys):
+    """`ramdaq rig fit --help` showed `ramdaq rig`'s usage (RIG where the trial goes)."""
+    from ramdaq.daq.commands.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["rig", "fit", "--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: ramdaq rig fit ") and "trial" in out.splitlines()[0] + out.splitlines()[2]
+    assert "the word 'fit'" not in out and "--units {si,report}" in out
+    with pytest.raises(SystemExit) as e:                 # a usage error names the fit too
+        main(["rig", "fit"])
+    assert e.value.code == 2 and "ramdaq rig fit: error: " in capsys.readouterr().err
+
+
+def test_rig_fit_units_report_prints_the_constants_in_the_reports_units(tmp_path, capsys):
+    """`rig fit --units report` printed the same SI table. The constants with a mass or a
+    length in them are now in the report's units, each row naming its unit (as `ramdaq rig
+    --units report` prints Eq 18's masses), the others as they were; the file stays SI."""
+    from ramdaq.analysis.model.units import FT_M, from_si
+    from ramdaq.daq.commands.cli import main
+
+    text = {}
+    for units in ("si", "report"):
+        out = tmp_path / f"{units}.toml"
+        assert main(["rig", "fit", str(WATER), "--out", str(out), "--units", units]) == 0
+        text[units] = capsys.readouterr().out.splitlines()
+    si, rep = (_table(text[u]) for u in ("si", "report"))
+    assert si.keys() == rep.keys() and si                 # the same constants, sds and words
+    assert all(si[k] == rep[k] for k in si)
+    assert (tmp_path / "si.toml").read_text() == (tmp_path / "report.toml").read_text()  # SI both
+
+    def values(lines: list[str], name: str) -> tuple[str, float, float]:
+        line = next(ln for ln in lines if ln.startswith(f"  {name} "))
+        unit = re.match(rf"^  {re.escape(name)} \[([^]]+)\]", line)
+        start, value = line[unit.end():].split()[:2] if unit else line.split()[1:3]
+        return (unit[1] if unit else ""), float(start), float(value)
+
+    rig = load_trial(WATER, "albacore").rig
+    for name, conv, unit in (("rudder.Iz_kg_m2", lambda v: from_si(v, "inertia"), "ft·ton·s^2"),
+                             ("stock.I_m4", lambda v: v / FT_M ** 4, "ft^4"),
+                             ("damping.water.C_N_s_per_m", lambda v: from_si(v, "damping_translational"),
+                              "ton·s/ft"),
+                             ("hull.modes[0].modal_mass_kg", lambda v: from_si(v, "mass"), "ton·s^2/ft")):
+        u, start, _ = values(text["report"], name)
+        assert u == unit and start == pytest.approx(conv(get_value(rig, name)), rel=1e-4), (name, start)
+        assert values(text["si"], name)[0] == ""          # SI: as the key says
+    u, start, _ = values(text["report"], "hull.modes[0].frequency_hz")
+    assert u == "" and start == pytest.approx(get_value(rig, "hull.modes[0].frequency_hz"))

@@ -81,6 +81,17 @@ bounds did). Constants the modes do not pin are held at their start value (a com
 them the modes cannot see would otherwise wander within its bounds on the identification's
 noise and biases)."""
 
+PINNED_SD = 0.5
+"""The largest posterior sd (of the log multiplier: 0.5 is +-50 %, a factor 1.65 at 1 sd) a
+fitted constant may have and still be called *pinned* in the printed table. :data:`PINNED` alone
+says the modes told more than the bounds did, which is why such a constant is fitted and not
+held; with the default factor-2 bounds of masses, inertias and stiffnesses (prior sd ln 2 =
+0.69) it already leaves at most 0.49, but with the factor-5 bounds of the damping constants
+(prior sd 1.61) halving the variance still leaves sd 1.14, a factor 3 either way at 1 sd (the
+SAMPSON water trial: c at +-108 % read "pinned"). Such a constant is fitted, as before, and
+printed *loose* (:attr:`FittedParam.loose`): the word says how far its value can be trusted,
+the rule of what is fitted is unchanged."""
+
 
 POLISH_SD = 3.0
 """How far (posterior sds of the fit with the floors) the polish on the identification's own
@@ -140,6 +151,17 @@ class FittedParam:
     @property
     def factor(self) -> float:
         return self.value / self.start
+
+    @property
+    def loose(self) -> bool:
+        """Fitted (the modes take away at least :data:`PINNED` of its prior variance) but its
+        posterior sd still beyond :data:`PINNED_SD`: moved by the modes, not pinned by them."""
+        return self.pinned and math.isfinite(self.sd) and self.sd > PINNED_SD
+
+    def pin_text(self) -> str:
+        """The table's word for it: ``pinned``, ``loose`` (fitted, sd beyond :data:`PINNED_SD`)
+        or ``NOT PINNED, held`` (at its start)."""
+        return "NOT PINNED, held" if not self.pinned else "loose" if self.loose else "pinned"
 
     @property
     def at_bound(self) -> bool:
@@ -1082,7 +1104,7 @@ class ModelLevel:
             "constants": {p.name: {"start": p.start, "value": p.value, "factor": round(p.factor, 5),
                                    "bounds": [p.lo, p.hi], "at_bound": p.at_bound,
                                    "sd_rel": p.sd if math.isfinite(p.sd) else None,
-                                   "pinned": p.pinned} for p in f.params},
+                                   "pinned": p.pinned, "loose": p.loose} for p in f.params},
             "modes": [{"f_id_hz": p.f_id_hz, "f_id_se_hz": p.f_id_se_hz, "f_start_hz": b.f_model_hz,
                        "f_fitted_hz": p.f_model_hz, "zeta_id": p.zeta_id, "zeta_fitted": p.zeta_model,
                        "mac_start": b.mac, "mac_fitted": p.mac}

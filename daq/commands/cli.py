@@ -779,7 +779,7 @@ def cmd_rig_fit(args: argparse.Namespace) -> int:
     mf, path = run_rig_fit(args.trial, args.start, out=Path(args.out) if args.out else None,
                            bounds=parse_bounds(args.bound), progress=lambda m: print(m, flush=True),
                            overwrite=args.overwrite)
-    print("\n".join(fit_lines(mf, path)))
+    print("\n".join(fit_lines(mf, path, getattr(args, "units", "si"))))
     return EXIT_OK
 
 
@@ -1063,6 +1063,39 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def rig_fit_parser() -> argparse.ArgumentParser:
+    """``ramdaq rig fit``'s own parser: ``rig`` takes a rig's name where ``fit`` stands, so the
+    fit's arguments are parsed here (:func:`main` sends ``rig fit ...`` to it), and its help and
+    usage errors name ``ramdaq rig fit`` and its own options, not ``ramdaq rig``'s."""
+    f = argparse.ArgumentParser(prog="ramdaq rig fit",
+                                description="tune a rig's uncertain constants to the modes identified "
+                                            "in a trial and write the fitted rig")
+    f.add_argument("trial", help="the recording (.mcap) whose modes the rig is tuned to")
+    f.add_argument("--rig", dest="start", help="the start rig (file or shipped name; default: the rig "
+                   "the trial was recorded with)")
+    f.add_argument("--out", help="the fitted rig file (default TRIAL_rig.toml beside the trial)")
+    f.add_argument("--bound", action="append", metavar="NAME=LO:HI",
+                   help="bounds of a constant as multipliers of its start value, e.g. "
+                        "stock.I_m4=0.8:1.25 (1:1 holds it); repeatable")
+    f.add_argument("--units", choices=("si", "report"), default="si",
+                   help="the constants' start and fitted values: SI, as the rig file's keys, or the "
+                        "report's ft / long ton / s (ton s^2/ft, ft ton s^2, ft^4, ton s/ft, ft ton s); "
+                        "the fitted file is SI either way")
+    f.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    f.add_argument("--debug", action="store_true", help="the traceback of an internal error")
+    f.set_defaults(func=cmd_rig_fit, command="rig fit")
+    return f
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    """The command line: ``rig fit ...`` (after any leading ``--debug``) by
+    :func:`rig_fit_parser`, everything else by :func:`build_parser`."""
+    k = next((i for i, a in enumerate(argv) if a != "--debug"), len(argv))
+    if argv[k:k + 2] == ["rig", "fit"]:
+        return rig_fit_parser().parse_args(argv[:k] + argv[k + 2:])
+    return build_parser().parse_args(argv)
+
+
 def _port(text: str) -> int:
     try:
         port = int(text)
@@ -1126,7 +1159,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:2] == ["gap", "benchmark"]:  # the older spelling of gap-benchmark
         argv = ["gap-benchmark", *argv[2:]]
-    args = build_parser().parse_args(argv)  # usage errors: SystemExit(2)
+    args = _parse(argv)  # usage errors: SystemExit(2)
     where = f"ramdaq {args.command}"
     with _sigterm_as_ctrl_c():
         try:

@@ -18,6 +18,8 @@ import numpy as np
 
 from ...analysis.gap.datamodel import P_CHANCE, Finding, Layer
 from ...analysis.gap.diagnose import Diagnosis, Settings
+from ...analysis.gap.evidence import GAP_CELL_Z
+from ...analysis.gap.rigfit import PINNED_SD
 from ...analysis.gap.trialdata import TrialData
 from ..analyzer import finite_json
 from ..gap_layers import diagnose_trial
@@ -102,9 +104,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
     out += rig_check_lines(d)
     out += answer_lines(d)
     zf = float(np.max(d.map_fit.z))
-    held = (f", {float(np.max(d.map_held.z)):.1f} held out; the largest the held-out impacts reproduce "
-            f"z = {d.z_detect:.1f}" if d.map_held else "")
-    out.append(f"  largest map cell z = {zf:.1f} on the fitted impacts{held}")
+    out.append(f"  largest map cell z = {zf:.1f} on the fitted impacts{held_text(d)}")
     out += data_lines(d)
     out += model_level_lines(d)
     cal = ", ".join(f"{p.name} x{math.exp(t):.3f}"
@@ -159,13 +159,28 @@ def summary_lines(d: Diagnosis) -> list[str]:
     return out
 
 
+def held_text(d: Diagnosis) -> str:
+    """The held-out impacts' part of the map line: their largest cell, and the largest cell of
+    the fitted impacts' map that they reproduce (:attr:`Diagnosis.z_detect`, what the verdict
+    holds against ``z_gap``) -- in words when there is none: no held-out cell is beyond
+    :data:`~ramdaq.analysis.gap.evidence.GAP_CELL_Z` (the score is then -inf, never printed)."""
+    if not d.map_held:
+        return ""
+    s = f", {float(np.max(d.map_held.z)):.1f} held out; "
+    if np.isfinite(d.z_detect):
+        return s + f"the largest the held-out impacts reproduce z = {d.z_detect:.1f}"
+    return (s + f"no cell reproduces on the held-out impacts (none of theirs beyond z {GAP_CELL_Z:g}): "
+            "nothing there to call a gap")
+
+
 def rig_check_lines(d: Diagnosis) -> list[str]:
     """One line when the rig's rudder mass is far from what the trial's modes imply
     (:class:`~ramdaq.analysis.gap.rigfit.MassScale`): a unit or value error of the rig file,
-    which no bound of the calibration reaches; none otherwise."""
+    which no bound of the calibration reaches; none otherwise. Indented as the verdict's other
+    lines (``rig fit`` prints it unindented, among its unindented lines)."""
     ml = d.model_level
     scale = None if ml is None or ml.fit is None else ml.fit.scale
-    return [] if scale is None else scale.check_lines()
+    return [] if scale is None else [f"  {line}" for line in scale.check_lines()]  # as its neighbours
 
 
 def model_level_lines(d: Diagnosis) -> list[str]:
@@ -184,9 +199,12 @@ def model_level_lines(d: Diagnosis) -> list[str]:
     held = [p.name for p in ml.fit.params if not p.pinned]
     text = ", ".join(f"{p.name} x{p.factor:.3f}"
                      + (f" +-{100 * p.sd:.1f} %" if math.isfinite(p.sd) else "")
+                     + (" (loose)" if p.loose else "")
                      + (" AT ITS BOUND" if p.at_bound else "") for p in moved)
     out = [f"{head} calibrated to the trial's modes ({ml.fit.outcome()}): "
            f"{text or 'no constant moved beyond 1 %'}"]
+    if any(p.loose for p in moved):
+        out.append(f"    loose: fitted, but the modes leave it beyond +-{100 * PINNED_SD:.0f} % (1 sd)")
     if held:
         out.append(f"    held at the rig's values (the modes do not pin them): {', '.join(held)}")
     return out
@@ -243,9 +261,7 @@ def verdict_lines(d: Diagnosis) -> list[str]:
     answer's finding on the next line when the first would be longer than
     :data:`VERDICT_WIDTH`; then the model form (:func:`form_lines`). The same words as
     :attr:`Diagnosis.headline` (gap.json's ``headline``), each said once."""
-    head = d.headline
-    if d.model_level is not None:  # the headline is the answer, "; ", the model level's statement
-        head = head.removesuffix("; " + d.model_level.statement(d.answer and d.answer.named))
+    head = verdict_head(d)
     cut = min((i for i in (head.find(":"), head.find(" (")) if i >= 0), default=len(head))
     head = head[:cut].upper() + head[cut:]
     out = [f"verdict: {head}"]
@@ -258,6 +274,26 @@ def verdict_lines(d: Diagnosis) -> list[str]:
                 detail = detail[1:-1]
             out = [f"verdict: {head[:i]}", f"  finding: {detail}"]
     return out + form_lines(d)
+
+
+def verdict_head(d: Diagnosis) -> str:
+    """The answer as the verdict line says it: :attr:`Diagnosis.headline` without the model
+    level's statement (which :func:`form_lines` prints on its own lines)."""
+    head = d.headline
+    if d.model_level is not None:  # the headline is the answer, "; ", the model level's statement
+        head = head.removesuffix("; " + d.model_level.statement(d.answer and d.answer.named))
+    return head
+
+
+def answer_verdict(d: Diagnosis) -> str:
+    """gap.json's ``verdict``: the answer the terminal's verdict line gives (both layers:
+    "explained by the data-only layer: gage_alignment", "no effect", "unexplained: gages ...",
+    "explained"), without the finding and its statistic that follow it (``headline`` has
+    them). The effect search's map alone says "no gap beyond noise", "explained" or
+    "unexplained": that is ``map_verdict``."""
+    head = verdict_head(d)
+    cut = min((i for i in (head.find(" -- "), head.find(" (")) if i >= 0), default=len(head))
+    return head[:cut].strip()
 
 
 def form_lines(d: Diagnosis) -> list[str]:
@@ -327,7 +363,11 @@ def write_report(d: Diagnosis, out: Path, *, plots: bool = True, source: str = "
     """gap.json (and the plots) in ``out``; ``source`` the recording, ``rig`` the rig it was held
     against (:func:`rig_record`)."""
     out.mkdir(parents=True, exist_ok=True)
-    doc = d.to_json() | {"source": source, "rig": rig}
+    doc = d.to_json()
+    # the answer the terminal prints, not the map's alone (which was "no gap beyond noise" beside
+    # a printed "EXPLAINED BY THE DATA-ONLY LAYER"); the map's keeps its own key, next to it
+    doc = {"verdict": answer_verdict(d), "map_verdict": doc.pop("verdict")} | doc | {
+        "source": source, "rig": rig}
     files = [out / "gap.json"]
     files[0].write_text(json.dumps(finite_json(doc), indent=1, allow_nan=False))  # NaN: null
     if plots:

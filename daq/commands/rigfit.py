@@ -10,8 +10,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ...analysis.gap.modal_level import ModalComparison, trial_modes
-from ...analysis.gap.rigfit import ModeFit, calibrate_to_modes, fit_params, fitted_rig_text
+from ...analysis.gap.rigfit import PINNED_SD, ModeFit, calibrate_to_modes, fit_params, fitted_rig_text
 from ...analysis.model.rig import RigError
+from ...analysis.model.units import FT_M, from_si, report_unit
 from ..gap_trial import load_trial, trial_data
 
 
@@ -94,16 +95,48 @@ def mode_table(before: ModalComparison, after: ModalComparison) -> list[str]:
     return out
 
 
-def fit_lines(mf: ModeFit, path: Path) -> list[str]:
-    """What ``ramdaq rig fit`` prints: the modes, the constants, the solver's end, the form."""
+_REPORT_UNITS = (("_kg_m2", "inertia"), ("_kg", "mass"), ("C_N_s_per_m", "damping_translational"),
+                 ("_N_m_s_per_rad", "damping_rotational"))
+"""A constant's key ending -> its quantity (:mod:`ramdaq.analysis.model.units`), for
+``--units report``; ``_m4`` (a stock's second moment of area) is ft^4."""
+
+
+def report_value(name: str, value: float) -> tuple[float, str]:
+    """A fitted constant's SI value in the report's units (Report 1836: ft, long ton, s) and the
+    unit's name; a constant with no length or mass in it (a frequency, a ratio, a factor) as it
+    is, with "" for its unit."""
+    if name.endswith("_m4"):
+        return value / FT_M ** 4, "ft^4"
+    for end, quantity in _REPORT_UNITS:
+        if name.endswith(end):
+            return float(from_si(value, quantity)), report_unit(quantity)
+    return value, ""
+
+
+def fit_lines(mf: ModeFit, path: Path, units: str = "si") -> list[str]:
+    """What ``ramdaq rig fit`` prints: the modes, the constants, the solver's end, the form.
+    ``units="report"``: the constants' start and fitted values in the report's units (masses
+    in ton s^2/ft, inertias in ft ton s^2, the stock's I and J in ft^4, the dashpots in ton s/ft
+    and ft ton s), each row naming its unit; the keys stay the rig file's (SI) ones."""
+    report = units == "report"
     out = mode_table(mf.before, mf.after)
     out.append("")
-    out.append("constants: start, fitted, x start, +- posterior sd (relative), bounds, and whether "
-               "these modes pin it (not pinned: held at its start):")
+    out.append("constants: start, fitted"
+               + (" (in the report's units, named after the key)" if report else "")
+               + ", x start, +- posterior sd (relative), bounds, and what these modes make of it:")
+    out.append(f"  (pinned: fitted, within +-{100 * PINNED_SD:.0f} % at 1 sd; loose: fitted, but the "
+               f"modes leave it beyond +-{100 * PINNED_SD:.0f} %, so its value is no better than "
+               "that; NOT PINNED, held: kept at its start)")
+    rows = []
     for p in mf.params:
-        out.append(f"  {p.name:38s} {p.start:11.5g} {p.value:11.5g}  x{p.factor:6.4f} "
-                   f"+-{_f(100 * p.sd, '5.1f')} %  [{p.lo:g}, {p.hi:g}]  "
-                   + ("pinned" if p.pinned else "NOT PINNED, held")
+        start, value, unit = p.start, p.value, ""
+        if report:
+            (start, unit), (value, _) = report_value(p.name, p.start), report_value(p.name, p.value)
+        rows.append((p, f"{p.name} [{unit}]" if unit else p.name, start, value))
+    width = max([38] + [len(r[1]) for r in rows])
+    for p, name, start, value in rows:
+        out.append(f"  {name:{width}s} {start:11.5g} {value:11.5g}  x{p.factor:6.4f} "
+                   f"+-{_f(100 * p.sd, '5.1f')} %  [{p.lo:g}, {p.hi:g}]  {p.pin_text()}"
                    + ("  AT BOUND" if p.at_bound else ""))
     if mf.misfit_scale > 1:
         out.append(f"  (sds widened x{mf.misfit_scale:.3g}: the modes differ from the fitted model by "

@@ -10,6 +10,7 @@ colour of z = 0; the thresholds the diagnosis uses are marked on the colour bars
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib as mpl
@@ -48,11 +49,19 @@ def _hatch_missing(ax, z: np.ndarray) -> None:
 
 
 def _mark(cbar, levels: dict[str, float]) -> None:
-    """Threshold lines, labelled, on a colour bar."""
+    """Threshold lines, labelled, on a colour bar: the labels on the bar's left, clear of its
+    tick labels on the right (a label at z 3 sat on the tick label 2, one at 8 on the bar)."""
     for label, v in levels.items():
         cbar.ax.axhline(v, color="c", lw=1.5)
-        cbar.ax.text(1.05, v, f" {label}", transform=cbar.ax.get_yaxis_transform(), va="center",
-                     fontsize=7, color="teal")
+        if label:
+            cbar.ax.text(-0.15, v, label, transform=cbar.ax.get_yaxis_transform(), va="center",
+                         ha="right", fontsize=7, color="teal")
+
+
+def _wrap(text: str, width: int) -> str:
+    """A title broken into lines of at most ``width`` characters (a pair of effects' names made
+    a panel's title run into its neighbour's)."""
+    return "\n".join(textwrap.wrap(text, width)) or text
 
 
 def _heat(fig: Figure, ax_row, m: GapMap, title: str, vmax: float) -> None:
@@ -61,7 +70,7 @@ def _heat(fig: Figure, ax_row, m: GapMap, title: str, vmax: float) -> None:
         im = ax.imshow(np.ma.masked_invalid(z), aspect="auto", cmap=_cmap("magma"), vmin=-2,
                        vmax=vmax, origin="upper", interpolation="nearest")
         _hatch_missing(ax, z)
-        ax.set_title(f"{title}: {WINDOWS[k]}-blow window", fontsize=9)
+        ax.set_title(_wrap(f"{title}: {WINDOWS[k]}-blow window", 45), fontsize=9)
         ax.set_xticks(range(len(m.bands.labels)), m.bands.labels, rotation=45, ha="right", fontsize=7)
         ax.set_yticks(range(len(m.gage_numbers)), [f"gage {g}" for g in m.gage_numbers], fontsize=7)
     cbar = fig.colorbar(im, ax=ax_row, label="z (beyond noise)")
@@ -79,7 +88,8 @@ def map_figure(d: Diagnosis) -> Figure:
     axes = fig.subplots(len(maps), 3, squeeze=False)
     for row, (m, t) in zip(axes, maps, strict=True):
         _heat(fig, row, m, t, vmax)
-    fig.suptitle(f"gap map (gage x band x window); verdict: {d.verdict}; grey hatched: not computed")
+    fig.suptitle(f"gap map (gage x band x window); grey hatched: not computed\nthe map alone says: "
+                 f"{d.verdict} (the diagnosis's answer, both layers, is gap.json's verdict)", fontsize=11)
     return fig
 
 
@@ -175,6 +185,7 @@ def ranking_figure(d: Diagnosis) -> Figure:
     for yi in y[~ok]:
         a.text(0, yi, " no score (no placement to try)", va="center", fontsize=8, color="0.4")
     a.set_yticks(y, [effect_text(s.effect.name) for s in sigs], fontsize=8)
+    a.set_ylim(-0.7, len(sigs) - 0.3)   # a row without a bar (no score) clear of the axis line
     a.axvline(0, color="k", lw=0.5)
     a.set_xlabel("signature score z (charged for the placements tried)")
     a.set_title("signature match")
@@ -191,8 +202,9 @@ def ranking_figure(d: Diagnosis) -> Figure:
     b.yaxis.tick_right()
     b.axvline(0, color="k", lw=0.5)
     b.margins(x=0.25)
-    b.set_xlabel("ΔBIC against the calibrated model (symmetric log; negative is better)")
-    b.set_title("refit with the effect" + (f" (red: named, {effect_text(best)})" if best else ""))
+    b.set_ylim(-0.7, max(len(c), 1) - 0.3)
+    b.set_xlabel("ΔBIC against the calibrated model\n(symmetric log; negative is better)")
+    b.set_title(_wrap("refit with the effect" + (f" (red: named, {effect_text(best)})" if best else ""), 50))
     return fig
 
 
