@@ -697,12 +697,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
     from ...analysis.impact import skipped_steps
     from ...analysis.model.rig_modes import eq18_check, modes_in
 
-    if args.rig == "fit":
-        return cmd_rig_fit(args)
-    if args.trial or args.start or args.out or args.bound or args.overwrite:
-        raise SystemExit("ramdaq rig: a trial, --rig, --out, --bound and --overwrite go with "
-                         "'ramdaq rig fit'")
-    rig = load_rig(args.rig)
+    rig = load_rig(args.rig)    # 'rig fit ...' has its own parser (rig_fit_parser)
     print(f"rig {rig.name} ({args.rig}): {rig.surface.title}, {len(rig.gages)} gages, "
           f"{rig.daq.sample_rate_hz:g} Hz, medium {rig.medium}")
     if not rig.structural:
@@ -993,17 +988,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("rig", help="a rig's modes in air and water, and Eq 18 on them; "
                        "'rig fit TRIAL --rig START' tunes a rig to a trial's modes")
-    g.add_argument("rig", help="rig file or shipped rig's name, or the word 'fit'")
-    g.add_argument("trial", nargs="?", help="fit: the recording (.mcap) whose modes the rig is tuned to")
-    g.add_argument("--rig", dest="start", help="fit: the start rig (file or shipped name; default: the rig "
-                   "the trial was recorded with)")
-    g.add_argument("--out", help="fit: the fitted rig file (default TRIAL_rig.toml beside the trial)")
-    g.add_argument("--bound", action="append", metavar="NAME=LO:HI",
-                   help="fit: bounds of a constant as multipliers of its start value, e.g. "
-                        "stock.I_m4=0.8:1.25 (1:1 holds it); repeatable")
+    g.add_argument("rig", help="rig file or shipped rig's name ('ramdaq rig fit --help': tune a rig "
+                   "to a trial's modes)")
     g.add_argument("--units", choices=("si", "report"), default="si",
                    help="masses in Eq 18's lines: SI (kg), or the report's ton s^2/ft")
-    g.add_argument("--overwrite", action="store_true", help="fit: replace an existing --out file")
     g.set_defaults(func=cmd_rig)
 
     m = sub.add_parser("import", help="another system's recording (CSV, UFF 58, TDMS) into MCAP")
