@@ -451,21 +451,17 @@ def ambient_first(findings: list[dict]) -> list[dict]:
     tone at 131x its chance level was named hull_coupling by the model level; a 5.0 Hz one at 29x
     read as a mode whose amplitude grows as the blow^0.20 -- the tone's share does not grow with
     the blow."""
-    switched = [h for f in findings if f["check"] == "line_persistence" for h in f["mode_hz"]]
     return [f for f in findings if f["check"] == "ambient_tone" and strength(f) >= PRECEDENCE_STRENGTH
-            and f["mode_hz"] and not any(abs(f["mode_hz"][0] - h) <= SAME_LINE_HZ for h in switched)]
+            and f["mode_hz"] and not on_switched_line(f["mode_hz"][0], findings)]
 
 
-def on_switched_line(c: dict, findings: list[dict]) -> bool:
-    """Whether the model level's coupled hull mode ``c`` (as JSON) lies on a line the blows switch
-    on (a ``line_persistence`` finding within :data:`SAME_LINE_HZ`): steady through each decay and
-    gone before the next blow, which no mode does -- a mode rings on, decaying. The free model
-    fits such a line with a pole of almost no damping, and the rig lacks it, so the model level
-    reads a hull mode (issue 17, modal benchmark seed 562002: mains pickup at 60, 180 and 300 Hz,
-    switched on by the blows, read as hull modes coupled at 7000x their chance level, which
-    answered "hull_coupling" over the line found at 4.7x)."""
-    switched = [h for f in findings if f["check"] == "line_persistence" for h in f["mode_hz"]]
-    return any(abs(c["f_hz"] - h) <= SAME_LINE_HZ for h in switched)
+def on_switched_line(f_hz: float, findings: list[dict]) -> bool:
+    """Whether ``f_hz`` (Hz) lies on a line the blows switch on: a ``line_persistence`` finding
+    (as JSON) within :data:`SAME_LINE_HZ`, steady through each decay and gone before the next
+    blow -- neither an ambient tone (it would be there throughout) nor a mode (it would ring on,
+    decaying)."""
+    return any(abs(f_hz - h) <= SAME_LINE_HZ
+               for f in findings if f["check"] == "line_persistence" for h in f["mode_hz"])
 
 
 def flat_tops_first(findings: list[dict], named: str) -> list[dict]:
@@ -573,7 +569,11 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     "tiller" where the rest answers "none" or "unexplained" by the model (:func:`turned_stock`)."""
     findings = [second_blow_held(f, candidates) for f in findings]
     turns = [c for c in coupled if c.get("kind") == "tiller"]
-    coupled = [c for c in coupled if c not in turns and not on_switched_line(c, findings)]
+    # a coupled "hull mode" on a line the blows switch on is that line, which the free model fits
+    # with a pole of almost no damping and the rig lacks (issue 17, modal benchmark seed 562002:
+    # mains pickup at 60, 180 and 300 Hz read as hull modes coupled at 7000x their chance level,
+    # answered "hull_coupling" over the line found at 4.7x)
+    coupled = [c for c in coupled if c not in turns and not on_switched_line(c["f_hz"], findings)]
     model, coupled = unrung_hull(model, candidates, coupled, form_gages)
     if coupled:
         findings = [f for f in findings if not phase_at_coupled(f, coupled)]
