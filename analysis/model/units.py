@@ -54,6 +54,7 @@ QUANTITIES: dict[str, tuple[float, str, str]] = {
     "length": (FT_M, "ft", "m"),
     "area": (FT_M**2, "ft^2", "m^2"),
     "volume": (FT_M**3, "ft^3", "m^3"),
+    "area_moment": (FT_M**4, "ft^4", "m^4"),
     "time": (1.0, "s", "s"),
     "frequency": (1.0, "Hz", "Hz"),
     "angle": (1.0, "rad", "rad"),

@@ -774,7 +774,7 @@ def cmd_rig_fit(args: argparse.Namespace) -> int:
     mf, path = run_rig_fit(args.trial, args.start, out=Path(args.out) if args.out else None,
                            bounds=parse_bounds(args.bound), progress=lambda m: print(m, flush=True),
                            overwrite=args.overwrite)
-    print("\n".join(fit_lines(mf, path, getattr(args, "units", "si"))))
+    print("\n".join(fit_lines(mf, path, args.units)))
     return EXIT_OK
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from ...analysis.gap.modal_level import ModalComparison, trial_modes
 from ...analysis.gap.rigfit import PINNED_SD, ModeFit, calibrate_to_modes, fit_params, fitted_rig_text
 from ...analysis.model.rig import RigError
-from ...analysis.model.units import FT_M, from_si, report_unit
+from ...analysis.model.units import from_si, report_unit
 from ..gap_trial import load_trial, trial_data
 
 
@@ -96,17 +96,15 @@ def mode_table(before: ModalComparison, after: ModalComparison) -> list[str]:
 
 
 _REPORT_UNITS = (("_kg_m2", "inertia"), ("_kg", "mass"), ("C_N_s_per_m", "damping_translational"),
-                 ("_N_m_s_per_rad", "damping_rotational"))
+                 ("_N_m_s_per_rad", "damping_rotational"), ("_m4", "area_moment"))
 """A constant's key ending -> its quantity (:mod:`ramdaq.analysis.model.units`), for
-``--units report``; ``_m4`` (a stock's second moment of area) is ft^4."""
+``--units report``."""
 
 
 def report_value(name: str, value: float) -> tuple[float, str]:
     """A fitted constant's SI value in the report's units (Report 1836: ft, long ton, s) and the
     unit's name; a constant with no length or mass in it (a frequency, a ratio, a factor) as it
     is, with "" for its unit."""
-    if name.endswith("_m4"):
-        return value / FT_M ** 4, "ft^4"
     for end, quantity in _REPORT_UNITS:
         if name.endswith(end):
             return float(from_si(value, quantity)), report_unit(quantity)
