@@ -94,12 +94,12 @@ def load_trial(src: str | Path | Recording, rig: Rig | str | Path | None = None,
     # level, the tone's, read as a decrement changing 36 % per doubling of the blow)
     said = np.array([(ev.not_analysable or "").startswith(NO_BLOW) for ev in impacts], dtype=bool)
     blow = ~(ratio <= NO_BLOW_RATIO) & ~(np.isnan(ratio) & said)
-    for t, r, ev in zip(onsets[~blow], ratio[~blow], [e for e, b in zip(impacts, blow, strict=True) if not b],
-                        strict=True):
-        why = (f"no band of the gages rings more after it than before (at most {r:.2f}x the RMS over "
-               f"{BLOW_WINDOW_S} s); a blow drives every mode (a mode that stops ringing by friction fires "
-               "the trigger too)") if np.isfinite(r) else f"the trigger's words: {ev.not_analysable}"
-        say(f"{path}: the trigger's onset at {t:.3f} s is no blow, not compared: {why}")
+    for k in np.flatnonzero(~blow):
+        why = (f"no band of the gages rings more after it than before (at most {ratio[k]:.2f}x the RMS "
+               f"over {BLOW_WINDOW_S} s); a blow drives every mode (a mode that stops ringing by friction "
+               "fires the trigger too)") if np.isfinite(ratio[k]) else (
+            f"the trigger's words: {impacts[k].not_analysable}")
+        say(f"{path}: the trigger's onset at {onsets[k]:.3f} s is no blow, not compared: {why}")
     onsets, impacts = onsets[blow], [ev for ev, b in zip(impacts, blow, strict=True) if b]
     say(f"{path}: {n / info.fs_hz:.1f} s of {len(have)} gages at {info.fs_hz:g} Hz, "
         f"{len(onsets)} impacts found")

@@ -248,9 +248,8 @@ def less_other_modes(v: np.ndarray, fm: FreeModal, g: int, f_hz: float) -> np.nd
     structure does (issue 17: ALBACORE in water, five clean blows, its 6.875 Hz mode at gage 6,
     0.015 m/s^2 beside a 13 Hz mode at 0.47, read "frequency falls by 3.3 % as its amplitude
     grows", z -4.4; less the model's other modes, it stays above ten times the noise for too few
-    cycles to read a law). Poles within twice the half
-    band are left in: the free linear model may split one nonlinear mode into a cluster of
-    poles, and its law is read on all of them."""
+    cycles to read a law). Poles within twice the half band are left in: the free linear model
+    may split one nonlinear mode into a cluster of poles, and its law is read on all of them."""
     half = max(LAW_BAND * f_hz, LAW_BAND_MIN_HZ)
     others = np.flatnonzero(np.abs(fm.f_hz - f_hz) > 2 * half)
     band = law_band(f_hz, fm.fs_hz)
