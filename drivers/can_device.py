@@ -508,6 +508,10 @@ class CanDevice(Device):
                 quiet = now - self._last_seen.get(g, self._first_wall)
                 if quiet > self.group_timeout_s and (grp.base is None or grp.done() < lead):
                     if g not in self._silent:
+                        # frames held late beside the group (a stall of the sender before a
+                        # burst) are its last: placed first, it is silent from where they end
+                        grp.settle_held()
+                        self._dirty = True
                         if self._behind(grp, lead) <= self._timeout_samples():
                             continue  # the host stalled between two groups' frames: not silence
                         self._timed_out(g, grp, quiet, lead)

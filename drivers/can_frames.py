@@ -678,6 +678,12 @@ class CycleAssembler:
             return "foreign_frame"
         return self._hold(seq, cycle, slot, data, t, x)
 
+    def settle_held(self) -> None:
+        """Decide the frames held beside the group now, as at the end of the stream: the group
+        has fallen silent, so they are its last frames, not a run that will yet catch up."""
+        if self.side is not None:
+            self._settle(final=True)
+
     def finish(self) -> None:
         """End of the stream: decide what is held, then make every cycle final."""
         if self.side is not None:

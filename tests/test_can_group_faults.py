@@ -56,10 +56,12 @@ def _frames(cycles: int, groups_at, spoil=None) -> list[can.Message]:
     return out
 
 
-def _record(tmp_path, frames: list[can.Message], query: str = "", pace_s: float | None = None):
+def _record(tmp_path, frames: list[can.Message], query: str = "", pace_s: float | None = None,
+            stall: tuple[int, float] | None = None):
     """``frames`` through a virtual bus into ``record()``; returns the lines said (with the
     monotonic time each was said), the error that ended it or the summary, the blocks and the
-    events recorded."""
+    events recorded. ``stall`` (frame index, s): the sender stops that long before that frame
+    (the virtual bus stamps each frame when it is sent, as a host stamps its arrival)."""
     name = f"ramdaq-{uuid.uuid4().hex[:8]}"
     dev = CanDevice(f"virtual/{name}?idle_s=1&{query}", dbc="classic")
     dev.open()
@@ -70,6 +72,8 @@ def _record(tmp_path, frames: list[can.Message], query: str = "", pace_s: float 
         for i, m in enumerate(frames):
             if pace_s is not None and i % 16 == 0:  # one cycle of both groups
                 time.sleep(max(0.0, t0 + (i // 16) * T / FS * pace_s - time.monotonic()))
+            if stall is not None and i == stall[0]:
+                time.sleep(stall[1])
             tx.send(m)
 
     sender = threading.Thread(target=send)
@@ -119,6 +123,33 @@ def test_a_group_silent_to_the_end_stops_the_recording_in_words_with_events(tmp_
             for e in end] == [((1024 - stop) * T, [2], True)]
     assert "device_error" in kinds
     assert any("frame group 2 (channels 9-16)" in s for _, s in said)
+
+
+def test_a_group_held_late_when_it_falls_silent_is_silent_from_its_last_frame(tmp_path):
+    """The sender stalls 0.5 s in the middle of cycle 45 (group 2's second frame), then sends
+    the rest at once: every later frame arrives 0.5 s late, more than the clock's tolerance, so
+    each group holds them beside its stream until they catch up (at most 0.8 s of samples).
+    Group 2 stops at cycle 205 (0.300 s) while still held; group 1 sends 2795 cycles more. The
+    group timeout (0.02 s: a poll every 0.05 s sees group 2 quiet while group 1's held run
+    is placed, whatever the machine's speed up to ~10 M frames/s) must declare group 2 silent
+    from its last frame, 0.300 s, with every sample before kept -- not from where its placed
+    stream stood when the stall began (0.067 s), which lost 0.23 s of samples it had received
+    (the flaky CI failure of 2026-11-28: "silent from 0.092 s")."""
+    stop = 205
+    frames = _frames(3000, lambda c: (1, 2) if c < stop else (1,))
+    said, error, blocks, events = _record(tmp_path, frames, "group_timeout_s=0.02",
+                                          stall=(45 * 16 + 9, 0.5))
+    assert isinstance(error, DeviceClosed)
+    assert "frame group 2 (channels 9-16) silent from 0.300 s" in str(error), str(error)
+    idx, counts = _delivered(blocks)
+    np.testing.assert_array_equal(idx, np.arange(stop * T))  # everything before, nothing after
+    truth = np.vstack([_counts(0, stop, 1), _counts(0, stop, 2)])
+    np.testing.assert_array_equal(counts, truth)
+    timeouts = [e for e in events if e["kind"] == "group_timeout"]
+    assert [e["t_ns"] for e in timeouts] == [round(stop * T / FS * 1e9)]
+    # the stall is said: the frames after it came late, and were placed where SEQ says
+    assert any(e["kind"] == "delayed_frames" or "delayed_frames" in str(e["detail"])
+               for e in events), events
 
 
 def test_a_group_that_never_sends_is_said_not_an_empty_good_recording(tmp_path):
