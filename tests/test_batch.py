@@ -32,6 +32,7 @@ from ramdaq.daq.commands.batch import (
     plan_batch,
     report_folders,
     run_batch,
+    summary_lines,
 )
 from ramdaq.daq.commands.batch_tasks import (
     TaskResult,
@@ -187,8 +188,8 @@ def test_gap_batch(client, fleet, tmp_path):
     from): the rig and its digest in the row, the numbers those of a serial run with that rig."""
     out = tmp_path / "out"
     rig = Path(ramdaq.rigs.__file__).parent / "sampson.toml"
-    run_batch("gap", [str(fleet / "a" / "sampson-water.mcap"), str(fleet / "b" / "truncated.mcap")], out,
-              client=client, plots=False, rig=rig)
+    paths = [str(fleet / "a" / "sampson-water.mcap"), str(fleet / "b" / "truncated.mcap")]
+    outcome = run_batch("gap", paths, out, client=client, plots=False, rig=rig)
     rows = {Path(r["recording"]).name: r for r in pq.read_table(out / "gap.parquet").to_pylist()}
     assert rows["truncated.mcap"]["status"] == "failed"
     r = rows["sampson-water.mcap"]
@@ -203,6 +204,8 @@ def test_gap_batch(client, fleet, tmp_path):
     # verdict is the answer ramdaq gap prints, which the table has as answer / answered_by
     assert doc["map_verdict"] == r["verdict"] and doc["effect"] == r["effect"]
     assert r["answer"] == doc["answer"]["named"] and r["answered_by"] == doc["answer"]["by"]
+    # the summary counts the answers ramdaq gap prints, not the map's verdicts
+    assert f"  answers: {r['answer']} 1" in summary_lines(outcome), summary_lines(outcome)
 
 
 def test_a_rig_for_the_batch_is_read_first_and_part_of_what_is_current(fleet, tmp_path):

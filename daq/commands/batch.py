@@ -517,7 +517,8 @@ def exit_code(outcome: BatchOutcome) -> int:
 def summary_lines(outcome: BatchOutcome) -> list[str]:
     """The end of a batch for the terminal, over the whole table written (this run's results
     and the current ones carried over): recordings, hits accepted and rejected (analyze) or
-    verdicts (gap), and every failure with its one-line reason."""
+    answers (gap: both layers', as ramdaq gap gives them), and every failure with its one-line
+    reason."""
     plan, rs = outcome.plan, list(outcome.results.values())
     recs = recordings_of(outcome.table)
     st = Counter(r["status"] for r in recs)
@@ -534,10 +535,13 @@ def summary_lines(outcome: BatchOutcome) -> list[str]:
         hits, acc = sum(r["hits_found"] for r in ok), sum(r["hits_accepted"] for r in ok)
         out.append(f"  hits: {hits} found, {acc} accepted, {hits - acc} rejected")
     else:
-        verdicts = Counter(v for v, s in zip(outcome.table.column("verdict").to_pylist(),
-                                             outcome.table.column("status").to_pylist(), strict=True)
-                           if s == "ok")
-        out.append("  verdicts: " + (", ".join(f"{v} {n}" for v, n in verdicts.items()) or "none"))
+        # the answer of both layers, as ramdaq gap's verdict line gives it (the "verdict"
+        # column is the effect search's map alone: "no gap beyond noise" where the data-only
+        # layer named a gage's gain)
+        answers = Counter(v or "not answered" for v, s in zip(
+            outcome.table.column("answer").to_pylist(), outcome.table.column("status").to_pylist(),
+            strict=True) if s == "ok")
+        out.append("  answers: " + (", ".join(f"{v} {n}" for v, n in answers.items()) or "none"))
     for r in recs:
         if r["status"] in ("failed", "lost"):
             out.append(f"  {r['status'].upper()} {r['recording']}: {r['status_reason']}")
