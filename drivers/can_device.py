@@ -26,7 +26,9 @@ identifier names its group, whatever bus it came on. Nothing is filled in:
   the groups that lacked them; the same instants lost in two groups are one gap, once);
 * a group silent for ``group_timeout_s`` while another delivers (and behind it by that much of
   samples: a host that stalled between two groups' frames has not heard a silence) is declared
-  missing (``group_timeout``, at the stream time it fell silent, with its channels). A block carries
+  missing (``group_timeout``, at the stream time it fell silent, with its channels; frames of
+  it still held late beside its stream -- a sender's stall before a burst -- are placed first,
+  so the time is that of its last frame received). A block carries
   every channel and the recording has no per-channel hole, so nothing is recorded until it
   speaks again: the other groups' samples of that span are lost -- never the silent group's
   invented -- and the ``seq_gap`` when it is back counts them. A stream that ends while a group
