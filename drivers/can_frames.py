@@ -686,8 +686,7 @@ class CycleAssembler:
 
     def finish(self) -> None:
         """End of the stream: decide what is held, then make every cycle final."""
-        if self.side is not None:
-            self._settle(final=True)
+        self.settle_held()
         if self.base is not None:
             self.finalize_to(self.hi + 1)
 

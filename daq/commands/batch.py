@@ -517,7 +517,7 @@ def exit_code(outcome: BatchOutcome) -> int:
 def summary_lines(outcome: BatchOutcome) -> list[str]:
     """The end of a batch for the terminal, over the whole table written (this run's results
     and the current ones carried over): recordings, hits accepted and rejected (analyze) or
-    answers (gap: both layers', as ramdaq gap gives them), and every failure with its one-line
+    answers (gap: of both layers, as ramdaq gap prints them), and every failure with its one-line
     reason."""
     plan, rs = outcome.plan, list(outcome.results.values())
     recs = recordings_of(outcome.table)
