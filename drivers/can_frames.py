@@ -709,11 +709,13 @@ class CycleAssembler:
     def _place(self, cycle: int, slot: int, data: bytes) -> str | None:
         if cycle < self.base:
             return "late_frame"
-        if cycle >= self.base + self.window:
-            self.finalize_to(cycle - self.window + 1)
         entry = self.open.get(cycle)
         if entry is None:
             entry = self.open[cycle] = [bytearray(self.F * self.L), 0]
+            if len(self.open) >= self.window:
+                # final: each cycle below the window-th newest one heard from (frames of
+                # ``window`` later cycles arrived, whatever SEQ distance lost cycles put between)
+                self.finalize_to(sorted(self.open)[-self.window])
         if entry[1] & (1 << slot):
             at = slot * self.L
             if entry[0][at : at + len(data)] != data:

@@ -189,6 +189,7 @@ def _assemble(codec: FrameCodec, g: int, counts: np.ndarray, wire: list) -> None
 @given(st.integers(0, 2**63 - 1))
 @example(97654)  # found by the long run: a jump's first frame, then a late frame of the jump
 @example(103522)  # found by the long run: test_cycle_after_a_jump_past_a_straggler_is_delivered
+@example(29224)  # found by CI: test_a_straggler_after_a_jump_of_the_window_is_placed
 def test_assembler_never_delivers_a_wrong_sample(seed):
     _assemble(*seeded_stream(seed))
 
@@ -215,6 +216,35 @@ def test_cycle_after_a_jump_past_a_straggler_is_delivered():
     assert [(r[0], r[1]) for r in asm.runs] == [(7385 * 20, 7387 * 20), (7391 * 20, 7393 * 20)]
     assert asm.lost == [[7387, 4, 1]]  # cycle 2 incomplete, 3-5 never seen
 
+
+
+def test_a_straggler_after_a_jump_of_the_window_is_placed():
+    """Regression (CI, seed 29224): classic, cycles 7-8 lost, so the next cycle heard is 3 (the
+    window) past cycle 6, and its first frame came before cycle 6's last. That frame used to make
+    cycle 6 final by SEQ distance alone, so its straggler was a late_frame and a cycle sent whole
+    was lost. A cycle is final once frames of ``window`` later cycles arrived: here one had."""
+    codec = CODECS["classic"]
+    lay = codec.groups[1]
+    n_slots = len(lay.frames)
+    b = lay.sample_bits
+    shape = (len(lay.channels), 12 * lay.samples_per_cycle)
+    counts = np.random.default_rng(3).integers(-(1 << b - 1), 1 << b - 1, shape)
+    msgs = codec.messages(1, 124, counts.astype(np.int32))
+    by_cycle = [msgs[k * n_slots : (k + 1) * n_slots] for k in range(12)]
+    order = ([(k, s) for k in range(6) for s in range(n_slots)] + [(6, s) for s in range(n_slots - 1)]
+             + [(9, 0), (6, n_slots - 1)]
+             + [(k, s) for k in range(9, 12) for s in range(n_slots) if (k, s) != (9, 0)])
+    wire = [(k, by_cycle[k][s]) for k, s in order]
+    _assemble(codec, 1, counts, wire)  # every complete cycle after the first delivered, bit for bit
+    asm = CycleAssembler(lay)
+    asm.start(124)
+    problems = []
+    for _, m in wire:
+        layout, seq = codec.check(m)
+        problems.append(asm.put(seq, layout.slot, m.data))
+    asm.finish()
+    assert problems == [None] * len(wire) and not asm.problems
+    assert asm.lost == [[131, 2, 0]]  # cycles 7-8, never seen
 
 @pytest.fixture
 def long_run(request: pytest.FixtureRequest, capsys: pytest.CaptureFixture):
