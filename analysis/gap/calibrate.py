@@ -170,13 +170,16 @@ def _pack(fw: Forward, terms: list[Term]):
 
 
 def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None = None,
-              max_iter: int = 60, free_base: bool = True, jac0: np.ndarray | None = None) -> Calibration:
+              max_iter: int = 60, free_base: bool = True, jac0: np.ndarray | None = None,
+              fit0: Fit | None = None) -> Calibration:
     """Fit the base constants (and the terms' parameters) to the fitted impacts.
 
     ``terms`` carry their start values in ``Term.x``; ``free_base=False`` keeps ``theta0``
     fixed and fits the terms alone (quicker, for screening). ``jac0``, the data rows of an
     earlier calibration's Jacobian in the base constants, saves recomputing them: only the
-    terms' columns are differenced.
+    terms' columns are differenced. ``fit0``, the prediction at the start (``theta0``, the
+    terms' ``x``) when it was made already (a fit of the terms alone ends there), is not made
+    again: the same numbers (unused when the start had to be moved inside the bounds).
     """
     terms = list(terms)
     n_b = len(fw.params)
@@ -194,10 +197,11 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
         return th, out
 
     last: dict[bytes, Fit] = {}     # the latest prediction: the solver mostly ends on it
+    known: dict[bytes, Fit] = {}    # the start's prediction, when given (fit0)
 
     def residual(p: np.ndarray) -> np.ndarray:
         th, ts = unpack(p)
-        fit = fw.fit(th, ts)
+        fit = known.pop(p.tobytes(), None) or fw.fit(th, ts)
         last.clear()
         last[p.tobytes()] = fit
         r = fw.whitened(fit, fitted)
@@ -205,7 +209,10 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
 
     x_start = np.concatenate(([theta0] if free_base else []) + [t.x for t in terms])
     lo_, hi_ = (lo, hi) if free_base else (lo[n_b:], hi[n_b:])
-    x_start = np.clip(x_start, lo_ + 1e-9 * (hi_ - lo_), hi_ - 1e-9 * (hi_ - lo_))
+    inside = np.clip(x_start, lo_ + 1e-9 * (hi_ - lo_), hi_ - 1e-9 * (hi_ - lo_))
+    if fit0 is not None and fit0.resid is not None and np.array_equal(inside, x_start):
+        known[x_start.tobytes()] = fit0
+    x_start = inside
     if len(x_start) == 0:
         fit = fw.fit(theta0, terms)
         r = fw.whitened(fit, fitted)

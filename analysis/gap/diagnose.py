@@ -528,6 +528,13 @@ class _Search:
                 gap_map(self.fw, resid, rep_cells, self.bands, held) if held.any() else None)
 
 
+KEEP_REPLICATES_BYTES = 32 << 20
+"""Replicates of the calibrated model this small (27 MB at 6 impacts, 24 replicates) are kept
+through the search rather than let go and made again (a second simulation of all of them);
+larger ones (86 MB at 20 impacts) are let go while the singles refit, as the memory target
+asks."""
+
+
 def diagnose(td: TrialData, settings: Settings = Settings(),
              progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Diagnose one trial (see the module docstring)."""
@@ -541,7 +548,10 @@ def diagnose(td: TrialData, settings: Settings = Settings(),
     significant = z_detect > settings.z_gap
     notes = _trial_notes(td)
     basis = ScoreBasis(fw, base, reps)
-    search = _Search(fw=fw, settings=settings, theta_pre=theta_pre, base=base, reps=None,
+    # the replicates are let go during the refits and made again when next read (the search's
+    # peak memory), unless they are small: then they are kept (the same numbers, not made twice)
+    search = _Search(fw=fw, settings=settings, theta_pre=theta_pre, base=base,
+                     reps=reps if reps.nbytes <= KEEP_REPLICATES_BYTES else None,
                      replicates=made, bands=bands, rep_cells=rep_cells,
                      kappa_cells=cell_inflation(fw, rep_cells, bands, td.fitted), m_fit=m_fit,
                      m_held=m_held, n_eff=basis.r.size, rng=np.random.default_rng(settings.seed),
@@ -831,7 +841,7 @@ def _consider(search: _Search, cands: list[Candidate], group: list[Signature]) -
     try:
         cal = _refit(search, terms, theta0, new)
         if not starts:
-            cal = _refit_single(search, group[0], cal)
+            cal = _refit_single(search, group[0], cal, (terms[0], theta0))
     except (ValueError, np.linalg.LinAlgError) as exc:
         search.notes.append(f"refit with {'+'.join(t.effect.name for t in terms)} failed: {exc}")
         return []
@@ -865,22 +875,28 @@ def _refit(search: _Search, terms: list[Term], theta0: np.ndarray, new: list[boo
     """The terms' own parameters first, the constants held (a tone's frequency must be found to
     a fraction of a cycle over the trial before anything else can move), then all. ``new``: per
     term, whether it is not refitted already (only those are fitted alone first)."""
+    fit0 = None
     if any(len(t.x) for t, n in zip(terms, new, strict=True) if n):
-        terms = calibrate(search.fw, terms, theta0=theta0, free_base=False, max_iter=15).terms
+        alone = calibrate(search.fw, terms, theta0=theta0, free_base=False, max_iter=15)
+        terms, fit0 = alone.terms, alone.fit      # where the refit with all free starts
     return calibrate(search.fw, terms, theta0=theta0, max_iter=search.settings.refit_iter,
-                     jac0=search.base.jacobian())
+                     jac0=search.base.jacobian(), fit0=fit0)
 
 
-def _refit_single(search: _Search, sig: Signature, cal: Calibration) -> Calibration:
+def _refit_single(search: _Search, sig: Signature, cal: Calibration,
+                  start: tuple[Term, np.ndarray] | None = None) -> Calibration:
     """A single effect's refit made good: again from the calibrated constants (the term where
     its score test put it) when the re-tuned start led somewhere worse than the calibration
-    itself; then its placement read again with the refit's constants and refitted from there,
-    up to :data:`N_REREAD` times while that improves."""
-    if cal.cost > search.base.cost:
-        pl = sig.placement
+    itself -- unless ``cal`` started there already (``start``: its term and constants), when
+    that refit would be ``cal`` again; then its placement read again with the refit's constants
+    and refitted from there, up to :data:`N_REREAD` times while that improves."""
+    pl = sig.placement
+    t0 = Term(sig.effect, pl, np.clip(sig.x0, pl.lo, pl.hi))
+    same = (start is not None and start[0].effect is t0.effect and start[0].placement is pl
+            and np.array_equal(start[0].x, t0.x) and np.array_equal(start[1], search.base.theta))
+    if cal.cost > search.base.cost and not same:
         cal.park_jacobian()     # the refit being made holds its own
-        alt = _refit(search, [Term(sig.effect, pl, np.clip(sig.x0, pl.lo, pl.hi))],
-                     search.base.theta, [True])
+        alt = _refit(search, [t0], search.base.theta, [True])
         cal = min(cal, alt, key=lambda c: c.cost)
     for _ in range(N_REREAD):
         pl = sig.effect.placement_after(search.fw, cal)
