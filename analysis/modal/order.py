@@ -106,14 +106,20 @@ class ModeSelector:
     by_matmul : bool
         Every fit's basis by :func:`~ramdaq.analysis.modal.varpro.damped_basis`'s ``by_matmul``
         (a hit's finals).
+    screen : float, optional
+        Λ of the linear screen (the new pole held at its start) below which a candidate is
+        rejected without a fit; default 0.25 × ``threshold``
+        (:func:`~ramdaq.analysis.modal.identify.identify_modes` sets it from the noise's own
+        χ² distribution: ``_Data.screen``).
     """
 
     def __init__(
         self, Y: np.ndarray, t: np.ndarray, fit_offset: bool, threshold: float, zeta_max: float,
         f_lim: tuple[float, float], w0: np.ndarray, final_se_tol: float = 0.0,
-        by_matmul: bool = False,
+        by_matmul: bool = False, screen: float | None = None,
     ) -> None:
         self.Y, self.t, self.fit_offset, self.by_matmul = Y, t, fit_offset, by_matmul
+        self.screen = 0.25 * threshold if screen is None else screen
         self.final_se_tol = final_se_tol
         self.threshold, self.zeta_max, self.f_lim = threshold, zeta_max, f_lim
         self.w = w0
@@ -183,7 +189,7 @@ class ModeSelector:
                 # not yet residual-based.
                 rss_lin_w = held.weighted_rss(fc1, dc1)
                 lam_lin = np.sum(self.rss * self.w**2 - rss_lin_w)
-                if lam_lin < 0.25 * self.threshold:
+                if lam_lin < self.screen:
                     return False
                 # The new mode alone, accepted poles held (see the module docstring): looked
                 # at after _EARLY_ITER iterations, then (unless rejected there) continued to
