@@ -989,10 +989,11 @@ class HeldPoleFitter:
 
     def start(
         self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
-        delta_bounds: tuple[float, float], chi2_tol: float = 0.0,
+        delta_bounds: tuple[float, float], chi2_tol: float = 0.0, se_tol: float = 0.0,
     ) -> HeldFit:
         """A fit of the new modes from (f0, δ0), to be advanced a few iterations at a time
-        (:class:`HeldFit`); its first evaluation done (:meth:`weighted_rss`'s if at that start)."""
+        (:class:`HeldFit`); its first evaluation done (:meth:`weighted_rss`'s if at that start).
+        ``chi2_tol``, ``se_tol``: :func:`_levenberg_marquardt`'s."""
         C, N = self.C, self.N
         K = f0.size + self.K_fixed
         P = 2 * K + int(self.fit_offset)
@@ -1006,7 +1007,7 @@ class HeldPoleFitter:
         theta0 = np.clip(theta0, lo, hi)
         last, self._last = getattr(self, "_last", None), None
         first = last[1] if last is not None and np.array_equal(last[0], theta0) else None
-        run = LMRun(self.prob, theta0, lo, hi, chi2_tol, dof, first)
+        run = LMRun(self.prob, theta0, lo, hi, chi2_tol, dof, first, se_tol)
         return HeldFit(run, self.weights, max(N - P - 2 * K / C, 1))
 
 
