@@ -119,6 +119,14 @@ def hankel_row_space(
     G = _hankel_gram(a, L)
     if n_vectors is None or n_vectors >= L + 1:
         w, V = linalg.eigh(G, lower=False)
+    elif 8 * n_vectors > L + 1:
+        # Many of them: divide and conquer (all L + 1, a fixed cost) is cheaper than the subset
+        # driver's bisection and inverse iteration (a cost per vector): one channel's Gram,
+        # 28 vectors of 101 (the order search's residual round) 0.75 ms against 1.25 ms; 28 of
+        # 201 2.8 against 3.0 ms; 12 of 201 (a fit of 4 modes given) stays on the subset, 1.7 ms.
+        # The same subspace to rounding (the poles depend on the span alone).
+        w, V = linalg.eigh(G, lower=False, driver="evd")
+        w, V = w[L + 1 - n_vectors :], V[:, L + 1 - n_vectors :]
     else:
         w, V = linalg.eigh(G, lower=False, subset_by_index=[L + 1 - n_vectors, L], driver="evr")
     w, V = w[::-1], V[:, ::-1]
