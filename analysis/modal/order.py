@@ -155,7 +155,8 @@ class ModeSelector:
             resid = Y - (Y.mean(axis=1, keepdims=True) if fit_offset else 0.0)
         self.rss = np.sum(resid**2, axis=1)
 
-    def refit(self, f: np.ndarray, d: np.ndarray, trial: bool = False) -> VarProFit | None:
+    def refit(self, f: np.ndarray, d: np.ndarray, trial: bool = False,
+              keep: dict | None = None) -> VarProFit | None:
         """NLS fit from (f, δ) with the current weights; None if it fails or leaves |ζ| ≤ ζmax.
 
         ``trial``: a fit that only decides the likelihood-ratio test (or starts a later fit) is
@@ -168,7 +169,7 @@ class ModeSelector:
                                    f_bounds_hz=self.f_lim, delta_bounds=(-3.0, 3.0),
                                    chi2_tol=_TRIAL_CHI2_TOL if trial else 0.0,
                                    se_tol=_TRIAL_CHI2_TOL if trial else self.final_se_tol,
-                                   by_matmul=self.by_matmul)
+                                   by_matmul=self.by_matmul, keep=keep)
         except (ValueError, linalg.LinAlgError):
             return None
         zeta = damping_ratio_from_decrement(fit.delta)
@@ -240,11 +241,17 @@ class ModeSelector:
             except (ValueError, linalg.LinAlgError):
                 return False
             f0, d0 = np.concatenate((self.fit.f_hz, fp)), np.concatenate((self.fit.delta, dp))
-        fit = self.refit(f0, d0, trial=True)
+        last: dict = {}
+        fit = self.refit(f0, d0, trial=True, keep=last)
         if fit is None or self._lr(self.rss, fit) <= self.threshold:
             return False
+        w_fit = self.w
         self.fit, self.rss = fit, fit.rss
         self.w = 1.0 / floor_noise(fit.noise_std, self.Y)
+        proj = last["proj"]
+        if proj.cho is not None:  # the screen's terms at the new fit (_screen_lr), reweighted
+            self._screen_cache = (fit, self.w, proj.Phi, proj,
+                                  last["resid_w"] * (self.w / w_fit)[None, :])
         return True
 
     def _screen_lr(self, fc: np.ndarray, dc: np.ndarray) -> float | None:
@@ -256,7 +263,8 @@ class ModeSelector:
         QR of Φ and the data projected, per fit: a candidate whose screen passes above the
         threshold goes straight to the refit, below the screen nowhere). None where Φ needs the
         QR path or S keeps under 10⁻⁶ of Φ_nᵀΦ_n (the new pole on an accepted one's): the
-        fitter decides."""
+        fitter decides. (Φ, its projector and r: those of the accepted fit's last evaluation,
+        where :meth:`try_add` kept them.)"""
         c = self._screen_cache
         if c is None or c[0] is not self.fit or c[1] is not self.w:
             Phi = damped_basis(self.t, self.fit.f_hz, self.fit.delta, self.fit_offset, self._grid,

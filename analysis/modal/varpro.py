@@ -803,6 +803,7 @@ def fit_modes_varpro(
     chi2_tol: float = 0.0,
     se_tol: float = 0.0,
     by_matmul: bool = False,
+    keep: dict | None = None,
 ) -> VarProFit:
     """Fit damped modes with poles shared by all channels by variable projection.
 
@@ -835,6 +836,11 @@ def fit_modes_varpro(
         :func:`~ramdaq.analysis.modal.identify.identify_modes` use 3e-4.
     by_matmul : bool
         The basis by :func:`damped_basis`'s ``by_matmul`` (a hit's finals).
+    keep : dict, optional
+        Given, it receives the last evaluation's weighted residual (``"resid_w"``, (n_samples,
+        n_channels), the data times ``weights`` minus the model) and its
+        :class:`Projector` (``"proj"``, on the basis at the fit's poles): for a caller that
+        needs them at the fit's poles (the order search's linear screen), not computed again.
 
     Returns
     -------
@@ -851,7 +857,7 @@ def fit_modes_varpro(
         raise ValueError(f"n_samples ({N}) too small for {K} modes")
     prob = _Problem(t, (Y * w[:, None]).T, fit_offset, by_matmul=by_matmul)
     lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
-    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol, se_tol=se_tol)
+    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol, se_tol=se_tol, keep=keep)
 
 
 def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
@@ -867,15 +873,19 @@ def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
 
 def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: np.ndarray,
             max_iter: int, chi2_tol: float, first: tuple | None = None,
-            se_tol: float = 0.0) -> VarProFit:
+            se_tol: float = 0.0, keep: dict | None = None) -> VarProFit:
     """:func:`fit_modes_varpro`'s fit and result on ``prob`` (weights ``w``) from θ₀ (``first``:
-    ``prob.residual(theta0)`` when known; ``se_tol``: :func:`_levenberg_marquardt`'s)."""
+    ``prob.residual(theta0)`` when known; ``se_tol``: :func:`_levenberg_marquardt`'s;
+    ``keep``: :func:`fit_modes_varpro`'s)."""
     fit_offset = prob.offset
     K, C, N = theta0.size // 2, prob.Yc.shape[0], prob.Yc.shape[1]
     P = 2 * K + int(fit_offset)
     dof = C * N - C * P - 2 * K
-    theta, resid_w, B, JtJ, n_eval, stop = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
-                                                                chi2_tol, dof, first, se_tol)
+    run = LMRun(prob, theta0, lo, hi, chi2_tol, dof, first, se_tol)  # (_levenberg_marquardt)
+    run.advance(max_iter)
+    theta, resid_w, B, JtJ, n_eval, stop = run.result()
+    if keep is not None:
+        keep["resid_w"], keep["proj"] = resid_w, run.proj
     B = B / w[None, :]
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
