@@ -153,6 +153,8 @@ _SEARCH_MAX_LENGTH, _SEARCH_LENGTH = 8192, 4096
 # search; the modes found are refitted on the whole NLS data).
 _SEARCH_CROP = 1.5
 _MAX_PRINCIPAL_CHANNELS = 8
+# The linear screen's level: noise at a fixed pole exceeds it with this probability (_Data.screen).
+_SCREEN_FALSE_ALARM = 1e-3
 
 
 def _candidates(
@@ -338,7 +340,7 @@ def identify_modes(
         fc, dc = (ranked_candidates(D.Y, D.w0) if start_fd is None
                   else _rank(D.Y, D.t, D.w0, *start_fd, trend))
         sel = ModeSelector(D.Y, D.t, trend, D.threshold, zeta_max, (0.5 * f_lo, 0.49 * D.fs), D.w0,
-                           final_se_tol, by_matmul=band_decimation)
+                           final_se_tol, by_matmul=band_decimation, screen=D.screen)
         # One channel: its weight scales the cost, not the optimum, so the reweighted refit
         # would restart at the point reached; the fit of the n modes is converged at once.
         final = n_modes is not None and D.Y.shape[0] == 1 and D is full
@@ -416,6 +418,18 @@ class _Data:
         self.colour = noise_colour(P, self.fs, self.band_hz)
         self.threshold = self.colour * float(chdtri(2 * self.Y.shape[0],
                                                     self.false_alarm / (2.0 * self.Y.shape[-1])))
+        # The linear screen (order.ModeSelector.try_add): a candidate whose Λ with its pole held
+        # at the start is below this is rejected without a fit. Λ of noise at a fixed pole is
+        # χ²(2 n_channels); the old screen, 0.25 x threshold (~25-33 on 16 channels), lay below
+        # that distribution's own mean (32), so nearly every noise candidate went on to a held
+        # fit (~20 of a 16-gage hit's ~60 ms). The screen is now that χ²'s 10⁻³ upper quantile
+        # (62.5 on 16 channels, 13.8 on one; x the colour, as the threshold), or 0.25 x
+        # threshold where that is higher. Measured (ord22): no accepted candidate's screen Λ was
+        # within 2.3x of it (one channel: 0.92 x threshold, two modes 1 % apart; 16 channels:
+        # >= 268 x); every decision and every estimate of hit_cost's and decrement_accuracy's
+        # records the same to the bit (only rejections moved from the held fit to the screen).
+        self.screen = max(0.25 * self.threshold,
+                          self.colour * float(chdtri(2 * self.Y.shape[0], _SCREEN_FALSE_ALARM)))
 
 
 def _search_data(full: _Data, Xa: np.ndarray, fs_hz: float, d_nls: int, band_hi: float,
@@ -499,7 +513,8 @@ def _refined(found: ModeSelector, full: _Data, zeta_max: float, f_lo: float) -> 
     columns; a trial fit with ``full``'s starting weights, then reweighted and converged as the
     search's own last step); None when they do not fit there."""
     sel = ModeSelector(full.Y, full.t, found.fit_offset, full.threshold, zeta_max,
-                       (0.5 * f_lo, 0.49 * full.fs), full.w0, found.final_se_tol, found.by_matmul)
+                       (0.5 * f_lo, 0.49 * full.fs), full.w0, found.final_se_tol, found.by_matmul,
+                       full.screen)
     f, d = found.fit.f_hz, found.fit.delta
     if full.Y.shape[0] == 1:  # its weight scales the cost, not the optimum: no reweighting
         sel.fit = sel.refit(f, d)

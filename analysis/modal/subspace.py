@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg
+from scipy.linalg import lapack
 
 __all__ = [
     "default_pencil_length",
@@ -119,10 +120,41 @@ def hankel_row_space(
     G = _hankel_gram(a, L)
     if n_vectors is None or n_vectors >= L + 1:
         w, V = linalg.eigh(G, lower=False)
+    elif 8 * n_vectors > L + 1 and not np.iscomplexobj(G):
+        # Many of them: divide and conquer on the tridiagonal form (all L + 1, a fixed cost),
+        # only the vectors asked transformed back, is cheaper than the subset driver's bisection
+        # and inverse iteration (a cost per vector): one channel's Gram, 28 vectors of 201 (the
+        # order search's first pencil) 2.2 ms against 3.0 ms, of 101 (its residual round) 0.56
+        # against 1.25 ms; 12 of 201 (a fit of 4 modes given) stays on the subset, 1.7 ms. The
+        # same subspace to rounding (the poles depend on the span alone: ~1e-11 apart).
+        w, V = _leading_eigh(G, n_vectors)
     else:
         w, V = linalg.eigh(G, lower=False, subset_by_index=[L + 1 - n_vectors, L], driver="evr")
     w, V = w[::-1], V[:, ::-1]
     return np.sqrt(np.clip(w, 0.0, None)), V
+
+
+def _leading_eigh(G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` largest eigenvalues (ascending) and their eigenvectors of the real symmetric
+    ``G`` (its lower triangle read): Householder tridiagonalisation (dsytrd), all eigenpairs of
+    the tridiagonal by divide and conquer (dstevd), the ``k`` wanted transformed back by the
+    reflectors (dormqr on them, as dormtr does)."""
+    n = G.shape[0]
+    c, d, e, tau, info = lapack.dsytrd(G, lower=1, lwork=int(lapack.dsytrd_lwork(n, lower=1)[0]))
+    if info != 0:
+        raise linalg.LinAlgError(f"dsytrd failed ({info})")
+    w, Z, info = lapack.dstevd(d, e, compute_v=1)
+    if info != 0:
+        raise linalg.LinAlgError(f"dstevd did not converge ({info})")
+    Z = Z[:, n - k :]
+    V = np.empty((n, k))
+    V[0] = Z[0]  # Q = diag(1, Q'), Q' the reflectors stored below the subdiagonal
+    refl = c[1:, : n - 1]
+    lwork = int(lapack.dormqr("L", "N", refl, tau, Z[1:], -1)[1][0].real)
+    V[1:], _, info = lapack.dormqr("L", "N", refl, tau, Z[1:], lwork)
+    if info != 0:
+        raise linalg.LinAlgError(f"dormqr failed ({info})")
+    return w[n - k :], V
 
 
 def matrix_pencil_poles(y: ArrayLike, order: int, L: int | None = None) -> np.ndarray:

@@ -148,6 +148,19 @@ def damped_basis(
         blocked = bool((ends < 300.0).all())  # else the envelope clamp below is active
     if blocked and by_matmul:
         _blocked_basis(PhiT, s, t0, dt, n, scratch)
+    elif blocked and scratch is None and K > 1:
+        # No work array kept between calls: one mode at a time through a small complex buffer
+        # (the same products, to the bit). A fresh (K, rows, m) complex array next to a fresh Φᵀ
+        # cost more in page faults than the products: 12 candidates on 4071 samples (the order
+        # search's ranking) 0.84 ms -> ~0.15 ms.
+        lo, hi = _grid_tables(s, t0, dt, n, scratch)
+        rows, m = hi.shape[1], lo.shape[1]
+        work = np.empty((rows, m), dtype=complex)
+        z = work.reshape(rows * m)[:n]
+        for k in range(K):
+            np.multiply(hi[k, :, None], lo[k, None, :], out=work)
+            PhiT[2 * k] = z.real
+            PhiT[2 * k + 1] = z.imag
     elif blocked:
         lo, hi = _grid_tables(s, t0, dt, n, scratch)
         rows, m = hi.shape[1], lo.shape[1]
@@ -370,7 +383,11 @@ class _Problem:
             rd = np.abs(np.diag(R))
             Q = Q[:, rd > 1e-10 * rd.max()]  # drop dependent fixed columns (same span)
             self.QfT = np.ascontiguousarray(Q.T)  # (m, n_samples)
-            self.Yc = self.Yc - (self.Yc @ self.QfT.T) @ self.QfT
+            # Yc − (Yc Q_F) Q_Fᵀ, the difference written over the product: the same operations,
+            # one data-sized array allocated, not two (16 gages x 4071 samples: 0.45 -> 0.07 ms,
+            # page faults)
+            proj_f = (self.Yc @ self.QfT.T) @ self.QfT
+            self.Yc = np.subtract(self.Yc, proj_f, out=proj_f)
             self.offset = False  # a fitted constant, if any, is among the fixed columns
         self.Yw = self.Yc.T  # (n_samples, n_channels)
         self._yy: np.ndarray | None = None  # Σy² per channel once Grams are used (use_grams)
@@ -786,6 +803,7 @@ def fit_modes_varpro(
     chi2_tol: float = 0.0,
     se_tol: float = 0.0,
     by_matmul: bool = False,
+    keep: dict | None = None,
 ) -> VarProFit:
     """Fit damped modes with poles shared by all channels by variable projection.
 
@@ -818,6 +836,11 @@ def fit_modes_varpro(
         :func:`~ramdaq.analysis.modal.identify.identify_modes` use 3e-4.
     by_matmul : bool
         The basis by :func:`damped_basis`'s ``by_matmul`` (a hit's finals).
+    keep : dict, optional
+        Given, it receives the last evaluation's weighted residual (``"resid_w"``, (n_samples,
+        n_channels), the data times ``weights`` minus the model) and its
+        :class:`Projector` (``"proj"``, on the basis at the fit's poles): for a caller that
+        needs them at the fit's poles (the order search's linear screen), not computed again.
 
     Returns
     -------
@@ -834,7 +857,7 @@ def fit_modes_varpro(
         raise ValueError(f"n_samples ({N}) too small for {K} modes")
     prob = _Problem(t, (Y * w[:, None]).T, fit_offset, by_matmul=by_matmul)
     lo, hi, theta0 = _box_start(f0, d0, f_bounds_hz, delta_bounds)
-    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol, se_tol=se_tol)
+    return _fitted(prob, theta0, lo, hi, w, max_iter, chi2_tol, se_tol=se_tol, keep=keep)
 
 
 def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
@@ -850,15 +873,19 @@ def _box_start(f0: np.ndarray, d0: np.ndarray, f_bounds_hz: tuple[float, float],
 
 def _fitted(prob: _Problem, theta0: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: np.ndarray,
             max_iter: int, chi2_tol: float, first: tuple | None = None,
-            se_tol: float = 0.0) -> VarProFit:
+            se_tol: float = 0.0, keep: dict | None = None) -> VarProFit:
     """:func:`fit_modes_varpro`'s fit and result on ``prob`` (weights ``w``) from θ₀ (``first``:
-    ``prob.residual(theta0)`` when known; ``se_tol``: :func:`_levenberg_marquardt`'s)."""
+    ``prob.residual(theta0)`` when known; ``se_tol``: :func:`_levenberg_marquardt`'s;
+    ``keep``: :func:`fit_modes_varpro`'s)."""
     fit_offset = prob.offset
     K, C, N = theta0.size // 2, prob.Yc.shape[0], prob.Yc.shape[1]
     P = 2 * K + int(fit_offset)
     dof = C * N - C * P - 2 * K
-    theta, resid_w, B, JtJ, n_eval, stop = _levenberg_marquardt(prob, theta0, lo, hi, max_iter,
-                                                                chi2_tol, dof, first, se_tol)
+    run = LMRun(prob, theta0, lo, hi, chi2_tol, dof, first, se_tol)  # (_levenberg_marquardt)
+    run.advance(max_iter)
+    theta, resid_w, B, JtJ, n_eval, stop = run.result()
+    if keep is not None:
+        keep["resid_w"], keep["proj"] = resid_w, run.proj
     B = B / w[None, :]
     rss = np.sum((resid_w / w[None, :]) ** 2, axis=0)
     s2 = float(np.sum(resid_w**2) / max(dof, 1))
@@ -972,10 +999,11 @@ class HeldPoleFitter:
 
     def start(
         self, f0: np.ndarray, d0: np.ndarray, *, f_bounds_hz: tuple[float, float],
-        delta_bounds: tuple[float, float], chi2_tol: float = 0.0,
+        delta_bounds: tuple[float, float], chi2_tol: float = 0.0, se_tol: float = 0.0,
     ) -> HeldFit:
         """A fit of the new modes from (f0, δ0), to be advanced a few iterations at a time
-        (:class:`HeldFit`); its first evaluation done (:meth:`weighted_rss`'s if at that start)."""
+        (:class:`HeldFit`); its first evaluation done (:meth:`weighted_rss`'s if at that start).
+        ``chi2_tol``, ``se_tol``: :func:`_levenberg_marquardt`'s."""
         C, N = self.C, self.N
         K = f0.size + self.K_fixed
         P = 2 * K + int(self.fit_offset)
@@ -989,7 +1017,7 @@ class HeldPoleFitter:
         theta0 = np.clip(theta0, lo, hi)
         last, self._last = getattr(self, "_last", None), None
         first = last[1] if last is not None and np.array_equal(last[0], theta0) else None
-        run = LMRun(self.prob, theta0, lo, hi, chi2_tol, dof, first)
+        run = LMRun(self.prob, theta0, lo, hi, chi2_tol, dof, first, se_tol)
         return HeldFit(run, self.weights, max(N - P - 2 * K / C, 1))
 
 
