@@ -20,7 +20,8 @@ def _homogeneity(gages: list[int], mode_hz: float, ratio: float, more: dict) -> 
 SLOPE = _homogeneity([3, 5, 7, 9, 10, 11, 12, 13, 14, 16], 7.26, 15.76,
                      {"amplitude_per_doubling": {"value": -0.62, "unit": "1"}})
 LAW = _homogeneity([1, 2, 3, 4, 5, 6, 8, 9, 11, 12, 13, 14], 25.0, 2.03,
-                   {"stiffness_law_z": {"value": -7.7, "unit": "1"}, "frequency_change": {"value": -0.10, "unit": "1"}})
+                   {"stiffness_law_z": {"value": -7.7, "unit": "1"},
+                    "frequency_change": {"value": -0.10, "unit": "1"}})
 WHERE = {"gages": [6], "window": "early", "band_hz": 22.2, "band_edges_hz": [12.6, 40.9]}
 
 
