@@ -120,13 +120,14 @@ def hankel_row_space(
     G = _hankel_gram(a, L)
     if n_vectors is None or n_vectors >= L + 1:
         w, V = linalg.eigh(G, lower=False)
-    elif 8 * n_vectors > L + 1 and not np.iscomplexobj(G):
+    elif 8 * n_vectors > L + 1 and not np.iscomplexobj(G) and hasattr(lapack, "dstevd"):
         # Many of them: divide and conquer on the tridiagonal form (all L + 1, a fixed cost),
         # only the vectors asked transformed back, is cheaper than the subset driver's bisection
         # and inverse iteration (a cost per vector): one channel's Gram, 28 vectors of 201 (the
         # order search's first pencil) 2.2 ms against 3.0 ms, of 101 (its residual round) 0.56
         # against 1.25 ms; 12 of 201 (a fit of 4 modes given) stays on the subset, 1.7 ms. The
-        # same subspace to rounding (the poles depend on the span alone: ~1e-11 apart).
+        # same subspace to rounding (the poles depend on the span alone: ~1e-11 apart). SciPy
+        # 1.14, the floor, does not wrap dstevd: there the subset driver below.
         w, V = _leading_eigh(G, n_vectors)
     else:
         w, V = linalg.eigh(G, lower=False, subset_by_index=[L + 1 - n_vectors, L], driver="evr")
