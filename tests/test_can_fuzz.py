@@ -194,6 +194,19 @@ def test_assembler_never_delivers_a_wrong_sample(seed):
     _assemble(*seeded_stream(seed))
 
 
+def _placed(codec: FrameCodec, g: int, first_seq: int, wire: list) -> tuple[CycleAssembler, list]:
+    """Group ``g``'s frames of ``wire`` put into an assembler started at SEQ ``first_seq``, the
+    stream finished: the assembler and each frame's problem (None: placed)."""
+    asm = CycleAssembler(codec.groups[g])
+    asm.start(first_seq)
+    problems = []
+    for _, m in wire:
+        layout, seq = codec.check(m)
+        problems.append(asm.put(seq, layout.slot, m.data))
+    asm.finish()
+    return asm, problems
+
+
 def test_cycle_after_a_jump_past_a_straggler_is_delivered():
     """Regression (long run, seed 103522): fd24, cycles 3-5 lost (a SEQ jump of 4), and the
     jump's first frame came before a straggler of cycle 2. The straggler used to make that first
@@ -207,15 +220,11 @@ def test_cycle_after_a_jump_past_a_straggler_is_delivered():
              + [(6, 0), (2, 5)] + [(6, s) for s in range(1, 16)] + [(7, s) for s in range(16)])
     wire = [(k, by_cycle[k][s]) for k, s in order]
     _assemble(codec, 1, counts, wire)  # every complete cycle after the first delivered, bit for bit
-    asm = CycleAssembler(lay)
-    asm.start(7385)
-    problems = [asm.put(m.data[0] | m.data[1] << 8, codec.check(m)[0].slot, m.data) for _, m in wire]
-    asm.finish()
+    asm, problems = _placed(codec, 1, 7385, wire)
     asm.decode(codec)
     assert problems == [None] * len(wire) and not asm.problems
     assert [(r[0], r[1]) for r in asm.runs] == [(7385 * 20, 7387 * 20), (7391 * 20, 7393 * 20)]
     assert asm.lost == [[7387, 4, 1]]  # cycle 2 incomplete, 3-5 never seen
-
 
 
 def test_a_straggler_after_a_jump_of_the_window_is_placed():
@@ -236,15 +245,10 @@ def test_a_straggler_after_a_jump_of_the_window_is_placed():
              + [(k, s) for k in range(9, 12) for s in range(n_slots) if (k, s) != (9, 0)])
     wire = [(k, by_cycle[k][s]) for k, s in order]
     _assemble(codec, 1, counts, wire)  # every complete cycle after the first delivered, bit for bit
-    asm = CycleAssembler(lay)
-    asm.start(124)
-    problems = []
-    for _, m in wire:
-        layout, seq = codec.check(m)
-        problems.append(asm.put(seq, layout.slot, m.data))
-    asm.finish()
+    asm, problems = _placed(codec, 1, 124, wire)
     assert problems == [None] * len(wire) and not asm.problems
     assert asm.lost == [[131, 2, 0]]  # cycles 7-8, never seen
+
 
 @pytest.fixture
 def long_run(request: pytest.FixtureRequest, capsys: pytest.CaptureFixture):
