@@ -399,8 +399,15 @@ class Forward:
         if n1 > n0:
             Jd = half_sine_response(lam, T, t[n0:n1])
             Z[:, n0:n1] = np.where(ms.exp_only[:, None], Z[:, n0:n1], Jd)
-        u = np.real(ms.A @ Z)
-        du = np.real(ms.A @ (lam[:, None] * Z))
+        # Re(A Z) and Re(A lam Z) as one real product: [Re A, -Im A] [Re Z, Re lam Z; Im Z, Im lam Z]
+        # (the complex products' imaginary halves were made and thrown away)
+        LZ = lam[:, None] * Z
+        m = len(lam)
+        S = np.empty((2 * m, 2 * n_s))
+        S[:m, :n_s], S[m:, :n_s] = Z.real, Z.imag
+        S[:m, n_s:], S[m:, n_s:] = LZ.real, LZ.imag
+        ud = np.hstack([ms.A.real, -ms.A.imag]) @ S
+        u, du = ud[:, :n_s], ud[:, n_s:]
         if n1 > n0:
             f = np.sin(math.pi / T * t[n0:n1])
             u[:, n0:n1] += ms.feed[:, None] * f[None, :]
