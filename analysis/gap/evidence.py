@@ -359,6 +359,12 @@ def chi2_logsf(x: float, k: int) -> float:
     return float(scipy.stats.norm.logsf(z))
 
 
+WHITE_COPY_BYTES = 32 << 20
+"""Replicates at most this large (a 6-impact trial's; 86 MB at 20 impacts) are kept whitened
+once scored: a second copy of them costs no more than the search's own peak, and re-whitening
+them was a fifth of the signature scores' time."""
+
+
 class ScoreBasis:
     """The calibration's own directions in the fitted segments' whitened sample space, to be
     projected out of every signature; and the replicates' residuals in the same space.
@@ -369,8 +375,10 @@ class ScoreBasis:
     block -- per fitted segment only the columns alive there -- and the projection is
     ``D - B G^-1 B^T D`` with ``G = B^T B`` (k, k) accumulated segment by segment, applied twice
     (the second pass removes what the first left through rounding: the same projection as an
-    orthonormal basis's to ~1e-12). No dense (N, k) basis, which grew with the impacts squared,
-    and no whitened copy of the replicates: they are whitened segment by segment when scored.
+    orthonormal basis's to ~1e-12). No dense (N, k) basis, which grew with the impacts squared.
+    The replicates are whitened segment by segment when scored; when they are small
+    (:data:`WHITE_COPY_BYTES`) the whitened segments are kept after the first score, the same
+    numbers, instead of being made again for each of the ~50 signatures.
     """
 
     def __init__(self, fw: Forward, cal: Calibration, reps: np.ndarray) -> None:
@@ -385,6 +393,7 @@ class ScoreBasis:
         self._ginv = _gram_inverse(self._gram())
         self.r = self._white(cal.fit.resid[self.fitted])
         self.reps = reps                           # (n_rep, n_seg, n_g, n_s), not whitened
+        self._reps_w: list[np.ndarray] | None = None   # the whitened segments, when kept
 
     def _white(self, resid: np.ndarray) -> np.ndarray:
         return np.nan_to_num(resid * self.W).ravel()
@@ -419,8 +428,16 @@ class ScoreBasis:
     def reps_dot(self, Dp: np.ndarray) -> np.ndarray:
         """The whitened replicates' products with templates ``Dp`` (k, N), (n_rep, k)."""
         out = np.zeros((len(self.reps), Dp.shape[0]))
+        keep = self._reps_w is None and self.reps.nbytes <= WHITE_COPY_BYTES
+        if keep:
+            self._reps_w = []
         for i, s in enumerate(self.fitted):
-            Rw = np.nan_to_num(self.reps[:, s] * self.W[i]).reshape(len(self.reps), -1)
+            if self._reps_w is not None and not keep:
+                Rw = self._reps_w[i]
+            else:
+                Rw = np.nan_to_num(self.reps[:, s] * self.W[i]).reshape(len(self.reps), -1)
+                if keep:
+                    self._reps_w.append(Rw)
             out += Rw @ Dp[:, self._rows(i)].T
         return out
 
