@@ -38,6 +38,9 @@ class Stop(StrEnum):
     """``max_iter`` steps taken without converging."""
     AT_BOUNDS = "stopped at the bounds"
     """The bounds cut the step to nothing."""
+    SCREENED = "brief refit ended"
+    """A brief refit (``refresh=False``) ended on a step that gained less than its tolerance on
+    a Broyden Jacobian: where it got ranks a start; it is not shown to be a minimum."""
     NOTHING_TO_FIT = "nothing to fit"
     """No free parameter (the terms' parameters alone were to be fitted, and they have none)."""
 
@@ -171,7 +174,7 @@ def _pack(fw: Forward, terms: list[Term]):
 
 def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None = None,
               max_iter: int = 60, free_base: bool = True, jac0: np.ndarray | None = None,
-              fit0: Fit | None = None) -> Calibration:
+              fit0: Fit | None = None, refresh: bool = True) -> Calibration:
     """Fit the base constants (and the terms' parameters) to the fitted impacts.
 
     ``terms`` carry their start values in ``Term.x``; ``free_base=False`` keeps ``theta0``
@@ -180,6 +183,7 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
     terms' columns are differenced. ``fit0``, the prediction at the start (``theta0``, the
     terms' ``x``) when it was made already (a fit of the terms alone ends there), is not made
     again: the same numbers (unused when the start had to be moved inside the bounds).
+    ``refresh=False``: a brief refit that ranks starts (:func:`levenberg_marquardt`'s).
     """
     terms = list(terms)
     n_b = len(fw.params)
@@ -226,7 +230,8 @@ def calibrate(fw: Forward, terms: list[Term] = (), *, theta0: np.ndarray | None 
         J0[: len(jac0), :n_b] = jac0[:, :n_b]
         J0[len(jac0):, :n_b] = np.diag(1 / sd)
     del jac0        # copied: a caller's temporary (a reweighted Jacobian, N x p) goes now
-    res = levenberg_marquardt(residual, x_start, lo_, hi_, x_scale, max_iter=max_iter, J0=J0)
+    res = levenberg_marquardt(residual, x_start, lo_, hi_, x_scale, max_iter=max_iter, J0=J0,
+                              refresh=refresh)
     th, ts = unpack(res.x)
     fit = last.pop(res.x.tobytes(), None) or fw.fit(th, ts)
     r = fw.whitened(fit, fitted)
@@ -326,7 +331,7 @@ class LMResult:
 def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: np.ndarray,
                         hi: np.ndarray, scale: np.ndarray, *, max_iter: int = 60,
                         J0: np.ndarray | None = None, rel_step: float = 1e-3, tol: float = 1e-6,
-                        max_step: float = 3.0) -> LMResult:
+                        max_step: float = 3.0, refresh: bool = True) -> LMResult:
     """Bounded Levenberg-Marquardt on ``sum(fun(x)^2)`` with Broyden updates of the Jacobian.
 
     The Jacobian is differenced once (forward, step ``rel_step * scale``; columns given in
@@ -340,6 +345,12 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
     with an effect end equally converged and their chi-square difference is the effect's.
     Six failed steps in a row (or the damping beyond 1e8) end it too, recorded as giving up
     (``LMResult.stop``), not as convergence.
+
+    ``refresh=False`` never differences the Jacobian afresh after the first: a brief refit
+    that only ranks starts by where it got in ``max_iter`` steps. Its convergence is never
+    claimed: a step that gains less than ``tol`` on a Broyden Jacobian ends it (``SCREENED``).
+    A fresh Jacobian costs one prediction per parameter -- in a six-step refit of eleven
+    parameters more than the steps themselves.
     """
     def difference(J: np.ndarray | None, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
         return _difference(fun, J, x, r, lo, hi, rel_step * scale)
@@ -373,6 +384,8 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
             if small:
                 if fresh:
                     return LMResult(x, J, nfev, Stop.CONVERGED)   # on a true Jacobian
+                if not refresh:
+                    return LMResult(x, J, nfev, Stop.SCREENED)
                 J = None      # the stale Jacobian is let go before the fresh one is made
                 (J, n), fresh = difference(None, x, r), True
                 nfev += n
@@ -381,7 +394,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
         else:
             mu *= 4
             fails += 1
-            if fails >= 2 and not fresh:
+            if fails >= 2 and not fresh and refresh:
                 J = None
                 (J, n), fresh, fails = difference(None, x, r), True, 0
                 nfev += n

@@ -377,7 +377,10 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     ``n_short`` starts -- the best half, then the best of each other starting frequency in turn --
     are each refitted briefly with every constant free (the calibration may have hidden the
     effect in constants far from where the re-tuning leaves them: a blow's duration, a damping),
-    and the best of those is the start."""
+    and the best of those is the start. A brief refit takes six steps on the calibration's
+    Jacobian with the term's columns differenced, Broyden-updated, never differenced afresh
+    (``refresh=False``: a fresh Jacobian of every constant costs more predictions than the six
+    steps, and the refit only ranks the starts; the chosen start's refit converges in full)."""
     pl = sig.placement
     retune = theta_pre is not None and sig.effect.retunes()
     tried = _tried_starts(fw, base, sig, others, theta_pre if retune else None)
@@ -388,7 +391,8 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     best = None
     for _, t, th in _shortlist(tried, n_short):
         try:
-            cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jacobian())
+            cal = calibrate(fw, [*others, t], theta0=th, max_iter=6, jac0=base.jacobian(),
+                            refresh=False)
         except (ValueError, np.linalg.LinAlgError):
             continue
         if best is None or cal.cost < best.cost:
