@@ -208,6 +208,32 @@ def test_the_refit_steps_stay_in_their_trust_region_and_still_converge():
         assert nearest <= 3.0 + 1e-6, (k, nearest)
 
 
+def test_a_brief_refit_never_differences_afresh():
+    """``refresh=False`` (a start's brief refit): after its first Jacobian only Broyden steps,
+    so a refit of ``p`` constants and ``max_iter`` steps costs at most 1 + p + max_iter
+    predictions, and it never claims convergence. The same problem refreshed differences all
+    three columns again at least once (its only way to converge), so it costs more."""
+    from ramdaq.analysis.gap.calibrate import Stop, levenberg_marquardt
+
+    t = np.linspace(0.0, 1.0, 20_000)
+    rng = np.random.default_rng(5)
+    y = 1.0 + 0.5 * np.exp(-2.0 * t) + 1e-2 * rng.standard_normal(t.size)
+    calls = []
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        calls.append(1)
+        return (x[0] + x[1] * np.exp(-x[2] * t) - y) / 1e-2
+
+    args = (np.array([0.9, 0.6, 1.5]), np.full(3, -10.0), np.full(3, 10.0), np.array([0.1, 0.1, 0.5]))
+    brief = levenberg_marquardt(fun, *args, max_iter=6, refresh=False)
+    n_brief = len(calls)
+    assert n_brief == brief.nfev <= 1 + 3 + 6
+    assert brief.stop in (Stop.SCREENED, Stop.ITERATION_LIMIT)
+    calls.clear()
+    full = levenberg_marquardt(fun, *args, max_iter=100)
+    assert full.stop is Stop.CONVERGED and len(calls) > n_brief
+
+
 def test_giving_up_is_not_convergence():
     """A cost with a cusp at the start (sqrt|x|): the differenced slope points downhill but
     every step it proposes raises the cost, so the solver gives up where it began, and says so
