@@ -337,8 +337,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
     The Jacobian is differenced once (forward, step ``rel_step * scale``; columns given in
     ``J0`` are taken as they are -- non-zero columns only; ``J0`` itself is filled and updated in
     place, not copied), then corrected by Broyden's rank-one
-    update after every step, and differenced afresh when steps fail or stall, or when the
-    Broyden Jacobian stops predicting what the steps gain (:data:`POOR_GAIN`). No step is longer
+    update after every step, and differenced afresh when steps fail or stall. No step is longer
     than ``max_step`` in units of ``scale`` (for the base constants their prior's sd, for an
     effect's parameters a tenth of their range). Each iteration
     thus costs one prediction instead of one per parameter; convergence (relative decrease
@@ -364,7 +363,6 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
     cost = float(r @ r)
     mu = 1e-3
     fails = 0
-    poor = 0        # accepted steps in a row that gained under POOR_GAIN of their prediction
     for _ in range(max_iter):
         x_new = _trial_point(J, r, x, scale, mu, lo, hi, max_step)
         step = x_new - x
@@ -376,23 +374,13 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
             r_new = None
         nfev += 1
         c_new = float(r_new @ r_new) if r_new is not None else math.inf
-        rl = r + J @ step                       # the linear model's residual after the step
-        predicted = cost - float(rl @ rl)
         if r_new is not None:
-            _broyden(J, r_new - rl, step)
+            _broyden(J, r_new - r - J @ step, step)
         if c_new < cost:
             small = (cost - c_new) < tol * cost
-            gain = (cost - c_new) / predicted if predicted > 0 else 0.0
             x, r, cost = x_new, r_new, c_new
             mu = max(mu / 3, 1e-7)
             fails = 0
-            poor = poor + 1 if gain < POOR_GAIN and not fresh else 0
-            if poor >= POOR_STEPS and not small and refresh:
-                # creeping on a Jacobian that no longer predicts: a fresh one steps across
-                J = None
-                (J, n), fresh, poor = difference(None, x, r), True, 0
-                nfev += n
-                continue
             if small:
                 if fresh:
                     return LMResult(x, J, nfev, Stop.CONVERGED)   # on a true Jacobian
@@ -474,17 +462,6 @@ def _trial_point(J: np.ndarray, r: np.ndarray, x: np.ndarray, scale: np.ndarray,
     if n_step > max_step:
         step *= max_step / n_step
     return np.clip(x + step, lo, hi)
-
-
-POOR_GAIN = 0.25
-"""An accepted step that gains less than this share of what the (Broyden) Jacobian predicted is
-a poor one (the gain ratio below which a trust-region method shrinks its region: Moré 1978).
-:data:`POOR_STEPS` of them in a row have the Jacobian differenced afresh. Without this, a
-calibration crept along a flat valley in the damping constants: Broyden steps each gaining
-0.1-1.2 of a chi-square of 77,500, the damping growing 4/3 every two evaluations, 60 steps to its
-iteration limit (106 predictions on a clean 6-blow trial, 54 with the refresh, converged; the
-refit under the form weights that follows ends 0.4 chi-square lower)."""
-POOR_STEPS = 2
 
 
 NORMAL_ROWS = 1 << 15
