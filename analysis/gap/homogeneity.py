@@ -634,17 +634,40 @@ def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
         for what, y, s in (("frequency", f[:, i], sf[:, i]), ("decrement", d[:, i], sd[:, i])):
             b, se = _slope(level_db, y, s)
             out.append((abs(b) / se, what, float(fm.f_hz[k]), b / float(np.mean(y)), k))
+    logs = {int(k): np.log(np.abs(own[:, int(np.argmax(snr[:, k])), k])) for k in ks}
     for k in ks:
-        if k == kp:
+        # linearity: every mode's amplitude grows as the blow (log-log slope 1), read against
+        # the median of the other modes' levels (:func:`reference_level`)
+        ref = reference_level(logs, int(k), level, int(kp))
+        if ref is None:
             continue
-        # linearity: every mode's amplitude grows as the blow (log-log slope 1)
         g = int(np.argmax(snr[:, k]))
         a = np.abs(own[:, g, k])
         sa = np.sqrt((fm.amp_se[:, g, k] / a) ** 2 + AMP_FLOOR**2)
-        b, se = _slope(level, np.log(a), sa)
+        b, se = _slope(ref, np.log(a), sa)
         out.append((abs(b - 1) / se, "amplitude", float(fm.f_hz[k]), b - 1, k))
     # a refit that did not converge (a mode the blow barely rings) gives no slope: not a finding
     return [o for o in out if np.isfinite(o[0]) and np.isfinite(o[3])]
+
+
+def reference_level(logs: dict[int, np.ndarray], k: int, level: np.ndarray, kp: int) -> np.ndarray | None:
+    """The blow's level (log, per impact) mode ``k``'s amplitude is read against: the median over
+    the other modes of their log amplitudes (``logs``, each at its best gage, per impact), each
+    less its mean over the impacts (a mode's scale is its shape's, not the blow's); with fewer
+    than two other modes, the best-measured mode's ``level`` (``kp``: None for ``kp`` itself).
+
+    A mode's amplitude that does not grow as the blow is read as a ratio to a reference, so the
+    reference must be the blow, not one mode: where the best-measured mode is the one an
+    amplitude-dependent stiffness acts on, every linear mode read against it grows as the blow
+    to a power 1/p and the finding names a linear mode's gages (issue 17: modal check seed
+    161002, a rattle on the 13.3 Hz mode read as the 6.87 Hz mode's amplitude "as the blow to
+    the power 2.91" on the hull's gages 5, 9, 13, 14). The median of the other modes is the blow
+    as long as fewer than half of them depart, and every mode, the best-measured one too, is
+    then tested against it."""
+    others = [v - v.mean() for j, v in logs.items() if j != k]
+    if len(others) < 2:
+        return None if k == kp else level
+    return np.median(np.array(others), axis=0)
 
 
 def _slope_finding(fm: FreeModal, best: tuple[float, str, float, float, int], snr: np.ndarray,
