@@ -610,7 +610,7 @@ def _moving_decay_finding(fm: FreeModal, w: DecayLaw, same: DecayLaw, snr: np.nd
 def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
                   snr: np.ndarray) -> list[tuple[float, str, float, float, int]]:
     """Across the blows: each mode's frequency and decrement (refitted per impact) and every
-    other mode's amplitude against the best-measured mode's level, as (|z|, what, f_hz,
+    mode's amplitude against the blow's level (:func:`reference_level`), as (|z|, what, f_hz,
     relative slope, k); empty when the blows' levels spread too little."""
     rows = list(dict.fromkeys(int(np.argmax(snr[:, k])) for k in ks))[:MAX_GAGES]
     kp = ks[int(np.argmax(snr[rows][:, ks].max(axis=0)))]               # the best-measured mode

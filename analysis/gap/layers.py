@@ -813,9 +813,11 @@ def slope_placed_by_law(f: dict, finds: list[dict]) -> dict | None:
     not :func:`told_law`); the strongest of them; None otherwise.
 
     The two are not readings of one kind. A mode's amplitude that does not grow as the blow is
-    read against a reference, the best-measured mode's amplitude at each blow
-    (:func:`~ramdaq.analysis.gap.homogeneity._level_slopes`): it says that the two modes' ratio
-    changes with the blow, not which of them departs from linearity -- where the reference is
+    read against a reference (:func:`~ramdaq.analysis.gap.homogeneity.reference_level`: the
+    median of the other modes' levels, the best-measured mode's where fewer than three modes are
+    read; stored trials before it, the best-measured mode's): against one mode it says that the
+    two modes' ratio changes with the blow, not which of them departs from linearity -- where the
+    reference is
     the mode an amplitude-dependent stiffness acts on, a linear mode reads as growing as the
     blow to a power 1/p, and the finding names the linear mode's gages, which its strength
     against its own chance level does not correct. A law told within each free decay reads one
