@@ -817,9 +817,8 @@ def slope_placed_by_law(f: dict, finds: list[dict]) -> dict | None:
     median of the other modes' levels, the best-measured mode's where fewer than three modes are
     read; stored trials before it, the best-measured mode's): against one mode it says that the
     two modes' ratio changes with the blow, not which of them departs from linearity -- where the
-    reference is
-    the mode an amplitude-dependent stiffness acts on, a linear mode reads as growing as the
-    blow to a power 1/p, and the finding names the linear mode's gages, which its strength
+    reference is the mode an amplitude-dependent stiffness acts on, a linear mode reads as growing
+    as the blow to a power 1/p, and the finding names the linear mode's gages, which its strength
     against its own chance level does not correct. A law told within each free decay reads one
     mode's own backbone, cycle by cycle, in its own band: the mode it names is the one that
     departs, and its gages are where that mode shows. So where both stand past the bar an
