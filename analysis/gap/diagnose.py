@@ -376,7 +376,8 @@ def _start(fw: Forward, base: Calibration, sig: Signature, others: list[Term] = 
     the term does. Where the placement has starts of its own (a stiffness spanning decades),
     ``n_short`` starts -- the best half, then the best of each other starting frequency in turn
     (4: with 8 the 12 truth-family tiller and 12 hull-coupling trials of the check and benchmark
-    seeds named the same effects, at 0.12 s a brief refit) --
+    seeds named the same first effect -- one second effect moved, benchmark seed 501001's
+    +gage_sensitivity to +gage_alignment -- at 0.12 s a brief refit) --
     are each refitted briefly with every constant free (the calibration may have hidden the
     effect in constants far from where the re-tuning leaves them: a blow's duration, a damping),
     and the best of those is the start. A brief refit takes six steps on the calibration's
