@@ -425,20 +425,19 @@ class ScoreBasis:
             out[:, self._rows(i)] -= Y[idx].T @ X
         return out
 
+    def _white_reps(self, i: int) -> np.ndarray:
+        """The replicates of fitted segment ``i`` whitened, (n_rep, n_g * n_s)."""
+        if self._reps_w is not None:
+            return self._reps_w[i]
+        return np.nan_to_num(self.reps[:, self.fitted[i]] * self.W[i]).reshape(len(self.reps), -1)
+
     def reps_dot(self, Dp: np.ndarray) -> np.ndarray:
         """The whitened replicates' products with templates ``Dp`` (k, N), (n_rep, k)."""
+        if self._reps_w is None and self.reps.nbytes <= WHITE_COPY_BYTES:
+            self._reps_w = [self._white_reps(i) for i in range(len(self.fitted))]
         out = np.zeros((len(self.reps), Dp.shape[0]))
-        keep = self._reps_w is None and self.reps.nbytes <= WHITE_COPY_BYTES
-        if keep:
-            self._reps_w = []
-        for i, s in enumerate(self.fitted):
-            if self._reps_w is not None and not keep:
-                Rw = self._reps_w[i]
-            else:
-                Rw = np.nan_to_num(self.reps[:, s] * self.W[i]).reshape(len(self.reps), -1)
-                if keep:
-                    self._reps_w.append(Rw)
-            out += Rw @ Dp[:, self._rows(i)].T
+        for i in range(len(self.fitted)):
+            out += self._white_reps(i) @ Dp[:, self._rows(i)].T
         return out
 
     def null_inflation(self, d: np.ndarray) -> float:
