@@ -644,7 +644,7 @@ def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
         g = int(np.argmax(snr[:, k]))
         a = np.abs(own[:, g, k])
         sa = np.sqrt((fm.amp_se[:, g, k] / a) ** 2 + AMP_FLOOR**2)
-        b, se = _slope(ref, np.log(a), sa)
+        b, se = _slope(ref, logs[int(k)], sa)
         out.append((abs(b - 1) / se, "amplitude", float(fm.f_hz[k]), b - 1, k))
     # a refit that did not converge (a mode the blow barely rings) gives no slope: not a finding
     return [o for o in out if np.isfinite(o[0]) and np.isfinite(o[3])]
