@@ -613,14 +613,18 @@ def shift_not_grown(f: dict) -> bool:
     the findings (issue 17: modal check seed 162003, mains pickup at 60 Hz on gages 13, 14, read
     "23.13 Hz 3.0 % lower early" on gages 1, 2, 3, 6 at 3.8x its chance level, its slope
     -0.03 % per doubling at z -0.07, answered over the switched line at 2.4x on gages 13, 14)."""
-    z = (f.get("more") or {}).get("shift_per_doubling_z")
-    if f.get("check") != "homogeneity" or z is None:
+    more = f.get("more") or {}
+    if f.get("check") != "homogeneity" or more.get("shift_per_doubling_z") is None:
         return False
-    z = z["value"] if isinstance(z, dict) else z
-    size = ((f.get("more") or {}).get("frequency_change") or {})
-    size = size["value"] if isinstance(size, dict) else size
-    return not (z is not None and math.isfinite(float(z)) and float(z) * float(size or 0.0) > 0
-                and abs(float(z)) > GROWTH_Z)
+    z, size = _number(more["shift_per_doubling_z"]), _number(more.get("frequency_change"))
+    return not (math.isfinite(z) and z * size > 0 and abs(z) > GROWTH_Z)
+
+
+def _number(v: dict | float | None) -> float:
+    """A finding's ``more`` entry as JSON (``{"value": ..., "unit": ...}``) or a plain number, as
+    a float; NaN where absent or null (no slope measured)."""
+    v = v["value"] if isinstance(v, dict) else v
+    return math.nan if v is None else float(v)
 
 
 def turned_stock(out: Answer, turns: Sequence[dict], candidates: list[dict]) -> Answer:
