@@ -216,6 +216,14 @@ def half_sine(onsets: np.ndarray, peaks: np.ndarray, contact_s: float, t: np.nda
     return out
 
 
+def ringing_per_impulse(f_hz: float, contact_s: float) -> float:
+    """A half-sine blow's ringing at ``f_hz`` as a fraction of an impulse's of the same area:
+    |F(w)| / F(0) = |cos(w T / 2) / (1 - (w T / pi)^2)| for contact time T (s); 1 for a short
+    blow, pi / 4 at w T = pi, near 0 for a mode well above 1 / T."""
+    x = 2 * f_hz * contact_s          # w T / pi
+    return math.pi / 4 if abs(1 - x * x) < 1e-9 else abs(math.cos(math.pi * x / 2) / (1 - x * x))
+
+
 def nonlinear_mode(f_hz: float, zeta: float, force: np.ndarray, dt: float, *,
                    coulomb: float = 0.0, crack_at: float = math.inf, crack_drop: float = 0.0,
                    stop_at: float = math.inf, stop_k: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -336,10 +344,9 @@ def _plan(effect: str, size: float, rig: RigData, modes: Modes, masses: np.ndarr
         p.nonlinear = {"crack_at": 0.5 * q0, "crack_drop": min(0.3 * size, 0.8)}
         p.gages, p.mode_hz, p.window, p.params = _showing(modes, pred, rig), f, "early", dict(p.nonlinear)
     elif effect == "rattle":
+        # a stop in the mode's own equation, as the crack: it shows where the mode does
         p.nonlinear = {"stop_at": 0.5 * q0, "stop_k": 2.0 * size}
-        stock = tuple(g.number for g in rig.gages if g.body == "stock")
-        p.gages, p.mode_hz, p.window = stock or _showing(modes, pred, rig), f, "early"
-        p.params = dict(p.nonlinear)
+        p.gages, p.mode_hz, p.window, p.params = _showing(modes, pred, rig), f, "early", dict(p.nonlinear)
     elif effect == "mains_pickup":
         first = int(rng.integers(0, len(num) - 2))
         rows = list(range(first, first + int(rng.integers(2, 4))))
@@ -400,10 +407,13 @@ def generate(rig_toml: str, rudder_hz: Sequence[float], effect: str = "none", si
     interval = float(np.clip(math.log(20) / sigma.min(), 3.0, 6.0))
     onsets = pre_s + interval * np.arange(n_impacts) + rb.uniform(0, 1, n_impacts) / fs
     n = math.ceil((pre_s + n_impacts * interval) * fs)
-    pred = max(rudder, key=lambda k: abs(modes.at_ram[k]) / masses[k])
+    # the predominant mode rings fastest after a blow: modal velocity amplitude per impulse
+    rings = [abs(a) / m * ringing_per_impulse(f, contact)
+             for a, m, f in zip(modes.at_ram, masses, modes.f_hz, strict=True)]
+    pred = max(rudder, key=lambda k: rings[k])
     w = 2 * math.pi * modes.f_hz[pred]
-    # the median blow's displacement amplitude of the predominant mode: impulse / (m w)
-    q0 = float(np.median(peaks)) * 2 * contact / math.pi * abs(modes.at_ram[pred]) / masses[pred] / w
+    # the median blow's displacement amplitude of the predominant mode: impulse x ringing / (m w)
+    q0 = float(np.median(peaks)) * 2 * contact / math.pi * rings[pred] / w
     plan = _plan(effect, size, rig, modes, masses, pred, q0, interval, onsets, peaks,
                  np.random.default_rng([seed, 73, EFFECTS.index(effect)]))
     acc = _response(modes, np.array(masses), pred, plan, onsets, peaks, contact, n * OVERSAMPLE, dt)
