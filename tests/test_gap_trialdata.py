@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 import scipy.signal
 
 from ramdaq.analysis.gap.trialdata import ScaledCounts, _lowpass, analysis_band, prepare
@@ -138,3 +139,41 @@ def test_a_calibrated_rig_does_not_narrow_the_band_compared():
     held = prepare(x, 2048.0, onsets, rig, min_corner_hz=300.0)
     assert own.lowpass_hz < 300.0 <= held.lowpass_hz and held.rig_lowpass_hz >= 300.0
     assert held.fs_hz > own.fs_hz    # decimated less: the band is sampled
+
+
+def _events(impacts) -> list[tuple]:
+    """Every field of each impact but its copy of the samples (``record``), for comparison."""
+    from dataclasses import fields
+
+    return [tuple((f.name, repr(getattr(ev, f.name))) for f in fields(ev) if f.name != "record")
+            for ev in impacts]
+
+
+@pytest.mark.parametrize("cut", ["whole", "a gap in a ringing", "a scale change"])
+def test_the_offline_trigger_finds_the_same_impacts_on_joined_blocks(cut):
+    """``ramdaq gap``'s trigger joins up to JOIN_S of contiguous blocks of one scale before it
+    reads them: every field of every impact is the one ``read_recording`` finds on the blocks
+    as recorded -- a stream does not see where its blocks were cut -- with a gap in a blow's
+    ringing (blocks 2.1-2.4 s after the first blow dropped) and the scale doubled halfway (the
+    counts halved), where no run is joined across."""
+    from ramdaq.daq.recording import BlockwiseOfflineTrigger, _join, _trigger_offline
+    from ramdaq.daq.trigger import Trigger
+    from ramdaq.drivers.block import Block
+    from ramdaq.drivers.mcap_replay import McapReplayDevice
+
+    path = ROOT / "recordings" / "albacore-water.mcap"
+    with McapReplayDevice(path) as dev:
+        info, blocks = dev.info, list(dev)
+    fs = info.fs_hz
+    if cut == "a gap in a ringing":
+        blocks = [b for b in blocks if not 4.1 * fs <= b.first_sample < 4.4 * fs]
+    elif cut == "a scale change":
+        half = len(blocks) // 2
+        blocks = blocks[:half] + [Block(b.seq, b.first_sample, b.t0_ns, b.fs_hz, b.counts // 2,
+                                        2 * b.scale) for b in blocks[half:]]
+    whole = _trigger_offline(Trigger(info), blocks, _join(blocks, info.n_channels)[0])
+    assert len(whole) >= 3 if cut != "a gap in a ringing" else len(whole) >= 2
+    for join_s in (0.3, 1.0):
+        trig = BlockwiseOfflineTrigger(Trigger(info), join_s=join_s)
+        found = [ev for b in blocks for ev in trig.process(b)] + trig.flush()
+        assert _events(found) == _events(whole), join_s
