@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ramdaq.analysis.gap.datamodel import Finding, FreeModal, Layer
-from ramdaq.analysis.gap.invariance import gain_invariance, line_persistence, one_gage_lines
+from ramdaq.analysis.gap.invariance import gain_invariance, line_persistence, one_gage_lines, one_gage_poles
 from ramdaq.analysis.gap.layers import PRECEDENCE_STRENGTH, answer
 
 FS = 1024.0
@@ -119,6 +119,35 @@ def test_an_early_line_on_one_gage_alone_is_found_and_a_modes_is_not():
     moded = x + np.outer(shape, rung[5] - x[5])
     assert one_gage_lines(moded, fm, on, numbers) == []
     assert one_gage_lines(x, fm, on, numbers) == []
+
+
+def test_a_pole_on_one_gage_alone_is_found_and_a_modes_is_not():
+    """A gage's own mount ringing at 90 Hz with 2 % damping after each blow, still there in the
+    decay windows: the free modal model holds it as a pole (so it is no line the model lacks),
+    whose shape lives on that gage alone; as a mode of the structure (on every gage) it is not
+    found, nor in the clean trial (six clean trials of the helper: none)."""
+    numbers = list(range(1, N_G + 1))
+    x, on = _trial((), switched=False, seed=4)
+    t = np.arange(x.shape[1]) / FS
+    ring = np.zeros_like(t)
+    for t0 in on:
+        u = np.clip(t - t0, 0, None)
+        ring += 0.2 * np.exp(-0.02 * 2 * math.pi * 90.0 * u) * np.sin(2 * math.pi * 90.0 * u) * (t >= t0)
+    rung = x.copy()
+    rung[5] += ring
+    fm = _fm_of(rung, on)
+    assert np.min(np.abs(fm.f_hz - 90.0)) < 0.5          # held as a pole
+    assert one_gage_lines(rung, fm, on, numbers) == []    # so no line the model lacks
+    (f,) = one_gage_poles(fm, numbers)
+    assert f.check == "one_gage_line" and f.gages == (6,) and f.statistic > f.chance_level
+    assert abs(f.mode_hz[0] - 90.0) < 0.5
+    shape = np.random.default_rng(5).uniform(0.5, 1.0, N_G)
+    assert one_gage_poles(_fm_of(x + np.outer(shape, ring), on), numbers) == []
+    for seed in range(6):
+        x, on = _trial((), switched=False, seed=seed)
+        assert one_gage_poles(_fm_of(x, on), numbers) == [], seed
+    # a gage left out (dead or clipped) is not read: its pole is no finding
+    assert one_gage_poles(fm, numbers, skip_rows=(5,)) == []
 
 
 def _finding(check: str, gages: tuple[int, ...], ratio: float, layer: Layer = Layer.SENSOR) -> dict:

@@ -45,7 +45,7 @@ from ..model.rig import Gage
 from .datamodel import P_CHANCE, Finding, FreeModal, Layer, closure_of, free_modal_model
 from .features import rigid_projector
 from .homogeneity import homogeneity
-from .invariance import gain_invariance, line_persistence, one_gage_lines
+from .invariance import gain_invariance, line_persistence, one_gage_lines, one_gage_poles
 from .signal_checks import (
     EARLY_FROM_S,
     DeclaredLine,
@@ -129,6 +129,7 @@ def check_trial(x: np.ndarray, fs_hz: float, onsets_s: np.ndarray, gages: Sequen
     found += gain_invariance(fm, numbers, skip_rows=rows)
     found += line_persistence(x, fm, onsets_s, numbers, pre_s=pre_s, skip_rows=rows)
     found += one_gage_lines(x, fm, onsets_s, numbers, skip_rows=rows)
+    found += one_gage_poles(fm, numbers, skip_rows=rows)
     return DataChecks(modal=fm, findings=found,
                       looked=("dead", "noisy", "gain", "rigid_body", "time_skew", "highpass", "clipping",
                               "ambient_tone", "double_hit", "homogeneity", "gain_invariance",
