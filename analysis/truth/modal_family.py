@@ -21,6 +21,11 @@ A trial (:func:`generate`):
   with its full scale set so the largest blow peaks at ~40 % of the range.
 * **Effects**, built here and nowhere else: the library's kinds (:data:`LIBRARY`) and effects the
   diagnosis's library does not hold (:data:`OUTSIDE`), whose right answer is "unexplained".
+  Friction, a split, a crack and a stop (rattle) act on the predominant rudder mode, the one
+  that rings fastest after a blow (participation per modal mass times the half-sine's spectrum
+  there, :func:`ringing_per_impulse`), at amplitudes set from its median blow; their gages are
+  where that mode shows (half its largest shape or more), which is where the trial departs from
+  its clean twin.
 
 Units SI; shapes (n_gages, n) in the rig file's channel order.
 """
