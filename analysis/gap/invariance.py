@@ -258,25 +258,46 @@ def one_gage_lines(x: np.ndarray, fm: FreeModal, onsets_s: np.ndarray, numbers: 
     # early_lines' own chance level: the early window's independent bins below 0.45 fs
     n_bins = max(1, int(0.45 * (DECAY_START_S - EARLY_FROM_S) * fm.fs_hz))
     chance = float(scipy.stats.gamma.isf(P_CHANCE / (n_bins * W.shape[0]), a0.size)) / a0.size
+    hits = _alone(W, f, chance, np.ones(f.size, bool))
+    if not hits:
+        return []
+    _, fk, g, best, second = hits[0]
+    text = (f"a line at {fk:.1f} Hz in the early window on gage {numbers[g]} alone ({best:.3g} times its "
+            f"noise, the next gage {second:.2g}): {ALONE}")
+    return [_alone_finding(hits, numbers, chance, text, "early",
+                           "early-window line power over the noise, summed over the blows: Gamma(n_imp, 1) / "
+                           f"n_imp, Bonferroni over {W.shape[0]} gages x {n_bins} bins")]
+
+
+def _alone(W: np.ndarray, f_hz: np.ndarray, chance: float, read: np.ndarray) -> list[tuple]:
+    """The columns of ``W`` (n_rows, n_lines: each line's power per row over its chance unit)
+    that live on one row alone, strongest first, each as (its power over ``chance``, its
+    frequency Hz, its row, its power there, the next row's): a line of ``read`` at or above
+    :data:`ONE_GAGE_MIN_HZ`, beyond ``chance`` on its row, at or below it on every other, and
+    :data:`ONE_GAGE_RATIO` times the next row's."""
     hits = []
-    for i, fk in enumerate(f):
+    for i, fk in enumerate(f_hz):
         o = np.argsort(-W[:, i])
         best, second = W[o[0], i], W[o[1], i]
         alone = second <= chance and best >= ONE_GAGE_RATIO * max(second, 1.0)
-        if fk >= ONE_GAGE_MIN_HZ and best > chance and alone:
+        if read[i] and fk >= ONE_GAGE_MIN_HZ and best > chance and alone:
             hits.append((best / chance, float(fk), int(o[0]), float(best), float(second)))
-    if not hits:
-        return []
-    hits.sort(reverse=True)
-    _, fk, g, best, second = hits[0]
+    return sorted(hits, reverse=True)
+
+
+ALONE = ("no structure moves one gage alone -- the gage's own mount or signal chain rings; no library "
+         "effect does")
+"""Why a line or pole on one gage alone is no mode and no library effect (the findings' text)."""
+
+
+def _alone_finding(hits: list[tuple], numbers: Sequence[int], chance: float, text: str, window: str,
+                   null: str) -> Finding:
+    """The ``one_gage_line`` finding of :func:`_alone`'s ``hits`` (rows as ``numbers``' gages):
+    the strongest one's statistic, every hit's gage and frequency."""
+    _, _, _, best, second = hits[0]
     gages = tuple(dict.fromkeys(numbers[h[2]] for h in hits))
-    text = (f"a line at {fk:.1f} Hz in the early window on gage {numbers[g]} alone ({best:.3g} times its "
-            f"noise, the next gage {second:.2g}): no structure moves one gage alone -- the gage's own "
-            "mount or signal chain rings; no library effect does")
-    return [Finding("one_gage_line", Layer.SENSOR, gages, best, chance, best / max(second, 1.0),
-                    "power ratio", text, window="early", mode_hz=tuple(h[1] for h in hits),
-                    null=("early-window line power over the noise, summed over the blows: Gamma(n_imp, 1) / "
-                          f"n_imp, Bonferroni over {W.shape[0]} gages x {n_bins} bins"))]
+    return Finding("one_gage_line", Layer.SENSOR, gages, best, chance, best / max(second, 1.0),
+                   "power ratio", text, window=window, mode_hz=tuple(h[1] for h in hits), null=null)
 
 
 def one_gage_poles(fm: FreeModal, numbers: Sequence[int], skip_rows: Sequence[int] = ()) -> list[Finding]:
@@ -297,22 +318,12 @@ def one_gage_poles(fm: FreeModal, numbers: Sequence[int], skip_rows: Sequence[in
     n_imp = fm.amp.shape[0]
     W = np.mean(np.abs(fm.amp[:, keep]) ** 2 / np.maximum(2 * fm.amp_se[:, keep] ** 2, 1e-300), axis=0)
     chance = float(scipy.stats.gamma.isf(P_CHANCE / (len(keep) * fm.n_modes), n_imp)) / n_imp
-    hits = []
-    for k in range(fm.n_modes):
-        o = np.argsort(-W[:, k])
-        best, second = W[o[0], k], W[o[1], k]
-        if (not fm.steady[k] and fm.f_hz[k] >= ONE_GAGE_MIN_HZ and best > chance and second <= chance
-                and best >= ONE_GAGE_RATIO * max(second, 1.0)):
-            hits.append((best / chance, float(fm.f_hz[k]), keep[int(o[0])], float(best), float(second)))
+    hits = _alone(W, fm.f_hz, chance, ~fm.steady)
     if not hits:
         return []
-    hits.sort(reverse=True)
     _, fk, g, best, second = hits[0]
-    gages = tuple(dict.fromkeys(numbers[h[2]] for h in hits))
-    text = (f"a pole at {fk:.1f} Hz on gage {numbers[g]} alone ({best:.3g} times its standard error "
-            f"squared, the next gage {second:.2g}): no structure moves one gage alone -- the gage's own "
-            "mount or signal chain rings; no library effect does")
-    return [Finding("one_gage_line", Layer.SENSOR, gages, best, chance, best / max(second, 1.0),
-                    "power ratio", text, window="decay", mode_hz=tuple(h[1] for h in hits),
-                    null=("a pole's amplitude power over its standard error, averaged over the blows: Gamma("
-                          f"n_imp, 1) / n_imp, Bonferroni over {len(keep)} gages x {fm.n_modes} poles"))]
+    text = (f"a pole at {fk:.1f} Hz on gage {numbers[keep[g]]} alone ({best:.3g} times its standard error "
+            f"squared, the next gage {second:.2g}): {ALONE}")
+    return [_alone_finding([(*h[:2], keep[h[2]], *h[3:]) for h in hits], numbers, chance, text, "decay",
+                           "a pole's amplitude power over its standard error, averaged over the blows: Gamma("
+                           f"n_imp, 1) / n_imp, Bonferroni over {len(keep)} gages x {fm.n_modes} poles")]
