@@ -32,14 +32,15 @@ def _loaded(tmp_path, seed: int, effect: str):
 
 
 def test_a_friction_mode_sticking_is_not_compared_as_a_blow(tmp_path):
-    """Modal development seed 58004 (friction, SAMPSON in water): the trigger fires 8 times for
-    4 blows; the 4 onsets where a mode stops ringing are dropped, each in a line, and the 4
-    blows are kept (within 2 ms: the trigger's onset)."""
+    """Modal development seed 58004 (friction, SAMPSON in water): the trigger fires at the 4
+    blows and again where a mode stops ringing (3 times); those onsets are dropped, each in a
+    line, and the 4 blows are kept (within 2 ms: the trigger's onset)."""
     blows, lt, said, path = _loaded(tmp_path, 58004, "friction")
     assert len(lt.onsets_s) == 4
     assert np.max(np.abs(lt.onsets_s - blows)) < 2e-3
     dropped = [s for s in said if "is no blow, not compared" in s]
-    assert len(dropped) == 4 and all("no band of the gages rings more" in s for s in dropped)
+    assert len(dropped) == len(read_recording(path).impacts) - 4 >= 1
+    assert all("no band of the gages rings more" in s for s in dropped)
 
 
 @pytest.mark.parametrize(("seed", "effect"), [(51000, "none"), (57000, "double_hit")])
@@ -52,13 +53,14 @@ def test_every_blow_is_kept(tmp_path, seed, effect):
 
 
 def test_the_trigger_says_a_friction_sticking_is_no_blow(tmp_path):
-    """The same trial as ``ramdaq analyze`` reads it: the trigger's 8 events are all handed over,
-    the 4 where the mode sticks not analysable as no blow (their ratio in the words), the 4
-    blows not."""
+    """The same trial as ``ramdaq analyze`` reads it: the trigger's events are all handed over,
+    those where the mode sticks (every one not at a blow) not analysable as no blow (their ratio
+    in the words), the 4 blows not."""
     blows, _, _, path = _loaded(tmp_path, 58004, "friction")
     events = read_recording(path).impacts
+    t0 = events[0].onset_s - blows[0]
+    at_blow = [ev for ev in events if np.min(np.abs(ev.onset_s - t0 - blows)) < 2e-3]
     flagged = [ev for ev in events if (ev.not_analysable or "").startswith(NO_BLOW)]
-    kept = [ev.onset_s for ev in events if ev not in flagged]
-    assert len(events) == 8 and len(flagged) == 4
+    assert len(at_blow) == 4 and len(events) > 4
+    assert flagged == [ev for ev in events if ev not in at_blow]
     assert all("at most 1.0" in ev.not_analysable for ev in flagged)  # the noise: 1.00-1.04x
-    assert np.max(np.abs(np.asarray(kept) - events[0].onset_s + blows[0] - blows)) < 2e-3
