@@ -478,7 +478,7 @@ def band_energy_ratio(before: np.ndarray, after: np.ndarray, fs_hz: float) -> fl
     time, so some band rings far more after it (that blow: 25x at 20-40 Hz; the blows of four
     modal development trials: 45-12 500x). A mode that stops ringing by friction (Coulomb
     sticking) takes energy out of its band and adds none: at most 1.04x in any band (modal
-    development seed 58004, four such onsets), the noise's own scatter."""
+    development seed 58004's sticks), the noise's own scatter."""
     n = before.shape[-1]
     win = np.hanning(n)
     pb = np.abs(np.fft.rfft(before * win, axis=-1)) ** 2
