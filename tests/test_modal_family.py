@@ -105,9 +105,9 @@ AMPLITUDE_LAWS = ("crack", "rattle", "friction")
 def test_an_amplitude_law_acts_in_every_trial_where_it_says(water_hz):
     """Twenty seeds of the rig in water at the smallest benchmark size (0.5): the crack opens and
     the stop is struck in every trial -- the trial departs from its clean twin by 5 % or more of
-    its ringing, an effect "plain on an oscillogram" (seeds 27 and 37
-    once took a 204-227 Hz mode the blow barely rings for the crack's and departed by 4-5 %;
-    benchmark seeds departed by 0-3 %: no effect in the data, scored as a missed one) -- and
+    its ringing, an effect "plain on an oscillogram" (where the crack sat on a 204-227 Hz mode
+    the blow barely rings, seeds 27 and 37 departed by 3.8-4.8 %, and benchmark seeds by 0-3 %:
+    no effect in the data, scored as a missed one) -- and
     the gage where the departure is largest is among the gages the truth names (where the data
     show it, whatever part of the structure the law stands for). About 20 s."""
     for seed in range(20, 40):
