@@ -1227,6 +1227,9 @@ class Trigger:
         scan.whitener = w
         scan.pos, scan.on, scan.ref_trace = s, False, None
         scan.level, scan.ref = w.var.copy(), w.var.copy()
+        # the scan goes on past this sample: where the refit still leaves the burst above the
+        # scan's ratio it would find the same sample, refit the same and reject it again
+        scan.dead_until = max(scan.dead_until, s + 1)
         return False
 
     def _stands_out(self, ev: _Event, s: int, kk: int, w: _Whitener) -> bool:
@@ -1313,46 +1316,47 @@ class Trigger:
 
     def _scan_sharp(self, ev: _Event, limit: int, closing: bool = False) -> int | None:
         """Next sharp onset (second contact) in ``scan.pos .. limit-1``, with hysteresis."""
-        scan, n, s = ev.scan, self._len, self.settings
-        a, was_on, ref = scan.pos, scan.on, scan.ref  # restored if a burst waits for its refit
-        if limit <= a or (self._fidx is None and scan.whitener is None):
-            return None
-        if self._fidx is not None:
-            f = np.abs(self._values(a, limit, [self._fidx])[0] - self._f_base)
-            on, off, p, last = f >= self._f_level, f < s.hysteresis * self._f_level, None, None
-        else:
-            x = self._values(a - n.order, limit, self._vidx[ev.voters])
-            e = _innovation(x, scan.whitener.a)
-            e2 = e * e
-            p, last = ons.exp_average(e2, n.innovation, scan.level)
-            kk = min(self._k, len(ev.voters))
-            if self._no_contact(scan, p, e2, kk, max(0, scan.dead_until - a)):
+        while True:  # a loop, not a recursion: a long block can hold hundreds of rejected bursts
+            scan, n, s = ev.scan, self._len, self.settings
+            a, was_on, ref = scan.pos, scan.on, scan.ref  # restored if a burst waits for its refit
+            if limit <= a or (self._fidx is None and scan.whitener is None):
+                return None
+            if self._fidx is not None:
+                f = np.abs(self._values(a, limit, [self._fidx])[0] - self._f_base)
+                on, off, p, last = f >= self._f_level, f < s.hysteresis * self._f_level, None, None
+            else:
+                x = self._values(a - n.order, limit, self._vidx[ev.voters])
+                e = _innovation(x, scan.whitener.a)
+                e2 = e * e
+                p, last = ons.exp_average(e2, n.innovation, scan.level)
+                kk = min(self._k, len(ev.voters))
+                if self._no_contact(scan, p, e2, kk, max(0, scan.dead_until - a)):
+                    scan.pos, scan.level = limit, last
+                    return None
+                ratio = self._innovation_ref(scan, e2)
+                np.divide(p, ratio, out=ratio)  # p / level, in the level's array
+                on = (ratio > self._double_on(kk)).sum(axis=0) >= kk
+                off = (ratio > s.off).sum(axis=0) < kk
+            dead = max(0, scan.dead_until - a)  # one contact cannot trigger twice
+            on[:dead] = off[:dead] = False
+            j, scan.on, off_i = ons.next_trigger(on, off, scan.on)
+            if j is not None and p is not None:
+                sure = self._confirm(ev, a + j, kk, closing)
+                if sure is None:  # wait for the samples after the burst; this block again then
+                    scan.on, scan.ref, scan.ref_trace = was_on, ref, None
+                    return None
+                if not sure:
+                    continue  # rejected: scan on from past it
+            if off_i >= 0:
+                scan.off_pos = a + off_i
+            if j is None:
                 scan.pos, scan.level = limit, last
                 return None
-            ratio = self._innovation_ref(scan, e2)
-            np.divide(p, ratio, out=ratio)  # p / level, in the level's array
-            on = (ratio > self._double_on(kk)).sum(axis=0) >= kk
-            off = (ratio > s.off).sum(axis=0) < kk
-        dead = max(0, scan.dead_until - a)  # one contact cannot trigger twice
-        on[:dead] = off[:dead] = False
-        j, scan.on, off_i = ons.next_trigger(on, off, scan.on)
-        if j is not None and p is not None:
-            sure = self._confirm(ev, a + j, kk, closing)
-            if sure is None:  # wait for the samples after the burst; this block again then
-                scan.on, scan.ref, scan.ref_trace = was_on, ref, None
-                return None
-            if not sure:
-                return self._scan_sharp(ev, limit, closing)
-        if off_i >= 0:
-            scan.off_pos = a + off_i
-        if j is None:
-            scan.pos, scan.level = limit, last
-            return None
-        scan.pos, scan.level = a + j + 1, None if p is None else p[:, j].copy()
-        if scan.ref_trace is not None:  # the mean up to the contact's sample, inclusive
-            scan.ref = scan.ref_trace[:, j].copy()
-        scan.dead_until = a + j + n.guard
-        return a + j
+            scan.pos, scan.level = a + j + 1, None if p is None else p[:, j].copy()
+            if scan.ref_trace is not None:  # the mean up to the contact's sample, inclusive
+                scan.ref = scan.ref_trace[:, j].copy()
+            scan.dead_until = a + j + n.guard
+            return a + j
 
     def _no_contact(self, scan: _ContactScan, p: np.ndarray, e2: np.ndarray, kk: int,
                     dead: int) -> bool:

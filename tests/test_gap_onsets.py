@@ -64,3 +64,25 @@ def test_the_trigger_says_a_friction_sticking_is_no_blow(tmp_path):
     assert len(at_blow) == 4 and len(events) > 4
     assert flagged == [ev for ev in events if ev not in at_blow]
     assert all("at most 1.0" in ev.not_analysable for ev in flagged)  # the noise: 1.00-1.04x
+
+
+def test_a_burst_its_refit_rejects_is_passed_over(tmp_path):
+    """Holdout truth trial 912002 (a second blow at 2x the first's size on SAMPSON in water): the
+    contact scan found a burst 53 samples after a blow, its refit said it was no contact, and the
+    scan, restarted at that sample with the refit, found it again -- round and round (a
+    RecursionError in ``ramdaq gap``'s read, and in ``read_recording``'s). A rejected sample is
+    now passed over: both reads end, with the trial's 4 blows and the same onsets."""
+    from ramdaq.daq.commands.gap_bench import _generate_truth
+
+    sc = next(s for s in scenarios(6, "holdout", None, 0.25, "all", 4)
+              if s.get("family", "truth") == "truth" and s["seed"] == 912002)
+    gen = _generate_truth(sc)
+    path = tmp_path / "trial.mcap"
+    dev = ArrayDevice(gen["counts"], gen["scale"], gen["fs_hz"], gages=gen["gages"], rig_toml=gen["rig"].text,
+                      extra={"medium": sc["medium"], "adc_bits": gen["adc_bits"]})
+    record(dev, path, readout=False, overwrite=True)
+    lt = load_trial(path)
+    rec = read_recording(path)
+    assert len(lt.onsets_s) == gen["n_impacts"] == 4
+    np.testing.assert_array_equal(lt.onsets_s, [ev.onset_s - rec.first_sample / rec.info.fs_hz
+                                                for ev in rec.impacts if not ev.not_analysable])
