@@ -7,6 +7,8 @@ SEED_SETS = {
     "check": (100_000, "second development set: shows whether tuning fitted the first set's trials"),
     "benchmark": (500_000, "the benchmark's own seeds: the issue's figures"),
     "holdout": (900_000, "held back: run once, after the work is final, never looked at before"),
+    "holdout2": (1_300_000, "held back since holdout's misses were read (issue 17, session 24): run "
+                            "once, after the work is final"),
 }
 """Seed sets by name: (first seed, its role). Only ``dev`` writes thresholds; the others are
 scored with them. Scenario seeds are ``first + 1000 * class + i`` with i < 100, so the sets never
