@@ -16,7 +16,7 @@ from ..analysis.onset import BLOW_WINDOW_S, NO_BLOW_RATIO
 from ..drivers.block import StreamInfo
 from ..drivers.fault_words import number_runs
 from ..drivers.mcap_replay import McapReplayDevice
-from .recording import BlockwiseOfflineTrigger, Recording, force_row, no_rig, rig_of, rig_or_fail
+from .recording import READ_JOIN_S, BlockwiseOfflineTrigger, Recording, force_row, no_rig, rig_of, rig_or_fail
 from .trigger import NO_BLOW, ImpactEvent, Trigger
 
 __all__ = ["LoadedTrial", "load_trial", "trial_data"]
@@ -116,7 +116,7 @@ def _read_gages(path: str | Path, rig: Rig | str | Path | None):
     block's scale of those gages (SI per count), the stream index of column 0, the trigger's
     impacts). Only the gages' counts are kept, as
     int16 when every count fits."""
-    with McapReplayDevice(path) as dev:
+    with McapReplayDevice(path, join_s=READ_JOIN_S) as dev:
         info = dev.info
         the_rig = rig_of(path, info, rig)
         have = _gages_present(path, info, the_rig)

@@ -197,64 +197,36 @@ def _trigger_offline(trig: Trigger, blocks: list[Block], values: np.ndarray) -> 
     return impacts + trig.flush()
 
 
-JOIN_S = 1.0
-"""Seconds of contiguous blocks of one scale that :class:`BlockwiseOfflineTrigger` joins before the
-trigger reads them: a stream, it finds the same impacts (``tests/test_gap_trialdata.py``), and
-much of its cost on a recording of 50 ms blocks was per block (``benchmarks/gap_cost.py``'s
-6-blow trial read in 0.27 s CPU instead of 0.43 s)."""
-
-
 class BlockwiseOfflineTrigger:
     """The offline trigger of :func:`read_recording` over a recording read block by block
     (``ramdaq gap`` keeps only counts): the blocks are held until they cover the trigger's
     :attr:`~ramdaq.daq.trigger.Trigger.head_samples`, the trigger is armed on them (and on the
     force channel's every sample, ``force_row``, read by :func:`force_row` beforehand), then
-    they and every later block go through it, up to ``join_s`` seconds of contiguous blocks of
-    one scale at a time. The impacts are those :func:`read_recording` finds."""
+    they and every later block go through it. The impacts are those :func:`read_recording`
+    finds."""
 
-    def __init__(self, trig: Trigger, force_row: np.ndarray | None = None, join_s: float = JOIN_S):
+    def __init__(self, trig: Trigger, force_row: np.ndarray | None = None):
         self._trig, self._force_row = trig, force_row
         self._held: list[Block] | None = []
-        self._run: list[Block] = []
-        self._join = max(1, round(join_s * trig.fs_hz))
 
     def process(self, block: Block) -> list[ImpactEvent]:
         """Feed the next block; the impacts whose records completed."""
-        if self._held is not None:
-            self._held.append(block)
-            if block.next_sample - self._held[0].first_sample < self._trig.head_samples:
-                return []
-            return self._arm()
-        out = self._feed() if self._run and not _continues(self._run[-1], block) else []
-        self._run.append(block)
-        if block.next_sample - self._run[0].first_sample >= self._join:
-            out += self._feed()
-        return out
+        if self._held is None:
+            return self._trig.process(block)
+        self._held.append(block)
+        if block.next_sample - self._held[0].first_sample < self._trig.head_samples:
+            return []
+        return self._arm()
 
     def flush(self) -> list[ImpactEvent]:
         """At the recording's end: the impacts still open."""
-        return (self._arm() if self._held is not None else []) + self._feed() + self._trig.flush()
+        return (self._arm() if self._held is not None else []) + self._trig.flush()
 
     def _arm(self) -> list[ImpactEvent]:
         held, self._held = self._held or [], None
         head, _ = _join(held, self._trig.info.n_channels)
         self._trig.arm_on_record(head, self._force_row)
-        return [e for b in held for e in self.process(b)]
-
-    def _feed(self) -> list[ImpactEvent]:
-        """The run of blocks held, as one block, through the trigger."""
-        run, self._run = self._run, []
-        if len(run) <= 1:
-            return [e for b in run for e in self._trig.process(b)]
-        b0 = run[0]
-        return self._trig.process(Block(b0.seq, b0.first_sample, b0.t0_ns, b0.fs_hz,
-                                        np.concatenate([b.counts for b in run], axis=1), b0.scale))
-
-
-def _continues(last: Block, block: Block) -> bool:
-    """Whether ``block`` goes on from ``last`` without a gap, in the same channels, rate and scale."""
-    return (block.first_sample == last.next_sample and block.n_channels == last.n_channels
-            and block.fs_hz == last.fs_hz and np.array_equal(block.scale, last.scale))
+        return [e for b in held for e in self._trig.process(b)]
 
 
 def force_row(path: str | PathLike, row: int | None) -> np.ndarray | None:
