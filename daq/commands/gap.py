@@ -219,9 +219,12 @@ def answer_lines(d: Diagnosis) -> list[str]:
                                                                        if model else "saw no gap")
     if a.by == "data":
         why = "the data-only finding takes precedence (it rests on the recorded values alone)"
-    else:
+    elif a.named in ("none", "unexplained"):
         why = ("it lies only where the rig calibrated to the trial's modes still misses them: not "
                "separable from the model's form error")
+    else:
+        why = (f"the trial's identified modes show {a.named} (against the rig calibrated to them), "
+               "each a test against its own chance level")
     return [f"  the model layer alone {alone}; {why}"]
 
 
