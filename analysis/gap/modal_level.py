@@ -298,13 +298,19 @@ def _a_split(tm: TrialModes, i: int, j: int) -> bool:
     return tm.f_hz[j] / tm.f_hz[i] - 1 >= SPLIT_RESOLVED * 0.5 * (zi + zj)
 
 
-def splits(tm: TrialModes, cmp: ModalComparison) -> list[Split]:
+def splits(tm: TrialModes, cmp: ModalComparison, rig: Rig) -> list[Split]:
     """The identified modes ``tm`` that are one mode split in two (:class:`Split`) against the
-    pairing ``cmp`` of the calibrated model: two modes within :data:`MAX_SPLIT_REL` in
+    pairing ``cmp`` of the calibrated model of ``rig``: two modes within :data:`MAX_SPLIT_REL` in
     frequency, shapes agreeing to :data:`SPLIT_MAC`, one of them paired with a model mode and
     the other not; alone (a chain of three or more modes of one shape is a frequency that moves
-    -- an amplitude-dependent stiffness, friction, a wandering tone -- not a split), and
-    decaying as halves of one mode do (:func:`_a_split`)."""
+    -- an amplitude-dependent stiffness, friction, a wandering tone -- not a split), decaying as
+    halves of one mode do (:func:`_a_split`), and the rudder's: a pair whose rudder and stock
+    move at most :data:`LINE_RIDE` times the hull (athwartship gages, :func:`ride_over_hull`; the
+    rig's own hull modes ride the rudder at 1.2-1.7x) is two hull modes -- a few gages on a hull
+    read two of its low modes as near one field, and the rig's one lumped hull mode pairs one of
+    them -- not a mode of the rudder split by something on it (issue 17: a clean modal-family
+    trial, holdout seed 950004, rang hull modes at 10.0 and 12.3 Hz of MAC 0.97, read as a
+    split)."""
     paired = {p.i_id for p in cmp.pairs}
     alike = _alike(tm)
     count = np.bincount([k for i, j, _ in alike for k in (i, j)], minlength=tm.n_modes)
@@ -313,10 +319,24 @@ def splits(tm: TrialModes, cmp: ModalComparison) -> list[Split]:
         if len(paired & {i, j}) != 1 or count[i] > 1 or count[j] > 1 or not _a_split(tm, i, j):
             continue
         a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
+        if ride_over_hull(a, rig) <= LINE_RIDE:
+            continue
         big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
         out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m, tuple(tm.gage_numbers[k] for k in big),
                          float(tm.zeta[i]), float(tm.zeta[j])))
     return out
+
+
+def ride_over_hull(a: np.ndarray, rig: Rig) -> float:
+    """A shape's largest rudder-and-stock amplitude over its largest hull amplitude, athwartship
+    gages (``a`` (n_gages,) amplitudes in channel order); inf when no hull gage reads it."""
+    gs = rig.gages_by_channel()
+    ath = np.array(["z" not in g.axis for g in gs])
+    hull = np.array([g.body == "hull" for g in gs]) & ath
+    ride = ~hull & ath
+    if not hull.any() or not ride.any():
+        return math.inf
+    return float(a[ride].max() / max(a[hull].max(), 1e-30))
 
 
 # -- the model's side ----------------------------------------------------------------------------
@@ -812,4 +832,4 @@ def structure_above(td: TrialData, f_from_hz: float) -> list[Split | Coupled]:
     if tm.n_modes == 0:
         return []
     cmp = compare(tm, td.rig)
-    return [*splits(tm, cmp), *flexible_coupled(tm, td.rig, cmp)]
+    return [*splits(tm, cmp, td.rig), *flexible_coupled(tm, td.rig, cmp)]

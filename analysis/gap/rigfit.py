@@ -1075,7 +1075,9 @@ class ModelLevel:
     def splits(self) -> list[Split]:
         """Identified modes of one shape where the calibrated rig has one mode
         (:func:`~ramdaq.analysis.gap.modal_level.splits`): a split no constant makes."""
-        return [] if self.fit is None or self.modes is None else splits(self.modes, self.fit.after)
+        if self.fit is None or self.modes is None:
+            return []
+        return splits(self.modes, self.fit.after, self.fit.rig)
 
     def coupled(self) -> list[Coupled]:
         """Identified hull modes the rudder does not ride rigidly, which the calibrated rig lacks
