@@ -12,10 +12,12 @@ import numpy as np
 from ramdaq.analysis.gap.layers import answer
 from ramdaq.analysis.gap.modal_level import (
     DRIVEN_MISFIT,
+    LINE_RIDE,
     compare,
     coupled_modes,
     flexible_coupled,
     model_modes_at_gages,
+    ride_over_hull,
     stock_driven,
 )
 from ramdaq.analysis.model.rig import HullMode, load_rig
@@ -48,6 +50,19 @@ def test_a_hull_mode_at_the_stock_the_rig_lacks_is_driven():
     assert c.gages and set(c.gages) <= hull
 
 
+def test_a_hull_mode_at_the_stock_beside_a_rudder_mode_is_driven_however_far_the_rudder_rides():
+    # just under the 24.5 Hz rudder mode the stock's answer grows: the rudder rides the hull mode
+    # at over 5x the hull (LINE_RIDE), as the truth family's hull couplings did at 5.3-5.7x
+    rig = load_rig("albacore").with_medium("air")
+    mm = model_modes_at_gages(rig)
+    f = 0.95 * sorted(mm.f_hz[mm.f_hz > 0])[1]
+    tm = modes_of(local_hull_mode(rig, f, 0.05))
+    i = int(np.argmin(np.abs(tm.f_hz - f)))
+    assert ride_over_hull(np.abs(tm.shapes[:, i]), rig) > LINE_RIDE
+    (c,) = coupled_modes(tm, rig, compare(tm, rig))
+    assert c.kind == "driven" and abs(c.f_hz / f - 1) < 0.05
+
+
 def test_a_hull_mode_the_rudder_rides_in_its_own_proportion_is_a_line():
     rig = load_rig("albacore").with_medium("air")
     tm = modes_of(rig)
@@ -70,5 +85,7 @@ def test_a_driven_line_answers_hull_coupling_and_a_plain_line_does_not():
     a = answer("unexplained", cands, None, form, [], (), [], [line | {"kind": "driven"}])
     assert a.named == "hull_coupling" and a.location["gages"] == [14, 13, 9, 5]
     assert a.location["effect_mode_hz"] == 17.95 and a.closed_held == 0.91
-    # no gap beyond noise: nothing to name
-    assert answer(None, cands, None, form, [], (), [], [line | {"kind": "driven"}]).named == "none"
+    # no gap beyond noise on the map: the driven line is its own test and answers; a plain line
+    # still names nothing (issue 17: truth hull couplings of size 0.05 answered "no effect")
+    assert answer(None, cands, None, form, [], (), [], [line | {"kind": "driven"}]).named == "hull_coupling"
+    assert answer(None, cands, None, form, [], (), [], [line]).named == "none"
