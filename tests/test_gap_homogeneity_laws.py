@@ -73,6 +73,12 @@ def test_coulombs_slope_with_a_moving_frequency_is_not_friction():
     assert not is_friction(f) and data_effect(f) == "unexplained" and set(f["gages"]) == {6, 8}
     kept = DecayLaw(112.23, 6, 40, 2.0, 0.3 * STIFF_MIN, 4.2, 0.204, 6.5)
     assert is_friction(_law_finding(fm, [kept], snr, (6, 8), 4.1, "null").to_json())
+    # a slope well above chance (modal check seed 157002: 9.4 against 3.8) is not contradicted by
+    # a frequency move within chance, and is by one beyond it
+    strong = DecayLaw(112.23, 6, 40, -2.3, -1.6 * STIFF_MIN, 9.4, 0.204, 1.6)
+    assert is_friction(_law_finding(fm, [strong], snr, (6, 8), 4.1, "null").to_json())
+    beyond = DecayLaw(112.23, 6, 40, -5.0, -1.6 * STIFF_MIN, 9.4, 0.204, 1.6)
+    assert not is_friction(_law_finding(fm, [beyond], snr, (6, 8), 4.1, "null").to_json())
 
 
 def test_a_friction_the_decays_contradict_is_unexplained():

@@ -47,6 +47,11 @@ P_CHANCE = 1e-3
 """Probability that a data-only check reports a finding on a trial without the fault: the chance
 level of every statistic is its null distribution's upper ``P_CHANCE`` quantile,
 Bonferroni-corrected for the gages, modes, frequencies or delays it searched."""
+PRECEDENCE_STRENGTH = 2.0
+"""A data-only sensor finding (or a double hit) overrides the model layer's "unexplained" when its
+statistic is at least this many times its chance level (which is already Bonferroni-corrected at
+``P_CHANCE``): well above chance, not a borderline excursion. Stated a priori, not tuned on
+benchmark seeds."""
 
 
 class Layer(StrEnum):

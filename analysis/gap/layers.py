@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import scipy.stats
 
-from .datamodel import P_CHANCE, Finding, Layer
+from .datamodel import P_CHANCE, PRECEDENCE_STRENGTH, Finding, Layer
 from .evidence import GAP_CELL_Z
 from .modal_level import MAX_SPLIT_REL
 from .verdict import CLOSURE_TIE, UNEXPLAINED_CLOSURE, closed_share
@@ -81,13 +81,6 @@ def unconfirmed(findings: list[Finding], looked: tuple[str, ...], effect: str | 
     found = {f.check for f in findings}
     checks = {COUNTERPART[e] for e in effect.split("+") if e in COUNTERPART}
     return sorted(c for c in checks if c in looked and c not in found)
-
-
-PRECEDENCE_STRENGTH = 2.0
-"""A data-only sensor finding (or a double hit) overrides the model layer's "unexplained" when its
-statistic is at least this many times its chance level (which is already Bonferroni-corrected at
-``P_CHANCE``): well above chance, not a borderline excursion. Stated a priori, not tuned on
-benchmark seeds."""
 
 
 DATA_EFFECT = {"gain": "gage_sensitivity", "dead": "gage_sensitivity", "rigid_body": "gage_alignment",
