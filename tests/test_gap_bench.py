@@ -376,6 +376,15 @@ def test_ramdaq_gap_prints_the_answer_the_benchmark_scores():
     d.answer = one_answer(d)
     assert d.answer.to_json() == decision(r | {"data_findings": [], "form_gages": []}, 8.0, 10.0, 0.0)
     assert Diagnosis.headline.fget(d).startswith("unexplained: gages 3") and answer_lines(d) == []
+    # a coupled hull mode the identified modes show answers where the map alone is unexplained:
+    # the report says why, not that the gap lies in the form error
+    c = {"f_hz": 6.2, "zeta": 0.02, "hull_share": 0.2, "nonrigid": 0.001, "statistic": 13.0,
+         "chance_level": 1.0, "gages": [13, 14, 9, 5], "kind": "driven"}
+    level.coupled = lambda: [SimpleNamespace(to_json=lambda: c)]
+    d.answer = one_answer(d)
+    assert d.answer.named == "hull_coupling" and d.answer.by == "model"
+    (why,) = answer_lines(d)
+    assert "identified modes show hull_coupling" in why and "form error" not in why
 
 
 _MISSED = ("measured on this check seed (2026-11-27, branch gen): the unexplained gap is placed "
