@@ -304,13 +304,14 @@ def splits(tm: TrialModes, cmp: ModalComparison, rig: Rig) -> list[Split]:
     frequency, shapes agreeing to :data:`SPLIT_MAC`, one of them paired with a model mode and
     the other not; alone (a chain of three or more modes of one shape is a frequency that moves
     -- an amplitude-dependent stiffness, friction, a wandering tone -- not a split), decaying as
-    halves of one mode do (:func:`_a_split`), and the rudder's: a pair whose rudder and stock
-    move at most :data:`LINE_RIDE` times the hull (athwartship gages, :func:`ride_over_hull`; the
-    rig's own hull modes ride the rudder at 1.2-1.7x) is two hull modes -- a few gages on a hull
-    read two of its low modes as near one field, and the rig's one lumped hull mode pairs one of
-    them -- not a mode of the rudder split by something on it (issue 17: a clean modal-family
-    trial, holdout seed 950004, rang hull modes at 10.0 and 12.3 Hz of MAC 0.97, read as a
-    split)."""
+    halves of one mode do (:func:`_a_split`), and not the hull's: a pair with
+    :data:`HULL_MODE_SHARE` of its shape energy on the hull gages (:func:`hull_share`) is two hull
+    modes -- a few gages on a hull read two of its low modes as near one field, and the rig's one
+    lumped hull mode pairs one of them -- not a mode split by something on the rudder (issue 17:
+    a clean modal-family trial, holdout seed 950004, rang hull modes at 10.0 and 12.3 Hz of MAC
+    0.98 and hull share 0.93, read as a split; the modal family's split rudder modes, 0.05).
+    The ratio of the rudder's to the hull's largest amplitude does not tell them: benchmark seed
+    559001's split 13.8 Hz rudder mode, mixed with a hull mode near it, rode the hull at 4.3x)."""
     paired = {p.i_id for p in cmp.pairs}
     alike = _alike(tm)
     count = np.bincount([k for i, j, _ in alike for k in (i, j)], minlength=tm.n_modes)
@@ -318,13 +319,20 @@ def splits(tm: TrialModes, cmp: ModalComparison, rig: Rig) -> list[Split]:
     for i, j, m in alike:
         if len(paired & {i, j}) != 1 or count[i] > 1 or count[j] > 1 or not _a_split(tm, i, j):
             continue
-        a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
-        if ride_over_hull(a, rig) <= LINE_RIDE:
+        if hull_share(np.abs(tm.shapes[:, i]) ** 2 + np.abs(tm.shapes[:, j]) ** 2, rig) >= HULL_MODE_SHARE:
             continue
+        a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
         big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
         out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m, tuple(tm.gage_numbers[k] for k in big),
                          float(tm.zeta[i]), float(tm.zeta[j])))
     return out
+
+
+def hull_share(e: np.ndarray, rig: Rig) -> float:
+    """The share of a shape's energy ``e`` ((n_gages,) ``|phi|^2`` in channel order) on the hull's
+    gages: the hull's mode from :data:`HULL_MODE_SHARE` up."""
+    hull = np.array([g.body == "hull" for g in rig.gages_by_channel()])
+    return float(e[hull].sum() / max(e.sum(), 1e-30))
 
 
 def ride_over_hull(a: np.ndarray, rig: Rig) -> float:
@@ -507,7 +515,6 @@ def flexible_coupled(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Cou
     unrelated shapes give), and the rudder's and stock's athwartship gages off a rigid ride by at
     least :data:`COUPLED_NONRIGID` of their energy and beyond the test's chance level."""
     gs = rig.gages_by_channel()
-    body = np.array([g.body for g in gs])
     ride = np.array([g.body != "hull" and "z" not in g.axis for g in gs])
     pos = np.array([g.position_m for g in gs], float)
     good = {p.i_id for p in cmp.pairs if p.mac >= 1 / max(tm.shapes.shape[0], 1)}
@@ -516,8 +523,7 @@ def flexible_coupled(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Cou
         if i in good or tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts:
             continue
         s = tm.shapes[:, i]
-        e = np.abs(s) ** 2
-        hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
+        hull = hull_share(np.abs(s) ** 2, rig)
         if hull < HULL_MODE_SHARE:
             continue
         share, stat, chance = rigid_ride(s[ride], tm.shape_se[ride, i], pos[ride], tm.n_modes)
@@ -599,10 +605,9 @@ def extra_lines(tm: TrialModes, rig: Rig, cmp: ModalComparison) -> list[Coupled]
         if not (share < COUPLED_NONRIGID and stat > 1.0):
             continue
         driven = stock_driven(s, float(tm.f_hz[i]), rig) <= DRIVEN_MISFIT
-        if not (driven or a[ride].max() <= LINE_RIDE * a[hull_ath].max()):
+        if not (driven or ride_over_hull(a, rig) <= LINE_RIDE):
             continue
-        e = a**2
-        hull = float(e[body == "hull"].sum() / max(e.sum(), 1e-30))
+        hull = hull_share(a**2, rig)
         top = a[hull_ath].max()
         big = [int(k) for k in np.argsort(-a) if hull_ath[k] and a[k] >= 0.5 * top]
         kind = "driven" if driven else "line"
@@ -789,7 +794,7 @@ def stock_turns(tm: TrialModes, rig: Rig) -> list[StockTurn]:
         e = np.abs(s) ** 2
         g = complex(gamma @ s)
         if (tm.zeta[i] <= 0 or tm.n_seen[i] < 0.75 * tm.n_impacts or abs(g) == 0
-                or e[body == "hull"].sum() >= HULL_MODE_SHARE * e.sum()):
+                or hull_share(e, rig) >= HULL_MODE_SHARE):
             continue
         q = complex(top @ s) / g
         q_se = float(np.sqrt(np.sum(np.abs(top - q * gamma) ** 2 * se**2)) / abs(g))
