@@ -640,7 +640,13 @@ def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
     for i, k in enumerate(ks):
         for what, y, s in (("frequency", f[:, i], sf[:, i]), ("decrement", d[:, i], sd[:, i])):
             b, se = _slope(level_db, y, s)
-            out.append((abs(b) / se, what, float(fm.f_hz[k]), b / float(np.mean(y)), k))
+            rel = b / float(np.mean(y))
+            # a frequency moving by less than STIFF_MIN over the blows' span is within the fits'
+            # bias: still one test, never a finding (issue 17: +0.1 to -0.5 % per doubling in
+            # trials of time skew, a double hit, a sensor resonance, a high-pass, a gain drift and
+            # no effect, holdout2 1350000 alarming at +0.2 %; cracks -0.6 to -1.0 %)
+            small = what == "frequency" and abs(rel) * float(np.ptp(level_db)) < STIFF_MIN
+            out.append((0.0 if small else abs(b) / se, what, float(fm.f_hz[k]), rel, k))
     logs = {int(k): np.log(np.abs(own[:, int(np.argmax(snr[:, k])), k])) for k in ks}
     for k in ks:
         # linearity: every mode's amplitude grows as the blow (log-log slope 1), read against
