@@ -9,6 +9,8 @@ SEED_SETS = {
     "holdout": (900_000, "held back: run once, after the work is final, never looked at before"),
     "holdout2": (1_300_000, "held back since holdout's misses were read (issue 17, session 24): run "
                             "once, after the work is final"),
+    "holdout3": (1_700_000, "held back since holdout2's misses were read (issue 17, session 25): run "
+                            "once, after the work is final"),
 }
 """Seed sets by name: (first seed, its role). Only ``dev`` writes thresholds; the others are
 scored with them. Scenario seeds are ``first + 1000 * class + i`` with i < 100, so the sets never
