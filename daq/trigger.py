@@ -1316,8 +1316,8 @@ class Trigger:
 
     def _scan_sharp(self, ev: _Event, limit: int, closing: bool = False) -> int | None:
         """Next sharp onset (second contact) in ``scan.pos .. limit-1``, with hysteresis."""
+        scan, n, s = ev.scan, self._len, self.settings
         while True:  # a loop, not a recursion: a long block can hold hundreds of rejected bursts
-            scan, n, s = ev.scan, self._len, self.settings
             a, was_on, ref = scan.pos, scan.on, scan.ref  # restored if a burst waits for its refit
             if limit <= a or (self._fidx is None and scan.whitener is None):
                 return None

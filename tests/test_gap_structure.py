@@ -156,7 +156,8 @@ def test_a_mode_split_in_two_is_found_and_a_clean_rig_has_none():
     hull = np.array([g.body == "hull" for g in rig.gages_by_channel()])
     k = int(np.argmax([hull_share(np.abs(tm.shapes[:, i]) ** 2, rig) for i in range(tm.n_modes)]))
     assert hull_share(np.abs(tm.shapes[:, k]) ** 2, rig) < HULL_MODE_SHARE    # the rig's rides at 1.2-1.7x
-    (kept,) = splits(split_copy(tm, k, 0.1), compare(split_copy(tm, k, 0.1), rig), rig)
+    rigs = split_copy(tm, k, 0.1)
+    (kept,) = splits(rigs, compare(rigs, rig), rig)
     assert kept.f_lo_hz == pytest.approx(tm.f_hz[k])
     shapes = tm.shapes.copy()
     shapes[~hull, k] *= 0.2

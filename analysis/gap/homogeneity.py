@@ -636,6 +636,7 @@ def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
     sf = np.sqrt(sf**2 + (F_FLOOR * f) ** 2)
     sd = np.sqrt(sd**2 + (D_FLOOR * np.abs(d)) ** 2)
     level_db = level / math.log(2)                                       # in doublings
+    span = float(np.ptp(level_db))
     out = []
     for i, k in enumerate(ks):
         for what, y, s in (("frequency", f[:, i], sf[:, i]), ("decrement", d[:, i], sd[:, i])):
@@ -645,7 +646,7 @@ def _level_slopes(x: np.ndarray, fm: FreeModal, ks: np.ndarray,
             # bias: still one test, never a finding (issue 17: +0.1 to -0.5 % per doubling in
             # trials of time skew, a double hit, a sensor resonance, a high-pass, a gain drift and
             # no effect, holdout2 1350000 alarming at +0.2 %; cracks -0.6 to -1.0 %)
-            small = what == "frequency" and abs(rel) * float(np.ptp(level_db)) < STIFF_MIN
+            small = what == "frequency" and abs(rel) * span < STIFF_MIN
             out.append((0.0 if small else abs(b) / se, what, float(fm.f_hz[k]), rel, k))
     logs = {int(k): np.log(np.abs(own[:, int(np.argmax(snr[:, k])), k])) for k in ks}
     for k in ks:

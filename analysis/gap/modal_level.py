@@ -319,9 +319,10 @@ def splits(tm: TrialModes, cmp: ModalComparison, rig: Rig) -> list[Split]:
     for i, j, m in alike:
         if len(paired & {i, j}) != 1 or count[i] > 1 or count[j] > 1 or not _a_split(tm, i, j):
             continue
-        if hull_share(np.abs(tm.shapes[:, i]) ** 2 + np.abs(tm.shapes[:, j]) ** 2, rig) >= HULL_MODE_SHARE:
+        ai, aj = np.abs(tm.shapes[:, i]), np.abs(tm.shapes[:, j])
+        if hull_share(ai**2 + aj**2, rig) >= HULL_MODE_SHARE:
             continue
-        a = np.abs(tm.shapes[:, i]) + np.abs(tm.shapes[:, j])
+        a = ai + aj
         big = [int(k) for k in np.argsort(-a) if a[k] >= 0.5 * a.max()]
         out.append(Split(float(tm.f_hz[i]), float(tm.f_hz[j]), m, tuple(tm.gage_numbers[k] for k in big),
                          float(tm.zeta[i]), float(tm.zeta[j])))
