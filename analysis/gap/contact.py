@@ -101,16 +101,24 @@ def fast_poles(fs_hz: float) -> np.ndarray:
     return -FAST_ZETA * 2 * math.pi * f + 2j * math.pi * f * math.sqrt(1 - FAST_ZETA**2)
 
 
-def contact_response(tau: np.ndarray, poles: np.ndarray, contact_s: float) -> np.ndarray:
+def contact_response(tau: np.ndarray, poles: np.ndarray, contact_s: float,
+                     growth: np.ndarray | None = None) -> np.ndarray:
     """Each pole's response ``int_0^min(tau, T) sin(pi u / T) e^(s (tau - u)) du`` to a unit
     half-sine contact of length ``T`` = ``contact_s`` from ``tau`` = 0, (N, K) complex; zero
-    before it."""
+    before it. ``growth``, :func:`pole_growth` ``(tau, poles)`` when made already (it does not
+    depend on the contact's length: a grid of lengths on one window makes it once)."""
     a = math.pi / contact_s
     tt = np.clip(tau, 0.0, contact_s)[:, None]
     J = (np.exp(-poles * tt) * (-poles * np.sin(a * tt) - a * np.cos(a * tt)) + a) / (poles**2 + a * a)
-    h = np.exp(np.multiply.outer(np.maximum(tau, 0.0), poles)) * J
+    h = (pole_growth(tau, poles) if growth is None else growth) * J
     h[tau < 0] = 0.0
     return h
+
+
+def pole_growth(tau: np.ndarray, poles: np.ndarray) -> np.ndarray:
+    """``e^(s max(tau, 0))`` of each pole ``s`` (K,) 1/s at each time ``tau`` (N,) s, (N, K)
+    complex: the part of :func:`contact_response` the contact's length leaves alone."""
+    return np.exp(np.multiply.outer(np.maximum(tau, 0.0), poles))
 
 
 def rss(e: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -180,11 +188,11 @@ def _strong(y: np.ndarray, fs_hz: float, poles: np.ndarray, extra: np.ndarray) -
     return extra[np.sort(np.array(order, dtype=int))]
 
 
-def _two_blow_rss(tau: np.ndarray, poles: np.ndarray, contact_s: float, delay_s: float,
-                  y: np.ndarray) -> np.ndarray:
-    """Residual sums of squares on two contacts, the second ``delay_s`` later at each size of
+def _two_blow_rss(h1: np.ndarray, tau: np.ndarray, poles: np.ndarray, contact_s: float,
+                  delay_s: float, y: np.ndarray) -> np.ndarray:
+    """Residual sums of squares on two contacts, the first ``h1`` (:func:`contact_response`
+    ``(tau, poles, contact_s)``), the second ``delay_s`` later at each size of
     :data:`RHO_GRID`, (n_rho,)."""
-    h1 = contact_response(tau, poles, contact_s)
     h2 = contact_response(tau - delay_s, poles, contact_s)
     return rss(h1[None] + RHO_GRID[:, None, None] * h2[None], y)
 
@@ -227,9 +235,19 @@ def one_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
     own = early_poles(x, fs_hz, onset_s, poles, sig) if extra is None else extra
     s = np.concatenate([poles, own, fast_poles(fs_hz)])
     n = np.arange(y.shape[0])
-    rss0, sh, T = min((float(rss(contact_response((n - (k - first)) / fs_hz, s, c), y)), int(k), float(c))
-                      for k in SHIFT_GRID for c in CONTACT_GRID_S)
+    rss0, sh, T = min((float(rss(contact_response(tau, s, c, growth), y)), int(k), float(c))
+                      for k in SHIFT_GRID for tau in [(n - (k - first)) / fs_hz]
+                      for growth in [pole_growth(tau, s)] for c in CONTACT_GRID_S)
     return OneBlow(y, s, (n - (sh - first)) / fs_hz, T, rss0, sh - first)
+
+
+def _first(made: dict[float, np.ndarray], tau: np.ndarray, poles: np.ndarray, contact_s: float,
+           growth: np.ndarray) -> np.ndarray:
+    """:func:`contact_response` ``(tau, poles, contact_s)``, from ``made`` (by contact length)
+    when made already, else made and kept there."""
+    if contact_s not in made:
+        made[contact_s] = contact_response(tau, poles, contact_s, growth)
+    return made[contact_s]
 
 
 def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
@@ -257,18 +275,21 @@ def second_blow(x: np.ndarray, fs_hz: float, onset_s: float, poles: np.ndarray,
         hi = min(hi, int(math.floor(until_s * fs_hz)) + 1)
     if hi <= lo:
         return None
+    growth = pole_growth(tau, s)
+    h1 = contact_response(tau, s, T, growth)
     coarse = [(float(rss0 - r.min()), i, float(RHO_GRID[int(np.argmin(r))])) for i in range(lo, hi, 2)
-              for r in [_two_blow_rss(tau, s, T, i / fs_hz, y)]]
+              for r in [_two_blow_rss(h1, tau, s, T, i / fs_hz, y)]]
     _, i0, rho0 = max(coarse)
     if rho0 * RHO_GRID[1] / RHO_GRID[0] < min_rho:
         return None
+    firsts: dict[float, np.ndarray] = {}      # the first contact at each length tried, made once
     near = [(float(rss0 - r.min()), i, float(RHO_GRID[int(np.argmin(r))]), float(c))
             for i in range(max(lo, i0 - 2), min(hi, i0 + 3))
             for c in np.union1d(CONTACT_GRID_S, T + np.arange(-4, 5) * 0.25e-3)
             if 1e-3 < c <= i / fs_hz - SEPARATION_S
-            for r in [_two_blow_rss(tau, s, c, i / fs_hz, y)]]
+            for r in [_two_blow_rss(_first(firsts, tau, s, c, growth), tau, s, c, i / fs_hz, y)]]
     _, i, rho, c = max(near)
-    h1, h2 = contact_response(tau, s, c), contact_response(tau - i / fs_hz, s, c)
+    h1, h2 = _first(firsts, tau, s, c, growth), contact_response(tau - i / fs_hz, s, c)
     step = RHO_GRID[1] / RHO_GRID[0]
     res = scipy.optimize.minimize_scalar(lambda r: float(rss(h1 + r * h2, y)), method="bounded",
                                          bounds=(rho / step, rho * step), options={"xatol": 1e-3 * rho})
