@@ -20,7 +20,7 @@ import scipy.signal
 import scipy.special
 import scipy.stats
 
-from .contact import SecondBlow, contact_response, early_poles, one_blow, rss, second_blow
+from .contact import RHO_GRID, SecondBlow, contact_response, early_poles, one_blow, rss, second_blow
 from .datamodel import DECAY_START_S, P_CHANCE, Finding, FreeModal, Layer, closure_of, held_out
 
 CLIP_SPAN_S = 2.0
@@ -482,10 +482,6 @@ MIN_BLOWS = 2
 """A second blow is reported when at least this many blows show it (all of them when fewer): a
 rebound of the ram belongs to the set-up and repeats; a misfit of one blow's early response is
 no double hit (as the map's gap must reproduce on held-out impacts)."""
-RHO_GRID = np.geomspace(0.02, 2.0, 14)
-"""Sizes of a second blow tried, relative to the first (the scan's; the size reported is
-refined between the best one's neighbours)."""
-
 DELAY_AGREE_S = 0.01
 """The contact-held measurement of a second blow (:func:`_measured`) is taken when its delay is
 within this of the scan's: the scan reads the delay from where the modes' amplitudes step, which
