@@ -108,3 +108,24 @@ def test_the_decay_spectrum_is_made_once_per_weights():
     again = fw.decay_spectrum()
     assert again is not first
     np.testing.assert_allclose(again[1], 4.0 * first[1], rtol=1e-12)  # power: twice the weights
+
+
+def test_a_blows_first_contact_made_once_is_the_one_made_each_time(monkeypatch):
+    """One blow fitted with its contact held and a second blow 26 ms later at 15 % (the contact
+    test's trial): ``one_blow`` and ``second_blow`` make each first contact and each window's
+    pole growth once; with both made afresh at every use (the long way, the contact's length
+    handed as the grid's own number each time) they give the very same numbers."""
+    from ramdaq.analysis.gap import contact
+    from tests.test_contact import FS, _trial
+
+    x, known, sig = _trial(0.026, 0.15)
+    short = contact.second_blow(x, FS, 1.0, known, sig), contact.one_blow(x, FS, 1.0, known, sig)
+    plain = contact.contact_response
+    monkeypatch.setattr(contact, "contact_response",
+                        lambda tau, poles, c, growth=None: plain(tau, poles, c))
+    monkeypatch.setattr(contact, "_first", lambda made, tau, poles, c, growth: plain(tau, poles, c))
+    long = contact.second_blow(x, FS, 1.0, known, sig), contact.one_blow(x, FS, 1.0, known, sig)
+    assert short[0] is not None and short[0].rho > 0.05      # a second blow was measured
+    assert short[0] == long[0]
+    for a, b in zip(vars(short[1]).values(), vars(long[1]).values(), strict=True):
+        np.testing.assert_array_equal(a, b)
