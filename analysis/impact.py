@@ -767,8 +767,9 @@ def _stock_lengths(amp: dict[int, complex], rig: Rig,
         curves["z_attach_bending_m"] = [bend.z_attach]
     except ValueError as err:
         notes.append(f"stock bending length: {err}")
-    p5, p13 = rig.gage(5).position_m, rig.gage(13).position_m
-    if 5 in a and abs(p5[2] - p13[2]) <= ALIGN_TOL_M and abs(p13[0] - p5[0]) > ALIGN_TOL_M:
+    p13 = rig.gage(13).position_m
+    p5 = rig.gage(5).position_m if 5 in a else None       # a field rig may have no gage 5
+    if p5 is not None and abs(p5[2] - p13[2]) <= ALIGN_TOL_M and abs(p13[0] - p5[0]) > ALIGN_TOL_M:
         gamma_b = (a[13] - a[5]) / (p13[0] - p5[0])  # the hull section's yaw, as for Eq 10
         try:
             tors = effective_length_torsion(z_stock, g_stock, b, gamma_b=gamma_b)

@@ -201,3 +201,33 @@ def test_ramdaq_rig_units_report_gives_eq18_in_ton_s2_per_ft(capsys):
     for kg, ton in ((si[0], rep[0]), (si[2], rep[2])):
         assert float(ton) == pytest.approx(float(kg) / per_unit, abs=0.5 / per_unit + 0.5e-4)
     assert float(rep[0]) == pytest.approx(0.0878, abs=0.5e-4)
+
+
+def test_a_rig_without_gage_5_is_analysed_and_says_why_the_torsion_length_is_not(tmp_path):
+    """A new user's 12-gage rig had no gage 5 (the hull gage forward of the stock): ``analyze``
+    rejected every hit with ``KeyError: 5`` (the stock lengths read gage 5's position before
+    asking whether it was recorded). Every hit is now accepted, the bending length is read off
+    Figure 8 as before, and the torsion length (Figure 9, which needs the hull's yaw from gages 5
+    and 13) is said to be not computed, with the reason."""
+    import json
+
+    from ramdaq.daq.commands.cli import main
+    from ramdaq.daq.record import record
+    from ramdaq.drivers.sim import SimDevice
+
+    text = (RIGS / "albacore.toml").read_text()
+    text = text.replace(_gage_block(text, 5), "")
+    # its channel (4) left out: the channels after it move down one, as a 15-channel system has them
+    text = re.sub(r"(?m)^channel = (\d+)$",
+                  lambda m: f"channel = {int(m[1]) - (int(m[1]) > 4)}", text)
+    rig = parse_rig(text, "no5.toml")
+    assert 5 not in {g.number for g in rig.gages}
+    trial = tmp_path / "no5.mcap"
+    record(SimDevice(rig, duration_s=9.0, impacts=[2.0, 5.5], seed=3), trial, readout=False)
+    assert main(["analyze", str(trial), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert [h["accepted"] for h in report["impacts"]] == [True, True]
+    assert report["summary"]["rejected"] == {}
+    notes = json.dumps([h["analysis"] for h in report["impacts"]])
+    assert "stock torsion length: needs gamma_b from level hull gages 5 and 13" in notes
+    assert "bending_m" in notes
