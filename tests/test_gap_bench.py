@@ -468,6 +468,24 @@ def test_the_run_prints_its_wall_and_cpu_time(tmp_path, capsys, monkeypatch):
                                    perturb=0.25, family="modal") == 0
     out = capsys.readouterr().out
     assert "no false alarm in 1 no-effect trials bounds the rate by 95 %" in out
+    # no effect trial: no top-1 to bound and no class to list, said as such (a new user's smoke
+    # run printed "a top-1 of 85 % is known to (Wilson 95 %) " and an empty "per-class top-1:")
+    assert "what this size can show: no effect trial above its threshold, no top-1" in out
+    assert "per-class top-1: none (no effect trial above its threshold)" in out
     last = out.strip().splitlines()[-1]
     assert last.startswith("whole run: ") and "min CPU of this process and its workers" in last
     assert "the scenarios' own 0.0 min (median 1.5 s a scenario)" in last
+
+
+def test_the_progress_line_shows_the_answer_that_is_scored():
+    """A modal no-effect trial's progress line read "unexplained" (the effect search's verdict)
+    while the summary counted it as "no effect; model form" (the one answer of both layers, as
+    ``ramdaq gap`` prints it): the line now leads with that answer and says what the search
+    alone said where it differs."""
+    from ramdaq.daq.commands.gap_bench import _tag
+
+    assert _tag({"verdict": "unexplained", "named": None, "answer": "none"}) == \
+        "none (effect search: unexplained)"
+    assert _tag({"verdict": "explained", "named": "tiller", "answer": "tiller"}) == "tiller"
+    assert _tag({"verdict": "no gap beyond noise", "named": None}) == "no gap beyond noise"
+    assert _tag({"error": "ValueError: no impacts"}) == "ValueError: no impacts"

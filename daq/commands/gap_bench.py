@@ -220,7 +220,7 @@ def run_one(sc: dict, workdir: str) -> dict:
     return sc | {
         "truth": gen["truth"], "expect": gen["expect"],
         "n_impacts_found": int(len(lt.onsets_s)), "n_impacts_true": gen["n_impacts"],
-        "verdict": d.verdict, "named": d.best.name if d.best else None,
+        "verdict": d.verdict, "named": d.best.name if d.best else None, "answer": d.answer.named,
         "zmax": float(max(np.max(d.map_fit.z), np.max(d.map_held.z) if d.map_held else -np.inf)),
         "zdetect": float(d.z_detect),
         "candidates": candidate_records(d),
@@ -571,7 +571,8 @@ def format_score(s: dict, thresholds: dict[str, float]) -> list[str]:
            f"detection thresholds a{100 * POD:.0f} (size where the hit/miss POD fit of the development "
            f"seeds reaches {100 * POD:.0f} %): " + ", ".join(
                f"{k} {v:.2f}" for k, v in sorted(thresholds.items())),
-           "per-class top-1: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in s["per_class_top1"].items()),
+           "per-class top-1: " + (", ".join(f"{k} {100 * v:.0f} %" for k, v in s["per_class_top1"].items())
+                                  or "none (no effect trial above its threshold)"),
            *_perturbed_lines(s),
            *family_lines(s),
            *size_lines(s),
@@ -620,7 +621,8 @@ def size_lines(s: dict) -> list[str]:
         for fam, f in s.get("by_family", {}).items()]
     parts = [f"{name} {n}: {100 * lo:.0f}-{100 * hi:.0f} %" for name, n in counts if n > 0
              for lo, hi in [wilson(round(0.85 * n), n)]]
-    out = ["what this size can show: a top-1 of 85 % is known to (Wilson 95 %) " + "; ".join(parts)]
+    out = ["what this size can show: a top-1 of 85 % is known to (Wilson 95 %) " + "; ".join(parts)
+           ] if parts else ["what this size can show: no effect trial above its threshold, no top-1"]
     if s.get("n_none"):
         out.append(f"  no false alarm in {s['n_none']} no-effect trials bounds the rate by "
                    f"{100 * false_alarm_bound(0, s['n_none']):.0f} % (95 %, one-sided); "
@@ -678,11 +680,24 @@ def _run(scs: list[dict], out: Path, seeds: str, jobs: int, say: Callable[[str],
         for n, f in enumerate(as_completed(futs)):
             advance()
             r = results[futs[f]] = f.result()
-            tag = r.get("named") or r.get("verdict") or r.get("error")
+            tag = _tag(r)
             fam = r.get("family", "truth")
             say(f"[{n + 1}/{len(scs)}] {fam:5s} {r['effect']:16s} size {r['size']:.2f} "
                 f"{r['rig']}/{r['medium']}: {tag} ({r['seconds']:.1f} s)")
     return results
+
+
+def _tag(r: dict) -> str:
+    """A scenario's progress line's answer: ``ramdaq gap``'s one answer of both layers (what is
+    scored; ``none`` is no effect, the gap the rig's form), with the effect search's verdict or
+    named effect beside it where that says otherwise; a failed scenario's error."""
+    if "error" in r:
+        return str(r["error"])
+    search = r.get("named") or r.get("verdict")
+    answer = r.get("answer")
+    if answer is None or answer == search:
+        return str(search)
+    return f"{answer} (effect search: {search})"
 
 
 def cpu_used() -> float:
