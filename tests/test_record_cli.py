@@ -51,6 +51,10 @@ def test_cli_record_and_info(tmp_path):
     assert len(d["channels"]) == 16
     text = _ramdaq("info", str(out), cwd=tmp_path)
     assert "g16" in text.stdout
+    # ``record`` runs no trigger: its file holds no detections, which is not "0 impacts" (a new
+    # user's import read "impacts 0 detected" for a file of six blows)
+    assert ("impacts    none written by a live trigger, 2 simulated (truth) (the file may still "
+            "hold blows: ramdaq replay or analyze detects them)") in text.stdout
 
 
 def test_cli_bad_rig_is_one_line(tmp_path):

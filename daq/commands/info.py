@@ -256,6 +256,17 @@ def _state(d: RecordingFacts) -> str:
     return ", ".join(parts) or "complete"
 
 
+def _impacts_line(d) -> str:
+    """The impacts a live trigger wrote into the recording (and the simulator's truth): a file
+    recorded without one (``ramdaq record``, ``import``) holds none, which is not "no blow" --
+    ``replay`` and ``analyze`` find them in the samples."""
+    sim = f", {len(d.sim_impacts)} simulated (truth)" if d.sim_impacts else ""
+    if not d.impacts:
+        return (f"impacts    none written by a live trigger{sim} (the file may still hold blows: "
+                "ramdaq replay or analyze detects them)")
+    return f"impacts    {len(d.impacts)} detected by the live trigger{sim}"
+
+
 def _gap_cause(d: RecordingFacts, seq: int) -> str:
     """Why the blocks after ``seq`` are missing: a damaged chunk, the recorder, or the device."""
     if any(x.after_seq == seq for x in d.damaged):
@@ -312,7 +323,7 @@ def format_info(d: RecordingFacts) -> str:
     )
     kinds = ", ".join(f"{k} {n}" for k, n in sorted(d.events.items())) or "none"
     lines.append(f"events     {kinds}")
-    lines.append(f"impacts    {len(d.impacts)} detected, {len(d.sim_impacts)} simulated (truth)")
+    lines.append(_impacts_line(d))
     if d.recovery:
         r = d.recovery
         skipped = f", {len(r['damaged'])} damaged stretch(es) left out" if r["damaged"] else ""
