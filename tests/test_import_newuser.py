@@ -367,6 +367,30 @@ def test_times_rounded_to_their_printed_resolution_are_one_grid(tmp_path, capsys
     assert np.max(np.abs(got - x[:, keep])) <= 1e-7 * np.max(np.abs(x))
 
 
+@pytest.mark.parametrize("fs_flag", [None, "2048"])
+def test_times_printed_to_significant_digits_are_one_grid(tmp_path, capsys, fs_flag):
+    """A new user's CSV had its times written with ``%g`` (numpy's and many exports' default):
+    six significant digits, so 0.000488281 s early and 10.0229 s after 10 s -- 0.1 ms there,
+    0.20 sample at 2048 Hz. One resolution for the column (its first rows': 1e-9 s) refused
+    line 20529 as "-0.10 samples off the grid (a non-uniform time column)". Each row is now
+    placed within its own printed rounding, and the import says how the column was printed."""
+    fs, n = 2048.0, 20 * 2048 + 600              # past 10 s, where %g drops to 4 decimals
+    x = _accel_rows(n, fs)
+    t = np.arange(n) / fs
+    src = tmp_path / "g.csv"
+    src.write_text("time_s,A1,A2,A3\n" + "\n".join(
+        f"{t[i]:g}," + ",".join(f"{v:.9e}" for v in x[:, i]) for i in range(n)) + "\n")
+    argv = ["import", src, "--units", "m/s^2"] + (["--fs", fs_flag] if fs_flag else [])
+    rc, out, err = _run(argv, capsys)
+    assert rc == 0, err
+    assert "3 ch at 2048 Hz" in out and "0 gaps (0 samples missing)" in out
+    assert ("the time column is printed to 6 significant digits, down to 0.0001 s at its latest "
+            "rows (0.20 sample at 2048 Hz)") in out
+    got = _values(tmp_path / "g.mcap")
+    assert got.shape == x.shape
+    assert np.max(np.abs(got - x)) <= 1e-7 * np.max(np.abs(x))   # 24-bit requantisation, as above
+
+
 def test_the_anti_alias_line_names_the_rig_once_quoted(tmp_path, capsys):
     """tester9: "rig 'albacore-like''s anti-alias corner" (a doubled quote)."""
     t, x = _decay(1000.0, 2, dur=0.5)  # 1000 Hz: Nyquist 500 Hz, below the rig's 800 Hz corner

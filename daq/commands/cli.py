@@ -611,7 +611,9 @@ def _read_notes(imp: dict, rig_given: bool = True) -> list[str]:
                    f"states, time 0 at the first row")
     if imp.get("time_resolution_s"):
         res, fs = imp["time_resolution_s"], imp.get("fs_hz")
-        out.append(f"the time column is printed to {res:g} s ({res * fs:.2f} sample at {fs:g} "
+        to = (f"{imp['time_digits']} significant digits, down to {res:g} s at its latest rows"
+              if imp.get("time_digits") else f"{res:g} s")
+        out.append(f"the time column is printed to {to} ({res * fs:.2f} sample at {fs:g} "
                    f"Hz): each row is placed on the {fs:g} Hz grid within that rounding")
     if imp.get("cut_last_line"):
         out.append(f"warning: line {imp['cut_last_line']}, the last, has no line end (the file "

@@ -193,8 +193,16 @@ def read_csv_table(data: bytes, name: str = "<csv>", *, fs_hz: float | None = No
                            notes={**notes, "time_gaps": 0}, where=where)
     scale = _TIME_UNITS[_time_unit(names[0], units[0], time_unit, name)]
     t = table[:, 0] * scale
-    res = printed_resolution(table[:, 0]) * scale
-    index, fs, grid = sample_grid(t, fs_hz, where, name, rate_hint=rate_hint, resolution_s=res)
+    res = printed_resolution(table[:, 0])
+    steps, digits = significant_step(table[:, 0])
+    # printed to N significant digits (%g) rather than to fixed decimals: the column's one
+    # resolution is its smallest values' and most rows are printed coarser than it (a fixed-
+    # decimals column's rows are mostly at its resolution, a round value or two coarser)
+    if digits and np.median(steps) > res:
+        res = np.maximum(res, steps)
+        notes["time_digits"] = digits
+    index, fs, grid = sample_grid(t, fs_hz, where, name, rate_hint=rate_hint,
+                                  resolution_s=res * scale)
     return SourceTable(names=names[1:], units=units[1:], sample_index=index, fs_hz=fs,
                        t0_s=float(t[0]), read=lambda i: table[:, i + 1], fmt="csv",
                        notes={**notes, **grid}, where=where)
@@ -224,6 +232,28 @@ def printed_resolution(t: np.ndarray) -> float:
         if np.all(np.abs(x - np.rint(x)) < 1e-6 * np.maximum(1.0, 1e-9 * np.abs(x))):
             return 10.0**-d
     return 0.0
+
+
+def significant_step(t: np.ndarray) -> tuple[np.ndarray, int]:
+    """Each time's printing step, in its own unit, if the column was printed to a number of
+    significant digits (C's ``%g``, numpy's and many exports' default; a spreadsheet's General):
+    ``10^(e - N + 1)`` with ``e`` the value's decimal exponent, for the fewest digits ``N`` (1 to
+    15) that every value is printed to (within 1e-6 of a multiple, as
+    :func:`printed_resolution`); a zero's step is 0. Returns the steps (as ``t``) and ``N``, 0
+    (and no steps) when no ``N`` up to 15 fits. A ``%g`` column's steps grow with the time
+    (0.0001 s from 10 s on, 0.001 s from 100 s), which one resolution for the column misses."""
+    sample = t if t.size <= 100_000 else t[:: -(-t.size // 100_000)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.floor(np.log10(np.abs(sample)))
+    e = e[np.isfinite(e)]
+    v = sample[sample != 0]
+    for n in range(1, 16):
+        x = v * 10.0 ** (n - 1 - e)
+        if np.all(np.abs(x - np.rint(x)) < 1e-6 * np.maximum(1.0, 1e-9 * np.abs(x))):
+            with np.errstate(divide="ignore"):
+                ea = np.floor(np.log10(np.abs(t)))
+            return np.where(t != 0, 10.0 ** (ea - n + 1), 0.0), n
+    return np.zeros_like(t), 0
 
 
 _MEDIUM_LINE = re.compile(r"^#\s*medium:\s*(\S+)", re.MULTILINE)
@@ -455,7 +485,8 @@ def _parse_slow(chunk: str, first: int, delim: str, names: list[str],
 
 
 def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
-                name: str, rate_hint: float | None = None, resolution_s: float = 0.0
+                name: str, rate_hint: float | None = None,
+                resolution_s: float | np.ndarray = 0.0
                 ) -> tuple[np.ndarray, float, dict]:
     """Place rows with times ``t`` (s) on one sample grid; refuse a non-uniform clock.
 
@@ -473,8 +504,9 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
     rate_hint : float, optional
         A rate, Hz, taken instead of the snapped one when it keeps every row as close to its
         grid point (a short file's times allow many rates; the rig's is the one meant).
-    resolution_s : float
-        The step the times were printed to, s (:func:`printed_resolution`): a time rounded to
+    resolution_s : float or numpy.ndarray
+        The step the times were printed to, s (:func:`printed_resolution`; one per row where it
+        grows with the time, :func:`significant_step`): a time rounded to
         it lies up to half of it off its sample, so where a row is off its grid point by more
         than 0.1 sample, rows may lie that much further (0.1 ms at 2048 Hz: 0.10 sample more).
         Refused when that leaves no room to tell neighbouring samples apart.
@@ -502,7 +534,7 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
                                     f"after the previous row's {float(t[r - 1])!r} s")
         rel = t - t[0]
         if fs_hz is None:
-            fs = _fitted_rate(rel, dt, name, rate_hint, resolution_s)
+            fs = _fitted_rate(rel, dt, name, rate_hint, float(np.max(resolution_s)))
         else:
             fs = float(fs_hz)
             if not fs > 0:
@@ -517,11 +549,16 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
         n = np.rint(pos)
         grid_tol = _GRID_TOL
         off = np.abs(pos - n) > grid_tol
-        if off.any() and resolution_s * fs > 0.01:  # rows off by their printed rounding?
-            grid_tol = _GRID_TOL + 0.5 * resolution_s * fs
-            if grid_tol >= 0.4:
-                raise ImportFormatError(f"{name}: the times are printed to {resolution_s:g} s, "
-                                        f"{resolution_s * fs:.2f} samples at {fs:g} Hz: too "
+        res_fs = np.asarray(resolution_s) * fs      # one for the column, or one per row
+        if off.any() and np.max(res_fs) > 0.01:  # rows off by their printed rounding?
+            grid_tol = _GRID_TOL + 0.5 * res_fs
+            coarse = np.atleast_1d(grid_tol >= 0.4)
+            if coarse.any():
+                r = int(np.argmax(coarse))
+                res = float(np.atleast_1d(resolution_s)[r])
+                at = f" from {where(r)} on" if np.ndim(resolution_s) else ""
+                raise ImportFormatError(f"{name}: the times are printed to {res:g} s{at}, "
+                                        f"{res * fs:.2f} samples at {fs:g} Hz: too "
                                         f"coarse to place each row on its sample")
             off = np.abs(pos - n) > grid_tol
         if off.any():
@@ -536,8 +573,8 @@ def sample_grid(t: np.ndarray, fs_hz: float | None, where: Callable[[int], str],
             raise ImportFormatError(f"{name}: {where(r)}: time {float(t[r])!r} s falls on the "
                                     f"same sample as the previous row at {fs:g} Hz")
         notes = {"time_gaps": int(np.count_nonzero(dn > 1))}
-        if grid_tol > _GRID_TOL:  # rounding that widened the tolerance: said
-            notes["time_resolution_s"] = resolution_s
+        if np.any(grid_tol > _GRID_TOL):  # rounding that widened the tolerance: said
+            notes["time_resolution_s"] = float(np.max(resolution_s))
         return index, fs, notes
 
 
