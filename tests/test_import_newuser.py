@@ -391,6 +391,28 @@ def test_times_printed_to_significant_digits_are_one_grid(tmp_path, capsys, fs_f
     assert np.max(np.abs(got - x)) <= 1e-7 * np.max(np.abs(x))   # 24-bit requantisation, as above
 
 
+def test_seconds_under_a_ms_header_ask_for_the_unit_not_a_rate_nothing_can_analyse(tmp_path, capsys):
+    """A new user's seconds under a 't [ms]' header read as 2.048 MHz: the refusal told them to
+    give --fs 2.048e+06, which imports a 0.01 s recording no trigger can read (the trigger takes
+    50 Hz to 51.2 kHz). A rate 1000 times the rig's, or one outside that span, now asks about
+    the time column's unit instead; a plain disagreement still offers --fs."""
+    t, x = _decay(2048.0, 2, dur=0.5)
+    rig = Path(__file__).resolve().parents[1] / "recordings" / "rigs" / "albacore.toml"
+    rows = "\n".join(f"{t[i]:.6f},{x[0, i]:.9e},{x[1, i]:.9e}" for i in range(t.size)) + "\n"
+    src = tmp_path / "ms.csv"
+    src.write_text("t [ms],g01,g02\n" + rows)
+    rc, out, err = _run(["import", src, "--rig", rig], capsys)
+    assert rc == 1
+    assert "2.048e+06 Hz disagrees with rig 'albacore-like'" in err
+    assert "1000 times it: are the times in s, read as ms? -- check the time column's unit" in err
+    assert "--fs 2.048e+06" not in err
+    src = tmp_path / "s.csv"                     # seconds said as such, at 1/2 the rig's rate
+    src.write_text("time_s,g01,g02\n" + "\n".join(
+        f"{2 * t[i]:.6f},{x[0, i]:.9e},{x[1, i]:.9e}" for i in range(t.size)) + "\n")
+    rc, out, err = _run(["import", src, "--rig", rig], capsys)
+    assert rc == 1 and "state it with --fs 1024" in err and "read as" not in err
+
+
 def test_the_anti_alias_line_names_the_rig_once_quoted(tmp_path, capsys):
     """tester9: "rig 'albacore-like''s anti-alias corner" (a doubled quote)."""
     t, x = _decay(1000.0, 2, dur=0.5)  # 1000 Hz: Nyquist 500 Hz, below the rig's 800 Hz corner

@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...analysis.model.rig import FORCE_UNITS, Rig, load_rig
+from ...analysis.model.rig import FORCE_UNITS, PLAUSIBLE, Rig, load_rig
 from ..base import Device
 from ..block import Block, StreamInfo, sample_time_ns
 from ..errors import DeviceError, DeviceNotFound
@@ -70,6 +70,19 @@ quantised."""
 RATE_TOLERANCE = 1e-4
 """Largest relative difference between a file's sample rate and its rig's that is the same rate:
 100 ppm, twice a crystal clock's tolerance and far below any rate set in a different number."""
+
+
+_RATES = PLAUSIBLE["daq.sample_rate_hz"]   # the rates a trial is sampled at (the trigger's), Hz
+_UNIT_SLIPS = ((1e3, "1000 times it: are the times in s, read as ms?"),
+               (1e6, "1e6 times it: are the times in s, read as us?"),
+               (1e-3, "1/1000 of it: are the times in ms, read as s?"),
+               (1e-6, "1/1e6 of it: are the times in us, read as s?"))
+
+
+def _unit_slip(ratio: float) -> str | None:
+    """What a file's rate ``ratio`` times the rig's says when it is a power of 1000 (within
+    1 %): the time column read in the wrong unit; else None."""
+    return next((what for k, what in _UNIT_SLIPS if abs(ratio / k - 1) <= 0.01), None)
 _INT32_MAX = 2**31 - 1
 _STEP_SAMPLE = 200_000  # values searched for the step (all values are checked against it)
 _TINY, _HUGE = 1e-290, 1e290  # m/s^2: a channel's peak beyond these is refused, not scaled
@@ -855,9 +868,17 @@ class FileImportDevice(Device):
             return
         rig_fs = self.rig.daq.sample_rate_hz
         if abs(fs / rig_fs - 1) > RATE_TOLERANCE:
-            raise ImportFormatError(f"{name}: the file's sample rate {fs:g} Hz disagrees with rig "
-                                    f"{self.rig.name!r} (daq.sample_rate_hz = {rig_fs:g} Hz); if "
-                                    f"the file is right, state it with "
+            said = (f"{name}: the file's sample rate {fs:g} Hz disagrees with rig "
+                    f"{self.rig.name!r} (daq.sample_rate_hz = {rig_fs:g} Hz)")
+            unit = _unit_slip(fs / rig_fs)
+            if unit or not _RATES.lo <= fs <= _RATES.hi:
+                # a time column read in the wrong unit, or a rate no trial has: stating it would
+                # only make a recording nothing can analyse (a new user's 't [ms]' on seconds,
+                # told to give --fs 2.048e+06)
+                why = unit or f"outside the {_RATES.lo:g}-{_RATES.hi:g} Hz a trial is sampled at"
+                raise ImportFormatError(f"{said}: {why} -- check the time column's unit (its "
+                                        f"header, or {option('time_unit=', '--time-unit')})")
+            raise ImportFormatError(f"{said}; if the file is right, state it with "
                                     f"{option(f'fs_hz={fs:g}', f'--fs {fs:g}')}")
 
     def _iter_blocks(self) -> Iterator[Block]:
