@@ -181,3 +181,28 @@ def test_the_gap_read_finds_the_same_impacts_on_joined_blocks(cut, tmp_path):
              if not (ev.not_analysable or "").startswith(NO_BLOW)]
     assert len(whole) >= 3 if cut != "a gap in a ringing" else len(whole) >= 2
     assert _events(load_trial(path).events) == _events(whole)
+
+
+def test_decays_cut_short_by_the_records_end_are_said(tmp_path):
+    """A new user's recovered recording kept 1.2 s after its last blow: every impact's decay was
+    then compared over 1.2 s instead of the 4 s asked, and nothing said so. The cut is now said,
+    with what cut it (the record's end, or the next blow's pre-trigger window); a record with
+    room after every blow says nothing. Onsets are picked to ~0.01 s: lengths read to 0.1 s."""
+    from ramdaq.daq.commands.cli import main
+    from ramdaq.daq.gap_trial import trial_data
+
+    rig = str(ROOT / "recordings" / "rigs" / "albacore.toml")
+    cases = (("end", "1.5,6.0", "over 2.0", "the record ends 2.0", "after impact 2"),
+             ("close", "1.5,4.0", "over 1.5", "impact 2's pre-trigger window begins 1.5",
+              "after impact 1"),
+             ("room", "1.5", None, None, None))
+    for name, impacts, *said in cases:
+        out = tmp_path / f"{name}.mcap"
+        assert main(["record", "--rig", rig, "--medium", "water", "--duration", "8",
+                     "--impacts", impacts, "--fast", "--quiet", "--out", str(out)]) == 0
+        cut = trial_data(load_trial(out)).decay_cut
+        if said[0] is None:
+            assert cut is None, cut
+            continue
+        assert cut.startswith(f"decays compared {said[0]}") and "not the 4 s asked" in cut, cut
+        assert said[1] in cut and f"{said[2]}, and every impact is compared over the same length" in cut

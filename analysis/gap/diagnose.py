@@ -668,6 +668,8 @@ def _trial_notes(td: TrialData) -> list[str]:
     notes = []
     if not (~td.fitted).any():
         notes.append("one impact only: nothing held out, closure on held-out impacts not measured")
+    if td.decay_cut:
+        notes.append(td.decay_cut)
     if td.dropped_onsets_s:
         notes.append("events too soon after the previous impact to compare, left out: "
                      + ", ".join(f"{t:.3f} s" for t in td.dropped_onsets_s))

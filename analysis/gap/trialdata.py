@@ -109,6 +109,9 @@ class TrialData:
     """The band's top the rig alone gives, Hz: its corner (:func:`analysis_band`), or half the
     rate where that corner leaves nothing to decimate (as ``lowpass_hz``); ``lowpass_hz`` is
     above it only where the data's band was asked for and they ring above it (:func:`data_corner`)."""
+    decay_cut: str | None = None
+    """Why every decay is compared over less than the length asked (``post_max_s``): the closest
+    blows, or the record's end after the last; None when it is not cut."""
 
     @property
     def n_seg(self) -> int:
@@ -404,6 +407,7 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
     skip_s = rig.impact.duration_s + SMEAR_CYCLES / corner
     gaps_next = np.diff(np.append(onsets, n / fs_hz + pre_s))
     post_s = float(min(post_max_s, np.min(gaps_next) - pre_s))
+    cut = _decay_cut(post_s, post_max_s, gaps_next - pre_s)
     if post_s < skip_s + 0.25:
         raise ValueError(f"impacts {np.min(gaps_next):.2f} s apart leave too short a decay to "
                          f"compare (need {pre_s + skip_s + 0.25:.2f} s)")
@@ -442,7 +446,20 @@ def prepare(x_full: np.ndarray | ScaledCounts, fs_hz: float, onsets_s: np.ndarra
                      windows=windows, lowpass_hz=corner if q > 1 else fs_hz / 2, fitted=fitted,
                      clip=clip, flat=flat, peak_full=peak,
                      gage_numbers=gage_numbers, dropped_onsets_s=dropped, ringing_above=above,
-                     rig_lowpass_hz=rig_corner if rig_q > 1 else fs_hz / 2)
+                     rig_lowpass_hz=rig_corner if rig_q > 1 else fs_hz / 2, decay_cut=cut)
+
+
+def _decay_cut(post_s: float, post_max_s: float, room_s: np.ndarray) -> str | None:
+    """Why every impact's decay is compared over ``post_s`` rather than the ``post_max_s`` asked
+    (s), from each impact's room ``room_s`` (s to the next impact's pre-trigger window, the last
+    one's to the record's end); None when it is not cut."""
+    if post_s >= post_max_s:
+        return None
+    k = int(np.argmin(room_s))
+    why = ("the record ends" if k == len(room_s) - 1 else
+           f"impact {k + 2}'s pre-trigger window begins") + f" {room_s[k]:.2f} s after impact {k + 1}"
+    return (f"decays compared over {post_s:.2f} s, not the {post_max_s:g} s asked: {why}, and "
+            "every impact is compared over the same length")
 
 
 def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner: float,
