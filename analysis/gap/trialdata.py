@@ -458,8 +458,8 @@ def _decay_cut(post_s: float, post_max_s: float, room_s: np.ndarray) -> str | No
     k = int(np.argmin(room_s))
     why = ("the record ends" if k == len(room_s) - 1 else
            f"impact {k + 2}'s pre-trigger window begins") + f" {room_s[k]:.2f} s after impact {k + 1}"
-    return (f"decays compared over {post_s:.2f} s, not the {post_max_s:g} s asked: {why}, and "
-            "every impact is compared over the same length")
+    return (f"decays compared over {post_s:.2f} s (at most {post_max_s:g} s): {why}, and every "
+            "impact is compared over the same length")
 
 
 def _segment(src: ScaledCounts | _ArrayWindows, a: int, q: int, n_s: int, corner: float,
