@@ -256,7 +256,7 @@ def _state(d: RecordingFacts) -> str:
     return ", ".join(parts) or "complete"
 
 
-def _impacts_line(d) -> str:
+def _impacts_line(d: RecordingFacts) -> str:
     """The impacts a live trigger wrote into the recording (and the simulator's truth): a file
     recorded without one (``ramdaq record``, ``import``) holds none, which is not "no blow" --
     ``replay`` and ``analyze`` find them in the samples."""
