@@ -489,3 +489,49 @@ def test_the_progress_line_shows_the_answer_that_is_scored():
     assert _tag({"verdict": "explained", "named": "tiller", "answer": "tiller"}) == "tiller"
     assert _tag({"verdict": "no gap beyond noise", "named": None}) == "no gap beyond noise"
     assert _tag({"error": "ValueError: no impacts"}) == "ValueError: no impacts"
+
+
+def test_a_dead_gage_leads_the_answer():
+    """A new user's trial with gage 8 dead and a faint 50 Hz hum on every gage answered
+    ambient_tone (a line before the blows answers first) and only listed the dead gage. A gage
+    the blow did not move is certain and spoils every other reading of it: it answers first, as
+    a gain of zero (gage_sensitivity) at that gage; without it the hum answers as before."""
+    from ramdaq.daq.commands.gap_bench import decision
+
+    dead = {"check": "dead", "layer": "sensor", "gages": [8], "window": "early", "mode_hz": [],
+            "statistic": float("inf"), "chance_level": 1.0, "more": {}}
+    hum = {"check": "ambient_tone", "layer": "excitation", "gages": [1, 2, 3, 4, 6, 7, 9, 10],
+           "window": "pre", "mode_hz": [50.0], "statistic": 4000.0, "chance_level": 10.0, "more": {}}
+    d = decision(_rec(data_findings=[hum, dead]), 8.0, 10.0, 0.0)
+    assert d["named"] == "gage_sensitivity" and d["by"] == "data" and d["location"]["gages"] == [8]
+    d = decision(_rec(data_findings=[hum]), 8.0, 10.0, 0.0)
+    assert d["named"] == "ambient_tone" and d["by"] == "data"
+
+
+def test_a_dead_gage_is_said_certain_not_inf_times_its_chance_level():
+    """The new user's dead gage read "statistic infx its chance level" in the verdict and
+    "statistic inf > 1" in its finding's line: no statistic measures a gage that did not move,
+    and both now say it is certain."""
+    import math
+    from types import SimpleNamespace
+
+    from ramdaq.analysis.gap.datamodel import Finding, Layer
+    from ramdaq.analysis.gap.diagnose import Diagnosis
+    from ramdaq.daq.commands.gap import finding_line
+    from ramdaq.daq.gap_layers import one_answer
+
+    text = "gage 8 is dead: its first blow moves it by 0 m/s^2 (one converter step or less)"
+    dead = Finding(check="dead", layer=Layer.SENSOR, gages=(8,), statistic=math.inf, chance_level=1.0,
+                   size=0.0, unit="m/s^2", text=text, window="early")
+    assert finding_line(dead).endswith("(early window; certain: no chance level applies)")
+    level = SimpleNamespace(form_gages=lambda: set(), form_modes=lambda: [],
+                            statement=lambda named=None: "", splits=lambda: [], coupled=lambda: [],
+                            candidate_form=lambda name: {})
+    d = SimpleNamespace(verdict="unexplained", best=None, candidates=[], model_level=level,
+                        unexplained_where=_rec()["unexplained_where"],
+                        data=SimpleNamespace(findings=[dead]))
+    d.model_choice = lambda: Diagnosis.model_choice(d)
+    d.answer = one_answer(d)
+    head = Diagnosis.headline.fget(d)
+    assert head.startswith(f"explained by the data-only layer: gage_sensitivity ({text}; certain: "
+                           "no chance level applies"), head

@@ -269,13 +269,12 @@ class Diagnosis:
         elif a.named == "unexplained":
             head = f"unexplained: {where_text(a.location)}" if a.location else "unexplained"
             if a.by == "data" and a.finding:     # what the data-only check found, how big
-                head += (f" -- {a.finding.get('text', '')} (statistic {strength(a.finding):.1f}x its "
-                         "chance level)")
+                head += f" -- {a.finding.get('text', '')} ({_beyond_chance(a.finding)})"
         elif a.by == "data":
             f = a.finding or {}
             also = [g for g in (a.location or {}).get("gages", []) if g not in f.get("gages", [])]
-            head = (f"explained by the data-only layer: {a.named} ({f.get('text', '')}; statistic "
-                    f"{strength(f):.1f}x its chance level"
+            head = (f"explained by the data-only layer: {a.named} ({f.get('text', '')}; "
+                    f"{_beyond_chance(f)}"
                     + (f"; found on gage{'s' if len(also) > 1 else ''} {', '.join(map(str, also))} "
                        "too" if also else "") + ")")
         elif self.best is None or a.named != self.best.name:
@@ -661,6 +660,14 @@ def _kept(fw: Forward, cal: Calibration, settings: Settings) -> Calibration:
     kept = calibrate(fw, theta0=zero, max_iter=0)
     kept.cache["kept_modal"] = why
     return kept
+
+
+def _beyond_chance(finding: dict) -> str:
+    """A data-only finding's statistic against its chance level, in words: ``statistic 12.3x
+    its chance level``, or, where no statistic measures it (a dead gage: certain), that."""
+    s = strength(finding)
+    return (f"statistic {s:.1f}x its chance level" if math.isfinite(s) else
+            "certain: no chance level applies")
 
 
 def _trial_notes(td: TrialData) -> list[str]:

@@ -435,6 +435,14 @@ check reads (:func:`~ramdaq.analysis.gap.signal_checks.pre_trigger_lines`), as
 :func:`declared_tone` reads it."""
 
 
+def dead_first(findings: list[dict]) -> list[dict]:
+    """The data-only findings (as JSON) of a gage the blow did not move: certain (no statistic
+    reaches it) and spoiling every other reading of that gage, they answer before anything else,
+    as a gain of zero at it (a new user's trial with a dead gage 8 and a faint mains hum answered
+    ambient_tone, the dead gage only listed)."""
+    return [f for f in findings if f["check"] == "dead"]
+
+
 def ambient_first(findings: list[dict]) -> list[dict]:
     """The data-only ambient tones (as JSON) that answer before anything else: a line found
     before the blows -- in every pre window with the previous blows' ringing taken out, and in
@@ -562,6 +570,8 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     (:func:`phase_at_coupled`). Its records of kind "tiller" (the stock's top turning with the
     rudder, :func:`~ramdaq.analysis.gap.modal_level.stock_turns`) are no hull mode: they answer
     "tiller" where the rest answers "none" or "unexplained" by the model (:func:`turned_stock`)."""
+    if dead := dead_first(findings):
+        return _data_answer(dead[0], candidates, findings)
     findings = [second_blow_held(f, candidates) for f in findings if not shift_not_grown(f)]
     turns = [c for c in coupled if c.get("kind") == "tiller"]
     # a coupled "hull mode" on a line the blows switch on is that line, which the free model fits

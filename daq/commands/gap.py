@@ -251,8 +251,9 @@ def finding_line(f: Finding) -> str:
               f"(95 % {_pct(f.closed_held_ci[0])} .. {_pct(f.closed_held_ci[1])})"
               if np.isfinite(f.closed_held) else "")
     beyond = ">" if f.statistic > f.chance_level else "within"
-    return (f"    [{f.layer}] {f.text} ({f.window} window; statistic {f.statistic:.4g} {beyond} "
-            f"{f.chance_level:.3g}{closes})")
+    stat = (f"statistic {f.statistic:.4g} {beyond} {f.chance_level:.3g}" if np.isfinite(f.statistic)
+            else "certain: no chance level applies")
+    return f"    [{f.layer}] {f.text} ({f.window} window; {stat}{closes})"
 
 VERDICT_WIDTH = 120
 """The verdict's first line is at most about this long: the answer; what it rests on follows."""
