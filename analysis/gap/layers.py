@@ -550,7 +550,8 @@ def answer(model: str | None, candidates: list[dict], where: dict | None, form_g
     (:func:`told_law`) well above chance: no linear model update makes a decrement grow as
     1/amplitude or a frequency move with it (issue 17: a modal friction trial read Coulomb's law
     at 20.5x its chance level while the model named hull_coupling). Of several, the
-    strongest against its chance level answers. Before all of these, a line found before the
+    strongest against its chance level answers. Before everything, a dead gage answers, as a gain
+    of zero there (:func:`dead_first`); then, before all of these, a line found before the
     blows well above chance answers ambient_tone (:func:`ambient_first`); on a rig left with form
     error (``form_gages``), a sensor finding or a second blow whose own correction closes half its
     residual held out outranks a structural update (:func:`held_out_data`); a second blow that
