@@ -454,3 +454,22 @@ def test_a_gain_is_read_on_weak_modes_the_rudder_rides_rigidly():
     found = {f.check: f for f in rigid_gain(replace(fm, amp_se=se), gages)}
     assert set(found) == {"gain", "flex"}
     assert found["gain"].gages == (3,) and found["gain"].size == pytest.approx(1.2, rel=0.02)
+
+
+def test_a_dead_gage_raises_no_numpy_warning(trials):
+    """A new user's dead gage put numpy's RuntimeWarnings (an All-NaN slice in the model level's
+    noise, an invalid divide in the line-persistence check) on the terminal, beside the finding
+    that says what they mean. The data-only layer and the model level's modes run quietly; the
+    dead gage is still found, and its noise is NaN where no impact measured one."""
+    import warnings
+
+    from ramdaq.analysis.gap.modal_level import trial_modes
+    from ramdaq.daq.gap_trial import trial_data
+
+    _, what, lt = trials("dead")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        dc = check_trial(lt.x, lt.fs_hz, lt.onsets_s, lt.rig.gages_by_channel())
+        tm = trial_modes(trial_data(lt))
+    assert [f.gages for f in dc.findings if f.check == "dead"] == [what.gages]
+    assert tm.n_modes >= 3 and np.isfinite(tm.noise_std).sum() >= tm.noise_std.size - 1

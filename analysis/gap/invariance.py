@@ -227,7 +227,8 @@ def _persistence(x: np.ndarray, fm: FreeModal, k: int, a0: np.ndarray, n_pre: in
     meas, se = (np.array(v) for v in zip(*(_line_amplitude(np.nan_to_num(x[:, a:a + n_pre]), fm.fs_hz,
                                                            fm.f_hz[k], others) for a in a0), strict=True))
     var = fm.amp_se[:-1, :, k] ** 2 + se**2 + (PERSIST_FLOOR * carry) ** 2
-    z = np.sum(carry - meas, axis=0) / np.sqrt(np.sum(var, axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):   # a dead gage: 0/0, NaN, no finding
+        z = np.sum(carry - meas, axis=0) / np.sqrt(np.sum(var, axis=0))
     return z, np.sum(meas, axis=0) / np.maximum(np.sum(carry, axis=0), 1e-300)
 
 

@@ -204,8 +204,17 @@ def trial_modes(td: TrialData, *, f_lo_hz: float = 0.5, min_share: float = 0.5) 
         shapes=col(4).T if merged else np.empty((n_g, 0), complex),
         shape_se=col(5).T if merged else np.empty((n_g, 0)),
         n_seen=col(6).astype(int) if merged else np.empty(0, int), n_impacts=len(found),
-        noise_std=np.nanmedian(np.array(noise), axis=0), gage_numbers=td.gage_numbers,
+        noise_std=_median_or_nan(np.array(noise)), gage_numbers=td.gage_numbers,
         skipped=tuple(skipped))
+
+
+def _median_or_nan(v: np.ndarray) -> np.ndarray:
+    """The median over impacts (axis 0) of each gage's value, NaN where no impact has one (a dead
+    gage's noise) -- without numpy's All-NaN warning on the terminal."""
+    out = np.full(v.shape[1:], np.nan)
+    some = ~np.all(np.isnan(v), axis=0)
+    out[some] = np.nanmedian(v[:, some], axis=0)
+    return out
 
 
 def _mean_se(v: np.ndarray, se: np.ndarray) -> tuple[float, float]:
