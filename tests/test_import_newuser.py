@@ -389,6 +389,13 @@ def test_times_printed_to_significant_digits_are_one_grid(tmp_path, capsys, fs_f
     got = _values(tmp_path / "g.mcap")
     assert got.shape == x.shape
     assert np.max(np.abs(got - x)) <= 1e-7 * np.max(np.abs(x))   # 24-bit requantisation, as above
+    # a row without its time is the one-line refusal naming it (the digits' reading skips it;
+    # it once broke on it, a numpy broadcast error instead of the line)
+    lines = src.read_text().splitlines()
+    lines[101] = "," + lines[101].split(",", 1)[1]
+    src.write_text("\n".join(lines) + "\n")
+    rc, out, err = _run(argv + ["--overwrite"], capsys)
+    assert rc == 1 and "g.csv: line 102: the time is missing or not finite" in err, err
 
 
 def test_seconds_under_a_ms_header_ask_for_the_unit_not_a_rate_nothing_can_analyse(tmp_path, capsys):

@@ -226,10 +226,9 @@ def printed_resolution(t: np.ndarray) -> float:
     times were printed with more than 9 decimals (full precision)."""
     if t.size == 0:
         return 0.0
-    sample = t if t.size <= 100_000 else t[:: -(-t.size // 100_000)]
+    sample = _sampled(t)
     for d in range(10):
-        x = sample * 10.0**d
-        if np.all(np.abs(x - np.rint(x)) < 1e-6 * np.maximum(1.0, 1e-9 * np.abs(x))):
+        if _whole(sample * 10.0**d):
             return 10.0**-d
     return 0.0
 
@@ -239,21 +238,29 @@ def significant_step(t: np.ndarray) -> tuple[np.ndarray, int]:
     significant digits (C's ``%g``, numpy's and many exports' default; a spreadsheet's General):
     ``10^(e - N + 1)`` with ``e`` the value's decimal exponent, for the fewest digits ``N`` (1 to
     15) that every value is printed to (within 1e-6 of a multiple, as
-    :func:`printed_resolution`); a zero's step is 0. Returns the steps (as ``t``) and ``N``, 0
-    (and no steps) when no ``N`` up to 15 fits. A ``%g`` column's steps grow with the time
-    (0.0001 s from 10 s on, 0.001 s from 100 s), which one resolution for the column misses."""
-    sample = t if t.size <= 100_000 else t[:: -(-t.size // 100_000)]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.floor(np.log10(np.abs(sample)))
-    e = e[np.isfinite(e)]
-    v = sample[sample != 0]
+    :func:`printed_resolution`); a zero's step is 0, a missing time's NaN. Returns the steps (as
+    ``t``) and ``N``, 0 (and no steps) when no ``N`` up to 15 fits. A ``%g`` column's steps grow
+    with the time (0.0001 s from 10 s on, 0.001 s from 100 s), which one resolution misses."""
+    sample = _sampled(t)
+    v = sample[np.isfinite(sample) & (sample != 0)]     # a missing time is refused later, by row
+    e = np.floor(np.log10(np.abs(v)))
     for n in range(1, 16):
-        x = v * 10.0 ** (n - 1 - e)
-        if np.all(np.abs(x - np.rint(x)) < 1e-6 * np.maximum(1.0, 1e-9 * np.abs(x))):
-            with np.errstate(divide="ignore"):
+        if v.size and _whole(v * 10.0 ** (n - 1 - e)):
+            with np.errstate(divide="ignore", invalid="ignore"):
                 ea = np.floor(np.log10(np.abs(t)))
             return np.where(t != 0, 10.0 ** (ea - n + 1), 0.0), n
     return np.zeros_like(t), 0
+
+
+def _sampled(t: np.ndarray) -> np.ndarray:
+    """``t``, or every k-th value of it down to 100 000 values (a column's printing, read on a
+    sample of its rows)."""
+    return t if t.size <= 100_000 else t[:: -(-t.size // 100_000)]
+
+
+def _whole(x: np.ndarray) -> bool:
+    """Whether every value of ``x`` is a whole number, within 1e-6 (1e-15 relative beyond 1e9)."""
+    return bool(np.all(np.abs(x - np.rint(x)) < 1e-6 * np.maximum(1.0, 1e-9 * np.abs(x))))
 
 
 _MEDIUM_LINE = re.compile(r"^#\s*medium:\s*(\S+)", re.MULTILINE)
