@@ -47,6 +47,9 @@ P_CHANCE = 1e-3
 """Probability that a data-only check reports a finding on a trial without the fault: the chance
 level of every statistic is its null distribution's upper ``P_CHANCE`` quantile,
 Bonferroni-corrected for the gages, modes, frequencies or delays it searched."""
+CERTAIN = "certain: no chance level applies"
+"""How a finding no statistic measures (an infinite statistic: a dead gage) is said against its
+chance level, where the others read "statistic 12.3x its chance level"."""
 PRECEDENCE_STRENGTH = 2.0
 """A data-only sensor finding (or a double hit) overrides the model layer's "unexplained" when its
 statistic is at least this many times its chance level (which is already Bonferroni-corrected at

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .calibrate import Calibration, ModeRef, Stop, calibrate, departs_from_modes, prefit_frequencies
+from .datamodel import CERTAIN
 from .effects import EFFECTS
 from .evidence import (
     Bands,
@@ -666,8 +667,7 @@ def _beyond_chance(finding: dict) -> str:
     """A data-only finding's statistic against its chance level, in words: ``statistic 12.3x
     its chance level``, or, where no statistic measures it (a dead gage: certain), that."""
     s = strength(finding)
-    return (f"statistic {s:.1f}x its chance level" if math.isfinite(s) else
-            "certain: no chance level applies")
+    return f"statistic {s:.1f}x its chance level" if math.isfinite(s) else CERTAIN
 
 
 def _trial_notes(td: TrialData) -> list[str]:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...analysis.gap.datamodel import P_CHANCE, Finding, Layer
+from ...analysis.gap.datamodel import CERTAIN, P_CHANCE, Finding, Layer
 from ...analysis.gap.diagnose import Diagnosis, Settings
 from ...analysis.gap.evidence import GAP_CELL_Z
 from ...analysis.gap.rigfit import PINNED_SD
@@ -252,7 +252,7 @@ def finding_line(f: Finding) -> str:
               if np.isfinite(f.closed_held) else "")
     beyond = ">" if f.statistic > f.chance_level else "within"
     stat = (f"statistic {f.statistic:.4g} {beyond} {f.chance_level:.3g}" if np.isfinite(f.statistic)
-            else "certain: no chance level applies")
+            else CERTAIN)
     return f"    [{f.layer}] {f.text} ({f.window} window; {stat}{closes})"
 
 VERDICT_WIDTH = 120

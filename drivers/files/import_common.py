@@ -70,8 +70,6 @@ quantised."""
 RATE_TOLERANCE = 1e-4
 """Largest relative difference between a file's sample rate and its rig's that is the same rate:
 100 ppm, twice a crystal clock's tolerance and far below any rate set in a different number."""
-
-
 _RATES = PLAUSIBLE["daq.sample_rate_hz"]   # the rates a trial is sampled at (the trigger's), Hz
 _UNIT_SLIPS = ((1e3, "1000 times it: are the times in s, read as ms?"),
                (1e6, "1e6 times it: are the times in s, read as us?"),
@@ -83,6 +81,8 @@ def _unit_slip(ratio: float) -> str | None:
     """What a file's rate ``ratio`` times the rig's says when it is a power of 1000 (within
     1 %): the time column read in the wrong unit; else None."""
     return next((what for k, what in _UNIT_SLIPS if abs(ratio / k - 1) <= 0.01), None)
+
+
 _INT32_MAX = 2**31 - 1
 _STEP_SAMPLE = 200_000  # values searched for the step (all values are checked against it)
 _TINY, _HUGE = 1e-290, 1e290  # m/s^2: a channel's peak beyond these is refused, not scaled
